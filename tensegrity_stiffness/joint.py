@@ -1,0 +1,487 @@
+"""Six-DOF tensegrity joint: string forces, wrench and analytical stiffness (Monke & Vikas).
+
+Model (eqs. 6-11, with the corrections of ``ERRATA.md``)
+---------------------------------------------------------
+Two rigid links carry nodes ``p1`` (in {1}) and ``p2`` (in {2}). String j joins link-1 node
+``a_j`` to link-2 node ``b_j``; with ``T = exp(hat(xi))`` (maps {2} into {1}):
+
+* ``s_j = p1_{a_j} - T p2_{b_j}`` (eq. 7), ``l_j = |s_j|``, unit vector ``u_j = s_j / l_j``.
+* tension ``phi_j`` (N): 0 when ``l <= l0`` (slack); ``k (l - l0)`` when taut;
+  ``k (lmax - l0)`` when ``l >= lmax`` (saturated) -- Hooke's law, the default.
+  With ``force_law='paper'`` (the authors' published code, which is what eq. 11 differentiates)
+  the tension is ``k (l - l0) / l`` when taut and ``k (lmax - l0) / lmax`` when saturated.
+* force on link 2: ``f_j = phi_j u_j``; wrench on link 2 in {1} about the origin of {1},
+  ``F = sum_j [f_j; p1_{a_j} x f_j]`` (eq. 9, summed once).
+* ``K = dF/dxi`` (eq. 10), rows ``[fx fy fz mx my mz]``, columns ``[wx wy wz vx vy vz]``.
+  ``df/ds = (phi' - phi/l) u u^T + (phi/l) I`` for every region (Hooke taut:
+  ``k (1 - l0/l) I + k l0/l^3 s s^T``; saturated: ``(phi/l)(I - u u^T)``; slack: 0).
+* ``K_c = -dF/d(delta)``, ``delta = [dv; dw]`` a spatial twist in {1} applied as
+  ``T -> exp(hat(delta)) T``; rows ``[f; m]``, columns ``[linear; angular]`` (ROS order). At an
+  unloaded equilibrium ``K_c`` is symmetric and it is positive definite exactly when the
+  equilibrium is stable. ``K = -K_c P J(xi)`` with ``P`` the swap of the two 3-blocks and ``J`` the
+  SE(3) left Jacobian in [omega; v] order.
+
+Implementation: with ``A_j = df/ds`` and ``q_j = T p2_{b_j}``, ``ds_j/dxi = [hat(q_j) G - Q, -G]``
+(``G``, ``Q`` from :class:`~tensegrity_stiffness.screw.ScrewKinematics`), so that both matrices
+follow from two 6x3 sums ``H_G = sum [I; hat(p1)] A hat(q)`` and ``H_D = sum [I; hat(p1)] A``:
+``K = [H_G G - H_D Q, -H_D G]`` and ``K_c = [H_D, -H_G]``. Every quantity is vectorised over a
+leading batch axis.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tensegrity_stiffness.screw import ScrewKinematics, as_screws, exp_se3
+
+FloatArray = NDArray[np.float64]
+
+FORCE_LAWS = ('hooke', 'paper')
+#: Strings shorter than this (m) have no defined direction: evaluation raises ValueError.
+MIN_STRING_LENGTH = 1e-12
+#: Default central-difference step of :meth:`JointModel.numerical_stiffness` (eq. 21).
+NUMERICAL_STEP = 1e-6
+
+
+@dataclass(frozen=True)
+class JointState:
+    """Everything the joint model computes at one screw (or a batch, leading axis N).
+
+    Shapes for one screw (batched: prefix ``N``): ``screw`` (6,), ``transform`` (4, 4),
+    ``string_vectors`` (n, 3) = s_j in {1} (m), ``lengths`` (n,) m, ``tensions`` (n,) N,
+    ``slack`` / ``saturated`` (n,) bool, ``wrench`` (6,) [N; N m], ``stiffness`` (6, 6) K,
+    ``cartesian_stiffness`` (6, 6) K_c.
+    """
+
+    screw: FloatArray
+    transform: FloatArray
+    string_vectors: FloatArray
+    lengths: FloatArray
+    tensions: FloatArray
+    slack: NDArray[np.bool_]
+    saturated: NDArray[np.bool_]
+    wrench: FloatArray
+    stiffness: FloatArray
+    cartesian_stiffness: FloatArray
+
+
+def _beta_map(Z: FloatArray) -> FloatArray:
+    """Matrix C (4n, 36) with ``sum_j beta_j [Z_j hat(q_j), Z_j] = (g @ C).reshape(6, 6)``.
+
+    ``g = [beta_1 q_1, beta_1, ..., beta_n q_n, beta_n]`` (homogeneous q scaled by beta);
+    ``hat(q)[b, c] = -eps[b, c, d] q_d``.
+    """
+    n = Z.shape[0]
+    eps = np.zeros((3, 3, 3))
+    eps[0, 1, 2] = eps[1, 2, 0] = eps[2, 0, 1] = 1.0
+    eps[0, 2, 1] = eps[2, 1, 0] = eps[1, 0, 2] = -1.0
+    C = np.zeros((n, 4, 6, 6))
+    C[:, :3, :, :3] = -np.einsum('jab,bcd->jdac', Z, eps)
+    C[:, 3, :, 3:] = Z
+    return C.reshape(4 * n, 36)
+
+
+def _finite_array(value: ArrayLike, name: str) -> FloatArray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name} must be numeric: {exc}') from None
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f'{name} must be finite, got {value!r}')
+    return arr
+
+
+_EYE3 = np.eye(3)
+# K_c = H @ _KC_MAP = [H_D, -H_G].
+_KC_MAP = np.block([[np.zeros((3, 3)), -np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
+
+
+def _hat(w: FloatArray) -> FloatArray:
+    """hat3 for (..., 3) arrays (local to keep the hot path free of extra conversions)."""
+    out = np.zeros(w.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2] = -w[..., 2], w[..., 1]
+    out[..., 1, 0], out[..., 1, 2] = w[..., 2], -w[..., 0]
+    out[..., 2, 0], out[..., 2, 1] = -w[..., 1], w[..., 0]
+    return out
+
+
+class JointModel:
+    """A six-DOF tensegrity joint: node sets, strings and their elastic law.
+
+    Parameters
+    ----------
+    link1_nodes : (n1, 3) node coordinates of link 1 in {1}, metres.
+    connections : (n, 2) int, string j joins ``link1_nodes[connections[j, 0]]`` to
+        ``link2_nodes[connections[j, 1]]``.
+    stiffness : (n,) or scalar, N/m, > 0.
+    rest_lengths : (n,) m, > 0.
+    link2_nodes : (n2, 3) in {2}; ``None`` uses ``link1_nodes`` (the paper's setting).
+    max_lengths : (n,) m, > rest length; ``None`` or ``inf`` for no limit. When rest lengths are
+        overridden at evaluation, each string keeps its maximum *stretch* ``lmax - l0``.
+    force_law : ``'hooke'`` (default) or ``'paper'`` (the authors' code, see module docstring).
+    node_names, link2_node_names, string_names : labels (optional).
+    initial_screw : (6,) default starting point of equilibrium solves (e.g. the unloaded
+        equilibrium); zeros when omitted.
+    """
+
+    def __init__(
+        self,
+        link1_nodes: ArrayLike,
+        connections: ArrayLike,
+        stiffness: ArrayLike,
+        rest_lengths: ArrayLike,
+        link2_nodes: ArrayLike | None = None,
+        max_lengths: ArrayLike | None = None,
+        force_law: str = 'hooke',
+        node_names: Sequence[str] | None = None,
+        link2_node_names: Sequence[str] | None = None,
+        string_names: Sequence[str] | None = None,
+        initial_screw: ArrayLike | None = None,
+    ) -> None:
+        p1 = _finite_array(link1_nodes, 'link1_nodes')
+        if p1.ndim != 2 or p1.shape[1] != 3 or p1.shape[0] == 0:
+            raise ValueError(f'link1_nodes must have shape (n1, 3) with n1 >= 1, got {p1.shape}')
+        p2 = p1 if link2_nodes is None else _finite_array(link2_nodes, 'link2_nodes')
+        if p2.ndim != 2 or p2.shape[1] != 3 or p2.shape[0] == 0:
+            raise ValueError(f'link2_nodes must have shape (n2, 3) with n2 >= 1, got {p2.shape}')
+        conn = np.asarray(connections)
+        if conn.ndim != 2 or conn.shape[1] != 2 or conn.shape[0] == 0:
+            raise ValueError(f'connections must have shape (n, 2) with n >= 1, got {conn.shape}')
+        if not np.issubdtype(conn.dtype, np.integer):
+            raise ValueError(f'connections must be integer node indices, got dtype {conn.dtype}')
+        n = conn.shape[0]
+        if conn[:, 0].min() < 0 or conn[:, 0].max() >= p1.shape[0]:
+            raise ValueError(f'connections[:, 0] must index link1_nodes (0..{p1.shape[0] - 1})')
+        if conn[:, 1].min() < 0 or conn[:, 1].max() >= p2.shape[0]:
+            raise ValueError(f'connections[:, 1] must index link2_nodes (0..{p2.shape[0] - 1})')
+        k = np.broadcast_to(_finite_array(stiffness, 'stiffness'), (n,)).copy()
+        if np.any(k <= 0.0):
+            raise ValueError(f'stiffness must be > 0 for every string, got {k}')
+        if force_law not in FORCE_LAWS:
+            raise ValueError(f'force_law must be one of {FORCE_LAWS}, got {force_law!r}')
+        self.link1_nodes = p1
+        self.link2_nodes = p2
+        self.connections = conn.astype(np.intp)
+        self.k = k
+        self.force_law = force_law
+        self.rest_lengths = self.validate_rest_lengths(rest_lengths, batched=False)
+        if max_lengths is None:
+            lmax = np.full(n, np.inf)
+        else:
+            lmax = np.broadcast_to(np.asarray(max_lengths, dtype=np.float64), (n,)).copy()
+            if np.any(np.isnan(lmax)):
+                raise ValueError('max_lengths must not be NaN (use inf for no limit)')
+            if np.any(lmax <= self.rest_lengths):
+                bad = np.flatnonzero(lmax <= self.rest_lengths)
+                raise ValueError(f'max_lengths must exceed rest_lengths (strings {bad.tolist()})')
+        self.max_lengths = lmax
+        self.max_stretch = lmax - self.rest_lengths
+        self.node_names = list(node_names) if node_names is not None else [
+            str(i) for i in range(p1.shape[0])]
+        self.link2_node_names = list(link2_node_names) if link2_node_names is not None else (
+            self.node_names if link2_nodes is None else [str(i) for i in range(p2.shape[0])])
+        self.string_names = list(string_names) if string_names is not None else [
+            f'{self.node_names[a]}-{self.link2_node_names[b]}' for a, b in self.connections]
+        if len(self.string_names) != n:
+            raise ValueError(f'string_names must have {n} entries, got {len(self.string_names)}')
+        x0 = np.zeros(6) if initial_screw is None else as_screws(initial_screw, 'initial_screw')
+        if x0.shape != (6,) or np.linalg.norm(x0[:3]) >= 2.0 * math.pi:
+            raise ValueError('initial_screw must have 6 values with |omega| < 2 pi')
+        self.initial_screw = x0
+        # Per-string node coordinates, gathered once.
+        self._p1 = p1[self.connections[:, 0]]
+        self._p2 = p2[self.connections[:, 1]]
+
+        self._p2h = np.hstack([self._p2, np.ones((n, 1))])
+        self._Z = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)), _hat(self._p1)], axis=1)
+        self._BETA_MAP = _beta_map(self._Z)
+
+    _SWAP = np.array([3, 4, 5, 0, 1, 2])
+    _SWAP_SIGN = np.array([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0])
+    _ROW_SIGN = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])[:, None]
+
+    # ------------------------------------------------------------------ construction
+    @property
+    def n_strings(self) -> int:
+        """Number of strings."""
+        return self.connections.shape[0]
+
+    @classmethod
+    def from_dict(cls, section: Mapping[str, Any]) -> JointModel:
+        """Build from the ``joint`` section of a config (see ``config/default_joint.yaml``).
+
+        Keys: ``node_names`` (list), ``link1_nodes`` (flat xyz list, m), ``link2_nodes`` (flat,
+        empty = same as link 1), ``link2_node_names`` (empty = same), ``string_names``,
+        ``string_link1_nodes`` / ``string_link2_nodes`` (node names), ``stiffness`` (N/m, one per
+        string or one for all), ``rest_lengths`` (m), ``max_lengths`` (m, empty = no limit),
+        ``force_law``. Errors name the offending key.
+        """
+        def get(key: str, default: Any = None, required: bool = True) -> Any:
+            if key in section and section[key] is not None:
+                return section[key]
+            if required and default is None:
+                raise ValueError(f'joint.{key} is missing')
+            return default
+
+        def nodes(key: str, value: Any) -> FloatArray:
+            arr = _finite_array(value, f'joint.{key}').ravel()
+            if arr.size == 0 or arr.size % 3:
+                raise ValueError(f'joint.{key} must be a flat list of x, y, z triples, '
+                                 f'got {arr.size} values')
+            return arr.reshape(-1, 3)
+
+        p1 = nodes('link1_nodes', get('link1_nodes'))
+        names1 = [str(x) for x in get('node_names', [], required=False)] or [
+            str(i) for i in range(p1.shape[0])]
+        if len(names1) != p1.shape[0]:
+            raise ValueError(f'joint.node_names has {len(names1)} names for {p1.shape[0]} nodes')
+        raw2 = get('link2_nodes', [], required=False)
+        p2 = nodes('link2_nodes', raw2) if len(raw2) else None
+        names2 = [str(x) for x in get('link2_node_names', [], required=False)]
+        if p2 is None:
+            names2 = names2 or names1
+            n2 = p1.shape[0]
+        else:
+            names2 = names2 or [str(i) for i in range(p2.shape[0])]
+            n2 = p2.shape[0]
+        if len(names2) != n2:
+            raise ValueError(f'joint.link2_node_names has {len(names2)} names for {n2} nodes')
+        ends1 = [str(x) for x in get('string_link1_nodes')]
+        ends2 = [str(x) for x in get('string_link2_nodes')]
+        if len(ends1) != len(ends2) or not ends1:
+            raise ValueError('joint.string_link1_nodes and joint.string_link2_nodes must be '
+                             f'non-empty and of equal length, got {len(ends1)} and {len(ends2)}')
+        try:
+            conn = np.array([[names1.index(a), names2.index(b)] for a, b in zip(ends1, ends2,
+                                                                                 strict=True)])
+        except ValueError:
+            unknown = sorted({a for a in ends1 if a not in names1}
+                             | {b for b in ends2 if b not in names2})
+            raise ValueError(f'joint.string_link1_nodes / string_link2_nodes name unknown '
+                             f'nodes {unknown}') from None
+        n = len(ends1)
+
+        def per_string(key: str, value: Any, allow_empty: bool = False) -> FloatArray | None:
+            arr = np.asarray(value, dtype=np.float64).ravel()
+            if arr.size == 0 and allow_empty:
+                return None
+            if arr.size == 1:
+                arr = np.full(n, arr[0])
+            if arr.size != n:
+                raise ValueError(f'joint.{key} must have {n} values (one per string), '
+                                 f'got {arr.size}')
+            if np.any(np.isnan(arr)) or (not allow_empty and not np.all(np.isfinite(arr))):
+                raise ValueError(f'joint.{key} must be finite, got {arr.tolist()}')
+            return arr
+
+        stiffness = per_string('stiffness', get('stiffness'))
+        if np.any(stiffness <= 0.0):
+            raise ValueError(f'joint.stiffness must be > 0, got {stiffness.tolist()}')
+        rest = per_string('rest_lengths', get('rest_lengths'))
+        if np.any(rest <= 0.0):
+            raise ValueError(f'joint.rest_lengths must be > 0, got {rest.tolist()}')
+        lmax = per_string('max_lengths', get('max_lengths', [], required=False), allow_empty=True)
+        if lmax is not None and np.any(lmax <= rest):
+            raise ValueError('joint.max_lengths must exceed joint.rest_lengths for every string')
+        law = str(get('force_law', 'hooke', required=False))
+        if law not in FORCE_LAWS:
+            raise ValueError(f'joint.force_law must be one of {FORCE_LAWS}, got {law!r}')
+        string_names = [str(x) for x in get('string_names', [], required=False)] or None
+        if string_names is not None and len(string_names) != n:
+            raise ValueError(f'joint.string_names must have {n} names, got {len(string_names)}')
+        raw_x0 = np.asarray(get('initial_screw', [], required=False), dtype=np.float64).ravel()
+        if raw_x0.size not in (0, 6) or not np.all(np.isfinite(raw_x0)):
+            raise ValueError(f'joint.initial_screw must be empty or 6 finite values, '
+                             f'got {raw_x0.tolist()}')
+        if raw_x0.size and np.linalg.norm(raw_x0[:3]) >= 2.0 * math.pi:
+            raise ValueError('joint.initial_screw must have |omega| < 2 pi')
+        return cls(p1, conn, stiffness, rest, link2_nodes=p2, max_lengths=lmax, force_law=law,
+                   node_names=names1, link2_node_names=names2, string_names=string_names,
+                   initial_screw=raw_x0 if raw_x0.size else None)
+
+    @classmethod
+    def from_yaml(cls, path: str | Path) -> JointModel:
+        """Load from a YAML file: a ROS parameter file (``<node>: ros__parameters: joint:``)
+        or a plain file with a top-level ``joint`` mapping."""
+        return cls.from_dict(joint_section(load_yaml(path)))
+
+    def with_rest_lengths(self, rest_lengths: ArrayLike) -> JointModel:
+        """A copy with new rest lengths (the maximum stretch of each string is kept)."""
+        rest = self.validate_rest_lengths(rest_lengths, batched=False)
+        return JointModel(self.link1_nodes, self.connections, self.k, rest,
+                          link2_nodes=self.link2_nodes, max_lengths=rest + self.max_stretch,
+                          force_law=self.force_law, node_names=self.node_names,
+                          link2_node_names=self.link2_node_names, string_names=self.string_names,
+                          initial_screw=self.initial_screw)
+
+    # ------------------------------------------------------------------ validation
+    def validate_rest_lengths(self, rest_lengths: ArrayLike | None, batched: bool = True
+                              ) -> FloatArray:
+        """Rest lengths as float array (n,) (or (N, n) when ``batched``): finite, > 0."""
+        if rest_lengths is None:
+            return self.rest_lengths
+        arr = _finite_array(rest_lengths, 'rest_lengths')
+        n = self.n_strings
+        if not (arr.shape == (n,) or (batched and arr.ndim == 2 and arr.shape[1] == n)):
+            raise ValueError(f'rest_lengths must have shape ({n},)'
+                             + (f' or (N, {n})' if batched else '') + f', got {arr.shape}')
+        if np.any(arr <= 0.0):
+            raise ValueError(f'rest_lengths must be > 0, got minimum {arr.min()}')
+        return arr
+
+    # ------------------------------------------------------------------ core evaluation
+    def _string_forces(self, lengths: FloatArray, rest: FloatArray
+                       ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
+        """Tension phi (N), d phi / d l (N/m), slack and saturated masks (eq. 8, corrected)."""
+        lmax = rest + self.max_stretch
+        slack = lengths <= rest
+        saturated = lengths >= lmax
+        taut = ~(slack | saturated)
+        clipped = np.minimum(np.maximum(lengths, rest), lmax)
+        if self.force_law == 'hooke':
+            phi = self.k * (clipped - rest)
+            dphi = self.k * taut
+        else:  # 'paper': tension k (l - l0) / l, constant beyond lmax
+            phi = self.k * (clipped - rest) / clipped
+            dphi = (self.k * rest / (clipped * clipped)) * taut
+        return phi, dphi, slack, saturated
+
+    def evaluate(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> JointState:
+        """All quantities at screw ``xi`` (6,) or a batch (N, 6); rest lengths (n,) or (N, n)."""
+        xi = as_screws(xi)
+        rest = self.validate_rest_lengths(rest_lengths)
+        if rest.ndim == 2 and (xi.ndim != 2 or xi.shape[0] != rest.shape[0]):
+            raise ValueError(f'batched rest_lengths {rest.shape} need screws of shape '
+                             f'({rest.shape[0]}, 6), got {xi.shape}')
+        kin = ScrewKinematics(xi)
+        # Homogeneous link-2 string ends in {1}: [q_j, 1] = T [p2_j, 1].
+        qh = self._p2h @ np.swapaxes(kin.T, -1, -2)  # (B, n, 4)
+        q = qh[..., :3]
+        s = self._p1 - q
+        lengths = np.sqrt(np.einsum('...i,...i->...', s, s))
+        if lengths.min() < MIN_STRING_LENGTH:
+            bad = np.unique(np.nonzero(lengths < MIN_STRING_LENGTH)[-1]).tolist()
+            raise ValueError(f'strings {bad} have zero length at this screw')
+        u = s / lengths[..., None]
+        phi, dphi, slack, saturated = self._string_forces(lengths, rest)
+        beta = phi / lengths
+        alpha = dphi - beta
+        # X_j = Z_j u_j = [u_j; p1_j x u_j] with Z_j = [I; hat(p1_j)]: F = sum phi_j X_j (eq. 9).
+        X = (self._Z @ u[..., None])[..., 0]  # (B, n, 6)
+        wrench = (phi[..., None, :] @ X)[..., 0, :]
+        # H = sum Z A [hat(q), I] with A = alpha u u^T + beta I (eq. 10 with df/ds of every
+        # region). Alpha part: sum alpha X Y^T, Y = [u x q; u] = [-(p1 x u); u] (u parallel s).
+        # Beta part: sum beta [Z hat(q), Z], linear in (beta q, beta): one precomputed matrix.
+        Y = X[..., self._SWAP] * self._SWAP_SIGN
+        H = np.swapaxes(X * alpha[..., None], -1, -2) @ Y
+        g = (qh * beta[..., None]).reshape(qh.shape[:-2] + (-1,))
+        H += (g @ self._BETA_MAP).reshape(H.shape)
+        # K = [H_G G - H_D Q, -H_D G] = H diag(I, -I) J (J the SE(3) left Jacobian);
+        # K_c = [H_D, -H_G].
+        K = H @ (kin.J * self._ROW_SIGN)
+        Kc = H @ _KC_MAP
+        return JointState(xi, kin.T, s, lengths, phi, slack, saturated, wrench, K, Kc)
+
+    # ------------------------------------------------------------------ public shortcuts
+    def wrench(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> FloatArray:
+        """String wrench on link 2, ``[f; m]`` in {1} about its origin (eq. 9): (6,) or (N, 6)."""
+        return self.evaluate(xi, rest_lengths).wrench
+
+    def stiffness(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> FloatArray:
+        """Analytical ``K = dF/dxi`` (eq. 10): (6, 6) or (N, 6, 6)."""
+        return self.evaluate(xi, rest_lengths).stiffness
+
+    def cartesian_stiffness(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None
+                            ) -> FloatArray:
+        """``K_c = -dF/d[dv; dw]`` for a spatial twist in {1}: (6, 6) or (N, 6, 6)."""
+        return self.evaluate(xi, rest_lengths).cartesian_stiffness
+
+    def tensions(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> FloatArray:
+        """String tensions (N): (n,) or (N, n)."""
+        return self.evaluate(xi, rest_lengths).tensions
+
+    def link2_nodes_in_link1(self, transform: ArrayLike) -> FloatArray:
+        """Link-2 nodes expressed in {1} for ``transform`` (4, 4) (or (N, 4, 4)): (..., n2, 3)."""
+        T = np.asarray(transform, dtype=np.float64)
+        return self.link2_nodes @ np.swapaxes(T[..., :3, :3], -1, -2) + T[..., None, :3, 3]
+
+    def lengths(self, xi: ArrayLike) -> FloatArray:
+        """String lengths (m): (n,) or (N, n)."""
+        xi = as_screws(xi)
+        T = exp_se3(xi)
+        q = self._p2 @ np.swapaxes(T[..., :3, :3], -1, -2) + T[..., None, :3, 3]
+        return np.linalg.norm(self._p1 - q, axis=-1)
+
+    def energy(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> FloatArray | float:
+        """Elastic potential energy of the strings (J): float or (N,).
+
+        Hooke: ``k (l - l0)^2 / 2``; paper law: ``k (l - l0 - l0 ln(l / l0))``; beyond lmax both
+        continue linearly with the saturated tension, so that the tension is ``dU/dl``.
+        """
+        xi = as_screws(xi)
+        rest = self.validate_rest_lengths(rest_lengths)
+        lengths = self.lengths(xi)
+        lmax = rest + self.max_stretch
+        lc = np.minimum(lengths, lmax)
+        if self.force_law == 'hooke':
+            stored = 0.5 * self.k * (lc - rest) ** 2
+        else:
+            stored = self.k * (lc - rest - rest * np.log(lc / rest))
+        phi, _, slack, saturated = self._string_forces(lengths, rest)
+        extra = np.where(saturated, phi * (lengths - lmax), 0.0)
+        total = np.sum(np.where(slack, 0.0, stored + extra), axis=-1)
+        return float(total) if np.ndim(total) == 0 else total
+
+    def numerical_stiffness(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None,
+                            step: float = NUMERICAL_STEP) -> FloatArray:
+        """Central-difference ``dF/dxi`` with step ``step`` (eqs. 21): (6, 6) or (N, 6, 6)."""
+        xi = as_screws(xi)
+        if not (math.isfinite(step) and step > 0.0):
+            raise ValueError(f'step must be finite and > 0, got {step}')
+        rest = self.validate_rest_lengths(rest_lengths)
+        eye = np.eye(6) * step
+        plus = xi[..., None, :] + eye  # (..., 6, 6): row i perturbs coordinate i
+        minus = xi[..., None, :] - eye
+        both = np.concatenate([plus, minus], axis=-2).reshape(-1, 6)
+        rest_b = rest if rest.ndim == 1 else np.repeat(rest, 12, axis=0)
+        F = self.evaluate(both, rest_b).wrench.reshape(xi.shape[:-1] + (12, 6))
+        return np.swapaxes((F[..., :6, :] - F[..., 6:, :]) / (2.0 * step), -1, -2)
+
+
+def load_yaml(path: str | Path) -> Any:
+    """Read a YAML file (PyYAML), with a clear error for a missing or malformed file."""
+    import yaml
+
+    path = Path(path)
+    try:
+        with path.open(encoding='utf-8') as handle:
+            return yaml.safe_load(handle)
+    except OSError as exc:
+        raise ValueError(f'cannot read config {path}: {exc.strerror}') from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f'config {path} is not valid YAML: {exc}') from None
+
+
+def joint_section(document: Any) -> Mapping[str, Any]:
+    """The ``joint`` mapping of a plain config or of a ROS parameter file."""
+    if not isinstance(document, Mapping):
+        raise ValueError('config must be a YAML mapping')
+    if 'joint' in document:
+        section = document['joint']
+    else:
+        section = None
+        for value in document.values():
+            if isinstance(value, Mapping) and isinstance(value.get('ros__parameters'), Mapping):
+                section = value['ros__parameters'].get('joint')
+                if section is not None:
+                    break
+    if not isinstance(section, Mapping):
+        raise ValueError('config has no "joint" section (top level or under ros__parameters)')
+    return section

@@ -1,0 +1,395 @@
+"""Screw algebra on SE(3) in the paper's [omega; v] ordering (Monke & Vikas, eqs. 1-5, 12-18).
+
+Conventions
+-----------
+* A screw is ``xi = [omega; v]`` (rotation first), ``theta = |omega|`` in radians, ``v`` in metres.
+* ``T(xi) = exp(hat(xi))`` maps coordinates in link 2's frame {2} into link 1's frame {1}.
+* Every function accepts one screw of shape ``(6,)`` or a batch of shape ``(N, 6)`` and returns
+  arrays with the same leading shape.
+
+The closed-form derivative ``dT/dxi`` uses the SO(3) left Jacobian ``G`` (eq. 4, 14) and the
+derivative of ``G v`` with respect to ``omega`` (eqs. 15-17). Every coefficient that is a ratio of
+vanishing quantities at ``theta -> 0`` has a Taylor branch below ``SERIES_THRESHOLD``; the closed
+forms are used above it, where they keep at least 13 significant digits.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: Below this rotation angle (rad) the Taylor series of the coefficients are used.
+SERIES_THRESHOLD = 0.5
+#: Number of Taylor terms (in theta**2) kept; the remainder at theta = 0.5 is below 1e-30.
+_SERIES_TERMS = 12
+#: Below this angle (rad) the inverse left Jacobian uses its series.
+_INVERSE_SERIES_THRESHOLD = 0.5
+#: |theta - pi| below which log_so3 takes the rotation axis from the symmetric part of R.
+_LOG_SYMMETRIC_BRANCH = 0.5 * math.pi
+
+
+def _series(offset: int, derivative: bool) -> FloatArray:
+    """Taylor coefficients (in theta**2) of sum_k (-1)^k theta^2k / (2k + offset)!.
+
+    With ``derivative`` the coefficients of (1/theta) d/dtheta of that series.
+    """
+    coeffs = np.array(
+        [(-1.0) ** k / math.factorial(2 * k + offset) for k in range(_SERIES_TERMS + 1)]
+    )
+    if derivative:
+        coeffs = np.array([2.0 * k * coeffs[k] for k in range(1, _SERIES_TERMS + 1)])
+    else:
+        coeffs = coeffs[:_SERIES_TERMS]
+    return coeffs[::-1].copy()  # highest power first, for np.polyval
+
+
+# a = sin t / t, b = (1 - cos t) / t^2, c = (t - sin t) / t^3 and b1 = b'/t, c1 = c'/t.
+_A_SERIES = _series(1, False)
+_B_SERIES = _series(2, False)
+_C_SERIES = _series(3, False)
+_B1_SERIES = _series(2, True)
+_C1_SERIES = _series(3, True)
+# e = (1 - t sin t / (2 (1 - cos t))) / t^2, the omega^2 coefficient of the inverse left Jacobian.
+_E_SERIES = np.array([691.0 / 1307674368000.0, 1.0 / 47900160.0, 1.0 / 1209600.0,
+                      1.0 / 30240.0, 1.0 / 720.0, 1.0 / 12.0])
+
+
+def rotation_coefficients(theta: ArrayLike) -> tuple[FloatArray, ...]:
+    """Coefficients ``a, b, c, b1, c1`` of Rodrigues' formula and the left Jacobian.
+
+    ``a = sin t / t``, ``b = (1 - cos t) / t^2``, ``c = (t - sin t) / t^3`` (eqs. 3, 4, 14) and
+    ``b1 = (db/dt) / t = (t sin t + 2 cos t - 2) / t^4``,
+    ``c1 = (dc/dt) / t = (3 sin t - t cos t - 2 t) / t^5`` (eq. 16 divided by t, so that
+    ``d b / d omega_i = b1 * omega_i``). Accurate for every ``t >= 0`` including 0.
+    """
+    t = np.asarray(theta, dtype=np.float64)
+    t2 = t * t
+    small = t < SERIES_THRESHOLD
+    ts = np.where(small, 1.0, t)  # avoid 0/0 in the discarded closed-form branch
+    s, c = np.sin(ts), np.cos(ts)
+    closed = (
+        s / ts,
+        (1.0 - c) / ts**2,
+        (ts - s) / ts**3,
+        (ts * s + 2.0 * c - 2.0) / ts**4,
+        (3.0 * s - ts * c - 2.0 * ts) / ts**5,
+    )
+    series = (_A_SERIES, _B_SERIES, _C_SERIES, _B1_SERIES, _C1_SERIES)
+    return tuple(
+        np.where(small, np.polyval(p, t2), value) for p, value in zip(series, closed, strict=True)
+    )
+
+
+def _coefficients_scalar(theta: float) -> tuple[float, float, float, float, float]:
+    """Scalar fast path of :func:`rotation_coefficients` (math module, no array overhead)."""
+    if theta < SERIES_THRESHOLD:
+        t2 = theta * theta
+        out = []
+        for p in (_A_SERIES, _B_SERIES, _C_SERIES, _B1_SERIES, _C1_SERIES):
+            acc = 0.0
+            for coeff in p:
+                acc = acc * t2 + coeff
+            out.append(acc)
+        return out[0], out[1], out[2], out[3], out[4]
+    s, c = math.sin(theta), math.cos(theta)
+    t2 = theta * theta
+    return (
+        s / theta,
+        (1.0 - c) / t2,
+        (theta - s) / (t2 * theta),
+        (theta * s + 2.0 * c - 2.0) / (t2 * t2),
+        (3.0 * s - theta * c - 2.0 * theta) / (t2 * t2 * theta),
+    )
+
+
+def as_screws(xi: ArrayLike, name: str = 'xi') -> FloatArray:
+    """Validate screws: shape ``(6,)`` or ``(N, 6)``, finite; returns a float64 array."""
+    arr = np.asarray(xi, dtype=np.float64)
+    if arr.ndim not in (1, 2) or arr.shape[-1] != 6:
+        raise ValueError(f'{name} must have shape (6,) or (N, 6), got {arr.shape}')
+    if not math.isfinite(float(arr.sum())) and not np.all(np.isfinite(arr)):
+        raise ValueError(f'{name} must be finite, got {arr}')
+    if not math.isfinite(float(arr.sum())):
+        raise ValueError(f'{name} is too large (its sum overflows), got {arr}')
+    return arr
+
+
+def hat3(w: ArrayLike) -> FloatArray:
+    """so(3) hat: ``(..., 3) -> (..., 3, 3)`` with ``hat3(a) @ b == cross(a, b)``."""
+    w = np.asarray(w, dtype=np.float64)
+    out = np.zeros(w.shape[:-1] + (3, 3))
+    out[..., 0, 1] = -w[..., 2]
+    out[..., 0, 2] = w[..., 1]
+    out[..., 1, 0] = w[..., 2]
+    out[..., 1, 2] = -w[..., 0]
+    out[..., 2, 0] = -w[..., 1]
+    out[..., 2, 1] = w[..., 0]
+    return out
+
+
+def vee3(W: ArrayLike) -> FloatArray:
+    """Inverse of :func:`hat3` (uses the skew-symmetric part)."""
+    W = np.asarray(W, dtype=np.float64)
+    return 0.5 * np.stack(
+        [W[..., 2, 1] - W[..., 1, 2], W[..., 0, 2] - W[..., 2, 0], W[..., 1, 0] - W[..., 0, 1]],
+        axis=-1,
+    )
+
+
+def hat(xi: ArrayLike) -> FloatArray:
+    """se(3) hat (eq. 1): ``(..., 6) -> (..., 4, 4)``, ``xi = [omega; v]``."""
+    xi = np.asarray(xi, dtype=np.float64)
+    out = np.zeros(xi.shape[:-1] + (4, 4))
+    out[..., :3, :3] = hat3(xi[..., :3])
+    out[..., :3, 3] = xi[..., 3:]
+    return out
+
+
+def vee(X: ArrayLike) -> FloatArray:
+    """Inverse of :func:`hat`: ``(..., 4, 4) -> (..., 6)`` as ``[omega; v]``."""
+    X = np.asarray(X, dtype=np.float64)
+    return np.concatenate([vee3(X[..., :3, :3]), X[..., :3, 3]], axis=-1)
+
+
+def _rotation_and_jacobian(
+    omega: FloatArray, coeffs: tuple[FloatArray, ...]
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """R = exp(hat omega) (eq. 3), G (eq. 4), W = hat(omega), W @ W for batched omega."""
+    a, b, c = coeffs[0], coeffs[1], coeffs[2]
+    W = hat3(omega)
+    W2 = W @ W
+    eye = np.eye(3)
+    R = eye + a[..., None, None] * W + b[..., None, None] * W2
+    G = eye + b[..., None, None] * W + c[..., None, None] * W2
+    return R, G, W, W2
+
+
+def exp_so3(omega: ArrayLike) -> FloatArray:
+    """Rodrigues' formula (eq. 3): ``(..., 3) -> (..., 3, 3)``."""
+    omega = np.asarray(omega, dtype=np.float64)
+    coeffs = rotation_coefficients(np.linalg.norm(omega, axis=-1))
+    return _rotation_and_jacobian(omega, coeffs)[0]
+
+
+def left_jacobian_so3(omega: ArrayLike) -> FloatArray:
+    """SO(3) left Jacobian ``G = I + b W + c W^2`` (eqs. 4, 14)."""
+    omega = np.asarray(omega, dtype=np.float64)
+    coeffs = rotation_coefficients(np.linalg.norm(omega, axis=-1))
+    return _rotation_and_jacobian(omega, coeffs)[1]
+
+
+def left_jacobian_so3_inverse(omega: ArrayLike) -> FloatArray:
+    """``G^-1 = I - W/2 + e W^2``, ``e = (1 - t sin t / (2 (1 - cos t))) / t^2``.
+
+    Singular at ``|omega| = 2 pi`` (where ``G`` is not invertible).
+    """
+    omega = np.asarray(omega, dtype=np.float64)
+    t = np.linalg.norm(omega, axis=-1)
+    small = t < _INVERSE_SERIES_THRESHOLD
+    ts = np.where(small, 1.0, t)
+    closed = (1.0 - ts * np.sin(ts) / (2.0 * (1.0 - np.cos(ts)))) / ts**2
+    e = np.where(small, np.polyval(_E_SERIES, t * t), closed)
+    W = hat3(omega)
+    return np.eye(3) - 0.5 * W + e[..., None, None] * (W @ W)
+
+
+def _translation_jacobian(
+    omega: FloatArray, v: FloatArray, coeffs: tuple[FloatArray, ...], W: FloatArray,
+    W2: FloatArray,
+) -> FloatArray:
+    """``D = d(G(omega) v) / d omega`` (eqs. 15-17), ``(..., 3, 3)``, column i = d/d omega_i.
+
+    With ``E_i W + W E_i = omega e_i^T + e_i omega^T - 2 omega_i I`` (E_i = hat(e_i)), eq. (15)
+    applied to v and summed into a matrix gives
+    ``D = -b hat(v) + c (omega v^T + (omega.v) I - 2 v omega^T) + (b1 W v + c1 W^2 v) omega^T``.
+    """
+    _, b, c, b1, c1 = coeffs
+    bb, cc = b[..., None, None], c[..., None, None]
+    wv = np.sum(omega * v, axis=-1)[..., None, None]
+    outer = omega[..., :, None] * v[..., None, :]
+    term = b1[..., None] * (W @ v[..., None])[..., 0] + c1[..., None] * (W2 @ v[..., None])[..., 0]
+    return (
+        -bb * hat3(v)
+        + cc * (outer + wv * np.eye(3) - 2.0 * np.swapaxes(outer, -1, -2))
+        + term[..., :, None] * omega[..., None, :]
+    )
+
+
+class ScrewKinematics:
+    """Everything derived from one screw (or a batch) that the joint model needs.
+
+    Attributes (leading batch shape ``B`` = ``()`` or ``(N,)``):
+    ``R`` (B, 3, 3), ``t`` (B, 3) with ``T = [R t; 0 1]``; ``G`` (B, 3, 3) the SO(3) left
+    Jacobian; ``D`` (B, 3, 3) = d t / d omega (eqs. 15-17); ``Q`` (B, 3, 3) = D + hat(t) G, the
+    lower-left block of the SE(3) left Jacobian in [omega; v] order; ``T`` (B, 4, 4);
+    ``J`` (B, 6, 6) = [[G, 0], [Q, G]] the SE(3) left Jacobian. A single screw takes a scalar fast
+    path (plain floats, about 10x faster than the array path at this size).
+    """
+
+    __slots__ = ('D', 'G', 'J', 'Q', 'R', 'T', 't', 'theta')
+
+    def __init__(self, xi: ArrayLike) -> None:
+        xi = np.asarray(xi, dtype=np.float64)
+        if xi.ndim == 1:
+            self._single(xi)
+            return
+        omega, v = xi[..., :3], xi[..., 3:]
+        self.theta = np.linalg.norm(omega, axis=-1)
+        coeffs = rotation_coefficients(self.theta)
+        self.R, self.G, W, W2 = _rotation_and_jacobian(omega, coeffs)
+        self.t = (self.G @ v[..., None])[..., 0]
+        self.D = _translation_jacobian(omega, v, coeffs, W, W2)
+        self.Q = self.D + hat3(self.t) @ self.G
+        batch = xi.shape[:-1]
+        self.T = np.zeros(batch + (4, 4))
+        self.T[..., :3, :3] = self.R
+        self.T[..., :3, 3] = self.t
+        self.T[..., 3, 3] = 1.0
+        self.J = np.zeros(batch + (6, 6))
+        self.J[..., :3, :3] = self.G
+        self.J[..., 3:, 3:] = self.G
+        self.J[..., 3:, :3] = self.Q
+
+    def _single(self, xi: FloatArray) -> None:
+        """Same quantities for one screw with scalar arithmetic (W^2 = w w^T - theta^2 I)."""
+        wx, wy, wz, vx, vy, vz = xi.tolist()
+        t2 = wx * wx + wy * wy + wz * wz
+        self.theta = math.sqrt(t2)
+        a, b, c, b1, c1 = _coefficients_scalar(self.theta)
+        xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
+        r = [[1.0 + b * (xx - t2), -a * wz + b * xy, a * wy + b * xz],
+             [a * wz + b * xy, 1.0 + b * (yy - t2), -a * wx + b * yz],
+             [-a * wy + b * xz, a * wx + b * yz, 1.0 + b * (zz - t2)]]
+        g00, g01, g02 = 1.0 + c * (xx - t2), -b * wz + c * xy, b * wy + c * xz
+        g10, g11, g12 = b * wz + c * xy, 1.0 + c * (yy - t2), -b * wx + c * yz
+        g20, g21, g22 = -b * wy + c * xz, b * wx + c * yz, 1.0 + c * (zz - t2)
+        tx = g00 * vx + g01 * vy + g02 * vz
+        ty = g10 * vx + g11 * vy + g12 * vz
+        tz = g20 * vx + g21 * vy + g22 * vz
+        wv = wx * vx + wy * vy + wz * vz
+        # e = b1 W v + c1 W^2 v; D = -b hat(v) + c (w v^T + (w.v) I - 2 v w^T) + e w^T.
+        ex = b1 * (wy * vz - wz * vy) + c1 * (wx * wv - t2 * vx)
+        ey = b1 * (wz * vx - wx * vz) + c1 * (wy * wv - t2 * vy)
+        ez = b1 * (wx * vy - wy * vx) + c1 * (wz * wv - t2 * vz)
+        d = [[c * (wv - wx * vx) + ex * wx, b * vz + c * (wx * vy - 2.0 * vx * wy) + ex * wy,
+              -b * vy + c * (wx * vz - 2.0 * vx * wz) + ex * wz],
+             [-b * vz + c * (wy * vx - 2.0 * vy * wx) + ey * wx, c * (wv - wy * vy) + ey * wy,
+              b * vx + c * (wy * vz - 2.0 * vy * wz) + ey * wz],
+             [b * vy + c * (wz * vx - 2.0 * vz * wx) + ez * wx,
+              -b * vx + c * (wz * vy - 2.0 * vz * wy) + ez * wy, c * (wv - wz * vz) + ez * wz]]
+        # Q = D + hat(t) G, row by row.
+        q = [[d[0][0] - tz * g10 + ty * g20, d[0][1] - tz * g11 + ty * g21,
+              d[0][2] - tz * g12 + ty * g22],
+             [d[1][0] + tz * g00 - tx * g20, d[1][1] + tz * g01 - tx * g21,
+              d[1][2] + tz * g02 - tx * g22],
+             [d[2][0] - ty * g00 + tx * g10, d[2][1] - ty * g01 + tx * g11,
+              d[2][2] - ty * g02 + tx * g12]]
+        self.T = np.array([r[0] + [tx], r[1] + [ty], r[2] + [tz], [0.0, 0.0, 0.0, 1.0]])
+        self.J = np.array([[g00, g01, g02, 0.0, 0.0, 0.0], [g10, g11, g12, 0.0, 0.0, 0.0],
+                           [g20, g21, g22, 0.0, 0.0, 0.0], q[0] + [g00, g01, g02],
+                           q[1] + [g10, g11, g12], q[2] + [g20, g21, g22]])
+        self.R = self.T[:3, :3]
+        self.t = self.T[:3, 3]
+        self.G = self.J[:3, :3]
+        self.Q = self.J[3:, :3]
+        self.D = np.array(d)
+
+
+def exp_se3(xi: ArrayLike) -> FloatArray:
+    """``T = exp(hat(xi))`` (eq. 2): ``(6,) -> (4, 4)`` or ``(N, 6) -> (N, 4, 4)``."""
+    return ScrewKinematics(as_screws(xi)).T
+
+
+def left_jacobian_se3(xi: ArrayLike) -> FloatArray:
+    """SE(3) left Jacobian in [omega; v] order: ``[[G, 0], [Q, G]]``, ``(..., 6, 6)``.
+
+    Defined by ``exp(hat(xi + d)) = exp(hat(J d)) exp(hat(xi)) + O(|d|^2)``: it maps a change of
+    screw coordinates to the spatial twist (in {1}, [omega; v]) that produces it.
+    """
+    return ScrewKinematics(as_screws(xi)).J
+
+
+def dexp_se3(xi: ArrayLike) -> FloatArray:
+    """Closed-form ``dT/dxi`` (eqs. 12-18): ``(6,) -> (4, 4, 6)``, ``[:, :, i] = dT/dxi_i``.
+
+    Rotation block: ``dR/d omega_i = hat(G e_i) R``, equal to Gallego and Yezzi's eq. (13) read
+    as a sum of three terms (see ERRATA; checked in the tests). Translation column:
+    ``d(G v)/d omega_i = D e_i`` (eqs. 15-17), ``dT/dv_i = [0, G e_i]`` (eq. 18). Batched input
+    ``(N, 6)`` gives ``(N, 4, 4, 6)``. Exact at ``theta = 0`` (series branch).
+    """
+    xi = as_screws(xi)
+    kin = ScrewKinematics(xi)
+    out = np.zeros(xi.shape[:-1] + (4, 4, 6))
+    # hat(G e_i) R for i = 0, 1, 2: move the column index of G to the front.
+    Gcols = np.moveaxis(kin.G, -1, -2)  # (..., 3 (i), 3)
+    dR = hat3(Gcols) @ kin.R[..., None, :, :]  # (..., 3 (i), 3, 3)
+    out[..., :3, :3, :3] = np.moveaxis(dR, -3, -1)
+    out[..., :3, 3, :3] = kin.D
+    out[..., :3, 3, 3:] = kin.G
+    return out
+
+
+def log_so3(R: ArrayLike, reference: ArrayLike | None = None) -> FloatArray:
+    """Rotation vector of ``R`` (``|omega| < 2 pi``) on the branch nearest to ``reference``.
+
+    The candidates are ``theta u`` and ``(theta - 2 pi) u`` with ``theta`` in ``[0, pi]``; without
+    a reference the principal one (``|omega| <= pi``) is returned. Robust at ``theta = 0`` and at
+    ``theta = pi`` (axis from the symmetric part of R, sign from the skew part).
+    """
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape != (3, 3):
+        raise ValueError(f'R must have shape (3, 3), got {R.shape}')
+    skew = vee3(R)  # sin(theta) u
+    sin_t = float(np.linalg.norm(skew))
+    cos_t = 0.5 * (float(np.trace(R)) - 1.0)
+    theta = math.atan2(sin_t, cos_t)
+    if theta < _LOG_SYMMETRIC_BRANCH:
+        # theta / sin(theta) with its series near 0.
+        t2 = theta * theta
+        ratio = 1.0 + t2 / 6.0 + 7.0 * t2 * t2 / 360.0 if theta < 1e-4 else theta / sin_t
+        omega = ratio * skew
+    else:
+        # u u^T = (sym(R) - cos t I) / (1 - cos t); take the best-conditioned column.
+        uu = (0.5 * (R + R.T) - cos_t * np.eye(3)) / (1.0 - cos_t)
+        k = int(np.argmax(np.diag(uu)))
+        u = uu[:, k] / math.sqrt(max(uu[k, k], np.finfo(float).tiny))
+        u /= np.linalg.norm(u)
+        if float(u @ skew) < 0.0:
+            u = -u
+        omega = theta * u
+    if reference is None or theta == 0.0:
+        return omega
+    ref = np.asarray(reference, dtype=np.float64)
+    norm = np.linalg.norm(omega)
+    other = omega * ((norm - 2.0 * math.pi) / norm)
+    return other if np.linalg.norm(other - ref) < np.linalg.norm(omega - ref) else omega
+
+
+def log_se3(T: ArrayLike, reference: ArrayLike | None = None) -> FloatArray:
+    """Screw ``xi = [omega; v]`` with ``exp(hat(xi)) = T`` (inverse of eq. 2).
+
+    ``reference`` (a screw, shape (6,)) selects the rotation branch nearest to its omega, which
+    matters at ``theta = pi`` where ``pi u`` and ``-pi u`` give the same rotation. ``T`` must be a
+    rigid transform (orthonormal R with det +1 to 1e-6).
+    """
+    T = np.asarray(T, dtype=np.float64)
+    if T.shape != (4, 4):
+        raise ValueError(f'T must have shape (4, 4), got {T.shape}')
+    if not np.all(np.isfinite(T)):
+        raise ValueError('T must be finite')
+    R, p = T[:3, :3], T[:3, 3]
+    if np.max(np.abs(R.T @ R - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0.0:
+        raise ValueError('T[:3, :3] must be a rotation matrix (orthonormal, det +1)')
+    ref_omega = None
+    if reference is not None:
+        ref = as_screws(reference, 'reference')
+        if ref.shape != (6,):
+            raise ValueError(f'reference must have shape (6,), got {ref.shape}')
+        ref_omega = ref[:3]
+    omega = log_so3(R, ref_omega)
+    v = left_jacobian_so3_inverse(omega) @ p
+    return np.concatenate([omega, v])
