@@ -6,7 +6,8 @@ minimises energy; with a constant wrench that is not equivalent on SE(3), see ``
 
 Method: damped Newton with the analytical ``K = dF/dxi`` as Jacobian and a backtracking line
 search on ``|F + W|``, steps clipped to a trust radius; if that stalls, scipy's trust-region
-``least_squares`` (with the same analytical Jacobian) takes over and Newton polishes its answer.
+``least_squares`` (with the same analytical Jacobian) takes over and Newton polishes its answer;
+last, load stepping (continuation from the initial screw in ``CONTINUATION_STEPS`` steps).
 Stability: the symmetric part of ``K_c`` is positive definite (equivalently that of
 ``S = -J^T P K``; at zero load S is the Hessian of the energy).
 """
@@ -36,6 +37,8 @@ MAX_ROTATION_STEP = 0.5
 MAX_TRANSLATION_STEP = 0.5
 #: Rotation angle beyond which the iterate is re-charted onto the branch |omega| <= pi + margin.
 RECHART_ANGLE = 2.0 * math.pi - 0.5
+#: Load steps of the continuation fallback.
+CONTINUATION_STEPS = 8
 #: Relative tolerance on the smallest eigenvalue of the scaled symmetric part of K_c.
 STABILITY_TOLERANCE = 1e-9
 
@@ -201,6 +204,9 @@ def solve_equilibrium(
     if norm > tolerance and time.perf_counter() < deadline:
         x, norm, iterations = _fallback(model, W, rest, x, norm, iterations, tolerance,
                                         max_iterations, deadline)
+    if norm > tolerance and time.perf_counter() < deadline:
+        x, norm, iterations = _continuation(model, W, rest, x0, x, norm, iterations, tolerance,
+                                            max_iterations, deadline)
     state = model.evaluate(x, rest)
     energy = float(model.energy(x, rest))
     if norm > tolerance:
@@ -219,12 +225,18 @@ def solve_equilibrium(
     return EquilibriumResult(True, message, x, norm, iterations, energy, stable, state)
 
 
+class _BudgetExhaustedError(Exception):
+    """Raised inside scipy's callbacks to stop at the deadline."""
+
+
 def _fallback(model: JointModel, W: FloatArray, rest: FloatArray, x: FloatArray, norm: float,
               iterations: int, tolerance: float, max_iterations: int, deadline: float
               ) -> tuple[FloatArray, float, int]:
     """Trust-region least squares on F + W with the analytic Jacobian, then Newton polish."""
 
     def residual(z: FloatArray) -> FloatArray:
+        if time.perf_counter() > deadline:
+            raise _BudgetExhaustedError
         try:
             return model.evaluate(z, rest).wrench + W
         except ValueError:
@@ -239,7 +251,7 @@ def _fallback(model: JointModel, W: FloatArray, rest: FloatArray, x: FloatArray,
     try:
         sol = least_squares(residual, x, jac=jacobian, method='trf', xtol=1e-15, ftol=1e-15,
                             gtol=1e-15, max_nfev=20 * max_iterations)
-    except (ValueError, np.linalg.LinAlgError):
+    except (ValueError, np.linalg.LinAlgError, _BudgetExhaustedError):
         return x, norm, iterations
     candidate = _rechart(sol.x)
     iterations += int(sol.nfev)
@@ -250,6 +262,22 @@ def _fallback(model: JointModel, W: FloatArray, rest: FloatArray, x: FloatArray,
         x, norm, extra = _newton(model, W, rest, x, max_iterations, tolerance, deadline)
         iterations += extra
     return x, norm, iterations
+
+
+def _continuation(model: JointModel, W: FloatArray, rest: FloatArray, x0: FloatArray,
+                  best: FloatArray, best_norm: float, iterations: int, tolerance: float,
+                  max_iterations: int, deadline: float) -> tuple[FloatArray, float, int]:
+    """Load stepping: solve for s W, s = 1/m, ..., 1, each from the previous solution."""
+    x = x0
+    for fraction in np.linspace(0.0, 1.0, CONTINUATION_STEPS + 1)[1:]:
+        x, norm, extra = _newton(model, fraction * W, rest, x, max_iterations, tolerance,
+                                 deadline)
+        iterations += extra
+        if norm > tolerance:
+            break
+    else:
+        return x, norm, iterations
+    return best, best_norm, iterations
 
 
 def _failure(model: JointModel, x: FloatArray, rest: FloatArray, W: FloatArray,

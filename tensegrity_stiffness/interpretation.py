@@ -1,0 +1,44 @@
+"""Physical interpretations of the stiffness matrix (Monke & Vikas, Section V, eqs. 19-20)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+#: Block names in the order of :attr:`StiffnessInterpretation.block_norms` (eq. 19).
+BLOCK_NAMES = ('K_fw', 'K_fv', 'K_mw', 'K_mv')
+#: Column labels of K (screw coordinates) and row labels (wrench components), eq. 20.
+COLUMN_NAMES = ('wx', 'wy', 'wz', 'vx', 'vy', 'vz')
+ROW_NAMES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
+
+
+@dataclass(frozen=True)
+class StiffnessInterpretation:
+    """Block, column and row views of ``K = dF/dxi``.
+
+    ``blocks``: the four 3x3 blocks of eq. (19) by name: K_fw (force per rotation), K_fv
+    (translational stiffness), K_mw (rotational stiffness), K_mv (moment per translation).
+    ``block_norms`` (4,): their Frobenius norms in :data:`BLOCK_NAMES` order;
+    ``column_norms`` (6,): |K e_i|, the wrench produced per unit change of screw coordinate i;
+    ``row_norms`` (6,): sensitivity of each wrench component (eq. 20).
+    """
+
+    blocks: dict[str, FloatArray]
+    block_norms: FloatArray
+    column_norms: FloatArray
+    row_norms: FloatArray
+
+
+def interpret_stiffness(stiffness: ArrayLike) -> StiffnessInterpretation:
+    """Block Frobenius norms, column norms and row norms of a (6, 6) stiffness matrix."""
+    K = np.asarray(stiffness, dtype=np.float64)
+    if K.shape != (6, 6):
+        raise ValueError(f'stiffness must have shape (6, 6), got {K.shape}')
+    blocks = {'K_fw': K[:3, :3], 'K_fv': K[:3, 3:], 'K_mw': K[3:, :3], 'K_mv': K[3:, 3:]}
+    block_norms = np.array([np.linalg.norm(blocks[name]) for name in BLOCK_NAMES])
+    return StiffnessInterpretation(blocks, block_norms, np.linalg.norm(K, axis=0),
+                                   np.linalg.norm(K, axis=1))
