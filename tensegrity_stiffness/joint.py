@@ -46,11 +46,13 @@ FloatArray = NDArray[np.float64]
 FORCE_LAWS = ('hooke', 'paper')
 #: Strings shorter than this (m) have no defined direction: evaluation raises ValueError.
 MIN_STRING_LENGTH = 1e-12
+#: Screws per chunk of the batched evaluation (keeps the working set in cache).
+BATCH_CHUNK = 1024
 #: Default central-difference step of :meth:`JointModel.numerical_stiffness` (eq. 21).
 NUMERICAL_STEP = 1e-6
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class JointState:
     """Everything the joint model computes at one screw (or a batch, leading axis N).
 
@@ -99,6 +101,8 @@ def _finite_array(value: ArrayLike, name: str) -> FloatArray:
 
 
 _EYE3 = np.eye(3)
+# Y = X @ _Y_MAP = [-(p1 x u); u] for X = [u; p1 x u] (row-wise).
+_Y_MAP = np.block([[np.zeros((3, 3)), np.eye(3)], [-np.eye(3), np.zeros((3, 3))]])
 # K_c = H @ _KC_MAP = [H_D, -H_G].
 _KC_MAP = np.block([[np.zeros((3, 3)), -np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
 
@@ -202,9 +206,9 @@ class JointModel:
         self._p2h = np.hstack([self._p2, np.ones((n, 1))])
         self._Z = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)), _hat(self._p1)], axis=1)
         self._BETA_MAP = _beta_map(self._Z)
+        # The same map for g laid out component-major ((4, n) instead of (n, 4)).
+        self._BETA_MAP_SOA = self._BETA_MAP.reshape(n, 4, 36).transpose(1, 0, 2).reshape(-1, 36)
 
-    _SWAP = np.array([3, 4, 5, 0, 1, 2])
-    _SWAP_SIGN = np.array([-1.0, -1.0, -1.0, 1.0, 1.0, 1.0])
     _ROW_SIGN = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])[:, None]
 
     # ------------------------------------------------------------------ construction
@@ -360,34 +364,86 @@ class JointModel:
         if rest.ndim == 2 and (xi.ndim != 2 or xi.shape[0] != rest.shape[0]):
             raise ValueError(f'batched rest_lengths {rest.shape} need screws of shape '
                              f'({rest.shape[0]}, 6), got {xi.shape}')
+        if xi.ndim == 2:
+            return self._evaluate_batch(xi, rest)
         kin = ScrewKinematics(xi)
         # Homogeneous link-2 string ends in {1}: [q_j, 1] = T [p2_j, 1].
-        qh = self._p2h @ np.swapaxes(kin.T, -1, -2)  # (B, n, 4)
-        q = qh[..., :3]
+        qh = self._p2h @ kin.T.T  # (n, 4)
+        q = qh[:, :3]
         s = self._p1 - q
-        lengths = np.sqrt(np.einsum('...i,...i->...', s, s))
-        if lengths.min() < MIN_STRING_LENGTH:
-            bad = np.unique(np.nonzero(lengths < MIN_STRING_LENGTH)[-1]).tolist()
-            raise ValueError(f'strings {bad} have zero length at this screw')
-        u = s / lengths[..., None]
+        lengths = np.sqrt((s * s).sum(1))
+        self._check_lengths(lengths)
+        u = s / lengths[:, None]
         phi, dphi, slack, saturated = self._string_forces(lengths, rest)
         beta = phi / lengths
         alpha = dphi - beta
         # X_j = Z_j u_j = [u_j; p1_j x u_j] with Z_j = [I; hat(p1_j)]: F = sum phi_j X_j (eq. 9).
-        X = (self._Z @ u[..., None])[..., 0]  # (B, n, 6)
-        wrench = (phi[..., None, :] @ X)[..., 0, :]
+        X = (self._Z @ u[:, :, None])[:, :, 0]  # (n, 6)
+        wrench = phi @ X
         # H = sum Z A [hat(q), I] with A = alpha u u^T + beta I (eq. 10 with df/ds of every
         # region). Alpha part: sum alpha X Y^T, Y = [u x q; u] = [-(p1 x u); u] (u parallel s).
         # Beta part: sum beta [Z hat(q), Z], linear in (beta q, beta): one precomputed matrix.
-        Y = X[..., self._SWAP] * self._SWAP_SIGN
-        H = np.swapaxes(X * alpha[..., None], -1, -2) @ Y
-        g = (qh * beta[..., None]).reshape(qh.shape[:-2] + (-1,))
-        H += (g @ self._BETA_MAP).reshape(H.shape)
+        H = (X * alpha[:, None]).T @ (X @ _Y_MAP)
+        H += ((qh * beta[:, None]).ravel() @ self._BETA_MAP).reshape(6, 6)
         # K = [H_G G - H_D Q, -H_D G] = H diag(I, -I) J (J the SE(3) left Jacobian);
         # K_c = [H_D, -H_G].
         K = H @ (kin.J * self._ROW_SIGN)
         Kc = H @ _KC_MAP
         return JointState(xi, kin.T, s, lengths, phi, slack, saturated, wrench, K, Kc)
+
+    def _check_lengths(self, lengths: FloatArray) -> None:
+        if lengths.min() < MIN_STRING_LENGTH:
+            bad = np.unique(np.nonzero(lengths < MIN_STRING_LENGTH)[-1]).tolist()
+            raise ValueError(f'strings {bad} have zero length at this screw')
+
+    def _evaluate_batch(self, xi: FloatArray, rest: FloatArray, wrench_only: bool = False
+                        ) -> JointState:
+        """The same computation as the single path for (N, 6) screws, in chunks of
+        ``BATCH_CHUNK`` and with strings on the last axis ((N, 3, n) component layout), so that
+        every step is one array operation or one GEMM over the chunk. With ``wrench_only`` the
+        stiffness matrices are left out (they are NaN): the honest baseline of
+        :meth:`numerical_stiffness`."""
+        N, n = xi.shape[0], self.n_strings
+        T = np.empty((N, 4, 4))
+        s_out = np.empty((N, n, 3))
+        lengths = np.empty((N, n))
+        phi = np.empty((N, n))
+        slack = np.empty((N, n), dtype=bool)
+        saturated = np.empty((N, n), dtype=bool)
+        wrench = np.empty((N, 6))
+        K = np.full((N, 6, 6), np.nan)
+        Kc = np.full((N, 6, 6), np.nan)
+        px, py, pz = self._p1.T
+        for start in range(0, N, BATCH_CHUNK):
+            sl = slice(start, min(start + BATCH_CHUNK, N))
+            m = sl.stop - sl.start
+            r = rest if rest.ndim == 1 else rest[sl]
+            kin = ScrewKinematics(xi[sl])
+            T[sl] = kin.T
+            qh = (kin.T.reshape(-1, 4) @ self._p2h.T).reshape(m, 4, n)
+            s = self._p1.T - qh[:, :3]
+            s_out[sl] = np.swapaxes(s, 1, 2)
+            ln = np.sqrt(np.einsum('mkj,mkj->mj', s, s))
+            self._check_lengths(ln)
+            lengths[sl] = ln
+            u = s / ln[:, None]
+            ph, dph, slack[sl], saturated[sl] = self._string_forces(ln, r)
+            phi[sl] = ph
+            X = np.empty((m, 6, n))
+            X[:, :3] = u
+            X[:, 3] = py * u[:, 2] - pz * u[:, 1]
+            X[:, 4] = pz * u[:, 0] - px * u[:, 2]
+            X[:, 5] = px * u[:, 1] - py * u[:, 0]
+            wrench[sl] = (X @ ph[:, :, None])[:, :, 0]
+            if wrench_only:
+                continue
+            beta = ph / ln
+            alpha = dph - beta
+            H = (X * alpha[:, None]) @ (np.swapaxes(X, 1, 2) @ _Y_MAP)
+            H += ((qh * beta[:, None]).reshape(m, -1) @ self._BETA_MAP_SOA).reshape(m, 6, 6)
+            K[sl] = H @ (kin.J * self._ROW_SIGN)
+            Kc[sl] = (H.reshape(-1, 6) @ _KC_MAP).reshape(m, 6, 6)
+        return JointState(xi, T, s_out, lengths, phi, slack, saturated, wrench, K, Kc)
 
     # ------------------------------------------------------------------ public shortcuts
     def wrench(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> FloatArray:
@@ -441,7 +497,11 @@ class JointModel:
 
     def numerical_stiffness(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None,
                             step: float = NUMERICAL_STEP) -> FloatArray:
-        """Central-difference ``dF/dxi`` with step ``step`` (eqs. 21): (6, 6) or (N, 6, 6)."""
+        """Central-difference ``dF/dxi`` with step ``step`` (eq. 21): (6, 6) or (N, 6, 6).
+
+        All 12 perturbed screws go through one vectorised wrench-only evaluation (the fastest
+        way to do central differences here, so that benchmarks compare against a fair baseline).
+        """
         xi = as_screws(xi)
         if not (math.isfinite(step) and step > 0.0):
             raise ValueError(f'step must be finite and > 0, got {step}')
@@ -451,7 +511,8 @@ class JointModel:
         minus = xi[..., None, :] - eye
         both = np.concatenate([plus, minus], axis=-2).reshape(-1, 6)
         rest_b = rest if rest.ndim == 1 else np.repeat(rest, 12, axis=0)
-        F = self.evaluate(both, rest_b).wrench.reshape(xi.shape[:-1] + (12, 6))
+        F = self._evaluate_batch(both, rest_b, wrench_only=True).wrench
+        F = F.reshape(xi.shape[:-1] + (12, 6))
         return np.swapaxes((F[..., :6, :] - F[..., 6:, :]) / (2.0 * step), -1, -2)
 
 

@@ -16,6 +16,7 @@ forms are used above it, where they keep at least 13 significant digits.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -195,106 +196,85 @@ def left_jacobian_so3_inverse(omega: ArrayLike) -> FloatArray:
     return np.eye(3) - 0.5 * W + e[..., None, None] * (W @ W)
 
 
-def _translation_jacobian(
-    omega: FloatArray, v: FloatArray, coeffs: tuple[FloatArray, ...], W: FloatArray,
-    W2: FloatArray,
-) -> FloatArray:
-    """``D = d(G(omega) v) / d omega`` (eqs. 15-17), ``(..., 3, 3)``, column i = d/d omega_i.
+def _kinematics_entries(xi6: list, coeffs: tuple, zero: Any, one: Any) -> tuple[list, list]:
+    """Entries of T (4x4) and J (6x6) as nested lists, for floats or (N,) arrays.
 
-    With ``E_i W + W E_i = omega e_i^T + e_i omega^T - 2 omega_i I`` (E_i = hat(e_i)), eq. (15)
-    applied to v and summed into a matrix gives
-    ``D = -b hat(v) + c (omega v^T + (omega.v) I - 2 v omega^T) + (b1 W v + c1 W^2 v) omega^T``.
+    ``W^2 = w w^T - theta^2 I`` gives R (eq. 3) and G (eq. 4); ``t = G v``;
+    ``D = -b hat(v) + c (w v^T + (w.v) I - 2 v w^T) + e w^T`` with ``e = b1 W v + c1 W^2 v``
+    (eqs. 15-17 applied to v); ``Q = D + hat(t) G``; ``J = [[G, 0], [Q, G]]``.
     """
-    _, b, c, b1, c1 = coeffs
-    bb, cc = b[..., None, None], c[..., None, None]
-    wv = np.sum(omega * v, axis=-1)[..., None, None]
-    outer = omega[..., :, None] * v[..., None, :]
-    term = b1[..., None] * (W @ v[..., None])[..., 0] + c1[..., None] * (W2 @ v[..., None])[..., 0]
-    return (
-        -bb * hat3(v)
-        + cc * (outer + wv * np.eye(3) - 2.0 * np.swapaxes(outer, -1, -2))
-        + term[..., :, None] * omega[..., None, :]
-    )
+    wx, wy, wz, vx, vy, vz = xi6
+    a, b, c, b1, c1 = coeffs
+    xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
+    t2 = xx + yy + zz
+    g00, g01, g02 = 1.0 + c * (xx - t2), -b * wz + c * xy, b * wy + c * xz
+    g10, g11, g12 = b * wz + c * xy, 1.0 + c * (yy - t2), -b * wx + c * yz
+    g20, g21, g22 = -b * wy + c * xz, b * wx + c * yz, 1.0 + c * (zz - t2)
+    tx = g00 * vx + g01 * vy + g02 * vz
+    ty = g10 * vx + g11 * vy + g12 * vz
+    tz = g20 * vx + g21 * vy + g22 * vz
+    T = [[1.0 + b * (xx - t2), -a * wz + b * xy, a * wy + b * xz, tx],
+         [a * wz + b * xy, 1.0 + b * (yy - t2), -a * wx + b * yz, ty],
+         [-a * wy + b * xz, a * wx + b * yz, 1.0 + b * (zz - t2), tz],
+         [zero, zero, zero, one]]
+    wv = wx * vx + wy * vy + wz * vz
+    ex = b1 * (wy * vz - wz * vy) + c1 * (wx * wv - t2 * vx)
+    ey = b1 * (wz * vx - wx * vz) + c1 * (wy * wv - t2 * vy)
+    ez = b1 * (wx * vy - wy * vx) + c1 * (wz * wv - t2 * vz)
+    d = [[c * (wv - wx * vx) + ex * wx, b * vz + c * (wx * vy - 2.0 * vx * wy) + ex * wy,
+          -b * vy + c * (wx * vz - 2.0 * vx * wz) + ex * wz],
+         [-b * vz + c * (wy * vx - 2.0 * vy * wx) + ey * wx, c * (wv - wy * vy) + ey * wy,
+          b * vx + c * (wy * vz - 2.0 * vy * wz) + ey * wz],
+         [b * vy + c * (wz * vx - 2.0 * vz * wx) + ez * wx,
+          -b * vx + c * (wz * vy - 2.0 * vz * wy) + ez * wy, c * (wv - wz * vz) + ez * wz]]
+    q = [[d[0][0] - tz * g10 + ty * g20, d[0][1] - tz * g11 + ty * g21,
+          d[0][2] - tz * g12 + ty * g22],
+         [d[1][0] + tz * g00 - tx * g20, d[1][1] + tz * g01 - tx * g21,
+          d[1][2] + tz * g02 - tx * g22],
+         [d[2][0] - ty * g00 + tx * g10, d[2][1] - ty * g01 + tx * g11,
+          d[2][2] - ty * g02 + tx * g12]]
+    J = [[g00, g01, g02, zero, zero, zero], [g10, g11, g12, zero, zero, zero],
+         [g20, g21, g22, zero, zero, zero], q[0] + [g00, g01, g02], q[1] + [g10, g11, g12],
+         q[2] + [g20, g21, g22]]
+    return T, J
 
 
 class ScrewKinematics:
     """Everything derived from one screw (or a batch) that the joint model needs.
 
     Attributes (leading batch shape ``B`` = ``()`` or ``(N,)``):
-    ``R`` (B, 3, 3), ``t`` (B, 3) with ``T = [R t; 0 1]``; ``G`` (B, 3, 3) the SO(3) left
-    Jacobian; ``D`` (B, 3, 3) = d t / d omega (eqs. 15-17); ``Q`` (B, 3, 3) = D + hat(t) G, the
-    lower-left block of the SE(3) left Jacobian in [omega; v] order; ``T`` (B, 4, 4);
-    ``J`` (B, 6, 6) = [[G, 0], [Q, G]] the SE(3) left Jacobian. A single screw takes a scalar fast
-    path (plain floats, about 10x faster than the array path at this size).
+    ``T`` (B, 4, 4) = exp(hat(xi)) with ``R`` (B, 3, 3) and ``t`` (B, 3) as views;
+    ``J`` (B, 6, 6) = [[G, 0], [Q, G]] the SE(3) left Jacobian in [omega; v] order, with views
+    ``G`` (the SO(3) left Jacobian, eq. 4) and ``Q = D + hat(t) G`` where ``D = d t / d omega``
+    (eqs. 15-17; :attr:`D` recovers it). One set of entry formulas serves both paths: plain
+    floats for a single screw (about 10x faster than arrays at this size), (N,) arrays for a batch.
     """
 
-    __slots__ = ('D', 'G', 'J', 'Q', 'R', 'T', 't', 'theta')
+    __slots__ = ('G', 'J', 'Q', 'R', 'T', 't', 'theta')
 
     def __init__(self, xi: ArrayLike) -> None:
         xi = np.asarray(xi, dtype=np.float64)
         if xi.ndim == 1:
-            self._single(xi)
-            return
-        omega, v = xi[..., :3], xi[..., 3:]
-        self.theta = np.linalg.norm(omega, axis=-1)
-        coeffs = rotation_coefficients(self.theta)
-        self.R, self.G, W, W2 = _rotation_and_jacobian(omega, coeffs)
-        self.t = (self.G @ v[..., None])[..., 0]
-        self.D = _translation_jacobian(omega, v, coeffs, W, W2)
-        self.Q = self.D + hat3(self.t) @ self.G
-        batch = xi.shape[:-1]
-        self.T = np.zeros(batch + (4, 4))
-        self.T[..., :3, :3] = self.R
-        self.T[..., :3, 3] = self.t
-        self.T[..., 3, 3] = 1.0
-        self.J = np.zeros(batch + (6, 6))
-        self.J[..., :3, :3] = self.G
-        self.J[..., 3:, 3:] = self.G
-        self.J[..., 3:, :3] = self.Q
+            values = xi.tolist()
+            self.theta = math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+            T, J = _kinematics_entries(values, _coefficients_scalar(self.theta), 0.0, 1.0)
+            self.T, self.J = np.array(T), np.array(J)
+        else:
+            n = xi.shape[0]
+            self.theta = np.sqrt(np.einsum('ij,ij->i', xi[:, :3], xi[:, :3]))
+            T, J = _kinematics_entries(list(xi.T), rotation_coefficients(self.theta),
+                                       np.zeros(n), np.ones(n))
+            self.T = np.moveaxis(np.array(T), -1, 0)
+            self.J = np.moveaxis(np.array(J), -1, 0)
+        self.R = self.T[..., :3, :3]
+        self.t = self.T[..., :3, 3]
+        self.G = self.J[..., :3, :3]
+        self.Q = self.J[..., 3:, :3]
 
-    def _single(self, xi: FloatArray) -> None:
-        """Same quantities for one screw with scalar arithmetic (W^2 = w w^T - theta^2 I)."""
-        wx, wy, wz, vx, vy, vz = xi.tolist()
-        t2 = wx * wx + wy * wy + wz * wz
-        self.theta = math.sqrt(t2)
-        a, b, c, b1, c1 = _coefficients_scalar(self.theta)
-        xx, yy, zz, xy, xz, yz = wx * wx, wy * wy, wz * wz, wx * wy, wx * wz, wy * wz
-        r = [[1.0 + b * (xx - t2), -a * wz + b * xy, a * wy + b * xz],
-             [a * wz + b * xy, 1.0 + b * (yy - t2), -a * wx + b * yz],
-             [-a * wy + b * xz, a * wx + b * yz, 1.0 + b * (zz - t2)]]
-        g00, g01, g02 = 1.0 + c * (xx - t2), -b * wz + c * xy, b * wy + c * xz
-        g10, g11, g12 = b * wz + c * xy, 1.0 + c * (yy - t2), -b * wx + c * yz
-        g20, g21, g22 = -b * wy + c * xz, b * wx + c * yz, 1.0 + c * (zz - t2)
-        tx = g00 * vx + g01 * vy + g02 * vz
-        ty = g10 * vx + g11 * vy + g12 * vz
-        tz = g20 * vx + g21 * vy + g22 * vz
-        wv = wx * vx + wy * vy + wz * vz
-        # e = b1 W v + c1 W^2 v; D = -b hat(v) + c (w v^T + (w.v) I - 2 v w^T) + e w^T.
-        ex = b1 * (wy * vz - wz * vy) + c1 * (wx * wv - t2 * vx)
-        ey = b1 * (wz * vx - wx * vz) + c1 * (wy * wv - t2 * vy)
-        ez = b1 * (wx * vy - wy * vx) + c1 * (wz * wv - t2 * vz)
-        d = [[c * (wv - wx * vx) + ex * wx, b * vz + c * (wx * vy - 2.0 * vx * wy) + ex * wy,
-              -b * vy + c * (wx * vz - 2.0 * vx * wz) + ex * wz],
-             [-b * vz + c * (wy * vx - 2.0 * vy * wx) + ey * wx, c * (wv - wy * vy) + ey * wy,
-              b * vx + c * (wy * vz - 2.0 * vy * wz) + ey * wz],
-             [b * vy + c * (wz * vx - 2.0 * vz * wx) + ez * wx,
-              -b * vx + c * (wz * vy - 2.0 * vz * wy) + ez * wy, c * (wv - wz * vz) + ez * wz]]
-        # Q = D + hat(t) G, row by row.
-        q = [[d[0][0] - tz * g10 + ty * g20, d[0][1] - tz * g11 + ty * g21,
-              d[0][2] - tz * g12 + ty * g22],
-             [d[1][0] + tz * g00 - tx * g20, d[1][1] + tz * g01 - tx * g21,
-              d[1][2] + tz * g02 - tx * g22],
-             [d[2][0] - ty * g00 + tx * g10, d[2][1] - ty * g01 + tx * g11,
-              d[2][2] - ty * g02 + tx * g12]]
-        self.T = np.array([r[0] + [tx], r[1] + [ty], r[2] + [tz], [0.0, 0.0, 0.0, 1.0]])
-        self.J = np.array([[g00, g01, g02, 0.0, 0.0, 0.0], [g10, g11, g12, 0.0, 0.0, 0.0],
-                           [g20, g21, g22, 0.0, 0.0, 0.0], q[0] + [g00, g01, g02],
-                           q[1] + [g10, g11, g12], q[2] + [g20, g21, g22]])
-        self.R = self.T[:3, :3]
-        self.t = self.T[:3, 3]
-        self.G = self.J[:3, :3]
-        self.Q = self.J[3:, :3]
-        self.D = np.array(d)
+    @property
+    def D(self) -> FloatArray:
+        """``d t / d omega`` (eqs. 15-17), (B, 3, 3): column i is d(G v)/d omega_i."""
+        return self.Q - hat3(self.t) @ self.G
 
 
 def exp_se3(xi: ArrayLike) -> FloatArray:

@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""Six-DOF core benchmark, run by hand: ``python3 bench/bench_joint.py [--quick]``.
+
+Prints, measured side by side in one run on the default joint:
+* per-call analytic K (eq. 10) vs central-difference K (eq. 21), and their ratio; the
+  central-difference baseline is given two ways (one vectorised wrench-only pass over the 12
+  perturbed screws, and a loop of 12 single wrench calls) and the faster one is used;
+* dT/dxi alone (closed form vs central differences);
+* batched K throughput (configs/s) for N = 10^4 and 10^5 vs single calls;
+* equilibrium solve time (median, p99) over random moderate wrenches.
+Targets (issue 2): K <= 25 us, >= 15x faster than central differences, batched >= 500,000
+configs/s, equilibrium median <= 2 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+import timeit
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
+from tensegrity_stiffness.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.screw import dexp_se3, exp_se3  # noqa: E402
+
+
+def per_call_us(fn, repeat: int = 7, number: int = 2000) -> float:
+    """Best-of-``repeat`` mean time per call, microseconds."""
+    return min(timeit.repeat(fn, repeat=repeat, number=number)) / number * 1e6
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--quick', action='store_true', help='fewer repetitions')
+    args = parser.parse_args()
+    number = 300 if args.quick else 2000
+    model = JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
+    rng = np.random.default_rng(0)
+    xi = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3)
+    step = 1e-6
+
+    def cd_loop() -> np.ndarray:
+        cols = []
+        for i in range(6):
+            e = np.zeros(6)
+            e[i] = step
+            cols.append((model.wrench(xi + e) - model.wrench(xi - e)) / (2 * step))
+        return np.stack(cols, axis=1)
+
+    def dexp_cd() -> np.ndarray:
+        e = np.eye(6) * step
+        return (exp_se3(xi + e) - exp_se3(xi - e)) / (2 * step)
+
+    t_k = per_call_us(lambda: model.stiffness(xi), number=number)
+    t_eval = per_call_us(lambda: model.evaluate(xi), number=number)
+    t_cd_vec = per_call_us(lambda: model.numerical_stiffness(xi), number=number)
+    t_cd_loop = per_call_us(cd_loop, number=max(number // 4, 50))
+    t_cd = min(t_cd_vec, t_cd_loop)
+    t_dexp = per_call_us(lambda: dexp_se3(xi), number=number)
+    t_dexp_cd = per_call_us(dexp_cd, number=number)
+    err = np.linalg.norm(model.stiffness(xi) - model.numerical_stiffness(xi)) / np.linalg.norm(
+        model.stiffness(xi))
+
+    print('per call (default joint, 12 strings)             time         ratio')
+    print(f'  analytic K (eq. 10)                       {t_k:9.1f} us')
+    print(f'  full evaluation (F, K, K_c, tensions)     {t_eval:9.1f} us')
+    print(f'  central-difference K, vectorised           {t_cd_vec:9.1f} us   '
+          f'{t_cd_vec / t_k:5.1f}x')
+    print(f'  central-difference K, loop of 12 wrenches  {t_cd_loop:9.1f} us   '
+          f'{t_cd_loop / t_k:5.1f}x')
+    print(f'  analytic vs best central difference                      {t_cd / t_k:5.1f}x '
+          f'(rel. difference {err:.1e})')
+    print(f'  dT/dxi closed form (eqs. 12-18)           {t_dexp:9.1f} us')
+    print(f'  dT/dxi central differences (vectorised)   {t_dexp_cd:9.1f} us   '
+          f'{t_dexp_cd / t_dexp:5.1f}x')
+
+    print('\nbatched K (full evaluation)                   configs/s    vs single')
+    single_rate = 1e6 / t_eval
+    print(f'  single calls                             {single_rate:12,.0f}')
+    for n in (10_000, 100_000):
+        xs = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(n, 6))
+        model.evaluate(xs[:1000])  # warm up
+        best = min(timeit.repeat(lambda xs=xs: model.evaluate(xs), repeat=3, number=1))
+        print(f'  N = {n:>7,}                              {n / best:12,.0f}   '
+              f'{n / best / single_rate:6.1f}x')
+
+    solves = 300 if args.quick else 2000
+    times = []
+    iterations = []
+    failures = 0
+    for _ in range(solves):
+        W = np.r_[rng.normal(scale=0.1, size=3), rng.normal(scale=0.002, size=3)]
+        start = time.perf_counter()
+        res = solve_equilibrium(model, W)
+        times.append(time.perf_counter() - start)
+        iterations.append(res.iterations)
+        failures += not res.success
+    times.sort()
+    print(f'\nequilibrium ({solves} random moderate wrenches): median '
+          f'{statistics.median(times) * 1e3:.3f} ms, p99 {times[int(0.99 * solves)] * 1e3:.3f} '
+          f'ms, median iterations {statistics.median(iterations):.0f}, failures {failures}')
+
+
+if __name__ == '__main__':
+    main()
