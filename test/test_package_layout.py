@@ -1,0 +1,150 @@
+"""The colcon install layout is what ``ros2 run`` and ``ros2 launch`` expect.
+
+``ros2 run tensegrity_stiffness stiffness_node`` resolves ``<prefix>/lib/tensegrity_stiffness/
+stiffness_node`` through the ament index (``AMENT_PREFIX_PATH``, set by scripts/env.sh); the
+parameter files are looked up under ``share/tensegrity_stiffness/config``; the service
+definitions come from the tensegrity_stiffness_interfaces package built next to it.
+
+Outside the set-up environment (plain ``pytest`` without ``source scripts/env.sh``) these tests
+skip with a reason; inside it (``TENSEGRITY_ENV_SOURCED`` set by env.sh, as in scripts/test.sh)
+a missing piece is a failure.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+PACKAGE = 'tensegrity_stiffness'
+INTERFACES = 'tensegrity_stiffness_interfaces'
+EXECUTABLE = 'stiffness_node'
+ENV_REQUIRED = bool(os.environ.get('TENSEGRITY_ENV_SOURCED'))
+
+
+def _unavailable(reason: str) -> None:
+    """Fail inside the set-up environment, skip outside it."""
+    if ENV_REQUIRED:
+        pytest.fail(reason + ' (scripts/env.sh was sourced: the build is incomplete)')
+    pytest.skip(reason + ' (not in the set-up environment: source scripts/env.sh)')
+
+
+@pytest.fixture(scope='module')
+def ament() -> Any:
+    try:
+        import ament_index_python.packages as module
+    except ImportError as exc:
+        _unavailable(f'ament_index_python not importable: {exc}')
+    return module
+
+
+@pytest.fixture(scope='module')
+def prefix(ament: Any) -> Path:
+    try:
+        return Path(ament.get_package_prefix(PACKAGE))
+    except (ament.PackageNotFoundError, OSError):
+        _unavailable(f'package {PACKAGE!r} not in the ament index '
+                     f'(AMENT_PREFIX_PATH={os.environ.get("AMENT_PREFIX_PATH", "")!r})')
+    raise AssertionError('unreachable')
+
+
+@pytest.fixture(scope='module')
+def srv() -> Any:
+    try:
+        import tensegrity_stiffness_interfaces.srv as module
+    except ImportError as exc:
+        _unavailable(f'{INTERFACES} not importable: {exc}')
+    if getattr(module, '__file__', None) is None:
+        # Only the source folder of the repo root was found (a PEP 420 namespace package), not
+        # the generated package of install/.
+        _unavailable(f'{INTERFACES}.srv resolves to the source folder {list(module.__path__)}')
+    return module
+
+
+def test_executable_where_ros2_run_looks(prefix: Path) -> None:
+    exe = prefix / 'lib' / PACKAGE / EXECUTABLE
+    assert exe.is_file(), f'{exe} missing'
+    assert os.access(exe, os.X_OK), f'{exe} is not executable'
+
+
+def test_package_xml_and_marker_installed(prefix: Path) -> None:
+    assert (prefix / 'share' / PACKAGE / 'package.xml').is_file()
+    marker = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / PACKAGE
+    assert marker.is_file(), f'ament index marker {marker} missing'
+
+
+def test_config_files_installed(prefix: Path) -> None:
+    configs = sorted((prefix / 'share' / PACKAGE / 'config').glob('*.yaml'))
+    assert configs, 'no share/tensegrity_stiffness/config/*.yaml installed'
+    assert any(p.name == 'default_joint.yaml' for p in configs)
+    for path in configs:
+        assert path.resolve().is_file(), f'{path} is a dangling link'
+
+
+def test_interface_package_in_ament_index(ament: Any) -> None:
+    try:
+        share = Path(ament.get_package_share_directory(INTERFACES))
+    except (ament.PackageNotFoundError, OSError):
+        _unavailable(f'{INTERFACES} not in the ament index')
+    assert (share / 'package.xml').is_file()
+    assert (share / 'srv' / 'SolveEquilibrium.srv').is_file()
+
+
+EXPECTED_FIELDS = {
+    'SolveEquilibrium': (
+        {'external_wrench': 'geometry_msgs/Wrench', 'rest_lengths': 'sequence<double>',
+         'initial_screw': 'sequence<double>'},
+        {'success': 'boolean', 'message': 'string', 'screw': 'double[6]',
+         'pose': 'geometry_msgs/Pose', 'string_wrench': 'geometry_msgs/Wrench',
+         'stiffness': 'double[36]', 'cartesian_stiffness': 'double[36]',
+         'tensions': 'sequence<double>', 'energy': 'double', 'stable': 'boolean',
+         'residual': 'double', 'iterations': 'int32'},
+    ),
+    'PlanarForwardKinematics': (
+        {'actuator_length': 'double', 'actuator_angle': 'double'},
+        {'success': 'boolean', 'message': 'string', 'x': 'double', 'y': 'double',
+         'platform_angle': 'double', 'stiffness': 'double', 'energy': 'double',
+         'stable': 'boolean', 'in_range': 'boolean', 'jacobian': 'double[4]',
+         'jacobian_determinant': 'double', 'singularities': 'sequence<string>'},
+    ),
+    'PlanarInverseKinematics': (
+        {'x': 'double', 'y': 'double'},
+        {'success': 'boolean', 'message': 'string', 'actuator_length': 'sequence<double>',
+         'actuator_angle': 'sequence<double>', 'platform_angle': 'sequence<double>',
+         'stiffness': 'sequence<double>', 'stable': 'sequence<boolean>'},
+    ),
+}
+
+
+@pytest.mark.parametrize('name', sorted(EXPECTED_FIELDS))
+def test_service_fields(srv: Any, name: str) -> None:
+    service = getattr(srv, name)
+    request_fields, response_fields = EXPECTED_FIELDS[name]
+    assert service.Request.get_fields_and_field_types() == request_fields
+    assert service.Response.get_fields_and_field_types() == response_fields
+    # the type support library loads (fails here if LD_LIBRARY_PATH misses install/.../lib)
+    service.Request()
+    service.Response()
+
+
+def test_solve_equilibrium_defaults(srv: Any) -> None:
+    response = srv.SolveEquilibrium.Response()
+    assert response.stiffness.shape == (36,)
+    assert response.cartesian_stiffness.shape == (36,)
+    assert response.screw.shape == (6,)
+    assert len(response.tensions) == 0
+    assert response.pose.orientation.w == 1.0
+
+
+def test_interface_loaded_once(srv: Any) -> None:
+    """The interfaces live in install/ only, never also in the venv (two copies of the C
+    libraries would load in random order, see NOTES.md)."""
+    module_file = Path(srv.__file__).resolve()
+    venv = Path(sys.prefix).resolve()
+    if ENV_REQUIRED:
+        assert venv not in module_file.parents, f'{INTERFACES} imported from the venv'
+    copies = list(venv.glob(f'lib/python*/site-packages/{INTERFACES}'))
+    assert not copies, f'second copy of {INTERFACES} in the venv: {copies}'
