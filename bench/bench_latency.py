@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""Node latency benchmark (two processes), run by hand after ``source scripts/env.sh``:
+
+    python bench/bench_latency.py [--rate 1000] [--seconds 10] [--calls 300]
+
+The installed ``stiffness_node`` runs as its own process on the default joint. This process
+publishes screws on ``~/screw`` at ``--rate`` Hz for ``--seconds`` and measures, per screw, the
+time until its ``~/stiffness`` message arrives (outputs come in input order over reliable QoS, so
+each stiffness is matched to its screw by value against the library), then the round trip of
+each service. Prints median / p99 / max latency and drops.
+Targets (issue 4): median <= 1 ms, p99 <= 5 ms, 0 drops; equilibrium service median <= 5 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import random
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / 'test'))
+sys.path.insert(0, str(ROOT))
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
+
+import numpy as np  # noqa: E402
+from ros_harness import NodeProcess, RosClient, unique_namespace  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+import msg_tools  # noqa: E402
+from tensegrity_stiffness.joint import JointModel  # noqa: E402
+from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
+    PlanarForwardKinematics,
+    PlanarInverseKinematics,
+    SolveEquilibrium,
+)
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def summary(name: str, seconds: list[float]) -> str:
+    ms = [s * 1e3 for s in seconds]
+    return (f'{name:<34} n={len(ms):>6}  median {statistics.median(ms):7.3f} ms  '
+            f'p99 {percentile(ms, 0.99):7.3f} ms  max {max(ms):8.3f} ms')
+
+
+def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: float,
+           rng: np.random.Generator) -> tuple[list[float], int, int]:
+    """Publish screws at ``rate`` for ``seconds``; returns (latencies, sent, drops)."""
+    inbox = ros.subscribe(Float64MultiArray, f'{base}/stiffness')
+    pub = ros.publisher(Float64MultiArray, f'{base}/screw')
+    ros.wait_for_subscribers(pub)
+    ros.wait_for_publishers(f'{base}/stiffness')
+    n = int(rate * seconds)
+    screws = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(n, 6))
+    sent_at = np.empty(n)
+    period = 1.0 / rate
+    start = time.perf_counter()
+    for k in range(n):
+        target = start + k * period
+        while True:
+            now = time.perf_counter()
+            if now >= target:
+                break
+            if target - now > 2e-4:
+                time.sleep(target - now - 1.5e-4)
+        sent_at[k] = time.perf_counter()
+        pub.publish(Float64MultiArray(data=screws[k].tolist()))
+    deadline = time.monotonic() + 5.0
+    while len(inbox) < n and time.monotonic() < deadline:
+        time.sleep(0.05)
+    # Outputs come in input order; match each to its input by value (a dropped input leaves a
+    # gap), so that a drop cannot shift the pairing.
+    expected = model.stiffness(screws).reshape(n, 36)
+    latencies = []
+    k = 0
+    for msg, arrived in zip(list(inbox.messages), list(inbox.times), strict=True):
+        K = np.asarray(msg.data)
+        while k < n and not np.allclose(K, expected[k], rtol=1e-12, atol=1e-12):
+            k += 1
+        if k == n:
+            raise AssertionError('an output matches no input')
+        latencies.append(arrived - sent_at[k])
+        k += 1
+    return latencies, n, n - len(latencies)
+
+
+def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Generator
+                        ) -> dict[str, list[float]]:
+    clients = {
+        'solve_equilibrium': ros.client(SolveEquilibrium, f'{base}/solve_equilibrium'),
+        'planar_forward_kinematics': ros.client(PlanarForwardKinematics,
+                                                f'{base}/planar_forward_kinematics'),
+        'planar_inverse_kinematics': ros.client(PlanarInverseKinematics,
+                                                f'{base}/planar_inverse_kinematics'),
+    }
+    out: dict[str, list[float]] = {name: [] for name in clients}
+    failures = 0
+    for _ in range(calls):
+        W = np.r_[rng.normal(scale=0.1, size=3), rng.normal(scale=0.002, size=3)]
+        requests = {
+            'solve_equilibrium': SolveEquilibrium.Request(
+                external_wrench=msg_tools.wrench_to_msg(W)),
+            'planar_forward_kinematics': PlanarForwardKinematics.Request(
+                actuator_length=rng.uniform(0.2, 1.8), actuator_angle=rng.uniform(0.2, 2.9)),
+            'planar_inverse_kinematics': PlanarInverseKinematics.Request(
+                x=rng.uniform(-1.0, 1.0), y=rng.uniform(0.2, 1.5)),
+        }
+        for name, client in clients.items():
+            start = time.perf_counter()
+            res = ros.call(client, requests[name])
+            out[name].append(time.perf_counter() - start)
+            failures += name == 'solve_equilibrium' and not res.success
+    print(f'  (equilibrium solves that failed: {failures})')
+    return out
+
+
+def main() -> None:
+    # The client publishes from the main thread while its executor thread receives: let the GIL
+    # change hands often, as the node does, so the client's own waits stay small.
+    sys.setswitchinterval(2e-4)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rate', type=float, default=1000.0, help='screw rate, Hz')
+    parser.add_argument('--seconds', type=float, default=10.0, help='stream duration, s')
+    parser.add_argument('--calls', type=int, default=300, help='calls per service')
+    parser.add_argument('--param', action='append', default=[],
+                        help='node parameter override NAME:=VALUE (repeatable)')
+    args = parser.parse_args()
+    model = JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
+    rng = np.random.default_rng(0)
+    ns = unique_namespace('bench')
+    proc = NodeProcess(ns, extra_args=[a for p in args.param for a in ('-p', p)])
+    ros = RosClient('bench')
+    gc.collect()
+    gc.freeze()
+    base = f'{ns}/stiffness_node'
+    try:
+        print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}, node pid {proc.process.pid}')
+        latencies, sent, drops = stream(ros, base, model, args.rate, args.seconds, rng)
+        print(f'screw -> stiffness at {args.rate:.0f} Hz for {args.seconds:.0f} s: sent {sent}, '
+              f'drops {drops}')
+        print(summary('  latency', latencies))
+        for name, times in service_round_trips(ros, base, args.calls, rng).items():
+            print(summary(f'  {name}', times))
+    finally:
+        ros.close()
+        code = proc.stop()
+        if code != 0:
+            print(f'node exited with {code}:\n{proc.log()}')
+
+
+if __name__ == '__main__':
+    main()

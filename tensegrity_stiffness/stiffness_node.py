@@ -1,0 +1,692 @@
+"""``stiffness_node``: real-time wrench and stiffness of a tensegrity joint over ROS 2.
+
+Thin layer: validate, convert with :mod:`msg_tools`, call the library, publish. Topics,
+services, parameters and QoS are documented in README.md; the conventions (frames, orderings,
+signs) in :mod:`tensegrity_stiffness.joint`.
+
+Concurrency: one single-threaded executor runs every callback, so inputs are answered in order
+with the least overhead (rclpy's multi-threaded executor dropped 80% of a 1 kHz stream here).
+The equilibrium service is a coroutine: it validates the request, hands the solve (bounded by
+``equilibrium.time_budget``) to a worker thread and awaits it, so the topics keep being served
+meanwhile. All the configuration a computation needs is one immutable :class:`NodeConfig`, swapped
+as a whole when parameters or rest lengths change and read once per callback: no output mixes two
+parameter sets.
+"""
+
+from __future__ import annotations
+
+import gc
+import math
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    SetParametersResult,
+)
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
+from rclpy.task import Future as RclpyFuture
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
+
+import msg_tools
+from tensegrity_stiffness.equilibrium import (
+    MAX_NEWTON_ITERATIONS,
+    EquilibriumResult,
+    is_stable,
+    solve_equilibrium,
+)
+from tensegrity_stiffness.interpretation import interpretation_vector
+from tensegrity_stiffness.joint import JointModel, JointState, joint_section, load_yaml
+from tensegrity_stiffness.planar import PlanarMechanism
+from tensegrity_stiffness.screw import log_se3
+from tensegrity_stiffness_interfaces.srv import (
+    PlanarForwardKinematics,
+    PlanarInverseKinematics,
+    SolveEquilibrium,
+)
+
+NODE_NAME = 'stiffness_node'
+#: Screws with |omega| at or beyond this are outside the chart (G is singular at 2 pi).
+CHART_LIMIT = 2.0 * math.pi
+#: Warnings about bad input are throttled to one per this many seconds per kind.
+WARN_THROTTLE_S = 1.0
+#: Window of the input-rate and compute-time statistics in /diagnostics.
+STATS_WINDOW = 1000
+#: Python's thread switch interval while the node runs (s): a long service solve yields the GIL
+#: to the topic thread at least this often (the default, 5 ms, would dominate the p99 latency).
+SWITCH_INTERVAL_S = 2e-4
+
+TENSIONS_LABEL = 'tensions [N], strings in config order: '
+INTERPRETATION_LABEL = ('stiffness interpretation of K: block Frobenius norms '
+                        '[K_fw K_fv K_mw K_mv] (4), column norms [wx wy wz vx vy vz] (6), '
+                        'row norms [fx fy fz mx my mz] (6)')
+KC_ROW_LABEL = 'rows: wrench [fx fy fz mx my mz]'
+KC_COL_LABEL = 'cols: spatial twist in {1} [dx dy dz rx ry rz] (linear first, as ROS)'
+
+JOINT_STRING_ARRAYS = ('node_names', 'link2_node_names', 'string_names', 'string_link1_nodes',
+                       'string_link2_nodes')
+JOINT_DOUBLE_ARRAYS = ('link1_nodes', 'link2_nodes', 'stiffness', 'rest_lengths', 'max_lengths',
+                       'initial_screw')
+PLANAR_KEYS = ('L', 'K1', 'K2', 'L3_min', 'L3_max', 'theta1_min', 'theta1_max', 'theta2_min',
+               'theta2_max')
+
+
+def default_config_path() -> Path:
+    """The packaged ``config/default_joint.yaml`` (installed share dir, else the source tree)."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        path = Path(get_package_share_directory('tensegrity_stiffness')) / 'config'
+        if (path / 'default_joint.yaml').is_file():
+            return path / 'default_joint.yaml'
+    except (ImportError, LookupError, ValueError):
+        pass
+    return Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
+
+
+def _ros_parameters(document: Any) -> Mapping[str, Any]:
+    """The ``ros__parameters`` mapping of the first node entry of a parameter file."""
+    if isinstance(document, Mapping):
+        for value in document.values():
+            if isinstance(value, Mapping) and isinstance(value.get('ros__parameters'), Mapping):
+                return value['ros__parameters']
+    return {}
+
+
+class _OutputMessages:
+    """One preallocated message per output topic (layouts labelled once, data refilled)."""
+
+    def __init__(self, string_names: tuple[str, ...]) -> None:
+        self.string_names = string_names
+        n = len(string_names)
+        self.wrench = WrenchStamped()
+        self.stiffness = msg_tools.matrix_to_multiarray(np.zeros((6, 6)))
+        self.cartesian_stiffness = msg_tools.matrix_to_multiarray(np.zeros((6, 6)), KC_ROW_LABEL,
+                                                                  KC_COL_LABEL)
+        self.tensions = msg_tools.vector_to_multiarray(np.zeros(n),
+                                                       TENSIONS_LABEL + ' '.join(string_names))
+        self.interpretation = msg_tools.vector_to_multiarray(np.zeros(16), INTERPRETATION_LABEL)
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """Everything one computation needs, swapped as a whole (never mutated)."""
+
+    model: JointModel
+    planar: PlanarMechanism
+    link1_frame: str
+    link2_frame: str
+    max_array_length: int
+    equilibrium_time_budget: float
+    equilibrium_max_iterations: int
+    marker_period: float
+    generation: int
+
+
+class StiffnessNode(Node):
+    """Publishes wrench, K, K_c, tensions, interpretation, markers and diagnostics per input."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self._declare_parameters()
+        self._config = self._config_from_parameters({}, generation=0)
+        self._state_lock = threading.Lock()
+        self._last_screw: np.ndarray | None = None
+        self._last_stamp = None
+        self._last_solution: np.ndarray | None = None
+        self._last_marker_time = -math.inf
+        self._last_state: JointState | None = None
+        self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
+        self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
+        self._rejected: dict[str, int] = {}
+        self._published = 0
+        self._outputs: _OutputMessages | None = None
+        self._solver = ThreadPoolExecutor(max_workers=1, thread_name_prefix='equilibrium')
+        self._wake = self.create_guard_condition(lambda: None)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+
+        depth = self.get_parameter('qos.depth').value
+        reliability = self.get_parameter('qos.input_reliability').value
+        input_qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=depth,
+            reliability=(ReliabilityPolicy.BEST_EFFORT if reliability == 'best_effort'
+                         else ReliabilityPolicy.RELIABLE),
+            durability=DurabilityPolicy.VOLATILE)
+        # Rest lengths are state: reliable + transient local, so that a restarted node gets the
+        # latest value from a latched publisher.
+        latched_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                                 reliability=ReliabilityPolicy.RELIABLE,
+                                 durability=DurabilityPolicy.TRANSIENT_LOCAL)
+        output_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                                reliability=ReliabilityPolicy.RELIABLE,
+                                durability=DurabilityPolicy.VOLATILE)
+
+        self._pub_wrench = self.create_publisher(WrenchStamped, '~/wrench', output_qos)
+        self._pub_stiffness = self.create_publisher(Float64MultiArray, '~/stiffness', output_qos)
+        self._pub_cartesian = self.create_publisher(Float64MultiArray, '~/cartesian_stiffness',
+                                                    output_qos)
+        self._pub_tensions = self.create_publisher(Float64MultiArray, '~/string_tensions',
+                                                   output_qos)
+        self._pub_interpretation = self.create_publisher(
+            Float64MultiArray, '~/stiffness_interpretation', output_qos)
+        self._pub_markers = self.create_publisher(MarkerArray, '~/markers', output_qos)
+        self._pub_diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+
+        self.create_subscription(Float64MultiArray, '~/screw', self._on_screw, input_qos)
+        self.create_subscription(PoseStamped, '~/pose', self._on_pose, input_qos)
+        self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
+                                 latched_qos)
+        # Own group: the coroutine holds its group while it awaits the worker; the default group
+        # (topics, planar services, timer) stays free.
+        self.create_service(SolveEquilibrium, '~/solve_equilibrium', self._on_solve_equilibrium,
+                            callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(PlanarForwardKinematics, '~/planar_forward_kinematics',
+                            self._on_planar_forward)
+        self.create_service(PlanarInverseKinematics, '~/planar_inverse_kinematics',
+                            self._on_planar_inverse)
+        self.create_timer(self.get_parameter('diagnostics.period').value,
+                          self._publish_diagnostics)
+        cfg = self._config
+        self.get_logger().info(
+            f'ready: {cfg.model.n_strings} strings, force law {cfg.model.force_law}, '
+            f'frames {cfg.link1_frame} -> {cfg.link2_frame}, inputs {reliability} depth {depth}')
+
+    # ------------------------------------------------------------------ parameters
+    def _declare_parameters(self) -> None:
+        defaults_doc = load_yaml(default_config_path())
+        defaults = _ros_parameters(defaults_doc)
+        joint = joint_section(defaults_doc)
+
+        def describe(text: str, read_only: bool = False, fp_range: tuple | None = None,
+                     int_range: tuple | None = None, constraints: str = '') -> ParameterDescriptor:
+            d = ParameterDescriptor(description=text, read_only=read_only,
+                                    additional_constraints=constraints)
+            if fp_range is not None:
+                d.floating_point_range = [FloatingPointRange(
+                    from_value=float(fp_range[0]), to_value=float(fp_range[1]), step=0.0)]
+            if int_range is not None:
+                d.integer_range = [IntegerRange(from_value=int(int_range[0]),
+                                                to_value=int(int_range[1]), step=1)]
+            return d
+
+        joint_docs = {
+            'node_names': 'names of the link-1 nodes (string ends refer to them)',
+            'link1_nodes': 'link-1 node coordinates in {1}, flat [x y z] per node, m',
+            'link2_nodes': 'link-2 node coordinates in {2}, flat [x y z] per node, m '
+                           '(empty: same as link1_nodes)',
+            'link2_node_names': 'names of the link-2 nodes (empty: same as node_names)',
+            'string_names': 'one name per string (orders every per-string array)',
+            'string_link1_nodes': 'link-1 node of each string',
+            'string_link2_nodes': 'link-2 node of each string',
+            'stiffness': 'string stiffness k, N/m, one per string (or one for all)',
+            'rest_lengths': 'rest lengths l0, m, one per string',
+            'max_lengths': 'maximum lengths lmax, m, one per string (empty: no limit)',
+            'initial_screw': 'starting screw [wx wy wz vx vy vz] of equilibrium solves (rad, m)',
+        }
+        for key in JOINT_STRING_ARRAYS + JOINT_DOUBLE_ARRAYS:
+            value = joint.get(key)
+            ptype = (Parameter.Type.STRING_ARRAY if key in JOINT_STRING_ARRAYS
+                     else Parameter.Type.DOUBLE_ARRAY)
+            if value is None or len(value) == 0:
+                value = ptype  # typed, no default
+            elif ptype == Parameter.Type.DOUBLE_ARRAY:
+                value = [float(v) for v in value]
+            else:
+                value = [str(v) for v in value]
+            self.declare_parameter(f'joint.{key}', value, describe(joint_docs[key]))
+        self.declare_parameter('joint.force_law', str(joint.get('force_law', 'hooke')),
+                               describe('string force law', constraints='hooke | paper'))
+        frames = defaults.get('frames', {})
+        self.declare_parameter('frames.link1', str(frames.get('link1', 'tensegrity_link1')),
+                               describe("link 1's frame: frame_id of every output"))
+        self.declare_parameter('frames.link2', str(frames.get('link2', 'tensegrity_link2')),
+                               describe("link 2's frame (child frame of ~/pose)"))
+        planar = defaults.get('planar', {})
+        planar_docs = {
+            'L': ('mobile triangle side L (base side 2 L), m', (1e-9, 1e9)),
+            'K1': ('stiffness K1 of the spring C2-D2, N/m', (1e-12, 1e12)),
+            'K2': ('stiffness K2 of the spring C3-D3, N/m', (1e-12, 1e12)),
+            'L3_min': ('actuator length lower bound, m', (0.0, 1e9)),
+            'L3_max': ('actuator length upper bound, m (default 2 L)', (1e-9, 1e9)),
+            'theta1_min': ('actuator angle lower bound, rad', (-2 * math.pi, 2 * math.pi)),
+            'theta1_max': ('actuator angle upper bound, rad', (-2 * math.pi, 2 * math.pi)),
+            'theta2_min': ('platform angle lower bound, rad', (-2 * math.pi, 2 * math.pi)),
+            'theta2_max': ('platform angle upper bound, rad', (-2 * math.pi, 2 * math.pi)),
+        }
+        planar_defaults = {'L': 1.0, 'K1': 100.0, 'K2': 10.0, 'L3_min': 0.0, 'L3_max': 2.0,
+                           'theta1_min': 0.0, 'theta1_max': math.pi, 'theta2_min': 0.0,
+                           'theta2_max': math.pi}
+        for key in PLANAR_KEYS:
+            text, rng = planar_docs[key]
+            self.declare_parameter(f'planar.{key}', float(planar.get(key, planar_defaults[key])),
+                                   describe(text, fp_range=rng))
+        self.declare_parameter('qos.depth', int(defaults.get('qos', {}).get('depth', 10)),
+                               describe('history depth of inputs and outputs', read_only=True,
+                                        int_range=(1, 1000)))
+        self.declare_parameter(
+            'qos.input_reliability',
+            str(defaults.get('qos', {}).get('input_reliability', 'reliable')),
+            describe('QoS reliability of ~/screw and ~/pose', read_only=True,
+                     constraints='reliable | best_effort'))
+        self.declare_parameter('limits.max_array_length',
+                               int(defaults.get('limits', {}).get('max_array_length', 1024)),
+                               describe('longer Float64MultiArray inputs are rejected unread',
+                                        int_range=(6, 1_000_000)))
+        eq = defaults.get('equilibrium', {})
+        self.declare_parameter('equilibrium.time_budget', float(eq.get('time_budget', 0.05)),
+                               describe('wall-clock budget of one equilibrium solve, s',
+                                        fp_range=(1e-4, 10.0)))
+        self.declare_parameter('equilibrium.max_iterations',
+                               int(eq.get('max_iterations', MAX_NEWTON_ITERATIONS)),
+                               describe('Newton iterations per solve stage',
+                                        int_range=(1, 10_000)))
+        self.declare_parameter('markers.max_rate',
+                               float(defaults.get('markers', {}).get('max_rate', 0.0)),
+                               describe('highest ~/markers rate, Hz (0: one per input)',
+                                        fp_range=(0.0, 10_000.0)))
+        self.declare_parameter('diagnostics.period',
+                               float(defaults.get('diagnostics', {}).get('period', 1.0)),
+                               describe('/diagnostics period, s', read_only=True,
+                                        fp_range=(0.01, 60.0)))
+
+    def _parameter_values(self, overrides: Mapping[str, Any]) -> dict[str, Any]:
+        names = ([f'joint.{k}' for k in JOINT_STRING_ARRAYS + JOINT_DOUBLE_ARRAYS]
+                 + ['joint.force_law', 'frames.link1', 'frames.link2']
+                 + [f'planar.{k}' for k in PLANAR_KEYS]
+                 + ['limits.max_array_length', 'equilibrium.time_budget',
+                    'equilibrium.max_iterations', 'markers.max_rate'])
+        values = {}
+        for name in names:
+            try:
+                values[name] = self.get_parameter(name).value
+            except ParameterUninitializedException:  # typed array without a default
+                values[name] = None
+        values.update(overrides)
+        return values
+
+    def _config_from_parameters(self, overrides: Mapping[str, Any], generation: int,
+                                keep_rest_lengths: np.ndarray | None = None) -> NodeConfig:
+        """Build (and so validate) a whole configuration; ValueError names the bad field."""
+        values = self._parameter_values(overrides)
+        section = {key[len('joint.'):]: (list(value) if value is not None else [])
+                   for key, value in values.items() if key.startswith('joint.')}
+        section['force_law'] = values['joint.force_law']
+        model = JointModel.from_dict(section)
+        if keep_rest_lengths is not None and keep_rest_lengths.shape == (model.n_strings,):
+            model = model.with_rest_lengths(keep_rest_lengths)
+        try:
+            planar = PlanarMechanism(**{k: values[f'planar.{k}'] for k in PLANAR_KEYS})
+        except ValueError as exc:
+            raise ValueError(f'planar.{exc}') from None
+        for key in ('frames.link1', 'frames.link2'):
+            if not str(values[key]).strip():
+                raise ValueError(f'{key} must not be empty')
+        rate = float(values['markers.max_rate'])
+        return NodeConfig(model=model, planar=planar, link1_frame=str(values['frames.link1']),
+                          link2_frame=str(values['frames.link2']),
+                          max_array_length=int(values['limits.max_array_length']),
+                          equilibrium_time_budget=float(values['equilibrium.time_budget']),
+                          equilibrium_max_iterations=int(values['equilibrium.max_iterations']),
+                          marker_period=0.0 if rate <= 0.0 else 1.0 / rate,
+                          generation=generation)
+
+    def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
+        """Validate a parameter change as a whole (no side effects)."""
+        overrides = {p.name: p.value for p in parameters}
+        try:
+            self._config_from_parameters(overrides, generation=-1)
+        except (ValueError, TypeError) as exc:
+            self.get_logger().warning(f'parameter change rejected: {exc}')
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, parameters: list[Parameter]) -> None:
+        """After a successful set: swap in the new configuration, keeping topic rest lengths
+        unless the change sets joint.rest_lengths itself."""
+        names = {p.name for p in parameters}
+        with self._state_lock:
+            old = self._config
+            keep = None if 'joint.rest_lengths' in names else old.model.rest_lengths
+            self._config = self._config_from_parameters({}, old.generation + 1, keep)
+        self.get_logger().info(f'parameters applied: {sorted(names)}')
+        self._republish_last()
+
+    # ------------------------------------------------------------------ inputs
+    def _reject(self, kind: str, problem: str) -> None:
+        self._rejected[kind] = self._rejected.get(kind, 0) + 1
+        self.get_logger().warning(f'{kind} rejected: {problem}',
+                                  throttle_duration_sec=WARN_THROTTLE_S)
+
+    def _on_screw(self, msg: Float64MultiArray) -> None:
+        cfg = self._config
+        try:
+            xi = msg_tools.multiarray_to_array(msg, expected_length=6,
+                                               max_length=cfg.max_array_length)
+            if np.linalg.norm(xi[:3]) >= CHART_LIMIT:
+                raise ValueError(f'|omega| = {np.linalg.norm(xi[:3]):.6g} rad is outside the '
+                                 f'chart (must be < 2 pi)')
+        except ValueError as exc:
+            self._reject('~/screw', str(exc))
+            return
+        self._compute_and_publish(cfg, xi, None, '~/screw')
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        cfg = self._config
+        try:
+            frame = msg.header.frame_id
+            if frame and frame != cfg.link1_frame:
+                raise ValueError(f"header.frame_id '{frame}' is not link 1's frame "
+                                 f"'{cfg.link1_frame}'")
+            T = msg_tools.pose_to_transform(msg.pose)
+            reference = self._last_screw if self._last_screw is not None else \
+                cfg.model.initial_screw
+            xi = log_se3(T, reference=reference)
+        except ValueError as exc:
+            self._reject('~/pose', str(exc))
+            return
+        stamp = msg.header.stamp
+        if stamp.sec == 0 and stamp.nanosec == 0:
+            stamp = None
+        self._compute_and_publish(cfg, xi, stamp, '~/pose')
+
+    def _on_rest_lengths(self, msg: Float64MultiArray) -> None:
+        with self._state_lock:
+            cfg = self._config
+            try:
+                rest = msg_tools.multiarray_to_array(msg, expected_length=cfg.model.n_strings,
+                                                     max_length=cfg.max_array_length)
+                model = cfg.model.with_rest_lengths(rest)
+            except ValueError as exc:
+                self._reject('~/rest_lengths', str(exc))
+                return
+            self._config = replace(cfg, model=model, generation=cfg.generation + 1)
+        self._republish_last()
+
+    def _republish_last(self) -> None:
+        with self._state_lock:
+            xi, stamp = self._last_screw, self._last_stamp
+        if xi is not None:
+            self._compute_and_publish(self._config, xi, stamp, 're-publish')
+
+    # ------------------------------------------------------------------ outputs
+    def _output_messages(self, cfg: NodeConfig) -> _OutputMessages:
+        """Reusable output messages (their layouts depend on the string names only)."""
+        names = tuple(cfg.model.string_names)
+        if self._outputs is None or self._outputs.string_names != names:
+            self._outputs = _OutputMessages(names)
+        return self._outputs
+
+    def _compute_and_publish(self, cfg: NodeConfig, xi: np.ndarray, stamp: Any,
+                             source: str) -> None:
+        start = time.perf_counter()
+        try:
+            state = cfg.model.evaluate(xi)
+            interpretation = interpretation_vector(state.stiffness)
+            if not (np.isfinite(state.stiffness).all() and np.isfinite(state.wrench).all()):
+                raise ValueError('non-finite result')
+        except ValueError as exc:
+            self._reject(source, str(exc))
+            return
+        if stamp is None:
+            stamp = self.get_clock().now().to_msg()
+        out = self._output_messages(cfg)
+        out.wrench.header.stamp = stamp
+        out.wrench.header.frame_id = cfg.link1_frame
+        msg_tools.set_wrench(out.wrench.wrench, state.wrench)
+        self._pub_wrench.publish(out.wrench)
+        self._pub_stiffness.publish(msg_tools.set_multiarray_data(out.stiffness,
+                                                                  state.stiffness))
+        self._pub_cartesian.publish(msg_tools.set_multiarray_data(
+            out.cartesian_stiffness, state.cartesian_stiffness))
+        self._pub_tensions.publish(msg_tools.set_multiarray_data(out.tensions, state.tensions))
+        self._pub_interpretation.publish(msg_tools.set_multiarray_data(out.interpretation,
+                                                                       interpretation))
+        now = time.monotonic()
+        if cfg.marker_period == 0.0 or now - self._last_marker_time >= cfg.marker_period:
+            self._last_marker_time = now
+            self._pub_markers.publish(self._markers(cfg, state, stamp))
+        with self._state_lock:
+            self._last_screw, self._last_stamp = xi, stamp
+            self._last_state = state
+        self._published += 1
+        self._input_times.append(now)
+        self._compute_times.append(time.perf_counter() - start)
+
+    def _markers(self, cfg: NodeConfig, state: JointState, stamp: Any) -> MarkerArray:
+        model = cfg.model
+        saturation = model.k * model.max_stretch
+        top = float(np.max(saturation)) if np.all(np.isfinite(saturation)) else None
+        return msg_tools.marker_array(
+            model.link1_nodes, model.link2_nodes_in_link1(state.transform), model.connections,
+            state.tensions, state.slack, cfg.link1_frame, stamp, max_tension=top)
+
+    # ------------------------------------------------------------------ services
+    async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
+                                    response: SolveEquilibrium.Response
+                                    ) -> SolveEquilibrium.Response:
+        """Validated here, solved on the worker thread: the executor keeps serving the topics
+        while the solve (bounded by ``equilibrium.time_budget``) runs."""
+        cfg = self._config
+        try:
+            W = msg_tools.msg_to_wrench(request.external_wrench)
+            rest = None
+            if len(request.rest_lengths):
+                rest = cfg.model.validate_rest_lengths(
+                    np.asarray(request.rest_lengths, dtype=np.float64), batched=False)
+            if len(request.initial_screw):
+                x0 = np.asarray(request.initial_screw, dtype=np.float64)
+                if x0.shape != (6,):
+                    raise ValueError(f'initial_screw must have 6 values, got {x0.size}')
+            else:
+                x0 = self._last_solution if self._last_solution is not None else \
+                    cfg.model.initial_screw
+            x0 = np.asarray(x0, dtype=np.float64)
+            if not np.isfinite(x0).all() or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
+                raise ValueError('initial_screw must have finite values and |omega| < 2 pi')
+            done = RclpyFuture(executor=self.executor)
+
+            def solve() -> None:
+                try:
+                    done.set_result(solve_equilibrium(
+                        cfg.model, W, rest_lengths=rest, initial_screw=x0,
+                        time_budget=cfg.equilibrium_time_budget,
+                        max_iterations=cfg.equilibrium_max_iterations))
+                except Exception as exc:  # reported to the caller by `await done`
+                    done.set_exception(exc)
+                # The executor polls the awaiting coroutine only when it wakes up: wake it.
+                self._wake.trigger()
+
+            self._solver.submit(solve)
+            result = await done
+        except ValueError as exc:
+            response.success = False
+            response.message = f'invalid request: {exc}'
+            self.get_logger().warning(f'~/solve_equilibrium: {response.message}',
+                                      throttle_duration_sec=WARN_THROTTLE_S)
+            return response
+        return self._fill_equilibrium(response, result)
+
+    def _fill_equilibrium(self, response: SolveEquilibrium.Response,
+                          result: EquilibriumResult) -> SolveEquilibrium.Response:
+        response.success = bool(result.success)
+        response.message = result.message
+        response.iterations = int(result.iterations)
+        response.residual = float(result.residual) if math.isfinite(result.residual) else -1.0
+        if not result.success or result.state is None:
+            return response
+        state = result.state
+        response.screw = result.screw.tolist()
+        response.pose = msg_tools.transform_to_pose(state.transform)
+        response.string_wrench = msg_tools.wrench_to_msg(state.wrench)
+        response.stiffness = state.stiffness.ravel().tolist()
+        response.cartesian_stiffness = state.cartesian_stiffness.ravel().tolist()
+        response.tensions = state.tensions.tolist()
+        response.energy = float(result.energy)
+        response.stable = bool(result.stable)
+        self._last_solution = result.screw
+        return response
+
+    def _on_planar_forward(self, request: PlanarForwardKinematics.Request,
+                           response: PlanarForwardKinematics.Response
+                           ) -> PlanarForwardKinematics.Response:
+        planar = self._config.planar
+        try:
+            fk = planar.forward(request.actuator_length, request.actuator_angle)
+        except ValueError as exc:
+            response.success = False
+            response.message = f'invalid request: {exc}'
+            return response
+        if not fk.actuator_in_range:
+            response.success = False
+            response.message = (
+                f'actuator (L3 = {request.actuator_length:.6g} m, theta1 = '
+                f'{request.actuator_angle:.6g} rad) is outside the actuator workspace '
+                f'L3 in [{planar.L3_min:.6g}, {planar.L3_max:.6g}], theta1 in '
+                f'[{planar.theta1_min:.6g}, {planar.theta1_max:.6g}]')
+            return response
+        values = (fk.x, fk.y, fk.theta2, fk.stiffness, fk.energy, fk.jacobian_determinant)
+        if not all(math.isfinite(v) for v in values) or not np.isfinite(fk.jacobian).all():
+            response.success = False
+            response.message = 'no isolated equilibrium here (neutral point): every theta2 is ' \
+                'an equilibrium'
+            return response
+        response.success = True
+        response.x, response.y = float(fk.x), float(fk.y)
+        response.platform_angle = float(fk.theta2)
+        response.stiffness = float(fk.stiffness)
+        response.energy = float(fk.energy)
+        response.stable = bool(fk.stable)
+        response.in_range = bool(fk.theta2_in_range)
+        response.jacobian = np.asarray(fk.jacobian, dtype=np.float64).ravel().tolist()
+        response.jacobian_determinant = float(fk.jacobian_determinant)
+        response.singularities = list(fk.singularities)
+        notes = []
+        if not fk.theta2_in_range:
+            notes.append('theta2 outside its allowed range')
+        if fk.singularities:
+            notes.append('singular: ' + ', '.join(fk.singularities))
+        response.message = 'ok' + (' (' + '; '.join(notes) + ')' if notes else '')
+        return response
+
+    def _on_planar_inverse(self, request: PlanarInverseKinematics.Request,
+                           response: PlanarInverseKinematics.Response
+                           ) -> PlanarInverseKinematics.Response:
+        try:
+            solutions = self._config.planar.inverse(request.x, request.y)
+        except ValueError as exc:
+            response.success = False
+            response.message = f'invalid request: {exc}'
+            return response
+        response.actuator_length = [float(s.L3) for s in solutions]
+        response.actuator_angle = [float(s.theta1) for s in solutions]
+        response.platform_angle = [float(s.theta2) for s in solutions]
+        response.stiffness = [float(s.stiffness) for s in solutions]
+        response.stable = [bool(s.stable) for s in solutions]
+        response.success = len(solutions) > 0
+        response.message = (f'{len(solutions)} solution(s)' if solutions
+                            else f'unreachable: {solutions.reason}')
+        return response
+
+    # ------------------------------------------------------------------ diagnostics
+    def _publish_diagnostics(self) -> None:
+        cfg = self._config
+        with self._state_lock:
+            state = self._last_state
+        times = list(self._input_times)
+        computes = list(self._compute_times)
+        now = time.monotonic()
+        recent = [t for t in times if now - t <= 1.0]
+        values: list[tuple[str, Any]] = [
+            ('input rate [Hz]', float(len(recent))),
+            ('outputs published', self._published),
+            ('compute time mean [us]', 1e6 * float(np.mean(computes)) if computes else 0.0),
+            ('compute time max [us]', 1e6 * float(np.max(computes)) if computes else 0.0),
+            ('rejected inputs', dict(sorted(self._rejected.items())) or 0),
+            ('parameter generation', cfg.generation),
+        ]
+        level, message = 'OK', 'no input yet'
+        if state is not None:
+            names = np.array(cfg.model.string_names) if len(cfg.model.string_names) == \
+                state.tensions.shape[0] else np.array([str(i) for i in range(len(state.slack))])
+            slack = names[state.slack].tolist()
+            saturated = names[state.saturated].tolist()
+            theta = float(np.linalg.norm(state.screw[:3]))
+            Kc = state.cartesian_stiffness
+            sym = 0.5 * (Kc + Kc.T)
+            diag = np.sqrt(np.abs(np.diag(sym))) + 1e-300
+            min_eig = float(np.linalg.eigvalsh(sym / diag[:, None] / diag[None, :])[0])
+            stable = is_stable(Kc)
+            values += [
+                ('slack strings', slack or 'none'),
+                ('saturated strings', saturated or 'none'),
+                ('chart margin 2pi - |omega| [rad]', CHART_LIMIT - theta),
+                ('stability margin (min eig of scaled sym K_c)', min_eig),
+                ('condition number of K', float(np.linalg.cond(state.stiffness))),
+            ]
+            problems = []
+            if slack:
+                problems.append(f'{len(slack)} slack')
+            if saturated:
+                problems.append(f'{len(saturated)} saturated')
+            if not stable:
+                problems.append('not stable')
+            if CHART_LIMIT - theta < 0.1:
+                problems.append('near the chart limit |omega| = 2 pi')
+            level = 'WARN' if problems else 'OK'
+            message = ', '.join(problems) if problems else 'all strings taut, stable'
+        status = msg_tools.diagnostic_status(f'{self.get_name()}: joint', level, message,
+                                             values, hardware_id=cfg.link1_frame)
+        self._pub_diagnostics.publish(msg_tools.diagnostic_array(
+            [status], self.get_clock().now().to_msg()))
+
+
+def main(args: list[str] | None = None, *,
+         executor_factory: Callable[[], Any] | None = None) -> None:
+    """Entry point of ``ros2 run tensegrity_stiffness stiffness_node``."""
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = StiffnessNode()
+        # Everything allocated so far (modules, node, config) lives as long as the process:
+        # move it out of the collector's reach so that full collections stay short.
+        gc.collect()
+        gc.freeze()
+        executor = (executor_factory or SingleThreadedExecutor)()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
