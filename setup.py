@@ -16,6 +16,7 @@ setup(
         ('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml')),
     ],
     install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
+    extras_require={'plots': ['matplotlib']},
     zip_safe=True,
     maintainer='tensegrity_stiffness maintainers',
     maintainer_email='maintainers@tensegrity-stiffness.invalid',
@@ -25,6 +26,7 @@ setup(
     entry_points={
         'console_scripts': [
             'stiffness_node = tensegrity_stiffness.stiffness_node:main',
+            'tensegrity-stiffness = tensegrity_stiffness.cli:main',
         ],
     },
 )
