@@ -395,3 +395,24 @@ def test_diagnostics(harness, model):
     keys = {kv.key for kv in status.values}
     assert {'input rate [Hz]', 'compute time mean [us]', 'slack strings', 'saturated strings',
             'chart margin 2pi - |omega| [rad]'} <= keys
+
+
+def test_markers_mark_slack_strings(harness, model):
+    xi = model.initial_screw
+    rest = model.rest_lengths.copy()
+    rest[:4] = 0.05  # the cross strings (0.0452 m long at rest) go slack
+    before = harness.counts()
+    harness.send_screw(xi)
+    harness.next_outputs(before)
+    before = harness.counts()
+    harness.rest_pub.publish(Float64MultiArray(data=rest.tolist()))
+    out = harness.next_outputs(before)
+    state = check_outputs(out, model, xi, rest)
+    assert state.slack[:4].all() and not state.slack[4:].any()
+    by_ns = {m.ns: m for m in out['markers'].markers}
+    assert len(by_ns['slack_strings'].points) == 2 * 4
+    assert len(by_ns['strings'].points) == 2 * 8 and len(by_ns['strings'].colors) == 2 * 8
+    before = harness.counts()
+    harness.rest_pub.publish(Float64MultiArray(data=model.rest_lengths.tolist()))
+    out = harness.next_outputs(before)
+    assert len({m.ns: m for m in out['markers'].markers}['slack_strings'].points) == 0
