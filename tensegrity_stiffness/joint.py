@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.screw import ScrewKinematics, as_screws, exp_se3
+from tensegrity_stiffness.validation import finite_array
 
 FloatArray = NDArray[np.float64]
 
@@ -88,16 +89,6 @@ def _beta_map(Z: FloatArray) -> FloatArray:
     C[:, :3, :, :3] = -np.einsum('jab,bcd->jdac', Z, eps)
     C[:, 3, :, 3:] = Z
     return C.reshape(4 * n, 36)
-
-
-def _finite_array(value: ArrayLike, name: str) -> FloatArray:
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name} must be numeric: {exc}') from None
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f'{name} must be finite, got {value!r}')
-    return arr
 
 
 _EYE3 = np.eye(3)
@@ -149,10 +140,10 @@ class JointModel:
         string_names: Sequence[str] | None = None,
         initial_screw: ArrayLike | None = None,
     ) -> None:
-        p1 = _finite_array(link1_nodes, 'link1_nodes')
+        p1 = finite_array('link1_nodes', link1_nodes)
         if p1.ndim != 2 or p1.shape[1] != 3 or p1.shape[0] == 0:
             raise ValueError(f'link1_nodes must have shape (n1, 3) with n1 >= 1, got {p1.shape}')
-        p2 = p1 if link2_nodes is None else _finite_array(link2_nodes, 'link2_nodes')
+        p2 = p1 if link2_nodes is None else finite_array('link2_nodes', link2_nodes)
         if p2.ndim != 2 or p2.shape[1] != 3 or p2.shape[0] == 0:
             raise ValueError(f'link2_nodes must have shape (n2, 3) with n2 >= 1, got {p2.shape}')
         conn = np.asarray(connections)
@@ -165,7 +156,7 @@ class JointModel:
             raise ValueError(f'connections[:, 0] must index link1_nodes (0..{p1.shape[0] - 1})')
         if conn[:, 1].min() < 0 or conn[:, 1].max() >= p2.shape[0]:
             raise ValueError(f'connections[:, 1] must index link2_nodes (0..{p2.shape[0] - 1})')
-        k = np.broadcast_to(_finite_array(stiffness, 'stiffness'), (n,)).copy()
+        k = np.broadcast_to(finite_array('stiffness', stiffness), (n,)).copy()
         if np.any(k <= 0.0):
             raise ValueError(f'stiffness must be > 0 for every string, got {k}')
         if force_law not in FORCE_LAWS:
@@ -235,7 +226,7 @@ class JointModel:
             return default
 
         def nodes(key: str, value: Any) -> FloatArray:
-            arr = _finite_array(value, f'joint.{key}').ravel()
+            arr = finite_array(f'joint.{key}', value).ravel()
             if arr.size == 0 or arr.size % 3:
                 raise ValueError(f'joint.{key} must be a flat list of x, y, z triples, '
                                  f'got {arr.size} values')
@@ -331,7 +322,7 @@ class JointModel:
         """Rest lengths as float array (n,) (or (N, n) when ``batched``): finite, > 0."""
         if rest_lengths is None:
             return self.rest_lengths
-        arr = _finite_array(rest_lengths, 'rest_lengths')
+        arr = finite_array('rest_lengths', rest_lengths)
         n = self.n_strings
         if not (arr.shape == (n,) or (batched and arr.ndim == 2 and arr.shape[1] == n)):
             raise ValueError(f'rest_lengths must have shape ({n},)'

@@ -55,6 +55,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.validation import finite_array, finite_scalar
+
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
 
@@ -86,28 +88,6 @@ NEUTRAL_TOL = 1e-12
 #: Inverse kinematics: a discriminant ``|p|^2 - L^2 Im(m)^2`` within ``+-FOLD_TOL L^2 Im(m)^2``
 #: is rounding on the fold (curve v) and counts as zero (one double solution).
 FOLD_TOL = 1e-12
-
-
-def _check_scalar(name: str, value: float) -> float:
-    """``float(value)``, or ValueError naming ``name`` when it is not a finite number."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name} must be a finite number: {exc}') from None
-    if not math.isfinite(v):
-        raise ValueError(f'{name} must be finite, got {v}')
-    return v
-
-
-def _check_array(name: str, value: ArrayLike) -> FloatArray:
-    """``np.asarray(value, float64)``; ValueError naming ``name`` if an entry is not finite."""
-    try:
-        a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name} must be numeric: {exc}') from None
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f'{name} must be finite, got {a[~np.isfinite(a)].ravel()[0]}')
-    return a
 
 
 def _wrap_scalar(theta: float, lo: float, hi: float, tol: float) -> tuple[float, bool]:
@@ -287,29 +267,29 @@ class PlanarMechanism:
     range_tol: float = DEFAULT_RANGE_TOL
 
     def __post_init__(self) -> None:
-        L = _check_scalar('L', self.L)
-        K1 = _check_scalar('K1', self.K1)
-        K2 = _check_scalar('K2', self.K2)
+        L = finite_scalar('L', self.L)
+        K1 = finite_scalar('K1', self.K1)
+        K2 = finite_scalar('K2', self.K2)
         for name, value in (('L', L), ('K1', K1), ('K2', K2)):
             if value <= 0.0:
                 raise ValueError(f'{name} must be > 0, got {value}')
-        L3_min = _check_scalar('L3_min', self.L3_min)
-        L3_max = 2.0 * L if self.L3_max is None else _check_scalar('L3_max', self.L3_max)
+        L3_min = finite_scalar('L3_min', self.L3_min)
+        L3_max = 2.0 * L if self.L3_max is None else finite_scalar('L3_max', self.L3_max)
         if L3_min < 0.0:
             raise ValueError(f'L3_min must be >= 0, got {L3_min}')
         if L3_max <= L3_min:
             raise ValueError(f'L3_max must be > L3_min = {L3_min}, got {L3_max}')
         ranges = {}
         for name in ('theta1', 'theta2'):
-            lo = _check_scalar(f'{name}_min', getattr(self, f'{name}_min'))
-            hi = _check_scalar(f'{name}_max', getattr(self, f'{name}_max'))
+            lo = finite_scalar(f'{name}_min', getattr(self, f'{name}_min'))
+            hi = finite_scalar(f'{name}_max', getattr(self, f'{name}_max'))
             if hi <= lo:
                 raise ValueError(f'{name}_max must be > {name}_min = {lo}, got {hi}')
             if hi - lo > TWO_PI + 1e-12:
                 raise ValueError(f'{name}_max - {name}_min must be <= 2 pi, got {hi - lo}')
             ranges[name] = (lo, hi)
         for name in ('singularity_tol', 'range_tol'):
-            tol = _check_scalar(name, getattr(self, name))
+            tol = finite_scalar(name, getattr(self, name))
             if tol <= 0.0:
                 raise ValueError(f'{name} must be > 0, got {tol}')
             object.__setattr__(self, name, tol)
@@ -366,7 +346,7 @@ class PlanarMechanism:
     # ------------------------------------------------------------------ model (vectorised)
     def node_positions(self, L3: ArrayLike, theta1: ArrayLike, theta2: ArrayLike) -> FloatArray:
         """Eq. (1) and D3 (eqs. 2-3): shape ``S + (6, 2)`` in the order ``NODE_NAMES`` (m)."""
-        L3, t1, t2 = np.broadcast_arrays(*(_check_array(n, v) for n, v in (
+        L3, t1, t2 = np.broadcast_arrays(*(finite_array(n, v) for n, v in (
             ('L3', L3), ('theta1', theta1), ('theta2', theta2))))
         L = self.L
         out = np.zeros(L3.shape + (6, 2))
@@ -393,7 +373,7 @@ class PlanarMechanism:
 
     def energy(self, L3: ArrayLike, theta1: ArrayLike, theta2: ArrayLike) -> FloatArray:
         """Potential energy U, eq. (4) (J)."""
-        L3, t1, t2 = (_check_array(n, v) for n, v in (
+        L3, t1, t2 = (finite_array(n, v) for n, v in (
             ('L3', L3), ('theta1', theta1), ('theta2', theta2)))
         c1, s1 = np.cos(t1), np.sin(t1)
         A, B = self._AB(L3, c1, s1)
@@ -401,21 +381,21 @@ class PlanarMechanism:
 
     def torque(self, L3: ArrayLike, theta1: ArrayLike, theta2: ArrayLike) -> FloatArray:
         """``tau = dU/dtheta2``, eq. (41) (N m): the torque that holds the platform at theta2."""
-        L3, t1, t2 = (_check_array(n, v) for n, v in (
+        L3, t1, t2 = (finite_array(n, v) for n, v in (
             ('L3', L3), ('theta1', theta1), ('theta2', theta2)))
         A, B = self._AB(L3, np.cos(t1), np.sin(t1))
         return -A * np.sin(t2) + B * np.cos(t2)
 
     def stiffness(self, L3: ArrayLike, theta1: ArrayLike, theta2: ArrayLike) -> FloatArray:
         """``K = d2U/dtheta2^2``, eq. (42) (N m/rad), at any theta2 (actuators locked)."""
-        L3, t1, t2 = (_check_array(n, v) for n, v in (
+        L3, t1, t2 = (finite_array(n, v) for n, v in (
             ('L3', L3), ('theta1', theta1), ('theta2', theta2)))
         A, B = self._AB(L3, np.cos(t1), np.sin(t1))
         return -A * np.cos(t2) - B * np.sin(t2)
 
     def eta(self, L3: ArrayLike, theta1: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """``(eta1, eta2)`` of eqs. (6)-(7) (N/m times m = N)."""
-        L3, t1 = _check_array('L3', L3), _check_array('theta1', theta1)
+        L3, t1 = finite_array('L3', L3), finite_array('theta1', theta1)
         A, B = self._AB(L3, np.cos(t1), np.sin(t1))
         return 2.0 * B / self.L, 2.0 * A / self.L
 
@@ -442,7 +422,7 @@ class PlanarMechanism:
         """Eq. (47) as printed (with eq. (46) corrected), N m/rad: eq. (42) at the root of eq. (5)
         with ``sin(theta2) >= 0`` (the paper's branch; stable only where ``eta1 < 0``).
         NaN where ``eta1 = 0``."""
-        L3, t1 = _check_array('L3', L3), _check_array('theta1', theta1)
+        L3, t1 = finite_array('L3', L3), finite_array('theta1', theta1)
         A, B = self._AB(L3, np.cos(t1), np.sin(t1))
         e1, e2 = 2.0 * B / self.L, 2.0 * A / self.L
         with np.errstate(divide='ignore', invalid='ignore'):
@@ -453,7 +433,7 @@ class PlanarMechanism:
         """``det J = L3 Phi1 / Phi2``, eqs. (23)-(25), with eq. (24) corrected
         (``4 L sin(theta2)``, not ``4 L3 L sin(theta2)``). Valid on either branch for the theta2
         of that branch; undefined (NaN) where ``Phi2 = 0`` (``eta1 = 0``). Units m."""
-        L3, t1, t2 = (_check_array(n, v) for n, v in (
+        L3, t1, t2 = (finite_array(n, v) for n, v in (
             ('L3', L3), ('theta1', theta1), ('theta2', theta2)))
         L, K1, K2 = self.L, self.K1, self.K2
         c1, s1 = np.cos(t1), np.sin(t1)
@@ -475,7 +455,7 @@ class PlanarMechanism:
         ``S + (2,)``: slot 0 (``+``) always > 0 (stable), slot 1 stable iff > 0 (otherwise it is
         the unstable equilibrium). NaN inside the fold circle (no equilibrium). No actuator ranges.
         """
-        x, y = _check_array('x', x), _check_array('y', y)
+        x, y = finite_array('x', x), finite_array('y', y)
         L, K1, K2 = self.L, self.K1, self.K2
         d1 = (K1 + 2 * K2) * y - SQRT3 * K1 * x + 2 * SQRT3 * K2 * L
         d2 = 2 * (2 * K1 - K2) * L + (K1 + 2 * K2) * x + SQRT3 * K1 * y
@@ -491,7 +471,7 @@ class PlanarMechanism:
         ``'i'``: L3/L; ``'ii'``: sin(theta1); ``'iii'``: eta1/|eta|; ``'iv'``: sin(theta2 -
         theta1); ``'v'``: det J / L3 = 1 - L^2 (K1/2 + K2)/K. See the module docstring.
         """
-        L3, t1 = np.broadcast_arrays(_check_array('L3', L3), _check_array('theta1', theta1))
+        L3, t1 = np.broadcast_arrays(finite_array('L3', L3), finite_array('theta1', theta1))
         c1, s1 = np.cos(t1), np.sin(t1)
         A, B = self._AB(L3, c1, s1)
         R = np.hypot(A, B)
@@ -507,8 +487,8 @@ class PlanarMechanism:
 
     def singularities(self, L3: float, theta1: float) -> tuple[str, ...]:
         """Names of the singular conditions holding at ``(L3, theta1)`` (``singularity_tol``)."""
-        L3 = _check_scalar('L3', L3)
-        theta1 = _check_scalar('theta1', theta1)
+        L3 = finite_scalar('L3', L3)
+        theta1 = finite_scalar('theta1', theta1)
         c1, s1 = math.cos(theta1), math.sin(theta1)
         A, B = self._AB(L3, c1, s1)
         R = math.hypot(A, B)
@@ -544,8 +524,8 @@ class PlanarMechanism:
         ``L3`` (m, >= 0) and ``theta1`` (rad) must be finite; values outside the actuator ranges
         are evaluated and flagged (``actuator_in_range``), not rejected.
         """
-        L3 = _check_scalar('L3', L3)
-        theta1 = _check_scalar('theta1', theta1)
+        L3 = finite_scalar('L3', L3)
+        theta1 = finite_scalar('theta1', theta1)
         if L3 < 0.0:
             raise ValueError(f'L3 must be >= 0, got {L3}')
         L = self.L
@@ -584,7 +564,7 @@ class PlanarMechanism:
 
     def forward_grid(self, L3: ArrayLike, theta1: ArrayLike) -> PlanarForwardGrid:
         """Vectorised :meth:`forward` (stable branch) over broadcast arrays ``L3``, ``theta1``."""
-        L3, t1 = np.broadcast_arrays(_check_array('L3', L3), _check_array('theta1', theta1))
+        L3, t1 = np.broadcast_arrays(finite_array('L3', L3), finite_array('theta1', theta1))
         if np.any(L3 < 0.0):
             raise ValueError(f'L3 must be >= 0, got {L3[L3 < 0.0].ravel()[0]}')
         L = self.L
@@ -636,8 +616,8 @@ class PlanarMechanism:
         ``[theta2_min, theta2_max]`` (by default they are kept and flagged). An unreachable point
         gives an empty list with a ``reason``; non-finite input raises ValueError.
         """
-        x = _check_scalar('x', x)
-        y = _check_scalar('y', y)
+        x = finite_scalar('x', x)
+        y = finite_scalar('y', y)
         L, K1, K2 = self.L, self.K1, self.K2
         a, b = self.m_real, 0.5 * SQRT3 * K1
         pr = (2.0 * K1 - K2) * L + a * x + b * y  # delta2 / 2
@@ -697,7 +677,7 @@ class PlanarMechanism:
 
     def inverse_grid(self, x: ArrayLike, y: ArrayLike) -> PlanarInverseGrid:
         """Vectorised :meth:`inverse` (both roots of eq. 48) over broadcast arrays ``x``, ``y``."""
-        x, y = np.broadcast_arrays(_check_array('x', x), _check_array('y', y))
+        x, y = np.broadcast_arrays(finite_array('x', x), finite_array('y', y))
         L, K1, K2 = self.L, self.K1, self.K2
         a, b = self.m_real, 0.5 * SQRT3 * K1
         pr = (2.0 * K1 - K2) * L + a * x + b * y
@@ -729,7 +709,7 @@ class PlanarMechanism:
     # ------------------------------------------------------------------ workspaces
     def in_actuator_workspace(self, L3: ArrayLike, theta1: ArrayLike) -> BoolArray:
         """Whether ``(L3, theta1)`` lies in the actuator ranges (eq. 31, Section 2), broadcast."""
-        L3, t1 = _check_array('L3', L3), _check_array('theta1', theta1)
+        L3, t1 = finite_array('L3', L3), finite_array('theta1', theta1)
         _, ok = _wrap_array(t1, self.theta1_min, self.theta1_max, self.range_tol)
         return ok & (L3 >= self.L3_min - self.range_tol) & (L3 <= self.L3_max + self.range_tol)
 

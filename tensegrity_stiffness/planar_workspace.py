@@ -19,7 +19,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.planar import SQRT3, _check_array, _wrap_array
+from tensegrity_stiffness.planar import SQRT3, _wrap_array
+from tensegrity_stiffness.validation import finite_array
 
 if TYPE_CHECKING:
     from tensegrity_stiffness.planar import PlanarMechanism
@@ -159,8 +160,8 @@ def actuator_stiffness_map(mech: PlanarMechanism, L3: ArrayLike, theta1: ArrayLi
     Closed form ``L/2 sqrt(eta1^2 + eta2^2)`` (eq. 47 on the stable branch); points outside the
     actuator ranges get the value ``outside`` (NaN by default).
     """
-    L3 = _check_array('L3', L3)
-    theta1 = _check_array('theta1', theta1)
+    L3 = finite_array('L3', L3)
+    theta1 = finite_array('theta1', theta1)
     K = mech.stiffness_closed_form(L3, theta1)
     return np.where(mech.in_actuator_workspace(L3, theta1), K, outside)
 

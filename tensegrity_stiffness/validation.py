@@ -1,0 +1,30 @@
+"""Input validation shared by the library: ValueError messages that name the field."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+
+def finite_scalar(name: str, value: float) -> float:
+    """``float(value)``, or ValueError naming ``name`` when it is not a finite number."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name} must be a finite number: {exc}') from None
+    if not math.isfinite(v):
+        raise ValueError(f'{name} must be finite, got {v}')
+    return v
+
+
+def finite_array(name: str, value: ArrayLike) -> NDArray[np.float64]:
+    """``np.asarray(value, float64)``; ValueError naming ``name`` if an entry is not finite."""
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name} must be numeric: {exc}') from None
+    if not np.isfinite(a).all():
+        raise ValueError(f'{name} must be finite, got {a[~np.isfinite(a)].ravel()[0]}')
+    return a
