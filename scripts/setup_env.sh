@@ -55,6 +55,8 @@ REQUIREMENTS=(
   'PyYAML==6.0.3'
   'pytest==9.2.0'
   'ruff==0.17.6'
+  # plots of the tensegrity-stiffness CLI (optional at run time, needed by the tests)
+  'matplotlib==3.11.2'
 )
 
 log() { printf '[setup_env %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
