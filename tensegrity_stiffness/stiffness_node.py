@@ -7,22 +7,33 @@ signs) in :mod:`tensegrity_stiffness.joint`.
 Concurrency: one single-threaded executor runs every callback, so inputs are answered in order
 with the least overhead (rclpy's multi-threaded executor dropped 80% of a 1 kHz stream here).
 The equilibrium service is a coroutine: it validates the request, hands the solve (bounded by
-``equilibrium.time_budget``) to a worker thread and awaits it, so the topics keep being served
-meanwhile. All the configuration a computation needs is one immutable :class:`NodeConfig`, swapped
-as a whole when parameters or rest lengths change and read once per callback: no output mixes two
-parameter sets.
+``equilibrium.time_budget``) to a worker process (:class:`SolverProcess`) and awaits it, so the
+topics keep being served meanwhile. All the configuration a computation needs is one immutable
+:class:`NodeConfig`, swapped as a whole when parameters or rest lengths change and read once per
+callback: no output mixes two parameter sets.
+
+Robustness: every callback is guarded (an unexpected exception is counted and logged, and a
+service answers ``success: false``; nothing reaches the executor, which would end the node); the
+outputs of one input are all computed and checked before the first is published; warnings about
+bad input are throttled per kind; before ``rclpy.init`` the process bounds the memory that
+oversized input messages can pin (see :func:`bound_input_memory`).
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import gc
+import inspect
 import math
+import multiprocessing
+import os
 import sys
+import tempfile
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -56,6 +67,7 @@ import msg_tools
 from tensegrity_stiffness.equilibrium import (
     MAX_NEWTON_ITERATIONS,
     EquilibriumResult,
+    _BudgetExhaustedError,
     is_stable,
     solve_equilibrium,
 )
@@ -79,6 +91,55 @@ STATS_WINDOW = 1000
 #: Python's thread switch interval while the node runs (s): a long service solve yields the GIL
 #: to the topic thread at least this often (the default, 5 ms, would dominate the p99 latency).
 SWITCH_INTERVAL_S = 2e-4
+
+#: Wall-clock time a solve may take beyond ``equilibrium.time_budget`` (process start-up, a
+#: loaded machine) before it is abandoned and the solver process replaced.
+SOLVER_GRACE_S = 5.0
+#: Nice value of the solver process: on a busy machine the kernel favours the node's topic
+#: thread (and the stack around it); a solve then gets fewer iterations within its budget.
+SOLVER_NICE = 10
+#: Run by the solver process when it starts (``exec``: a builtin, so nothing of the node's
+#: module is imported there): the nice value above, and SIGINT ignored (Ctrl-C in a terminal
+#: reaches the whole process group; the node ends its solver itself).
+SOLVER_SETUP = (f'import os, signal; os.nice({SOLVER_NICE}); '
+                'signal.signal(signal.SIGINT, signal.SIG_IGN)')
+#: glibc ``mallopt`` parameter M_MMAP_THRESHOLD, and the threshold set (bytes).
+M_MMAP_THRESHOLD = -3
+MMAP_THRESHOLD_BYTES = 128 * 1024
+#: Fast DDS profile of the node's process (see :func:`bound_input_memory`): readers allocate a
+#: sample's memory when it arrives and free it once it is taken (``DYNAMIC``), instead of the
+#: rmw_fastrtps default, a pool of buffers that each grow to the largest sample seen and are kept:
+#: with it, a burst of 8 MB messages on a topic of depth 100 pins up to 800 MB for good. Writers,
+#: discovery and the publication mode are those rmw_fastrtps sets by default.
+FASTDDS_PROFILE = """<?xml version="1.0" encoding="UTF-8" ?>
+<profiles xmlns="http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles">
+  <participant profile_name="tensegrity_stiffness_participant" is_default_profile="true">
+    <rtps>
+      <builtin>
+        <readerHistoryMemoryPolicy>PREALLOCATED_WITH_REALLOC</readerHistoryMemoryPolicy>
+        <writerHistoryMemoryPolicy>PREALLOCATED_WITH_REALLOC</writerHistoryMemoryPolicy>
+      </builtin>
+    </rtps>
+  </participant>
+  <data_writer profile_name="tensegrity_stiffness_writer" is_default_profile="true">
+    <qos>
+      <publishMode><kind>SYNCHRONOUS</kind></publishMode>
+      <data_sharing><kind>OFF</kind></data_sharing>
+    </qos>
+    <historyMemoryPolicy>PREALLOCATED_WITH_REALLOC</historyMemoryPolicy>
+  </data_writer>
+  <data_reader profile_name="tensegrity_stiffness_reader" is_default_profile="true">
+    <qos>
+      <data_sharing><kind>OFF</kind></data_sharing>
+    </qos>
+    <historyMemoryPolicy>DYNAMIC</historyMemoryPolicy>
+  </data_reader>
+</profiles>
+"""
+#: Environment variables with which a deployment configures Fast DDS itself (then the node
+#: leaves Fast DDS alone).
+FASTDDS_ENVIRONMENT = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES_FILE',
+                       'RMW_FASTRTPS_USE_QOS_FROM_XML')
 
 TENSIONS_LABEL = 'tensions [N], strings in config order: '
 INTERPRETATION_LABEL = ('stiffness interpretation of K: block Frobenius norms '
@@ -132,6 +193,95 @@ class _OutputMessages:
         self.interpretation = msg_tools.vector_to_multiarray(np.zeros(16), INTERPRETATION_LABEL)
 
 
+def _guarded(kind: str) -> Callable:
+    """Decorator of a topic or timer callback: an unexpected exception is counted and logged
+    (throttled) instead of reaching the executor, whose ``spin`` would re-raise it and end the
+    node. Nothing has been published by then (outputs are published only once all are built)."""
+
+    def wrap(method: Callable) -> Callable:
+        @functools.wraps(method)
+        def run(self: StiffnessNode, *args: Any) -> None:
+            try:
+                method(self, *args)
+            except Exception as exc:  # the safety net: no callback may end the node
+                self._internal_error(kind, exc)
+
+        return run
+
+    return wrap
+
+
+def _guarded_service(kind: str) -> Callable:
+    """Decorator of a service callback (plain or coroutine): an unexpected exception answers a
+    fresh response with ``success: false`` and ``message: 'internal error: ...'``."""
+
+    def failure(self: StiffnessNode, response: Any, exc: Exception) -> Any:
+        self._internal_error(kind, exc)
+        fresh = type(response)()
+        fresh.success = False
+        fresh.message = f'internal error: {type(exc).__name__}: {exc}'
+        return fresh
+
+    def wrap(method: Callable) -> Callable:
+        if inspect.iscoroutinefunction(method):
+            @functools.wraps(method)
+            async def run_async(self: StiffnessNode, request: Any, response: Any) -> Any:
+                try:
+                    return await method(self, request, response)
+                except Exception as exc:  # the safety net: no callback may end the node
+                    return failure(self, response, exc)
+
+            return run_async
+
+        @functools.wraps(method)
+        def run(self: StiffnessNode, request: Any, response: Any) -> Any:
+            try:
+                return method(self, request, response)
+            except Exception as exc:  # the safety net: no callback may end the node
+                return failure(self, response, exc)
+
+        return run
+
+    return wrap
+
+
+class SolverProcess:
+    """Equilibrium solves in one worker process.
+
+    Not a thread of the node's process: a solve is Python and numpy holding the GIL for its
+    whole budget, and the executor thread, which gives the GIL up at every wait and publish,
+    then gets it back only after a switch interval each time (the convoy effect): measured here,
+    back-to-back 50 ms solves on a thread cut a 1 kHz screw stream to about 250 Hz, with 100 ms
+    latency and drops. Spawned, not forked (the process runs the middleware's threads). The
+    result or exception of ``fn`` goes to ``on_result`` / ``on_error`` on a thread of the pool;
+    :meth:`restart` abandons a solve that does not come back.
+    """
+
+    def __init__(self) -> None:
+        self._context = multiprocessing.get_context('spawn')
+        self._lock = threading.Lock()
+        self._pool = self._new_pool()
+
+    def _new_pool(self) -> Any:
+        return self._context.Pool(1, initializer=exec, initargs=(SOLVER_SETUP,))
+
+    def submit(self, fn: Callable, args: tuple, kwargs: dict[str, Any],
+               on_result: Callable[[Any], None], on_error: Callable[[BaseException], None]
+               ) -> None:
+        with self._lock:
+            self._pool.apply_async(fn, args, kwargs, callback=on_result,
+                                   error_callback=on_error)
+
+    def restart(self) -> None:
+        with self._lock:
+            old, self._pool = self._pool, self._new_pool()
+        old.terminate()
+
+    def close(self) -> None:
+        with self._lock:
+            self._pool.terminate()
+
+
 @dataclass(frozen=True)
 class NodeConfig:
     """Everything one computation needs, swapped as a whole (never mutated)."""
@@ -163,9 +313,10 @@ class StiffnessNode(Node):
         self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._rejected: dict[str, int] = {}
+        self._warned: dict[str, tuple[float, int]] = {}
         self._published = 0
         self._outputs: _OutputMessages | None = None
-        self._solver = ThreadPoolExecutor(max_workers=1, thread_name_prefix='equilibrium')
+        self._solver = SolverProcess()
         self._wake = self.create_guard_condition(lambda: None)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -212,6 +363,9 @@ class StiffnessNode(Node):
         self.create_timer(self.get_parameter('diagnostics.period').value,
                           self._publish_diagnostics)
         cfg = self._config
+        # Warm the solver process up (imports, first solve) before the first request needs it.
+        self._solver.submit(solve_equilibrium, (cfg.model, np.zeros(6)), {'time_budget': 1.0},
+                            lambda _: None, lambda _: None)
         self.get_logger().info(
             f'ready: {cfg.model.n_strings} strings, force law {cfg.model.force_law}, '
             f'frames {cfg.link1_frame} -> {cfg.link2_frame}, inputs {reliability} depth {depth}')
@@ -357,31 +511,66 @@ class StiffnessNode(Node):
 
     def _validate_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         """Validate a parameter change as a whole (no side effects)."""
-        overrides = {p.name: p.value for p in parameters}
         try:
+            overrides = {p.name: p.value for p in parameters}
             self._config_from_parameters(overrides, generation=-1)
-        except (ValueError, TypeError) as exc:
-            self.get_logger().warning(f'parameter change rejected: {exc}')
-            return SetParametersResult(successful=False, reason=str(exc))
+        except Exception as exc:  # ValueError / TypeError name the field; anything else: a bug
+            reason = str(exc) if isinstance(exc, (ValueError, TypeError)) else \
+                f'internal error: {type(exc).__name__}: {exc}'
+            self._warn('parameter change', reason)
+            return SetParametersResult(successful=False, reason=reason)
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
         """After a successful set: swap in the new configuration, keeping topic rest lengths
         unless the change sets joint.rest_lengths itself."""
         names = {p.name for p in parameters}
-        with self._state_lock:
-            old = self._config
-            keep = None if 'joint.rest_lengths' in names else old.model.rest_lengths
-            self._config = self._config_from_parameters({}, old.generation + 1, keep)
+        try:
+            with self._state_lock:
+                old = self._config
+                keep = None if 'joint.rest_lengths' in names else old.model.rest_lengths
+                self._config = self._config_from_parameters({}, old.generation + 1, keep)
+        except Exception as exc:  # validated before: only a bug gets here; the old set stays
+            self._internal_error('parameters', exc)
+            return
         self.get_logger().info(f'parameters applied: {sorted(names)}')
-        self._republish_last()
+        try:  # an exception here would reach the parameter service, and the executor
+            self._republish_last()
+        except Exception as exc:  # the safety net: no callback may end the node
+            self._internal_error('re-publish', exc)
 
     # ------------------------------------------------------------------ inputs
     def _reject(self, kind: str, problem: str) -> None:
         self._rejected[kind] = self._rejected.get(kind, 0) + 1
-        self.get_logger().warning(f'{kind} rejected: {problem}',
-                                  throttle_duration_sec=WARN_THROTTLE_S)
+        self._warn(kind, problem)
 
+    def _warn(self, kind: str, problem: str, error: bool = False) -> None:
+        """``<kind> rejected: <problem>``, at most once per ``WARN_THROTTLE_S`` per kind; the
+        next one says how many were left out."""
+        now = time.monotonic()
+        last, left_out = self._warned.get(kind, (-math.inf, 0))
+        if now - last < WARN_THROTTLE_S:
+            self._warned[kind] = (last, left_out + 1)
+            return
+        self._warned[kind] = (now, 0)
+        text = f'{kind} rejected: {problem}' + (
+            f' ({left_out} more since the last warning)' if left_out else '')
+        # One severity per call site: rclpy raises when a call site changes its severity.
+        if error:
+            self.get_logger().error(text)
+        else:
+            self.get_logger().warning(text)
+
+    def _internal_error(self, kind: str, exc: BaseException) -> None:
+        """An exception no validation anticipated (a bug): counted and logged, never raised."""
+        key = f'{kind} internal error'
+        self._rejected[key] = self._rejected.get(key, 0) + 1
+        try:
+            self._warn(key, f'{type(exc).__name__}: {exc}', error=True)
+        except Exception:  # the safety net must not throw itself
+            pass
+
+    @_guarded('~/screw')
     def _on_screw(self, msg: Float64MultiArray) -> None:
         cfg = self._config
         try:
@@ -395,6 +584,7 @@ class StiffnessNode(Node):
             return
         self._compute_and_publish(cfg, xi, None, '~/screw')
 
+    @_guarded('~/pose')
     def _on_pose(self, msg: PoseStamped) -> None:
         cfg = self._config
         try:
@@ -414,6 +604,7 @@ class StiffnessNode(Node):
             stamp = None
         self._compute_and_publish(cfg, xi, stamp, '~/pose')
 
+    @_guarded('~/rest_lengths')
     def _on_rest_lengths(self, msg: Float64MultiArray) -> None:
         with self._state_lock:
             cfg = self._config
@@ -444,32 +635,42 @@ class StiffnessNode(Node):
     def _compute_and_publish(self, cfg: NodeConfig, xi: np.ndarray, stamp: Any,
                              source: str) -> None:
         start = time.perf_counter()
+        # Every output is built and checked before the first is published: an input gets all
+        # of its outputs or none.
         try:
-            state = cfg.model.evaluate(xi)
-            interpretation = interpretation_vector(state.stiffness)
-            if not (np.isfinite(state.stiffness).all() and np.isfinite(state.wrench).all()):
+            with np.errstate(all='ignore'):  # overflow shows as a non-finite result below
+                state = cfg.model.evaluate(xi)
+                interpretation = interpretation_vector(state.stiffness)
+                finite = all(np.isfinite(a).all() for a in (
+                    state.wrench, state.stiffness, state.cartesian_stiffness, state.tensions,
+                    state.transform, interpretation))
+            if not finite:
                 raise ValueError('non-finite result')
+            if stamp is None:
+                stamp = self.get_clock().now().to_msg()
+            out = self._output_messages(cfg)
+            out.wrench.header.stamp = stamp
+            out.wrench.header.frame_id = cfg.link1_frame
+            msg_tools.set_wrench(out.wrench.wrench, state.wrench)
+            msg_tools.set_multiarray_data(out.stiffness, state.stiffness)
+            msg_tools.set_multiarray_data(out.cartesian_stiffness, state.cartesian_stiffness)
+            msg_tools.set_multiarray_data(out.tensions, state.tensions)
+            msg_tools.set_multiarray_data(out.interpretation, interpretation)
+            now = time.monotonic()
+            markers = None
+            if cfg.marker_period == 0.0 or now - self._last_marker_time >= cfg.marker_period:
+                markers = self._markers(cfg, state, stamp)
         except ValueError as exc:
             self._reject(source, str(exc))
             return
-        if stamp is None:
-            stamp = self.get_clock().now().to_msg()
-        out = self._output_messages(cfg)
-        out.wrench.header.stamp = stamp
-        out.wrench.header.frame_id = cfg.link1_frame
-        msg_tools.set_wrench(out.wrench.wrench, state.wrench)
         self._pub_wrench.publish(out.wrench)
-        self._pub_stiffness.publish(msg_tools.set_multiarray_data(out.stiffness,
-                                                                  state.stiffness))
-        self._pub_cartesian.publish(msg_tools.set_multiarray_data(
-            out.cartesian_stiffness, state.cartesian_stiffness))
-        self._pub_tensions.publish(msg_tools.set_multiarray_data(out.tensions, state.tensions))
-        self._pub_interpretation.publish(msg_tools.set_multiarray_data(out.interpretation,
-                                                                       interpretation))
-        now = time.monotonic()
-        if cfg.marker_period == 0.0 or now - self._last_marker_time >= cfg.marker_period:
+        self._pub_stiffness.publish(out.stiffness)
+        self._pub_cartesian.publish(out.cartesian_stiffness)
+        self._pub_tensions.publish(out.tensions)
+        self._pub_interpretation.publish(out.interpretation)
+        if markers is not None:
             self._last_marker_time = now
-            self._pub_markers.publish(self._markers(cfg, state, stamp))
+            self._pub_markers.publish(markers)
         with self._state_lock:
             self._last_screw, self._last_stamp = xi, stamp
             self._last_state = state
@@ -486,6 +687,7 @@ class StiffnessNode(Node):
             state.tensions, state.slack, cfg.link1_frame, stamp, max_tension=top)
 
     # ------------------------------------------------------------------ services
+    @_guarded_service('~/solve_equilibrium')
     async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
                                     response: SolveEquilibrium.Response
                                     ) -> SolveEquilibrium.Response:
@@ -493,6 +695,11 @@ class StiffnessNode(Node):
         while the solve (bounded by ``equilibrium.time_budget``) runs."""
         cfg = self._config
         try:
+            for name in ('rest_lengths', 'initial_screw'):
+                n = len(getattr(request, name))
+                if n > cfg.max_array_length:  # rejected before anything is converted
+                    raise ValueError(f'{name}: too many elements: {n} > max_length '
+                                     f'{cfg.max_array_length}')
             W = msg_tools.msg_to_wrench(request.external_wrench)
             rest = None
             if len(request.rest_lengths):
@@ -509,25 +716,54 @@ class StiffnessNode(Node):
             if not np.isfinite(x0).all() or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
                 raise ValueError('initial_screw must have finite values and |omega| < 2 pi')
             done = RclpyFuture(executor=self.executor)
+            settle_lock = threading.Lock()
 
-            def solve() -> None:
-                try:
-                    done.set_result(solve_equilibrium(
-                        cfg.model, W, rest_lengths=rest, initial_screw=x0,
-                        time_budget=cfg.equilibrium_time_budget,
-                        max_iterations=cfg.equilibrium_max_iterations))
-                except Exception as exc:  # reported to the caller by `await done`
-                    done.set_exception(exc)
+            def settle(result: Any = None, error: BaseException | None = None) -> None:
+                with settle_lock:
+                    if done.done():
+                        return
+                    if error is None:
+                        done.set_result(result)
+                    else:  # reported to the caller by `await done`
+                        done.set_exception(error)
                 # The executor polls the awaiting coroutine only when it wakes up: wake it.
                 self._wake.trigger()
 
-            self._solver.submit(solve)
-            result = await done
+            limit = cfg.equilibrium_time_budget + SOLVER_GRACE_S
+
+            def overrun() -> None:
+                if not done.done():
+                    settle(error=TimeoutError(f'no result within {limit:.3g} s'))
+                    self._solver.restart()
+
+            watchdog = threading.Timer(limit, overrun)
+            watchdog.daemon = True
+            watchdog.start()
+            self._solver.submit(
+                solve_equilibrium, (cfg.model, W),
+                {'rest_lengths': rest, 'initial_screw': x0,
+                 'time_budget': cfg.equilibrium_time_budget,
+                 'max_iterations': cfg.equilibrium_max_iterations},
+                lambda result: settle(result=result), lambda error: settle(error=error))
+            try:
+                result = await done
+            finally:
+                watchdog.cancel()
+        except TimeoutError as exc:
+            response.success = False
+            response.message = f'solver overran its budget: {exc}; solver restarted'
+            self._warn('~/solve_equilibrium', response.message, error=True)
+            return response
+        except _BudgetExhaustedError:
+            # equilibrium._fallback evaluates its last candidate outside its try block, so the
+            # deadline exception can escape solve_equilibrium (a library bug): a budget failure.
+            response.success = False
+            response.message = 'time budget exhausted (the solver stopped at its deadline)'
+            return response
         except ValueError as exc:
             response.success = False
             response.message = f'invalid request: {exc}'
-            self.get_logger().warning(f'~/solve_equilibrium: {response.message}',
-                                      throttle_duration_sec=WARN_THROTTLE_S)
+            self._reject('~/solve_equilibrium', str(exc))
             return response
         return self._fill_equilibrium(response, result)
 
@@ -540,6 +776,13 @@ class StiffnessNode(Node):
         if not result.success or result.state is None:
             return response
         state = result.state
+        if not (math.isfinite(result.energy) and all(np.isfinite(a).all() for a in (
+                result.screw, state.transform, state.wrench, state.stiffness,
+                state.cartesian_stiffness, state.tensions))):
+            # e.g. a start so far out that the string lengths overflow: F evaluates to 0 there
+            response.success = False
+            response.message = 'no usable equilibrium: the state at the solution is not finite'
+            return response
         response.screw = result.screw.tolist()
         response.pose = msg_tools.transform_to_pose(state.transform)
         response.string_wrench = msg_tools.wrench_to_msg(state.wrench)
@@ -551,6 +794,7 @@ class StiffnessNode(Node):
         self._last_solution = result.screw
         return response
 
+    @_guarded_service('~/planar_forward_kinematics')
     def _on_planar_forward(self, request: PlanarForwardKinematics.Request,
                            response: PlanarForwardKinematics.Response
                            ) -> PlanarForwardKinematics.Response:
@@ -593,6 +837,7 @@ class StiffnessNode(Node):
         response.message = 'ok' + (' (' + '; '.join(notes) + ')' if notes else '')
         return response
 
+    @_guarded_service('~/planar_inverse_kinematics')
     def _on_planar_inverse(self, request: PlanarInverseKinematics.Request,
                            response: PlanarInverseKinematics.Response
                            ) -> PlanarInverseKinematics.Response:
@@ -612,7 +857,11 @@ class StiffnessNode(Node):
                             else f'unreachable: {solutions.reason}')
         return response
 
+    def close_solver(self) -> None:
+        self._solver.close()
+
     # ------------------------------------------------------------------ diagnostics
+    @_guarded('diagnostics')
     def _publish_diagnostics(self) -> None:
         cfg = self._config
         with self._state_lock:
@@ -665,14 +914,46 @@ class StiffnessNode(Node):
             [status], self.get_clock().now().to_msg()))
 
 
+def bound_input_memory() -> Path | None:
+    """Keep oversized input messages from growing the process for good; call before the first
+    node is created. Returns the Fast DDS profile file written (delete it once the node exists),
+    or None.
+
+    * glibc: allocations above ``MMAP_THRESHOLD_BYTES`` always by ``mmap``, so that freeing one
+      returns it to the system (by default the threshold rises to the largest block freed, up to
+      32 MB, and later 8 MB message buffers stay in the heap).
+    * Fast DDS: unless the environment configures Fast DDS itself (``FASTDDS_ENVIRONMENT``),
+      readers with per-sample memory (``FASTDDS_PROFILE``), through a profile file and
+      ``RMW_FASTRTPS_USE_QOS_FROM_XML=1``; the QoS set in code still apply.
+    """
+    try:
+        ctypes.CDLL(None).mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD_BYTES)
+    except (OSError, AttributeError):  # not glibc
+        pass
+    rmw = os.environ.get('RMW_IMPLEMENTATION') or 'rmw_fastrtps_cpp'
+    if not rmw.startswith('rmw_fastrtps') or any(os.environ.get(v) for v in FASTDDS_ENVIRONMENT):
+        return None
+    fd, name = tempfile.mkstemp(prefix='tensegrity_stiffness_fastdds_', suffix='.xml')
+    with os.fdopen(fd, 'w') as f:
+        f.write(FASTDDS_PROFILE)
+    os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = name
+    os.environ['RMW_FASTRTPS_USE_QOS_FROM_XML'] = '1'
+    return Path(name)
+
+
 def main(args: list[str] | None = None, *,
          executor_factory: Callable[[], Any] | None = None) -> None:
     """Entry point of ``ros2 run tensegrity_stiffness stiffness_node``."""
     sys.setswitchinterval(SWITCH_INTERVAL_S)
+    profile = bound_input_memory()
     rclpy.init(args=args)
     node = None
     try:
-        node = StiffnessNode()
+        try:
+            node = StiffnessNode()
+        finally:  # Fast DDS read the profile when the node's participant was created
+            if profile is not None:
+                profile.unlink(missing_ok=True)
         # Everything allocated so far (modules, node, config) lives as long as the process:
         # move it out of the collector's reach so that full collections stay short.
         gc.collect()
@@ -684,6 +965,7 @@ def main(args: list[str] | None = None, *,
         pass
     finally:
         if node is not None:
+            node.close_solver()
             node.destroy_node()
         rclpy.try_shutdown()
 

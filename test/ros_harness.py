@@ -4,17 +4,22 @@ Real middleware only: the node runs as a separate process started from its colco
 location (the file ``ros2 run`` would start), and the client is a real rclpy node in a private
 context whose executor spins in a background thread (``spin_until_future_complete`` busy-loops
 and starves the middleware on 2 cores; see the pypi notes).
+
+:class:`NodeFuzzer` drives a running node with the inputs of ``fuzz_inputs`` and counts what
+comes back (shared by ``test/test_robustness.py`` and ``bench/fuzz_node.py``).
 """
 
 from __future__ import annotations
 
+import itertools
 import os
 import signal
 import subprocess
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterable
+from collections import Counter, deque
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +35,11 @@ EXECUTABLE = 'stiffness_node'
 RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                       reliability=ReliabilityPolicy.RELIABLE,
                       durability=DurabilityPolicy.VOLATILE)
+#: For streams whose every message is counted: a client that stalls (a loaded 2-core machine)
+#: must not lose messages from its own history (pair with the node's ``qos.depth``).
+DEEP = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
+                  reliability=ReliabilityPolicy.RELIABLE,
+                  durability=DurabilityPolicy.VOLATILE)
 LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                      reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -53,12 +63,16 @@ class NodeProcess:
     """The node as a child process (environment passed through unchanged, as the wheels'
     bootstrapper needs), with its output in a log file."""
 
+    _starts = itertools.count()
+
     def __init__(self, namespace: str, params_file: Path | None = None,
                  extra_args: Iterable[str] = (), log_dir: Path | None = None) -> None:
         self.namespace = namespace
         params_file = params_file or REPO / 'config' / 'default_joint.yaml'
         log_dir = log_dir or Path(os.environ.get('TMPDIR', '/tmp'))
-        self.log_path = log_dir / f'stiffness_node{namespace.replace("/", "_")}.log'
+        # One log per start (a restart in the same namespace keeps the first one).
+        self.log_path = log_dir / (f'stiffness_node{namespace.replace("/", "_")}'
+                                   f'_{os.getpid()}_{next(NodeProcess._starts)}.log')
         self._log = self.log_path.open('w')
         args = [str(node_executable()), '--ros-args', '--params-file', str(params_file),
                 '-r', f'__ns:={namespace}', *extra_args]
@@ -68,9 +82,22 @@ class NodeProcess:
     def alive(self) -> bool:
         return self.process.poll() is None
 
+    @property
+    def pid(self) -> int:
+        return self.process.pid
+
     def log(self) -> str:
-        self._log.flush()
+        if not self._log.closed:
+            self._log.flush()
         return self.log_path.read_text(errors='replace')
+
+    def rss_bytes(self) -> int:
+        """Resident memory of the node process (VmRSS of /proc/<pid>/status)."""
+        with open(f'/proc/{self.process.pid}/status') as f:
+            for line in f:
+                if line.startswith('VmRSS:'):
+                    return int(line.split()[1]) * 1024
+        raise RuntimeError(f'no VmRSS for pid {self.process.pid}')
 
     def stop(self, timeout: float = 10.0) -> int:
         if self.alive():
@@ -84,9 +111,11 @@ class NodeProcess:
         return self.process.returncode
 
     def kill(self) -> None:
+        """SIGKILL (no clean-up in the node), then close the log."""
         if self.alive():
             self.process.kill()
             self.process.wait(10)
+        self._log.close()
 
 
 class Inbox:
@@ -203,3 +232,284 @@ class RosClient:
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+# ---------------------------------------------------------------------------- fuzzing
+class StreamMatcher:
+    """Subscription callback that matches the messages of one output topic, in arrival order,
+    to the outputs expected for the inputs sent.
+
+    The sender calls :meth:`expect` before it publishes an input that must be answered (so an
+    answer can never arrive before its expectation). A message equal (rtol = atol = 1e-12) to
+    the oldest expectation matches it; one equal to a later expectation (within ``LOOKAHEAD``)
+    matches that one and the skipped ones count as ``missing``; one equal to none counts as
+    ``wrong`` (a publication for an invalid input, or a wrong value). ``on_match(seq, t)`` gets
+    each match with its arrival time (time.perf_counter).
+    """
+
+    LOOKAHEAD = 64
+
+    def __init__(self, extract: Callable[[Any], Any],
+                 on_match: Callable[[int, float], None] | None = None) -> None:
+        import numpy as np
+
+        self._np = np
+        self._extract = extract
+        self._on_match = on_match
+        self._expected: deque[tuple[int, Any]] = deque()
+        self._cond = threading.Condition()
+        self.received = 0
+        self.matched = 0
+        self.missing = 0
+        self.wrong = 0
+        self.wrong_examples: list[str] = []
+
+    def expect(self, seq: int, value: Any) -> None:
+        with self._cond:
+            self._expected.append((seq, value))
+
+    def __call__(self, msg: Any) -> None:
+        now = time.perf_counter()
+        value = self._np.asarray(self._extract(msg), dtype=self._np.float64)
+        np = self._np
+        with self._cond:
+            self.received += 1
+            for j, (seq, expected) in enumerate(itertools.islice(self._expected,
+                                                                 self.LOOKAHEAD)):
+                if value.shape == expected.shape and np.allclose(value, expected, rtol=1e-12,
+                                                                 atol=1e-12):
+                    for _ in range(j + 1):
+                        self._expected.popleft()
+                    self.missing += j
+                    self.matched += 1
+                    if self._on_match is not None:
+                        self._on_match(seq, now)
+                    self._cond.notify_all()
+                    return
+            self.wrong += 1
+            if len(self.wrong_examples) < 5:
+                self.wrong_examples.append(np.array2string(value, precision=6, threshold=40))
+            self._cond.notify_all()
+
+    def outstanding(self) -> int:
+        with self._cond:
+            return len(self._expected)
+
+    def wait_outstanding(self, at_most: int, timeout: float) -> bool:
+        """Wait until at most ``at_most`` expectations are open; False on timeout."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while len(self._expected) > at_most:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+            return True
+
+    def give_up(self, keep: int = 0) -> int:
+        """Count the oldest open expectations beyond ``keep`` as missing; returns how many."""
+        with self._cond:
+            n = max(0, len(self._expected) - keep)
+            for _ in range(n):
+                self._expected.popleft()
+            self.missing += n
+            return n
+
+
+class NodeFuzzer:
+    """Drives a running node with :mod:`fuzz_inputs` cases over the real middleware and counts.
+
+    Topic inputs are predicted by a :class:`fuzz_inputs.TopicOracle` and the node's
+    ``~/stiffness`` and ``~/wrench`` are matched to the predictions by value
+    (:class:`StreamMatcher`): a message that matches no valid input is a wrong publication, a
+    valid input without its message is missing. Before a pose or rest lengths (whose answer
+    depends on the node's state) the fuzzer waits until the node has answered everything sent:
+    the node orders inputs per topic only. Service answers are judged by the ``check_*``
+    functions of :mod:`fuzz_inputs`, one worker thread per service, while screws keep streaming.
+    ``rate``: topic inputs per second at most; ``window``: answers outstanding at most;
+    ``track_latency``: keep ``(sent, latency)`` of every matched ``~/stiffness`` in
+    ``latencies`` (time.perf_counter seconds).
+    """
+
+    def __init__(self, ros: RosClient, proc: NodeProcess, base: str, oracle: Any, planar: Any,
+                 rate: float = 1000.0, window: int = 50, timeout: float = 10.0,
+                 track_latency: bool = False) -> None:
+        import fuzz_inputs
+        from geometry_msgs.msg import PoseStamped, WrenchStamped
+        from std_msgs.msg import Float64MultiArray
+
+        import msg_tools
+        from tensegrity_stiffness_interfaces.srv import (
+            PlanarForwardKinematics,
+            PlanarInverseKinematics,
+            SolveEquilibrium,
+        )
+
+        self.fi = fuzz_inputs
+        self.ros, self.proc, self.base = ros, proc, base
+        self.oracle, self.planar = oracle, planar
+        self.period = 1.0 / rate
+        self.window, self.timeout = window, timeout
+        self.sent_at: dict[int, float] = {}
+        self.latencies: list[tuple[float, float]] = []
+        self.track_latency = track_latency
+        self.stiffness = StreamMatcher(lambda m: m.data, self._matched if track_latency else None)
+        self.wrench = StreamMatcher(lambda m: msg_tools.msg_to_wrench(m.wrench))
+        ros.node.create_subscription(Float64MultiArray, f'{base}/stiffness', self.stiffness, DEEP)
+        ros.node.create_subscription(WrenchStamped, f'{base}/wrench', self.wrench, DEEP)
+        self.publishers = {
+            'screw': ros.publisher(Float64MultiArray, f'{base}/screw', DEEP),
+            'pose': ros.publisher(PoseStamped, f'{base}/pose', DEEP),
+            'rest_lengths': ros.publisher(Float64MultiArray, f'{base}/rest_lengths', LATCHED),
+        }
+        self.clients = {
+            'forward': ros.client(PlanarForwardKinematics, f'{base}/planar_forward_kinematics'),
+            'inverse': ros.client(PlanarInverseKinematics, f'{base}/planar_inverse_kinematics'),
+            'equilibrium': ros.client(SolveEquilibrium, f'{base}/solve_equilibrium'),
+        }
+        for pub in self.publishers.values():
+            ros.wait_for_subscribers(pub)
+        for topic in ('stiffness', 'wrench'):
+            ros.wait_for_publishers(f'{base}/{topic}')
+        self.seq = 0
+        self._next_send = time.perf_counter()
+        self._lock = threading.Lock()
+        self.sent: Counter[str] = Counter()  # '<target> valid' / '<target> invalid'
+        self.kinds: Counter[str] = Counter()  # '<target>/<kind>'
+        self.requests: Counter[str] = Counter()
+        self.failed_valid: Counter[str] = Counter()  # valid requests answered success: false
+        self.wrong_answers = 0
+        self.wrong_answer_examples: list[str] = []
+        self.generator_errors: list[str] = []  # must_reject cases the oracle accepts
+        self.sync_timeouts = 0
+
+    def _matched(self, seq: int, arrived: float) -> None:
+        sent = self.sent_at.pop(seq, None)
+        if sent is not None:
+            self.latencies.append((sent, arrived - sent))
+
+    # -------------------------------------------------------------- topics
+    def _pace(self) -> None:
+        """At most ``rate`` inputs per second and ``window`` answers outstanding."""
+        if not self.stiffness.wait_outstanding(self.window, self.timeout):
+            self.sync_timeouts += 1
+            self.stiffness.give_up(self.window)
+            self.wrench.give_up(self.window)
+        now = time.perf_counter()
+        if self._next_send > now:
+            time.sleep(self._next_send - now)
+        self._next_send = max(self._next_send + self.period, time.perf_counter() - 0.05)
+
+    def sync(self) -> None:
+        """Wait until every input sent so far has been answered (or give up after timeout)."""
+        for matcher in (self.stiffness, self.wrench):
+            if not matcher.wait_outstanding(0, self.timeout):
+                self.sync_timeouts += 1
+                matcher.give_up()
+
+    def send(self, case: Any) -> bool:
+        """Publish one topic case; True if the oracle expects an answer."""
+        msg = self.fi.to_message(case)
+        if case.target != 'screw':
+            self.sync()  # the node's state (last screw, rest lengths) is the oracle's now
+        before = self.oracle.model
+        out = self.oracle.predict(case, msg)
+        if case.must_reject and (out is not None or self.oracle.model is not before):
+            self.generator_errors.append(f'{case.target}/{case.kind}')
+        self._pace()
+        self.seq += 1
+        if out is not None:
+            self.stiffness.expect(self.seq, out.stiffness)
+            self.wrench.expect(self.seq, out.wrench)
+            if self.track_latency:
+                self.sent_at[self.seq] = time.perf_counter()
+        self.publishers[case.target].publish(msg)
+        self.sent[f'{case.target} {"valid" if out is not None else "invalid"}'] += 1
+        self.kinds[f'{case.target}/{case.kind}'] += 1
+        if case.target != 'screw':
+            if out is not None:
+                self.sync()
+            elif self.oracle.model is not before:  # state changed, nothing to wait for
+                time.sleep(0.05)
+        return out is not None
+
+    def run_topics(self, cases: Iterable[Any]) -> None:
+        for case in cases:
+            self.send(case)
+        self.sync()
+
+    # -------------------------------------------------------------- services
+    def _serve(self, target: str, cases: list[Any], model: Any) -> None:
+        check = {'forward': lambda c, r: self.fi.check_forward(self.planar, c, r),
+                 'inverse': lambda c, r: self.fi.check_inverse(self.planar, c, r),
+                 'equilibrium': lambda c, r: self.fi.check_equilibrium(model, c, r)}[target]
+        client = self.clients[target]
+        for case in cases:
+            response = self.ros.call(client, self.fi.to_message(case), timeout=60.0)
+            verdict = check(case, response)
+            with self._lock:
+                self.requests[target] += 1
+                self.kinds[f'{target}/{case.kind}'] += 1
+                if verdict is not None:
+                    self.wrong_answers += 1
+                    if len(self.wrong_answer_examples) < 10:
+                        self.wrong_answer_examples.append(f'{target}/{case.kind}: {verdict}')
+                elif not response.success and not case.must_reject:
+                    self.failed_valid[f'{target}/{case.kind}'] += 1
+
+    def run_services(self, cases: Iterable[Any], screws: Iterator[Any]) -> None:
+        """Answer ``cases`` (one worker thread per service) while ``screws`` stream on."""
+        self.sync()
+        model = self.oracle.model  # constant meanwhile: only screws are sent
+        by_target: dict[str, list[Any]] = {}
+        for case in cases:
+            by_target.setdefault(case.target, []).append(case)
+        errors: list[BaseException] = []
+
+        def work(target: str, items: list[Any]) -> None:
+            try:
+                self._serve(target, items, model)
+            except BaseException as exc:  # reported by the caller
+                errors.append(exc)
+
+        workers = [threading.Thread(target=work, args=item, daemon=True)
+                   for item in by_target.items()]
+        for w in workers:
+            w.start()
+        while any(w.is_alive() for w in workers):
+            case = next(screws, None)
+            if case is None:
+                time.sleep(0.01)
+            else:
+                self.send(case)
+        for w in workers:
+            w.join()
+        self.sync()
+        if errors:
+            raise errors[0]
+
+    # -------------------------------------------------------------- summary
+    def finish(self, quiet: float = 1.0) -> dict[str, Any]:
+        """Wait for the last answers, then ``quiet`` seconds for stray ones; the figures."""
+        self.sync()
+        time.sleep(quiet)
+        messages = sum(self.sent.values())
+        return {
+            'messages': messages,
+            'valid messages': sum(v for k, v in self.sent.items() if k.endswith(' valid')),
+            'invalid messages': sum(v for k, v in self.sent.items() if k.endswith('invalid')),
+            'sent': dict(sorted(self.sent.items())),
+            'requests': sum(self.requests.values()),
+            'requests per service': dict(sorted(self.requests.items())),
+            'stiffness received': self.stiffness.received,
+            'wrench received': self.wrench.received,
+            'wrong publications': max(self.stiffness.wrong, self.wrench.wrong),
+            'missing answers': max(self.stiffness.missing, self.wrench.missing),
+            'wrong examples': self.stiffness.wrong_examples + self.wrench.wrong_examples,
+            'wrong answers': self.wrong_answers,
+            'wrong answer examples': self.wrong_answer_examples,
+            'valid requests that failed (allowed)': dict(sorted(self.failed_valid.items())),
+            'generator errors': self.generator_errors,
+            'sync timeouts': self.sync_timeouts,
+            'node alive': self.proc.alive(),
+        }
