@@ -79,7 +79,8 @@ def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: f
         time.sleep(0.05)
     # Outputs come in input order; match each to its input by value (a dropped input leaves a
     # gap), so that a drop cannot shift the pairing.
-    expected = model.stiffness(screws).reshape(n, 36)
+    # One screw at a time, as the node computes (the batched path rounds differently).
+    expected = np.array([model.stiffness(x).ravel() for x in screws])
     latencies = []
     k = 0
     for msg, arrived in zip(list(inbox.messages), list(inbox.times), strict=True):

@@ -209,6 +209,11 @@ def solve_equilibrium(
                                             max_iterations, deadline)
     state = model.evaluate(x, rest)
     energy = float(model.energy(x, rest))
+    if not (np.isfinite(state.wrench).all() and np.isfinite(state.stiffness).all()
+            and math.isfinite(energy)):
+        return EquilibriumResult(False, 'no usable equilibrium: the state at the last iterate '
+                                 'is not finite (string lengths overflow)', x, math.inf,
+                                 iterations, math.nan, False, None)
     if norm > tolerance:
         reason = 'time budget exhausted' if time.perf_counter() >= deadline else 'no convergence'
         return EquilibriumResult(False, f'{reason}: residual |F + W| = {norm:.3e} after '
@@ -255,7 +260,10 @@ def _fallback(model: JointModel, W: FloatArray, rest: FloatArray, x: FloatArray,
         return x, norm, iterations
     candidate = _rechart(sol.x)
     iterations += int(sol.nfev)
-    cand_norm = float(np.linalg.norm(residual(candidate)))
+    try:
+        cand_norm = float(np.linalg.norm(residual(candidate)))
+    except _BudgetExhaustedError:
+        return x, norm, iterations
     if cand_norm < norm:
         x, norm = candidate, cand_norm
     if norm > tolerance and time.perf_counter() < deadline:

@@ -119,3 +119,12 @@ def test_initial_screw_with_a_collapsed_string_fails_cleanly(model):
     res = solve_equilibrium(model, np.zeros(6), initial_screw=np.zeros(6))
     assert not res.success
     assert 'not admissible' in res.message
+
+
+def test_far_out_start_is_not_reported_as_converged(model):
+    # String vectors beyond ~1e154 overflow |s|^2: the wrench evaluates to 0 there, which must
+    # not pass for an equilibrium.
+    with np.errstate(over='ignore', invalid='ignore'):
+        res = solve_equilibrium(model, np.zeros(6), initial_screw=np.r_[0.1, 0, 0, 1e200, 0, 0],
+                                time_budget=0.5)
+    assert not res.success
