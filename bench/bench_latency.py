@@ -41,6 +41,10 @@ from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
 )
 
 
+#: Seconds between the node being reachable and the start of the stream.
+STARTUP_SETTLE_S = 3.0
+
+
 def percentile(values: list[float], q: float) -> float:
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
@@ -59,6 +63,9 @@ def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: f
     pub = ros.publisher(Float64MultiArray, f'{base}/screw')
     ros.wait_for_subscribers(pub)
     ros.wait_for_publishers(f'{base}/stiffness')
+    # Measure the steady state: let the node finish starting up (its solver process imports
+    # numpy and scipy and solves once, which takes a core for about a second).
+    time.sleep(STARTUP_SETTLE_S)
     n = int(rate * seconds)
     screws = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(n, 6))
     sent_at = np.empty(n)
