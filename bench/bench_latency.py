@@ -40,7 +40,6 @@ from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
     SolveEquilibrium,
 )
 
-
 #: Seconds between the node being reachable and the start of the stream.
 STARTUP_SETTLE_S = 3.0
 
