@@ -450,8 +450,9 @@ def _percentile(values: list[float], q: float) -> float:
 
 def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_property):
     """A burst of equilibrium requests that each use up the solve's time budget (50 ms) while
-    screws stream at 1 kHz: every screw is answered, and the worst latency stays far below one
-    solve (generous bound for a loaded 2-core machine; bench/burst_latency.py has the figures)."""
+    screws stream at 1 kHz: every screw is answered, and the answers keep coming *while* each
+    solve runs (a solve on the executor would hold them back until its response). No timed
+    bound: the latency figures are printed here and measured by bench/burst_latency.py."""
     proc, ros, base = light_node
     inputs = fi.InputFuzzer(model, fi.planar_from_config(), seed=5)
     fuzzer = _fuzzer(proc, ros, base, model, track_latency=True, window=200)
@@ -461,7 +462,7 @@ def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_p
     hard = fi.Case('equilibrium', 'wrench 50 N', {
         'wrench': np.r_[50.0, 0, 0, 0, 0, 0], 'rest_lengths': np.empty(0),
         'initial_screw': model.initial_screw, 'easy': False})
-    durations: list[float] = []
+    solves: list[tuple[float, float]] = []  # (request sent, response received)
     window: list[float] = []
 
     def burst() -> None:
@@ -469,7 +470,7 @@ def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_p
         for _ in range(40):
             t = time.perf_counter()
             res = ros.call(client, fi.to_message(hard), timeout=30.0)
-            durations.append(time.perf_counter() - t)
+            solves.append((t, time.perf_counter()))
             assert not res.success and 'budget' in res.message, res.message
         window.append(time.perf_counter())
 
@@ -485,13 +486,28 @@ def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_p
     assert figures['wrong publications'] == 0 and figures['missing answers'] == 0
     during = [lat for sent, lat in fuzzer.latencies if window[0] <= sent <= window[1]]
     before = [lat for sent, lat in fuzzer.latencies if sent < window[0]]
+    durations = [end - start for start, end in solves]
+    # Screws sent and answered strictly inside one solve's round trip.
+    inside_sent = inside_answered = 0
+    for sent, lat in fuzzer.latencies:
+        for start, end in solves:
+            if start <= sent <= end:
+                inside_sent += 1
+                inside_answered += sent + lat <= end
+                break
     worst = max(during)
     record_property('burst worst latency [ms]', round(1e3 * worst, 2))
+    record_property('answered within the solve', f'{inside_answered}/{inside_sent}')
     print(f'\nburst: {len(durations)} solves, median {1e3 * statistics.median(durations):.1f} ms;'
           f' screw latency during the burst: n={len(during)} median '
           f'{1e3 * statistics.median(during):.2f} ms p99 {1e3 * _percentile(during, 0.99):.2f} ms'
           f' max {1e3 * worst:.2f} ms (before: p99 {1e3 * _percentile(before, 0.99):.2f} ms, '
-          f'max {1e3 * max(before):.2f} ms)')
+          f'max {1e3 * max(before):.2f} ms); screws sent during a solve and answered before its '
+          f'response: {inside_answered}/{inside_sent}')
     assert len(durations) == 40 and statistics.median(durations) > 0.03  # hard: budget used
-    assert len(during) > 1000
-    assert worst < 0.1, f'a screw waited {1e3 * worst:.1f} ms during the burst'
+    assert len(during) > 1000 and inside_sent > 500
+    # A blocking solve answers none of them before its response; half is a wide margin for a
+    # loaded machine.
+    assert inside_answered > inside_sent / 2, (
+        f'only {inside_answered} of {inside_sent} screws sent during a solve were answered '
+        'before the solve returned')
