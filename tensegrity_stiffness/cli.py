@@ -42,8 +42,15 @@ from tensegrity_stiffness.interpretation import (
     ROW_NAMES,
     interpret_stiffness,
 )
-from tensegrity_stiffness.joint import FORCE_LAWS, JointModel, JointState, load_yaml
+from tensegrity_stiffness.joint import (
+    FORCE_LAWS,
+    JointModel,
+    JointState,
+    default_config_path,
+    load_yaml,
+)
 from tensegrity_stiffness.planar import SINGULARITY_DESCRIPTIONS, PlanarMechanism
+from tensegrity_stiffness.quaternion import quaternion_to_rotation, rotation_to_quaternion
 from tensegrity_stiffness.screw import log_se3
 
 FloatArray = NDArray[np.float64]
@@ -54,11 +61,6 @@ EXIT_NO_SOLUTION = 1
 EXIT_BAD_INPUT = 2
 EXIT_NO_MATPLOTLIB = 3
 
-#: Largest accepted deviation of a --pose quaternion's norm from 1 (renormalised within it);
-#: the node's value (msg_tools.geometry.QUATERNION_UNIT_TOLERANCE).
-QUATERNION_UNIT_TOLERANCE = 1e-3
-#: Quaternion norms below this are rejected (no rotation can be recovered).
-QUATERNION_ZERO_NORM = 1e-12
 #: Table cells: width (characters) and relative size below which an entry is shown as 0.
 CELL_WIDTH = 13
 DISPLAY_ZERO = 1e-12
@@ -241,20 +243,6 @@ def _yes(flag: bool) -> str:
 
 
 # ------------------------------------------------------------------------------ joint inputs
-def default_config_path() -> Path:
-    """The packaged ``config/default_joint.yaml``: the installed share folder (ament index, when
-    available) or the source tree -- the node's lookup, without importing rclpy."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        path = Path(get_package_share_directory('tensegrity_stiffness')) / 'config'
-        if (path / 'default_joint.yaml').is_file():
-            return path / 'default_joint.yaml'
-    except (ImportError, LookupError, ValueError):
-        pass
-    return Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
-
-
 def _ros_section(document: Any, key: str) -> dict[str, Any] | None:
     """``document[key]`` of a plain config or of a ROS parameter file (None if absent)."""
     if not isinstance(document, dict):
@@ -294,32 +282,6 @@ def _load_joint(args: argparse.Namespace) -> tuple[JointModel, Path, FloatArray]
     return model, path, rest
 
 
-def quaternion_to_rotation(q: Sequence[float]) -> FloatArray:
-    """(3, 3) rotation of a ROS quaternion ``[x, y, z, w]`` (unit within
-    :data:`QUATERNION_UNIT_TOLERANCE`, renormalised)."""
-    q = np.asarray(q, dtype=np.float64)
-    norm = float(np.linalg.norm(q))
-    if norm < QUATERNION_ZERO_NORM:
-        raise ValueError('--pose quaternion has zero norm')
-    if abs(norm - 1.0) > QUATERNION_UNIT_TOLERANCE:
-        raise ValueError(f'--pose quaternion [qx qy qz qw] is not a unit quaternion: norm '
-                         f'{norm:.9g} deviates from 1 by more than {QUATERNION_UNIT_TOLERANCE:g}')
-    x, y, z, w = q / norm
-    return np.array([
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-    ])
-
-
-def rotation_to_quaternion(R: FloatArray) -> FloatArray:
-    """ROS quaternion ``[x, y, z, w]`` (w >= 0) of a rotation matrix."""
-    from scipy.spatial.transform import Rotation
-
-    q = Rotation.from_matrix(R).as_quat()
-    return -q if q[3] < 0.0 else q
-
-
 def _screw(args: argparse.Namespace, model: JointModel) -> FloatArray:
     """The screw of --screw, or of --pose (on the branch nearest the config's initial screw, as
     the node does), or the config's initial screw (the unloaded equilibrium)."""
@@ -330,7 +292,10 @@ def _screw(args: argparse.Namespace, model: JointModel) -> FloatArray:
         return xi
     if args.pose is not None:
         T = np.eye(4)
-        T[:3, :3] = quaternion_to_rotation(args.pose[3:])
+        try:  # the node's rule: unit within QUATERNION_UNIT_TOLERANCE, renormalised
+            T[:3, :3] = quaternion_to_rotation(args.pose[3:])
+        except ValueError as exc:
+            raise ValueError(f'--pose [x y z qx qy qz qw]: {exc}') from None
         T[:3, 3] = args.pose[:3]
         return log_se3(T, reference=model.initial_screw)
     return model.initial_screw.copy()

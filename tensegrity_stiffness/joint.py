@@ -507,6 +507,20 @@ class JointModel:
         return np.swapaxes((F[..., :6, :] - F[..., 6:, :]) / (2.0 * step), -1, -2)
 
 
+def default_config_path() -> Path:
+    """The packaged ``config/default_joint.yaml``: the installed share folder (found through the
+    ament index when ``ament_index_python`` is importable), else the source tree."""
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        path = Path(get_package_share_directory('tensegrity_stiffness')) / 'config'
+        if (path / 'default_joint.yaml').is_file():
+            return path / 'default_joint.yaml'
+    except (ImportError, LookupError, ValueError):
+        pass
+    return Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
+
+
 def load_yaml(path: str | Path) -> Any:
     """Read a YAML file (PyYAML), with a clear error for a missing or malformed file."""
     import yaml

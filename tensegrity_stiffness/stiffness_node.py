@@ -72,7 +72,13 @@ from tensegrity_stiffness.equilibrium import (
     solve_equilibrium,
 )
 from tensegrity_stiffness.interpretation import interpretation_vector
-from tensegrity_stiffness.joint import JointModel, JointState, joint_section, load_yaml
+from tensegrity_stiffness.joint import (
+    JointModel,
+    JointState,
+    default_config_path,
+    joint_section,
+    load_yaml,
+)
 from tensegrity_stiffness.planar import PlanarMechanism
 from tensegrity_stiffness.screw import log_se3
 from tensegrity_stiffness_interfaces.srv import (
@@ -154,19 +160,6 @@ JOINT_DOUBLE_ARRAYS = ('link1_nodes', 'link2_nodes', 'stiffness', 'rest_lengths'
                        'initial_screw')
 PLANAR_KEYS = ('L', 'K1', 'K2', 'L3_min', 'L3_max', 'theta1_min', 'theta1_max', 'theta2_min',
                'theta2_max')
-
-
-def default_config_path() -> Path:
-    """The packaged ``config/default_joint.yaml`` (installed share dir, else the source tree)."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        path = Path(get_package_share_directory('tensegrity_stiffness')) / 'config'
-        if (path / 'default_joint.yaml').is_file():
-            return path / 'default_joint.yaml'
-    except (ImportError, LookupError, ValueError):
-        pass
-    return Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
 
 
 def _ros_parameters(document: Any) -> Mapping[str, Any]:

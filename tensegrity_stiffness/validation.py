@@ -28,3 +28,18 @@ def finite_array(name: str, value: ArrayLike) -> NDArray[np.float64]:
     if not np.isfinite(a).all():
         raise ValueError(f'{name} must be finite, got {a[~np.isfinite(a)].ravel()[0]}')
     return a
+
+
+def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...]
+                          ) -> NDArray[np.float64]:
+    """``np.asarray(value, float64)`` of exactly ``shape``; ValueError naming ``name`` when it is
+    not numeric, has another shape or contains NaN or inf."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name} must be numeric: {exc}') from None
+    if arr.shape != shape:
+        raise ValueError(f'{name} must have shape {shape}, got {arr.shape}')
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f'{name} contains NaN or inf')
+    return arr

@@ -1,0 +1,111 @@
+"""Unit quaternions (ROS order ``[x, y, z, w]``, scalar last) <-> rotation matrices.
+
+Pure numpy, shared by the node's message conversions (``msg_tools.geometry``) and the command
+line, so that a pose means the same everywhere: a quaternion is accepted when finite, non-zero
+and of unit norm within :data:`QUATERNION_UNIT_TOLERANCE` (then renormalised); a rotation matrix
+when orthonormal within :data:`ROTATION_TOLERANCE` with det > 0. Quaternions are returned with
+``w >= 0``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tensegrity_stiffness.validation import finite_array_of_shape
+
+__all__ = [
+    'QUATERNION_UNIT_TOLERANCE',
+    'QUATERNION_ZERO_NORM',
+    'ROTATION_TOLERANCE',
+    'quaternion_to_rotation',
+    'rotation_to_quaternion',
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Largest accepted deviation of a quaternion norm from 1; within it the quaternion is
+#: renormalised silently (float32 sources, rounded hand-typed values), beyond it rejected.
+#: Same order as RViz's quaternion validation.
+QUATERNION_UNIT_TOLERANCE = 1e-3
+#: Quaternion norms below this are treated as zero (no rotation can be recovered).
+QUATERNION_ZERO_NORM = 1e-12
+#: Largest accepted max-abs deviation of R^T R from I (and of the last row of T from [0 0 0 1]).
+ROTATION_TOLERANCE = 1e-6
+
+
+
+def quaternion_to_rotation(quaternion: ArrayLike,
+                           unit_tolerance: float = QUATERNION_UNIT_TOLERANCE) -> FloatArray:
+    """(3, 3) rotation matrix of a quaternion ``[x, y, z, w]``.
+
+    The quaternion must be finite and of unit norm within ``unit_tolerance`` (absolute deviation
+    of the norm from 1); it is renormalised before use.
+
+    Raises
+    ------
+    ValueError
+        ``'NaN or inf'``, ``'zero norm'`` or ``'not a unit quaternion'``.
+    """
+    q = finite_array_of_shape('quaternion', quaternion, (4,))
+    norm = float(np.linalg.norm(q))
+    if norm < QUATERNION_ZERO_NORM:
+        raise ValueError('quaternion has zero norm')
+    if abs(norm - 1.0) > unit_tolerance:
+        raise ValueError(
+            f'not a unit quaternion: norm {norm:.9g} deviates from 1 by more than '
+            f'unit_tolerance={unit_tolerance:g}')
+    x, y, z, w = q / norm
+    return np.array([
+        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
+        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
+        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+    ])
+
+
+def rotation_to_quaternion(rotation: ArrayLike,
+                           tolerance: float = ROTATION_TOLERANCE) -> FloatArray:
+    """Unit quaternion ``[x, y, z, w]`` (``w >= 0``) of a (3, 3) rotation matrix.
+
+    Shepperd's method (J. Guidance and Control 1(3), 1978): of the four candidates
+    ``4w^2 = 1 + tr R`` and ``4x^2 = 1 + 2 R00 - tr R`` (and y, z alike) the largest is taken
+    as the pivot, so the square root and the division never act on a small number; accurate to
+    machine precision over all of SO(3), including rotations by pi.
+
+    Raises
+    ------
+    ValueError
+        If R is not finite, not (3, 3), not orthonormal within ``tolerance`` (max-abs entry of
+        R^T R - I) or has det R < 0.
+    """
+    R = finite_array_of_shape('rotation', rotation, (3, 3))
+    deviation = float(np.max(np.abs(R.T @ R - np.eye(3))))
+    if deviation > tolerance:
+        raise ValueError(
+            f'rotation is not orthonormal: max |R^T R - I| = {deviation:.3g} > '
+            f'tolerance={tolerance:g}')
+    if np.linalg.det(R) < 0.0:
+        raise ValueError('rotation has det < 0 (a reflection, not a rotation)')
+    trace = R[0, 0] + R[1, 1] + R[2, 2]
+    pivots = (trace, R[0, 0], R[1, 1], R[2, 2])
+    k = int(np.argmax(pivots))
+    if k == 0:
+        s = 2.0 * np.sqrt(1.0 + trace)  # s = 4w
+        q = np.array([(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s,
+                      (R[1, 0] - R[0, 1]) / s, 0.25 * s])
+    elif k == 1:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * R[0, 0] - trace)  # s = 4x
+        q = np.array([0.25 * s, (R[0, 1] + R[1, 0]) / s,
+                      (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s])
+    elif k == 2:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * R[1, 1] - trace)  # s = 4y
+        q = np.array([(R[0, 1] + R[1, 0]) / s, 0.25 * s,
+                      (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s])
+    else:
+        s = 2.0 * np.sqrt(1.0 + 2.0 * R[2, 2] - trace)  # s = 4z
+        q = np.array([(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s,
+                      0.25 * s, (R[1, 0] - R[0, 1]) / s])
+    q /= np.linalg.norm(q)
+    if q[3] < 0.0:
+        q = -q
+    return q

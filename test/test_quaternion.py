@@ -1,0 +1,57 @@
+"""tensegrity_stiffness.quaternion: the pure-numpy pose rule shared by the node and the CLI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from tensegrity_stiffness.quaternion import (
+    QUATERNION_UNIT_TOLERANCE,
+    quaternion_to_rotation,
+    rotation_to_quaternion,
+)
+
+
+def test_round_trip_against_scipy_including_half_turns():
+    rng = np.random.default_rng(3)
+    rotations = list(Rotation.random(500, random_state=4))
+    axes = rng.normal(size=(50, 3))
+    rotations += [Rotation.from_rotvec(np.pi * a / np.linalg.norm(a)) for a in axes]
+    for rot in rotations:
+        q_ref = rot.as_quat()  # scipy uses [x y z w] too
+        R = quaternion_to_rotation(q_ref)
+        np.testing.assert_allclose(R, rot.as_matrix(), atol=1e-15)
+        q = rotation_to_quaternion(R)
+        assert q[3] >= 0.0 and abs(np.linalg.norm(q) - 1.0) < 1e-15
+        # Same rotation (q and -q are one rotation).
+        assert min(np.abs(q - q_ref).max(), np.abs(q + q_ref).max()) < 1e-14
+
+
+def test_renormalised_within_the_tolerance_rejected_beyond():
+    q = np.array([0.0, 0.0, np.sin(0.3), np.cos(0.3)])
+    R = quaternion_to_rotation(q * (1.0 + 0.5 * QUATERNION_UNIT_TOLERANCE))
+    np.testing.assert_allclose(R, Rotation.from_quat(q).as_matrix(), atol=1e-15)
+    with pytest.raises(ValueError, match='not a unit quaternion'):
+        quaternion_to_rotation(q * (1.0 + 2.0 * QUATERNION_UNIT_TOLERANCE))
+
+
+@pytest.mark.parametrize(('value', 'match'), [
+    ([0.0, 0.0, 0.0, 0.0], 'zero norm'),
+    ([np.nan, 0.0, 0.0, 1.0], 'quaternion contains NaN or inf'),
+    ([0.0, 0.0, 1.0], r'quaternion must have shape \(4,\)'),
+    ('abcd', 'quaternion must be numeric'),
+])
+def test_bad_quaternions_raise_naming_the_problem(value, match):
+    with pytest.raises(ValueError, match=match):
+        quaternion_to_rotation(value)
+
+
+@pytest.mark.parametrize(('R', 'match'), [
+    (np.diag([1.0, 1.0, -1.0]), 'det < 0'),
+    (2.0 * np.eye(3), 'not orthonormal'),
+    (np.eye(4), r'rotation must have shape \(3, 3\)'),
+])
+def test_bad_rotations_raise_naming_the_problem(R, match):
+    with pytest.raises(ValueError, match=match):
+        rotation_to_quaternion(R)
