@@ -29,7 +29,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
-from ros_harness import NodeProcess, RosClient, unique_namespace  # noqa: E402
+from ros_harness import NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 import msg_tools  # noqa: E402
@@ -71,13 +71,7 @@ def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: f
     period = 1.0 / rate
     start = time.perf_counter()
     for k in range(n):
-        target = start + k * period
-        while True:
-            now = time.perf_counter()
-            if now >= target:
-                break
-            if target - now > 2e-4:
-                time.sleep(target - now - 1.5e-4)
+        sleep_until(start + k * period)
         sent_at[k] = time.perf_counter()
         pub.publish(Float64MultiArray(data=screws[k].tolist()))
     deadline = time.monotonic() + 5.0

@@ -33,7 +33,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
-from ros_harness import DEEP, NodeProcess, RosClient, unique_namespace  # noqa: E402
+from ros_harness import DEEP, NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 import msg_tools  # noqa: E402
@@ -127,10 +127,7 @@ def run(args: argparse.Namespace) -> dict[str, object]:
         cpu = [(0, cpu_seconds(proc.pid))]
         start = time.perf_counter()
         for k in range(n):
-            target = start + k * period
-            while (now := time.perf_counter()) < target:
-                if target - now > 2e-4:
-                    time.sleep(target - now - 1.5e-4)
+            sleep_until(start + k * period)
             if k == n // 3:
                 window.append(time.perf_counter())
                 cpu.append((k, cpu_seconds(proc.pid)))

@@ -33,7 +33,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
-from ros_harness import DEEP, NodeProcess, RosClient, unique_namespace  # noqa: E402
+from ros_harness import DEEP, NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
@@ -159,12 +159,7 @@ def main() -> int:
         for minute in range(minutes):
             for _ in range(per_minute):
                 target = start + k * period
-                while True:
-                    now = time.perf_counter()
-                    if now >= target:
-                        break
-                    if target - now > 2e-4:
-                        time.sleep(target - now - 1.5e-4)
+                now = sleep_until(target)
                 if now - target > 2e-3:  # the client was held up: go on at the rate, no burst
                     start += now - target
                 matcher.expect(minute, time.perf_counter(), expected[k])

@@ -55,6 +55,16 @@ def node_executable() -> Path:
     return path
 
 
+def sleep_until(target: float) -> float:
+    """Wait until ``time.perf_counter() >= target`` (sleeping while more than 0.2 ms remain,
+    spinning for the rest, so that a paced stream keeps its rate to a few microseconds);
+    returns the time at which it stopped."""
+    while (now := time.perf_counter()) < target:
+        if target - now > 2e-4:
+            time.sleep(target - now - 1.5e-4)
+    return now
+
+
 def unique_namespace(prefix: str = 'test') -> str:
     return f'/{prefix}_{uuid.uuid4().hex[:8]}'
 
