@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> dict[str, object]:
     base = f'{ns}/stiffness_node'
     matcher = Matcher(expected)
     try:
-        ros.node.create_subscription(Float64MultiArray, f'{base}/stiffness', matcher, DEEP)
+        ros.subscribe_callback(Float64MultiArray, f'{base}/stiffness', matcher, DEEP)
         pub = ros.publisher(Float64MultiArray, f'{base}/screw', DEEP)
         client = ros.client(SolveEquilibrium, f'{base}/solve_equilibrium')
         ros.wait_for_subscribers(pub)

@@ -70,7 +70,6 @@ import msg_tools
 from tensegrity_stiffness.equilibrium import (
     MAX_NEWTON_ITERATIONS,
     EquilibriumResult,
-    _BudgetExhaustedError,
     is_stable,
     solve_equilibrium,
 )
@@ -802,12 +801,6 @@ class StiffnessNode(Node):
             response.success = False
             response.message = f'solver overran its budget: {exc}; solver restarted'
             self._warn('~/solve_equilibrium', response.message, error=True)
-            return response
-        except _BudgetExhaustedError:
-            # equilibrium._fallback evaluates its last candidate outside its try block, so the
-            # deadline exception can escape solve_equilibrium (a library bug): a budget failure.
-            response.success = False
-            response.message = 'time budget exhausted (the solver stopped at its deadline)'
             return response
         except ValueError as exc:
             response.success = False
