@@ -460,7 +460,10 @@ def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_p
     bound: the latency figures are printed here and measured by bench/burst_latency.py."""
     proc, ros, base = light_node
     inputs = fi.InputFuzzer(model, fi.planar_from_config(), seed=5)
-    fuzzer = _fuzzer(proc, ros, base, model, track_latency=True, window=50)
+    # At most 8 answers outstanding: the latency then shows the node, not a backlog of the
+    # client, whose matching is slower than 1 kHz on the 2-core CI machine (with 200 the
+    # backlog alone was 100-470 ms, longer than a solve).
+    fuzzer = _fuzzer(proc, ros, base, model, track_latency=True, window=8)
     _warm_up(fuzzer, inputs)
     fuzzer.latencies.clear()
     client = fuzzer.clients['equilibrium']
@@ -510,7 +513,7 @@ def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_p
           f'max {1e3 * max(before):.2f} ms); screws sent during a solve and answered before its '
           f'response: {inside_answered}/{inside_sent}')
     assert len(durations) == 40 and statistics.median(durations) > 0.03  # hard: budget used
-    assert len(during) > 1000 and inside_sent > 500
+    assert len(during) > 500 and inside_sent > 300  # enough screws to judge by
     # A blocking solve answers none of them before its response; half is a wide margin for a
     # loaded machine.
     assert inside_answered > inside_sent / 2, (
