@@ -474,7 +474,7 @@ class StiffnessNode(Node):
                                    describe(text, fp_range=rng))
         self.declare_parameter('qos.depth', int(defaults.get('qos', {}).get('depth', 10)),
                                describe('history depth of inputs and outputs', read_only=True,
-                                        int_range=(1, 1000)))
+                                        int_range=(1, 10_000)))
         self.declare_parameter(
             'qos.input_reliability',
             str(defaults.get('qos', {}).get('input_reliability', 'reliable')),

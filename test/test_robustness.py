@@ -25,9 +25,8 @@ import fuzz_inputs as fi  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import DurabilityPolicy, ReliabilityPolicy  # noqa: E402
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from ros_harness import (  # noqa: E402
-    DEEP,
     LATCHED,
     NodeFuzzer,
     NodeProcess,
@@ -54,6 +53,12 @@ def model() -> JointModel:
 #: Node arguments of the counting tests: an output history deep enough that a client stalled by
 #: a loaded machine loses nothing (the node's default, 100, is 100 ms at 1 kHz).
 DEEP_NODE = ['-p', 'qos.depth:=1000']
+#: The torn-state test: 5 s of its 1 kHz stream. On 2 cores its client (three output topics)
+#: and the node together fall up to 1 s behind during the switches; a history shorter than the
+#: lag loses screws, which says nothing about torn state.
+STREAM_DEPTH = 5000
+STREAM = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STREAM_DEPTH,
+                    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 
 
 @contextlib.contextmanager
@@ -312,22 +317,28 @@ REJECTED_CHANGES = [
 ]
 
 
-def test_no_torn_state_under_parameter_changes_at_1khz(node, model, record_property):
+@pytest.fixture
+def stream_node():
+    with _running_node(['-p', f'qos.depth:={STREAM_DEPTH}']) as running:
+        yield running
+
+
+def test_no_torn_state_under_parameter_changes_at_1khz(stream_node, model, record_property):
     """Screws at 1 kHz while the whole joint (geometry, k, rest lengths, force law) switches
     between sets A and B and rejected changes come in between: every output (K, wrench,
     tensions) is the library's for its screw under exactly one set, the sets change only at the
     re-publish a successful switch causes, and a screw sent after a switch was acknowledged is
     answered with the new set."""
-    _, ros, base = node
+    _, ros, base = stream_node
     changes_b, model_b = _set_b(model)
     changes_a = _set_a(changes_b)
     models = (model, model_b)
-    inboxes = {name: ros.subscribe(Float64MultiArray, f'{base}/{name}', DEEP)
+    inboxes = {name: ros.subscribe(Float64MultiArray, f'{base}/{name}', STREAM)
                for name in ('stiffness', 'string_tensions')}
     from geometry_msgs.msg import WrenchStamped
 
-    inboxes['wrench'] = ros.subscribe(WrenchStamped, f'{base}/wrench', DEEP)
-    pub = ros.publisher(Float64MultiArray, f'{base}/screw', DEEP)
+    inboxes['wrench'] = ros.subscribe(WrenchStamped, f'{base}/wrench', STREAM)
+    pub = ros.publisher(Float64MultiArray, f'{base}/screw', STREAM)
     client = ros.client(SetParametersAtomically, f'{base}/set_parameters_atomically')
     ros.wait_for_subscribers(pub)
     for name in inboxes:
@@ -411,7 +422,7 @@ def test_no_torn_state_under_parameter_changes_at_1khz(node, model, record_prope
     record_property('switches', switches)
     print(f'\ntorn state: {n} screws at 1 kHz, {switches} switches A <-> B, '
           f'{switches} re-publishes, every output from one set')
-    assert switches >= 20
+    assert switches >= 10  # about 20 in the 4 s of the stream; fewer on a loaded machine
 
 
 def test_rejected_parameter_changes_keep_the_old_set(node, model):
