@@ -25,7 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'test'))
 sys.path.insert(0, str(ROOT))
 
-from test_screw import reference_dexp  # noqa: E402  (block-exponential oracle of the tests)
+from test_equilibrium import moderate_wrench  # noqa: E402  (the tests' generators and oracle)
+from test_screw import random_screws, reference_dexp  # noqa: E402
 
 from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
@@ -48,9 +49,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     model = JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
 
-    axis = rng.normal(size=(n, 3))
-    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    xs = np.hstack([axis * rng.uniform(0.0, math.pi, size=(n, 1)), rng.normal(size=(n, 3))])
+    xs = random_screws(rng, n)
     analytic = dexp_se3(xs)
     numeric = np.empty_like(analytic)
     for i in range(6):
@@ -71,8 +70,7 @@ def main() -> None:
     screws = np.zeros((n, 6))
     converged, residual = 0, 0.0
     for _ in range(n):
-        W = np.r_[rng.normal(scale=0.1, size=3), rng.normal(scale=0.002, size=3)]
-        res = solve_equilibrium(model, W)
+        res = solve_equilibrium(model, moderate_wrench(rng))
         if res.success:
             screws[converged] = res.screw
             converged += 1

@@ -6,8 +6,9 @@ signs) in :mod:`tensegrity_stiffness.joint`.
 
 Concurrency: one single-threaded executor runs every callback, so inputs are answered in order
 with the least overhead (rclpy's multi-threaded executor dropped 80% of a 1 kHz stream here).
-A topic callback also takes the messages queued behind its own (:func:`take_queued`, bounded),
-since rclpy's per-callback cost exceeds the computation itself.
+The ``~/screw`` and ``~/pose`` callbacks also take the messages queued behind their own
+(:mod:`tensegrity_stiffness.draining_subscription`): rclpy's per-callback cost exceeds the
+computation itself.
 The equilibrium service is a coroutine: it validates the request, hands the solve (bounded by
 ``equilibrium.time_budget``) to a worker process (:class:`SolverProcess`) and awaits it, so the
 topics keep being served meanwhile. All the configuration a computation needs is one immutable
@@ -67,6 +68,7 @@ from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 import msg_tools
+from tensegrity_stiffness.draining_subscription import create_draining_subscription
 from tensegrity_stiffness.equilibrium import (
     MAX_NEWTON_ITERATIONS,
     EquilibriumResult,
@@ -94,10 +96,6 @@ NODE_NAME = 'stiffness_node'
 CHART_LIMIT = 2.0 * math.pi
 #: Warnings about bad input are throttled to one per this many seconds per kind.
 WARN_THROTTLE_S = 1.0
-#: A topic callback also handles up to this many messages already queued behind its own, for at
-#: most ``DRAIN_BUDGET_S`` seconds (see :func:`take_queued`).
-DRAIN_LIMIT = 32
-DRAIN_BUDGET_S = 0.01
 #: Window of the input-rate and compute-time statistics in /diagnostics.
 STATS_WINDOW = 1000
 #: Python's thread switch interval while the node runs (s): a long service solve yields the GIL
@@ -281,31 +279,6 @@ class SolverProcess:
             self._pool.terminate()
 
 
-def take_queued(subscription: Any, handle: Callable[[Any], None], limit: int = DRAIN_LIMIT,
-                budget_s: float = DRAIN_BUDGET_S) -> int:
-    """Take the messages already queued on ``subscription`` and pass each to ``handle``, in
-    order, from within that subscription's callback; at most ``limit`` of them, for at most
-    ``budget_s`` seconds. Returns how many were taken.
-
-    rclpy's executor rebuilds its wait set and wraps a task around every callback it runs, which
-    costs more than the node's whole computation for a screw (about 0.6 ms of 1.2 ms measured
-    on the 2-core CI machine): at 1 kHz the node then fell behind, 15% of the screws were
-    dropped and the latency grew to 100 ms. Taking a backlog in one callback pays that cost once
-    per backlog; the bounds keep services, parameter changes and the other topics served in
-    between. Uses the take call of rclpy's own executor (``handle.take_message``).
-    """
-    deadline = time.perf_counter() + budget_s
-    taken = 0
-    while taken < limit and time.perf_counter() <= deadline:
-        with subscription.handle:
-            message = subscription.handle.take_message(subscription.msg_type, subscription.raw)
-        if message is None:
-            break
-        taken += 1
-        handle(message[0])
-    return taken
-
-
 @dataclass(frozen=True)
 class NodeConfig:
     """Everything one computation needs, swapped as a whole (never mutated)."""
@@ -379,10 +352,12 @@ class StiffnessNode(Node):
         self._pub_markers = publisher(MarkerArray, '~/markers', output_qos)
         self._pub_diagnostics = publisher(DiagnosticArray, '/diagnostics', 10)
 
-        self._sub_screw = self.create_subscription(Float64MultiArray, '~/screw',
-                                                   self._on_screw, input_qos)
-        self._sub_pose = self.create_subscription(PoseStamped, '~/pose', self._on_pose,
-                                                  input_qos)
+        create_draining_subscription(
+            self, Float64MultiArray, '~/screw', self._on_screw, input_qos,
+            on_error=lambda exc: self._internal_error('~/screw', exc))
+        create_draining_subscription(
+            self, PoseStamped, '~/pose', self._on_pose, input_qos,
+            on_error=lambda exc: self._internal_error('~/pose', exc))
         self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
                                  latched_qos)
         # Own group: the coroutine holds its group while it awaits the worker; the default group
@@ -603,23 +578,8 @@ class StiffnessNode(Node):
         except Exception:  # the safety net must not throw itself
             pass
 
-    def _on_screw(self, msg: Float64MultiArray) -> None:
-        """The executor's message, then those queued behind it (:func:`take_queued`)."""
-        self._handle_screw(msg)
-        self._drain(self._sub_screw, self._handle_screw, '~/screw')
-
-    def _on_pose(self, msg: PoseStamped) -> None:
-        self._handle_pose(msg)
-        self._drain(self._sub_pose, self._handle_pose, '~/pose')
-
-    def _drain(self, subscription: Any, handle: Callable[[Any], None], kind: str) -> None:
-        try:
-            take_queued(subscription, handle)
-        except Exception as exc:  # e.g. the subscription destroyed at shutdown
-            self._internal_error(kind, exc)
-
     @_guarded('~/screw')
-    def _handle_screw(self, msg: Float64MultiArray) -> None:
+    def _on_screw(self, msg: Float64MultiArray) -> None:
         cfg = self._config
         try:
             xi = msg_tools.multiarray_to_array(msg, expected_length=6,
@@ -633,7 +593,7 @@ class StiffnessNode(Node):
         self._compute_and_publish(cfg, xi, None, '~/screw')
 
     @_guarded('~/pose')
-    def _handle_pose(self, msg: PoseStamped) -> None:
+    def _on_pose(self, msg: PoseStamped) -> None:
         cfg = self._config
         try:
             frame = msg.header.frame_id
@@ -686,14 +646,11 @@ class StiffnessNode(Node):
         # Every output is built and checked before the first is published: an input gets all
         # of its outputs or none.
         try:
-            with np.errstate(all='ignore'):  # overflow shows as a non-finite result below
+            # Overflow shows as a non-finite result, which the msg_tools setters below reject
+            # (ValueError naming the output; a non-finite transform makes the wrench NaN).
+            with np.errstate(all='ignore'):
                 state = cfg.model.evaluate(xi)
                 interpretation = interpretation_vector(state.stiffness)
-                finite = all(np.isfinite(a).all() for a in (
-                    state.wrench, state.stiffness, state.cartesian_stiffness, state.tensions,
-                    state.transform, interpretation))
-            if not finite:
-                raise ValueError('non-finite result')
             if stamp is None:
                 stamp = self.get_clock().now().to_msg()
             out = self._output_messages(cfg)

@@ -28,23 +28,26 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from tensegrity_stiffness.stiffness_node import take_queued
+from tensegrity_stiffness.draining_subscription import create_draining_subscription
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = 'tensegrity_stiffness'
 EXECUTABLE = 'stiffness_node'
 
-RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                      reliability=ReliabilityPolicy.RELIABLE,
-                      durability=DurabilityPolicy.VOLATILE)
+
+
+def reliable_qos(depth: int, durability: DurabilityPolicy = DurabilityPolicy.VOLATILE
+                 ) -> QoSProfile:
+    """Reliable, keep-last ``depth``."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=durability)
+
+
+RELIABLE = reliable_qos(100)
 #: For streams whose every message is counted: a client that stalls (a loaded 2-core machine)
 #: must not lose messages from its own history (pair with the node's ``qos.depth``).
-DEEP = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2000,
-                  reliability=ReliabilityPolicy.RELIABLE,
-                  durability=DurabilityPolicy.VOLATILE)
-LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                     reliability=ReliabilityPolicy.RELIABLE,
-                     durability=DurabilityPolicy.TRANSIENT_LOCAL)
+DEEP = reliable_qos(2000)
+LATCHED = reliable_qos(1, DurabilityPolicy.TRANSIENT_LOCAL)
 
 
 def node_executable() -> Path:
@@ -209,16 +212,9 @@ class RosClient:
     def subscribe_callback(self, msg_type: Any, topic: str, callback: Callable[[Any], None],
                            qos: QoSProfile = RELIABLE) -> Any:
         """A subscription whose callback also takes the messages queued behind the current one
-        (the node's :func:`take_queued`): at 1 kHz on 2 cores the client's executor, not the
-        node, would otherwise set the pace."""
-        subscription = None
-
-        def run(msg: Any) -> None:
-            callback(msg)
-            take_queued(subscription, callback)
-
-        subscription = self.node.create_subscription(msg_type, topic, run, qos)
-        return subscription
+        (:func:`create_draining_subscription`, as the node does): at 1 kHz on 2 cores the
+        client's executor, not the node, would otherwise set the pace."""
+        return create_draining_subscription(self.node, msg_type, topic, callback, qos)
 
     def publisher(self, msg_type: Any, topic: str, qos: QoSProfile = RELIABLE) -> Any:
         return self.node.create_publisher(msg_type, topic, qos)

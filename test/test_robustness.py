@@ -25,12 +25,13 @@ import fuzz_inputs as fi  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rcl_interfaces.srv import GetParameters, SetParameters, SetParametersAtomically  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy  # noqa: E402
 from ros_harness import (  # noqa: E402
     LATCHED,
     NodeFuzzer,
     NodeProcess,
     RosClient,
+    reliable_qos,
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -57,8 +58,7 @@ DEEP_NODE = ['-p', 'qos.depth:=1000']
 #: and the node together fall up to 1 s behind during the switches; a history shorter than the
 #: lag loses screws, which says nothing about torn state.
 STREAM_DEPTH = 5000
-STREAM = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=STREAM_DEPTH,
-                    reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+STREAM = reliable_qos(STREAM_DEPTH)
 
 
 @contextlib.contextmanager
