@@ -31,6 +31,20 @@ _SERIES_TERMS = 12
 _INVERSE_SERIES_THRESHOLD = 0.5
 #: |theta - pi| below which log_so3 takes the rotation axis from the symmetric part of R.
 _LOG_SYMMETRIC_BRANCH = 0.5 * math.pi
+#: The chart of screw coordinates: |omega| < CHART_LIMIT (the left Jacobian G, eq. 4, is singular
+#: at 2 pi, so neither dT/dxi nor K can be inverted there).
+CHART_LIMIT = 2.0 * math.pi
+
+
+def check_in_chart(xi: ArrayLike, name: str = 'screw') -> None:
+    """ValueError naming ``name`` unless every screw of ``xi`` (shape (6,) or (N, 6)) has
+    |omega| < :data:`CHART_LIMIT`."""
+    omega = np.asarray(xi, dtype=np.float64)[..., :3]
+    theta = np.sqrt(np.sum(omega * omega, axis=-1))
+    if not np.all(theta < CHART_LIMIT):
+        worst = float(np.max(np.where(np.isnan(theta), np.inf, theta)))
+        raise ValueError(f'{name}: |omega| = {worst:.6g} rad is outside the chart '
+                         f'(must be < 2 pi)')
 
 
 def _series(offset: int, derivative: bool) -> FloatArray:

@@ -1,0 +1,56 @@
+"""Labels and shapes of the arrays that tensegrity_stiffness publishes: one home for the node,
+the bag command, the command line and :mod:`msg_tools`.
+
+No ROS import: the labels are plain strings, used to build ``std_msgs/Float64MultiArray``
+layouts with rclpy messages (:mod:`msg_tools`) or with any other message implementation
+(rosbags types in the bag command). Layout convention (row-major, ``std_msgs/MultiArrayLayout``):
+a matrix of shape (rows, cols) has ``dim[0] = (row_label, rows, rows*cols)`` and
+``dim[1] = (col_label, cols, cols)``; a vector ``dim[0] = (label, n, n)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+#: Component names of a wrench (rows of K and K_c), of a screw (columns of K) and of a spatial
+#: twist in {1}, linear first as ROS orders 6-vectors (columns of K_c).
+WRENCH_NAMES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
+SCREW_NAMES = ('wx', 'wy', 'wz', 'vx', 'vy', 'vz')
+TWIST_NAMES = ('dx', 'dy', 'dz', 'rx', 'ry', 'rz')
+#: Names of the four 3x3 blocks of K (Monke & Vikas eq. 19), in the order of the interpretation.
+BLOCK_NAMES = ('K_fw', 'K_fv', 'K_mw', 'K_mv')
+
+WRENCH_LABEL = 'wrench [' + ' '.join(WRENCH_NAMES) + ']'
+SCREW_LABEL = 'screw [' + ' '.join(SCREW_NAMES) + ']'
+TWIST_LABEL = 'spatial twist in {1} [' + ' '.join(TWIST_NAMES) + '] (linear first, as ROS)'
+
+#: Row label of K and K_c; column labels of K (screw) and of K_c (spatial twist).
+STIFFNESS_ROW_LABEL = 'rows: ' + WRENCH_LABEL
+STIFFNESS_COL_LABEL = 'cols: ' + SCREW_LABEL
+CARTESIAN_STIFFNESS_COL_LABEL = 'cols: ' + TWIST_LABEL
+
+#: Label of ``~/string_tensions``: this prefix, then the string names in config order.
+TENSIONS_LABEL_PREFIX = 'tensions [N], strings in config order: '
+
+#: Label of ``~/stiffness_interpretation`` (16 values, :func:`interpretation_vector`).
+INTERPRETATION_LABEL = (
+    'stiffness interpretation of K: block Frobenius norms [' + ' '.join(BLOCK_NAMES) + '] (4), '
+    'column norms [' + ' '.join(SCREW_NAMES) + '] (6), '
+    'row norms [' + ' '.join(WRENCH_NAMES) + '] (6)')
+INTERPRETATION_SIZE = len(BLOCK_NAMES) + len(SCREW_NAMES) + len(WRENCH_NAMES)
+
+
+def tensions_label(string_names: Sequence[str]) -> str:
+    """Label of the tensions vector for these string names (config order)."""
+    return TENSIONS_LABEL_PREFIX + ' '.join(string_names)
+
+
+def matrix_dims(rows: int, cols: int, row_label: str, col_label: str
+                ) -> list[tuple[str, int, int]]:
+    """``(label, size, stride)`` of the two dimensions of a dense row-major matrix."""
+    return [(row_label, rows, rows * cols), (col_label, cols, cols)]
+
+
+def vector_dims(n: int, label: str) -> list[tuple[str, int, int]]:
+    """``(label, size, stride)`` of the one dimension of a vector."""
+    return [(label, n, n)]
