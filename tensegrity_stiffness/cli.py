@@ -34,7 +34,7 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from tensegrity_stiffness import plots, sweeps
+from tensegrity_stiffness import config, plots, sweeps
 from tensegrity_stiffness.equilibrium import is_stable, solve_equilibrium
 from tensegrity_stiffness.interpretation import (
     BLOCK_NAMES,
@@ -42,13 +42,7 @@ from tensegrity_stiffness.interpretation import (
     ROW_NAMES,
     interpret_stiffness,
 )
-from tensegrity_stiffness.joint import (
-    FORCE_LAWS,
-    JointModel,
-    JointState,
-    default_config_path,
-    load_yaml,
-)
+from tensegrity_stiffness.joint import FORCE_LAWS, JointModel, JointState
 from tensegrity_stiffness.planar import SINGULARITY_DESCRIPTIONS, PlanarMechanism
 from tensegrity_stiffness.quaternion import quaternion_to_rotation, rotation_to_quaternion
 from tensegrity_stiffness.screw import log_se3
@@ -243,30 +237,14 @@ def _yes(flag: bool) -> str:
 
 
 # ------------------------------------------------------------------------------ joint inputs
-def _ros_section(document: Any, key: str) -> dict[str, Any] | None:
-    """``document[key]`` of a plain config or of a ROS parameter file (None if absent)."""
-    if not isinstance(document, dict):
-        return None
-    if isinstance(document.get(key), dict):
-        return document[key]
-    for value in document.values():
-        if isinstance(value, dict) and isinstance(value.get('ros__parameters'), dict):
-            section = value['ros__parameters'].get(key)
-            if isinstance(section, dict):
-                return section
-    return None
-
-
 def _load_joint(args: argparse.Namespace) -> tuple[JointModel, Path, FloatArray]:
     """Joint model, config path and rest lengths (n,) from --config, --force-law,
     --rest-lengths."""
-    path = Path(args.config) if args.config else default_config_path()
-    document = load_yaml(path)
-    section = _ros_section(document, 'joint')
-    if section is None:
-        raise ValueError(f'config {path} has no "joint" section (top level or under '
-                         'ros__parameters)')
-    section = dict(section)
+    path = Path(args.config) if args.config else config.packaged_config_path()
+    try:
+        section = dict(config.load_section(path, 'joint'))
+    except ValueError as exc:
+        raise ValueError(f'config {path}: {exc}') from None
     if args.force_law:
         section['force_law'] = args.force_law
     model = JointModel.from_dict(section)
@@ -424,8 +402,8 @@ def _planar(args: argparse.Namespace, base: dict[str, float]) -> PlanarMechanism
 def _planar_config(args: argparse.Namespace) -> dict[str, float]:
     """The node's planar parameters: the ``planar`` section of --config (default: the packaged
     config), missing keys from :data:`PLANAR_NODE_DEFAULTS`."""
-    path = Path(args.config) if args.config else default_config_path()
-    section = _ros_section(load_yaml(path), 'planar') or {}
+    path = Path(args.config) if args.config else config.packaged_config_path()
+    section = config.load_section(path, 'planar', required=False)
     params = dict(PLANAR_NODE_DEFAULTS)
     for key in PLANAR_KEYS:
         if key in section:

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness import config
 from tensegrity_stiffness.screw import ScrewKinematics, as_screws, exp_se3
 from tensegrity_stiffness.validation import finite_array
 
@@ -305,7 +306,7 @@ class JointModel:
     def from_yaml(cls, path: str | Path) -> JointModel:
         """Load from a YAML file: a ROS parameter file (``<node>: ros__parameters: joint:``)
         or a plain file with a top-level ``joint`` mapping."""
-        return cls.from_dict(joint_section(load_yaml(path)))
+        return cls.from_dict(config.load_section(path, 'joint'))
 
     def with_rest_lengths(self, rest_lengths: ArrayLike) -> JointModel:
         """A copy with new rest lengths (the maximum stretch of each string is kept)."""
@@ -505,49 +506,3 @@ class JointModel:
         F = self._evaluate_batch(both, rest_b, wrench_only=True).wrench
         F = F.reshape(xi.shape[:-1] + (12, 6))
         return np.swapaxes((F[..., :6, :] - F[..., 6:, :]) / (2.0 * step), -1, -2)
-
-
-def default_config_path() -> Path:
-    """The packaged ``config/default_joint.yaml``: the installed share folder (found through the
-    ament index when ``ament_index_python`` is importable), else the source tree."""
-    try:
-        from ament_index_python.packages import get_package_share_directory
-
-        path = Path(get_package_share_directory('tensegrity_stiffness')) / 'config'
-        if (path / 'default_joint.yaml').is_file():
-            return path / 'default_joint.yaml'
-    except (ImportError, LookupError, ValueError):
-        pass
-    return Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
-
-
-def load_yaml(path: str | Path) -> Any:
-    """Read a YAML file (PyYAML), with a clear error for a missing or malformed file."""
-    import yaml
-
-    path = Path(path)
-    try:
-        with path.open(encoding='utf-8') as handle:
-            return yaml.safe_load(handle)
-    except OSError as exc:
-        raise ValueError(f'cannot read config {path}: {exc.strerror}') from None
-    except yaml.YAMLError as exc:
-        raise ValueError(f'config {path} is not valid YAML: {exc}') from None
-
-
-def joint_section(document: Any) -> Mapping[str, Any]:
-    """The ``joint`` mapping of a plain config or of a ROS parameter file."""
-    if not isinstance(document, Mapping):
-        raise ValueError('config must be a YAML mapping')
-    if 'joint' in document:
-        section = document['joint']
-    else:
-        section = None
-        for value in document.values():
-            if isinstance(value, Mapping) and isinstance(value.get('ros__parameters'), Mapping):
-                section = value['ros__parameters'].get('joint')
-                if section is not None:
-                    break
-    if not isinstance(section, Mapping):
-        raise ValueError('config has no "joint" section (top level or under ros__parameters)')
-    return section

@@ -68,6 +68,7 @@ from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 import msg_tools
+from tensegrity_stiffness import config
 from tensegrity_stiffness.draining_subscription import create_draining_subscription
 from tensegrity_stiffness.equilibrium import (
     MAX_NEWTON_ITERATIONS,
@@ -79,9 +80,6 @@ from tensegrity_stiffness.interpretation import interpretation_vector
 from tensegrity_stiffness.joint import (
     JointModel,
     JointState,
-    default_config_path,
-    joint_section,
-    load_yaml,
 )
 from tensegrity_stiffness.planar import PlanarMechanism
 from tensegrity_stiffness.screw import log_se3
@@ -164,15 +162,6 @@ JOINT_DOUBLE_ARRAYS = ('link1_nodes', 'link2_nodes', 'stiffness', 'rest_lengths'
                        'initial_screw')
 PLANAR_KEYS = ('L', 'K1', 'K2', 'L3_min', 'L3_max', 'theta1_min', 'theta1_max', 'theta2_min',
                'theta2_max')
-
-
-def _ros_parameters(document: Any) -> Mapping[str, Any]:
-    """The ``ros__parameters`` mapping of the first node entry of a parameter file."""
-    if isinstance(document, Mapping):
-        for value in document.values():
-            if isinstance(value, Mapping) and isinstance(value.get('ros__parameters'), Mapping):
-                return value['ros__parameters']
-    return {}
 
 
 class _OutputMessages:
@@ -380,9 +369,9 @@ class StiffnessNode(Node):
 
     # ------------------------------------------------------------------ parameters
     def _declare_parameters(self) -> None:
-        defaults_doc = load_yaml(default_config_path())
-        defaults = _ros_parameters(defaults_doc)
-        joint = joint_section(defaults_doc)
+        defaults_doc = config.load_yaml(config.packaged_config_path())
+        defaults = config.parameters(defaults_doc)
+        joint = config.section(defaults_doc, 'joint')
 
         def describe(text: str, read_only: bool = False, fp_range: tuple | None = None,
                      int_range: tuple | None = None, constraints: str = '') -> ParameterDescriptor:

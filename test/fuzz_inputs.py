@@ -31,9 +31,10 @@ from typing import Any
 import numpy as np
 
 import msg_tools
+from tensegrity_stiffness.config import load_yaml
 from tensegrity_stiffness.equilibrium import RESIDUAL_TOLERANCE, is_stable
 from tensegrity_stiffness.interpretation import interpretation_vector
-from tensegrity_stiffness.joint import JointModel, load_yaml
+from tensegrity_stiffness.joint import JointModel
 from tensegrity_stiffness.planar import PlanarMechanism
 from tensegrity_stiffness.screw import exp_se3, log_se3
 

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from tensegrity_stiffness import cli, plots, sweeps
+from tensegrity_stiffness import cli, config, plots, sweeps
 from tensegrity_stiffness.cli import TerminalProgress, main, parse_number
 from tensegrity_stiffness.equilibrium import solve_equilibrium
 from tensegrity_stiffness.interpretation import (
@@ -29,7 +29,7 @@ from tensegrity_stiffness.interpretation import (
     ROW_NAMES,
     interpret_stiffness,
 )
-from tensegrity_stiffness.joint import JointModel, joint_section, load_yaml
+from tensegrity_stiffness.joint import JointModel
 from tensegrity_stiffness.planar import PlanarMechanism
 from tensegrity_stiffness.screw import exp_se3
 
@@ -185,7 +185,7 @@ def test_pose_gives_the_screw_on_the_initial_branch(capsys, model):
 
 
 def test_rest_lengths_and_force_law(capsys):
-    section = dict(joint_section(load_yaml(CONFIG)))
+    section = dict(config.load_section(CONFIG, 'joint'))
     section['force_law'] = 'paper'
     paper = JointModel.from_dict(section)
     rest = np.full(paper.n_strings, 0.034)

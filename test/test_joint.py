@@ -6,9 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from tensegrity_stiffness import config
 from tensegrity_stiffness.equilibrium import is_stable, solve_equilibrium
 from tensegrity_stiffness.interpretation import interpret_stiffness
-from tensegrity_stiffness.joint import JointModel, joint_section, load_yaml
+from tensegrity_stiffness.joint import JointModel
 from tensegrity_stiffness.screw import dexp_se3, exp_se3, hat3, left_jacobian_se3, log_se3
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
@@ -378,7 +379,7 @@ def test_bad_input_raises(model):
     ('node_names', ['A', 'B'], 'joint.node_names has 2 names for 4 nodes'),
 ])
 def test_config_errors_name_the_field(key, value, match):
-    section = dict(joint_section(load_yaml(CONFIG)))
+    section = dict(config.load_section(CONFIG, 'joint'))
     section[key] = value
     with pytest.raises(ValueError, match=match):
         JointModel.from_dict(section)
@@ -394,7 +395,7 @@ def test_config_file_errors(tmp_path):
     bad.write_text('other: 1\n')
     with pytest.raises(ValueError, match='no "joint" section'):
         JointModel.from_yaml(bad)
-    section = dict(joint_section(load_yaml(CONFIG)))
+    section = dict(config.load_section(CONFIG, 'joint'))
     del section['rest_lengths']
     with pytest.raises(ValueError, match=r'joint\.rest_lengths is missing'):
         JointModel.from_dict(section)

@@ -381,9 +381,9 @@ def test_parameters_validated_as_a_whole(harness, model):
 
 
 def _section():
-    from tensegrity_stiffness.joint import joint_section, load_yaml
+    from tensegrity_stiffness import config
 
-    return dict(joint_section(load_yaml(CONFIG)))
+    return dict(config.load_section(CONFIG, 'joint'))
 
 
 def test_diagnostics(harness, model):

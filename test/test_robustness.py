@@ -37,7 +37,8 @@ from ros_harness import (  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 import msg_tools  # noqa: E402
-from tensegrity_stiffness.joint import JointModel, joint_section, load_yaml  # noqa: E402
+from tensegrity_stiffness import config  # noqa: E402
+from tensegrity_stiffness.joint import JointModel  # noqa: E402
 
 CONFIG = fi.CONFIG
 #: Size of the in-suite fuzz (the bench runs >= 100,000 messages and 10,000 requests).
@@ -280,7 +281,7 @@ def test_restart_picks_up_the_latched_rest_lengths(model):
 def _set_b(model: JointModel) -> tuple[dict[str, object], JointModel]:
     """Parameter set B (geometry, k, rest lengths and force law all differ from A = the
     config), as parameters and as the library's model."""
-    section = dict(joint_section(load_yaml(CONFIG)))
+    section = dict(config.load_section(CONFIG, 'joint'))
     changes = {
         'link1_nodes': (np.asarray(section['link1_nodes'], dtype=float) * 1.02).tolist(),
         'stiffness': [90.0] * model.n_strings,
@@ -291,7 +292,7 @@ def _set_b(model: JointModel) -> tuple[dict[str, object], JointModel]:
 
 
 def _set_a(changes_b: dict[str, object]) -> dict[str, object]:
-    section = dict(joint_section(load_yaml(CONFIG)))
+    section = dict(config.load_section(CONFIG, 'joint'))
     return {key: ([float(v) for v in section[key]] if isinstance(section[key], list)
                   else section[key]) for key in changes_b}
 

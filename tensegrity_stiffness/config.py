@@ -1,0 +1,75 @@
+"""Reading configurations: plain YAML files and ROS 2 parameter files, one reader for the
+library, the nodes, the command line and the tests.
+
+A ROS parameter file has the node's parameters under ``<node name>: ros__parameters:`` (the
+packaged ``config/default_joint.yaml`` uses ``/**``, any node); a plain config has the same
+sections (``joint``, ``planar``, ...) at the top level. :func:`parameters` returns that mapping for
+either form, :func:`section` one section of it.
+
+No ROS import: the packaged files are found through ``AMENT_PREFIX_PATH`` (as the ament index
+does) or next to the source tree.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+PACKAGE = 'tensegrity_stiffness'
+#: The packaged configuration of the joint node (the default joint, frames, planar mechanism).
+DEFAULT_JOINT_CONFIG = 'default_joint.yaml'
+#: Key under which a ROS parameter file holds a node's parameters.
+ROS_PARAMETERS = 'ros__parameters'
+
+
+def packaged_config_path(name: str = DEFAULT_JOINT_CONFIG) -> Path:
+    """``config/<name>`` of the installed package (``<prefix>/share/tensegrity_stiffness/config``
+    of the first ``AMENT_PREFIX_PATH`` entry that has it), else of the source tree."""
+    for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)):
+        path = Path(prefix) / 'share' / PACKAGE / 'config' / name
+        if path.is_file():
+            return path
+    return Path(__file__).resolve().parents[1] / 'config' / name
+
+
+def load_yaml(path: str | Path) -> Any:
+    """Read a YAML file (PyYAML), with a clear error for a missing or malformed file."""
+    import yaml
+
+    path = Path(path)
+    try:
+        with path.open(encoding='utf-8') as handle:
+            return yaml.safe_load(handle)
+    except OSError as exc:
+        raise ValueError(f'cannot read config {path}: {exc.strerror}') from None
+    except yaml.YAMLError as exc:
+        raise ValueError(f'config {path} is not valid YAML: {exc}') from None
+
+
+def parameters(document: Any) -> Mapping[str, Any]:
+    """The parameter mapping of a config document: the ``ros__parameters`` of the first node
+    entry of a ROS parameter file, else the document itself (a plain config)."""
+    if not isinstance(document, Mapping):
+        raise ValueError('config must be a YAML mapping')
+    for value in document.values():
+        if isinstance(value, Mapping) and isinstance(value.get(ROS_PARAMETERS), Mapping):
+            return value[ROS_PARAMETERS]
+    return document
+
+
+def section(document: Any, key: str, required: bool = True) -> Mapping[str, Any]:
+    """``parameters(document)[key]``; ValueError naming ``key`` when it is missing and
+    ``required`` (else an empty mapping)."""
+    value = parameters(document).get(key)
+    if isinstance(value, Mapping):
+        return value
+    if value is None and not required:
+        return {}
+    raise ValueError(f'config has no "{key}" section (top level or under {ROS_PARAMETERS})')
+
+
+def load_section(path: str | Path, key: str, required: bool = True) -> Mapping[str, Any]:
+    """:func:`section` of the YAML file at ``path``."""
+    return section(load_yaml(path), key, required)
