@@ -9,7 +9,7 @@ PACKAGE_NAME = 'tensegrity_stiffness'
 setup(
     name=PACKAGE_NAME,
     version='0.1.0',
-    packages=[PACKAGE_NAME, 'msg_tools'],
+    packages=[PACKAGE_NAME, PACKAGE_NAME + '.ros', 'msg_tools'],
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
@@ -25,7 +25,7 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'stiffness_node = tensegrity_stiffness.stiffness_node:main',
+            'stiffness_node = tensegrity_stiffness.ros.stiffness_node:main',
             'tensegrity-stiffness = tensegrity_stiffness.cli:main',
         ],
     },

@@ -12,6 +12,7 @@ geometry     ``geometry_msgs`` Wrench / Pose <-> numpy; rotation matrix <-> quat
 stamps       ``builtin_interfaces/Time`` <-> nanoseconds / seconds.
 diagnostics  ``diagnostic_msgs/DiagnosticStatus`` and ``DiagnosticArray`` builders.
 markers      ``visualization_msgs/MarkerArray`` of nodes and tension-coloured strings for RViz.
+joint_outputs  the joint node's five per-input output messages and its markers.
 
 Orderings: wrench ``[fx fy fz mx my mz]``, screw ``[wx wy wz vx vy vz]``, quaternion
 ``[x y z w]``.
@@ -42,6 +43,7 @@ from msg_tools.geometry import (
     transform_to_pose,
     wrench_to_msg,
 )
+from msg_tools.joint_outputs import JointOutputMessages, joint_markers
 from msg_tools.markers import marker_array, tension_color
 from msg_tools.stamps import (
     stamp_from_nanoseconds,
@@ -59,9 +61,11 @@ __all__ = [
     'SCREW_LABEL',
     'WRENCH_LABEL',
     'WRENCH_ROW_LABEL',
+    'JointOutputMessages',
     'diagnostic_array',
     'diagnostic_status',
     'format_value',
+    'joint_markers',
     'marker_array',
     'matrix_to_multiarray',
     'msg_to_wrench',

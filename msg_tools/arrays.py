@@ -19,6 +19,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 
+from tensegrity_stiffness.layouts import (
+    CARTESIAN_STIFFNESS_COL_LABEL,
+    SCREW_LABEL,
+    STIFFNESS_COL_LABEL,
+    STIFFNESS_ROW_LABEL,
+    WRENCH_LABEL,
+)
+from tensegrity_stiffness.validation import finite_array_of_shape
+
 __all__ = [
     'CARTESIAN_TWIST_COL_LABEL',
     'DEFAULT_MAX_LENGTH',
@@ -36,25 +45,12 @@ __all__ = [
 #: Largest element count accepted from an incoming message unless the caller says otherwise.
 DEFAULT_MAX_LENGTH = 4096
 
-#: Labels of the orderings used by tensegrity_stiffness (wrench rows, screw / twist columns).
-WRENCH_LABEL = 'wrench [fx fy fz mx my mz]'
-SCREW_LABEL = 'screw [wx wy wz vx vy vz]'
-WRENCH_ROW_LABEL = 'rows: ' + WRENCH_LABEL
-SCREW_COL_LABEL = 'cols: ' + SCREW_LABEL
-CARTESIAN_TWIST_COL_LABEL = 'cols: twist in {1} [dx dy dz rx ry rz]'
+#: Labels of the orderings (wrench rows, screw / twist columns): tensegrity_stiffness.layouts.
+WRENCH_ROW_LABEL = STIFFNESS_ROW_LABEL
+SCREW_COL_LABEL = STIFFNESS_COL_LABEL
+CARTESIAN_TWIST_COL_LABEL = CARTESIAN_STIFFNESS_COL_LABEL
 
 FloatArray = NDArray[np.float64]
-
-
-def _finite_float_array(value: ArrayLike, name: str) -> FloatArray:
-    """Return ``value`` as a float64 array; ValueError if it is not numeric or not finite."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name} must be numeric: {exc}') from exc
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f'{name} contains NaN or inf')
-    return arr
 
 
 def _to_data(arr: FloatArray) -> array.array:
@@ -77,7 +73,7 @@ def vector_to_multiarray(values: ArrayLike, label: str = '') -> Float64MultiArra
     ValueError
         If ``values`` is not 1-D or contains NaN / inf.
     """
-    arr = _finite_float_array(values, 'vector')
+    arr = finite_array_of_shape('vector', values, None)
     if arr.ndim != 1:
         raise ValueError(f'vector must be 1-D, got shape {arr.shape}')
     n = arr.shape[0]
@@ -100,7 +96,7 @@ def matrix_to_multiarray(matrix: ArrayLike, row_label: str = WRENCH_ROW_LABEL,
     ValueError
         If ``matrix`` is not 2-D or contains NaN / inf.
     """
-    arr = _finite_float_array(matrix, 'matrix')
+    arr = finite_array_of_shape('matrix', matrix, None)
     if arr.ndim != 2:
         raise ValueError(f'matrix must be 2-D, got shape {arr.shape}')
     rows, cols = arr.shape
@@ -120,7 +116,7 @@ def set_multiarray_data(msg: Float64MultiArray, values: ArrayLike) -> Float64Mul
     ValueError
         If ``values`` contains NaN / inf or its size differs from the layout's element count.
     """
-    arr = _finite_float_array(values, 'values')
+    arr = finite_array_of_shape('values', values, None)
     expected = msg.layout.dim[0].stride if msg.layout.dim else arr.size
     if arr.size != expected:
         raise ValueError(f'layout holds {expected} values, got {arr.size}')
@@ -150,10 +146,7 @@ def multiarray_to_array(msg: Float64MultiArray, expected_length: int | None = No
     n = n_total - offset
     if expected_length is not None and n != expected_length:
         raise ValueError(f'expected {expected_length} values, got {n}')
-    arr = np.array(msg.data, dtype=np.float64)[offset:]
-    if not np.all(np.isfinite(arr)):
-        raise ValueError('array contains NaN or inf')
-    return arr
+    return finite_array_of_shape('array', np.array(msg.data, dtype=np.float64)[offset:], None)
 
 
 def multiarray_to_matrix(msg: Float64MultiArray,

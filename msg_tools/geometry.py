@@ -54,11 +54,8 @@ def set_wrench(msg: Wrench, wrench: ArrayLike) -> Wrench:
 
 def msg_to_wrench(msg: Wrench) -> FloatArray:
     """(6,) array ``[fx fy fz mx my mz]`` of a ``geometry_msgs/Wrench``; ValueError on NaN/inf."""
-    w = np.array([msg.force.x, msg.force.y, msg.force.z,
-                  msg.torque.x, msg.torque.y, msg.torque.z], dtype=np.float64)
-    if not np.all(np.isfinite(w)):
-        raise ValueError('wrench contains NaN or inf')
-    return w
+    return finite_array_of_shape('wrench', [msg.force.x, msg.force.y, msg.force.z,
+                                            msg.torque.x, msg.torque.y, msg.torque.z], None)
 
 
 def pose_to_transform(pose: Pose,
@@ -73,9 +70,8 @@ def pose_to_transform(pose: Pose,
     ValueError
         Non-finite position, or an invalid orientation quaternion.
     """
-    p = np.array([pose.position.x, pose.position.y, pose.position.z], dtype=np.float64)
-    if not np.all(np.isfinite(p)):
-        raise ValueError('pose position contains NaN or inf')
+    p = finite_array_of_shape('pose position',
+                              [pose.position.x, pose.position.y, pose.position.z], None)
     o = pose.orientation
     T = np.eye(4)
     T[:3, :3] = quaternion_to_rotation([o.x, o.y, o.z, o.w], unit_tolerance=unit_tolerance)

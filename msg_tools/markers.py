@@ -21,6 +21,8 @@ from numpy.typing import ArrayLike, NDArray
 from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
+from tensegrity_stiffness.validation import finite_array_of_shape
+
 __all__ = [
     'HIGH_TENSION_COLOR',
     'LINK1_COLOR',
@@ -51,9 +53,7 @@ def _points(value: ArrayLike, name: str) -> NDArray[np.float64]:
     arr = np.asarray(value, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != 3:
         raise ValueError(f'{name} must have shape (n, 3), got {arr.shape}')
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f'{name} contains NaN or inf')
-    return arr
+    return finite_array_of_shape(name, arr, None)
 
 
 def _color(rgba: tuple[float, float, float, float] | NDArray[np.float64]) -> ColorRGBA:
@@ -123,11 +123,7 @@ def marker_array(p1: ArrayLike, p2: ArrayLike, connections: ArrayLike, tensions:
         raise ValueError(f'connections[:, 0] must index p1 (0..{a.shape[0] - 1})')
     if n and (conn[:, 1].min() < 0 or conn[:, 1].max() >= b.shape[0]):
         raise ValueError(f'connections[:, 1] must index p2 (0..{b.shape[0] - 1})')
-    t = np.asarray(tensions, dtype=np.float64)
-    if t.shape != (n,):
-        raise ValueError(f'tensions must have shape ({n},), got {t.shape}')
-    if not np.all(np.isfinite(t)):
-        raise ValueError('tensions contain NaN or inf')
+    t = finite_array_of_shape('tensions', tensions, (n,))
     if np.any(t < 0.0):
         raise ValueError('tensions must be >= 0')
     is_slack = np.asarray(slack)

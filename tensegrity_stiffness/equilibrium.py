@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from tensegrity_stiffness.joint import JointModel, JointState
-from tensegrity_stiffness.screw import as_screws, log_se3
+from tensegrity_stiffness.screw import CHART_LIMIT, as_screws, log_se3
 
 FloatArray = NDArray[np.float64]
 
@@ -36,7 +36,7 @@ MAX_ROTATION_STEP = 0.5
 #: Largest translation change per Newton step, in units of the mean rest length.
 MAX_TRANSLATION_STEP = 0.5
 #: Rotation angle beyond which the iterate is re-charted onto the branch |omega| <= pi + margin.
-RECHART_ANGLE = 2.0 * math.pi - 0.5
+RECHART_ANGLE = CHART_LIMIT - 0.5
 #: Load steps of the continuation fallback.
 CONTINUATION_STEPS = 8
 #: Relative tolerance on the smallest eigenvalue of the scaled symmetric part of K_c.
@@ -82,19 +82,23 @@ class EquilibriumResult:
         return None if self.state is None else self.state.tensions
 
 
-def is_stable(cartesian_stiffness: ArrayLike, tolerance: float = STABILITY_TOLERANCE) -> bool:
-    """True when the symmetric part of K_c is positive definite.
-
-    The matrix is first scaled by its diagonal (units N/m, N, N m mixed), so ``tolerance`` is a
-    relative threshold on the smallest eigenvalue.
-    """
+def stability_margin(cartesian_stiffness: ArrayLike) -> float:
+    """Smallest eigenvalue of the symmetric part of K_c scaled by its diagonal (units N/m, N, N m
+    mixed, so the margin is dimensionless): > 0 for a stable joint, ``-inf`` when a diagonal entry
+    is not positive or an entry is not finite."""
     Kc = np.asarray(cartesian_stiffness, dtype=np.float64)
     S = 0.5 * (Kc + Kc.T)
     diag = np.diag(S)
     if np.any(diag <= 0.0) or not np.all(np.isfinite(S)):
-        return False
+        return -math.inf
     scale = 1.0 / np.sqrt(diag)
-    return bool(np.linalg.eigvalsh(S * scale[:, None] * scale[None, :])[0] > tolerance)
+    return float(np.linalg.eigvalsh(S * scale[:, None] * scale[None, :])[0])
+
+
+def is_stable(cartesian_stiffness: ArrayLike, tolerance: float = STABILITY_TOLERANCE) -> bool:
+    """True when the symmetric part of K_c is positive definite: its
+    :func:`stability_margin` exceeds ``tolerance`` (a relative threshold)."""
+    return stability_margin(cartesian_stiffness) > tolerance
 
 
 def _length_scale(model: JointModel, rest: FloatArray) -> float:
@@ -187,7 +191,7 @@ def solve_equilibrium(
                    'initial_screw')
     if x0.shape != (6,):
         raise ValueError(f'initial_screw must have shape (6,), got {x0.shape}')
-    if np.linalg.norm(x0[:3]) >= 2.0 * math.pi:
+    if np.linalg.norm(x0[:3]) >= CHART_LIMIT:
         raise ValueError('initial_screw must have |omega| < 2 pi')
     if not (math.isfinite(tolerance) and tolerance > 0.0):
         raise ValueError(f'tolerance must be finite and > 0, got {tolerance}')

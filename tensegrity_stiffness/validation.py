@@ -19,26 +19,27 @@ def finite_scalar(name: str, value: float) -> float:
     return v
 
 
-def finite_array(name: str, value: ArrayLike) -> NDArray[np.float64]:
-    """``np.asarray(value, float64)``; ValueError naming ``name`` if an entry is not finite."""
+def _as_float_array(name: str, value: ArrayLike) -> NDArray[np.float64]:
     try:
-        a = np.asarray(value, dtype=np.float64)
+        return np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise ValueError(f'{name} must be numeric: {exc}') from None
+
+
+def finite_array(name: str, value: ArrayLike) -> NDArray[np.float64]:
+    """``np.asarray(value, float64)``; ValueError naming ``name`` if an entry is not finite."""
+    a = _as_float_array(name, value)
     if not np.isfinite(a).all():
         raise ValueError(f'{name} must be finite, got {a[~np.isfinite(a)].ravel()[0]}')
     return a
 
 
-def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...]
+def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...] | None
                           ) -> NDArray[np.float64]:
-    """``np.asarray(value, float64)`` of exactly ``shape``; ValueError naming ``name`` when it is
-    not numeric, has another shape or contains NaN or inf."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name} must be numeric: {exc}') from None
-    if arr.shape != shape:
+    """``np.asarray(value, float64)`` of exactly ``shape`` (None: any shape); ValueError naming
+    ``name`` when it is not numeric, has another shape or contains NaN or inf."""
+    arr = _as_float_array(name, value)
+    if shape is not None and arr.shape != shape:
         raise ValueError(f'{name} must have shape {shape}, got {arr.shape}')
     if not np.all(np.isfinite(arr)):
         raise ValueError(f'{name} contains NaN or inf')

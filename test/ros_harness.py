@@ -28,7 +28,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from tensegrity_stiffness.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = 'tensegrity_stiffness'
@@ -70,6 +70,34 @@ def sleep_until(target: float) -> float:
     return now
 
 
+def process_children(pid: int) -> list[int]:
+    """Child process ids of ``pid`` (from /proc; [] once it is gone)."""
+    children = []
+    for task in Path(f'/proc/{pid}/task').glob('*'):
+        try:
+            children += [int(c) for c in (task / 'children').read_text().split()]
+        except OSError:
+            pass
+    return children
+
+
+def process_cmdline(pid: int) -> str:
+    """The command line of ``pid`` ('' once it is gone)."""
+    try:
+        return Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ').decode()
+    except OSError:
+        return ''
+
+
+def process_alive(pid: int) -> bool:
+    """True while ``pid`` exists and is not a zombie."""
+    try:
+        stat = Path(f'/proc/{pid}/stat').read_text()
+    except OSError:
+        return False
+    return stat.rsplit(')', 1)[1].split()[0] != 'Z'
+
+
 def unique_namespace(prefix: str = 'test') -> str:
     return f'/{prefix}_{uuid.uuid4().hex[:8]}'
 
@@ -81,7 +109,8 @@ class NodeProcess:
     _starts = itertools.count()
 
     def __init__(self, namespace: str, params_file: Path | None = None,
-                 extra_args: Iterable[str] = (), log_dir: Path | None = None) -> None:
+                 extra_args: Iterable[str] = (), log_dir: Path | None = None,
+                 new_session: bool = False) -> None:
         self.namespace = namespace
         params_file = params_file or REPO / 'config' / 'default_joint.yaml'
         log_dir = log_dir or Path(os.environ.get('TMPDIR', '/tmp'))
@@ -91,8 +120,9 @@ class NodeProcess:
         self._log = self.log_path.open('w')
         args = [str(node_executable()), '--ros-args', '--params-file', str(params_file),
                 '-r', f'__ns:={namespace}', *extra_args]
+        # new_session: the node leads a process group of its own (as under a supervisor).
         self.process = subprocess.Popen(args, stdout=self._log, stderr=subprocess.STDOUT,
-                                        env=os.environ.copy())
+                                        env=os.environ.copy(), start_new_session=new_session)
 
     def alive(self) -> bool:
         return self.process.poll() is None
@@ -105,6 +135,20 @@ class NodeProcess:
         if not self._log.closed:
             self._log.flush()
         return self.log_path.read_text(errors='replace')
+
+    def children(self) -> list[int]:
+        """Process ids of the node's child processes (its solver worker among them)."""
+        return process_children(self.process.pid)
+
+    def worker_pid(self, timeout: float = 20.0) -> int:
+        """The pid of the node's solver worker (a spawned multiprocessing child)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            for pid in self.children():
+                if '--multiprocessing-fork' in process_cmdline(pid):
+                    return pid
+            time.sleep(0.05)
+        raise TimeoutError(f'no solver worker under pid {self.process.pid}')
 
     def rss_bytes(self) -> int:
         """Resident memory of the node process (VmRSS of /proc/<pid>/status)."""

@@ -23,6 +23,7 @@ def moderate_wrench(rng):
     return np.r_[rng.normal(scale=0.1, size=3), rng.normal(scale=0.002, size=3)]
 
 
+@pytest.mark.slow
 def test_10000_moderate_wrenches_converge(model):
     rng = np.random.default_rng(0)
     n = 10_000

@@ -83,6 +83,7 @@ def test_wrench_matches_string_by_string_geometry(model):
         np.testing.assert_allclose(model.wrench(xi), direct_wrench(model, xi), atol=1e-13)
 
 
+@pytest.mark.slow
 def test_k_against_central_differences_at_10000_equilibria(model):
     """The paper's check (Table II: 4.4e-10): equilibria under random external wrenches."""
     rng = np.random.default_rng(1)

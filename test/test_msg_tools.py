@@ -106,7 +106,8 @@ class TestMultiArray:
 
     def test_cartesian_label(self) -> None:
         msg = matrix_to_multiarray(np.eye(6), WRENCH_ROW_LABEL, CARTESIAN_TWIST_COL_LABEL)
-        assert msg.layout.dim[1].label == 'cols: twist in {1} [dx dy dz rx ry rz]'
+        assert msg.layout.dim[1].label == ('cols: spatial twist in {1} [dx dy dz rx ry rz] '
+                                           '(linear first, as ROS)')
 
     def test_vector_round_trip(self, rng: np.random.Generator) -> None:
         v = rng.standard_normal(12)
@@ -471,7 +472,7 @@ class TestMarkers:
         ({'connections': CONN + [[3, 0]] * 4}, r'connections\[:, 0\] must index p1'),
         ({'connections': CONN + [[0, 2]] * 4}, r'connections\[:, 1\] must index p2'),
         ({'tensions': [1.0, 2.0]}, r'tensions must have shape \(4,\)'),
-        ({'tensions': [1.0, np.nan, 0.0, 0.0]}, 'tensions contain NaN or inf'),
+        ({'tensions': [1.0, np.nan, 0.0, 0.0]}, 'tensions contains NaN or inf'),
         ({'tensions': [1.0, -2.0, 0.0, 0.0]}, 'tensions must be >= 0'),
         ({'slack': [True]}, r'slack must have shape \(4,\)'),
         ({'max_tension': 0.0}, 'max_tension must be finite and > 0'),

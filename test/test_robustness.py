@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 
 rclpy = pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+pytestmark = pytest.mark.ros
 
 import fuzz_inputs as fi  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
@@ -139,6 +140,7 @@ def test_generated_inputs_agree_with_the_library(model):
         assert expected in kinds, expected
 
 
+@pytest.mark.slow
 def test_fuzz_every_input_publishes_nothing_wrong(node, model, record_property):
     """Hostile input on every subscription and service, valid input interleaved and checked
     against the library: 0 crashes, 0 publications for invalid input, 0 wrong answers."""
@@ -324,6 +326,7 @@ def stream_node():
         yield running
 
 
+@pytest.mark.slow
 def test_no_torn_state_under_parameter_changes_at_1khz(stream_node, model, record_property):
     """Screws at 1 kHz while the whole joint (geometry, k, rest lengths, force law) switches
     between sets A and B and rejected changes come in between: every output (K, wrench,
@@ -465,6 +468,7 @@ def _percentile(values: list[float], q: float) -> float:
     return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
+@pytest.mark.slow
 def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_property):
     """A burst of equilibrium requests that each use up the solve's time budget (50 ms) while
     screws stream at 1 kHz: every screw is answered, and the answers keep coming *while* each

@@ -6,7 +6,7 @@ costs more than the node's whole computation for a screw (about 0.6 ms of 1.2 ms
 latency grew to 100 ms. Taking a backlog in one callback pays that cost once per backlog. Used
 by the node for ``~/screw`` and ``~/pose`` and by the test and bench clients.
 
-No rclpy import: works on any rclpy subscription (it uses the take call of rclpy's own executor,
+Works on any rclpy subscription (it uses the take call of rclpy's own executor,
 ``handle.take_message``).
 """
 

@@ -1,0 +1,285 @@
+"""The parameters of the package's nodes: one table of names, types, defaults, ranges, read-only
+flags and descriptions, and the whole-set validation built on it.
+
+The table feeds the nodes' declarations and descriptors
+(:mod:`tensegrity_stiffness.ros.parameters`), the command line's defaults, the bag command and
+the tests; ``config/default_joint.yaml`` is a ROS parameter file that agrees with it
+(``test/test_parameters.py``). No ROS import.
+
+Types are ROS parameter types by name: ``bool``, ``int``, ``double``, ``string``,
+``double_array``, ``string_array``. A ``default`` of ``None`` on an array means "empty" (an
+optional array left out, e.g. ``joint.link2_nodes``: link 2 uses link 1's nodes).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.joint import FORCE_LAWS, JointModel
+from tensegrity_stiffness.planar import PlanarMechanism
+
+TYPES = ('bool', 'int', 'double', 'string', 'double_array', 'string_array')
+RELIABILITIES = ('reliable', 'best_effort')
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One parameter: ``name`` (dotted), ROS ``type`` name, ``default``, ``description``,
+    ``read_only`` (fixed once the node runs), numeric ``range`` (inclusive) and string
+    ``choices``."""
+
+    name: str
+    type: str
+    default: Any
+    description: str
+    read_only: bool = False
+    range: tuple[float, float] | None = None
+    choices: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.type not in TYPES:
+            raise ValueError(f'{self.name}: unknown type {self.type!r}')
+
+    @property
+    def constraints(self) -> str:
+        """Human-readable constraints (the descriptor's ``additional_constraints``)."""
+        return ' | '.join(self.choices)
+
+    def check(self, value: Any) -> Any:
+        """``value`` converted to this parameter's Python type; ValueError naming the parameter
+        when it has another type, lies outside ``range`` or is not one of ``choices``."""
+        kind = self.type
+        if kind in ('double_array', 'string_array'):
+            if value is None:
+                return []
+            if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+                raise ValueError(f'{self.name} must be a list ({kind}), got {value!r}')
+            value = list(value)
+            if kind == 'double_array':
+                if not all(_is_number(v) for v in value):
+                    raise ValueError(f'{self.name} must be a list of numbers')
+                return [float(v) for v in value]
+            if not all(isinstance(v, str) for v in value):
+                raise ValueError(f'{self.name} must be a list of strings')
+            return value
+        if kind == 'bool':
+            if not isinstance(value, bool):
+                raise ValueError(f'{self.name} must be true or false, got {value!r}')
+            return value
+        if kind == 'string':
+            if not isinstance(value, str):
+                raise ValueError(f'{self.name} must be a string, got {value!r}')
+            if self.choices and value not in self.choices:
+                raise ValueError(f'{self.name} must be one of {self.constraints}, got {value!r}')
+            return value
+        if kind == 'int':
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ValueError(f'{self.name} must be an integer, got {value!r}')
+        elif not _is_number(value):
+            raise ValueError(f'{self.name} must be a number, got {value!r}')
+        else:
+            value = float(value)
+            if not math.isfinite(value):
+                raise ValueError(f'{self.name} must be finite, got {value}')
+        if self.range is not None and not self.range[0] <= value <= self.range[1]:
+            raise ValueError(f'{self.name} = {value:g} is outside [{self.range[0]:g}, '
+                             f'{self.range[1]:g}]')
+        return value
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+# ---------------------------------------------------------------------------------- the table
+#: The default joint: the sub-vertebra of the authors' published code (README, "The default
+#: joint"); nodes A, B, C, D, the same set on both links.
+_DEFAULT_NODES = [-0.030162, 0.0, 0.0, -0.01524, -0.026035, 0.0,
+                  0.01524, -0.026035, 0.0, 0.030162, 0.0, 0.0]
+_CROSS_REST, _STRAIGHT_REST, _STRETCH = 0.0381, 0.03175, 0.02
+#: Its unloaded equilibrium (solve_equilibrium, |F| < 1e-13): a rotation by pi about
+#: (1, 0, -1)/sqrt(2), link 2 turned over.
+_DEFAULT_INITIAL_SCREW = [2.221441469079183, 0.0, -2.221441469079183,
+                          0.016657666062385, 0.0, 0.016657666062385]
+
+JOINT_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('joint.node_names', 'string_array', ['A', 'B', 'C', 'D'],
+                  'names of the link-1 nodes (string ends refer to them)'),
+    ParameterSpec('joint.link1_nodes', 'double_array', _DEFAULT_NODES,
+                  'link-1 node coordinates in {1}, flat [x y z] per node, m'),
+    ParameterSpec('joint.link2_nodes', 'double_array', None,
+                  'link-2 node coordinates in {2}, flat [x y z] per node, m (empty: same as '
+                  'link1_nodes)'),
+    ParameterSpec('joint.link2_node_names', 'string_array', None,
+                  'names of the link-2 nodes (empty: same as node_names)'),
+    ParameterSpec('joint.string_names', 'string_array',
+                  ['cross_AA', 'cross_AD', 'cross_DA', 'cross_DD',
+                   'straight_AB', 'straight_AC', 'straight_BA', 'straight_BD',
+                   'straight_CA', 'straight_CD', 'straight_DB', 'straight_DC'],
+                  'one name per string (orders every per-string array)'),
+    ParameterSpec('joint.string_link1_nodes', 'string_array',
+                  ['A', 'A', 'D', 'D', 'A', 'A', 'B', 'B', 'C', 'C', 'D', 'D'],
+                  'link-1 node of each string'),
+    ParameterSpec('joint.string_link2_nodes', 'string_array',
+                  ['A', 'D', 'A', 'D', 'B', 'C', 'A', 'D', 'A', 'D', 'B', 'C'],
+                  'link-2 node of each string'),
+    ParameterSpec('joint.stiffness', 'double_array', [77.0] * 12,
+                  'string stiffness k, N/m, one per string (or one for all)'),
+    ParameterSpec('joint.rest_lengths', 'double_array',
+                  [_CROSS_REST] * 4 + [_STRAIGHT_REST] * 8, 'rest lengths l0, m, one per string'),
+    ParameterSpec('joint.max_lengths', 'double_array',
+                  [_CROSS_REST + _STRETCH] * 4 + [_STRAIGHT_REST + _STRETCH] * 8,
+                  'maximum lengths lmax, m, one per string (empty: no limit)'),
+    ParameterSpec('joint.force_law', 'string', 'hooke', 'string force law', choices=FORCE_LAWS),
+    ParameterSpec('joint.initial_screw', 'double_array', _DEFAULT_INITIAL_SCREW,
+                  'starting screw [wx wy wz vx vy vz] of equilibrium solves and reference '
+                  'branch of the first pose (rad, m)'),
+)
+
+FRAME_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('frames.link1', 'string', 'tensegrity_link1',
+                  "link 1's frame: frame_id of every output"),
+    ParameterSpec('frames.link2', 'string', 'tensegrity_link2',
+                  "link 2's frame (child frame of ~/pose)"),
+)
+
+_ANGLE_RANGE = (-2.0 * math.pi, 2.0 * math.pi)
+PLANAR_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('planar.L', 'double', 1.0, 'mobile triangle side L (base side 2 L), m',
+                  range=(1e-9, 1e9)),
+    ParameterSpec('planar.K1', 'double', 100.0, 'stiffness K1 of the spring C2-D2, N/m',
+                  range=(1e-12, 1e12)),
+    ParameterSpec('planar.K2', 'double', 10.0, 'stiffness K2 of the spring C3-D3, N/m',
+                  range=(1e-12, 1e12)),
+    ParameterSpec('planar.L3_min', 'double', 0.0, 'actuator length lower bound, m',
+                  range=(0.0, 1e9)),
+    ParameterSpec('planar.L3_max', 'double', 2.0, 'actuator length upper bound, m (eq. 31: 2 L)',
+                  range=(1e-9, 1e9)),
+    ParameterSpec('planar.theta1_min', 'double', 0.0, 'actuator angle lower bound, rad',
+                  range=_ANGLE_RANGE),
+    ParameterSpec('planar.theta1_max', 'double', math.pi, 'actuator angle upper bound, rad',
+                  range=_ANGLE_RANGE),
+    ParameterSpec('planar.theta2_min', 'double', 0.0, 'platform angle lower bound, rad',
+                  range=_ANGLE_RANGE),
+    ParameterSpec('planar.theta2_max', 'double', math.pi, 'platform angle upper bound, rad',
+                  range=_ANGLE_RANGE),
+)
+
+#: Parameters every node of the package has (QoS, limits, solver budget, markers, diagnostics).
+COMMON_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('qos.depth', 'int', 100,
+                  'history depth of inputs and outputs (100: 100 ms of a 1 kHz stream)',
+                  read_only=True, range=(1, 10_000)),
+    ParameterSpec('qos.input_reliability', 'string', 'reliable',
+                  'QoS reliability of the streamed inputs', read_only=True,
+                  choices=RELIABILITIES),
+    ParameterSpec('limits.max_array_length', 'int', 1024,
+                  'longer Float64MultiArray inputs are rejected unread',
+                  range=(6, 1_000_000)),
+    ParameterSpec('equilibrium.time_budget', 'double', 0.05,
+                  'wall-clock budget of one equilibrium solve, s', range=(1e-4, 10.0)),
+    ParameterSpec('equilibrium.max_iterations', 'int', 60,
+                  'Newton iterations per solve stage', range=(1, 10_000)),
+    ParameterSpec('markers.max_rate', 'double', 30.0,
+                  'highest ~/markers rate, Hz (0: one per input)', range=(0.0, 10_000.0)),
+    ParameterSpec('diagnostics.period', 'double', 1.0, '/diagnostics period, s',
+                  read_only=True, range=(0.01, 60.0)),
+)
+
+#: Every parameter of ``stiffness_node``, in declaration order.
+STIFFNESS_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
+    JOINT_PARAMETERS + FRAME_PARAMETERS + PLANAR_PARAMETERS + COMMON_PARAMETERS)
+
+
+def by_name(table: Iterable[ParameterSpec]) -> dict[str, ParameterSpec]:
+    """The table as a mapping from parameter name to spec."""
+    return {spec.name: spec for spec in table}
+
+
+def defaults(table: Iterable[ParameterSpec]) -> dict[str, Any]:
+    """``{name: default}`` of a table (arrays without a default as empty lists)."""
+    return {spec.name: spec.check(spec.default) for spec in table}
+
+
+def flatten(section: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Dotted names of a nested parameter mapping (``{'qos': {'depth': 1}}`` ->
+    ``{'qos.depth': 1}``), as ROS names the parameters of a parameter file."""
+    out: dict[str, Any] = {}
+    for key, value in section.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            out.update(flatten(value, name + '.'))
+        else:
+            out[name] = value
+    return out
+
+
+def values_from_config(path: Any, table: Iterable[ParameterSpec]) -> dict[str, Any]:
+    """The table's defaults overridden by the parameters of a config file (a ROS parameter file
+    or a plain config of the same sections); ValueError names an unknown or mistyped one."""
+    specs = by_name(table)
+    values = defaults(specs.values())
+    for name, value in flatten(config.parameters(config.load_yaml(path))).items():
+        if name not in specs:
+            raise ValueError(f'config {path}: unknown parameter {name}')
+        values[name] = specs[name].check(value)
+    return values
+
+
+# ------------------------------------------------------------------------- building from values
+def joint_from_values(values: Mapping[str, Any]) -> JointModel:
+    """The joint model of the ``joint.*`` values (ValueError names the bad field)."""
+    section = {spec.name[len('joint.'):]: values[spec.name] for spec in JOINT_PARAMETERS}
+    return JointModel.from_dict({k: (v if v is not None else []) for k, v in section.items()})
+
+
+def planar_from_values(values: Mapping[str, Any]) -> PlanarMechanism:
+    """The planar mechanism of the ``planar.*`` values (ValueError names the bad field)."""
+    try:
+        return PlanarMechanism(**{spec.name[len('planar.'):]: float(values[spec.name])
+                                  for spec in PLANAR_PARAMETERS})
+    except ValueError as exc:
+        raise ValueError(f'planar.{exc}') from None
+
+
+@dataclass(frozen=True)
+class JointNodeSettings:
+    """Everything one computation of ``stiffness_node`` needs, swapped as a whole (never
+    mutated): built from a complete set of parameter values by :func:`joint_node_settings`."""
+
+    model: JointModel
+    planar: PlanarMechanism
+    link1_frame: str
+    link2_frame: str
+    max_array_length: int
+    equilibrium_time_budget: float
+    equilibrium_max_iterations: int
+    marker_period: float
+    generation: int = 0
+    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+
+def marker_period(rate: float) -> float:
+    """Seconds between markers for ``markers.max_rate`` (0: one per input)."""
+    return 0.0 if rate <= 0.0 else 1.0 / rate
+
+
+def joint_node_settings(values: Mapping[str, Any], generation: int = 0) -> JointNodeSettings:
+    """Validate a whole parameter set of ``stiffness_node`` and build its settings; ValueError
+    names the bad field. Every parameter of the table must be in ``values``."""
+    checked = {spec.name: spec.check(values[spec.name]) for spec in STIFFNESS_NODE_PARAMETERS}
+    for name in ('frames.link1', 'frames.link2'):
+        if not checked[name].strip():
+            raise ValueError(f'{name} must not be empty')
+    return JointNodeSettings(
+        model=joint_from_values(checked), planar=planar_from_values(checked),
+        link1_frame=checked['frames.link1'], link2_frame=checked['frames.link2'],
+        max_array_length=checked['limits.max_array_length'],
+        equilibrium_time_budget=checked['equilibrium.time_budget'],
+        equilibrium_max_iterations=checked['equilibrium.max_iterations'],
+        marker_period=marker_period(checked['markers.max_rate']),
+        generation=generation, values=checked)

@@ -1,0 +1,109 @@
+"""What a node reports about bad input and its own faults: per-kind rejection counts, warnings
+throttled per kind, and the guards that keep an unexpected exception in a callback from reaching
+the executor (whose ``spin`` would re-raise it and end the node)."""
+
+from __future__ import annotations
+
+import functools
+import inspect
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+#: Warnings about bad input are throttled to one per this many seconds per kind.
+WARN_THROTTLE_S = 1.0
+
+
+class Reporter:
+    """Counts rejected inputs by kind and logs ``<kind> rejected: <problem>`` at most once per
+    ``WARN_THROTTLE_S`` per kind; the next warning says how many were left out."""
+
+    def __init__(self, logger: Any, throttle_s: float = WARN_THROTTLE_S) -> None:
+        self._logger = logger
+        self._throttle_s = throttle_s
+        self.rejected: dict[str, int] = {}
+        self._warned: dict[str, tuple[float, int]] = {}
+
+    def reject(self, kind: str, problem: str) -> None:
+        """An input of ``kind`` was rejected for ``problem``: counted and warned about."""
+        self.rejected[kind] = self.rejected.get(kind, 0) + 1
+        self.warn(kind, problem)
+
+    def warn(self, kind: str, problem: str, error: bool = False) -> None:
+        """``<kind> rejected: <problem>`` (throttled per kind), as an error if ``error``."""
+        now = time.monotonic()
+        last, left_out = self._warned.get(kind, (-math.inf, 0))
+        if now - last < self._throttle_s:
+            self._warned[kind] = (last, left_out + 1)
+            return
+        self._warned[kind] = (now, 0)
+        text = f'{kind} rejected: {problem}' + (
+            f' ({left_out} more since the last warning)' if left_out else '')
+        # One severity per call site: rclpy raises when a call site changes its severity.
+        if error:
+            self._logger.error(text)
+        else:
+            self._logger.warning(text)
+
+    def internal_error(self, kind: str, exc: BaseException) -> None:
+        """An exception no validation anticipated (a bug): counted and logged, never raised."""
+        key = f'{kind} internal error'
+        self.rejected[key] = self.rejected.get(key, 0) + 1
+        try:
+            self.warn(key, f'{type(exc).__name__}: {exc}', error=True)
+        except Exception:  # the safety net must not throw itself
+            pass
+
+
+def guarded(kind: str) -> Callable:
+    """Decorator of a topic or timer callback method of a node with a ``reporter``: an
+    unexpected exception is counted and logged instead of reaching the executor. Nothing has been
+    published by then (a node publishes an input's outputs only once all are built)."""
+
+    def wrap(method: Callable) -> Callable:
+        @functools.wraps(method)
+        def run(self: Any, *args: Any) -> None:
+            try:
+                method(self, *args)
+            except Exception as exc:  # the safety net: no callback may end the node
+                self.reporter.internal_error(kind, exc)
+
+        return run
+
+    return wrap
+
+
+def guarded_service(kind: str) -> Callable:
+    """Decorator of a service callback method (plain or coroutine) of a node with a
+    ``reporter``: an unexpected exception answers a fresh response with ``success: false`` and
+    ``message: 'internal error: ...'``."""
+
+    def failure(self: Any, response: Any, exc: Exception) -> Any:
+        self.reporter.internal_error(kind, exc)
+        fresh = type(response)()
+        fresh.success = False
+        fresh.message = f'internal error: {type(exc).__name__}: {exc}'
+        return fresh
+
+    def wrap(method: Callable) -> Callable:
+        if inspect.iscoroutinefunction(method):
+            @functools.wraps(method)
+            async def run_async(self: Any, request: Any, response: Any) -> Any:
+                try:
+                    return await method(self, request, response)
+                except Exception as exc:  # the safety net: no callback may end the node
+                    return failure(self, response, exc)
+
+            return run_async
+
+        @functools.wraps(method)
+        def run(self: Any, request: Any, response: Any) -> Any:
+            try:
+                return method(self, request, response)
+            except Exception as exc:  # the safety net: no callback may end the node
+                return failure(self, response, exc)
+
+        return run
+
+    return wrap

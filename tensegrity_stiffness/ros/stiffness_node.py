@@ -1,0 +1,351 @@
+"""``stiffness_node``: real-time wrench and stiffness of a tensegrity joint over ROS 2.
+
+Thin layer: validate, convert with :mod:`msg_tools`, call the library
+(:mod:`tensegrity_stiffness.processing`), publish. Topics, services, parameters and QoS are
+documented in README.md; the conventions (frames, orderings, signs) in
+:mod:`tensegrity_stiffness.joint`; the parameters in :mod:`tensegrity_stiffness.parameters`.
+
+Concurrency: one single-threaded executor runs every callback, so inputs are answered in order.
+The ``~/screw`` and ``~/pose`` callbacks also take the messages queued behind their own
+(:mod:`.draining_subscription`): rclpy's per-callback cost exceeds the computation itself. The
+equilibrium service is a coroutine: it validates the request, hands the solve to the worker
+process (:class:`.SolverWorker`) and awaits it, so the topics keep being served meanwhile. All the
+configuration a computation needs is one immutable :class:`JointNodeSettings`, swapped as a whole
+when parameters or rest lengths change and read once per callback: no output mixes two sets.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.event_handler import PublisherEventCallbacks
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
+
+import msg_tools
+from tensegrity_stiffness.equilibrium import solve_equilibrium
+from tensegrity_stiffness.health import joint_health
+from tensegrity_stiffness.parameters import (
+    STIFFNESS_NODE_PARAMETERS,
+    JointNodeSettings,
+    joint_node_settings,
+)
+from tensegrity_stiffness.processing import JointOutputs, joint_outputs, pose_input, screw_input
+from tensegrity_stiffness.ros import joint_services, runner
+from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.parameters import ParameterBinding
+from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
+from tensegrity_stiffness.ros.solver_worker import SolverWorker, WorkerDiedError
+from tensegrity_stiffness_interfaces.srv import (
+    PlanarForwardKinematics,
+    PlanarInverseKinematics,
+    SolveEquilibrium,
+)
+
+NODE_NAME = 'stiffness_node'
+#: Window of the input-rate and compute-time statistics in /diagnostics.
+STATS_WINDOW = 1000
+#: Wall-clock time a solve may take beyond ``equilibrium.time_budget`` (a loaded machine) before
+#: it counts as an overrun and the worker is replaced.
+SOLVER_GRACE_S = 2.0
+
+
+def input_qos(depth: int, reliability: str) -> QoSProfile:
+    """Keep-last ``depth``, volatile, reliable or best effort: the streamed inputs."""
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                      reliability=(ReliabilityPolicy.BEST_EFFORT if reliability == 'best_effort'
+                                   else ReliabilityPolicy.RELIABLE),
+                      durability=DurabilityPolicy.VOLATILE)
+
+
+#: State inputs (rest lengths): reliable + transient local, depth 1, so that a restarted node
+#: gets the latest value from a latched publisher.
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def create_output_publisher(node: Node, msg_type: Any, topic: str, qos: QoSProfile | int) -> Any:
+    """A publisher without rclpy's default QoS-event handlers: each would be one more waitable
+    the executor rebuilds its wait set with before every callback (an incompatible subscriber is
+    still reported on its own side)."""
+    return node.create_publisher(msg_type, topic, qos, event_callbacks=PublisherEventCallbacks(
+        use_default_callbacks=False))
+
+
+class StiffnessNode(Node):
+    """Publishes wrench, K, K_c, tensions, interpretation, markers and diagnostics per input."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.reporter = Reporter(self.get_logger())
+        self._state_lock = threading.Lock()
+        self._binding = ParameterBinding(
+            self, STIFFNESS_NODE_PARAMETERS, joint_node_settings, self._apply_parameters,
+            lambda reason: self.reporter.warn('parameter change', reason))
+        self._settings = joint_node_settings(self._binding.values())
+        self._last_screw: np.ndarray | None = None
+        self._last_stamp = None
+        self._last_outputs: JointOutputs | None = None
+        self._last_solution: np.ndarray | None = None
+        self._last_marker_time = -math.inf
+        self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
+        self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
+        self._published = 0
+        self._messages = msg_tools.JointOutputMessages(tuple(self._settings.model.string_names))
+        self._solver = SolverWorker('equilibrium worker')
+        self._wake = self.create_guard_condition(lambda: None)
+
+        values = self._settings.values
+        depth, reliability = values['qos.depth'], values['qos.input_reliability']
+        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.VOLATILE)
+        self._output_publishers = [
+            create_output_publisher(self, t, topic, out_qos) for t, topic in (
+                (WrenchStamped, '~/wrench'), (Float64MultiArray, '~/stiffness'),
+                (Float64MultiArray, '~/cartesian_stiffness'),
+                (Float64MultiArray, '~/string_tensions'),
+                (Float64MultiArray, '~/stiffness_interpretation'))]
+        self._pub_markers = create_output_publisher(self, MarkerArray, '~/markers', out_qos)
+        self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics', 10)
+
+        qos = input_qos(depth, reliability)
+        for msg_type, topic, callback in ((Float64MultiArray, '~/screw', self._on_screw),
+                                          (PoseStamped, '~/pose', self._on_pose)):
+            create_draining_subscription(
+                self, msg_type, topic, callback, qos,
+                on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc))
+        self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
+                                 LATCHED_QOS)
+        # Own group: the coroutine holds its group while it awaits the worker; the default group
+        # (topics, planar services, timer) stays free.
+        self.create_service(SolveEquilibrium, '~/solve_equilibrium', self._on_solve_equilibrium,
+                            callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(PlanarForwardKinematics, '~/planar_forward_kinematics',
+                            self._on_planar_forward)
+        self.create_service(PlanarInverseKinematics, '~/planar_inverse_kinematics',
+                            self._on_planar_inverse)
+        self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
+        model = self._settings.model
+        # Warm the worker up (imports, first solve) before the first request needs it.
+        self._solver.submit(solve_equilibrium, (model, np.zeros(6)), {'time_budget': 1.0},
+                            lambda _: None, lambda _: None, deadline_s=1.0 + SOLVER_GRACE_S)
+        self.get_logger().info(
+            f'ready: {model.n_strings} strings, force law {model.force_law}, frames '
+            f'{self._settings.link1_frame} -> {self._settings.link2_frame}, inputs '
+            f'{reliability} depth {depth}')
+
+    def close(self) -> None:
+        """End the worker process (called by the runner before the node is destroyed)."""
+        self._solver.close()
+
+    # ------------------------------------------------------------------ parameters
+    def _apply_parameters(self, values: dict[str, Any], names: set[str]) -> None:
+        """After a successful set: swap in the new settings, keeping topic rest lengths unless
+        the change sets joint.rest_lengths itself."""
+        try:
+            with self._state_lock:
+                old = self._settings
+                settings = joint_node_settings(values, old.generation + 1)
+                rest = old.model.rest_lengths
+                if 'joint.rest_lengths' not in names and rest.shape == (
+                        settings.model.n_strings,):
+                    settings = replace(settings, model=settings.model.with_rest_lengths(rest))
+                self._settings = settings
+        except Exception as exc:  # validated before: only a bug gets here; the old set stays
+            self.reporter.internal_error('parameters', exc)
+            return
+        self.get_logger().info(f'parameters applied: {sorted(names)}')
+        try:  # an exception here would reach the parameter service, and the executor
+            self._republish_last()
+        except Exception as exc:  # the safety net: no callback may end the node
+            self.reporter.internal_error('re-publish', exc)
+
+    # ------------------------------------------------------------------ inputs
+    @guarded('~/screw')
+    def _on_screw(self, msg: Float64MultiArray) -> None:
+        settings = self._settings
+        try:
+            xi = screw_input(msg_tools.multiarray_to_array(
+                msg, expected_length=6, max_length=settings.max_array_length))
+        except ValueError as exc:
+            self.reporter.reject('~/screw', str(exc))
+            return
+        self._compute_and_publish(settings, xi, None, '~/screw')
+
+    @guarded('~/pose')
+    def _on_pose(self, msg: PoseStamped) -> None:
+        settings = self._settings
+        try:
+            last = self._last_screw
+            xi = pose_input(msg.header.frame_id, msg_tools.pose_to_transform(msg.pose),
+                            settings.link1_frame,
+                            last if last is not None else settings.model.initial_screw)
+        except ValueError as exc:
+            self.reporter.reject('~/pose', str(exc))
+            return
+        stamp = msg.header.stamp
+        self._compute_and_publish(settings, xi, stamp if stamp.sec or stamp.nanosec else None,
+                                  '~/pose')
+
+    @guarded('~/rest_lengths')
+    def _on_rest_lengths(self, msg: Float64MultiArray) -> None:
+        with self._state_lock:
+            settings = self._settings
+            try:
+                rest = msg_tools.multiarray_to_array(msg, expected_length=settings.model.n_strings,
+                                                     max_length=settings.max_array_length)
+                model = settings.model.with_rest_lengths(rest)
+            except ValueError as exc:
+                self.reporter.reject('~/rest_lengths', str(exc))
+                return
+            self._settings = replace(settings, model=model, generation=settings.generation + 1)
+        self._republish_last()
+
+    def _republish_last(self) -> None:
+        with self._state_lock:
+            xi, stamp = self._last_screw, self._last_stamp
+        if xi is not None:
+            self._compute_and_publish(self._settings, xi, stamp, 're-publish')
+
+    # ------------------------------------------------------------------ outputs
+    def _compute_and_publish(self, settings: JointNodeSettings, xi: np.ndarray, stamp: Any,
+                             source: str) -> None:
+        """Build and check every output, then publish them all (an input gets all of its
+        outputs or none)."""
+        start = time.perf_counter()
+        messages = self._messages
+        try:
+            outputs = joint_outputs(settings.model, xi)
+            if stamp is None:
+                stamp = self.get_clock().now().to_msg()
+            if messages.string_names != tuple(settings.model.string_names):
+                messages = self._messages = msg_tools.JointOutputMessages(
+                    tuple(settings.model.string_names))
+            messages.fill(outputs, stamp, settings.link1_frame)
+            now = time.monotonic()
+            markers = None
+            if settings.marker_period == 0.0 or \
+                    now - self._last_marker_time >= settings.marker_period:
+                markers = msg_tools.joint_markers(settings.model, outputs.state,
+                                                  settings.link1_frame, stamp)
+        except ValueError as exc:
+            self.reporter.reject(source, str(exc))
+            return
+        for publisher, msg in zip(self._output_publishers, messages.messages(), strict=True):
+            publisher.publish(msg)
+        if markers is not None:
+            self._last_marker_time = now
+            self._pub_markers.publish(markers)
+        with self._state_lock:
+            self._last_screw, self._last_stamp = xi, stamp
+            self._last_outputs = outputs
+        self._published += 1
+        self._input_times.append(now)
+        self._compute_times.append(time.perf_counter() - start)
+
+    # ------------------------------------------------------------------ services
+    @guarded_service('~/solve_equilibrium')
+    async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
+                                    response: SolveEquilibrium.Response
+                                    ) -> SolveEquilibrium.Response:
+        """Validated here, solved in the worker process: the executor keeps serving the topics
+        while the solve (bounded by ``equilibrium.time_budget``) runs."""
+        settings = self._settings
+        try:
+            job = joint_services.equilibrium_job(request, settings, self._last_solution)
+        except ValueError as exc:
+            self.reporter.reject('~/solve_equilibrium', str(exc))
+            return joint_services.fail(response, f'invalid request: {exc}')
+        done = Future(executor=self.executor)
+        settle_lock = threading.Lock()
+
+        def settle(result: Any = None, error: BaseException | None = None) -> None:
+            with settle_lock:
+                if done.done():
+                    return
+                if error is None:
+                    done.set_result(result)
+                else:  # reported to the caller by `await done`
+                    done.set_exception(error)
+            # The executor polls the awaiting coroutine only when it wakes up: wake it.
+            self._wake.trigger()
+
+        self._solver.submit(solve_equilibrium, (settings.model, job.external_wrench),
+                            job.kwargs(), lambda result: settle(result=result),
+                            lambda error: settle(error=error),
+                            deadline_s=job.time_budget + SOLVER_GRACE_S)
+        try:
+            result = await done
+        except TimeoutError as exc:
+            message = f'solver overran its budget: {exc}'
+        except WorkerDiedError as exc:
+            message = f'solver failed: {exc}; try again'
+        else:
+            if joint_services.fill_equilibrium(response, result):
+                self._last_solution = result.screw
+            return response
+        self.reporter.warn('~/solve_equilibrium', message, error=True)
+        return joint_services.fail(response, message)
+
+    @guarded_service('~/planar_forward_kinematics')
+    def _on_planar_forward(self, request: PlanarForwardKinematics.Request,
+                           response: PlanarForwardKinematics.Response
+                           ) -> PlanarForwardKinematics.Response:
+        return joint_services.planar_forward(self._settings.planar, request, response)
+
+    @guarded_service('~/planar_inverse_kinematics')
+    def _on_planar_inverse(self, request: PlanarInverseKinematics.Request,
+                           response: PlanarInverseKinematics.Response
+                           ) -> PlanarInverseKinematics.Response:
+        return joint_services.planar_inverse(self._settings.planar, request, response)
+
+    # ------------------------------------------------------------------ diagnostics
+    @guarded('diagnostics')
+    def _publish_diagnostics(self) -> None:
+        settings = self._settings
+        with self._state_lock:
+            outputs = self._last_outputs
+        computes = list(self._compute_times)
+        now = time.monotonic()
+        values: list[tuple[str, Any]] = [
+            ('input rate [Hz]', float(sum(1 for t in self._input_times if now - t <= 1.0))),
+            ('outputs published', self._published),
+            ('compute time mean [us]', 1e6 * float(np.mean(computes)) if computes else 0.0),
+            ('compute time max [us]', 1e6 * float(np.max(computes)) if computes else 0.0),
+            ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
+            ('parameter generation', settings.generation),
+            ('equilibrium worker restarts', self._solver.restarts),
+        ]
+        level, message = 'OK', 'no input yet'
+        if outputs is not None:
+            health = joint_health(outputs.state, settings.model.string_names)
+            values += health.values()
+            level = 'WARN' if health.problems else 'OK'
+            message = ', '.join(health.problems) or 'all strings taut, stable'
+        status = msg_tools.diagnostic_status(f'{self.get_name()}: joint', level, message,
+                                             values, hardware_id=settings.link1_frame)
+        self._pub_diagnostics.publish(msg_tools.diagnostic_array(
+            [status], self.get_clock().now().to_msg()))
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run tensegrity_stiffness stiffness_node``."""
+    runner.run(StiffnessNode, args)
+
+
+if __name__ == '__main__':
+    main()
