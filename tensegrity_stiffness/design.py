@@ -340,10 +340,18 @@ def _infeasibility_reason(model: JointModel, A: FloatArray, b: FloatArray, t_min
         hi_names = [model.string_names[j] for j in np.flatnonzero(t >= t_max * (1 - 1e-12))]
         return (f'tension_max: the load needs tensions above {t_max:g} N (closest residual '
                 f'{res_max:.3g} N with {", ".join(hi_names) or "no string"} at tension_max)')
-    capped = [f'{model.string_names[j]} (<= {pose.cap[j]:.4g} N for {pose.cap_reason[j]})'
-              for j in np.flatnonzero(pose.cap < t_max)]
-    return ('string caps: within the tension limits the load needs more tension than '
-            + ', '.join(capped) + ' can carry')
+    return 'string caps: within the tension limits the load needs more tension than ' + \
+        _caps_text(model, pose, np.flatnonzero(pose.cap < t_max)) + ' can carry'
+
+
+def _caps_text(model: JointModel, pose: _Pose, strings: NDArray[np.intp]) -> str:
+    """``name cap N, ... (reason)`` for each distinct reason."""
+    parts = []
+    for reason in dict.fromkeys(pose.cap_reason[j] for j in strings):
+        names = [f'{model.string_names[j]} {pose.cap[j]:.4g} N' for j in strings
+                 if pose.cap_reason[j] == reason]
+        parts.append(', '.join(names) + f' (for {reason})')
+    return '; '.join(parts)
 
 
 # ---------------------------------------------------------------------------------- validation
@@ -416,10 +424,9 @@ def design_rest_lengths(
     lo = np.full(n, t_min)
     hi = np.minimum(t_max, pose.cap)
     if np.any(hi <= lo):
-        bad = [f'{model.string_names[j]} (<= {pose.cap[j]:.4g} N for {pose.cap_reason[j]})'
-               for j in np.flatnonzero(hi <= lo)]
         return _nan_result(model, xi, 'string caps: at this pose these strings cannot carry '
-                           f'tension_min = {t_min:g} N: ' + ', '.join(bad), L, lo, hi)
+                           f'tension_min = {t_min:g} N: '
+                           + _caps_text(model, pose, np.flatnonzero(hi <= lo)), L, lo, hi)
     t0, residual = _closest_feasible(A, b, lo, hi)
     if residual > FEASIBILITY_TOLERANCE:
         reason = _infeasibility_reason(model, A, b, t_min, t_max, pose)
@@ -515,7 +522,7 @@ def rest_length_sensitivity(model: JointModel, screw: ArrayLike, rest_lengths: A
     check_in_chart(xi, 'screw')
     rest = model.validate_rest_lengths(rest_lengths, batched=False)
     lengths, X, ZE = _geometry(model, xi)
-    a, b, dt_dl0 = _law(model, lengths)
+    _, b, dt_dl0 = _law(model, lengths)
     lmax = rest + model.max_stretch
     slack = lengths <= rest
     saturated = ~slack & (lengths >= lmax)
