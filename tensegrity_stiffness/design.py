@@ -67,7 +67,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.equilibrium import is_stable
-from tensegrity_stiffness.joint import JointModel, JointState
+from tensegrity_stiffness.joint import MIN_STRING_LENGTH, JointModel, JointState
 from tensegrity_stiffness.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.screw import as_screws, check_in_chart, exp_se3, log_se3
 from tensegrity_stiffness.validation import finite_array_of_shape, finite_scalar
@@ -177,8 +177,8 @@ def _geometry(model: JointModel, screw: FloatArray) -> tuple[FloatArray, ...]:
     q = model.link2_nodes[model.connections[:, 1]] @ T[:3, :3].T + T[:3, 3]
     s = p1 - q
     lengths = np.sqrt(np.einsum('ij,ij->i', s, s))
-    if lengths.min() < 1e-12:
-        bad = np.flatnonzero(lengths < 1e-12).tolist()
+    if lengths.min() < MIN_STRING_LENGTH:
+        bad = np.flatnonzero(lengths < MIN_STRING_LENGTH).tolist()
         raise ValueError(f'strings {bad} have zero length at this screw')
     u = s / lengths[:, None]
     X = np.concatenate([u, np.cross(p1, u)], axis=1)
