@@ -69,7 +69,7 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness.equilibrium import is_stable
 from tensegrity_stiffness.joint import MIN_STRING_LENGTH, JointModel, JointState
 from tensegrity_stiffness.quaternion import quaternion_to_rotation
-from tensegrity_stiffness.screw import as_screws, check_in_chart, exp_se3, log_se3
+from tensegrity_stiffness.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
 from tensegrity_stiffness.validation import finite_array_of_shape, finite_scalar
 
 FloatArray = NDArray[np.float64]
@@ -162,14 +162,6 @@ class _Pose:
 
 
 # ---------------------------------------------------------------------------------- the pose
-def _hat(w: FloatArray) -> FloatArray:
-    out = np.zeros(w.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -w[..., 2], w[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = w[..., 2], -w[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -w[..., 1], w[..., 0]
-    return out
-
-
 def _geometry(model: JointModel, screw: FloatArray) -> tuple[FloatArray, ...]:
     """Lengths (n,), X = [u; p1 x u] (n, 6) and Z_j E_j (n, 6, 6) at ``screw``."""
     T = exp_se3(screw)
@@ -182,7 +174,7 @@ def _geometry(model: JointModel, screw: FloatArray) -> tuple[FloatArray, ...]:
         raise ValueError(f'strings {bad} have zero length at this screw')
     u = s / lengths[:, None]
     X = np.concatenate([u, np.cross(p1, u)], axis=1)
-    hp, hq = _hat(p1), _hat(q)
+    hp, hq = hat3(p1), hat3(q)
     n = len(lengths)
     ZE = np.empty((n, 6, 6))
     ZE[:, :3, :3] = np.eye(3)
