@@ -7,9 +7,12 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
 * ``equilibrium``  the equilibrium under an external wrench (Section VI)
 * ``planar-fk``    planar mechanism forward kinematics at (L3, theta1) (eqs. 2-7, 17-30, 42)
 * ``planar-ik``    planar mechanism inverse kinematics at D3 = (x, y) (eqs. 8-16, 48-52)
+* ``design``       rest lengths that hold a screw under a load within tension limits, with a
+  chosen Cartesian stiffness (:mod:`tensegrity_stiffness.design`)
 * ``plot <figure>`` one PNG: ``joint``, ``extension`` (Monke & Vikas Figs. 4-5),
   ``actuator-workspace``, ``cartesian-workspace`` (Ji, Li & Lin Figs. 2-3), ``theta2``
-  (Figs. 4-6), ``actuator-stiffness``, ``cartesian-stiffness`` (Figs. 7-8)
+  (Figs. 4-6), ``actuator-stiffness``, ``cartesian-stiffness`` (Figs. 7-8), ``stiffness-range``
+  (reachable diagonal of K_c along a screw sweep)
 * ``figures``      every figure of the README into a folder (``docs/figures``)
 
 Numbers accept arithmetic with ``pi`` (``pi/10``, ``-3*pi/4``, ``-1e-3``). ``--json`` prints
@@ -34,7 +37,7 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from tensegrity_stiffness import config, plots, sweeps
+from tensegrity_stiffness import config, design, plots, sweeps
 from tensegrity_stiffness.equilibrium import is_stable, solve_equilibrium
 from tensegrity_stiffness.interpretation import (
     BLOCK_NAMES,
@@ -79,6 +82,7 @@ FIGURE_FILES = {
     'theta2': 'planar_theta2.png',
     'actuator-stiffness': 'planar_stiffness_actuator.png',
     'cartesian-stiffness': 'planar_stiffness_cartesian.png',
+    'stiffness-range': 'stiffness_range.png',
 }
 #: Accepted range of ``figures --scale``.
 SCALE_RANGE = (0.1, 4.0)
@@ -482,6 +486,92 @@ def _cmd_planar_ik(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# ------------------------------------------------------------------------------ design
+def _tension_limits(args: argparse.Namespace) -> tuple[float, float]:
+    t_min, t_max = args.tension_limits
+    if not t_min > 0.0:
+        raise ValueError(f'--tension-limits: MIN must be > 0 N, got {t_min:g}')
+    if not t_max > t_min:
+        raise ValueError(f'--tension-limits: MAX must exceed MIN, got {t_min:g} {t_max:g}')
+    return t_min, t_max
+
+
+def read_target_stiffness(path: str | Path) -> FloatArray:
+    """The target K_c (6, 6) of a YAML file: key ``cartesian_stiffness`` with 6 rows of 6
+    values or 36 values row-major (rows [fx fy fz mx my mz], columns [dx dy dz rx ry rz])."""
+    document = config.load_yaml(path)
+    if not isinstance(document, dict) or 'cartesian_stiffness' not in document:
+        raise ValueError(f'--target-stiffness {path}: needs a "cartesian_stiffness" key '
+                         '(6 rows of 6 values or 36 values, row-major)')
+    try:
+        values = np.asarray(document['cartesian_stiffness'], dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f'--target-stiffness {path}: cartesian_stiffness must be 36 numbers '
+                         '(6 rows of 6 or flat, row-major)') from None
+    if values.size != 36 or values.shape not in ((36,), (6, 6)):
+        raise ValueError(f'--target-stiffness {path}: cartesian_stiffness must be 6x6 or 36 '
+                         f'values, got shape {values.shape}')
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f'--target-stiffness {path}: cartesian_stiffness must be finite')
+    return values.reshape(6, 6)
+
+
+def _cmd_design(args: argparse.Namespace) -> int:
+    model, path, _ = _load_joint(args)
+    xi = _screw(args, model)
+    W = np.asarray(args.wrench, dtype=np.float64)
+    t_min, t_max = _tension_limits(args)
+    target = None
+    if args.target_stiffness is not None:
+        target = read_target_stiffness(args.target_stiffness)
+    elif args.scale_stiffness is not None:
+        if not args.scale_stiffness > 0.0:
+            raise ValueError(f'--scale-stiffness must be > 0, got {args.scale_stiffness:g}')
+        base = design.design_rest_lengths(model, xi, W, t_min, t_max,
+                                          length_scale=args.length_scale)
+        if base.success:
+            target = args.scale_stiffness * base.cartesian_stiffness
+    result = design.design_rest_lengths(model, xi, W, t_min, t_max, target,
+                                        args.length_scale)
+    strings = [{'name': name, 'length': float(length), 'rest_length': float(l0),
+                'tension': float(t)}
+               for name, length, l0, t in zip(
+                   model.string_names, model.lengths(xi), result.rest_lengths, result.tensions,
+                   strict=True)]
+    report: dict[str, Any] = {
+        'config': str(path), 'force_law': model.force_law, 'screw': xi, 'external_wrench': W,
+        'tension_limits': [t_min, t_max], 'success': result.success,
+        'message': result.message, 'rest_lengths': result.rest_lengths,
+        'tensions': result.tensions, 'strings': strings,
+        'cartesian_stiffness': result.cartesian_stiffness, 'stiffness': result.stiffness,
+        'target_stiffness': target, 'stiffness_error': result.stiffness_error,
+        'length_scale': result.length_scale, 'stable': result.stable}
+    if args.json:
+        _print_json(report)
+    else:
+        print(f"design at screw {_vector(_display(xi))} under W = {_vector(W)} (N, N m), "
+              f'tensions in [{t_min:g}, {t_max:g}] N: {result.message}')
+        if result.success:
+            print()
+            print(f"  {'name':<14}{'length (m)':>13}{'rest (m)':>13}{'tension (N)':>13}")
+            for s in strings:
+                print(f"  {s['name']:<14}{_num(s['length'], 13)}{_num(s['rest_length'], 13)}"
+                      f"{_num(s['tension'], 13)}")
+            print()
+            print('achieved Cartesian stiffness K_c; columns: spatial twist in {1}, linear '
+                  'first:')
+            print('\n'.join(_matrix_lines(result.cartesian_stiffness, ROW_NAMES,
+                                          KC_COLUMN_NAMES)))
+            if target is not None:
+                print(f'  stiffness error |S (K_c - K*) S| / |S K* S| = '
+                      f'{_num(result.stiffness_error)} (L = {_num(result.length_scale)} m)')
+            print(f'  stable: {_yes(result.stable)}')
+    if not result.success:
+        print(f'{PROG}: no design: {result.message}', file=sys.stderr)
+        return EXIT_NO_SOLUTION
+    return EXIT_OK
+
+
 # ------------------------------------------------------------------------------ plots
 def _out_path(args: argparse.Namespace, figure: str) -> Path:
     return Path(args.out) if args.out else Path(FIGURE_FILES[figure])
@@ -537,6 +627,14 @@ def _draw(figure: str, args: argparse.Namespace, path: Path, size: tuple[int, in
         return plots.plot_cartesian_stiffness(mech, path, resolution=args.resolution,
                                               samples=args.samples, width=w, height=h,
                                               progress=progress)
+    if figure == 'stiffness-range':
+        model, _, _ = _load_joint(args)
+        t_min, t_max = _tension_limits(args)
+        return plots.plot_stiffness_range(model, _screw(args, model), path,
+                                          coordinate=args.coordinate, extent=args.extent,
+                                          samples=args.samples, external_wrench=args.wrench,
+                                          tension_min=t_min, tension_max=t_max, width=w,
+                                          height=h, progress=progress)
     raise ValueError(f'unknown figure {figure!r}')  # unreachable: argparse checks the choice
 
 
@@ -607,6 +705,33 @@ def _add_joint_options(p: argparse.ArgumentParser, screw: bool = True) -> None:
                             'order); turned into the screw nearest the initial screw')
 
 
+def _add_design_options(p: argparse.ArgumentParser, limits_required: bool) -> None:
+    g = p.add_argument_group('joint')
+    g.add_argument('--config', metavar='YAML',
+                   help='joint config (default: the packaged config/default_joint.yaml)')
+    g.add_argument('--force-law', choices=FORCE_LAWS,
+                   help="string force law (default: the config's)")
+    s = g.add_mutually_exclusive_group()
+    s.add_argument('--screw', nargs=6, type=parse_number,
+                   metavar=('WX', 'WY', 'WZ', 'VX', 'VY', 'VZ'),
+                   help="target screw xi = [omega; v] (rad, m); default: the config's "
+                        'initial_screw')
+    s.add_argument('--pose', nargs=7, type=parse_number,
+                   metavar=('X', 'Y', 'Z', 'QX', 'QY', 'QZ', 'QW'),
+                   help='target pose of link 2 in {1}: position (m) and unit quaternion '
+                        '(ROS order), on the branch nearest the initial screw')
+    p.add_argument('--wrench', nargs=6, type=parse_number, default=[0.0] * 6,
+                   metavar=('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'),
+                   help='external wrench on link 2 in {1} about its origin (N, N m; default 0)')
+    p.add_argument('--tension-limits', nargs=2, type=parse_number, metavar=('MIN', 'MAX'),
+                   required=limits_required,
+                   default=None if limits_required else [design.DEFAULT_TENSION_MIN,
+                                                         design.DEFAULT_TENSION_MAX],
+                   help='string tension limits (N), 0 < MIN < MAX'
+                        + ('' if limits_required else ' (default 0.1 1.5)'))
+    p.set_defaults(rest_lengths=None)
+
+
 def _add_planar_options(p: argparse.ArgumentParser, defaults: str, config: bool) -> None:
     g = p.add_argument_group('planar mechanism', f'defaults: {defaults}')
     if config:
@@ -641,6 +766,8 @@ PLOT_HELP = {
     'theta2': 'U, tau and K against theta2 with the actuators locked (Figs. 4-6)',
     'actuator-stiffness': 'stiffness map over the actuator workspace (Fig. 7)',
     'cartesian-stiffness': 'stiffness map over the Cartesian workspace (Fig. 8)',
+    'stiffness-range': 'reachable range of each diagonal entry of K_c over the admissible '
+                       'tensions along a sweep of one screw coordinate',
 }
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of every subcommand."""
@@ -692,6 +819,23 @@ def build_parser() -> argparse.ArgumentParser:
     _add_json(p)
     p.set_defaults(handler=_cmd_planar_ik)
 
+    p = sub.add_parser('design', help='rest lengths for a pose, load, tension limits and '
+                       'stiffness', description='Rest lengths that hold the target screw or pose '
+                       'in equilibrium under the external wrench with every tension within the '
+                       'limits and K_c closest to a target (exact convex QP).')
+    _add_design_options(p, limits_required=True)
+    t = p.add_mutually_exclusive_group()
+    t.add_argument('--target-stiffness', metavar='FILE.yaml',
+                   help='target K_c: YAML with "cartesian_stiffness", 6 rows of 6 or 36 values '
+                        '(row-major; N/m, N, N m/m, N m/rad)')
+    t.add_argument('--scale-stiffness', type=parse_number, metavar='F',
+                   help='target K_c = F times the K_c of the mid-limit design (no target)')
+    p.add_argument('--length-scale', type=parse_number, metavar='M',
+                   help='L of S = diag(1, 1, 1, 1/L, 1/L, 1/L) (m; default: the largest '
+                        'distance of a link-1 node from the origin of {1})')
+    _add_json(p)
+    p.set_defaults(handler=_cmd_design)
+
     p = sub.add_parser('plot', help='write one figure as PNG (needs matplotlib)',
                        description='Write one figure as PNG (needs matplotlib).')
     figures = p.add_subparsers(dest='figure', required=True, metavar='FIGURE')
@@ -723,6 +867,15 @@ def build_parser() -> argparse.ArgumentParser:
             f.add_argument('--samples', type=_positive_int,
                            default=plots.DEFAULT_THETA2_SAMPLES,
                            help=f'theta2 samples (default {plots.DEFAULT_THETA2_SAMPLES})')
+        elif figure == 'stiffness-range':
+            _add_design_options(f, limits_required=False)
+            f.add_argument('--coordinate', choices=plots.SCREW_COORDINATES, default='wx',
+                           help='screw coordinate swept about the screw (default wx)')
+            f.add_argument('--extent', type=parse_number, default=0.3, metavar='OFFSET',
+                           help='sweep from -OFFSET to +OFFSET (rad or m; default 0.3)')
+            f.add_argument('--samples', type=_positive_int, default=plots.DEFAULT_RANGE_SAMPLES,
+                           help=f'points along the sweep (default '
+                                f'{plots.DEFAULT_RANGE_SAMPLES})')
         else:
             _add_planar_options(f, 'L = 1, K1 = 200, K2 = 100, L3 in [0, 2L], theta1 in '
                                    '[0, pi] (Figs. 2-3, 7-8)', False)

@@ -19,6 +19,8 @@ Figures (defaults are the papers' parameter sets):
   L = 1 m, L3 = 6 m, K1 = 100, K2 = 10 N/m, theta1 = pi/10).
 * :func:`plot_actuator_stiffness`, :func:`plot_cartesian_stiffness` -- stiffness maps over both
   workspaces (Figs. 7-8; K1 = 200, K2 = 100 N/m).
+* :func:`plot_stiffness_range` -- the reachable range of each diagonal entry of K_c over the
+  admissible tensions along a sweep of one screw coordinate (:mod:`tensegrity_stiffness.design`).
 """
 
 from __future__ import annotations
@@ -30,6 +32,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.design import (
+    DIAGONAL_NAMES,
+    DIAGONAL_UNITS,
+    design_rest_lengths,
+    stiffness_range,
+)
 from tensegrity_stiffness.joint import JointModel
 from tensegrity_stiffness.planar import SQRT3, PlanarMechanism
 from tensegrity_stiffness.planar_workspace import (
@@ -60,6 +68,7 @@ DEFAULT_SIZES = {
     'theta2': (900, 750),
     'actuator-stiffness': (900, 600),
     'cartesian-stiffness': (800, 700),
+    'stiffness-range': (1000, 600),
 }
 #: Default samples along each curve and per side of each map grid.
 DEFAULT_CURVE_SAMPLES = 400
@@ -535,4 +544,71 @@ def plot_cartesian_stiffness(mech: PlanarMechanism, path: str | Path, *,
     ax.set_ylabel('y (m)')
     ax.set_title(f'Fig. 8: stiffness in the Cartesian workspace '
                  f'(K1 = {mech.K1:g}, K2 = {mech.K2:g} N/m)', fontsize=10)
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------- stiffness design
+#: Screw coordinates a stiffness-range sweep can move along, and their units.
+SCREW_COORDINATES = ('wx', 'wy', 'wz', 'vx', 'vy', 'vz')
+SCREW_COORDINATE_UNITS = ('rad', 'rad', 'rad', 'm', 'm', 'm')
+DEFAULT_RANGE_SAMPLES = 31
+
+
+def stiffness_range_curves(model: JointModel, screw: ArrayLike, coordinate: str,
+                           offsets: ArrayLike, external_wrench: ArrayLike | None = None,
+                           tension_min: float = 0.1, tension_max: float = 1.5,
+                           progress: ProgressCallback | None = None
+                           ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Along ``screw + offset e_coordinate``: (minimum, maximum, design) (N, 6) of the diagonal
+    of K_c (:func:`~tensegrity_stiffness.design.stiffness_range`; ``design`` = the tensions
+    closest to the middle of the limits); NaN where the request is infeasible."""
+    if coordinate not in SCREW_COORDINATES:
+        raise ValueError(f'coordinate must be one of {SCREW_COORDINATES}, got {coordinate!r}')
+    offsets = np.asarray(offsets, dtype=np.float64)
+    axis = np.eye(6)[SCREW_COORDINATES.index(coordinate)]
+    out = np.full((3, offsets.size, 6), np.nan)
+    for i, s in enumerate(offsets):
+        xi = np.asarray(screw, dtype=np.float64) + s * axis
+        rng = stiffness_range(model, xi, external_wrench, tension_min, tension_max)
+        if rng.success:
+            out[0, i], out[1, i] = rng.minimum, rng.maximum
+            design = design_rest_lengths(model, xi, external_wrench, tension_min, tension_max)
+            if design.success:
+                out[2, i] = np.diag(design.cartesian_stiffness)
+        if progress is not None:
+            progress(i + 1, offsets.size)
+    return out[0], out[1], out[2]
+
+
+def plot_stiffness_range(model: JointModel, screw: ArrayLike, path: str | Path, *,
+                         coordinate: str = 'wx', extent: float = 0.3,
+                         samples: int = DEFAULT_RANGE_SAMPLES,
+                         external_wrench: ArrayLike | None = None, tension_min: float = 0.1,
+                         tension_max: float = 1.5,
+                         width: int = DEFAULT_SIZES['stiffness-range'][0],
+                         height: int = DEFAULT_SIZES['stiffness-range'][1],
+                         progress: ProgressCallback | None = None) -> Path:
+    """Reachable range (shaded) of each diagonal entry of K_c over every admissible tension set,
+    and the entry of the mid-limit design (line), for a sweep of one screw coordinate in
+    ``[-extent, extent]`` about ``screw``; blank where no tensions hold the load."""
+    path = _output(path)
+    samples = _check_count('samples', samples)
+    offsets = np.linspace(-extent, extent, samples)
+    lo, hi, mid = stiffness_range_curves(model, screw, coordinate, offsets, external_wrench,
+                                         tension_min, tension_max, progress)
+    fig = _figure(width, height)
+    axes = fig.subplots(2, 3, sharex=True)
+    unit = SCREW_COORDINATE_UNITS[SCREW_COORDINATES.index(coordinate)]
+    for i, ax in enumerate(axes.ravel()):
+        ax.fill_between(offsets, lo[:, i], hi[:, i], color='tab:blue', alpha=0.3,
+                        label='reachable')
+        ax.plot(offsets, mid[:, i], color='tab:blue', linewidth=1.6, label='mid-limit design')
+        ax.set_title(f'$K_c$ {DIAGONAL_NAMES[i]}-{DIAGONAL_NAMES[i]} ({DIAGONAL_UNITS[i]})',
+                     fontsize=10)
+        ax.grid(True, alpha=0.3)
+        if i >= 3:
+            ax.set_xlabel(f'offset of {coordinate} from the centre screw ({unit})')
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle(f'diagonal of $K_c$ reachable with tensions in [{tension_min:g}, '
+                 f'{tension_max:g}] N', fontsize=11)
     return _save(fig, path)
