@@ -9,6 +9,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -434,3 +435,101 @@ def test_rate_progress_shows_rate_and_eta() -> None:
     text = stream.getvalue()
     assert 'bag:  50% (50/100)' in text and 'inputs/s ETA' in text
     assert text.endswith('\n') and ' in ' in text.splitlines()[-1].split('\r')[-1]
+
+
+# ------------------------------------------------------------------------------ the running node
+@pytest.mark.ros
+def test_bag_output_equals_the_running_nodes_recorded_output(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scenario's inputs sent to the installed node one by one; its outputs recorded by an
+    rclpy subscriber writing with rosbags; that recording and the bag command's output of the
+    same inputs compared message by message. Stamps: equal where the node copies them (poses,
+    re-publishes of poses); the node's time of computation elsewhere, the log time in the bag."""
+    pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+    from geometry_msgs.msg import PoseStamped, WrenchStamped
+    from rclpy.serialization import deserialize_message, serialize_message
+    from ros_harness import LATCHED, NodeProcess, RosClient, unique_namespace
+    from std_msgs.msg import Float64MultiArray
+
+    ns = unique_namespace('bag')
+    base = f'{ns}/stiffness_node'
+    msgs, expected, _ = scenario()
+    src = write_bag(tmp_path / 'in', msgs, namespace=base)
+    rcl_types = {'screw': Float64MultiArray, 'pose': PoseStamped,
+                 'rest_lengths': Float64MultiArray}
+    out_types = {'wrench': WrenchStamped, **dict.fromkeys(OUTPUTS[1:], Float64MultiArray)}
+    recorded = tmp_path / 'node_out'
+    # The installed node with its own sources: this checkout's are left off its PYTHONPATH.
+    paths = [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep)
+             if p and Path(p).resolve() not in (REPO, REPO / 'test')]
+    with monkeypatch.context() as env:
+        env.setenv('PYTHONPATH', os.pathsep.join(paths))
+        proc = NodeProcess(ns, REPO / 'config' / 'default_joint.yaml')
+    ros = RosClient('bag_test')
+    try:
+        log_time = [0]
+        with Writer(recorded, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            conns = {name: writer.add_connection(f'{base}/{name}', TYPESTORE_NAMES[name],
+                                                 typestore=TYPESTORE) for name in OUTPUTS}
+            inboxes = {}
+            for name in OUTPUTS:
+                def record(msg: Any, name: str = name) -> None:
+                    writer.write(conns[name], log_time[0], serialize_message(msg))
+                inboxes[name] = ros.subscribe(out_types[name], f'{base}/{name}')
+                ros.subscribe_callback(out_types[name], f'{base}/{name}', record)
+            pubs = {'screw': ros.publisher(Float64MultiArray, f'{base}/screw'),
+                    'pose': ros.publisher(PoseStamped, f'{base}/pose'),
+                    'rest_lengths': ros.publisher(Float64MultiArray, f'{base}/rest_lengths',
+                                                  LATCHED)}
+            for pub in pubs.values():
+                ros.wait_for_subscribers(pub)
+            for name in OUTPUTS:
+                ros.wait_for_publishers(f'{base}/{name}')
+            answered_times = {e['t'] for e in expected}
+            count = 0
+            for m in msgs:
+                if isinstance(m.msg, bytes):  # undecodable: cannot be sent over ROS
+                    continue
+                log_time[0] = m.t
+                raw = bytes(TYPESTORE.serialize_cdr(m.msg, m.msgtype))
+                pubs[m.topic].publish(deserialize_message(raw, rcl_types[m.topic]))
+                if m.t in answered_times:
+                    count += 1
+                    for name in OUTPUTS:
+                        inboxes[name].wait_for(count, timeout=10.0)
+            time.sleep(0.5)  # nothing more may come
+            assert {name: len(inboxes[name]) for name in OUTPUTS} == dict.fromkeys(
+                OUTPUTS, len(expected))
+    finally:
+        ros.close()
+        proc.stop()
+
+    code, _, stderr = run_cli('bag', src, '--out', tmp_path / 'bag_out', '--namespace', base)
+    assert code == 0, stderr
+    node_out, bag_out = read_bag(recorded), read_bag(tmp_path / 'bag_out')
+    assert len(node_out) == len(bag_out) == 5 * len(expected)
+    for k, ((topic_n, t_n, n), (topic_b, t_b, b)) in enumerate(
+            zip(node_out, bag_out, strict=True)):
+        exp = expected[k // 5]
+        assert topic_n == topic_b and t_n == t_b == exp['t'], k
+        if topic_b.endswith('/wrench'):
+            assert n.header.frame_id == b.header.frame_id == FRAME
+            copied = exp['stamp'] != exp['t'] and (exp['source'] == 'pose' or any(
+                e['source'] == 'pose' and e['stamp'] == exp['stamp'] for e in expected))
+            if copied:
+                assert (n.header.stamp.sec, n.header.stamp.nanosec) == (
+                    b.header.stamp.sec, b.header.stamp.nanosec)
+            vn = [n.wrench.force.x, n.wrench.force.y, n.wrench.force.z,
+                  n.wrench.torque.x, n.wrench.torque.y, n.wrench.torque.z]
+            vb = [b.wrench.force.x, b.wrench.force.y, b.wrench.force.z,
+                  b.wrench.torque.x, b.wrench.torque.y, b.wrench.torque.z]
+            np.testing.assert_allclose(vb, vn, rtol=1e-12, atol=ATOL)
+        else:
+            assert [(d.label, d.size, d.stride) for d in n.layout.dim] == \
+                [(d.label, d.size, d.stride) for d in b.layout.dim]
+            assert n.layout.data_offset == b.layout.data_offset
+            np.testing.assert_allclose(b.data, n.data, rtol=1e-12, atol=ATOL_K)
+
+
+TYPESTORE_NAMES = {'wrench': 'geometry_msgs/msg/WrenchStamped',
+                   **dict.fromkeys(OUTPUTS[1:], FMA)}
