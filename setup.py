@@ -15,7 +15,7 @@ setup(
         ('share/' + PACKAGE_NAME, ['package.xml']),
         ('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml')),
     ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML'],
+    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML', 'rosbags'],
     extras_require={'plots': ['matplotlib']},
     zip_safe=True,
     maintainer='tensegrity_stiffness maintainers',

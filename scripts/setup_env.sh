@@ -57,6 +57,8 @@ REQUIREMENTS=(
   'ruff==0.17.6'
   # plots of the tensegrity-stiffness CLI (optional at run time, needed by the tests)
   'matplotlib==3.11.2'
+  # rosbag2 reading and writing of the bag command (pure Python, no ROS install needed)
+  'rosbags==0.11.9'
 )
 
 log() { printf '[setup_env %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }

@@ -14,6 +14,7 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
   (Figs. 4-6), ``actuator-stiffness``, ``cartesian-stiffness`` (Figs. 7-8), ``stiffness-range``
   (reachable diagonal of K_c along a screw sweep)
 * ``figures``      every figure of the README into a folder (``docs/figures``)
+* ``bag``          what the node would publish, for a whole rosbag2 recording (needs rosbags)
 
 Numbers accept arithmetic with ``pi`` (``pi/10``, ``-3*pi/4``, ``-1e-3``). ``--json`` prints
 machine-readable output (NaN and inf as null). Exit codes: 0 success, 1 no solution (equilibrium
@@ -184,6 +185,31 @@ class TerminalProgress:
             self.stream.write('\n')
             self.stream.flush()
             self._last = 100
+
+
+class TerminalRateProgress(TerminalProgress):
+    """:class:`TerminalProgress` with the rate and the time left:
+    ``label: 42% (n/total) 23456/s ETA 3 s``."""
+
+    def __init__(self, label: str, unit: str = '/s', stream: TextIO | None = None) -> None:
+        super().__init__(label, stream)
+        self.unit = unit
+        self._start = time.perf_counter()
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.enabled:
+            return
+        elapsed = max(time.perf_counter() - self._start, 1e-9)
+        rate = done / elapsed
+        percent = 100 if total <= 0 else int(100 * min(done, total) / total)
+        eta = f'ETA {(total - done) / rate:.0f} s' if 0 < rate and done < total else \
+            f'in {elapsed:.1f} s'
+        self.stream.write(f'\r{self.label}: {percent:3d}% ({done}/{total}) '
+                          f'{rate:.0f}{self.unit} {eta}   ')
+        self._last = percent
+        if done >= total:
+            self.stream.write('\n')
+        self.stream.flush()
 
 
 # ------------------------------------------------------------------------------ formatting
@@ -679,6 +705,40 @@ def _cmd_figures(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_bag(args: argparse.Namespace) -> int:
+    from tensegrity_stiffness import bag
+
+    progress = TerminalRateProgress('bag', unit=' inputs/s')
+    try:
+        summary = bag.process_bag(
+            args.input, args.out, config_path=args.config, namespace=args.namespace,
+            storage=args.storage, csv_path=args.csv, topics=args.topics,
+            overwrite=args.overwrite, progress=progress)
+    except ImportError as exc:  # rosbags not installed
+        raise ValueError(f'the bag command needs rosbags ({exc})') from None
+    finally:
+        progress.finish()
+    report = summary.to_dict()
+    if args.json:
+        _print_json(report)
+        return EXIT_OK
+    inputs = ', '.join(f'{n} {k}' for k, n in report['inputs'].items())
+    answered = ', '.join(f'{n} {k}' for k, n in report['answered'].items())
+    print(f"read {report['input']}: {inputs}")
+    print(f"answered {report['answers']} inputs ({answered}) in {report['seconds']:.2f} s"
+          + (f" ({report['inputs_per_second']:.0f} inputs/s)"
+             if report['inputs_per_second'] else ''))
+    print(f"wrote {report['output']} ({report['storage']}): "
+          + ', '.join(f'{t} {n}' for t, n in report['written'].items()))
+    if report['csv']:
+        print(f"wrote {report['csv']}: {report['answers']} rows")
+    if report['rejected']:
+        print(f"skipped {report['rejected_total']} bad messages:")
+        for kind, n in report['rejected'].items():
+            print(f"  {kind}: {n} (e.g. {report['rejection_examples'][kind]})")
+    return EXIT_OK
+
+
 # ------------------------------------------------------------------------------ parser
 def _add_json(p: argparse.ArgumentParser) -> None:
     p.add_argument('--json', action='store_true', help='machine-readable JSON output')
@@ -890,6 +950,31 @@ def build_parser() -> argparse.ArgumentParser:
                                help=f'grid points per side (default '
                                     f'{plots.DEFAULT_MAP_RESOLUTION})')
     p.set_defaults(handler=_cmd_plot)
+
+    p = sub.add_parser('bag', help='wrench and stiffness for a whole rosbag2 recording',
+                       description="Read the node's inputs (screw, pose, rest_lengths) from a "
+                                   'rosbag2 (mcap or sqlite3) and write what stiffness_node '
+                                   'would publish (wrench, stiffness, cartesian_stiffness, '
+                                   'string_tensions, stiffness_interpretation) to a new rosbag2, '
+                                   'each answer at the log time of its input (needs rosbags).')
+    p.add_argument('input', metavar='INPUT', help='rosbag2 folder (or a .mcap / .db3 file)')
+    p.add_argument('--out', required=True, metavar='OUTPUT', help='rosbag2 folder to write')
+    p.add_argument('--config', metavar='YAML',
+                   help="the node's parameter file (default: the packaged "
+                        'config/default_joint.yaml; a file overrides the parameters it has)')
+    p.add_argument('--namespace', default='/stiffness_node', metavar='NS',
+                   help="the node's topics' prefix (default /stiffness_node: the node in the "
+                        'root namespace)')
+    p.add_argument('--storage', metavar='mcap|sqlite3',
+                   help="storage of OUTPUT (default: the input's)")
+    p.add_argument('--csv', metavar='FILE', help='also write one row per answered input')
+    p.add_argument('--topics', nargs='+', metavar='TOPIC',
+                   help='outputs to write (default all: wrench stiffness cartesian_stiffness '
+                        'string_tensions stiffness_interpretation)')
+    p.add_argument('--overwrite', action='store_true',
+                   help='replace OUTPUT (a rosbag2) and FILE if they exist')
+    _add_json(p)
+    p.set_defaults(handler=_cmd_bag)
 
     p = sub.add_parser('figures', help="regenerate every README figure into a folder",
                        description='Write every figure at its default parameters (the '
