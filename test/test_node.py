@@ -23,12 +23,14 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 import msg_tools  # noqa: E402
+from tensegrity_stiffness.design import design_rest_lengths  # noqa: E402
 from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
 from tensegrity_stiffness.interpretation import interpret_stiffness  # noqa: E402
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.planar import PlanarMechanism  # noqa: E402
 from tensegrity_stiffness.screw import exp_se3, log_se3  # noqa: E402
 from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
+    DesignRestLengths,
     PlanarForwardKinematics,
     PlanarInverseKinematics,
     SolveEquilibrium,
@@ -58,6 +60,7 @@ class Harness:
         self.pose_pub = self.ros.publisher(PoseStamped, f'{base}/pose')
         self.rest_pub = self.ros.publisher(Float64MultiArray, f'{base}/rest_lengths', LATCHED)
         self.solve = self.ros.client(SolveEquilibrium, f'{base}/solve_equilibrium')
+        self.design = self.ros.client(DesignRestLengths, f'{base}/design_rest_lengths')
         self.fk = self.ros.client(PlanarForwardKinematics, f'{base}/planar_forward_kinematics')
         self.ik = self.ros.client(PlanarInverseKinematics, f'{base}/planar_inverse_kinematics')
         self.set_params = self.ros.client(SetParameters, f'{base}/set_parameters')
@@ -254,6 +257,63 @@ def test_solve_equilibrium_rejections(harness, request_fields, match):
     assert not res.success
     assert match in res.message, res.message
     assert harness.proc.alive()
+
+
+def test_design_rest_lengths_service(harness, model):
+    target = model.initial_screw + np.array([0.05, 0.0, 0.0, 0.0, 0.001, 0.0])
+    W = np.array([0.0, 0.2, 0.0, 0.0, 0.0, 0.001])
+    request = DesignRestLengths.Request(target_screw=target.tolist(), tension_min=0.1,
+                                        tension_max=1.5)
+    request.external_wrench = msg_tools.wrench_to_msg(W)
+    response = harness.ros.call(harness.design, request)
+    expected = design_rest_lengths(model, target, W, tension_min=0.1, tension_max=1.5)
+    assert response.success and expected.success, response.message
+    np.testing.assert_allclose(response.rest_lengths, expected.rest_lengths, rtol=1e-12)
+    np.testing.assert_allclose(response.tensions, expected.tensions, rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(np.reshape(response.cartesian_stiffness, (6, 6)),
+                               expected.cartesian_stiffness, rtol=1e-12, atol=1e-12)
+    assert response.stable == expected.stable
+    # it computes only: the equilibrium with the designed rest lengths is the target
+    check = solve_equilibrium(model, W, rest_lengths=np.asarray(response.rest_lengths),
+                              initial_screw=target + 1e-3)
+    np.testing.assert_allclose(check.screw, target, atol=1e-9)
+    # the node's own rest lengths are unchanged
+    before = harness.counts()
+    harness.send_screw(model.initial_screw)
+    out = harness.next_outputs(before)
+    np.testing.assert_allclose(data(out['stiffness']).reshape(6, 6),
+                               model.stiffness(model.initial_screw), rtol=1e-12, atol=1e-12)
+    # the pose form gives the same answer
+    pose = msg_tools.transform_to_pose(exp_se3(target))
+    by_pose = harness.ros.call(harness.design, DesignRestLengths.Request(
+        target_pose=pose, external_wrench=request.external_wrench, tension_min=0.1,
+        tension_max=1.5))
+    np.testing.assert_allclose(by_pose.rest_lengths, response.rest_lengths, rtol=1e-9)
+
+
+@pytest.mark.parametrize(('fields', 'match'), [
+    ({'target_screw': [0.0] * 5, 'tension_min': 0.1, 'tension_max': 1.5}, 'target_screw'),
+    ({'target_screw': [2.2214, 0, -2.2214, 0.0167, 0, 0.0167], 'tension_min': 1.0,
+      'tension_max': 0.5}, 'tension_max'),
+    ({'target_screw': [7.0, 0, 0, 0, 0, 0], 'tension_min': 0.1, 'tension_max': 1.5},
+     'chart'),
+])
+def test_design_rest_lengths_rejections(harness, fields, match):
+    response = harness.ros.call(harness.design, DesignRestLengths.Request(**fields))
+    assert not response.success
+    assert response.message.startswith('invalid request') and match in response.message, \
+        response.message
+    assert harness.proc.alive()
+
+
+def test_design_rest_lengths_infeasible(harness, model):
+    response = harness.ros.call(harness.design, DesignRestLengths.Request(
+        target_screw=model.initial_screw.tolist(), tension_min=0.1, tension_max=1.5,
+        external_wrench=msg_tools.wrench_to_msg([0.0, 50.0, 0.0, 0.0, 0.0, 0.0])))
+    assert not response.success
+    assert not response.message.startswith(('invalid request', 'internal error')), \
+        response.message
+    assert list(response.rest_lengths) == []
 
 
 def test_planar_services(harness):

@@ -110,6 +110,14 @@ EXPECTED_FIELDS = {
          'stable': 'boolean', 'in_range': 'boolean', 'jacobian': 'double[4]',
          'jacobian_determinant': 'double', 'singularities': 'sequence<string>'},
     ),
+    'DesignRestLengths': (
+        {'target_screw': 'sequence<double>', 'target_pose': 'geometry_msgs/Pose',
+         'external_wrench': 'geometry_msgs/Wrench', 'tension_min': 'double',
+         'tension_max': 'double', 'target_cartesian_stiffness': 'sequence<double>'},
+        {'success': 'boolean', 'message': 'string', 'rest_lengths': 'sequence<double>',
+         'tensions': 'sequence<double>', 'cartesian_stiffness': 'double[36]',
+         'stiffness': 'double[36]', 'stiffness_error': 'double', 'stable': 'boolean'},
+    ),
     'PlanarInverseKinematics': (
         {'x': 'double', 'y': 'double'},
         {'success': 'boolean', 'message': 'string', 'actuator_length': 'sequence<double>',

@@ -2,8 +2,8 @@
 no rclpy (requests and responses are the generated message objects, or anything with the same
 fields), so they are tested without a node.
 
-``~/solve_equilibrium`` is validated here and solved in the worker process
-(:class:`EquilibriumJob`); the planar services are answered here whole.
+``~/solve_equilibrium`` and ``~/design_rest_lengths`` are validated here and computed in the
+worker process; the planar services are answered here whole.
 """
 
 from __future__ import annotations
@@ -16,6 +16,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 import msg_tools
+from tensegrity_stiffness.design import (
+    DesignResult,
+    design_request_from_service,
+    design_response_fields,
+)
 from tensegrity_stiffness.equilibrium import EquilibriumResult
 from tensegrity_stiffness.parameters import JointNodeSettings
 from tensegrity_stiffness.planar import PlanarMechanism
@@ -93,6 +98,31 @@ def fill_equilibrium(response: Any, result: EquilibriumResult) -> bool:
     response.energy = float(result.energy)
     response.stable = bool(result.stable)
     return True
+
+
+def design_kwargs(request: Any, settings: JointNodeSettings, reference: FloatArray
+                  ) -> dict[str, Any]:
+    """Keyword arguments of :func:`design.design_rest_lengths` (after the model) from a
+    ``DesignRestLengths`` request; ValueError naming the field. A target pose is converted on the
+    branch nearest ``reference`` (the node's last screw)."""
+    for name in ('target_screw', 'target_cartesian_stiffness'):
+        n = len(getattr(request, name))
+        if n > settings.max_array_length:
+            raise ValueError(f'{name}: too many elements: {n} > max_length '
+                             f'{settings.max_array_length}')
+    pose = request.target_pose
+    return design_request_from_service(
+        request.target_screw, [pose.position.x, pose.position.y, pose.position.z],
+        [pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w],
+        msg_tools.msg_to_wrench(request.external_wrench), request.tension_min,
+        request.tension_max, request.target_cartesian_stiffness, reference)
+
+
+def fill_design(response: Any, result: DesignResult) -> Any:
+    """Fill a ``DesignRestLengths`` response from a design result."""
+    for name, value in design_response_fields(result).items():
+        setattr(response, name, value)
+    return response
 
 
 def fail(response: Any, message: str) -> Any:

@@ -35,6 +35,7 @@ from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 import msg_tools
+from tensegrity_stiffness.design import design_rest_lengths
 from tensegrity_stiffness.equilibrium import solve_equilibrium
 from tensegrity_stiffness.health import joint_health
 from tensegrity_stiffness.parameters import (
@@ -49,6 +50,7 @@ from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
 from tensegrity_stiffness.ros.solver_worker import SolverWorker, WorkerDiedError
 from tensegrity_stiffness_interfaces.srv import (
+    DesignRestLengths,
     PlanarForwardKinematics,
     PlanarInverseKinematics,
     SolveEquilibrium,
@@ -60,6 +62,8 @@ STATS_WINDOW = 1000
 #: Wall-clock time a solve may take beyond ``equilibrium.time_budget`` (a loaded machine) before
 #: it counts as an overrun and the worker is replaced.
 SOLVER_GRACE_S = 2.0
+#: Wall-clock bound of one rest-length design in the worker (it takes milliseconds).
+DESIGN_DEADLINE_S = 5.0
 
 
 def input_qos(depth: int, reliability: str) -> QoSProfile:
@@ -133,6 +137,9 @@ class StiffnessNode(Node):
         # Own group: the coroutine holds its group while it awaits the worker; the default group
         # (topics, planar services, timer) stays free.
         self.create_service(SolveEquilibrium, '~/solve_equilibrium', self._on_solve_equilibrium,
+                            callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_service(DesignRestLengths, '~/design_rest_lengths',
+                            self._on_design_rest_lengths,
                             callback_group=MutuallyExclusiveCallbackGroup())
         self.create_service(PlanarForwardKinematics, '~/planar_forward_kinematics',
                             self._on_planar_forward)
@@ -258,18 +265,11 @@ class StiffnessNode(Node):
         self._compute_times.append(time.perf_counter() - start)
 
     # ------------------------------------------------------------------ services
-    @guarded_service('~/solve_equilibrium')
-    async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
-                                    response: SolveEquilibrium.Response
-                                    ) -> SolveEquilibrium.Response:
-        """Validated here, solved in the worker process: the executor keeps serving the topics
-        while the solve (bounded by ``equilibrium.time_budget``) runs."""
-        settings = self._settings
-        try:
-            job = joint_services.equilibrium_job(request, settings, self._last_solution)
-        except ValueError as exc:
-            self.reporter.reject('~/solve_equilibrium', str(exc))
-            return joint_services.fail(response, f'invalid request: {exc}')
+    async def _in_worker(self, fn: Any, args: tuple, kwargs: dict[str, Any],
+                         deadline_s: float) -> Any:
+        """``fn(*args, **kwargs)`` computed in the worker process and awaited, so that the
+        executor keeps serving the topics meanwhile; raises the worker's exception, a
+        :class:`WorkerOverrunError` (a TimeoutError) or a :class:`WorkerDiedError`."""
         done = Future(executor=self.executor)
         settle_lock = threading.Lock()
 
@@ -284,21 +284,58 @@ class StiffnessNode(Node):
             # The executor polls the awaiting coroutine only when it wakes up: wake it.
             self._wake.trigger()
 
-        self._solver.submit(solve_equilibrium, (settings.model, job.external_wrench),
-                            job.kwargs(), lambda result: settle(result=result),
-                            lambda error: settle(error=error),
-                            deadline_s=job.time_budget + SOLVER_GRACE_S)
+        self._solver.submit(fn, args, kwargs, lambda result: settle(result=result),
+                            lambda error: settle(error=error), deadline_s=deadline_s)
+        return await done
+
+    @guarded_service('~/solve_equilibrium')
+    async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
+                                    response: SolveEquilibrium.Response
+                                    ) -> SolveEquilibrium.Response:
+        """Validated here, solved in the worker process within ``equilibrium.time_budget``."""
+        settings = self._settings
         try:
-            result = await done
-        except TimeoutError as exc:
-            message = f'solver overran its budget: {exc}'
-        except WorkerDiedError as exc:
-            message = f'solver failed: {exc}; try again'
-        else:
-            if joint_services.fill_equilibrium(response, result):
-                self._last_solution = result.screw
-            return response
-        self.reporter.warn('~/solve_equilibrium', message, error=True)
+            job = joint_services.equilibrium_job(request, settings, self._last_solution)
+        except ValueError as exc:
+            self.reporter.reject('~/solve_equilibrium', str(exc))
+            return joint_services.fail(response, f'invalid request: {exc}')
+        try:
+            result = await self._in_worker(solve_equilibrium,
+                                           (settings.model, job.external_wrench), job.kwargs(),
+                                           job.time_budget + SOLVER_GRACE_S)
+        except (TimeoutError, WorkerDiedError) as exc:
+            return self._worker_failure('~/solve_equilibrium', response, exc)
+        if joint_services.fill_equilibrium(response, result):
+            self._last_solution = result.screw
+        return response
+
+    @guarded_service('~/design_rest_lengths')
+    async def _on_design_rest_lengths(self, request: DesignRestLengths.Request,
+                                      response: DesignRestLengths.Response
+                                      ) -> DesignRestLengths.Response:
+        """Validated here, designed in the worker process; the node's rest lengths stay."""
+        settings = self._settings
+        last = self._last_screw
+        try:
+            kwargs = joint_services.design_kwargs(
+                request, settings, last if last is not None else settings.model.initial_screw)
+        except ValueError as exc:
+            self.reporter.reject('~/design_rest_lengths', str(exc))
+            return joint_services.fail(response, f'invalid request: {exc}')
+        try:
+            result = await self._in_worker(design_rest_lengths, (settings.model,), kwargs,
+                                           DESIGN_DEADLINE_S)
+        except ValueError as exc:  # a request the library refuses (e.g. outside the chart)
+            self.reporter.reject('~/design_rest_lengths', str(exc))
+            return joint_services.fail(response, f'invalid request: {exc}')
+        except (TimeoutError, WorkerDiedError) as exc:
+            return self._worker_failure('~/design_rest_lengths', response, exc)
+        return joint_services.fill_design(response, result)
+
+    def _worker_failure(self, kind: str, response: Any, exc: BaseException) -> Any:
+        message = (f'solver overran its budget: {exc}' if isinstance(exc, TimeoutError)
+                   else f'solver failed: {exc}; try again')
+        self.reporter.warn(kind, message, error=True)
         return joint_services.fail(response, message)
 
     @guarded_service('~/planar_forward_kinematics')
