@@ -38,7 +38,7 @@ from typing import Any, TextIO
 import numpy as np
 from numpy.typing import NDArray
 
-from tensegrity_stiffness import config, design, plots, sweeps
+from tensegrity_stiffness import config, design, parameters, plots, sweeps
 from tensegrity_stiffness.equilibrium import is_stable, solve_equilibrium
 from tensegrity_stiffness.interpretation import (
     BLOCK_NAMES,
@@ -47,9 +47,10 @@ from tensegrity_stiffness.interpretation import (
     interpret_stiffness,
 )
 from tensegrity_stiffness.joint import FORCE_LAWS, JointModel, JointState
+from tensegrity_stiffness.layouts import TWIST_NAMES
 from tensegrity_stiffness.planar import SINGULARITY_DESCRIPTIONS, PlanarMechanism
 from tensegrity_stiffness.quaternion import quaternion_to_rotation, rotation_to_quaternion
-from tensegrity_stiffness.screw import log_se3
+from tensegrity_stiffness.screw import CHART_LIMIT, log_se3
 
 FloatArray = NDArray[np.float64]
 
@@ -65,12 +66,9 @@ DISPLAY_ZERO = 1e-12
 #: Longest accepted numeric expression (characters).
 MAX_EXPRESSION_LENGTH = 100
 #: Column labels of K_c: a spatial twist in {1}, linear first (the node's labels).
-KC_COLUMN_NAMES = ('dx', 'dy', 'dz', 'rx', 'ry', 'rz')
-#: Planar mechanism parameters of the node (stiffness_node) when the config has none.
-PLANAR_NODE_DEFAULTS = {'L': 1.0, 'K1': 100.0, 'K2': 10.0, 'L3_min': 0.0, 'L3_max': 2.0,
-                        'theta1_min': 0.0, 'theta1_max': math.pi, 'theta2_min': 0.0,
-                        'theta2_max': math.pi}
-PLANAR_KEYS = tuple(PLANAR_NODE_DEFAULTS)
+KC_COLUMN_NAMES = TWIST_NAMES
+#: Keys of the planar mechanism (the node's ``planar.*`` parameters without the prefix).
+PLANAR_KEYS = tuple(spec.name[len('planar.'):] for spec in parameters.PLANAR_PARAMETERS)
 #: Screw of the README's joint figure: the default joint's unloaded equilibrium bent by 0.4 rad
 #: about the x axis of {1} (two strings go slack).
 README_JOINT_SCREW = (2.3963, 0.4857, -2.3963, 0.0198, -0.0033, 0.0161)
@@ -295,7 +293,7 @@ def _screw(args: argparse.Namespace, model: JointModel) -> FloatArray:
     the node does), or the config's initial screw (the unloaded equilibrium)."""
     if args.screw is not None:
         xi = np.asarray(args.screw, dtype=np.float64)
-        if np.linalg.norm(xi[:3]) >= 2.0 * math.pi:
+        if np.linalg.norm(xi[:3]) >= CHART_LIMIT:
             raise ValueError('--screw must have |omega| = |(wx, wy, wz)| < 2 pi')
         return xi
     if args.pose is not None:
@@ -431,17 +429,16 @@ def _planar(args: argparse.Namespace, base: dict[str, float]) -> PlanarMechanism
 
 def _planar_config(args: argparse.Namespace) -> dict[str, float]:
     """The node's planar parameters: the ``planar`` section of --config (default: the packaged
-    config), missing keys from :data:`PLANAR_NODE_DEFAULTS`."""
+    config), missing keys from the node's parameter table."""
     path = Path(args.config) if args.config else config.packaged_config_path()
     section = config.load_section(path, 'planar', required=False)
-    params = dict(PLANAR_NODE_DEFAULTS)
-    for key in PLANAR_KEYS:
-        if key in section:
-            try:
-                params[key] = float(section[key])
-            except (TypeError, ValueError):
-                raise ValueError(f'config {path}: planar.{key} must be a number, '
-                                 f'got {section[key]!r}') from None
+    params = {}
+    for spec in parameters.PLANAR_PARAMETERS:
+        key = spec.name[len('planar.'):]
+        try:
+            params[key] = spec.check(section.get(key, spec.default))
+        except ValueError as exc:
+            raise ValueError(f'config {path}: {exc}') from None
     return params
 
 

@@ -31,18 +31,18 @@ from typing import Any
 import numpy as np
 
 import msg_tools
-from tensegrity_stiffness.config import load_yaml
+from tensegrity_stiffness import parameters
 from tensegrity_stiffness.equilibrium import RESIDUAL_TOLERANCE, is_stable
 from tensegrity_stiffness.interpretation import interpretation_vector
 from tensegrity_stiffness.joint import JointModel
 from tensegrity_stiffness.planar import PlanarMechanism
-from tensegrity_stiffness.screw import exp_se3, log_se3
+from tensegrity_stiffness.screw import CHART_LIMIT, exp_se3, log_se3
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
-#: The node's chart limit and its default limits (``limits.max_array_length``, frame of link 1).
-CHART_LIMIT = 2.0 * math.pi
-MAX_ARRAY_LENGTH = 1024
-LINK1_FRAME = 'tensegrity_link1'
+#: The node's default limits (``limits.max_array_length``, frame of link 1).
+_DEFAULTS = parameters.defaults(parameters.STIFFNESS_NODE_PARAMETERS)
+MAX_ARRAY_LENGTH = _DEFAULTS['limits.max_array_length']
+LINK1_FRAME = _DEFAULTS['frames.link1']
 #: Element count of the oversized arrays (8 MB of float64).
 OVERSIZED = 10**6
 DENORMALS = (5e-324, -5e-324, 1e-310, -2.5e-320, 2.2250738585072014e-308 / 2)
@@ -68,18 +68,10 @@ class Case:
 
 
 def planar_from_config(path: Path = CONFIG) -> PlanarMechanism:
-    """The planar mechanism of a node parameter file (the node's defaults where a key is left
+    """The planar mechanism of a node parameter file (the table's defaults where a key is left
     out), as the node builds it."""
-    doc = load_yaml(path)
-    params: dict[str, Any] = {}
-    for value in doc.values() if isinstance(doc, dict) else ():
-        if isinstance(value, dict) and isinstance(value.get('ros__parameters'), dict):
-            params = value['ros__parameters'].get('planar', {})
-            break
-    defaults = {'L': 1.0, 'K1': 100.0, 'K2': 10.0, 'L3_min': 0.0, 'L3_max': 2.0,
-                'theta1_min': 0.0, 'theta1_max': math.pi, 'theta2_min': 0.0,
-                'theta2_max': math.pi}
-    return PlanarMechanism(**{k: float(params.get(k, v)) for k, v in defaults.items()})
+    return parameters.planar_from_values(
+        parameters.values_from_config(path, parameters.STIFFNESS_NODE_PARAMETERS))
 
 
 # ---------------------------------------------------------------------------- messages
