@@ -145,7 +145,7 @@ class ChainState:
     ``screws`` (N, 6); ``transforms`` (N, 4, 4) T_i ({2}_i in {1}_i); ``joint_frames`` (N, 4, 4)
     P_i ({1}_i in the base); ``link_transforms`` (N, 4, 4) L_i ({2}_i in the base);
     ``tip_transform`` (4, 4); ``wrenches`` (N, 6) F_i in {1}_i; ``stiffness`` (N, 6, 6) K_i;
-    ``cartesian_stiffness`` (N, 6, 6) K_c,i; ``left_jacobians`` (N, 6, 6) J_i; ``tensions``,
+    ``cartesian_stiffness`` (N, 6, 6) K_c,i; ``tensions``,
     ``lengths``, ``slack``, ``saturated``: one array per joint (stacked (N, n) when every joint
     has n strings).
     """
@@ -158,7 +158,6 @@ class ChainState:
     wrenches: FloatArray
     stiffness: FloatArray
     cartesian_stiffness: FloatArray
-    left_jacobians: FloatArray
     tensions: Any
     lengths: Any
     slack: Any
@@ -230,6 +229,9 @@ class JointChain:
             groups.setdefault(id(model), []).append(i)
         self._groups = [(joints[idx[0]], np.array(idx)) for idx in groups.values()]
         self._unloaded: dict[int, FloatArray] = {}
+        # Block masks of the 6N x 6N tangent: [j < i] per block, and the joint indices.
+        self._strictly_lower = np.kron(np.tri(n, n, -1), np.ones((6, 6)))
+        self._index = np.arange(n)
 
     # ------------------------------------------------------------------ construction
     @property
@@ -370,18 +372,13 @@ class JointChain:
         """Pose of the tool frame in the base, ``T_1 O_1 ... T_N O_tool``: (4, 4)."""
         return self._frames(exp_se3(self._screws(screws)))[2]
 
-    @staticmethod
-    def _jacobian_blocks(P: FloatArray, J: FloatArray) -> FloatArray:
-        """``S_j = Ad_{P_j} Pi J_j``: (N, 6, 6)."""
-        return _adjoint(P) @ J[:, _SWAP]
-
     def jacobian(self, screws: ArrayLike) -> FloatArray:
         """Tip spatial twist ``[dv; dw]`` (base) per joint screw change: (6, 6N), joint-major
         columns ``[wx wy wz vx vy vz]`` of each joint."""
         xi = self._screws(screws)
         kin = ScrewKinematics(xi)
         P = self._frames(kin.T)[0]
-        return np.concatenate(list(self._jacobian_blocks(P, kin.J)), axis=1)
+        return np.concatenate(list(_adjoint(P) @ kin.J[:, _SWAP]), axis=1)
 
     # ------------------------------------------------------------------ evaluation
     def evaluate(self, screws: ArrayLike, rest_lengths: Any = None) -> ChainState:
@@ -393,12 +390,23 @@ class JointChain:
         wrenches = np.empty((n, 6))
         K = np.empty((n, 6, 6))
         Kc = np.empty((n, 6, 6))
+        if len(self._groups) == 1:
+            model, _ = self._groups[0]
+            batch_rest = None if all(x is None for x in rest) else np.array(
+                [model.rest_lengths if x is None else x for x in rest])
+            state = model.evaluate(xi, batch_rest)
+            P, L, tip = self._frames(state.transform)
+            return ChainState(xi, state.transform, P, L, tip, state.wrench, state.stiffness,
+                              state.cartesian_stiffness, state.tensions, state.lengths,
+                              state.slack, state.saturated)
+        T = np.empty((n, 4, 4))
         per_joint: list[list[Any]] = [[None] * n for _ in range(4)]
         for model, idx in self._groups:
             r = [rest[i] for i in idx]
             batch_rest = None if all(x is None for x in r) else np.array(
                 [model.rest_lengths if x is None else x for x in r])
             state = model.evaluate(xi[idx], batch_rest)
+            T[idx] = state.transform
             wrenches[idx] = state.wrench
             K[idx] = state.stiffness
             Kc[idx] = state.cartesian_stiffness
@@ -410,9 +418,8 @@ class JointChain:
             stacked = [np.array(a) for a in per_joint]
         else:
             stacked = per_joint
-        kin = ScrewKinematics(xi)
-        P, L, tip = self._frames(kin.T)
-        return ChainState(xi, kin.T, P, L, tip, wrenches, K, Kc, kin.J, *stacked)
+        P, L, tip = self._frames(T)
+        return ChainState(xi, T, P, L, tip, wrenches, K, Kc, *stacked)
 
     def _weights(self, L: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Base wrenches w_k (N, 6) of the link weights and their transport N_k (N, 6, 6)."""
@@ -425,34 +432,48 @@ class JointChain:
         Nk[:, 3:, 3:] = hG @ hat3(x)
         return w, Nk
 
-    def _system(self, state: ChainState, W: FloatArray, g: FloatArray, jacobian: bool = True
+    def _system(self, state: ChainState, W: FloatArray, g: FloatArray, tangent: bool = True
                 ) -> tuple[FloatArray, FloatArray | None, FloatArray, FloatArray]:
-        """Residuals r (N, 6), their Jacobian A (6N, 6N) (None unless ``jacobian``),
-        ``Ad_{P_i}^T`` (N, 6, 6) = dr_i/dW, and the tip Jacobian blocks S (N, 6, 6)."""
+        """Residuals r (N, 6); ``dr/d(delta)`` (6N, 6N) with respect to the joints' twists
+        ``delta_j`` (spatial in {1}_j, [dv; dw]; None unless ``tangent``), i.e. minus the chain's
+        tangent stiffness, blocks ``-[i = j] K_c,i + Ad_{P_i}^T E_ij Ad_{P_j}``;
+        ``Ad_{P_i}^T`` (N, 6, 6) = dr_i/dW; ``Ad_{P_i}`` (N, 6, 6)."""
         n = self.n_joints
-        AdT = np.swapaxes(_adjoint(state.joint_frames), 1, 2)
+        Ad = _adjoint(state.joint_frames)
+        AdT = np.swapaxes(Ad, 1, 2)
         weights = self._has_weights(g)
         if weights:
             w, Nk = self._weights(state.link_transforms, g)
             B = W + np.cumsum(w[::-1], axis=0)[::-1]
+            r = state.wrenches + (AdT @ B[:, :, None])[:, :, 0]
         else:
-            B = np.broadcast_to(W, (n, 6))
-        r = state.wrenches + (AdT @ B[:, :, None])[:, :, 0]
-        S = self._jacobian_blocks(state.joint_frames, state.left_jacobians)
-        if not jacobian:
-            return r, None, AdT, S
-        lower = np.tri(n, n, -1, dtype=bool)  # [j < i]
-        E = np.zeros((n, n, 6, 6))
-        if np.any(B):
-            E[lower] = np.broadcast_to(_load_transport(B)[:, None], (n, n, 6, 6))[lower]
+            r = state.wrenches + AdT @ W
+        if not tangent:
+            return r, None, AdT, Ad
         if weights:
+            E = np.zeros((n, n, 6, 6))
+            lower = np.tri(n, n, -1, dtype=bool)  # [j < i]
+            E[lower] = np.broadcast_to(_load_transport(B)[:, None], (n, n, 6, 6))[lower]
             Nsum = np.cumsum(Nk[::-1], axis=0)[::-1]
-            m = np.maximum.outer(np.arange(n), np.arange(n))
-            E += Nsum[m]
-        blocks = AdT[:, None] @ E @ S[None, :]
-        blocks[np.arange(n), np.arange(n)] += state.stiffness
-        A = blocks.transpose(0, 2, 1, 3).reshape(6 * n, 6 * n)
-        return r, A, AdT, S
+            E += Nsum[np.maximum.outer(np.arange(n), np.arange(n))]
+            blocks = AdT[:, None] @ E @ Ad[None, :]
+            D = blocks.transpose(0, 2, 1, 3).reshape(6 * n, 6 * n)
+        elif n > 1 and np.any(W):
+            # One load B = W for every joint: all blocks j < i are Ad_i^T M(W) Ad_j.
+            D = AdT.reshape(6 * n, 6) @ (_load_transport(W) @ Ad.transpose(1, 0, 2).reshape(
+                6, 6 * n))
+            D *= self._strictly_lower
+        else:
+            D = np.zeros((6 * n, 6 * n))
+        diag = D.reshape(n, 6, n, 6)
+        diag[self._index, :, self._index, :] -= state.cartesian_stiffness
+        return r, D, AdT, Ad
+
+    def _screw_jacobian(self, D: FloatArray, screws: FloatArray) -> FloatArray:
+        """``dr/dxi = dr/d(delta) diag(Pi J_j)`` (6N, 6N) from the twist form ``D``."""
+        n = self.n_joints
+        PJ = ScrewKinematics(screws).J[:, _SWAP]
+        return np.einsum('ajb,jbc->ajc', D.reshape(6 * n, n, 6), PJ).reshape(6 * n, 6 * n)
 
     def tip_stiffness_from_state(self, state: ChainState, tip_wrench: ArrayLike | None = None,
                                  gravity: ArrayLike | None = None, frame: str = 'base'
@@ -462,10 +483,11 @@ class JointChain:
             raise ValueError(f"frame must be 'base' or 'tool', got {frame!r}")
         W = self._wrench(tip_wrench)
         g = self._gravity(gravity)
-        _, A, AdT, S = self._system(state, W, g)
+        _, D, AdT, Ad = self._system(state, W, g)
         n = self.n_joints
-        X = np.linalg.solve(A, AdT.reshape(6 * n, 6))
-        C = -np.concatenate(list(S), axis=1) @ X
+        # Twist coordinates: dr = D delta + Ad^T dW = 0, tip twist = sum_j Ad_j delta_j.
+        X = np.linalg.solve(D, AdT.reshape(6 * n, 6))
+        C = -Ad.transpose(1, 0, 2).reshape(6, 6 * n) @ X
         K = np.linalg.inv(C)
         if frame == 'tool':
             Ad = _adjoint(state.tip_transform)
@@ -495,21 +517,16 @@ class JointChain:
                           ) -> FloatArray:
         """``dr/dxi`` (6N, 6N), joint-major rows and columns."""
         state = self.evaluate(screws, rest_lengths)
-        return self._system(state, self._wrench(tip_wrench), self._gravity(gravity))[1]
+        D = self._system(state, self._wrench(tip_wrench), self._gravity(gravity))[1]
+        return self._screw_jacobian(D, state.screws)
 
     def tangent_stiffness(self, screws: ArrayLike, tip_wrench: ArrayLike | None = None,
                           gravity: ArrayLike | None = None, rest_lengths: Any = None
                           ) -> FloatArray:
-        """``S_chain = -A diag(J_i^-1 Pi)`` (6N, 6N): minus the residuals' derivative with
-        respect to the joints' spatial twists in {1}_i ([dv; dw]); K_c for one joint."""
+        """The chain's tangent stiffness (6N, 6N): minus the residuals' derivative with respect
+        to the joints' spatial twists in {1}_i ([dv; dw]); K_c for one joint."""
         state = self.evaluate(screws, rest_lengths)
-        A = self._system(state, self._wrench(tip_wrench), self._gravity(gravity))[1]
-        return self._tangent(A, state)
-
-    def _tangent(self, A: FloatArray, state: ChainState) -> FloatArray:
-        n = self.n_joints
-        D = np.linalg.inv(state.left_jacobians)[:, :, _SWAP]  # J^-1 Pi
-        return -np.einsum('ajb,jbc->ajc', A.reshape(6 * n, n, 6), D).reshape(6 * n, 6 * n)
+        return -self._system(state, self._wrench(tip_wrench), self._gravity(gravity))[1]
 
     def implied_tip_wrench(self, screws: ArrayLike, gravity: ArrayLike | None = None,
                            rest_lengths: Any = None) -> FloatArray:
@@ -597,29 +614,34 @@ class _Problem:
         self.lengths = np.array([float(np.mean(m.rest_lengths if r is None else r))
                                  for m, r in zip(chain.joints, rest, strict=True)])
 
-    def evaluate(self, x: FloatArray, scale: float = 1.0, jacobian: bool = True
+    def evaluate(self, x: FloatArray, scale: float = 1.0, tangent: bool = True
                  ) -> tuple[ChainState, FloatArray, FloatArray | None] | None:
+        """(state, residuals (N, 6), dr/d(delta) or None); None when ``x`` is not admissible."""
         try:
             state = self.chain.evaluate(x, self.rest)
         except ValueError:  # a string of zero length, or out of the chart
             return None
-        r, A, _, _ = self.chain._system(state, scale * self.W, scale * self.g, jacobian)
+        r, D, _, _ = self.chain._system(state, scale * self.W, scale * self.g, tangent)
         if not np.all(np.isfinite(r)):
             return None
-        return state, r, A
+        return state, r, D
 
     def newton(self, x: FloatArray, scale: float, max_iterations: int, tolerance: float
                ) -> tuple[FloatArray, float, int]:
+        """Damped Newton on r(xi) with the analytic dr/dxi and a backtracking line search."""
         got = self.evaluate(x, scale)
         if got is None:
             return x, math.inf, 0
-        _, r, A = got
+        state, r, D = got
         norm = float(np.linalg.norm(r))
         n = self.chain.n_joints
         it = 0
         for it in range(1, max_iterations + 1):
             if norm <= tolerance or time.perf_counter() > self.deadline:
                 return x, norm, it - 1
+            if D is None:
+                D = self.chain._system(state, scale * self.W, scale * self.g)[1]
+            A = self.chain._screw_jacobian(D, x)
             try:
                 step = np.linalg.solve(A, -r.ravel())
             except np.linalg.LinAlgError:
@@ -631,7 +653,7 @@ class _Problem:
             accepted = False
             for _ in range(30):
                 trial = _rechart(x + alpha * step)
-                got = self.evaluate(trial, scale)
+                got = self.evaluate(trial, scale, tangent=False)
                 if got is not None:
                     trial_norm = float(np.linalg.norm(got[1]))
                     if trial_norm < (1.0 - 1e-4 * alpha) * norm or trial_norm <= tolerance:
@@ -640,7 +662,7 @@ class _Problem:
                 alpha *= 0.5
             if not accepted:
                 break
-            x, (_, r, A), norm = trial, got, trial_norm
+            x, (state, r, D), norm = trial, got, trial_norm
         return x, norm, it
 
     def joint_by_joint(self, x0: FloatArray, tolerance: float, max_iterations: int
@@ -666,7 +688,7 @@ class _Problem:
             P = P @ exp_se3(x[i])
             if i < chain.n_joints - 1:
                 P = P @ chain.link_offsets[i]
-        got = self.evaluate(x, jacobian=False)
+        got = self.evaluate(x, tangent=False)
         if got is None:
             return None
         return x, float(np.linalg.norm(got[1])), iterations
@@ -703,7 +725,7 @@ def solve_chain_equilibrium(
     start = time.perf_counter()
     deadline = math.inf if time_budget is None else start + float(time_budget)
     problem = _Problem(chain, W, g, rest, deadline)
-    if problem.evaluate(x0, jacobian=False) is None:
+    if problem.evaluate(x0, tangent=False) is None:
         return ChainEquilibriumResult(False, 'initial screws are not admissible (a string of '
                                       'zero length)', x0, math.inf, 0, None, None, False)
     x, norm, iterations = problem.newton(x0, 1.0, max_iterations, tolerance)
@@ -726,7 +748,7 @@ def solve_chain_equilibrium(
     if got is None:
         return ChainEquilibriumResult(False, 'no usable equilibrium: the last iterate cannot '
                                       'be evaluated', x, math.inf, iterations, None, None, False)
-    state, _, A = got
+    state, _, D = got
     if norm > tolerance:
         reason = 'time budget exhausted' if time.perf_counter() >= deadline else 'no convergence'
         return ChainEquilibriumResult(False, f'{reason}: residual |r| = {norm:.3e} after '
@@ -739,7 +761,7 @@ def solve_chain_equilibrium(
         return ChainEquilibriumResult(False, f'all strings of joints {loose} are slack: the '
                                       'chain is unconstrained', x, norm, iterations,
                                       state.tip_transform, None, False, None, state)
-    stable = is_stable(chain._tangent(A, state))
+    stable = is_stable(-D)
     try:
         K = chain.tip_stiffness_from_state(state, W, g)
         Ad = _adjoint(state.tip_transform)
