@@ -591,7 +591,7 @@ def _cmd_figures(args: argparse.Namespace) -> int:
 
 # ------------------------------------------------------------------------------ chains
 #: Tip wrench of the README's spine figure (N, N m in the base frame): a sideways push.
-README_SPINE_TIP_WRENCH = (0.03, 0.0, 0.0, 0.0, 0.0, 0.0)
+README_SPINE_TIP_WRENCH = (0.1, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 def _chain_configuration(args: argparse.Namespace
