@@ -18,8 +18,8 @@ Conventions
 
 Equilibrium (the single joint's ``F + W = 0`` of Section VI, joint by joint)
 ---------------------------------------------------------------------------
-``F_i(xi_i)`` is joint i's string wrench on link i in {1}_i (eq. 9). Each joint balances every
-load above it: ``r_i = F_i + Ad_{P_i}^T B_i = 0`` with ``B_i = W + sum_{k >= i} w_k``.
+``F_i(xi_i)`` is joint i's string wrench on link i in {1}_i (eq. 9 of Monke & Vikas). Each joint
+balances every load above it: ``r_i = F_i + Ad_{P_i}^T B_i = 0`` with ``B_i = W + sum_{k >= i} w_k``.
 
 Tangent (implicit differentiation). A change ``dxi_j`` moves every frame above joint j by the
 spatial twist ``S_j dxi_j``, ``S_j = Ad_{P_j} Pi J_j`` (``J_j`` the SE(3) left Jacobian in
@@ -29,22 +29,30 @@ wrench ``B`` seen from a frame moved by ``s`` changes by ``Ad_P^T M(B) s`` with
 weight moved by ``s`` changes by ``N_k s``, ``N_k = [[0, 0], [-hat(G_k), hat(G_k) hat(x_k)]]``.
 So the 6N x 6N Jacobian of the residuals has the blocks
 
-    dr_i/dxi_j = [i = j] K_i + Ad_{P_i}^T ([j < i] M(B_i) + sum_{k >= max(i, j)} N_k) S_j,
+    dr_i/dxi_j = [i = j] K_i + Ad_{P_i}^T E_ij S_j,
+    E_ij = [j < i] M(B_i) + sum_{k >= max(i, j)} N_k,
 
-with ``K_i = dF_i/dxi_i`` (eq. 10; ``K = -K_c Pi J``), and ``dr_i/dW = Ad_{P_i}^T``. Without
-weights, ``r_i`` depends on ``xi_1..xi_i`` only (block lower triangular). At an equilibrium
-``A dxi = -B dW``, so the tip compliance is ``C = dT_tip/dW = -[S_1 ... S_N] A^-1 B`` and the tip
-stiffness ``K_tip = C^-1`` (rows ``[f; m]``, columns ``[dv; dw]`` in the base). At an unloaded
-equilibrium without weights ``A`` is ``diag(K_i)`` and ``C = sum_i Ad_{P_i} K_c,i^-1 Ad_{P_i}^T``
-(joint compliances in series); for N = 1 ``K_tip = K_c``. In the tool frame
-``K_tool = Ad_{T_tip}^T K_tip Ad_{T_tip}``.
+with ``K_i = dF_i/dxi_i`` (eq. 10 of Monke & Vikas), and ``dr_i/dW = Ad_{P_i}^T``. In the
+joints' own twists ``delta_j = Pi J_j dxi_j`` (spatial in {1}_j, [dv; dw]) the Jacobians drop out:
+``K_j J_j^-1 Pi = -K_c,j`` (``K = -K_c Pi J``) and ``S_j J_j^-1 Pi = Ad_{P_j}``, so
 
-Stability: in the joints' own twists ``delta_i`` (spatial in {1}_i, ``dxi_i = J_i^-1 Pi
-delta_i``) the chain's tangent stiffness is ``S_chain = -A diag(J_i^-1 Pi)``; an equilibrium is
-stable when its symmetric part is positive definite (scaled test of
-:func:`~tensegrity_stiffness.equilibrium.is_stable`; for N = 1 ``S_chain = K_c``).
+    D_ij = dr_i/d(delta_j) = -[i = j] K_c,i + Ad_{P_i}^T E_ij Ad_{P_j},
 
-Solver: damped Newton on all 6N unknowns with the analytic ``A`` from each joint's unloaded
+which is what the code builds (``K_c`` from the batched joint evaluation; Newton multiplies by
+``diag(Pi J_j)`` to get ``dr/dxi``). Without weights, ``r_i`` depends on ``xi_1..xi_i`` only (block
+lower triangular). At an equilibrium ``D delta = -Ad^T dW`` and the tip twist is
+``sum_j Ad_{P_j} delta_j``, so the tip compliance is ``C = -[Ad_{P_1} ... Ad_{P_N}] D^-1 Ad^T``
+and the tip stiffness ``K_tip = C^-1`` (rows ``[f; m]``, columns ``[dv; dw]`` in the base). At an
+unloaded equilibrium without weights ``D = -diag(K_c,i)`` and
+``C = sum_i Ad_{P_i} K_c,i^-1 Ad_{P_i}^T`` (joint compliances in series); for N = 1
+``K_tip = K_c``. In the tool frame ``K_tool = Ad_{T_tip}^T K_tip Ad_{T_tip}``.
+
+Stability: ``-D`` is the chain's tangent stiffness in the joints' twists (for N = 1 it is
+``K_c``); an equilibrium is stable when its symmetric part is positive definite (the scaled test
+of :func:`~tensegrity_stiffness.equilibrium.is_stable`). Under weights alone (conservative) it is
+symmetric at an equilibrium.
+
+Solver: damped Newton on all 6N unknowns with the analytic ``dr/dxi`` from each joint's unloaded
 equilibrium; without weights, if Newton stalls, joint-by-joint solves (the triangular structure:
 joint i under ``Ad_{P_i}^T W`` once joints 1..i-1 are solved, with the single-joint solver and its
 fallbacks); last, load stepping.
