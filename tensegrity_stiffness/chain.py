@@ -19,7 +19,7 @@ Conventions
 Equilibrium (the single joint's ``F + W = 0`` of Section VI, joint by joint)
 ---------------------------------------------------------------------------
 ``F_i(xi_i)`` is joint i's string wrench on link i in {1}_i (eq. 9 of Monke & Vikas). Each joint
-balances every load above it: ``r_i = F_i + Ad_{P_i}^T B_i = 0`` with ``B_i = W + sum_{k >= i} w_k``.
+balances every load above it: ``r_i = F_i + Ad_{P_i}^T B_i = 0``, ``B_i = W + sum_{k >= i} w_k``.
 
 Tangent (implicit differentiation). A change ``dxi_j`` moves every frame above joint j by the
 spatial twist ``S_j dxi_j``, ``S_j = Ad_{P_j} Pi J_j`` (``J_j`` the SE(3) left Jacobian in
