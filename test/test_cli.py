@@ -327,6 +327,7 @@ PLOT_CASES = {
     'theta2': ['--samples', '60', '--L3', '6', '--theta1', 'pi/10'],
     'actuator-stiffness': ['--resolution', '25'],
     'cartesian-stiffness': ['--resolution', '25', '--samples', '40'],
+    'spine': ['--tip-wrench', '0.05', '0', '0', '0', '0', '0', '--elevation', '20'],
 }
 
 
