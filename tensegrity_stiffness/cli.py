@@ -13,6 +13,8 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
   ``actuator-workspace``, ``cartesian-workspace`` (Ji, Li & Lin Figs. 2-3), ``theta2``
   (Figs. 4-6), ``actuator-stiffness``, ``cartesian-stiffness`` (Figs. 7-8), ``stiffness-range``
   (reachable diagonal of K_c along a screw sweep)
+* ``chain``        a spine of joints: tip pose and exact tip stiffness at screws, or at the chain
+  equilibrium under a tip wrench and link weights (``plot spine`` draws it)
 * ``figures``      every figure of the README into a folder (``docs/figures``)
 * ``bag``          what the node would publish, for a whole rosbag2 recording (needs rosbags)
 
@@ -39,6 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness import config, design, parameters, plots, sweeps
+from tensegrity_stiffness.chain import DEFAULT_SPINE_CONFIG, JointChain, solve_chain_equilibrium
 from tensegrity_stiffness.equilibrium import is_stable, solve_equilibrium
 from tensegrity_stiffness.interpretation import (
     BLOCK_NAMES,
@@ -82,6 +85,7 @@ FIGURE_FILES = {
     'actuator-stiffness': 'planar_stiffness_actuator.png',
     'cartesian-stiffness': 'planar_stiffness_cartesian.png',
     'stiffness-range': 'stiffness_range.png',
+    'spine': 'spine.png',
 }
 #: Accepted range of ``figures --scale``.
 SCALE_RANGE = (0.1, 4.0)
@@ -629,6 +633,10 @@ def _draw(figure: str, args: argparse.Namespace, path: Path, size: tuple[int, in
         model, _, rest = _load_joint(args)
         sweep = sweeps.extension_sweep(model, args.extent, args.samples, rest, progress=progress)
         return plots.plot_extension_sweep(sweep, path, width=w, height=h)
+    if figure == 'spine':
+        chain, _, screws, W, _ = _chain_configuration(args)
+        return plots.plot_spine(chain, screws, path, width=w, height=h, tip_wrench=W,
+                                elevation=args.elevation, azimuth=args.azimuth)
     if figure == 'theta2':
         mech = _planar(args, {k: v for k, v in plots.PLANAR_THETA2_PARAMETERS.items()
                               if k in PLANAR_KEYS})
@@ -736,6 +744,115 @@ def _cmd_bag(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# ------------------------------------------------------------------------------ chains
+#: Tip wrench of the README's spine figure (N, N m in the base frame): a sideways push.
+README_SPINE_TIP_WRENCH = (0.1, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def _chain_configuration(args: argparse.Namespace
+                         ) -> tuple[JointChain, Path, FloatArray, FloatArray, Any]:
+    """(chain, config path, screws, tip wrench, equilibrium result or None) of --config,
+    --screws, --tip-wrench, --gravity: the given screws, else the chain equilibrium."""
+    path = Path(args.config) if args.config else config.packaged_config_path(
+        DEFAULT_SPINE_CONFIG)
+    try:
+        chain = JointChain.from_yaml(path)
+    except ValueError as exc:
+        raise ValueError(f'config {path}: {exc}') from None
+    W = np.asarray(args.tip_wrench, dtype=np.float64)
+    if args.gravity is not None:
+        chain.gravity = chain._gravity(np.asarray(args.gravity, dtype=np.float64))
+    if args.screws is not None:
+        values = np.asarray(args.screws, dtype=np.float64)
+        if values.size != 6 * chain.n_joints:
+            raise ValueError(f'--screws needs 6 N = {6 * chain.n_joints} values (joint-major '
+                             f'[wx wy wz vx vy vz]), got {values.size}')
+        return chain, path, values.reshape(chain.n_joints, 6), W, None
+    result = solve_chain_equilibrium(chain, W, time_budget=args.time_budget)
+    return chain, path, result.screws, W, result
+
+
+def _cmd_chain(args: argparse.Namespace) -> int:
+    chain, path, screws, W, result = _chain_configuration(args)
+    state = chain.evaluate(screws)
+    residuals = chain.residuals(screws, W)
+    report: dict[str, Any] = {
+        'config': str(path), 'n_joints': chain.n_joints, 'tip_wrench': W,
+        'gravity': chain.gravity, 'link_masses': chain.link_masses,
+        'solved': result is not None,
+        'success': True if result is None else result.success,
+        'message': 'evaluated at the given screws' if result is None else result.message,
+        'iterations': 0 if result is None else result.iterations,
+        'residual': float(np.linalg.norm(residuals)), 'screws': screws,
+        'joint_wrenches': state.wrenches,
+        'slack_strings': [int(np.count_nonzero(s)) for s in state.slack],
+        'tip_transform': state.tip_transform, 'tip_position': state.tip_transform[:3, 3],
+        'tip_quaternion': rotation_to_quaternion(state.tip_transform[:3, :3]),
+        'base_frame': chain.base_frame, 'tool_frame': chain.tool_frame}
+    try:
+        K = chain.tip_stiffness_from_state(state, W)
+        report['tip_stiffness'] = K
+        report['tip_stiffness_tool'] = chain.tip_stiffness_from_state(state, W, frame='tool')
+        report['stable'] = is_stable(chain.tangent_stiffness(screws, W))
+    except np.linalg.LinAlgError:
+        report['tip_stiffness'] = report['tip_stiffness_tool'] = None
+        report['stable'] = False
+    if args.json:
+        _print_json(report)
+    else:
+        _print_chain(report)
+    if not report['success']:
+        print(f'{PROG}: no equilibrium found: {report["message"]}', file=sys.stderr)
+        return EXIT_NO_SOLUTION
+    return EXIT_OK
+
+
+def _print_chain(report: dict[str, Any]) -> None:
+    print(f"chain: {report['config']} ({report['n_joints']} joints)")
+    print(f"tip wrench W (N, N m, base frame): {_vector(report['tip_wrench'])}; gravity "
+          f"{_vector(report['gravity'])} m/s^2, link masses {_vector(report['link_masses'])} kg")
+    what = 'equilibrium' if report['solved'] else 'configuration'
+    print(f"{what}: {report['message']}; residual {_num(report['residual'])}, iterations "
+          f"{report['iterations']}, stable: {_yes(report['stable'])}")
+    print()
+    print('  joint' + ''.join(c.rjust(CELL_WIDTH) for c in COLUMN_NAMES) + '  slack')
+    for i, (xi, slack) in enumerate(zip(_display(report['screws']), report['slack_strings'],
+                                        strict=True)):
+        print(f'  {i + 1:>5}' + ''.join(_num(float(v), CELL_WIDTH) for v in xi) + f'  {slack:>5}')
+    print()
+    print(f"tip pose in {report['base_frame']}: position (m) "
+          f"{_vector(_display(report['tip_position']))}, quaternion [x y z w] "
+          f"{_vector(_display(report['tip_quaternion']))}")
+    for key, frame in (('tip_stiffness', f"base frame ({report['base_frame']})"),
+                       ('tip_stiffness_tool', f"tool frame ({report['tool_frame']})")):
+        print()
+        if report[key] is None:
+            print(f'tip stiffness in the {frame}: singular')
+            continue
+        print(f'tip stiffness dW/d[dv; dw] in the {frame}; rows: wrench (N, N m), columns: '
+              'tip twist, linear first:')
+        print('\n'.join(_matrix_lines(np.asarray(report[key]), ROW_NAMES, KC_COLUMN_NAMES)))
+
+
+def _add_chain_options(p: argparse.ArgumentParser, tip_wrench: Sequence[float]) -> None:
+    g = p.add_argument_group('chain')
+    g.add_argument('--config', metavar='YAML',
+                   help='spine config (ROS parameter file or plain YAML with "joint" and '
+                        '"chain"; default: the packaged config/default_spine.yaml)')
+    g.add_argument('--screws', nargs='+', type=parse_number, metavar='XI',
+                   help='6 N values, joint-major [wx wy wz vx vy vz] (default: the chain '
+                        'equilibrium under --tip-wrench and the weights)')
+    g.add_argument('--tip-wrench', nargs=6, type=parse_number, default=list(tip_wrench),
+                   metavar=('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'),
+                   help='wrench on the last link in the base frame about its origin (N, N m; '
+                        f'default {" ".join(f"{v:g}" for v in tip_wrench)})')
+    g.add_argument('--gravity', nargs=3, type=parse_number, metavar=('GX', 'GY', 'GZ'),
+                   help="gravity in the base frame (m/s^2; default: the config's; acts on "
+                        'chain.link_masses)')
+    g.add_argument('--time-budget', type=parse_number, metavar='S',
+                   help='bound on the equilibrium solve (s; default: none)')
+
+
 # ------------------------------------------------------------------------------ parser
 def _add_json(p: argparse.ArgumentParser) -> None:
     p.add_argument('--json', action='store_true', help='machine-readable JSON output')
@@ -825,6 +942,8 @@ PLOT_HELP = {
     'cartesian-stiffness': 'stiffness map over the Cartesian workspace (Fig. 8)',
     'stiffness-range': 'reachable range of each diagonal entry of K_c over the admissible '
                        'tensions along a sweep of one screw coordinate',
+    'spine': 'a spine of joints in 3D at screws or at its equilibrium under a tip wrench: '
+             'strings coloured by tension',
 }
 def build_parser() -> argparse.ArgumentParser:
     """The argparse parser of every subcommand."""
@@ -914,6 +1033,12 @@ def build_parser() -> argparse.ArgumentParser:
                            default=sweeps.DEFAULT_SWEEP_SAMPLES,
                            help=f'points along the sweep (default '
                                 f'{sweeps.DEFAULT_SWEEP_SAMPLES})')
+        elif figure == 'spine':
+            _add_chain_options(f, README_SPINE_TIP_WRENCH)
+            f.add_argument('--elevation', type=parse_number, default=12.0, metavar='DEG',
+                           help='view elevation (degrees, default 12)')
+            f.add_argument('--azimuth', type=parse_number, default=-60.0, metavar='DEG',
+                           help='view azimuth (degrees, default -60)')
         elif figure == 'theta2':
             _add_planar_options(f, 'L = 1, K1 = 100, K2 = 10, theta2 in [0, pi] (Figs. 4-6)',
                                 False)
@@ -972,6 +1097,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help='replace OUTPUT (a rosbag2) and FILE if they exist')
     _add_json(p)
     p.set_defaults(handler=_cmd_bag)
+    p = sub.add_parser('chain', help='a spine of joints: tip pose and tip stiffness',
+                       description='Tip pose and exact tip stiffness of a chain of joints at '
+                                   '--screws (under the given loads), or at its equilibrium '
+                                   'under --tip-wrench and the link weights.')
+    _add_chain_options(p, (0.0,) * 6)
+    _add_json(p)
+    p.set_defaults(handler=_cmd_chain)
 
     p = sub.add_parser('figures', help="regenerate every README figure into a folder",
                        description='Write every figure at its default parameters (the '

@@ -21,6 +21,8 @@ Figures (defaults are the papers' parameter sets):
   workspaces (Figs. 7-8; K1 = 200, K2 = 100 N/m).
 * :func:`plot_stiffness_range` -- the reachable range of each diagonal entry of K_c over the
   admissible tensions along a sweep of one screw coordinate (:mod:`tensegrity_stiffness.design`).
+* :func:`plot_spine` -- a chain of joints (:mod:`tensegrity_stiffness.chain`) in the base frame,
+  strings coloured by tension.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.chain import JointChain
 from tensegrity_stiffness.design import (
     DIAGONAL_NAMES,
     DIAGONAL_UNITS,
@@ -69,6 +72,7 @@ DEFAULT_SIZES = {
     'actuator-stiffness': (900, 600),
     'cartesian-stiffness': (800, 700),
     'stiffness-range': (1000, 600),
+    'spine': (700, 900),
 }
 #: Default samples along each curve and per side of each map grid.
 DEFAULT_CURVE_SAMPLES = 400
@@ -611,4 +615,86 @@ def plot_stiffness_range(model: JointModel, screw: ArrayLike, path: str | Path, 
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(f'diagonal of $K_c$ reachable with tensions in [{tension_min:g}, '
                  f'{tension_max:g}] N', fontsize=11)
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------- spine
+def plot_spine(chain: JointChain, screws: ArrayLike, path: str | Path, *,
+               rest_lengths: Any = None, width: int = DEFAULT_SIZES['spine'][0],
+               height: int = DEFAULT_SIZES['spine'][1], title: str | None = None,
+               elevation: float = 12.0, azimuth: float = -60.0,
+               tip_wrench: ArrayLike | None = None) -> Path:
+    """The chain at ``screws`` in 3D (base frame, mm): each link's nodes (link i = link 2 of joint
+    i and link 1 of joint i+1, one colour per link, joined by a polyline per node set), every
+    joint's strings coloured by tension (one colour bar), slack strings dashed grey, saturated
+    thick; the base and tool frames as RGB triads; the tip wrench's force as an arrow."""
+    path = _output(path)
+    state = chain.evaluate(screws, rest_lengths)
+    fig = _figure(width, height)
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from matplotlib.lines import Line2D
+
+    ax = fig.add_subplot(projection='3d')
+    tensions = [np.asarray(t) for t in state.tensions]
+    top = max(float(t.max()) for t in tensions)
+    norm = Normalize(0.0, top if top > 0.0 else 1.0)
+    cmap = _colormap(TENSION_CMAP)
+    links = _colormap('tab10')
+    points = []
+    n_slack = 0
+    for i, model in enumerate(chain.joints):
+        P, L = state.joint_frames[i], state.link_transforms[i]
+        p1 = (model.link1_nodes @ P[:3, :3].T + P[:3, 3]) * MM
+        p2 = model.link2_nodes_in_link1(L) * MM
+        points += [p1, p2]
+        slack, saturated = np.asarray(state.slack[i]), np.asarray(state.saturated[i])
+        n_slack += int(slack.sum())
+        for j, (a, b) in enumerate(model.connections):
+            seg = np.vstack([p1[a], p2[b]])
+            if slack[j]:
+                style = {'color': '0.55', 'linestyle': '--', 'linewidth': 0.9}
+            else:
+                style = {'color': cmap(norm(tensions[i][j])), 'linestyle': '-',
+                         'linewidth': 2.4 if saturated[j] else 1.4}
+            ax.plot(seg[:, 0], seg[:, 1], seg[:, 2], **style)
+        for nodes, link in ((p1, i), (p2, i + 1)):
+            colour = '0.3' if link == 0 else links((link - 1) % 10)
+            ax.plot(nodes[:, 0], nodes[:, 1], nodes[:, 2], color=colour, linewidth=3.0,
+                    alpha=0.6)
+            ax.scatter(nodes[:, 0], nodes[:, 1], nodes[:, 2], s=12, color=colour,
+                       depthshade=False)
+    cloud = np.vstack(points)
+    span = float(np.ptp(cloud, axis=0).max())
+    for name, T in (('base', np.eye(4)), ('tool', state.tip_transform)):
+        origin = T[:3, 3] * MM
+        for k, colour in enumerate(('red', 'green', 'blue')):
+            tip = origin + 0.08 * span * T[:3, k]
+            ax.plot(*np.vstack([origin, tip]).T, color=colour, linewidth=1.5)
+        ax.text(*origin, f' {name}', fontsize=8)
+    handles = [Line2D([], [], color=cmap(0.7), linewidth=1.4, label='taut string'),
+               Line2D([], [], color='0.55', linestyle='--', label=f'slack string ({n_slack})')]
+    W = None if tip_wrench is None else np.asarray(tip_wrench, dtype=np.float64)
+    if W is not None and np.linalg.norm(W[:3]) > 0.0:
+        origin = state.tip_transform[:3, 3] * MM
+        arrow = 0.25 * span * W[:3] / np.linalg.norm(W[:3])
+        ax.quiver(*origin, *arrow, color='black', linewidth=1.5)
+        handles.append(Line2D([], [], color='black', label=f'tip force '
+                              f'{np.linalg.norm(W[:3]):.3g} N'))
+    centre = 0.5 * (cloud.max(axis=0) + cloud.min(axis=0))
+    half = 0.55 * span
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_zlim(centre[2] - half, centre[2] + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
+    ax.view_init(elev=elevation, azim=azimuth, vertical_axis='y')
+    ax.set_xlabel('x (mm)')
+    ax.set_ylabel('y (mm)')
+    ax.set_zlabel('z (mm)')
+    fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.5, pad=0.08,
+                 label='string tension (N)')
+    ax.legend(handles=handles, loc='upper left', fontsize=8)
+    p = state.tip_transform[:3, 3] * MM
+    ax.set_title(title or (f'spine of {chain.n_joints} joints, tip at '
+                           f'({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f}) mm'), fontsize=10)
     return _save(fig, path)

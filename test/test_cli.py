@@ -328,6 +328,7 @@ PLOT_CASES = {
     'actuator-stiffness': ['--resolution', '25'],
     'cartesian-stiffness': ['--resolution', '25', '--samples', '40'],
     'stiffness-range': ['--samples', '4', '--extent', '0.1', '--coordinate', 'vy'],
+    'spine': ['--tip-wrench', '0.05', '0', '0', '0', '0', '0', '--elevation', '20'],
 }
 
 
