@@ -407,7 +407,19 @@ class JointModel:
         lengths = np.sqrt(l2)
         if np.minimum.reduce(lengths) < MIN_STRING_LENGTH:
             self._check_lengths(lengths)
-        phi, dphi, slack, saturated = self._string_forces(lengths, rest)
+        slack = lengths <= rest
+        saturated = lengths >= rest + self.max_stretch
+        if slack.tobytes() == self._no_strings and saturated.tobytes() == self._no_strings:
+            # Every string taut: the taut branch of _string_forces, without the masks.
+            stretch = lengths - rest
+            if self.force_law == 'hooke':
+                phi = self.k * stretch
+                dphi = self.k
+            else:
+                phi = self.k * stretch / lengths
+                dphi = self.k * rest / (lengths * lengths)
+        else:
+            phi, dphi, slack, saturated = self._string_forces(lengths, rest)
         # g_j = [gamma_j s_j; beta_j] [s_j; 1]^T, gamma = (phi' - beta) / l^2, beta = phi / l.
         a = np.empty((self.connections.shape[0], 4))
         beta = np.divide(phi, lengths, out=a[:, 3])
