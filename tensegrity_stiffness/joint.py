@@ -24,8 +24,13 @@ Two rigid links carry nodes ``p1`` (in {1}) and ``p2`` (in {2}). String j joins 
 Implementation: with ``A_j = df/ds`` and ``q_j = T p2_{b_j}``, ``ds_j/dxi = [hat(q_j) G - Q, -G]``
 (``G``, ``Q`` from :class:`~tensegrity_stiffness.screw.ScrewKinematics`), so that both matrices
 follow from two 6x3 sums ``H_G = sum [I; hat(p1)] A hat(q)`` and ``H_D = sum [I; hat(p1)] A``:
-``K = [H_G G - H_D Q, -H_D G]`` and ``K_c = [H_D, -H_G]``. Every quantity is vectorised over a
-leading batch axis.
+``K = [H_G G - H_D Q, -H_D G]`` and ``K_c = [H_D, -H_G]``. These sums and ``F`` are linear in the
+per-string entries of ``[gamma s; beta] [s; 1]^T`` (``A = gamma s s^T + beta I``), so one
+product with a map precomputed from the link-1 nodes (:func:`_linear_map`) gives
+``K' = [H_G, -H_D]`` and ``F``; then ``K = K' J``. A single screw takes its kinematics in plain
+floats and the strings in a few array operations; a batch (leading axis N) is processed in
+chunks with one GEMM each. :mod:`tensegrity_stiffness.joint_reference` keeps the step-by-step
+computation that both are tested against.
 """
 
 from __future__ import annotations
@@ -41,8 +46,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.screw import (
-    ScrewKinematics,
     _coefficients_scalar,
+    _kinematics_batch,
     _kinematics_entries,
     as_screws,
     exp_se3,
@@ -55,7 +60,9 @@ FORCE_LAWS = ('hooke', 'paper')
 #: Strings shorter than this (m) have no defined direction: evaluation raises ValueError.
 MIN_STRING_LENGTH = 1e-12
 #: Screws per chunk of the batched evaluation (keeps the working set in cache).
-BATCH_CHUNK = 1024
+BATCH_CHUNK = 512
+#: Chunks whose screw kinematics are computed together in the batched evaluation.
+KINEMATICS_CHUNKS = 8
 #: Default central-difference step of :meth:`JointModel.numerical_stiffness` (eq. 21).
 NUMERICAL_STEP = 1e-6
 
@@ -112,11 +119,11 @@ def _linear_map(p1: FloatArray) -> FloatArray:
     return out.reshape(n, 4, 4, 42)
 
 
+_EYE3 = np.eye(3)
 #: (row, column) pairs of the 4x4 outer product g that hold the 10 distinct per-string entries
 #: of the batched layout: gamma s s^T (6, upper triangle), beta s (3), beta.
 _BATCH_ENTRIES = (((0, 0),), ((1, 1),), ((2, 2),), ((0, 1), (1, 0)), ((0, 2), (2, 0)),
                   ((1, 2), (2, 1)), ((3, 0),), ((3, 1),), ((3, 2),), ((3, 3),))
-_EYE3 = np.eye(3)
 
 
 def _hat(w: FloatArray) -> FloatArray:
@@ -429,10 +436,8 @@ class JointModel:
         K = Kp @ kin[16:].reshape(6, 6)
         if not full:
             return K
-        # K_c = [H_D, -H_G] = -[K'[:, 3:], K'[:, :3]].
-        Kc = np.empty((6, 6))
-        np.negative(Kp[:, 3:], out=Kc[:, :3])
-        np.negative(Kp[:, :3], out=Kc[:, 3:])
+        # K_c = [H_D, -H_G] = -[K'[:, 3:], K'[:, :3]] (the two column blocks swapped).
+        Kc = np.negative(Kp.reshape(6, 2, 3)[:, ::-1]).reshape(6, 6)
         return JointState(xi, transform, s, lengths, phi, slack, saturated, out[36:], K, Kc)
 
     def _check_lengths(self, lengths: FloatArray) -> None:
@@ -455,17 +460,21 @@ class JointModel:
         slack = np.empty((N, n), dtype=bool)
         saturated = np.empty((N, n), dtype=bool)
         wrench = np.empty((N, 6))
-        K = np.full((N, 6, 6), np.nan)
-        Kc = np.full((N, 6, 6), np.nan)
+        K = np.full((N, 6, 6), np.nan) if wrench_only else np.empty((N, 6, 6))
+        Kc = np.full((N, 6, 6), np.nan) if wrench_only else np.empty((N, 6, 6))
         p1 = self._p1.T
         p2h = self._p2h.T
+        # Kinematics in blocks of KINEMATICS_CHUNKS chunks (their cost is mostly per operation).
+        block = KINEMATICS_CHUNKS * BATCH_CHUNK
         for start in range(0, N, BATCH_CHUNK):
             sl = slice(start, min(start + BATCH_CHUNK, N))
             m = sl.stop - sl.start
             r = rest if rest.ndim == 1 else rest[sl]
-            kin = ScrewKinematics(xi[sl])
-            T[sl] = kin.T
-            s = p1 - (kin.T[:, :3].reshape(-1, 4) @ p2h).reshape(m, 3, n)
+            if start % block == 0:
+                kb = slice(start, min(start + block, N))
+                T[kb], J_block = _kinematics_batch(xi[kb])
+            J = J_block[start - kb.start:sl.stop - kb.start]
+            s = p1 - (T[sl, :3].reshape(-1, 4) @ p2h).reshape(m, 3, n)
             s_out[sl] = np.swapaxes(s, 1, 2)
             l2 = np.einsum('mkj,mkj->mj', s, s)
             ln = np.sqrt(l2, out=lengths[sl])
@@ -486,9 +495,8 @@ class JointModel:
             out = g.reshape(m, -1) @ self._map_batch
             wrench[sl] = out[:, 36:]
             Kp = out[:, :36].reshape(m, 6, 6)
-            np.matmul(Kp, kin.J, out=K[sl])
-            np.negative(Kp[:, :, 3:], out=Kc[sl, :, :3])
-            np.negative(Kp[:, :, :3], out=Kc[sl, :, 3:])
+            np.matmul(Kp, J, out=K[sl])
+            np.negative(Kp.reshape(m, 6, 2, 3)[:, :, ::-1], out=Kc[sl].reshape(m, 6, 2, 3))
         return JointState(xi, T, s_out, lengths, phi, slack, saturated, wrench, K, Kc)
 
     # ------------------------------------------------------------------ public shortcuts

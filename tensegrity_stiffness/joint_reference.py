@@ -26,7 +26,6 @@ FloatArray = NDArray[np.float64]
 #: Screws per chunk of the batched reference evaluation.
 BATCH_CHUNK = 1024
 
-_EYE3 = np.eye(3)
 # Y = X @ _Y_MAP = [-(p1 x u); u] for X = [u; p1 x u] (row-wise).
 _Y_MAP = np.block([[np.zeros((3, 3)), np.eye(3)], [-np.eye(3), np.zeros((3, 3))]])
 # K_c = H @ _KC_MAP = [H_D, -H_G].

@@ -14,7 +14,7 @@ import pytest
 
 from tensegrity_stiffness import joint_reference
 from tensegrity_stiffness.interpretation import interpret_stiffness, interpretation_vector
-from tensegrity_stiffness.joint import BATCH_CHUNK, JointModel
+from tensegrity_stiffness.joint import BATCH_CHUNK, KINEMATICS_CHUNKS, JointModel
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
 RTOL = 1e-13
@@ -148,7 +148,7 @@ def test_every_string_slack_and_every_string_saturated(model):
 
 @pytest.mark.parametrize('force_law', ['hooke', 'paper'])
 @pytest.mark.parametrize('n', [0, 1, 2, BATCH_CHUNK - 1, BATCH_CHUNK, BATCH_CHUNK + 1,
-                               2 * BATCH_CHUNK + 3])
+                               2 * BATCH_CHUNK + 3, KINEMATICS_CHUNKS * BATCH_CHUNK + 1])
 def test_batch_matches_reference_and_single(model, force_law, n):
     rng = np.random.default_rng(13 + n)
     m = random_model(rng, force_law) if n % 2 else JointModel(
