@@ -2,19 +2,25 @@
 """Six-DOF core benchmark, run by hand: ``python3 bench/bench_joint.py [--quick]``.
 
 Prints, measured side by side in one run on the default joint:
+* the current paths against the previous implementation (``joint_reference``, the readable
+  reference of the tests): per-call ``evaluate`` and ``stiffness``, batched ``evaluate`` at
+  N = 10^4 and 10^5 and ``interpretation_vector`` (against ``interpret_stiffness``), with the
+  ratios new / old; new and old are timed in alternation (best of each), so that load on a
+  shared machine falls on both alike;
 * per-call analytic K (eq. 10) vs central-difference K (eq. 21), and their ratio; the
   central-difference baseline is given two ways (one vectorised wrench-only pass over the 12
   perturbed screws, and a loop of 12 single wrench calls) and the faster one is used;
 * dT/dxi alone (closed form vs central differences);
 * batched K throughput (configs/s) for N = 10^4 and 10^5 vs single calls;
 * equilibrium solve time (median, p99) over random moderate wrenches.
-Targets (issue 2): K <= 25 us, >= 15x faster than central differences, batched >= 500,000
-configs/s, equilibrium median <= 2 ms.
+Targets (issues 2 and 12): evaluate <= 40 us, K <= 25 us, >= 15x faster than central
+differences, batched >= 500,000 configs/s at N = 10^4, equilibrium median <= 2 ms.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 import time
@@ -26,7 +32,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tensegrity_stiffness import joint_reference  # noqa: E402
 from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
+from tensegrity_stiffness.interpretation import (  # noqa: E402
+    interpret_stiffness,
+    interpretation_vector,
+)
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.screw import dexp_se3, exp_se3  # noqa: E402
 
@@ -34,6 +45,56 @@ from tensegrity_stiffness.screw import dexp_se3, exp_se3  # noqa: E402
 def per_call_us(fn, repeat: int = 7, number: int = 2000) -> float:
     """Best-of-``repeat`` mean time per call, microseconds."""
     return min(timeit.repeat(fn, repeat=repeat, number=number)) / number * 1e6
+
+
+def side_by_side(new, old, repeat: int, number: int) -> tuple[float, float]:
+    """Best per-call time (us) of ``new`` and ``old``, timed in alternation."""
+    t_new, t_old = math.inf, math.inf
+    for _ in range(repeat):
+        t_new = min(t_new, timeit.timeit(new, number=number) / number * 1e6)
+        t_old = min(t_old, timeit.timeit(old, number=number) / number * 1e6)
+    return t_new, t_old
+
+
+def old_interpretation(K: np.ndarray) -> np.ndarray:
+    """The 16 numbers from the readable :func:`interpret_stiffness`."""
+    it = interpret_stiffness(K)
+    return np.concatenate([it.block_norms, it.column_norms, it.row_norms])
+
+
+def compare_with_previous(model: JointModel, xi: np.ndarray, rng: np.random.Generator,
+                          number: int) -> None:
+    """New paths vs :mod:`joint_reference` (the previous implementation), side by side."""
+    def old_stiffness() -> np.ndarray:
+        return joint_reference.evaluate(model, xi).stiffness
+
+    K = model.stiffness(xi)
+    rows = [
+        ('evaluate (everything the node publishes)',
+         *side_by_side(lambda: model.evaluate(xi), lambda: joint_reference.evaluate(model, xi),
+                       7, number)),
+        ('stiffness K (eq. 10)', *side_by_side(lambda: model.stiffness(xi), old_stiffness, 7,
+                                               number)),
+        ('interpretation_vector (16 norms)',
+         *side_by_side(lambda: interpretation_vector(K), lambda: old_interpretation(K), 7,
+                       number)),
+    ]
+    print('new vs previous implementation           new         old    new/old')
+    for name, t_new, t_old in rows:
+        print(f'  {name:<40} {t_new:7.1f} us  {t_old:7.1f} us   {t_new / t_old:5.2f}')
+    for n in (10_000, 100_000):
+        xs = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(n, 6))
+        model.evaluate(xs[:1000])  # warm up
+        joint_reference.evaluate(model, xs[:1000])
+        t_new, t_old = side_by_side(lambda xs=xs: model.evaluate(xs),
+                                    lambda xs=xs: joint_reference.evaluate(model, xs), 3, 1)
+        print(f'  batched evaluate, N = {n:>7,} (configs/s)  {n / t_new * 1e6:10,.0f}  '
+              f'{n / t_old * 1e6:10,.0f}   {t_new / t_old:5.2f} (time)')
+    state, ref = model.evaluate(xi), joint_reference.evaluate(model, xi)
+    worst = max(float(np.max(np.abs(getattr(state, f) - getattr(ref, f)))
+                      / np.max(np.abs(getattr(ref, f))))
+                for f in ('wrench', 'stiffness', 'cartesian_stiffness', 'tensions', 'lengths'))
+    print(f'  largest difference new - old (relative to the largest entry): {worst:.1e}\n')
 
 
 def main() -> None:
@@ -45,6 +106,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     xi = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3)
     step = 1e-6
+    compare_with_previous(model, xi, rng, number)
 
     def cd_loop() -> np.ndarray:
         cols = []

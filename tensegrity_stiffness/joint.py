@@ -24,8 +24,13 @@ Two rigid links carry nodes ``p1`` (in {1}) and ``p2`` (in {2}). String j joins 
 Implementation: with ``A_j = df/ds`` and ``q_j = T p2_{b_j}``, ``ds_j/dxi = [hat(q_j) G - Q, -G]``
 (``G``, ``Q`` from :class:`~tensegrity_stiffness.screw.ScrewKinematics`), so that both matrices
 follow from two 6x3 sums ``H_G = sum [I; hat(p1)] A hat(q)`` and ``H_D = sum [I; hat(p1)] A``:
-``K = [H_G G - H_D Q, -H_D G]`` and ``K_c = [H_D, -H_G]``. Every quantity is vectorised over a
-leading batch axis.
+``K = [H_G G - H_D Q, -H_D G]`` and ``K_c = [H_D, -H_G]``. These sums and ``F`` are linear in the
+per-string entries of ``[gamma s; beta] [s; 1]^T`` (``A = gamma s s^T + beta I``), so one
+product with a map precomputed from the link-1 nodes (:func:`_linear_map`) gives
+``K' = [H_G, -H_D]`` and ``F``; then ``K = K' J``. A single screw takes its kinematics in plain
+floats and the strings in a few array operations; a batch (leading axis N) is processed in
+chunks with one GEMM each. :mod:`tensegrity_stiffness.joint_reference` keeps the step-by-step
+computation that both are tested against.
 """
 
 from __future__ import annotations
@@ -40,7 +45,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.screw import ScrewKinematics, as_screws, exp_se3
+from tensegrity_stiffness.screw import (
+    _coefficients_scalar,
+    _kinematics_batch,
+    _kinematics_entries,
+    as_screws,
+    exp_se3,
+)
 from tensegrity_stiffness.validation import finite_array
 
 FloatArray = NDArray[np.float64]
@@ -49,7 +60,9 @@ FORCE_LAWS = ('hooke', 'paper')
 #: Strings shorter than this (m) have no defined direction: evaluation raises ValueError.
 MIN_STRING_LENGTH = 1e-12
 #: Screws per chunk of the batched evaluation (keeps the working set in cache).
-BATCH_CHUNK = 1024
+BATCH_CHUNK = 512
+#: Chunks whose screw kinematics are computed together in the batched evaluation.
+KINEMATICS_CHUNKS = 8
 #: Default central-difference step of :meth:`JointModel.numerical_stiffness` (eq. 21).
 NUMERICAL_STEP = 1e-6
 
@@ -76,27 +89,41 @@ class JointState:
     cartesian_stiffness: FloatArray
 
 
-def _beta_map(Z: FloatArray) -> FloatArray:
-    """Matrix C (4n, 36) with ``sum_j beta_j [Z_j hat(q_j), Z_j] = (g @ C).reshape(6, 6)``.
+def _linear_map(p1: FloatArray) -> FloatArray:
+    """Map C (n, 4, 4, 42): ``[K' | F] = sum_j sum_ik g_jik C[j, i, k]`` with the per-string
+    outer product ``g_j = [gamma_j s_j; beta_j] [s_j; 1]^T`` (4x4).
 
-    ``g = [beta_1 q_1, beta_1, ..., beta_n q_n, beta_n]`` (homogeneous q scaled by beta);
-    ``hat(q)[b, c] = -eps[b, c, d] q_d``.
+    With ``A_j = gamma_j s_j s_j^T + beta_j I`` (``df/ds``, ``gamma = (phi' - beta) / l^2``,
+    ``beta = phi / l``), ``P_j = hat(p1_j)`` and ``b_j = beta_j s_j = f_j``:
+    ``H_D = sum [A; P A]`` and, as ``hat(q) = P - hat(s)`` and ``A hat(s) = beta hat(s)``,
+    ``H_G = sum [A P - hat(b); P (A P - hat(b))]``; columns 0-35 of C give
+    ``K' = [H_G, -H_D]`` (row-major, ``K = K' J``, ``K_c = -K' P_swap``) and columns 36-41 the
+    wrench ``F = sum [b; P b]`` (eq. 9). The entries ``gamma_j s_j`` (column 3 of g) map to 0.
     """
-    n = Z.shape[0]
-    eps = np.zeros((3, 3, 3))
-    eps[0, 1, 2] = eps[1, 2, 0] = eps[2, 0, 1] = 1.0
-    eps[0, 2, 1] = eps[2, 1, 0] = eps[1, 0, 2] = -1.0
-    C = np.zeros((n, 4, 6, 6))
-    C[:, :3, :, :3] = -np.einsum('jab,bcd->jdac', Z, eps)
-    C[:, 3, :, 3:] = Z
-    return C.reshape(4 * n, 36)
+    n = p1.shape[0]
+    basis = np.eye(16).reshape(16, 4, 4)
+    M = basis[:, :3, :3]
+    b = basis[:, 3, :3]
+    beta = basis[:, 3, 3]
+    A = M + beta[:, None, None] * _EYE3  # (16, 3, 3)
+    P = _hat(p1)  # (n, 3, 3)
+    APb = np.einsum('bik,jkl->jbil', A, P) - _hat(b)[None]  # (n, 16, 3, 3)
+    out = np.zeros((n, 16, 42))
+    Kp = out[:, :, :36].reshape(n, 16, 6, 6)
+    Kp[..., :3, :3] = APb
+    Kp[..., 3:, :3] = np.einsum('jik,jbkl->jbil', P, APb)
+    Kp[..., :3, 3:] = -A[None]
+    Kp[..., 3:, 3:] = -np.einsum('jik,bkl->jbil', P, A)
+    out[:, :, 36:39] = b[None]
+    out[:, :, 39:42] = np.einsum('jik,bk->jbi', P, b)
+    return out.reshape(n, 4, 4, 42)
 
 
 _EYE3 = np.eye(3)
-# Y = X @ _Y_MAP = [-(p1 x u); u] for X = [u; p1 x u] (row-wise).
-_Y_MAP = np.block([[np.zeros((3, 3)), np.eye(3)], [-np.eye(3), np.zeros((3, 3))]])
-# K_c = H @ _KC_MAP = [H_D, -H_G].
-_KC_MAP = np.block([[np.zeros((3, 3)), -np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
+#: (row, column) pairs of the 4x4 outer product g that hold the 10 distinct per-string entries
+#: of the batched layout: gamma s s^T (6, upper triangle), beta s (3), beta.
+_BATCH_ENTRIES = (((0, 0),), ((1, 1),), ((2, 2),), ((0, 1), (1, 0)), ((0, 2), (2, 0)),
+                  ((1, 2), (2, 1)), ((3, 0),), ((3, 1),), ((3, 2),), ((3, 3),))
 
 
 def _hat(w: FloatArray) -> FloatArray:
@@ -195,13 +222,16 @@ class JointModel:
         self._p1 = p1[self.connections[:, 0]]
         self._p2 = p2[self.connections[:, 1]]
 
+        # Fast paths: homogeneous link-2 ends [p2, 1], link-1 ends [p1, 2] (so that
+        # [p1, 2] - T [p2, 1] = [s, 1]) and the linear maps of _linear_map in the single (16 per
+        # string) and batched (10 per string, component-major) layouts.
         self._p2h = np.hstack([self._p2, np.ones((n, 1))])
-        self._Z = np.concatenate([np.broadcast_to(np.eye(3), (n, 3, 3)), _hat(self._p1)], axis=1)
-        self._BETA_MAP = _beta_map(self._Z)
-        # The same map for g laid out component-major ((4, n) instead of (n, 4)).
-        self._BETA_MAP_SOA = self._BETA_MAP.reshape(n, 4, 36).transpose(1, 0, 2).reshape(-1, 36)
-
-    _ROW_SIGN = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])[:, None]
+        self._p1w = np.hstack([self._p1, np.full((n, 1), 2.0)])
+        linear = _linear_map(self._p1)
+        self._map_single = linear.reshape(16 * n, 42)
+        self._map_batch = np.stack([sum(linear[:, i, k] for i, k in pairs)
+                                    for pairs in _BATCH_ENTRIES]).reshape(10 * n, 42)
+        self._no_strings = bytes(n)
 
     # ------------------------------------------------------------------ construction
     @property
@@ -351,37 +381,64 @@ class JointModel:
 
     def evaluate(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> JointState:
         """All quantities at screw ``xi`` (6,) or a batch (N, 6); rest lengths (n,) or (N, n)."""
-        xi = as_screws(xi)
+        arr = np.asarray(xi, dtype=np.float64)
+        if arr.shape == (6,) and (rest_lengths is None or rest_lengths is self.rest_lengths):
+            return self._evaluate_single(arr, self.rest_lengths, True)
+        xi = as_screws(arr)
         rest = self.validate_rest_lengths(rest_lengths)
         if rest.ndim == 2 and (xi.ndim != 2 or xi.shape[0] != rest.shape[0]):
             raise ValueError(f'batched rest_lengths {rest.shape} need screws of shape '
                              f'({rest.shape[0]}, 6), got {xi.shape}')
         if xi.ndim == 2:
             return self._evaluate_batch(xi, rest)
-        kin = ScrewKinematics(xi)
-        # Homogeneous link-2 string ends in {1}: [q_j, 1] = T [p2_j, 1].
-        qh = self._p2h @ kin.T.T  # (n, 4)
-        q = qh[:, :3]
-        s = self._p1 - q
-        lengths = np.sqrt((s * s).sum(1))
-        self._check_lengths(lengths)
-        u = s / lengths[:, None]
-        phi, dphi, slack, saturated = self._string_forces(lengths, rest)
-        beta = phi / lengths
-        alpha = dphi - beta
-        # X_j = Z_j u_j = [u_j; p1_j x u_j] with Z_j = [I; hat(p1_j)]: F = sum phi_j X_j (eq. 9).
-        X = (self._Z @ u[:, :, None])[:, :, 0]  # (n, 6)
-        wrench = phi @ X
-        # H = sum Z A [hat(q), I] with A = alpha u u^T + beta I (eq. 10 with df/ds of every
-        # region). Alpha part: sum alpha X Y^T, Y = [u x q; u] = [-(p1 x u); u] (u parallel s).
-        # Beta part: sum beta [Z hat(q), Z], linear in (beta q, beta): one precomputed matrix.
-        H = (X * alpha[:, None]).T @ (X @ _Y_MAP)
-        H += ((qh * beta[:, None]).ravel() @ self._BETA_MAP).reshape(6, 6)
-        # K = [H_G G - H_D Q, -H_D G] = H diag(I, -I) J (J the SE(3) left Jacobian);
-        # K_c = [H_D, -H_G].
-        K = H @ (kin.J * self._ROW_SIGN)
-        Kc = H @ _KC_MAP
-        return JointState(xi, kin.T, s, lengths, phi, slack, saturated, wrench, K, Kc)
+        return self._evaluate_single(xi, rest, True)
+
+    def _evaluate_single(self, xi: FloatArray, rest: FloatArray, full: bool
+                         ) -> JointState | FloatArray:
+        """One screw (6,) with validated rest lengths (n,): the :class:`JointState`, or ``K``
+        alone when not ``full``. Kinematics in plain floats, the strings in a few array
+        operations on (n, 4) arrays and one product with the precomputed map
+        (:func:`_linear_map`)."""
+        values = xi.tolist()
+        if not math.isfinite(sum(values)):
+            as_screws(xi)  # names the non-finite entry (a finite sum may overflow: then no error)
+        theta = math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+        T, J = _kinematics_entries(values, _coefficients_scalar(theta), 0.0, 1.0)
+        kin = np.fromiter([*T[0], *T[1], *T[2], *T[3], *J[0], *J[1], *J[2], *J[3], *J[4], *J[5]],
+                          np.float64, 52)
+        transform = kin[:16].reshape(4, 4)
+        # w_j = [p1_j, 2] - T [p2_j, 1] = [s_j, 1] (eq. 7).
+        w = self._p1w - self._p2h @ transform.T
+        s = w[:, :3]
+        l2 = np.add.reduce(s * s, axis=1)
+        lengths = np.sqrt(l2)
+        if np.minimum.reduce(lengths) < MIN_STRING_LENGTH:
+            self._check_lengths(lengths)
+        slack = lengths <= rest
+        saturated = lengths >= rest + self.max_stretch
+        if slack.tobytes() == self._no_strings and saturated.tobytes() == self._no_strings:
+            # Every string taut: the taut branch of _string_forces, without the masks.
+            stretch = lengths - rest
+            if self.force_law == 'hooke':
+                phi = self.k * stretch
+                dphi = self.k
+            else:
+                phi = self.k * stretch / lengths
+                dphi = self.k * rest / (lengths * lengths)
+        else:
+            phi, dphi, slack, saturated = self._string_forces(lengths, rest)
+        # g_j = [gamma_j s_j; beta_j] [s_j; 1]^T, gamma = (phi' - beta) / l^2, beta = phi / l.
+        a = np.empty((self.connections.shape[0], 4))
+        beta = np.divide(phi, lengths, out=a[:, 3])
+        np.multiply(s, ((dphi - beta) / l2)[:, None], out=a[:, :3])
+        out = (a[:, :, None] * w[:, None, :]).reshape(-1) @ self._map_single
+        Kp = out[:36].reshape(6, 6)
+        K = Kp @ kin[16:].reshape(6, 6)
+        if not full:
+            return K
+        # K_c = [H_D, -H_G] = -[K'[:, 3:], K'[:, :3]] (the two column blocks swapped).
+        Kc = np.negative(Kp.reshape(6, 2, 3)[:, ::-1]).reshape(6, 6)
+        return JointState(xi, transform, s, lengths, phi, slack, saturated, out[36:], K, Kc)
 
     def _check_lengths(self, lengths: FloatArray) -> None:
         if lengths.min() < MIN_STRING_LENGTH:
@@ -391,10 +448,10 @@ class JointModel:
     def _evaluate_batch(self, xi: FloatArray, rest: FloatArray, wrench_only: bool = False
                         ) -> JointState:
         """The same computation as the single path for (N, 6) screws, in chunks of
-        ``BATCH_CHUNK`` and with strings on the last axis ((N, 3, n) component layout), so that
-        every step is one array operation or one GEMM over the chunk. With ``wrench_only`` the
-        stiffness matrices are left out (they are NaN): the honest baseline of
-        :meth:`numerical_stiffness`."""
+        ``BATCH_CHUNK`` and with strings on the last axis ((N, 3, n) component layout): the
+        10 distinct entries of every string's g (:data:`_BATCH_ENTRIES`) go through one GEMM
+        with the precomputed map. With ``wrench_only`` the stiffness matrices are left out (they
+        are NaN): the honest baseline of :meth:`numerical_stiffness`."""
         N, n = xi.shape[0], self.n_strings
         T = np.empty((N, 4, 4))
         s_out = np.empty((N, n, 3))
@@ -403,38 +460,43 @@ class JointModel:
         slack = np.empty((N, n), dtype=bool)
         saturated = np.empty((N, n), dtype=bool)
         wrench = np.empty((N, 6))
-        K = np.full((N, 6, 6), np.nan)
-        Kc = np.full((N, 6, 6), np.nan)
-        px, py, pz = self._p1.T
+        K = np.full((N, 6, 6), np.nan) if wrench_only else np.empty((N, 6, 6))
+        Kc = np.full((N, 6, 6), np.nan) if wrench_only else np.empty((N, 6, 6))
+        p1 = self._p1.T
+        p2h = self._p2h.T
+        # Kinematics in blocks of KINEMATICS_CHUNKS chunks (their cost is mostly per operation).
+        block = KINEMATICS_CHUNKS * BATCH_CHUNK
         for start in range(0, N, BATCH_CHUNK):
             sl = slice(start, min(start + BATCH_CHUNK, N))
             m = sl.stop - sl.start
             r = rest if rest.ndim == 1 else rest[sl]
-            kin = ScrewKinematics(xi[sl])
-            T[sl] = kin.T
-            qh = (kin.T.reshape(-1, 4) @ self._p2h.T).reshape(m, 4, n)
-            s = self._p1.T - qh[:, :3]
+            if start % block == 0:
+                kb = slice(start, min(start + block, N))
+                T[kb], J_block = _kinematics_batch(xi[kb])
+            J = J_block[start - kb.start:sl.stop - kb.start]
+            s = p1 - (T[sl, :3].reshape(-1, 4) @ p2h).reshape(m, 3, n)
             s_out[sl] = np.swapaxes(s, 1, 2)
-            ln = np.sqrt(np.einsum('mkj,mkj->mj', s, s))
+            l2 = np.einsum('mkj,mkj->mj', s, s)
+            ln = np.sqrt(l2, out=lengths[sl])
             self._check_lengths(ln)
-            lengths[sl] = ln
-            u = s / ln[:, None]
             ph, dph, slack[sl], saturated[sl] = self._string_forces(ln, r)
             phi[sl] = ph
-            X = np.empty((m, 6, n))
-            X[:, :3] = u
-            X[:, 3] = py * u[:, 2] - pz * u[:, 1]
-            X[:, 4] = pz * u[:, 0] - px * u[:, 2]
-            X[:, 5] = px * u[:, 1] - py * u[:, 0]
-            wrench[sl] = (X @ ph[:, :, None])[:, :, 0]
-            if wrench_only:
-                continue
             beta = ph / ln
-            alpha = dph - beta
-            H = (X * alpha[:, None]) @ (np.swapaxes(X, 1, 2) @ _Y_MAP)
-            H += ((qh * beta[:, None]).reshape(m, -1) @ self._BETA_MAP_SOA).reshape(m, 6, 6)
-            K[sl] = H @ (kin.J * self._ROW_SIGN)
-            Kc[sl] = (H.reshape(-1, 6) @ _KC_MAP).reshape(m, 6, 6)
+            g = np.empty((m, 10, n))
+            np.multiply(s, beta[:, None], out=g[:, 6:9])
+            if wrench_only:
+                wrench[sl] = g[:, 6:9].reshape(m, -1) @ self._map_batch[6 * n:9 * n, 36:]
+                continue
+            g[:, 9] = beta
+            gs = s * ((dph - beta) / l2)[:, None]
+            np.multiply(gs, s, out=g[:, :3])
+            np.multiply(gs[:, :1], s[:, 1:], out=g[:, 3:5])
+            np.multiply(gs[:, 1], s[:, 2], out=g[:, 5])
+            out = g.reshape(m, -1) @ self._map_batch
+            wrench[sl] = out[:, 36:]
+            Kp = out[:, :36].reshape(m, 6, 6)
+            np.matmul(Kp, J, out=K[sl])
+            np.negative(Kp.reshape(m, 6, 2, 3)[:, :, ::-1], out=Kc[sl].reshape(m, 6, 2, 3))
         return JointState(xi, T, s_out, lengths, phi, slack, saturated, wrench, K, Kc)
 
     # ------------------------------------------------------------------ public shortcuts
@@ -444,6 +506,9 @@ class JointModel:
 
     def stiffness(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> FloatArray:
         """Analytical ``K = dF/dxi`` (eq. 10): (6, 6) or (N, 6, 6)."""
+        arr = np.asarray(xi, dtype=np.float64)
+        if arr.shape == (6,) and (rest_lengths is None or rest_lengths is self.rest_lengths):
+            return self._evaluate_single(arr, self.rest_lengths, False)
         return self.evaluate(xi, rest_lengths).stiffness
 
     def cartesian_stiffness(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None

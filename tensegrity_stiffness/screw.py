@@ -84,7 +84,9 @@ def rotation_coefficients(theta: ArrayLike) -> tuple[FloatArray, ...]:
     t = np.asarray(theta, dtype=np.float64)
     t2 = t * t
     small = t < SERIES_THRESHOLD
-    ts = np.where(small, 1.0, t)  # avoid 0/0 in the discarded closed-form branch
+    # Without small angles only the closed forms are needed; otherwise they are evaluated at 1
+    # where the series is taken (no 0/0 in the discarded branch).
+    ts = t if t.ndim and not small.any() else np.where(small, 1.0, t)
     s, c = np.sin(ts), np.cos(ts)
     closed = (
         s / ts,
@@ -93,6 +95,8 @@ def rotation_coefficients(theta: ArrayLike) -> tuple[FloatArray, ...]:
         (ts * s + 2.0 * c - 2.0) / ts**4,
         (3.0 * s - ts * c - 2.0 * ts) / ts**5,
     )
+    if ts is t:
+        return closed
     series = (_A_SERIES, _B_SERIES, _C_SERIES, _B1_SERIES, _C1_SERIES)
     return tuple(
         np.where(small, np.polyval(p, t2), value) for p, value in zip(series, closed, strict=True)
@@ -251,6 +255,18 @@ def _kinematics_entries(xi6: list, coeffs: tuple, zero: Any, one: Any) -> tuple[
          [g20, g21, g22, zero, zero, zero], q[0] + [g00, g01, g02], q[1] + [g10, g11, g12],
          q[2] + [g20, g21, g22]]
     return T, J
+
+
+def _kinematics_batch(xi: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``T`` (N, 4, 4) and ``J`` (N, 6, 6) of (N, 6) screws as C-contiguous arrays: the
+    entries of :class:`ScrewKinematics` (same formulas), gathered in one copy."""
+    n = xi.shape[0]
+    rows = np.ascontiguousarray(xi.T)
+    theta = np.sqrt(np.einsum('ij,ij->i', xi[:, :3], xi[:, :3]))
+    T, J = _kinematics_entries(list(rows), rotation_coefficients(theta), np.zeros(n),
+                               np.ones(n))
+    out = np.stack([entry for row in T + J for entry in row], axis=-1)
+    return out[:, :16].reshape(n, 4, 4), out[:, 16:].reshape(n, 6, 6)
 
 
 class ScrewKinematics:

@@ -1,0 +1,241 @@
+"""Fast paths of the joint model and of the interpretation against the readable reference.
+
+``JointModel.evaluate`` / ``stiffness`` (single screw and batched) must give what
+:mod:`tensegrity_stiffness.joint_reference` (the previous implementation) gives, to 1e-13
+relative: per quantity, relative to its largest entry; for the wrench, relative to the sum of the
+moduli of its string contributions (it cancels to ~0 at an equilibrium). Region masks are equal.
+"""
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tensegrity_stiffness import joint_reference
+from tensegrity_stiffness.interpretation import interpret_stiffness, interpretation_vector
+from tensegrity_stiffness.joint import BATCH_CHUNK, KINEMATICS_CHUNKS, JointModel
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
+RTOL = 1e-13
+FIELDS = ('transform', 'string_vectors', 'lengths', 'tensions', 'stiffness',
+          'cartesian_stiffness')
+TWO_PI = 2.0 * math.pi
+
+
+@pytest.fixture(scope='module')
+def model():
+    return JointModel.from_yaml(CONFIG)
+
+
+def random_model(rng, force_law='hooke', n1=5, n2=4, n=9):
+    """Own link-2 node set, random strings, stiffnesses, rest lengths and (some) limits."""
+    p1 = rng.normal(scale=0.05, size=(n1, 3))
+    p2 = rng.normal(scale=0.04, size=(n2, 3))
+    conn = np.column_stack([rng.integers(0, n1, n), rng.integers(0, n2, n)])
+    rest = rng.uniform(0.02, 0.08, n)
+    lmax = rest + rng.uniform(0.005, 0.05, n)
+    lmax[rng.random(n) < 0.3] = np.inf
+    return JointModel(p1, conn, rng.uniform(20.0, 120.0, n), rest, link2_nodes=p2,
+                      max_lengths=lmax, force_law=force_law)
+
+
+def assert_same(model, state, ref):
+    """``state`` equals ``ref`` to RTOL (see the module docstring)."""
+    np.testing.assert_array_equal(state.slack, ref.slack)
+    np.testing.assert_array_equal(state.saturated, ref.saturated)
+    np.testing.assert_array_equal(state.screw, ref.screw)
+    for name in FIELDS:
+        new, old = getattr(state, name), getattr(ref, name)
+        assert new.shape == old.shape and new.dtype == old.dtype, name
+        scale = np.max(np.abs(old), initial=0.0)
+        np.testing.assert_allclose(new, old, rtol=0.0, atol=RTOL * scale, err_msg=name)
+    arm = 1.0 + np.max(np.linalg.norm(model.link1_nodes, axis=1))
+    scale = np.sum(np.abs(ref.tensions), axis=-1, keepdims=True) * arm
+    assert state.wrench.shape == ref.wrench.shape
+    assert np.all(np.abs(state.wrench - ref.wrench) <= RTOL * scale + 1e-300)
+
+
+def check_single(model, xi, rest=None):
+    state = model.evaluate(xi, rest)
+    ref = joint_reference.evaluate(model, xi, rest)
+    assert_same(model, state, ref)
+    np.testing.assert_array_equal(model.stiffness(xi, rest), state.stiffness)
+    return state
+
+
+def special_screws(rng, base):
+    """theta = 0 exactly, -> 0 across the series threshold, -> pi, near 2 pi; v kept."""
+    v = base[3:]
+    axis = rng.normal(size=3)
+    axis /= np.linalg.norm(axis)
+    thetas = [0.0, 1e-300, 1e-12, 1e-8, 1e-4, 0.3, 0.5 - 1e-12, 0.5, 0.5 + 1e-12,
+              math.pi - 1e-9, math.pi, math.pi + 1e-9, TWO_PI - 1e-3, TWO_PI - 1e-7]
+    return [np.r_[t * axis, v] for t in thetas]
+
+
+@pytest.mark.parametrize('force_law', ['hooke', 'paper'])
+def test_single_screw_matches_reference_on_the_default_joint(model, force_law):
+    m = JointModel(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+                   max_lengths=model.max_lengths, force_law=force_law,
+                   initial_screw=model.initial_screw)
+    rng = np.random.default_rng(10)
+    regions = {'taut': 0, 'slack': 0, 'saturated': 0}
+    for scale in (0.02, 0.3, 0.8):
+        for _ in range(150):
+            xi = m.initial_screw + rng.normal(scale=[scale] * 3 + [scale / 30] * 3)
+            if np.linalg.norm(xi[:3]) >= TWO_PI:
+                continue
+            state = check_single(m, xi)
+            regions['slack'] += int(state.slack.any())
+            regions['saturated'] += int(state.saturated.any())
+            regions['taut'] += int(not (state.slack.any() or state.saturated.any()))
+    assert min(regions.values()) > 20, regions
+    check_single(m, m.initial_screw)
+
+
+@pytest.mark.parametrize('force_law', ['hooke', 'paper'])
+def test_single_screw_matches_reference_on_random_joints(force_law):
+    rng = np.random.default_rng(11)
+    checked = 0
+    for _ in range(30):
+        m = random_model(rng, force_law)
+        for _ in range(20):
+            xi = np.r_[rng.uniform(-1, 1, 3) * rng.uniform(0, 6.2), rng.normal(scale=0.03,
+                                                                               size=3)]
+            if np.linalg.norm(xi[:3]) >= TWO_PI:
+                continue
+            check_single(m, xi)
+            checked += 1
+        for xi in special_screws(rng, np.r_[0, 0, 0, rng.normal(scale=0.03, size=3)]):
+            check_single(m, xi)
+    assert checked > 400
+
+
+def test_special_angles_on_the_default_joint(model):
+    rng = np.random.default_rng(12)
+    for _ in range(5):
+        # Translated so that no string of the coincident node sets has zero length at theta 0.
+        base = np.r_[0, 0, 0, 0.01, -0.02, 0.03] + rng.normal(scale=0.003, size=6)
+        for xi in special_screws(rng, base):
+            check_single(model, xi)
+    pi_axis = model.initial_screw[:3] / np.linalg.norm(model.initial_screw[:3])
+    for t in (math.pi - 1e-12, math.pi, math.pi + 1e-12):
+        check_single(model, np.r_[t * pi_axis, model.initial_screw[3:]])
+
+
+def test_every_string_slack_and_every_string_saturated(model):
+    xi = model.initial_screw
+    lengths = model.evaluate(xi).lengths
+    expected = {'slack': 'all', 'saturated': 'all', 'slack ': 'all', 'taut': 'none',
+                'mixed': 'any'}
+    rests = (lengths * 1.5, lengths * 0.2, lengths, np.nextafter(lengths, 0.0),
+             np.where(np.arange(12) % 3 == 0, lengths * 1.1, lengths * 0.5))
+    for (region, how), rest in zip(expected.items(), rests, strict=True):
+        m = model.with_rest_lengths(rest)
+        state = check_single(m, xi)
+        check_single(model, xi, rest)
+        mask = state.slack | state.saturated
+        assert {'all': mask.all(), 'none': not mask.any(), 'any': mask.any()}[how], region
+    # A string exactly at its rest length is slack (l <= l0), exactly at lmax saturated.
+    state = check_single(model.with_rest_lengths(lengths), xi)
+    assert state.slack.all() and not state.tensions.any()
+    m = JointModel(model.link1_nodes, model.connections, model.k, lengths * 0.9,
+                   max_lengths=lengths)
+    state = check_single(m, xi)
+    assert state.saturated.all()
+
+
+@pytest.mark.parametrize('force_law', ['hooke', 'paper'])
+@pytest.mark.parametrize('n', [0, 1, 2, BATCH_CHUNK - 1, BATCH_CHUNK, BATCH_CHUNK + 1,
+                               2 * BATCH_CHUNK + 3, KINEMATICS_CHUNKS * BATCH_CHUNK + 1])
+def test_batch_matches_reference_and_single(model, force_law, n):
+    rng = np.random.default_rng(13 + n)
+    m = random_model(rng, force_law) if n % 2 else JointModel(
+        model.link1_nodes, model.connections, model.k, model.rest_lengths,
+        max_lengths=model.max_lengths, force_law=force_law)
+    xs = np.r_[model.initial_screw] + rng.normal(scale=[0.6] * 3 + [0.02] * 3, size=(n, 6))
+    if n >= 14:
+        xs[:14] = special_screws(rng, np.r_[0, 0, 0, 0.01, -0.02, 0.03])
+    state = m.evaluate(xs)
+    assert_same(m, state, joint_reference.evaluate(m, xs))
+    assert state.stiffness.shape == (n, 6, 6) and state.transform.shape == (n, 4, 4)
+    assert state.string_vectors.shape == (n, m.n_strings, 3)
+    for k in sorted({0, n // 2, n - 1}) if n else ():
+        assert_same(m, m.evaluate(xs[k]), joint_reference.evaluate(m, xs[k]))
+    # Batched rest lengths (N, n).
+    rest = m.rest_lengths * rng.uniform(0.7, 1.3, size=(n, m.n_strings))
+    assert_same(m, m.evaluate(xs, rest), joint_reference.evaluate(m, xs, rest))
+
+
+def test_numerical_stiffness_wrench_only_batch_matches_reference(model):
+    rng = np.random.default_rng(14)
+    xs = model.initial_screw + rng.normal(scale=[0.3] * 3 + [0.01] * 3, size=(300, 6))
+    new = model._evaluate_batch(xs, model.rest_lengths, wrench_only=True)
+    ref = joint_reference.evaluate_batch(model, xs, model.rest_lengths, wrench_only=True)
+    scale = np.sum(np.abs(ref.tensions), axis=-1, keepdims=True)
+    assert np.all(np.abs(new.wrench - ref.wrench) <= RTOL * scale)
+    assert np.isnan(new.stiffness).all() and np.isnan(new.cartesian_stiffness).all()
+    np.testing.assert_allclose(model.numerical_stiffness(xs[:5]),
+                               model.stiffness(xs[:5]), rtol=1e-6, atol=1e-6)
+
+
+BAD_SCREWS = [np.zeros(5), np.zeros((2, 3)), np.zeros((2, 2, 6)), [1.0, np.nan, 0, 0, 0, 0],
+              [np.inf, 0, 0, 0, 0, 0], np.array([[0, 0, 0, 0, 0, -np.inf]] * 2), 'abcdef']
+
+
+@pytest.mark.parametrize('xi', BAD_SCREWS)
+def test_bad_screws_raise_the_same_errors(model, xi):
+    with pytest.raises(ValueError) as ref:
+        joint_reference.evaluate(model, xi)
+    for call in (model.evaluate, model.stiffness, model.wrench):
+        with pytest.raises(ValueError) as new:
+            call(xi)
+        assert str(new.value) == str(ref.value)
+
+
+def test_zero_length_strings_and_bad_rest_lengths_raise_the_same_errors(model):
+    for xi in (np.zeros(6), np.zeros((3, 6))):
+        with pytest.raises(ValueError) as ref:
+            joint_reference.evaluate(model, xi)
+        with pytest.raises(ValueError) as new:
+            model.evaluate(xi)
+        assert str(new.value) == str(ref.value) and 'zero length' in str(new.value)
+    for rest in (np.zeros(12), np.ones(11), np.ones((2, 12)), np.full(12, np.nan)):
+        with pytest.raises(ValueError) as ref:
+            joint_reference.evaluate(model, model.initial_screw, rest)
+        with pytest.raises(ValueError) as new:
+            model.evaluate(model.initial_screw, rest)
+        assert str(new.value) == str(ref.value)
+
+
+def test_overflowing_but_finite_screw_behaves_as_before(model):
+    xi = np.array([1e308, 1e308, 0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(OverflowError):
+        joint_reference.evaluate(model, xi)
+    with pytest.raises(OverflowError):
+        model.evaluate(xi)
+
+
+def test_input_forms_and_rest_length_identity(model):
+    xi = model.initial_screw + 0.01
+    ref = joint_reference.evaluate(model, xi)
+    for form in (xi.tolist(), tuple(xi), xi.astype(np.float32).astype(np.float64)):
+        state = model.evaluate(form)
+        assert_same(model, state, joint_reference.evaluate(model, form))
+    assert_same(model, model.evaluate(xi, model.rest_lengths.copy()), ref)
+    assert_same(model, model.evaluate(xi, list(model.rest_lengths)), ref)
+
+
+def test_interpretation_vector_matches_interpret_stiffness():
+    rng = np.random.default_rng(15)
+    for _ in range(500):
+        K = rng.normal(size=(6, 6)) * 10.0 ** rng.uniform(-6, 6, size=(6, 6))
+        it = interpret_stiffness(K)
+        ref = np.concatenate([it.block_norms, it.column_norms, it.row_norms])
+        np.testing.assert_allclose(interpretation_vector(K), ref, rtol=RTOL, atol=0.0)
+    np.testing.assert_array_equal(interpretation_vector(np.zeros((6, 6))), np.zeros(16))
+    np.testing.assert_allclose(interpretation_vector(np.eye(6).tolist())[:4],
+                               [math.sqrt(3), 0, 0, math.sqrt(3)])
+    with pytest.raises(ValueError, match=r'stiffness must have shape \(6, 6\)'):
+        interpretation_vector(np.zeros(36))
