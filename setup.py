@@ -26,6 +26,7 @@ setup(
     entry_points={
         'console_scripts': [
             'stiffness_node = tensegrity_stiffness.ros.stiffness_node:main',
+            'spine_node = tensegrity_stiffness.ros.spine_node:main',
             'tensegrity-stiffness = tensegrity_stiffness.cli:main',
         ],
     },

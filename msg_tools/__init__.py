@@ -13,6 +13,7 @@ stamps       ``builtin_interfaces/Time`` <-> nanoseconds / seconds.
 diagnostics  ``diagnostic_msgs/DiagnosticStatus`` and ``DiagnosticArray`` builders.
 markers      ``visualization_msgs/MarkerArray`` of nodes and tension-coloured strings for RViz.
 joint_outputs  the joint node's five per-input output messages and its markers.
+spine_outputs  the spine node's seven per-input output messages and its markers.
 
 Orderings: wrench ``[fx fy fz mx my mz]``, screw ``[wx wy wz vx vy vz]``, quaternion
 ``[x y z w]``.
@@ -45,6 +46,7 @@ from msg_tools.geometry import (
 )
 from msg_tools.joint_outputs import JointOutputMessages, joint_markers
 from msg_tools.markers import marker_array, tension_color
+from msg_tools.spine_outputs import SpineOutputMessages, spine_markers
 from msg_tools.stamps import (
     stamp_from_nanoseconds,
     stamp_from_seconds,
@@ -62,6 +64,7 @@ __all__ = [
     'WRENCH_LABEL',
     'WRENCH_ROW_LABEL',
     'JointOutputMessages',
+    'SpineOutputMessages',
     'diagnostic_array',
     'diagnostic_status',
     'format_value',
@@ -76,6 +79,7 @@ __all__ = [
     'rotation_to_quaternion',
     'set_multiarray_data',
     'set_wrench',
+    'spine_markers',
     'stamp_from_nanoseconds',
     'stamp_from_seconds',
     'stamp_to_nanoseconds',

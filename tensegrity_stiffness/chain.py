@@ -106,6 +106,10 @@ def _adjoint(P: FloatArray) -> FloatArray:
     return out
 
 
+#: Public name of :func:`_adjoint`: ``Ad_P`` of (..., 4, 4) poses, for twists [v; w].
+adjoint = _adjoint
+
+
 def _load_transport(B: FloatArray) -> FloatArray:
     """``M(B) = [[0, hat(f)], [hat(f), hat(m)]]`` for (..., 6) wrenches: (..., 6, 6)."""
     out = np.zeros(B.shape[:-1] + (6, 6))
@@ -540,7 +544,11 @@ class JointChain:
                            rest_lengths: Any = None) -> FloatArray:
         """The tip wrench (base) that the last joint balances at ``screws``:
         ``-Ad_{P_N}^-T F_N - w_N`` (less the weight of link N when masses are set)."""
-        state = self.evaluate(screws, rest_lengths)
+        return self.implied_tip_wrench_from_state(self.evaluate(screws, rest_lengths), gravity)
+
+    def implied_tip_wrench_from_state(self, state: ChainState, gravity: ArrayLike | None = None
+                                      ) -> FloatArray:
+        """:meth:`implied_tip_wrench` at an evaluated ``state`` (no second evaluation)."""
         g = self._gravity(gravity)
         AdT_N = _adjoint(state.joint_frames[-1]).T
         W = -np.linalg.solve(AdT_N, state.wrenches[-1])

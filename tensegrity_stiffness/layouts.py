@@ -54,3 +54,23 @@ def matrix_dims(rows: int, cols: int, row_label: str, col_label: str
 def vector_dims(n: int, label: str) -> list[tuple[str, int, int]]:
     """``(label, size, stride)`` of the one dimension of a vector."""
     return [(label, n, n)]
+
+
+# ------------------------------------------------------------------------------------ spines
+#: First dimension of the spine's per-joint arrays (joint-major: joint 1 first).
+JOINTS_LABEL = 'joints'
+#: Tip stiffness K_tip = dW/d(delta) of a spine: rows the tip wrench, cols a small twist of the
+#: tool frame (linear first, as ROS), both in the tool frame (``~/tip_stiffness``) or in the
+#: base frame, wrench about its origin (``~/tip_stiffness_base``).
+TIP_STIFFNESS_LABELS = {
+    frame: ('rows: tip wrench in the ' + frame + ' frame [' + ' '.join(WRENCH_NAMES) + ']',
+            'cols: tip twist in the ' + frame + ' frame [' + ' '.join(TWIST_NAMES)
+            + '] (linear first, as ROS)')
+    for frame in ('tool', 'base')}
+
+
+def stacked_matrix_dims(n: int, rows: int, cols: int, stack_label: str, row_label: str,
+                        col_label: str) -> list[tuple[str, int, int]]:
+    """``(label, size, stride)`` of ``n`` dense row-major (rows, cols) matrices, one after
+    the other (shape (n, rows, cols))."""
+    return [(stack_label, n, n * rows * cols), *matrix_dims(rows, cols, row_label, col_label)]

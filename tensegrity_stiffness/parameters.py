@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.chain import JointChain
 from tensegrity_stiffness.joint import FORCE_LAWS, JointModel
 from tensegrity_stiffness.planar import PlanarMechanism
 
@@ -278,6 +279,148 @@ def joint_node_settings(values: Mapping[str, Any], generation: int = 0) -> Joint
     return JointNodeSettings(
         model=joint_from_values(checked), planar=planar_from_values(checked),
         link1_frame=checked['frames.link1'], link2_frame=checked['frames.link2'],
+        max_array_length=checked['limits.max_array_length'],
+        equilibrium_time_budget=checked['equilibrium.time_budget'],
+        equilibrium_max_iterations=checked['equilibrium.max_iterations'],
+        marker_period=marker_period(checked['markers.max_rate']),
+        generation=generation, values=checked)
+
+
+# ---------------------------------------------------------------------------------- spine_node
+#: The default spine's link offset and tool pose (config/default_spine.yaml): turn the vertebra's
+#: link 2 back upright (rotation by pi about (1, 0, -1)/sqrt 2) and move 55 mm along -y of {2}_i.
+_UPRIGHT = [0.7071067811865476, 0.0, -0.7071067811865476, 0.0]
+_DEFAULT_LINK_OFFSET = [0.0, -0.055, 0.0, *_UPRIGHT]
+_DEFAULT_TOOL = [0.0, 0.0, 0.0, *_UPRIGHT]
+#: Largest number of joints of a spine_node.
+MAX_SPINE_JOINTS = 100
+
+CHAIN_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('chain.n_joints', 'int', 5,
+                  'number of joints N (the joint model repeated, with joint_<i> overrides)',
+                  read_only=True, range=(1, MAX_SPINE_JOINTS)),
+    ParameterSpec('chain.link_offsets', 'double_array', _DEFAULT_LINK_OFFSET,
+                  'pose of {1}_(i+1) in {2}_i, flat [x y z qx qy qz qw] per offset: N - 1 of '
+                  'them, or one for all (empty: identity)'),
+    ParameterSpec('chain.tool', 'double_array', _DEFAULT_TOOL,
+                  'pose of the tool frame in {2}_N, [x y z qx qy qz qw] (empty: identity)'),
+    ParameterSpec('chain.link_masses', 'double_array', None,
+                  'link masses, kg, link i = link 2 of joint i: N values or one for all (empty: '
+                  'massless)'),
+    ParameterSpec('chain.link_coms', 'double_array', None,
+                  'centres of mass, flat [x y z] per link in {2}_i, m, or one for all (empty: '
+                  'the link origins)'),
+    ParameterSpec('chain.gravity', 'double_array', [0.0, -9.81, 0.0],
+                  'gravity in the base frame, m/s^2 (3 values)'),
+)
+
+SPINE_FRAME_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('frames.base', 'string', 'spine_base',
+                  "the base frame ({1} of joint 1): frame_id of the base-frame outputs"),
+    ParameterSpec('frames.tool', 'string', 'spine_tool', 'the tool frame on link N'),
+)
+
+#: The common parameters with the spine's solver budget (a 6N-unknown solve).
+SPINE_COMMON_PARAMETERS: tuple[ParameterSpec, ...] = tuple(
+    ParameterSpec(s.name, s.type, 0.1, s.description, s.read_only, s.range, s.choices)
+    if s.name == 'equilibrium.time_budget' else s for s in COMMON_PARAMETERS)
+
+_JOINT_OVERRIDE_SUFFIXES = tuple(spec.name[len('joint.'):] for spec in JOINT_PARAMETERS)
+
+
+def joint_override_parameters(n_joints: int) -> tuple[ParameterSpec, ...]:
+    """``joint_<i>.<key>`` (i = 1..N) for every key of the joint model: set, it overrides
+    ``joint.<key>`` for joint i (``JointChain.from_dict``); left empty, joint i uses the joint
+    model."""
+    specs = []
+    for i in range(1, n_joints + 1):
+        for spec in JOINT_PARAMETERS:
+            key = spec.name[len('joint.'):]
+            description = f'joint {i}: overrides joint.{key} (empty: joint.{key})'
+            if spec.type == 'string':
+                specs.append(ParameterSpec(f'joint_{i}.{key}', 'string', '', description,
+                                           choices=('', *spec.choices)))
+            else:
+                specs.append(ParameterSpec(f'joint_{i}.{key}', spec.type, None, description))
+    return tuple(specs)
+
+
+def spine_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, ...]:
+    """Every parameter of ``spine_node`` for a spine of ``n_joints``, in declaration order."""
+    return (JOINT_PARAMETERS + joint_override_parameters(n_joints) + CHAIN_PARAMETERS
+            + SPINE_FRAME_PARAMETERS + SPINE_COMMON_PARAMETERS)
+
+
+#: The parameters of ``spine_node`` with the default ``chain.n_joints``.
+SPINE_NODE_PARAMETERS: tuple[ParameterSpec, ...] = spine_node_parameters()
+
+
+def chain_document(values: Mapping[str, Any]) -> dict[str, Any]:
+    """The config document of :meth:`JointChain.from_dict` of a spine's values (overrides left
+    empty are left out)."""
+    n = values['chain.n_joints']
+    document: dict[str, Any] = {
+        'joint': {spec.name[len('joint.'):]: values[spec.name] for spec in JOINT_PARAMETERS},
+        'chain': {spec.name[len('chain.'):]: values[spec.name] for spec in CHAIN_PARAMETERS},
+        'frames': {'base': values['frames.base'], 'tool': values['frames.tool']},
+    }
+    for i in range(1, n + 1):
+        override = {key: values[f'joint_{i}.{key}'] for key in _JOINT_OVERRIDE_SUFFIXES
+                    if values.get(f'joint_{i}.{key}') not in (None, '', [])}
+        if override:
+            document[f'joint_{i}'] = override
+    return document
+
+
+@dataclass(frozen=True)
+class SpineNodeSettings:
+    """Everything one computation of ``spine_node`` needs, swapped as a whole (never mutated):
+    built from a complete set of parameter values by :func:`spine_node_settings`.
+    ``rest_lengths``: per-joint rest lengths set on ``~/rest_lengths`` (None: the models')."""
+
+    chain: JointChain
+    base_frame: str
+    tool_frame: str
+    max_array_length: int
+    equilibrium_time_budget: float
+    equilibrium_max_iterations: int
+    marker_period: float
+    rest_lengths: tuple[Any, ...] | None = None
+    generation: int = 0
+    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def n_joints(self) -> int:
+        return self.chain.n_joints
+
+    @property
+    def n_strings(self) -> list[int]:
+        """String count of every joint."""
+        return [model.n_strings for model in self.chain.joints]
+
+    def current_rest_lengths(self) -> list[Any]:
+        """Every joint's rest lengths now (topic-set or configured)."""
+        if self.rest_lengths is not None:
+            return list(self.rest_lengths)
+        return [model.rest_lengths for model in self.chain.joints]
+
+
+def spine_node_settings(values: Mapping[str, Any], generation: int = 0) -> SpineNodeSettings:
+    """Validate a whole parameter set of ``spine_node`` and build its settings; ValueError
+    names the bad field. Every parameter of :func:`spine_node_parameters` for
+    ``values['chain.n_joints']`` must be in ``values``."""
+    n = by_name(CHAIN_PARAMETERS)['chain.n_joints'].check(values['chain.n_joints'])
+    checked = {spec.name: spec.check(values[spec.name]) for spec in spine_node_parameters(n)}
+    for name in ('frames.base', 'frames.tool'):
+        if not checked[name].strip():
+            raise ValueError(f'{name} must not be empty')
+    chain = JointChain.from_dict(chain_document(checked))
+    longest = max(6 * n, sum(model.n_strings for model in chain.joints))
+    if checked['limits.max_array_length'] < longest:
+        raise ValueError(f'limits.max_array_length = {checked["limits.max_array_length"]} is '
+                         f'below the longest input of this spine ({longest} values)')
+    return SpineNodeSettings(
+        chain=chain, base_frame=checked['frames.base'], tool_frame=checked['frames.tool'],
         max_array_length=checked['limits.max_array_length'],
         equilibrium_time_budget=checked['equilibrium.time_budget'],
         equilibrium_max_iterations=checked['equilibrium.max_iterations'],

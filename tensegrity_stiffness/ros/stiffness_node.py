@@ -30,7 +30,6 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
@@ -48,7 +47,8 @@ from tensegrity_stiffness.ros import joint_services, runner
 from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
-from tensegrity_stiffness.ros.solver_worker import SolverWorker, WorkerDiedError
+from tensegrity_stiffness.ros.solver_worker import WorkerDiedError
+from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
 from tensegrity_stiffness_interfaces.srv import (
     DesignRestLengths,
     PlanarForwardKinematics,
@@ -109,8 +109,8 @@ class StiffnessNode(Node):
         self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._published = 0
         self._messages = msg_tools.JointOutputMessages(tuple(self._settings.model.string_names))
-        self._solver = SolverWorker('equilibrium worker')
-        self._wake = self.create_guard_condition(lambda: None)
+        self._worker = WorkerCalls(self, 'equilibrium worker')
+        self._solver = self._worker.worker
 
         values = self._settings.values
         depth, reliability = values['qos.depth'], values['qos.input_reliability']
@@ -267,26 +267,8 @@ class StiffnessNode(Node):
     # ------------------------------------------------------------------ services
     async def _in_worker(self, fn: Any, args: tuple, kwargs: dict[str, Any],
                          deadline_s: float) -> Any:
-        """``fn(*args, **kwargs)`` computed in the worker process and awaited, so that the
-        executor keeps serving the topics meanwhile; raises the worker's exception, a
-        :class:`WorkerOverrunError` (a TimeoutError) or a :class:`WorkerDiedError`."""
-        done = Future(executor=self.executor)
-        settle_lock = threading.Lock()
-
-        def settle(result: Any = None, error: BaseException | None = None) -> None:
-            with settle_lock:
-                if done.done():
-                    return
-                if error is None:
-                    done.set_result(result)
-                else:  # reported to the caller by `await done`
-                    done.set_exception(error)
-            # The executor polls the awaiting coroutine only when it wakes up: wake it.
-            self._wake.trigger()
-
-        self._solver.submit(fn, args, kwargs, lambda result: settle(result=result),
-                            lambda error: settle(error=error), deadline_s=deadline_s)
-        return await done
+        """``fn(*args, **kwargs)`` awaited from the worker process (:meth:`WorkerCalls.call`)."""
+        return await self._worker.call(fn, args, kwargs, deadline_s)
 
     @guarded_service('~/solve_equilibrium')
     async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
@@ -333,8 +315,7 @@ class StiffnessNode(Node):
         return joint_services.fill_design(response, result)
 
     def _worker_failure(self, kind: str, response: Any, exc: BaseException) -> Any:
-        message = (f'solver overran its budget: {exc}' if isinstance(exc, TimeoutError)
-                   else f'solver failed: {exc}; try again')
+        message = worker_failure_message(exc)
         self.reporter.warn(kind, message, error=True)
         return joint_services.fail(response, message)
 

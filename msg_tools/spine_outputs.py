@@ -1,0 +1,109 @@
+"""The messages of the spine node's per-input outputs (``~/joint_wrenches``,
+``~/joint_stiffness``, ``~/joint_cartesian_stiffness``, ``~/tip_pose``, ``~/tip_wrench``,
+``~/tip_stiffness``, ``~/tip_stiffness_base``) and its markers.
+
+One preallocated message per topic, its layout labelled once from
+:mod:`tensegrity_stiffness.layouts`; per input only the data and the headers are refilled, and
+every array is checked finite as it is set (ValueError: nothing is published yet).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+from visualization_msgs.msg import MarkerArray
+
+from msg_tools.arrays import matrix_to_multiarray, set_multiarray_data
+from msg_tools.geometry import set_wrench, transform_to_pose
+from msg_tools.markers import marker_array
+from tensegrity_stiffness.chain import ChainState, JointChain
+from tensegrity_stiffness.layouts import (
+    CARTESIAN_STIFFNESS_COL_LABEL,
+    JOINTS_LABEL,
+    STIFFNESS_COL_LABEL,
+    STIFFNESS_ROW_LABEL,
+    TIP_STIFFNESS_LABELS,
+    WRENCH_LABEL,
+    matrix_dims,
+    stacked_matrix_dims,
+)
+from tensegrity_stiffness.spine_processing import SpineOutputs
+
+__all__ = ['SpineOutputMessages', 'spine_markers']
+
+
+def _multiarray(dims: list[tuple[str, int, int]]) -> Float64MultiArray:
+    """A zero-filled Float64MultiArray with the layout ``dims`` ((label, size, stride) each)."""
+    layout = MultiArrayLayout(dim=[MultiArrayDimension(label=label, size=size, stride=stride)
+                                   for label, size, stride in dims], data_offset=0)
+    return Float64MultiArray(layout=layout, data=[0.0] * dims[0][2])
+
+
+class SpineOutputMessages:
+    """The seven output messages of a spine of ``n_joints``, refilled per input by
+    :meth:`fill`."""
+
+    def __init__(self, n_joints: int) -> None:
+        self.n_joints = n_joints
+        self.joint_wrenches = _multiarray(matrix_dims(n_joints, 6, JOINTS_LABEL, WRENCH_LABEL))
+        self.joint_stiffness = _multiarray(stacked_matrix_dims(
+            n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL))
+        self.joint_cartesian_stiffness = _multiarray(stacked_matrix_dims(
+            n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, CARTESIAN_STIFFNESS_COL_LABEL))
+        self.tip_pose = PoseStamped()
+        self.tip_wrench = WrenchStamped()
+        self.tip_stiffness = matrix_to_multiarray(np.zeros((6, 6)),
+                                                  *TIP_STIFFNESS_LABELS['tool'])
+        self.tip_stiffness_base = matrix_to_multiarray(np.zeros((6, 6)),
+                                                       *TIP_STIFFNESS_LABELS['base'])
+
+    def fill(self, outputs: SpineOutputs, stamp: Time, base_frame: str) -> None:
+        """Set every message from ``outputs``; ValueError if a value is not finite."""
+        state = outputs.state
+        set_multiarray_data(self.joint_wrenches, state.wrenches)
+        set_multiarray_data(self.joint_stiffness, state.stiffness)
+        set_multiarray_data(self.joint_cartesian_stiffness, state.cartesian_stiffness)
+        set_multiarray_data(self.tip_stiffness, outputs.tip_stiffness_tool)
+        set_multiarray_data(self.tip_stiffness_base, outputs.tip_stiffness_base)
+        self.tip_pose.pose = transform_to_pose(state.tip_transform)
+        set_wrench(self.tip_wrench.wrench, outputs.tip_wrench)
+        for msg in (self.tip_pose, self.tip_wrench):
+            msg.header.stamp = stamp
+            msg.header.frame_id = base_frame
+
+    def messages(self) -> tuple[Any, ...]:
+        """The messages in topic order: joint_wrenches, joint_stiffness,
+        joint_cartesian_stiffness, tip_pose, tip_wrench, tip_stiffness, tip_stiffness_base."""
+        return (self.joint_wrenches, self.joint_stiffness, self.joint_cartesian_stiffness,
+                self.tip_pose, self.tip_wrench, self.tip_stiffness, self.tip_stiffness_base)
+
+
+def _in_base(pose: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return points @ pose[:3, :3].T + pose[:3, 3]
+
+
+def spine_markers(chain: JointChain, state: ChainState, frame_id: str, stamp: Time
+                  ) -> MarkerArray:
+    """The markers of :func:`marker_array` for every joint, in the base frame (namespaces
+    ``joint_<i>/...``): tensions coloured up to the largest saturation tension ``k (lmax - l0)``
+    of all strings (up to the largest tension without a limit)."""
+    saturation = np.concatenate([np.ravel(m.k * m.max_stretch) for m in chain.joints])
+    top = float(np.max(saturation)) if np.all(np.isfinite(saturation)) else None
+    if top is None:
+        taut = np.concatenate([np.asarray(t)[~np.asarray(s)] for t, s in
+                               zip(state.tensions, state.slack, strict=True)])
+        top = float(taut.max()) if taut.size and taut.max() > 0.0 else 1.0
+    markers = []
+    for i, model in enumerate(chain.joints):
+        joint = marker_array(_in_base(state.joint_frames[i], model.link1_nodes),
+                             _in_base(state.link_transforms[i], model.link2_nodes),
+                             model.connections, state.tensions[i], state.slack[i], frame_id,
+                             stamp, max_tension=top)
+        for marker in joint.markers:
+            marker.ns = f'joint_{i + 1}/{marker.ns}'
+        markers += joint.markers
+    return MarkerArray(markers=markers)

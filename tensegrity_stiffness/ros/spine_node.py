@@ -1,0 +1,317 @@
+"""``spine_node``: real-time per-joint and tip stiffness of a tensegrity spine over ROS 2.
+
+A spine is a :class:`~tensegrity_stiffness.chain.JointChain` (conventions, frames and loads in
+:mod:`tensegrity_stiffness.chain`; parameters in :mod:`tensegrity_stiffness.parameters`; topics,
+services and QoS in README.md). Built from the parts of ``stiffness_node``: the parameter binding,
+the reporter and guards, draining subscriptions, the worker process and the runner. Thin layer:
+validate (:mod:`tensegrity_stiffness.spine_processing`), convert (:mod:`msg_tools`), call the
+library, publish all of an input's outputs or none.
+
+Concurrency as in ``stiffness_node``: one single-threaded executor; the equilibrium service is a
+coroutine awaiting the worker process; all configuration is one immutable
+:class:`SpineNodeSettings`, swapped as a whole and read once per callback.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections import deque
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
+
+import msg_tools
+from tensegrity_stiffness.chain import solve_chain_equilibrium
+from tensegrity_stiffness.parameters import (
+    CHAIN_PARAMETERS,
+    SpineNodeSettings,
+    by_name,
+    spine_node_parameters,
+    spine_node_settings,
+)
+from tensegrity_stiffness.ros import runner, spine_services
+from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.parameters import ParameterBinding
+from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
+from tensegrity_stiffness.ros.solver_worker import WorkerDiedError
+from tensegrity_stiffness.ros.stiffness_node import (
+    LATCHED_QOS,
+    SOLVER_GRACE_S,
+    STATS_WINDOW,
+    create_output_publisher,
+    input_qos,
+)
+from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
+from tensegrity_stiffness.spine_processing import (
+    SpineOutputs,
+    joint_health_in_chain,
+    poses_input,
+    rest_lengths_input,
+    screws_input,
+    spine_outputs,
+)
+from tensegrity_stiffness_interfaces.srv import SolveChainEquilibrium
+
+NODE_NAME = 'spine_node'
+#: Output topics in the order of :meth:`msg_tools.SpineOutputMessages.messages`.
+OUTPUT_TOPICS = (
+    (Float64MultiArray, '~/joint_wrenches'), (Float64MultiArray, '~/joint_stiffness'),
+    (Float64MultiArray, '~/joint_cartesian_stiffness'), (PoseStamped, '~/tip_pose'),
+    (WrenchStamped, '~/tip_wrench'), (Float64MultiArray, '~/tip_stiffness'),
+    (Float64MultiArray, '~/tip_stiffness_base'))
+
+
+def _declared_joint_count(node: Node) -> int:
+    """``chain.n_joints`` as the parameter file or overrides set it: the parameter table depends
+    on it (the ``joint_<i>`` overrides), so it is read before the table is declared."""
+    spec = by_name(CHAIN_PARAMETERS)['chain.n_joints']
+    value = node.declare_parameter(spec.name, spec.default).value
+    node.undeclare_parameter(spec.name)  # declared again, with its descriptor, from the table
+    return spec.check(value)
+
+
+class SpineNode(Node):
+    """Publishes per-joint wrenches, K, K_c and the tip pose, implied wrench and stiffness per
+    input; solves the chain's equilibrium as a service."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.reporter = Reporter(self.get_logger())
+        self._state_lock = threading.Lock()
+        n_joints = _declared_joint_count(self)
+        self._binding = ParameterBinding(
+            self, spine_node_parameters(n_joints), spine_node_settings, self._apply_parameters,
+            lambda reason: self.reporter.warn('parameter change', reason))
+        self._settings = spine_node_settings(self._binding.values())
+        self._last_screws: np.ndarray | None = None
+        self._last_stamp = None
+        self._last_outputs: SpineOutputs | None = None
+        self._last_solution: np.ndarray | None = None
+        self._last_marker_time = -math.inf
+        self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
+        self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
+        self._published = 0
+        self._messages = msg_tools.SpineOutputMessages(n_joints)
+        self._worker = WorkerCalls(self, 'chain equilibrium worker')
+
+        values = self._settings.values
+        depth, reliability = values['qos.depth'], values['qos.input_reliability']
+        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                             reliability=ReliabilityPolicy.RELIABLE,
+                             durability=DurabilityPolicy.VOLATILE)
+        self._output_publishers = [create_output_publisher(self, t, topic, out_qos)
+                                   for t, topic in OUTPUT_TOPICS]
+        self._pub_markers = create_output_publisher(self, MarkerArray, '~/markers', out_qos)
+        self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics', 10)
+
+        qos = input_qos(depth, reliability)
+        for msg_type, topic, callback in ((Float64MultiArray, '~/screws', self._on_screws),
+                                          (PoseArray, '~/poses', self._on_poses)):
+            create_draining_subscription(
+                self, msg_type, topic, callback, qos,
+                on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc))
+        self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
+                                 LATCHED_QOS)
+        self.create_service(SolveChainEquilibrium, '~/solve_equilibrium',
+                            self._on_solve_equilibrium,
+                            callback_group=MutuallyExclusiveCallbackGroup())
+        self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
+        chain = self._settings.chain
+        # Warm the worker up (imports, first solve) before the first request needs it.
+        self._worker.worker.submit(solve_chain_equilibrium, (chain, np.zeros(6)),
+                                   {'time_budget': 1.0}, lambda _: None, lambda _: None,
+                                   deadline_s=1.0 + SOLVER_GRACE_S)
+        self.get_logger().info(
+            f'ready: {n_joints} joints, frames {self._settings.base_frame} -> '
+            f'{self._settings.tool_frame}, inputs {reliability} depth {depth}')
+
+    def close(self) -> None:
+        """End the worker process (called by the runner before the node is destroyed)."""
+        self._worker.close()
+
+    # ------------------------------------------------------------------ parameters
+    def _apply_parameters(self, values: dict[str, Any], names: set[str]) -> None:
+        """After a successful set: swap in the new settings, keeping topic rest lengths unless
+        the change sets rest lengths itself."""
+        try:
+            with self._state_lock:
+                old = self._settings
+                settings = spine_node_settings(values, old.generation + 1)
+                if old.rest_lengths is not None and not any(
+                        n.endswith('.rest_lengths') for n in names) and [
+                        r.shape[0] for r in old.rest_lengths] == settings.n_strings:
+                    settings = replace(settings, rest_lengths=old.rest_lengths)
+                self._settings = settings
+        except Exception as exc:  # validated before: only a bug gets here; the old set stays
+            self.reporter.internal_error('parameters', exc)
+            return
+        self.get_logger().info(f'parameters applied: {sorted(names)}')
+        try:  # an exception here would reach the parameter service, and the executor
+            self._republish_last()
+        except Exception as exc:  # the safety net: no callback may end the node
+            self.reporter.internal_error('re-publish', exc)
+
+    # ------------------------------------------------------------------ inputs
+    @guarded('~/screws')
+    def _on_screws(self, msg: Float64MultiArray) -> None:
+        settings = self._settings
+        try:
+            xi = screws_input(msg_tools.multiarray_to_array(
+                msg, max_length=settings.max_array_length), settings.n_joints)
+        except ValueError as exc:
+            self.reporter.reject('~/screws', str(exc))
+            return
+        self._compute_and_publish(settings, xi, None, '~/screws')
+
+    @guarded('~/poses')
+    def _on_poses(self, msg: PoseArray) -> None:
+        settings = self._settings
+        try:
+            last = self._last_screws
+            reference = last if last is not None else np.array(
+                [model.initial_screw for model in settings.chain.joints])
+            xi = poses_input(msg.header.frame_id, msg.poses, settings.base_frame, reference,
+                             msg_tools.pose_to_transform)
+        except ValueError as exc:
+            self.reporter.reject('~/poses', str(exc))
+            return
+        stamp = msg.header.stamp
+        self._compute_and_publish(settings, xi, stamp if stamp.sec or stamp.nanosec else None,
+                                  '~/poses')
+
+    @guarded('~/rest_lengths')
+    def _on_rest_lengths(self, msg: Float64MultiArray) -> None:
+        with self._state_lock:
+            settings = self._settings
+            try:
+                rest = rest_lengths_input(msg_tools.multiarray_to_array(
+                    msg, max_length=settings.max_array_length), settings.chain)
+            except ValueError as exc:
+                self.reporter.reject('~/rest_lengths', str(exc))
+                return
+            self._settings = replace(settings, rest_lengths=rest,
+                                     generation=settings.generation + 1)
+        self._republish_last()
+
+    def _republish_last(self) -> None:
+        with self._state_lock:
+            xi, stamp = self._last_screws, self._last_stamp
+        if xi is not None:
+            self._compute_and_publish(self._settings, xi, stamp, 're-publish')
+
+    # ------------------------------------------------------------------ outputs
+    def _compute_and_publish(self, settings: SpineNodeSettings, xi: np.ndarray, stamp: Any,
+                             source: str) -> None:
+        """Build and check every output, then publish them all (an input gets all of its
+        outputs or none)."""
+        start = time.perf_counter()
+        messages = self._messages
+        try:
+            outputs = spine_outputs(settings.chain, xi, settings.rest_lengths)
+            if stamp is None:
+                stamp = self.get_clock().now().to_msg()
+            messages.fill(outputs, stamp, settings.base_frame)
+            now = time.monotonic()
+            markers = None
+            if settings.marker_period == 0.0 or \
+                    now - self._last_marker_time >= settings.marker_period:
+                markers = msg_tools.spine_markers(settings.chain, outputs.state,
+                                                  settings.base_frame, stamp)
+        except ValueError as exc:
+            self.reporter.reject(source, str(exc))
+            return
+        for publisher, msg in zip(self._output_publishers, messages.messages(), strict=True):
+            publisher.publish(msg)
+        if markers is not None:
+            self._last_marker_time = now
+            self._pub_markers.publish(markers)
+        with self._state_lock:
+            self._last_screws, self._last_stamp = xi, stamp
+            self._last_outputs = outputs
+        self._published += 1
+        self._input_times.append(now)
+        self._compute_times.append(time.perf_counter() - start)
+
+    # ------------------------------------------------------------------ services
+    @guarded_service('~/solve_equilibrium')
+    async def _on_solve_equilibrium(self, request: SolveChainEquilibrium.Request,
+                                    response: SolveChainEquilibrium.Response
+                                    ) -> SolveChainEquilibrium.Response:
+        """Validated here, solved in the worker process within ``equilibrium.time_budget``."""
+        settings = self._settings
+        try:
+            job = spine_services.chain_equilibrium_job(request, settings, self._last_solution)
+        except ValueError as exc:
+            self.reporter.reject('~/solve_equilibrium', str(exc))
+            return spine_services.fail(response, f'invalid request: {exc}')
+        try:
+            result = await self._worker.call(solve_chain_equilibrium,
+                                             (settings.chain, *job.args()), job.kwargs(),
+                                             job.time_budget + SOLVER_GRACE_S)
+        except ValueError as exc:  # a request the library refuses
+            self.reporter.reject('~/solve_equilibrium', str(exc))
+            return spine_services.fail(response, f'invalid request: {exc}')
+        except (TimeoutError, WorkerDiedError) as exc:
+            message = worker_failure_message(exc)
+            self.reporter.warn('~/solve_equilibrium', message, error=True)
+            return spine_services.fail(response, message)
+        if spine_services.fill_chain_equilibrium(response, result):
+            self._last_solution = result.screws
+        return response
+
+    # ------------------------------------------------------------------ diagnostics
+    @guarded('diagnostics')
+    def _publish_diagnostics(self) -> None:
+        settings = self._settings
+        with self._state_lock:
+            outputs = self._last_outputs
+        computes = list(self._compute_times)
+        now = time.monotonic()
+        values: list[tuple[str, Any]] = [
+            ('joints', settings.n_joints),
+            ('input rate [Hz]', float(sum(1 for t in self._input_times if now - t <= 1.0))),
+            ('outputs published', self._published),
+            ('compute time mean [us]', 1e6 * float(np.mean(computes)) if computes else 0.0),
+            ('compute time max [us]', 1e6 * float(np.max(computes)) if computes else 0.0),
+            ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
+            ('parameter generation', settings.generation),
+            ('equilibrium worker restarts', self._worker.worker.restarts),
+        ]
+        name = self.get_name()
+        statuses = []
+        problems = []
+        if outputs is not None:
+            for i, model in enumerate(settings.chain.joints):
+                health = joint_health_in_chain(outputs.state, i, model.string_names)
+                if health.problems:
+                    problems.append(f'joint {i + 1}: ' + ', '.join(health.problems))
+                statuses.append(msg_tools.diagnostic_status(
+                    f'{name}: joint {i + 1}', 'WARN' if health.problems else 'OK',
+                    ', '.join(health.problems) or 'all strings taut, stable', health.values(),
+                    hardware_id=settings.base_frame))
+        message = ('no input yet' if outputs is None else
+                   '; '.join(problems) or 'every joint: all strings taut, stable')
+        statuses.insert(0, msg_tools.diagnostic_status(
+            f'{name}: chain', 'WARN' if problems else 'OK', message, values,
+            hardware_id=settings.base_frame))
+        self._pub_diagnostics.publish(msg_tools.diagnostic_array(
+            statuses, self.get_clock().now().to_msg()))
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run tensegrity_stiffness spine_node``."""
+    runner.run(SpineNode, args)
+
+
+if __name__ == '__main__':
+    main()
