@@ -50,11 +50,11 @@ DEEP = reliable_qos(2000)
 LATCHED = reliable_qos(1, DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def node_executable() -> Path:
-    """``<prefix>/lib/tensegrity_stiffness/stiffness_node`` found through the ament index."""
+def node_executable(executable: str = EXECUTABLE) -> Path:
+    """``<prefix>/lib/tensegrity_stiffness/<executable>`` found through the ament index."""
     from ament_index_python.packages import get_package_prefix
 
-    path = Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / EXECUTABLE
+    path = Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / executable
     if not os.access(path, os.X_OK):
         raise FileNotFoundError(f'{path} is not an executable')
     return path
@@ -104,21 +104,23 @@ def unique_namespace(prefix: str = 'test') -> str:
 
 class NodeProcess:
     """The node as a child process (environment passed through unchanged, as the wheels'
-    bootstrapper needs), with its output in a log file."""
+    bootstrapper needs), with its output in a log file; ``executable``: which of the package's
+    nodes (``stiffness_node`` by default, ``spine_node``)."""
 
     _starts = itertools.count()
 
     def __init__(self, namespace: str, params_file: Path | None = None,
                  extra_args: Iterable[str] = (), log_dir: Path | None = None,
-                 new_session: bool = False) -> None:
+                 new_session: bool = False, executable: str = EXECUTABLE) -> None:
         self.namespace = namespace
+        self.executable = executable
         params_file = params_file or REPO / 'config' / 'default_joint.yaml'
         log_dir = log_dir or Path(os.environ.get('TMPDIR', '/tmp'))
         # One log per start (a restart in the same namespace keeps the first one).
-        self.log_path = log_dir / (f'stiffness_node{namespace.replace("/", "_")}'
+        self.log_path = log_dir / (f'{executable}{namespace.replace("/", "_")}'
                                    f'_{os.getpid()}_{next(NodeProcess._starts)}.log')
         self._log = self.log_path.open('w')
-        args = [str(node_executable()), '--ros-args', '--params-file', str(params_file),
+        args = [str(node_executable(executable)), '--ros-args', '--params-file', str(params_file),
                 '-r', f'__ns:={namespace}', *extra_args]
         # new_session: the node leads a process group of its own (as under a supervisor).
         self.process = subprocess.Popen(args, stdout=self._log, stderr=subprocess.STDOUT,
