@@ -22,6 +22,7 @@ import pytest
 PACKAGE = 'tensegrity_stiffness'
 INTERFACES = 'tensegrity_stiffness_interfaces'
 EXECUTABLE = 'stiffness_node'
+SPINE_EXECUTABLE = 'spine_node'
 ENV_REQUIRED = bool(os.environ.get('TENSEGRITY_ENV_SOURCED'))
 
 
@@ -68,6 +69,13 @@ def test_executable_where_ros2_run_looks(prefix: Path) -> None:
     exe = prefix / 'lib' / PACKAGE / EXECUTABLE
     assert exe.is_file(), f'{exe} missing'
     assert os.access(exe, os.X_OK), f'{exe} is not executable'
+
+
+def test_spine_node_executable_where_ros2_run_looks(prefix: Path) -> None:
+    exe = prefix / 'lib' / PACKAGE / SPINE_EXECUTABLE
+    assert exe.is_file(), f'{exe} missing'
+    assert os.access(exe, os.X_OK), f'{exe} is not executable'
+    assert (prefix / 'share' / PACKAGE / 'config' / 'default_spine.yaml').is_file()
 
 
 def test_package_xml_and_marker_installed(prefix: Path) -> None:
@@ -117,6 +125,14 @@ EXPECTED_FIELDS = {
         {'success': 'boolean', 'message': 'string', 'rest_lengths': 'sequence<double>',
          'tensions': 'sequence<double>', 'cartesian_stiffness': 'double[36]',
          'stiffness': 'double[36]', 'stiffness_error': 'double', 'stable': 'boolean'},
+    ),
+    'SolveChainEquilibrium': (
+        {'tip_wrench': 'geometry_msgs/Wrench', 'use_gravity': 'boolean',
+         'rest_lengths': 'sequence<double>', 'initial_screws': 'sequence<double>'},
+        {'success': 'boolean', 'message': 'string', 'screws': 'sequence<double>',
+         'tip_pose': 'geometry_msgs/Pose', 'tip_stiffness': 'double[36]',
+         'tip_stiffness_base': 'double[36]', 'joint_wrenches': 'sequence<double>',
+         'residual': 'double', 'iterations': 'int32', 'stable': 'boolean'},
     ),
     'PlanarInverseKinematics': (
         {'x': 'double', 'y': 'double'},

@@ -1,0 +1,179 @@
+#!/usr/bin/env python3
+"""spine_node latency benchmark (two processes), run by hand after ``source scripts/env.sh``:
+
+    python bench/bench_spine_latency.py [--rate 1000] [--seconds 10] [--joints 5 10] [--calls 50]
+
+For each joint count the installed ``spine_node`` runs as its own process on the default spine
+(``config/default_spine.yaml``, ``chain.n_joints`` overridden). This process publishes screws on
+``~/screws`` at ``--rate`` Hz for ``--seconds``; a controller-like client subscribes to
+``~/tip_stiffness`` and, per message, forms the tip's restoring wrench ``-K e`` for a small
+error ``e`` (as an impedance controller would). The latency of a screw is the time until its
+``~/tip_stiffness`` arrives (outputs come in input order over reliable QoS; each is matched to
+its input by value against the library, so a drop cannot shift the pairing). Then the round trip
+of ``~/solve_equilibrium`` for the first joint count (random moderate tip wrenches).
+Targets (issue 14, 5 joints): median <= 1.5 ms, p99 <= 5 ms, 0 drops; service median <= 30 ms.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gc
+import os
+import statistics
+import sys
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / 'test'))
+sys.path.insert(0, str(ROOT))
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ.setdefault('ROS_DOMAIN_ID', '231')  # Fast DDS takes domain ids up to 232
+
+import numpy as np  # noqa: E402
+from ros_harness import NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+
+import msg_tools  # noqa: E402
+from tensegrity_stiffness import parameters  # noqa: E402
+from tensegrity_stiffness.spine_processing import spine_outputs  # noqa: E402
+from tensegrity_stiffness_interfaces.srv import SolveChainEquilibrium  # noqa: E402
+
+CONFIG = ROOT / 'config' / 'default_spine.yaml'
+#: Seconds between the node being reachable and the start of the stream (the worker's warm-up).
+STARTUP_SETTLE_S = 3.0
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def summary(name: str, seconds: list[float]) -> str:
+    ms = [s * 1e3 for s in seconds]
+    return (f'{name:<34} n={len(ms):>6}  median {statistics.median(ms):7.3f} ms  '
+            f'p99 {percentile(ms, 0.99):7.3f} ms  max {max(ms):8.3f} ms')
+
+
+class Controller:
+    """The client's ``~/tip_stiffness`` callback: keeps the message and its arrival time and
+    computes the restoring wrench ``-K e`` of a fixed small tip error."""
+
+    def __init__(self) -> None:
+        self.messages: list[np.ndarray] = []
+        self.times: list[float] = []
+        self.error = np.array([1e-4, -2e-4, 1e-4, 1e-3, 0.0, -1e-3])
+        self.command = np.zeros(6)
+        self._lock = threading.Lock()
+
+    def __call__(self, msg: Float64MultiArray) -> None:
+        now = time.perf_counter()
+        K = np.frombuffer(msg.data, dtype=np.float64).reshape(6, 6) if isinstance(
+            msg.data, memoryview) else np.asarray(msg.data, dtype=np.float64).reshape(6, 6)
+        self.command = -K @ self.error
+        with self._lock:
+            self.messages.append(K.ravel().copy())
+            self.times.append(now)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self.messages)
+
+
+def settings_for(n_joints: int) -> parameters.SpineNodeSettings:
+    values = parameters.values_from_config(CONFIG, parameters.spine_node_parameters(n_joints))
+    values['chain.n_joints'] = n_joints
+    return parameters.spine_node_settings(values)
+
+
+def stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float,
+           rng: np.random.Generator) -> tuple[list[float], int, int]:
+    """Publish screws at ``rate`` for ``seconds``; returns (latencies, sent, drops)."""
+    chain = settings_for(n_joints).chain
+    controller = Controller()
+    ros.subscribe_callback(Float64MultiArray, f'{base}/tip_stiffness', controller)
+    pub = ros.publisher(Float64MultiArray, f'{base}/screws')
+    ros.wait_for_subscribers(pub)
+    ros.wait_for_publishers(f'{base}/tip_stiffness')
+    time.sleep(STARTUP_SETTLE_S)
+    n = int(rate * seconds)
+    center = chain.unloaded_screws()
+    screws = center + rng.normal(scale=[0.02] * 3 + [0.0005] * 3, size=(n, n_joints, 6))
+    messages = [Float64MultiArray(data=x.ravel().tolist()) for x in screws]
+    sent_at = np.empty(n)
+    period = 1.0 / rate
+    start = time.perf_counter()
+    for k in range(n):
+        sleep_until(start + k * period)
+        sent_at[k] = time.perf_counter()
+        pub.publish(messages[k])
+    deadline = time.monotonic() + 5.0
+    while len(controller) < n and time.monotonic() < deadline:
+        time.sleep(0.05)
+    latencies = []
+    k = 0
+    for K, arrived in zip(list(controller.messages), list(controller.times), strict=True):
+        while k < n and not np.allclose(
+                K, spine_outputs(chain, screws[k]).tip_stiffness_tool.ravel(), rtol=1e-12,
+                atol=1e-12):
+            k += 1
+        if k == n:
+            raise AssertionError('an output matches no input')
+        latencies.append(arrived - sent_at[k])
+        k += 1
+    return latencies, n, n - len(latencies)
+
+
+def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Generator
+                        ) -> tuple[list[float], int]:
+    client = ros.client(SolveChainEquilibrium, f'{base}/solve_equilibrium')
+    times, failures = [], 0
+    for _ in range(calls):
+        W = np.r_[rng.normal(scale=0.03, size=3), rng.normal(scale=0.0006, size=3)]
+        request = SolveChainEquilibrium.Request(tip_wrench=msg_tools.wrench_to_msg(W))
+        start = time.perf_counter()
+        response = ros.call(client, request, timeout=30.0)
+        times.append(time.perf_counter() - start)
+        failures += not response.success
+    return times, failures
+
+
+def main() -> None:
+    sys.setswitchinterval(2e-4)  # as the node: the GIL changes hands often
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rate', type=float, default=1000.0, help='screw rate, Hz')
+    parser.add_argument('--seconds', type=float, default=10.0, help='stream duration, s')
+    parser.add_argument('--joints', type=int, nargs='+', default=[5, 10], help='joint counts')
+    parser.add_argument('--calls', type=int, default=50,
+                        help='service calls (first joint count; 0: none)')
+    args = parser.parse_args()
+    rng = np.random.default_rng(0)
+    print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}, load average '
+          f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')
+    for index, n_joints in enumerate(args.joints):
+        ns = unique_namespace('bench_spine')
+        proc = NodeProcess(ns, CONFIG, extra_args=['-p', f'chain.n_joints:={n_joints}'],
+                           executable='spine_node')
+        ros = RosClient('bench_spine')
+        gc.collect()
+        gc.freeze()
+        base = f'{ns}/spine_node'
+        try:
+            latencies, sent, drops = stream(ros, base, n_joints, args.rate, args.seconds, rng)
+            print(f'{n_joints} joints: screws -> tip_stiffness at {args.rate:.0f} Hz for '
+                  f'{args.seconds:.0f} s: sent {sent}, drops {drops}')
+            print(summary('  latency', latencies))
+            if index == 0 and args.calls:
+                times, failures = service_round_trips(ros, base, args.calls, rng)
+                print(summary(f'  solve_equilibrium (N = {n_joints})', times)
+                      + f'  failed {failures}')
+        finally:
+            ros.close()
+            code = proc.stop()
+            if code != 0:
+                print(f'node exited with {code}:\n{proc.log()}')
+
+
+if __name__ == '__main__':
+    main()
