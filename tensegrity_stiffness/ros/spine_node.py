@@ -223,8 +223,10 @@ class SpineNode(Node):
             messages.fill(outputs, stamp, settings.base_frame)
             now = time.monotonic()
             markers = None
-            if settings.marker_period == 0.0 or \
-                    now - self._last_marker_time >= settings.marker_period:
+            # The whole spine's markers take milliseconds: built only for a subscriber.
+            if (settings.marker_period == 0.0 or
+                    now - self._last_marker_time >= settings.marker_period) and \
+                    self._pub_markers.get_subscription_count():
                 markers = msg_tools.spine_markers(settings.chain, outputs.state,
                                                   settings.base_frame, stamp)
         except ValueError as exc:
