@@ -188,6 +188,9 @@ COMMON_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'highest ~/markers rate, Hz (0: one per input)', range=(0.0, 10_000.0)),
     ParameterSpec('diagnostics.period', 'double', 1.0, '/diagnostics period, s',
                   read_only=True, range=(0.01, 60.0)),
+    ParameterSpec('realtime.fast_lane', 'bool', True,
+                  'serve the streamed inputs on a thread of their own (a lean wait-set loop) '
+                  'instead of the executor', read_only=True),
 )
 
 #: Every parameter of ``stiffness_node``, in declaration order.
