@@ -26,9 +26,10 @@ from __future__ import annotations
 import csv
 import shutil
 import time
-from collections import Counter
+from collections import Counter, defaultdict
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from io import BytesIO
 from pathlib import Path
 from typing import Any
 
@@ -675,6 +676,22 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     return summary
 
 
+def _mcap_parts() -> bool:
+    """Whether the installed rosbags' ``McapWriter`` has the parts :class:`_BlockWriter`
+    extends (else it writes message by message)."""
+    try:
+        from rosbags.rosbag2 import storage_mcap as m
+    except ImportError:
+        return False
+    names = ('write_uint16', 'write_uint32', 'write_uint64', 'write_string', 'write_record',
+             'PendingChunk', 'McapWriter')
+    return all(hasattr(m, name) for name in names) and all(
+        hasattr(m.McapWriter, name) for name in ('close_chunk', 'write', 'close'))
+
+
+_MCAP_PARTS_CHECKED = _mcap_parts()
+
+
 class _BlockWriter:
     """Writes blocks of messages (``rows[k]`` (N, bytes) on ``connections[k]``, the k messages
     of input i at ``log_times[i]``, in that order) to a rosbags ``Writer``: the records rosbags
@@ -696,8 +713,10 @@ class _BlockWriter:
 
         self.writer = writer
         storage = writer.storage
-        if type(storage) is McapWriter and all(
-                hasattr(storage, name) for name in ('chunk', 'close_chunk', 'channel_stats')):
+        self._index: dict[int, list[tuple[NDArray[np.int64], NDArray[np.int64]]]] = {}
+        if type(storage) is McapWriter and _MCAP_PARTS_CHECKED:
+            # Only this class writes messages to the bag: its index replaces chunk.msgs.
+            storage.close_chunk = self._close_mcap_chunk
             self._write = self._mcap
         elif type(storage) is Sqlite3Writer and hasattr(storage, 'cursor'):
             self._write = self._sqlite3
@@ -731,7 +750,7 @@ class _BlockWriter:
 
     def _mcap(self, connections: Sequence[Any], log_times: NDArray[np.int64],
               rows: Sequence[NDArray[np.uint8]]) -> None:
-        n, head = len(log_times), self._RECORD_HEAD
+        n, k, head = len(log_times), len(connections), self._RECORD_HEAD
         sizes = [head + block.shape[1] for block in rows]
         records = np.empty((n, sum(sizes)), dtype=np.uint8)
         at = 0
@@ -746,32 +765,84 @@ class _BlockWriter:
             record[:, 23:31] = stamps
             record[:, head:] = block
             at += size
-        ends = np.cumsum(np.tile(sizes, n))  # end of each message in the block, in order
-        cids = [c.id for c in connections] * n
-        times = np.repeat(log_times, len(connections)).tolist()
+        flat_sizes = np.tile(np.array(sizes, dtype=np.int64), n)
+        ends = np.cumsum(flat_sizes)  # end of each message in the block, in write order
+        starts = ends - flat_sizes
+        which = np.tile(np.arange(k), n)  # connection of each message
+        times = np.repeat(log_times, k)
         flat = records.reshape(-1)
         storage, first = self.writer.storage, 0
         while first < len(ends):
             chunk = storage.chunk
-            start = chunk.bio.tell()
-            base = int(ends[first - 1]) if first else 0
+            start, base = chunk.bio.tell(), int(starts[first])
             # rosbags closes the chunk after the first message that takes it past the limit
             past = np.flatnonzero(ends[first:] - base + start > self._MCAP_CHUNK_LIMIT)
             last = first + int(past[0]) if past.size else len(ends) - 1
+            seg = slice(first, last + 1)
             chunk.bio.write(flat[base:int(ends[last])].tobytes())
-            offsets = (np.concatenate(([base], ends[first:last])) - base + start).tolist()
-            for j in range(first, last + 1):
-                chunk.msgs[cids[j]].append((times[j], offsets[j - first]))
-            t_lo, t_hi = min(times[first:last + 1]), max(times[first:last + 1])
+            offsets, seg_times, seg_which = starts[seg] - base + start, times[seg], which[seg]
+            for r in range(k):  # in the order of first appearance, as chunk.msgs fills
+                j = (int(seg_which[0]) + r) % k
+                connection, chosen = connections[j], seg_which == j
+                if chosen.any():
+                    self._index.setdefault(connection.id, []).append(
+                        (seg_times[chosen], offsets[chosen]))
+                    storage.channel_stats[connection.id] += int(chosen.sum())
+            t_lo, t_hi = int(seg_times.min()), int(seg_times.max())
             chunk.message_start_time = min(t_lo, chunk.message_start_time)
             chunk.message_end_time = max(t_hi, chunk.message_end_time)
             storage.message_start_time = min(t_lo, storage.message_start_time)
             storage.message_end_time = max(t_hi, storage.message_end_time)
-            for connection in connections:
-                storage.channel_stats[connection.id] += cids[first:last + 1].count(connection.id)
             if past.size:
                 storage.close_chunk()
             first = last + 1
+
+    def _close_mcap_chunk(self) -> None:
+        """rosbags' ``McapWriter.close_chunk`` (chunk record, message indexes, chunk index)
+        with the message indexes of :meth:`_mcap`'s blocks written as arrays."""
+        from rosbags.rosbag2 import storage_mcap as m
+
+        storage = self.writer.storage
+        chunk = storage.chunk
+        rec = BytesIO()
+        m.write_uint64(rec, chunk.message_start_time)
+        m.write_uint64(rec, chunk.message_end_time)
+        m.write_uint64(rec, chunk.bio.tell())
+        m.write_uint32(rec, 0)
+        compressed = storage.compressor(chunk.bio.getvalue())
+        m.write_string(rec, storage.compression)
+        m.write_uint64(rec, len(compressed))
+        rec.write(compressed)
+        chunk_start = storage.bio.tell()
+        m.write_record(storage.bio, 0x06, rec)
+        chunk_end = storage.bio.tell()
+        offsets: list[tuple[int, int]] = []
+        for cid, parts in self._index.items():
+            offsets.append((cid, storage.bio.tell()))
+            entries = np.empty((sum(len(t) for t, _ in parts), 2), dtype='<u8')
+            entries[:, 0] = np.concatenate([t for t, _ in parts])
+            entries[:, 1] = np.concatenate([o for _, o in parts])
+            rec = BytesIO()
+            m.write_uint16(rec, cid)
+            m.write_uint32(rec, entries.nbytes)
+            rec.write(entries.tobytes())
+            m.write_record(storage.bio, 0x07, rec)
+        self._index = {}
+        rec = BytesIO()
+        m.write_uint64(rec, chunk.message_start_time)
+        m.write_uint64(rec, chunk.message_end_time)
+        m.write_uint64(rec, chunk_start)
+        m.write_uint64(rec, chunk_end - chunk_start)
+        m.write_uint32(rec, len(offsets) * 10)
+        for cid, offset in offsets:
+            m.write_uint16(rec, cid)
+            m.write_uint64(rec, offset)
+        m.write_uint64(rec, storage.bio.tell() - chunk_end)
+        m.write_string(rec, storage.compression)
+        m.write_uint64(rec, len(compressed))
+        m.write_uint64(rec, chunk.bio.tell())
+        storage.chunks.append(rec)
+        storage.chunk = m.PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
 
 
 def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, str]],
