@@ -27,7 +27,7 @@ import csv
 import shutil
 import time
 from collections import Counter, defaultdict
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
@@ -883,7 +883,9 @@ def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, st
     done = 0
     screw_raw = processor.screw_raw
     screw_topic = f'{prefix}/screw'
-    for connection, log_time, raw in _messages(reader, connections):
+    # rosbags yields each storage file in log-time order; the files of a split bag follow
+    # each other in time.
+    for connection, log_time, raw in reader.messages(connections=connections):
         done += 1
         topic = connection.topic
         if topic == screw_topic and connection.msgtype == FLOAT64_MULTIARRAY:
@@ -916,8 +918,3 @@ def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, st
     summary.rejection_examples = dict(processor.examples)
     return summary
 
-
-def _messages(reader: Any, connections: list[Any]) -> Iterator[tuple[Any, int, bytes]]:
-    """The messages of ``connections`` in log-time order (rosbags yields each storage file in
-    log-time order; the files of a split bag follow each other in time)."""
-    yield from reader.messages(connections=connections)
