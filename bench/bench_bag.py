@@ -8,10 +8,10 @@ unloaded equilibrium) to a temporary folder, then measures side by side in one r
 * its parts, with the command's own pieces: reading and decoding (rosbags ``Reader.messages``,
   plain screws decoded in blocks with ``plain_screw_values`` and checked with
   ``processing.screw_inputs``); the library (``processing.joint_outputs_batch`` and
-  ``finite_rows`` in the command's chunks); writing (the output templates' rows and the block
+  ``finite_rows`` in the command's chunks, OpenBLAS on one thread as in the command); writing (the output templates' rows and the block
   writer, five messages per input); and, for comparison, the per-message paths they replace
   (``deserialize_cdr`` + ``msg_tools.multiarray_to_array`` per message, five ``Writer.write``
-  per input).
+  per input), and the library with OpenBLAS's default thread count.
 """
 
 from __future__ import annotations
@@ -70,13 +70,21 @@ def main() -> None:
                 raw, bag.FLOAT64_MULTIARRAY), expected_length=6, max_length=1024)
         decode_each = time.perf_counter() - start
 
+        def evaluate_all() -> list[processing.JointOutputs]:
+            outputs = []
+            for k in range(0, n, chunk):
+                out = processing.joint_outputs_batch(settings.model, screws[k:k + chunk])
+                assert processing.finite_rows(out).all()
+                outputs.append(out)
+            return outputs
+
         start = time.perf_counter()
-        outputs = []
-        for k in range(0, n, chunk):
-            out = processing.joint_outputs_batch(settings.model, screws[k:k + chunk])
-            assert processing.finite_rows(out).all()
-            outputs.append(out)
+        with bag.single_threaded_blas():
+            outputs = evaluate_all()
         library = time.perf_counter() - start
+        start = time.perf_counter()
+        evaluate_all()
+        library_threads = time.perf_counter() - start
 
         typestore = bag._typestore()
         messages = bag.output_messages(typestore, settings.model.string_names,
@@ -125,8 +133,9 @@ def main() -> None:
     rest = end_to_end - sum(seconds for _, seconds in parts)
     print(f'{"rest (dispatch)":<19}: {"":9}           ({1e6 * rest / n:5.1f} us per input, '
           f'{100 * rest / end_to_end:3.0f}% of end to end)')
-    print('per-message paths replaced (for comparison):')
-    for name, seconds in (('decode each', decode_each), ('5 writes each', write_each)):
+    print('per-message paths replaced, default BLAS threads (for comparison):')
+    for name, seconds in (('decode each', decode_each), ('5 writes each', write_each),
+                          ('library, BLAS thr.', library_threads)):
         print(f'{name:<19}: {n / seconds:9.0f} inputs/s  ({1e6 * seconds / n:5.1f} us per '
               f'input)')
 

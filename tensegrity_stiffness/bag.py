@@ -27,7 +27,8 @@ import csv
 import shutil
 import time
 from collections import Counter, defaultdict
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from io import BytesIO
 from pathlib import Path
@@ -103,6 +104,58 @@ def node_settings(path: str | Path | None = None) -> JointNodeSettings:
         text = str(exc)
         raise BagError(text if path is None or str(path) in text else f'config {path}: {text}'
                        ) from None
+
+
+# ------------------------------------------------------------------------------ BLAS threads
+#: (get, set) thread-count functions of the OpenBLAS builds numpy and scipy ship, by symbol.
+_OPENBLAS_THREAD_SYMBOLS = (
+    ('scipy_openblas_get_num_threads64_', 'scipy_openblas_set_num_threads64_'),
+    ('scipy_openblas_get_num_threads', 'scipy_openblas_set_num_threads'),
+    ('openblas_get_num_threads64_', 'openblas_set_num_threads64_'),
+    ('openblas_get_num_threads', 'openblas_set_num_threads'),
+)
+
+
+def _loaded_openblas() -> list[tuple[Any, Any]]:
+    """(get, set) thread-count functions of every OpenBLAS library loaded in this process
+    (Linux: from /proc/self/maps; elsewhere none)."""
+    import ctypes
+
+    try:
+        with open('/proc/self/maps', encoding='utf-8') as maps:
+            paths = {line.split()[-1] for line in maps if 'openblas' in line.lower()}
+    except OSError:
+        return []
+    found = []
+    for path in sorted(p for p in paths if p.startswith('/')):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for get_name, set_name in _OPENBLAS_THREAD_SYMBOLS:
+            get, put = getattr(lib, get_name, None), getattr(lib, set_name, None)
+            if get is not None and put is not None:
+                get.restype, put.argtypes = ctypes.c_int, [ctypes.c_int]
+                found.append((get, put))
+                break
+    return found
+
+
+@contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """OpenBLAS on one thread inside the block (restored after). The batched evaluation's
+    GEMMs (chunks of 512 rows) are large enough for OpenBLAS to start its threads, whose
+    busy waiting on a shared two-core machine costs more than it saves; the bag command runs
+    one process that is already busy. No effect without a loaded OpenBLAS."""
+    libraries = _loaded_openblas()
+    before = [get() for get, _ in libraries]
+    for _, put in libraries:
+        put(1)
+    try:
+        yield
+    finally:
+        for (_, put), n in zip(libraries, before, strict=True):
+            put(n)
 
 
 # ------------------------------------------------------------------------------ rejections
@@ -658,8 +711,10 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
         csv_sink = None
         try:
             csv_sink = _CsvSink(csv_file, settings.model.string_names) if csv_file else None
-            summary = _run(reader, connections, wanted, writer, typestore, settings, outputs,
-                           spec, prefix, csv_sink, summary, total, progress, chunk_size)
+            with single_threaded_blas():
+                summary = _run(reader, connections, wanted, writer, typestore, settings,
+                               outputs, spec, prefix, csv_sink, summary, total, progress,
+                               chunk_size)
         finally:
             writer.close()
             if csv_sink is not None:
