@@ -7,18 +7,23 @@ rosbag2 with the node's five array outputs (``wrench``, ``stiffness``, ``cartesi
 (:mod:`tensegrity_stiffness.layouts`) and frame ids as the node, one of each per answered input,
 written at the log time of the input it answers.
 
-The node's behaviour, input by input: inputs are decoded with the node's :mod:`msg_tools`
-functions (they read messages by attribute, so rosbags' messages do as well as rclpy's) and
-validated as the node validates them; a bad input is skipped and counted by kind. A pose is
-turned into a screw on the branch nearest the last answered screw (the config's initial screw
-before the first). New rest lengths apply from their log time on and re-publish the last answer,
-written at the log time of the rest-lengths message. Header stamps: a pose's stamp when it is
-non-zero; where the node stamps the time of computation (screws, zero-stamped poses) the input's
-log time; a re-publish keeps the stamp of the answer it repeats, as the node does.
+The node's behaviour, input by input, with the node's functions: inputs are decoded with
+:mod:`msg_tools` (it reads messages by attribute, so rosbags' messages do as well as rclpy's),
+checked and computed with :mod:`tensegrity_stiffness.processing`, configured from the node's
+parameter table (:mod:`tensegrity_stiffness.parameters`); a bad input is skipped and counted by
+kind, with the node's text as the example. A pose is turned into a screw on the branch nearest
+the last answered screw (the config's initial screw before the first). New rest lengths apply
+from their log time on and re-publish the last answer, written at the log time of the
+rest-lengths message. Header stamps: a pose's stamp when it is non-zero; where the node stamps
+the time of computation (screws, zero-stamped poses) the input's log time; a re-publish keeps
+the stamp of the answer it repeats, as the node does.
 
-Speed: answers are computed in chunks with one batched :meth:`JointModel.evaluate` call; an
-output message is a serialized template (layout, labels, frame id; built once with rosbags)
-whose payload bytes are replaced, so no message is serialized per answer.
+Speed: answers are computed in chunks with one batched evaluation
+(:func:`processing.joint_outputs_batch`, OpenBLAS on one thread); a screw of the plain layout
+is decoded with its chunk in one ``frombuffer``; an output message is a serialized template
+(layout, labels, frame id; built once with rosbags) whose payload bytes are replaced, and a
+chunk's messages are written as one block (:class:`_BlockWriter`: the bytes rosbags' writer
+writes, assembled with numpy).
 """
 
 from __future__ import annotations
@@ -248,6 +253,11 @@ class StiffnessProcessor:
         self.model = settings.model
         self.emit = emit
         self.chunk_size = chunk_size
+        if deserialize is None:
+            store = _typestore()
+
+            def deserialize(raw: bytes) -> Any:
+                return store.deserialize_cdr(raw, FLOAT64_MULTIARRAY)
         self.deserialize = deserialize
         self.rejected: Counter[str] = Counter()
         self.examples: dict[str, str] = {}
