@@ -223,13 +223,14 @@ def flatten(section: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
 
 def values_from_config(path: Any, table: Iterable[ParameterSpec]) -> dict[str, Any]:
     """The table's defaults overridden by the parameters of a config file (a ROS parameter file
-    or a plain config of the same sections); ValueError names an unknown or mistyped one."""
+    or a plain config of the same sections); ValueError names a mistyped one. Names that are not
+    in the table are left out, as a node leaves out the undeclared parameters of its
+    ``--params-file`` (``use_sim_time``, ``qos_overrides``, another node's)."""
     specs = by_name(table)
     values = defaults(specs.values())
     for name, value in flatten(config.parameters(config.load_yaml(path))).items():
-        if name not in specs:
-            raise ValueError(f'config {path}: unknown parameter {name}')
-        values[name] = specs[name].check(value)
+        if name in specs:
+            values[name] = specs[name].check(value)
     return values
 
 

@@ -54,3 +54,47 @@ def joint_outputs(model: JointModel, screw: FloatArray) -> JointOutputs:
         state = model.evaluate(screw)
         interpretation = interpretation_vector(state.stiffness)
     return JointOutputs(screw, state, interpretation)
+
+
+def screw_inputs(values: FloatArray) -> tuple[NDArray[np.bool_], dict[int, str]]:
+    """:func:`screw_input` over the rows of ``values`` (N, 6) of finite screws: which rows are
+    accepted, and for each rejected row its ValueError's text (the node's words)."""
+    values = np.asarray(values, dtype=np.float64).reshape(-1, 6)
+    try:
+        check_in_chart(values, 'screw')
+    except ValueError:
+        pass
+    else:
+        return np.ones(len(values), dtype=bool), {}
+    accepted = np.ones(len(values), dtype=bool)
+    problems: dict[int, str] = {}
+    for i, row in enumerate(values):
+        try:
+            screw_input(row)
+        except ValueError as exc:
+            accepted[i] = False
+            problems[i] = str(exc)
+    return accepted, problems
+
+
+def joint_outputs_batch(model: JointModel, screws: FloatArray) -> JointOutputs:
+    """:func:`joint_outputs` of many screws (N, 6) in one batched evaluation: every field with a
+    leading axis N (``state`` from :meth:`JointModel.evaluate`, ``interpretation`` (N, 16)).
+    Rows agree with :func:`joint_outputs` of each screw to rounding."""
+    screws = np.asarray(screws, dtype=np.float64).reshape(-1, 6)
+    with np.errstate(all='ignore'):
+        state = model.evaluate(screws)
+        interpretation = interpretation_vector(state.stiffness)
+    return JointOutputs(screws, state, interpretation)
+
+
+def finite_rows(outputs: JointOutputs) -> NDArray[np.bool_]:
+    """(N,) mask of the rows of a :func:`joint_outputs_batch` whose published arrays (wrench,
+    K, K_c, tensions, interpretation) are all finite: the rows the node's publishers accept."""
+    state = outputs.state
+    n = len(outputs.screw)
+    return (np.isfinite(state.wrench.reshape(n, -1)).all(axis=1)
+            & np.isfinite(state.stiffness.reshape(n, -1)).all(axis=1)
+            & np.isfinite(state.cartesian_stiffness.reshape(n, -1)).all(axis=1)
+            & np.isfinite(state.tensions.reshape(n, -1)).all(axis=1)
+            & np.isfinite(outputs.interpretation.reshape(n, -1)).all(axis=1))
