@@ -18,7 +18,6 @@ under one lock, so no output mixes two sets and the two threads never interleave
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections import deque
@@ -108,7 +107,8 @@ class StiffnessNode(Node):
         self._last_stamp = None
         self._last_outputs: JointOutputs | None = None
         self._last_solution: np.ndarray | None = None
-        self._last_marker_time = -math.inf
+        self._marked: JointOutputs | None = None
+        self._clock = self.get_clock()
         self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._published = 0
@@ -155,6 +155,8 @@ class StiffnessNode(Node):
         self.create_service(PlanarInverseKinematics, '~/planar_inverse_kinematics',
                             self._on_planar_inverse)
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
+        self._marker_timer = self.create_timer(
+            self._settings.marker_period or 1.0, self._publish_markers)
         model = self._settings.model
         # Warm the worker up (imports, first solve) before the first request needs it.
         self._solver.submit(solve_equilibrium, (model, np.zeros(6)), {'time_budget': 1.0},
@@ -186,6 +188,9 @@ class StiffnessNode(Node):
                         settings.model.n_strings,):
                     settings = replace(settings, model=settings.model.with_rest_lengths(rest))
                 self._settings = settings
+            if 'markers.max_rate' in names:
+                self._marker_timer.timer_period_ns = int(1e9 * (settings.marker_period or 1.0))
+                self._marker_timer.reset()
         except Exception as exc:  # validated before: only a bug gets here; the old set stays
             self.reporter.internal_error('parameters', exc)
             return
@@ -246,39 +251,54 @@ class StiffnessNode(Node):
     def _compute_and_publish(self, settings: JointNodeSettings, xi: np.ndarray, stamp: Any,
                              source: str) -> None:
         """Build and check every output, then publish them all (an input gets all of its
-        outputs or none)."""
+        outputs or none); topics nobody subscribes to are not filled (a publication there
+        reaches no one: the outputs are volatile)."""
         with self._output_lock:
             start = time.perf_counter()
             messages = self._messages
             try:
                 outputs = joint_outputs(settings.model, xi)
                 if stamp is None:
-                    stamp = self.get_clock().now().to_msg()
+                    stamp = self._clock.now().to_msg()
                 if messages.string_names != tuple(settings.model.string_names):
                     messages = self._messages = msg_tools.JointOutputMessages(
                         tuple(settings.model.string_names))
-                messages.fill(outputs, stamp, settings.link1_frame)
-                now = time.monotonic()
+                wanted = tuple(p.get_subscription_count() > 0 for p in self._output_publishers)
+                messages.fill(outputs, stamp, settings.link1_frame, wanted)
                 markers = None
-                if settings.marker_period == 0.0 or \
-                        now - self._last_marker_time >= settings.marker_period:
+                if settings.marker_period == 0.0:  # one per input; else _publish_markers
                     markers = msg_tools.joint_markers(settings.model, outputs.state,
                                                       settings.link1_frame, stamp)
             except ValueError as exc:
                 self.reporter.reject(source, str(exc))
                 return
-            for publisher, msg in zip(self._output_publishers, messages.messages(),
-                                      strict=True):
-                publisher.publish(msg)
+            for publisher, msg, publish in zip(self._output_publishers, messages.messages(),
+                                               wanted, strict=True):
+                if publish:
+                    publisher.publish(msg)
             if markers is not None:
-                self._last_marker_time = now
                 self._pub_markers.publish(markers)
             with self._state_lock:
                 self._last_screw, self._last_stamp = xi, stamp
                 self._last_outputs = outputs
             self._published += 1
-            self._input_times.append(now)
+            self._input_times.append(time.monotonic())
             self._compute_times.append(time.perf_counter() - start)
+
+    @guarded('~/markers')
+    def _publish_markers(self) -> None:
+        """At most ``markers.max_rate`` Hz, on the executor's thread (a MarkerArray costs as much
+        as all other outputs together): the last configuration, once, if anyone listens."""
+        settings = self._settings
+        with self._state_lock:
+            outputs, stamp = self._last_outputs, self._last_stamp
+        if (settings.marker_period == 0.0 or outputs is None or outputs is self._marked
+                or self._pub_markers.get_subscription_count() == 0):
+            return
+        self._marked = outputs
+        self._pub_markers.publish(msg_tools.joint_markers(
+            settings.model, outputs.state, settings.link1_frame,
+            stamp if stamp is not None else self._clock.now().to_msg()))
 
     # ------------------------------------------------------------------ services
     async def _in_worker(self, fn: Any, args: tuple, kwargs: dict[str, Any],
