@@ -100,7 +100,6 @@ def _is_number(value: Any) -> bool:
 #: joint"); nodes A, B, C, D, the same set on both links.
 _DEFAULT_NODES = [-0.030162, 0.0, 0.0, -0.01524, -0.026035, 0.0,
                   0.01524, -0.026035, 0.0, 0.030162, 0.0, 0.0]
-_CROSS_REST, _STRAIGHT_REST, _STRETCH = 0.0381, 0.03175, 0.02
 #: Its unloaded equilibrium (solve_equilibrium, |F| < 1e-13): a rotation by pi about
 #: (1, 0, -1)/sqrt(2), link 2 turned over.
 _DEFAULT_INITIAL_SCREW = [2.221441469079183, 0.0, -2.221441469079183,
@@ -130,9 +129,9 @@ JOINT_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('joint.stiffness', 'double_array', [77.0] * 12,
                   'string stiffness k, N/m, one per string (or one for all)'),
     ParameterSpec('joint.rest_lengths', 'double_array',
-                  [_CROSS_REST] * 4 + [_STRAIGHT_REST] * 8, 'rest lengths l0, m, one per string'),
+                  [0.0381] * 4 + [0.03175] * 8, 'rest lengths l0, m, one per string'),
     ParameterSpec('joint.max_lengths', 'double_array',
-                  [_CROSS_REST + _STRETCH] * 4 + [_STRAIGHT_REST + _STRETCH] * 8,
+                  [0.0581] * 4 + [0.05175] * 8,
                   'maximum lengths lmax, m, one per string (empty: no limit)'),
     ParameterSpec('joint.force_law', 'string', 'hooke', 'string force law', choices=FORCE_LAWS),
     ParameterSpec('joint.initial_screw', 'double_array', _DEFAULT_INITIAL_SCREW,
