@@ -1,14 +1,20 @@
 #!/usr/bin/env python3
 """Node latency benchmark (two processes), run by hand after ``source scripts/env.sh``:
 
-    python bench/bench_latency.py [--rate 1000] [--seconds 10] [--calls 300]
+    python bench/bench_latency.py [--rates 1000 2000] [--seconds 10] [--paths fast executor]
+                                  [--clients stiffness all] [--calls 300]
 
-The installed ``stiffness_node`` runs as its own process on the default joint. This process
-publishes screws on ``~/screw`` at ``--rate`` Hz for ``--seconds`` and measures, per screw, the
-time until its ``~/stiffness`` message arrives (outputs come in input order over reliable QoS, so
-each stiffness is matched to its screw by value against the library), then the round trip of
-each service. Prints median / p99 / max latency and drops.
-Targets (issue 4): median <= 1 ms, p99 <= 5 ms, 0 drops; equilibrium service median <= 5 ms.
+For each input path (``fast``: ``realtime.fast_lane: true``, the screws on the node's fast lane;
+``executor``: the previous path, rclpy's executor with draining callbacks), each rate and each
+client, a fresh installed ``stiffness_node`` runs as its own process on the default joint (markers
+at 30 Hz and diagnostics at 1 Hz, the defaults). This process publishes screws on ``~/screw`` for
+``--seconds`` and measures, per screw, the time until its ``~/stiffness`` message arrives (outputs
+come in input order over reliable QoS, so each is matched to its screw by value against the
+library). Client ``stiffness`` subscribes to ``~/stiffness`` alone (a controller); ``all`` also to
+the other four outputs. Then the round trip of each service on the first path. Prints median /
+p99 / max latency and drops, side by side.
+Targets (issue 12): at 1 kHz median <= 0.8 ms, p99 <= 3 ms, 0 drops; at 2 kHz 0 drops, median
+<= 1.5 ms.
 """
 
 from __future__ import annotations
@@ -29,6 +35,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
+from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from ros_harness import NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
@@ -55,10 +62,20 @@ def summary(name: str, seconds: list[float]) -> str:
             f'p99 {percentile(ms, 0.99):7.3f} ms  max {max(ms):8.3f} ms')
 
 
+#: The node's outputs besides ~/stiffness (the ``all`` client takes them too).
+OTHER_OUTPUTS = {'wrench': WrenchStamped, 'cartesian_stiffness': Float64MultiArray,
+                 'string_tensions': Float64MultiArray,
+                 'stiffness_interpretation': Float64MultiArray}
+
+
 def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: float,
-           rng: np.random.Generator) -> tuple[list[float], int, int]:
+           rng: np.random.Generator, all_outputs: bool = False
+           ) -> tuple[list[float], int, int]:
     """Publish screws at ``rate`` for ``seconds``; returns (latencies, sent, drops)."""
     inbox = ros.subscribe(Float64MultiArray, f'{base}/stiffness')
+    if all_outputs:
+        for topic, msg_type in OTHER_OUTPUTS.items():
+            ros.subscribe_callback(msg_type, f'{base}/{topic}', lambda _msg: None)
     pub = ros.publisher(Float64MultiArray, f'{base}/screw')
     ros.wait_for_subscribers(pub)
     ros.wait_for_publishers(f'{base}/stiffness')
@@ -124,38 +141,57 @@ def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Ge
     return out
 
 
-def main() -> None:
-    # The client publishes from the main thread while its executor thread receives: let the GIL
-    # change hands often, as the node does, so the client's own waits stay small.
-    sys.setswitchinterval(2e-4)
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--rate', type=float, default=1000.0, help='screw rate, Hz')
-    parser.add_argument('--seconds', type=float, default=10.0, help='stream duration, s')
-    parser.add_argument('--calls', type=int, default=300, help='calls per service')
-    parser.add_argument('--param', action='append', default=[],
-                        help='node parameter override NAME:=VALUE (repeatable)')
-    args = parser.parse_args()
-    model = JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
+PATHS = {'fast': 'true', 'executor': 'false'}
+
+
+def run(path: str, rate: float, client: str, args: argparse.Namespace, model: JointModel,
+        services: bool) -> None:
     rng = np.random.default_rng(0)
     ns = unique_namespace('bench')
-    proc = NodeProcess(ns, extra_args=[a for p in args.param for a in ('-p', p)])
+    extra = ['-p', f'realtime.fast_lane:={PATHS[path]}']
+    proc = NodeProcess(ns, extra_args=extra + [a for p in args.param for a in ('-p', p)])
     ros = RosClient('bench')
-    gc.collect()
-    gc.freeze()
     base = f'{ns}/stiffness_node'
     try:
-        print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}, node pid {proc.process.pid}')
-        latencies, sent, drops = stream(ros, base, model, args.rate, args.seconds, rng)
-        print(f'screw -> stiffness at {args.rate:.0f} Hz for {args.seconds:.0f} s: sent {sent}, '
-              f'drops {drops}')
-        print(summary('  latency', latencies))
-        for name, times in service_round_trips(ros, base, args.calls, rng).items():
-            print(summary(f'  {name}', times))
+        latencies, sent, drops = stream(ros, base, model, rate, args.seconds, rng,
+                                        all_outputs=client == 'all')
+        print(summary(f'{path:<8} {rate:5.0f} Hz  client {client:<9}', latencies)
+              + f'  drops {drops} of {sent}', flush=True)
+        if services:
+            for name, times in service_round_trips(ros, base, args.calls, rng).items():
+                print(summary(f'  {name}', times), flush=True)
     finally:
         ros.close()
         code = proc.stop()
         if code != 0:
             print(f'node exited with {code}:\n{proc.log()}')
+
+
+def main() -> None:
+    # The client publishes from the main thread while its executor thread receives: let the GIL
+    # change hands often, as the node does, so the client's own waits stay small.
+    sys.setswitchinterval(2e-4)
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rates', type=float, nargs='+', default=[1000.0, 2000.0],
+                        help='screw rates, Hz')
+    parser.add_argument('--seconds', type=float, default=10.0, help='stream duration, s')
+    parser.add_argument('--paths', nargs='+', choices=sorted(PATHS), default=['fast', 'executor'])
+    parser.add_argument('--clients', nargs='+', choices=['stiffness', 'all'],
+                        default=['stiffness'])
+    parser.add_argument('--calls', type=int, default=300, help='calls per service (0: none)')
+    parser.add_argument('--param', action='append', default=[],
+                        help='node parameter override NAME:=VALUE (repeatable)')
+    args = parser.parse_args()
+    model = JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
+    gc.collect()
+    gc.freeze()
+    print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}; screw -> ~/stiffness latency')
+    first = True
+    for client in args.clients:
+        for rate in args.rates:
+            for path in args.paths:
+                run(path, rate, client, args, model, services=first and args.calls > 0)
+                first = False
 
 
 if __name__ == '__main__':

@@ -38,6 +38,7 @@ __all__ = [
     'matrix_to_multiarray',
     'multiarray_to_array',
     'multiarray_to_matrix',
+    'payload',
     'set_multiarray_data',
     'vector_to_multiarray',
 ]
@@ -53,8 +54,9 @@ CARTESIAN_TWIST_COL_LABEL = CARTESIAN_STIFFNESS_COL_LABEL
 FloatArray = NDArray[np.float64]
 
 
-def _to_data(arr: FloatArray) -> array.array:
-    """Row-major float64 payload for ``Float64MultiArray.data`` (one memcpy, no Python loop)."""
+def payload(arr: FloatArray) -> array.array:
+    """Row-major float64 payload for ``Float64MultiArray.data`` (one memcpy, no Python loop; no
+    checks: for arrays already checked finite and of the layout's size)."""
     data = array.array('d')
     data.frombytes(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
     return data
@@ -79,7 +81,7 @@ def vector_to_multiarray(values: ArrayLike, label: str = '') -> Float64MultiArra
     n = arr.shape[0]
     layout = MultiArrayLayout(
         dim=[MultiArrayDimension(label=label, size=n, stride=n)], data_offset=0)
-    return Float64MultiArray(layout=layout, data=_to_data(arr))
+    return Float64MultiArray(layout=layout, data=payload(arr))
 
 
 def matrix_to_multiarray(matrix: ArrayLike, row_label: str = WRENCH_ROW_LABEL,
@@ -104,7 +106,7 @@ def matrix_to_multiarray(matrix: ArrayLike, row_label: str = WRENCH_ROW_LABEL,
         dim=[MultiArrayDimension(label=row_label, size=rows, stride=rows * cols),
              MultiArrayDimension(label=col_label, size=cols, stride=cols)],
         data_offset=0)
-    return Float64MultiArray(layout=layout, data=_to_data(arr))
+    return Float64MultiArray(layout=layout, data=payload(arr))
 
 
 def set_multiarray_data(msg: Float64MultiArray, values: ArrayLike) -> Float64MultiArray:
@@ -120,7 +122,7 @@ def set_multiarray_data(msg: Float64MultiArray, values: ArrayLike) -> Float64Mul
     expected = msg.layout.dim[0].stride if msg.layout.dim else arr.size
     if arr.size != expected:
         raise ValueError(f'layout holds {expected} values, got {arr.size}')
-    msg.data = _to_data(arr)
+    msg.data = payload(arr)
     return msg
 
 

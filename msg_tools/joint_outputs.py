@@ -2,8 +2,9 @@
 ``~/cartesian_stiffness``, ``~/string_tensions``, ``~/stiffness_interpretation``) and its markers.
 
 One preallocated message per topic, its layout labelled once from
-:mod:`tensegrity_stiffness.layouts`; per input only the data and the header are refilled, and
-every array is checked finite as it is set (ValueError naming nothing is published yet).
+:mod:`tensegrity_stiffness.layouts`; per input only the data and the header are refilled, after
+one finite check of every output (:func:`processing.require_finite`: ValueError naming the
+output, and nothing is published).
 """
 
 from __future__ import annotations
@@ -15,8 +16,7 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
 from visualization_msgs.msg import MarkerArray
 
-from msg_tools.arrays import matrix_to_multiarray, set_multiarray_data, vector_to_multiarray
-from msg_tools.geometry import set_wrench
+from msg_tools.arrays import matrix_to_multiarray, payload, vector_to_multiarray
 from msg_tools.markers import marker_array
 from tensegrity_stiffness.joint import JointModel, JointState
 from tensegrity_stiffness.layouts import (
@@ -27,7 +27,7 @@ from tensegrity_stiffness.layouts import (
     STIFFNESS_ROW_LABEL,
     tensions_label,
 )
-from tensegrity_stiffness.processing import JointOutputs
+from tensegrity_stiffness.processing import JointOutputs, output_arrays, require_finite
 
 __all__ = ['JointOutputMessages', 'joint_markers']
 
@@ -47,16 +47,22 @@ class JointOutputMessages:
         self.interpretation = vector_to_multiarray(np.zeros(INTERPRETATION_SIZE),
                                                    INTERPRETATION_LABEL)
 
-    def fill(self, outputs: JointOutputs, stamp: Time, frame_id: str) -> None:
-        """Set every message from ``outputs``; ValueError if an array is not finite."""
-        state = outputs.state
-        self.wrench.header.stamp = stamp
-        self.wrench.header.frame_id = frame_id
-        set_wrench(self.wrench.wrench, state.wrench)
-        set_multiarray_data(self.stiffness, state.stiffness)
-        set_multiarray_data(self.cartesian_stiffness, state.cartesian_stiffness)
-        set_multiarray_data(self.tensions, state.tensions)
-        set_multiarray_data(self.interpretation, outputs.interpretation)
+    def fill(self, outputs: JointOutputs, stamp: Time, frame_id: str,
+             wanted: tuple[bool, ...] | None = None) -> None:
+        """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
+        order; default all); ValueError if any output is not finite (then none is set)."""
+        require_finite(outputs)
+        arrays = output_arrays(outputs)
+        for k, msg in enumerate(self.messages()):
+            if wanted is not None and not wanted[k]:
+                continue
+            if k == 0:
+                msg.header.stamp = stamp
+                msg.header.frame_id = frame_id
+                f, t = msg.wrench.force, msg.wrench.torque
+                f.x, f.y, f.z, t.x, t.y, t.z = arrays[0].tolist()
+            else:
+                msg.data = payload(arrays[k])
 
     def messages(self) -> tuple[Any, ...]:
         """The messages in topic order: wrench, stiffness, cartesian_stiffness, tensions,

@@ -7,18 +7,23 @@ rosbag2 with the node's five array outputs (``wrench``, ``stiffness``, ``cartesi
 (:mod:`tensegrity_stiffness.layouts`) and frame ids as the node, one of each per answered input,
 written at the log time of the input it answers.
 
-The node's behaviour, input by input: inputs are decoded with the node's :mod:`msg_tools`
-functions (they read messages by attribute, so rosbags' messages do as well as rclpy's) and
-validated as the node validates them; a bad input is skipped and counted by kind. A pose is
-turned into a screw on the branch nearest the last answered screw (the config's initial screw
-before the first). New rest lengths apply from their log time on and re-publish the last answer,
-written at the log time of the rest-lengths message. Header stamps: a pose's stamp when it is
-non-zero; where the node stamps the time of computation (screws, zero-stamped poses) the input's
-log time; a re-publish keeps the stamp of the answer it repeats, as the node does.
+The node's behaviour, input by input, with the node's functions: inputs are decoded with
+:mod:`msg_tools` (it reads messages by attribute, so rosbags' messages do as well as rclpy's),
+checked and computed with :mod:`tensegrity_stiffness.processing`, configured from the node's
+parameter table (:mod:`tensegrity_stiffness.parameters`); a bad input is skipped and counted by
+kind, with the node's text as the example. A pose is turned into a screw on the branch nearest
+the last answered screw (the config's initial screw before the first). New rest lengths apply
+from their log time on and re-publish the last answer, written at the log time of the
+rest-lengths message. Header stamps: a pose's stamp when it is non-zero; where the node stamps
+the time of computation (screws, zero-stamped poses) the input's log time; a re-publish keeps
+the stamp of the answer it repeats, as the node does.
 
-Speed: answers are computed in chunks with one batched :meth:`JointModel.evaluate` call; an
-output message is a serialized template (layout, labels, frame id; built once with rosbags)
-whose payload bytes are replaced, so no message is serialized per answer.
+Speed: answers are computed in chunks with one batched evaluation
+(:func:`processing.joint_outputs_batch`, OpenBLAS on one thread); a screw of the plain layout
+is decoded with its chunk in one ``frombuffer``; an output message is a serialized template
+(layout, labels, frame id; built once with rosbags) whose payload bytes are replaced, and a
+chunk's messages are written as one block (:class:`_BlockWriter`: the bytes rosbags' writer
+writes, assembled with numpy).
 """
 
 from __future__ import annotations
@@ -26,9 +31,11 @@ from __future__ import annotations
 import csv
 import shutil
 import time
-from collections import Counter
+from collections import Counter, defaultdict
 from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
+from io import BytesIO
 from pathlib import Path
 from typing import Any
 
@@ -36,10 +43,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 import msg_tools
-from tensegrity_stiffness import config, layouts
-from tensegrity_stiffness.interpretation import interpretation_vector
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.screw import check_in_chart, log_se3
+from tensegrity_stiffness import config, layouts, parameters
+from tensegrity_stiffness.parameters import JointNodeSettings
+from tensegrity_stiffness.processing import (
+    JointOutputs,
+    finite_rows,
+    joint_outputs,
+    joint_outputs_batch,
+    pose_input,
+    screw_input,
+    screw_inputs,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -50,10 +64,6 @@ WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
 DEFAULT_NAMESPACE = '/stiffness_node'
 #: Output storages (rosbag2 storage identifiers).
 STORAGES = ('mcap', 'sqlite3')
-#: Frame id of the outputs and largest accepted input array when the config has none (the
-#: node's parameter defaults).
-DEFAULT_LINK1_FRAME = 'tensegrity_link1'
-DEFAULT_MAX_ARRAY_LENGTH = 1024
 #: Answers computed per batched evaluation.
 CHUNK_SIZE = 2048
 #: Seconds between progress reports.
@@ -87,40 +97,70 @@ class BagError(ValueError):
 
 
 # ------------------------------------------------------------------------------ configuration
-@dataclass(frozen=True)
-class ProcessingConfig:
-    """What the node's per-input path reads from its parameters."""
+def node_settings(path: str | Path | None = None) -> JointNodeSettings:
+    """The settings ``stiffness_node`` runs with for ``--params-file path`` (model, frames,
+    limits): the parameter table's defaults, overridden by the file's parameters
+    (:func:`parameters.values_from_config`); BagError names the file and the field."""
+    try:
+        values = (parameters.defaults(parameters.STIFFNESS_NODE_PARAMETERS) if path is None
+                  else parameters.values_from_config(path, parameters.STIFFNESS_NODE_PARAMETERS))
+        return parameters.joint_node_settings(values)
+    except ValueError as exc:
+        text = str(exc)
+        raise BagError(text if path is None or str(path) in text else f'config {path}: {text}'
+                       ) from None
 
-    model: JointModel
-    link1_frame: str
-    max_array_length: int
 
-    @classmethod
-    def from_file(cls, path: str | Path | None = None) -> ProcessingConfig:
-        """The node's configuration for ``--params-file path``: each parameter of the file, the
-        packaged config's value for the others (the node declares its parameters with the
-        packaged values, then the file overrides those it has). ValueError names the field."""
-        packaged = config.parameters(config.load_yaml(config.packaged_config_path()))
-        sections: dict[str, dict[str, Any]] = {
-            key: dict(packaged.get(key) or {}) for key in ('joint', 'frames', 'limits')}
-        if path is not None:
-            try:
-                given = config.parameters(config.load_yaml(path))
-            except ValueError as exc:
-                raise BagError(f'config {path}: {exc}') from None
-            for key in sections:
-                value = given.get(key)
-                if value is not None and not isinstance(value, Mapping):
-                    raise BagError(f'config {path}: {key} must be a mapping')
-                sections[key].update(value or {})
-        model = JointModel.from_dict(sections['joint'])
-        frame = str(sections['frames'].get('link1', DEFAULT_LINK1_FRAME))
-        if not frame.strip():
-            raise ValueError('frames.link1 must not be empty')
-        max_length = int(sections['limits'].get('max_array_length', DEFAULT_MAX_ARRAY_LENGTH))
-        if max_length < 6:
-            raise ValueError(f'limits.max_array_length must be >= 6, got {max_length}')
-        return cls(model=model, link1_frame=frame, max_array_length=max_length)
+# ------------------------------------------------------------------------------ BLAS threads
+#: (get, set) thread-count functions of the OpenBLAS builds numpy and scipy ship, by symbol.
+_OPENBLAS_THREAD_SYMBOLS = (
+    ('scipy_openblas_get_num_threads64_', 'scipy_openblas_set_num_threads64_'),
+    ('scipy_openblas_get_num_threads', 'scipy_openblas_set_num_threads'),
+    ('openblas_get_num_threads64_', 'openblas_set_num_threads64_'),
+    ('openblas_get_num_threads', 'openblas_set_num_threads'),
+)
+
+
+def _loaded_openblas() -> list[tuple[Any, Any]]:
+    """(get, set) thread-count functions of every OpenBLAS library loaded in this process
+    (Linux: from /proc/self/maps; elsewhere none)."""
+    import ctypes
+
+    try:
+        with open('/proc/self/maps', encoding='utf-8') as maps:
+            paths = {line.split()[-1] for line in maps if 'openblas' in line.lower()}
+    except OSError:
+        return []
+    found = []
+    for path in sorted(p for p in paths if p.startswith('/')):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for get_name, set_name in _OPENBLAS_THREAD_SYMBOLS:
+            get, put = getattr(lib, get_name, None), getattr(lib, set_name, None)
+            if get is not None and put is not None:
+                get.restype, put.argtypes = ctypes.c_int, [ctypes.c_int]
+                found.append((get, put))
+                break
+    return found
+
+
+@contextmanager
+def single_threaded_blas() -> Iterator[None]:
+    """OpenBLAS on one thread inside the block (restored after). The batched evaluation's
+    GEMMs (chunks of 512 rows) are large enough for OpenBLAS to start its threads, whose
+    busy waiting on a shared two-core machine costs more than it saves; the bag command runs
+    one process that is already busy. No effect without a loaded OpenBLAS."""
+    libraries = _loaded_openblas()
+    before = [get() for get, _ in libraries]
+    for _, put in libraries:
+        put(1)
+    try:
+        yield
+    finally:
+        for (_, put), n in zip(libraries, before, strict=True):
+            put(n)
 
 
 # ------------------------------------------------------------------------------ rejections
@@ -146,6 +186,22 @@ def rejection_kind(problem: str) -> str:
     return 'invalid'
 
 
+# ------------------------------------------------------------------------------ screw CDR
+#: Serialized ``Float64MultiArray`` of six values without layout dimensions, little-endian CDR:
+#: encapsulation header, ``dim`` count 0, ``data_offset`` 0, ``data`` length 6, 4 padding bytes,
+#: then the six float64 (the plain layout recorders write for a screw).
+_PLAIN_SCREW_HEAD = b'\x00\x01\x00\x00' + bytes(8) + (6).to_bytes(4, 'little')
+_PLAIN_SCREW_DATA = 20
+PLAIN_SCREW_SIZE = _PLAIN_SCREW_DATA + 8 * 6
+
+
+def plain_screw_values(raws: Sequence[bytes]) -> FloatArray:
+    """(N, 6) values of serialized screws of the plain layout (:data:`PLAIN_SCREW_SIZE` bytes
+    starting with ``_PLAIN_SCREW_HEAD``; the caller checks), read in one ``frombuffer``."""
+    block = np.frombuffer(b''.join(raws), dtype=np.uint8).reshape(len(raws), PLAIN_SCREW_SIZE)
+    return np.ascontiguousarray(block[:, _PLAIN_SCREW_DATA:]).view('<f8').astype(np.float64)
+
+
 # ------------------------------------------------------------------------------ answers
 @dataclass
 class Answers:
@@ -168,177 +224,225 @@ class Answers:
     def __len__(self) -> int:
         return len(self.sources)
 
-
-@dataclass
-class _Pending:
-    """An accepted input waiting for the next batched evaluation."""
-
-    source: str
-    log_time: int
-    stamp: int | None       # ns; None: the log time (or, for a re-publish, the repeated stamp)
-    screw: FloatArray
-    transform: FloatArray | None = None   # a pose's transform (its screw depends on the branch)
+    @classmethod
+    def of(cls, outputs: JointOutputs, rows: slice | NDArray[np.int64], log_times: Any,
+           sources: list[str], stamps: Any) -> Answers:
+        """The answers of ``rows`` of a batch of :class:`JointOutputs`."""
+        state = outputs.state
+        return cls(np.asarray(log_times, dtype=np.int64), sources,
+                   np.asarray(stamps, dtype=np.int64), outputs.screw[rows],
+                   state.wrench[rows], state.stiffness[rows], state.cartesian_stiffness[rows],
+                   state.tensions[rows], outputs.interpretation[rows])
 
 
 class StiffnessProcessor:
     """The node's per-input behaviour (``_on_screw``, ``_on_pose``, ``_on_rest_lengths``,
-    ``_compute_and_publish``) over a recording, answering in batches.
+    ``_compute_and_publish``) over a recording, answering in batches with the node's functions
+    (:mod:`tensegrity_stiffness.processing`, :mod:`msg_tools`).
 
-    Feed inputs in log-time order with :meth:`screw`, :meth:`pose`, :meth:`rest_lengths`;
-    answers go to ``emit`` in chunks (:class:`Answers`), rejections are counted in
-    :attr:`rejected` by ``'<topic>: <kind>'``. Call :meth:`finish` at the end.
+    Feed inputs in log-time order with :meth:`screw_raw` (serialized) or :meth:`screw`,
+    :meth:`pose`, :meth:`rest_lengths`; answers go to ``emit`` in chunks (:class:`Answers`),
+    rejections are counted in :attr:`rejected` by ``'<topic>: <kind>'`` with the node's text
+    as the example. Call :meth:`finish` at the end.
     """
 
-    def __init__(self, cfg: ProcessingConfig, emit: Callable[[Answers], None],
-                 chunk_size: int = CHUNK_SIZE) -> None:
-        self.cfg = cfg
-        self.model = cfg.model
+    def __init__(self, settings: JointNodeSettings, emit: Callable[[Answers], None],
+                 chunk_size: int = CHUNK_SIZE,
+                 deserialize: Callable[[bytes], Any] | None = None) -> None:
+        self.settings = settings
+        self.model = settings.model
         self.emit = emit
         self.chunk_size = chunk_size
+        if deserialize is None:
+            store = _typestore()
+
+            def deserialize(raw: bytes) -> Any:
+                return store.deserialize_cdr(raw, FLOAT64_MULTIARRAY)
+        self.deserialize = deserialize
         self.rejected: Counter[str] = Counter()
         self.examples: dict[str, str] = {}
         self.answered: Counter[str] = Counter()
-        self._pending: list[_Pending] = []
+        # Plain-layout screws not decoded yet (raw bytes, log times).
+        self._raw: list[bytes] = []
+        self._raw_times: list[int] = []
+        # Accepted inputs waiting for the next batched evaluation.
+        self._sources: list[str] = []
+        self._times: list[int] = []
+        self._stamps: list[int | None] = []  # None: the stamp of the last answer (re-publish)
+        self._screws: list[FloatArray] = []  # blocks (k, 6)
+        self._count = 0
+        self._transforms: dict[int, FloatArray] = {}  # pending index -> a pose's transform
         # The last answer (screw, wrench stamp ns), as the node keeps _last_screw/_last_stamp.
         self._last_screw: FloatArray | None = None
         self._last_stamp: int | None = None
-        self._evaluated: tuple[Any, FloatArray, NDArray[np.bool_]] | None = None
 
-    def _reject(self, topic: str, problem: str, kind: str | None = None) -> None:
+    def reject(self, topic: str, problem: str, kind: str | None = None) -> None:
         key = f'{topic}: {kind or rejection_kind(problem)}'
         self.rejected[key] += 1
         self.examples.setdefault(key, problem)
 
     def _reference(self) -> FloatArray:
         """Branch reference of the next pose: the last accepted screw (answered or pending)."""
-        if self._pending:
-            return self._pending[-1].screw
+        if self._screws:
+            return self._screws[-1][-1]
         return self._last_screw if self._last_screw is not None else self.model.initial_screw
 
+    def _add(self, source: str, log_times: list[int], stamps: list[int | None],
+             screws: FloatArray, transform: FloatArray | None = None) -> None:
+        if transform is not None:
+            self._transforms[self._count] = transform
+        self._sources += [source] * len(log_times)
+        self._times += log_times
+        self._stamps += stamps
+        self._screws.append(screws)
+        self._count += len(log_times)
+        if self._count >= self.chunk_size:
+            self.flush()
+
     # -------------------------------------------------------------- inputs (node callbacks)
-    def screw(self, msg: Any, log_time: int) -> None:
-        try:
-            xi = msg_tools.multiarray_to_array(msg, expected_length=6,
-                                               max_length=self.cfg.max_array_length)
-        except ValueError as exc:
-            self._reject('screw', str(exc))
+    def screw_raw(self, raw: bytes, log_time: int) -> None:
+        """A serialized ``~/screw`` message: a plain six-value array is decoded later with the
+        others (:meth:`_decode`); any other is deserialized and checked now."""
+        if len(raw) == PLAIN_SCREW_SIZE and raw[:16] == _PLAIN_SCREW_HEAD:
+            self._raw.append(raw)
+            self._raw_times.append(log_time)
+            if len(self._raw) >= self.chunk_size:
+                self._decode()
             return
-        # The chart is checked per chunk (check_in_chart); a screw outside it is rejected then.
-        self._add(_Pending('screw', log_time, None, xi))
+        msg = self._deserialize('screw', raw)
+        if msg is not None:
+            self.screw(msg, log_time)
+
+    def _deserialize(self, topic: str, raw: bytes) -> Any:
+        try:
+            return self.deserialize(raw)
+        except Exception as exc:  # rosbags raises several types on corrupt CDR
+            self.reject(topic, f'cannot deserialize: {type(exc).__name__}: {exc}', 'undecodable')
+            return None
+
+    def _decode(self) -> None:
+        """Check the pending plain screws as :meth:`screw` does, in one batch: the decoded
+        values are exactly what ``msg_tools.multiarray_to_array`` returns for them (no data
+        offset, six values); a non-finite one goes through that function for its message."""
+        if not self._raw:
+            return
+        raws, times = self._raw, self._raw_times
+        self._raw, self._raw_times = [], []
+        values = plain_screw_values(raws)
+        finite = np.isfinite(values).all(axis=1)
+        if not finite.all():
+            max_length = self.settings.max_array_length
+            for i in np.flatnonzero(~finite):
+                try:  # raises the node's 'array contains NaN or inf'
+                    msg_tools.multiarray_to_array(self.deserialize(raws[i]), expected_length=6,
+                                                  max_length=max_length)
+                except ValueError as exc:
+                    self.reject('screw', str(exc))
+            values, times = values[finite], [t for t, ok in zip(times, finite.tolist(),
+                                                                strict=True) if ok]
+        accepted, problems = screw_inputs(values)
+        for problem in problems.values():
+            self.reject('screw', problem)
+        if problems:
+            values = values[accepted]
+            times = [t for t, ok in zip(times, accepted.tolist(), strict=True) if ok]
+        if len(times):
+            self._add('screw', times, list(times), values)
+
+    def screw(self, msg: Any, log_time: int) -> None:
+        """A deserialized ``~/screw`` message (the node's ``_on_screw``)."""
+        self._decode()
+        try:
+            xi = screw_input(msg_tools.multiarray_to_array(
+                msg, expected_length=6, max_length=self.settings.max_array_length))
+        except ValueError as exc:
+            self.reject('screw', str(exc))
+            return
+        self._add('screw', [log_time], [log_time], xi[None])
 
     def pose(self, msg: Any, log_time: int) -> None:
+        """A deserialized ``~/pose`` message (the node's ``_on_pose``)."""
+        self._decode()
         try:
-            frame = msg.header.frame_id
-            if frame and frame != self.cfg.link1_frame:
-                raise ValueError(f"header.frame_id '{frame}' is not link 1's frame "
-                                 f"'{self.cfg.link1_frame}'")
             T = msg_tools.pose_to_transform(msg.pose)
-            xi = log_se3(T, reference=self._reference())
+            xi = pose_input(msg.header.frame_id, T, self.settings.link1_frame,
+                            self._reference())
         except ValueError as exc:
-            self._reject('pose', str(exc))
+            self.reject('pose', str(exc))
             return
         stamp = msg.header.stamp
         ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-        self._add(_Pending('pose', log_time, ns if ns != 0 else None, xi, T))
+        self._add('pose', [log_time], [ns if ns != 0 else log_time], xi[None], T)
 
     def rest_lengths(self, msg: Any, log_time: int) -> None:
+        """A deserialized ``~/rest_lengths`` message (the node's ``_on_rest_lengths``)."""
         self.flush()  # inputs logged before apply the old rest lengths
         try:
             rest = msg_tools.multiarray_to_array(msg, expected_length=self.model.n_strings,
-                                                 max_length=self.cfg.max_array_length)
+                                                 max_length=self.settings.max_array_length)
             self.model = self.model.with_rest_lengths(rest)
         except ValueError as exc:
-            self._reject('rest_lengths', str(exc))
+            self.reject('rest_lengths', str(exc))
             return
         if self._last_screw is not None:  # the node's _republish_last
-            self._pending.append(_Pending('re-publish', log_time, self._last_stamp,
-                                          self._last_screw))
+            self._add('re-publish', [log_time], [None], self._last_screw[None])
             self.flush()
 
     def finish(self) -> None:
         self.flush()
 
     # -------------------------------------------------------------- batched answers
-    def _add(self, item: _Pending) -> None:
-        self._pending.append(item)
-        if len(self._pending) >= self.chunk_size:
-            self.flush()
-
     def flush(self) -> None:
-        """Answer the pending inputs. The first one the node would reject (a screw outside the
-        chart, a non-finite result) splits the chunk: the inputs before it are answered, the
+        """Answer the pending inputs with one :func:`joint_outputs_batch`. The first row the
+        node's publishers would refuse (a non-finite output) splits the chunk: the rows before
+        it are answered, it goes through the node's single path (``joint_outputs`` and
+        ``msg_tools.JointOutputMessages.fill``, whose ValueError is the rejection), and the
         poses after it get their branch again from the last answer."""
-        while self._pending:
-            items, self._pending = self._pending, []
-            screws = np.array([p.screw for p in items])
-            bad = self._first_rejected(items, screws)
-            if bad is None:
-                self._answer(items, screws)
+        self._decode()
+        while self._count:
+            sources, times, stamps = self._sources, self._times, self._stamps
+            screws = np.concatenate(self._screws)
+            transforms = self._transforms
+            self._sources, self._times, self._stamps, self._screws = [], [], [], []
+            self._transforms, self._count = {}, 0
+            if stamps[0] is None:
+                stamps[0] = self._last_stamp
+            outputs = joint_outputs_batch(self.model, screws)
+            finite = finite_rows(outputs)
+            bad = len(screws) if finite.all() else int(np.flatnonzero(~finite)[0])
+            if bad:
+                self._answer(Answers.of(outputs, slice(0, bad), times[:bad], sources[:bad],
+                                        stamps[:bad]))
+            if bad == len(screws):
                 return
-            index, topic, problem, kind = bad
-            if index:
-                self._answer(items[:index], screws[:index])
-            self._reject(topic, problem, kind)
-            for item in items[index + 1:]:
-                if item.transform is not None:
-                    reference = self._reference()
-                    item.screw = log_se3(item.transform, reference=reference)
-                self._pending.append(item)
+            self._single(sources[bad], times[bad], stamps[bad], screws[bad])
+            for i in range(bad + 1, len(screws)):
+                T = transforms.get(i)
+                xi = screws[i] if T is None else pose_input(
+                    '', T, self.settings.link1_frame, self._reference())
+                self._add(sources[i], [times[i]], [stamps[i]], xi[None], T)
 
-    def _first_rejected(self, items: list[_Pending], screws: FloatArray
-                        ) -> tuple[int, str, str, str | None] | None:
-        """(index, topic, problem, kind) of the first pending input the node would reject."""
-        is_screw = np.array([p.source == 'screw' for p in items])
-        first = len(items)
-        found: tuple[int, str, str, str | None] | None = None
+    def _single(self, source: str, log_time: int, stamp: int | None, xi: FloatArray) -> None:
+        """One input through the node's own single-screw path."""
+        outputs = joint_outputs(self.model, xi)
+        messages = msg_tools.JointOutputMessages(tuple(self.model.string_names))
         try:
-            check_in_chart(screws[is_screw])
-        except ValueError:
-            for i in np.flatnonzero(is_screw):
-                try:
-                    check_in_chart(screws[i])
-                except ValueError as exc:
-                    first = int(i)
-                    found = (first, 'screw', str(exc), None)
-                    break
-        if first == 0:
-            return found
-        self._evaluated = self._evaluate(screws[:first])
-        finite = self._evaluated[-1]
-        if not finite.all():
-            i = int(np.flatnonzero(~finite)[0])
-            source = items[i].source
-            return (i, source, 'an output is not finite (NaN or inf)', 'non-finite result')
-        return found
+            messages.fill(outputs, msg_tools.stamp_from_nanoseconds(0),
+                          self.settings.link1_frame)
+        except ValueError as exc:
+            self.reject(source, str(exc), 'non-finite result')
+            return
+        state = outputs.state
+        self._answer(Answers(
+            np.array([log_time], dtype=np.int64), [source],
+            np.array([self._last_stamp if stamp is None else stamp], dtype=np.int64),
+            xi[None], state.wrench[None], state.stiffness[None],
+            state.cartesian_stiffness[None], state.tensions[None],
+            outputs.interpretation[None]))
 
-    def _evaluate(self, screws: FloatArray) -> tuple[Any, FloatArray, NDArray[np.bool_]]:
-        """Batched state, interpretation vectors and a per-row finite mask of every output."""
-        with np.errstate(all='ignore'):
-            state = self.model.evaluate(screws.reshape(-1, 6))
-            interp = np.array([interpretation_vector(K) for K in state.stiffness]
-                              ).reshape(-1, layouts.INTERPRETATION_SIZE)
-        n = len(screws)
-        finite = (np.isfinite(state.wrench).all(axis=1)
-                  & np.isfinite(state.stiffness.reshape(n, -1)).all(axis=1)
-                  & np.isfinite(state.cartesian_stiffness.reshape(n, -1)).all(axis=1)
-                  & np.isfinite(state.tensions).all(axis=1)
-                  & np.isfinite(interp).all(axis=1))
-        return state, interp, finite
-
-    def _answer(self, items: list[_Pending], screws: FloatArray) -> None:
-        """Emit the answers of ``items`` (the first rows of the last evaluation)."""
-        state, interp, _ = self._evaluated
-        n = len(items)
-        stamps = np.array([p.log_time if p.stamp is None else p.stamp for p in items],
-                          dtype=np.int64)
-        answers = Answers(
-            log_times=np.array([p.log_time for p in items], dtype=np.int64),
-            sources=[p.source for p in items], stamps=stamps, screws=screws,
-            wrenches=state.wrench[:n], stiffness=state.stiffness[:n],
-            cartesian_stiffness=state.cartesian_stiffness[:n], tensions=state.tensions[:n],
-            interpretation=interp[:n])
-        self._last_screw = screws[n - 1].copy()
-        self._last_stamp = int(stamps[n - 1])
+    def _answer(self, answers: Answers) -> None:
+        self._last_screw = answers.screws[-1].copy()
+        self._last_stamp = int(answers.stamps[-1])
         self.answered.update(answers.sources)
         self.emit(answers)
 
@@ -581,7 +685,7 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
         raise BagError(f"unknown storage '{storage}' (mcap or sqlite3)")
     prefix = namespace_prefix(namespace)
     outputs = _output_topics(topics, prefix)
-    cfg = ProcessingConfig.from_file(config_path)
+    settings = node_settings(config_path)
     if out.resolve() == src.resolve():
         raise BagError(f'{out}: the output must not be the input')
 
@@ -616,9 +720,11 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
             raise BagError(f'{out}: cannot write: {exc}') from None
         csv_sink = None
         try:
-            csv_sink = _CsvSink(csv_file, cfg.model.string_names) if csv_file else None
-            summary = _run(reader, connections, wanted, writer, typestore, cfg, outputs,
-                           spec, prefix, csv_sink, summary, total, progress, chunk_size)
+            csv_sink = _CsvSink(csv_file, settings.model.string_names) if csv_file else None
+            with single_threaded_blas():
+                summary = _run(reader, connections, wanted, writer, typestore, settings,
+                               outputs, spec, prefix, csv_sink, summary, total, progress,
+                               chunk_size)
         finally:
             writer.close()
             if csv_sink is not None:
@@ -635,20 +741,190 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     return summary
 
 
+def _mcap_parts() -> bool:
+    """Whether the installed rosbags' ``McapWriter`` has the parts :class:`_BlockWriter`
+    extends (else it writes message by message)."""
+    try:
+        from rosbags.rosbag2 import storage_mcap as m
+    except ImportError:
+        return False
+    names = ('write_uint16', 'write_uint32', 'write_uint64', 'write_string', 'write_record',
+             'PendingChunk', 'McapWriter')
+    return all(hasattr(m, name) for name in names) and all(
+        hasattr(m.McapWriter, name) for name in ('close_chunk', 'write', 'close'))
+
+
+_MCAP_PARTS_CHECKED = _mcap_parts()
+
+
+class _BlockWriter:
+    """Writes blocks of messages (``rows[k]`` (N, bytes) on ``connections[k]``, the k messages
+    of input i at ``log_times[i]``, in that order) to a rosbags ``Writer``: the records rosbags
+    writes, message by message, but built for a whole block at once.
+
+    mcap: message records of rosbags' ``McapWriter`` (opcode 0x05, length, channel id, sequence
+    0, log and publish time, data) assembled with numpy and appended to its open chunk, the
+    chunk closed where rosbags closes it (its size past 1 MiB after a message), the message
+    index, the chunk and channel statistics and the writer's counts and time range updated as
+    ``Writer.write`` updates them; sqlite3: one ``executemany`` of rosbags' insert. Any other
+    storage (or a rosbags whose writers lack these parts) is written message by message."""
+
+    _MCAP_CHUNK_LIMIT = 2**20
+    _RECORD_HEAD = 1 + 8 + 2 + 4 + 8 + 8
+
+    def __init__(self, writer: Any) -> None:
+        from rosbags.rosbag2.storage_mcap import McapWriter
+        from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
+
+        self.writer = writer
+        storage = writer.storage
+        self._index: dict[int, list[tuple[NDArray[np.int64], NDArray[np.int64]]]] = {}
+        if type(storage) is McapWriter and _MCAP_PARTS_CHECKED:
+            # Only this class writes messages to the bag: its index replaces chunk.msgs.
+            storage.close_chunk = self._close_mcap_chunk
+            self._write = self._mcap
+        elif type(storage) is Sqlite3Writer and hasattr(storage, 'cursor'):
+            self._write = self._sqlite3
+        else:
+            self._write = self._each
+
+    def write(self, connections: Sequence[Any], log_times: NDArray[np.int64],
+              rows: Sequence[NDArray[np.uint8]]) -> None:
+        if len(log_times):
+            self._write(connections, np.asarray(log_times, dtype=np.int64), rows)
+            w = self.writer
+            for connection in connections:
+                w.counts[connection.id] += len(log_times)
+            w.min_timestamp = min(int(log_times.min()), w.min_timestamp)
+            w.max_timestamp = max(int(log_times.max()), w.max_timestamp)
+
+    def _each(self, connections: Sequence[Any], log_times: NDArray[np.int64],
+              rows: Sequence[NDArray[np.uint8]]) -> None:
+        write = self.writer.storage.write
+        for i, t in enumerate(log_times.tolist()):
+            for connection, block in zip(connections, rows, strict=True):
+                write(connection, t, block[i].tobytes())
+
+    def _sqlite3(self, connections: Sequence[Any], log_times: NDArray[np.int64],
+                 rows: Sequence[NDArray[np.uint8]]) -> None:
+        times = log_times.tolist()
+        blocks = [(c.id, block) for c, block in zip(connections, rows, strict=True)]
+        self.writer.storage.cursor.executemany(
+            'INSERT INTO messages (topic_id, timestamp, data) VALUES(?, ?, ?)',
+            [(cid, t, block[i].tobytes()) for i, t in enumerate(times) for cid, block in blocks])
+
+    def _mcap(self, connections: Sequence[Any], log_times: NDArray[np.int64],
+              rows: Sequence[NDArray[np.uint8]]) -> None:
+        n, k, head = len(log_times), len(connections), self._RECORD_HEAD
+        sizes = [head + block.shape[1] for block in rows]
+        records = np.empty((n, sum(sizes)), dtype=np.uint8)
+        at = 0
+        stamps = log_times.astype('<u8').view(np.uint8).reshape(n, 8)
+        for connection, block, size in zip(connections, rows, sizes, strict=True):
+            record = records[:, at:at + size]
+            record[:, 0] = 0x05
+            record[:, 1:9] = np.frombuffer((size - 9).to_bytes(8, 'little'), np.uint8)
+            record[:, 9:11] = np.frombuffer(connection.id.to_bytes(2, 'little'), np.uint8)
+            record[:, 11:15] = 0
+            record[:, 15:23] = stamps
+            record[:, 23:31] = stamps
+            record[:, head:] = block
+            at += size
+        flat_sizes = np.tile(np.array(sizes, dtype=np.int64), n)
+        ends = np.cumsum(flat_sizes)  # end of each message in the block, in write order
+        starts = ends - flat_sizes
+        which = np.tile(np.arange(k), n)  # connection of each message
+        times = np.repeat(log_times, k)
+        flat = records.reshape(-1)
+        storage, first = self.writer.storage, 0
+        while first < len(ends):
+            chunk = storage.chunk
+            start, base = chunk.bio.tell(), int(starts[first])
+            # rosbags closes the chunk after the first message that takes it past the limit
+            past = np.flatnonzero(ends[first:] - base + start > self._MCAP_CHUNK_LIMIT)
+            last = first + int(past[0]) if past.size else len(ends) - 1
+            seg = slice(first, last + 1)
+            chunk.bio.write(flat[base:int(ends[last])].tobytes())
+            offsets, seg_times, seg_which = starts[seg] - base + start, times[seg], which[seg]
+            for r in range(k):  # in the order of first appearance, as chunk.msgs fills
+                j = (int(seg_which[0]) + r) % k
+                connection, chosen = connections[j], seg_which == j
+                if chosen.any():
+                    self._index.setdefault(connection.id, []).append(
+                        (seg_times[chosen], offsets[chosen]))
+                    storage.channel_stats[connection.id] += int(chosen.sum())
+            t_lo, t_hi = int(seg_times.min()), int(seg_times.max())
+            chunk.message_start_time = min(t_lo, chunk.message_start_time)
+            chunk.message_end_time = max(t_hi, chunk.message_end_time)
+            storage.message_start_time = min(t_lo, storage.message_start_time)
+            storage.message_end_time = max(t_hi, storage.message_end_time)
+            if past.size:
+                storage.close_chunk()
+            first = last + 1
+
+    def _close_mcap_chunk(self) -> None:
+        """rosbags' ``McapWriter.close_chunk`` (chunk record, message indexes, chunk index)
+        with the message indexes of :meth:`_mcap`'s blocks written as arrays."""
+        from rosbags.rosbag2 import storage_mcap as m
+
+        storage = self.writer.storage
+        chunk = storage.chunk
+        rec = BytesIO()
+        m.write_uint64(rec, chunk.message_start_time)
+        m.write_uint64(rec, chunk.message_end_time)
+        m.write_uint64(rec, chunk.bio.tell())
+        m.write_uint32(rec, 0)
+        compressed = storage.compressor(chunk.bio.getvalue())
+        m.write_string(rec, storage.compression)
+        m.write_uint64(rec, len(compressed))
+        rec.write(compressed)
+        chunk_start = storage.bio.tell()
+        m.write_record(storage.bio, 0x06, rec)
+        chunk_end = storage.bio.tell()
+        offsets: list[tuple[int, int]] = []
+        for cid, parts in self._index.items():
+            offsets.append((cid, storage.bio.tell()))
+            entries = np.empty((sum(len(t) for t, _ in parts), 2), dtype='<u8')
+            entries[:, 0] = np.concatenate([t for t, _ in parts])
+            entries[:, 1] = np.concatenate([o for _, o in parts])
+            rec = BytesIO()
+            m.write_uint16(rec, cid)
+            m.write_uint32(rec, entries.nbytes)
+            rec.write(entries.tobytes())
+            m.write_record(storage.bio, 0x07, rec)
+        self._index = {}
+        rec = BytesIO()
+        m.write_uint64(rec, chunk.message_start_time)
+        m.write_uint64(rec, chunk.message_end_time)
+        m.write_uint64(rec, chunk_start)
+        m.write_uint64(rec, chunk_end - chunk_start)
+        m.write_uint32(rec, len(offsets) * 10)
+        for cid, offset in offsets:
+            m.write_uint16(rec, cid)
+            m.write_uint64(rec, offset)
+        m.write_uint64(rec, storage.bio.tell() - chunk_end)
+        m.write_string(rec, storage.compression)
+        m.write_uint64(rec, len(compressed))
+        m.write_uint64(rec, chunk.bio.tell())
+        storage.chunks.append(rec)
+        storage.chunk = m.PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+
+
 def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, str]],
-         writer: Any, typestore: Any, cfg: ProcessingConfig, outputs: list[str],
+         writer: Any, typestore: Any, settings: JointNodeSettings, outputs: list[str],
          spec: NodeTopics, prefix: str, csv_sink: _CsvSink | None, summary: BagSummary,
          total: int, progress: Callable[[int, int], None] | None,
          chunk_size: int) -> BagSummary:
     """The read - process - write loop of :func:`process_bag`."""
-    messages = output_messages(typestore, cfg.model.string_names, cfg.link1_frame)
+    messages = output_messages(typestore, settings.model.string_names, settings.link1_frame)
     sizes = {'wrench': 6, 'stiffness': 36, 'cartesian_stiffness': 36,
-             'string_tensions': cfg.model.n_strings,
+             'string_tensions': settings.model.n_strings,
              'stiffness_interpretation': layouts.INTERPRETATION_SIZE}
     templates = {name: _Template(typestore, spec.outputs[name], messages[name], sizes[name],
                                  name == 'wrench') for name in outputs}
-    out_connections = {name: writer.add_connection(f'{prefix}/{name}', spec.outputs[name],
-                                                   typestore=typestore) for name in outputs}
+    out_connections = [writer.add_connection(f'{prefix}/{name}', spec.outputs[name],
+                                             typestore=typestore) for name in outputs]
+    block_writer = _BlockWriter(writer)
     written = Counter()
 
     def emit(a: Answers) -> None:
@@ -656,45 +932,50 @@ def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, st
                     'cartesian_stiffness': a.cartesian_stiffness,
                     'string_tensions': a.tensions,
                     'stiffness_interpretation': a.interpretation}
-        blocks = [(out_connections[name], templates[name].rows(
-            payloads[name], a.stamps if name == 'wrench' else None)) for name in outputs]
-        write = writer.write
-        for i, t in enumerate(a.log_times.tolist()):
-            for connection, rows in blocks:
-                write(connection, t, rows[i].tobytes())
+        block_writer.write(out_connections, a.log_times, [templates[name].rows(
+            payloads[name], a.stamps if name == 'wrench' else None) for name in outputs])
         for name in outputs:
             written[name] += len(a)
         if csv_sink is not None:
             csv_sink.write(a)
 
-    processor = StiffnessProcessor(cfg, emit, chunk_size=chunk_size)
-    handlers = {'screw': processor.screw, 'pose': processor.pose,
-                'rest_lengths': processor.rest_lengths}
-    inputs: Counter[str] = Counter()
     deserialize = typestore.deserialize_cdr
+    processor = StiffnessProcessor(settings, emit, chunk_size=chunk_size,
+                                   deserialize=lambda raw: deserialize(raw, FLOAT64_MULTIARRAY))
+    handlers = {'pose': processor.pose, 'rest_lengths': processor.rest_lengths}
+    inputs: Counter[str] = Counter()
     next_report = time.perf_counter() + PROGRESS_PERIOD
     done = 0
-    for connection, log_time, raw in _messages(reader, connections):
+    screw_raw = processor.screw_raw
+    screw_topic = f'{prefix}/screw'
+    # rosbags yields each storage file in log-time order; the files of a split bag follow
+    # each other in time.
+    for connection, log_time, raw in reader.messages(connections=connections):
         done += 1
-        name, msgtype = wanted[connection.topic]
-        inputs[name] += 1
-        if connection.msgtype != msgtype:
-            processor._reject(name, f'message type {connection.msgtype}, expected {msgtype}',
-                              'wrong message type')
-            continue
-        try:
-            msg = deserialize(raw, msgtype)
-        except Exception as exc:  # rosbags raises several types on corrupt CDR
-            processor._reject(name, f'cannot deserialize: {type(exc).__name__}: {exc}',
-                              'undecodable')
-            continue
-        handlers[name](msg, log_time)
-        if progress is not None and done % 256 == 0 and time.perf_counter() >= next_report:
+        topic = connection.topic
+        if topic == screw_topic and connection.msgtype == FLOAT64_MULTIARRAY:
+            screw_raw(raw, log_time)
+        else:
+            name, msgtype = wanted[topic]
+            inputs[name] += 1
+            if connection.msgtype != msgtype:
+                processor.reject(name, f'message type {connection.msgtype}, expected '
+                                 f'{msgtype}', 'wrong message type')
+            else:
+                try:
+                    msg = deserialize(raw, msgtype)
+                except Exception as exc:  # rosbags raises several types on corrupt CDR
+                    processor.reject(name, f'cannot deserialize: {type(exc).__name__}: {exc}',
+                                     'undecodable')
+                else:
+                    handlers[name](msg, log_time)
+        if progress is not None and not done & 1023 and time.perf_counter() >= next_report:
             next_report = time.perf_counter() + PROGRESS_PERIOD
             progress(done, total)
     processor.finish()
     if progress is not None:
         progress(done, total)
+    inputs['screw'] += done - sum(inputs.values())
     summary.inputs = {name: inputs[name] for name in spec.inputs if inputs[name]}
     summary.answered = dict(processor.answered)
     summary.written = {f'{prefix}/{name}': written[name] for name in outputs}
@@ -702,8 +983,3 @@ def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, st
     summary.rejection_examples = dict(processor.examples)
     return summary
 
-
-def _messages(reader: Any, connections: list[Any]) -> Iterator[tuple[Any, int, bytes]]:
-    """The messages of ``connections`` in log-time order (rosbags yields each storage file in
-    log-time order; the files of a split bag follow each other in time)."""
-    yield from reader.messages(connections=connections)

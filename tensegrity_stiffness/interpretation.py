@@ -61,9 +61,14 @@ _SUMMING_MAP = _summing_map()
 
 def interpretation_vector(stiffness: ArrayLike) -> FloatArray:
     """The 16 numbers of :func:`interpret_stiffness` in one vector, computed in three array
-    operations (for the node's per-message path): block Frobenius norms in
-    :data:`BLOCK_NAMES` order (4), column norms (6), row norms (6)."""
+    operations: block Frobenius norms in :data:`BLOCK_NAMES` order (4), column norms (6), row
+    norms (6). ``stiffness`` (6, 6) gives (16,); a batch (..., 6, 6) gives (..., 16), each row
+    one vector-matrix product as for a single K (a stack of (1, 36) products: no large GEMM,
+    whose threading would depend on OPENBLAS_NUM_THREADS and the load)."""
     K = np.asarray(stiffness, dtype=np.float64)
-    if K.shape != (6, 6):
-        raise ValueError(f'stiffness must have shape (6, 6), got {K.shape}')
-    return np.sqrt(np.square(K).reshape(36) @ _SUMMING_MAP)
+    if K.shape == (6, 6):
+        return np.sqrt(np.square(K).reshape(36) @ _SUMMING_MAP)
+    if K.ndim < 2 or K.shape[-2:] != (6, 6):
+        raise ValueError(f'stiffness must have shape (6, 6) or (..., 6, 6), got {K.shape}')
+    squares = np.square(K).reshape(-1, 1, 36)
+    return np.sqrt(squares @ _SUMMING_MAP).reshape(*K.shape[:-2], 16)

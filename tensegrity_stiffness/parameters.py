@@ -101,7 +101,6 @@ def _is_number(value: Any) -> bool:
 #: joint"); nodes A, B, C, D, the same set on both links.
 _DEFAULT_NODES = [-0.030162, 0.0, 0.0, -0.01524, -0.026035, 0.0,
                   0.01524, -0.026035, 0.0, 0.030162, 0.0, 0.0]
-_CROSS_REST, _STRAIGHT_REST, _STRETCH = 0.0381, 0.03175, 0.02
 #: Its unloaded equilibrium (solve_equilibrium, |F| < 1e-13): a rotation by pi about
 #: (1, 0, -1)/sqrt(2), link 2 turned over.
 _DEFAULT_INITIAL_SCREW = [2.221441469079183, 0.0, -2.221441469079183,
@@ -131,9 +130,9 @@ JOINT_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('joint.stiffness', 'double_array', [77.0] * 12,
                   'string stiffness k, N/m, one per string (or one for all)'),
     ParameterSpec('joint.rest_lengths', 'double_array',
-                  [_CROSS_REST] * 4 + [_STRAIGHT_REST] * 8, 'rest lengths l0, m, one per string'),
+                  [0.0381] * 4 + [0.03175] * 8, 'rest lengths l0, m, one per string'),
     ParameterSpec('joint.max_lengths', 'double_array',
-                  [_CROSS_REST + _STRETCH] * 4 + [_STRAIGHT_REST + _STRETCH] * 8,
+                  [0.0581] * 4 + [0.05175] * 8,
                   'maximum lengths lmax, m, one per string (empty: no limit)'),
     ParameterSpec('joint.force_law', 'string', 'hooke', 'string force law', choices=FORCE_LAWS),
     ParameterSpec('joint.initial_screw', 'double_array', _DEFAULT_INITIAL_SCREW,
@@ -189,6 +188,9 @@ COMMON_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'highest ~/markers rate, Hz (0: one per input)', range=(0.0, 10_000.0)),
     ParameterSpec('diagnostics.period', 'double', 1.0, '/diagnostics period, s',
                   read_only=True, range=(0.01, 60.0)),
+    ParameterSpec('realtime.fast_lane', 'bool', True,
+                  'serve the streamed inputs on a thread of their own (a lean wait-set loop) '
+                  'instead of the executor', read_only=True),
 )
 
 #: Every parameter of ``stiffness_node``, in declaration order.
@@ -221,13 +223,14 @@ def flatten(section: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
 
 def values_from_config(path: Any, table: Iterable[ParameterSpec]) -> dict[str, Any]:
     """The table's defaults overridden by the parameters of a config file (a ROS parameter file
-    or a plain config of the same sections); ValueError names an unknown or mistyped one."""
+    or a plain config of the same sections); ValueError names a mistyped one. Names that are not
+    in the table are left out, as a node leaves out the undeclared parameters of its
+    ``--params-file`` (``use_sim_time``, ``qos_overrides``, another node's)."""
     specs = by_name(table)
     values = defaults(specs.values())
     for name, value in flatten(config.parameters(config.load_yaml(path))).items():
-        if name not in specs:
-            raise ValueError(f'config {path}: unknown parameter {name}')
-        values[name] = specs[name].check(value)
+        if name in specs:
+            values[name] = specs[name].check(value)
     return values
 
 

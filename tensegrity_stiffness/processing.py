@@ -8,6 +8,7 @@ Decoding a message into numbers (length, NaN and size checks, quaternions) is
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,3 +55,70 @@ def joint_outputs(model: JointModel, screw: FloatArray) -> JointOutputs:
         state = model.evaluate(screw)
         interpretation = interpretation_vector(state.stiffness)
     return JointOutputs(screw, state, interpretation)
+
+
+#: The published arrays of :class:`JointOutputs`, in topic order (wrench, stiffness,
+#: cartesian_stiffness, string_tensions, stiffness_interpretation).
+OUTPUT_NAMES = ('wrench', 'stiffness', 'cartesian_stiffness', 'tensions', 'interpretation')
+
+
+def output_arrays(outputs: JointOutputs) -> tuple[FloatArray, ...]:
+    """The published arrays of ``outputs`` in :data:`OUTPUT_NAMES` order."""
+    state = outputs.state
+    return (state.wrench, state.stiffness, state.cartesian_stiffness, state.tensions,
+            outputs.interpretation)
+
+
+def require_finite(outputs: JointOutputs) -> None:
+    """ValueError naming the first published array of ``outputs`` that is not finite (an input
+    gets all of its outputs or none). One sum per array on the common, finite path."""
+    arrays = output_arrays(outputs)
+    with np.errstate(all='ignore'):
+        total = sum(float(a.sum()) for a in arrays)
+    if math.isfinite(total):
+        return
+    for name, array in zip(OUTPUT_NAMES, arrays, strict=True):
+        if not np.isfinite(array).all():
+            raise ValueError(f'{name} contains NaN or inf')
+
+
+def screw_inputs(values: FloatArray) -> tuple[NDArray[np.bool_], dict[int, str]]:
+    """:func:`screw_input` over the rows of ``values`` (N, 6) of finite screws: which rows are
+    accepted, and for each rejected row its ValueError's text (the node's words)."""
+    values = np.asarray(values, dtype=np.float64).reshape(-1, 6)
+    try:
+        check_in_chart(values, 'screw')
+    except ValueError:
+        pass
+    else:
+        return np.ones(len(values), dtype=bool), {}
+    accepted = np.ones(len(values), dtype=bool)
+    problems: dict[int, str] = {}
+    for i, row in enumerate(values):
+        try:
+            screw_input(row)
+        except ValueError as exc:
+            accepted[i] = False
+            problems[i] = str(exc)
+    return accepted, problems
+
+
+def joint_outputs_batch(model: JointModel, screws: FloatArray) -> JointOutputs:
+    """:func:`joint_outputs` of many screws (N, 6) in one batched evaluation: every field with a
+    leading axis N (``state`` from :meth:`JointModel.evaluate`, ``interpretation`` (N, 16)).
+    Rows agree with :func:`joint_outputs` of each screw to rounding."""
+    screws = np.asarray(screws, dtype=np.float64).reshape(-1, 6)
+    with np.errstate(all='ignore'):
+        state = model.evaluate(screws)
+        interpretation = interpretation_vector(state.stiffness)
+    return JointOutputs(screws, state, interpretation)
+
+
+def finite_rows(outputs: JointOutputs) -> NDArray[np.bool_]:
+    """(N,) mask of the rows of a :func:`joint_outputs_batch` whose published arrays (wrench,
+    K, K_c, tensions, interpretation) are all finite: the rows :func:`require_finite` accepts."""
+    n = len(outputs.screw)
+    mask = np.ones(n, dtype=bool)
+    for array in output_arrays(outputs):
+        mask &= np.isfinite(array.reshape(n, -1)).all(axis=1)
+    return mask

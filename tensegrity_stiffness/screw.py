@@ -39,12 +39,21 @@ CHART_LIMIT = 2.0 * math.pi
 def check_in_chart(xi: ArrayLike, name: str = 'screw') -> None:
     """ValueError naming ``name`` unless every screw of ``xi`` (shape (6,) or (N, 6)) has
     |omega| < :data:`CHART_LIMIT`."""
-    omega = np.asarray(xi, dtype=np.float64)[..., :3]
-    theta = np.sqrt(np.sum(omega * omega, axis=-1))
-    if not np.all(theta < CHART_LIMIT):
-        worst = float(np.max(np.where(np.isnan(theta), np.inf, theta)))
-        raise ValueError(f'{name}: |omega| = {worst:.6g} rad is outside the chart '
-                         f'(must be < 2 pi)')
+    arr = np.asarray(xi, dtype=np.float64)
+    if arr.ndim == 1:  # one screw (the node's per-message path): plain floats
+        wx, wy, wz = arr[:3].tolist()
+        theta = math.sqrt(wx * wx + wy * wy + wz * wz)
+        if theta < CHART_LIMIT:
+            return
+        worst = theta if not math.isnan(theta) else math.inf
+    else:
+        omega = arr[..., :3]
+        thetas = np.sqrt(np.sum(omega * omega, axis=-1))
+        if np.all(thetas < CHART_LIMIT):
+            return
+        worst = float(np.max(np.where(np.isnan(thetas), np.inf, thetas)))
+    raise ValueError(f'{name}: |omega| = {worst:.6g} rad is outside the chart '
+                     f'(must be < 2 pi)')
 
 
 def _series(offset: int, derivative: bool) -> FloatArray:

@@ -533,3 +533,187 @@ def test_bag_output_equals_the_running_nodes_recorded_output(
 
 TYPESTORE_NAMES = {'wrench': 'geometry_msgs/msg/WrenchStamped',
                    **dict.fromkeys(OUTPUTS[1:], FMA)}
+
+
+# ------------------------------------------------------------------------------ batched parts
+def _rewrite_message_by_message(src: Path, dst: Path, storage: str) -> None:
+    """The messages of the bag ``src`` written again one ``Writer.write`` at a time."""
+    with Reader(src) as reader, Writer(dst, version=9,
+                                       storage_plugin=StoragePlugin[storage.upper()]) as writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=TYPESTORE)
+                 for c in reader.connections}
+        for c, t, raw in reader.messages():
+            writer.write(conns[c.id], t, raw)
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_block_writer_writes_what_rosbags_writes_message_by_message(
+        tmp_path: Path, storage: str) -> None:
+    """Blocks straddling mcap chunk boundaries (about 1.1 kB per input, 1 MiB chunks): the bag
+    is byte for byte the one rosbags' Writer writes for the same messages (sqlite3: the same
+    messages and metadata read back)."""
+    from tensegrity_stiffness import bag
+
+    screws = screw_stream(2500, seed=9)
+    src = write_bag(tmp_path / 'in', [In('screw', T0 + 1000 * (i // 2), multiarray(xi))
+                                      for i, xi in enumerate(screws)], storage)
+    out, again = tmp_path / 'out', tmp_path / 'again' / 'out'  # same name: same metadata
+    bag.process_bag(src, out, chunk_size=333)
+    _rewrite_message_by_message(out, again, storage)
+    if storage == 'mcap':
+        assert (out / 'out.mcap').read_bytes() == (again / 'out.mcap').read_bytes()
+    else:
+        def raw_messages(path: Path) -> list[tuple[str, int, bytes]]:
+            with Reader(path) as reader:
+                return [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+
+        assert raw_messages(out) == raw_messages(again)
+    assert (out / 'metadata.yaml').read_text() == (again / 'metadata.yaml').read_text()
+
+
+def test_plain_screws_decoded_in_blocks_equal_the_nodes_decoding(tmp_path: Path) -> None:
+    """Screws of the plain layout (decoded with frombuffer) and of other layouts (a labelled
+    dimension, a data offset; deserialized), NaN and out-of-chart ones among them: the same
+    answers and the node's rejection texts."""
+    from tensegrity_stiffness import bag
+
+    types = TYPESTORE.types
+    screws = screw_stream(40, seed=4)
+    msgs, expected = [], []
+    for i, xi in enumerate(screws):
+        t = T0 + 1000 * i
+        if i % 7 == 3:
+            msgs.append(In('screw', t, multiarray([math.inf, *xi[1:]])))
+        elif i % 7 == 5:
+            msgs.append(In('screw', t, multiarray([0, 0, 6.4, 0, 0, 0])))
+        elif i % 5 == 1:
+            labelled = multiarray(xi)
+            labelled.layout.dim = [types['std_msgs/msg/MultiArrayDimension'](
+                label='screw', size=6, stride=6)]
+            msgs.append(In('screw', t, labelled))
+            expected.append({'source': 'screw', 't': t, 'stamp': t, 'xi': xi,
+                             'rest': default_model().rest_lengths})
+        elif i % 5 == 2:
+            msgs.append(In('screw', t, multiarray([9.0, *xi], data_offset=1)))
+            expected.append({'source': 'screw', 't': t, 'stamp': t, 'xi': xi,
+                             'rest': default_model().rest_lengths})
+        else:
+            msgs.append(In('screw', t, multiarray(xi)))
+            expected.append({'source': 'screw', 't': t, 'stamp': t, 'xi': xi,
+                             'rest': default_model().rest_lengths})
+    plain = bytes(TYPESTORE.serialize_cdr(multiarray(screws[0]), FMA))
+    assert len(plain) == bag.PLAIN_SCREW_SIZE
+    np.testing.assert_array_equal(bag.plain_screw_values([plain])[0], screws[0])
+    src = write_bag(tmp_path / 'in', msgs)
+    summary = bag.process_bag(src, tmp_path / 'out', chunk_size=8)
+    check_output(tmp_path / 'out', expected)
+    assert summary.rejected == {'screw: NaN or inf': 6, 'screw: outside the chart': 5}
+    assert summary.rejection_examples['screw: NaN or inf'] == 'array contains NaN or inf'
+    assert summary.rejection_examples['screw: outside the chart'] == (
+        'screw: |omega| = 6.4 rad is outside the chart (must be < 2 pi)')
+
+
+def test_interpretation_vector_of_a_batch_matches_interpret_stiffness() -> None:
+    from tensegrity_stiffness.interpretation import interpret_stiffness
+
+    rng = np.random.default_rng(21)
+    K = rng.normal(size=(3, 50, 6, 6)) * 10.0 ** rng.uniform(-6, 6, size=(3, 50, 6, 6))
+    got = interpretation_vector(K)
+    assert got.shape == (3, 50, 16)
+    for index in np.ndindex(3, 50):
+        it = interpret_stiffness(K[index])
+        ref = np.concatenate([it.block_norms, it.column_norms, it.row_norms])
+        np.testing.assert_allclose(got[index], ref, rtol=1e-13, atol=0.0)
+        np.testing.assert_allclose(got[index], interpretation_vector(K[index]), rtol=1e-14)
+    assert interpretation_vector(np.zeros((0, 6, 6))).shape == (0, 16)
+    for shape in [(36,), (6, 5), (4, 6, 5)]:
+        with pytest.raises(ValueError, match='stiffness must have shape'):
+            interpretation_vector(np.zeros(shape))
+
+
+def test_batched_processing_agrees_with_the_node_functions() -> None:
+    from tensegrity_stiffness import processing
+
+    model = default_model()
+    screws = screw_stream(64, seed=8)
+    screws[5] = [0, 0, 7.0, 0, 0, 0]
+    screws[9] = [0, 0, 2 * math.pi, 0, 0, 0]
+    accepted, problems = processing.screw_inputs(screws)
+    assert np.flatnonzero(~accepted).tolist() == [5, 9] and sorted(problems) == [5, 9]
+    for i, problem in problems.items():
+        with pytest.raises(ValueError) as exc:
+            processing.screw_input(screws[i])
+        assert str(exc.value) == problem
+    good = screws[accepted]
+    batch = processing.joint_outputs_batch(model, good)
+    assert processing.finite_rows(batch).all()
+    for i, xi in enumerate(good):
+        one = processing.joint_outputs(model, xi)
+        np.testing.assert_allclose(batch.state.wrench[i], one.state.wrench, atol=ATOL)
+        np.testing.assert_allclose(batch.state.stiffness[i], one.state.stiffness, atol=ATOL_K)
+        np.testing.assert_allclose(batch.interpretation[i], one.interpretation, atol=ATOL_K)
+    unlimited = model_without_max_lengths()  # far out, the tensions overflow
+    far = processing.joint_outputs_batch(unlimited, np.array([good[0], [0, 0, 0, 1e300, 0, 0]]))
+    assert processing.finite_rows(far).tolist() == [True, False]
+
+
+def model_without_max_lengths() -> JointModel:
+    from tensegrity_stiffness import parameters
+
+    values = parameters.defaults(parameters.STIFFNESS_NODE_PARAMETERS)
+    values['joint.max_lengths'] = []
+    return parameters.joint_node_settings(values).model
+
+
+def test_non_finite_result_splits_the_chunk_with_the_nodes_message(tmp_path: Path) -> None:
+    """A screw whose outputs overflow (no max lengths): rejected with the text of the node's
+    publisher check, the inputs around it answered, a pose after it on the branch of the last
+    answer."""
+    from tensegrity_stiffness import bag
+
+    params = tmp_path / 'params.yaml'
+    params.write_text('joint:\n  max_lengths: []\n')
+    model = model_without_max_lengths()
+    screws = screw_stream(6, seed=12)
+    msgs = [In('screw', T0 + i, multiarray(xi)) for i, xi in enumerate(screws[:3])]
+    msgs.append(In('screw', T0 + 3, multiarray([0, 0, 0, 1e300, 0, 0])))
+    T = exp_se3(screws[3])
+    msgs.append(In('pose', T0 + 4, pose_msg(T), POSE))
+    msgs += [In('screw', T0 + 5 + i, multiarray(xi)) for i, xi in enumerate(screws[4:])]
+    src = write_bag(tmp_path / 'in', msgs)
+    summary = bag.process_bag(src, tmp_path / 'out', config_path=params)
+    assert summary.rejected == {'screw: non-finite result': 1}
+    assert summary.rejection_examples['screw: non-finite result'] == \
+        'wrench contains NaN or inf'
+    got = read_bag(tmp_path / 'out')
+    answered = [e for e in got if e[0].endswith('/wrench')]
+    assert [t for _, t, _ in answered] == [T0, T0 + 1, T0 + 2, T0 + 4, T0 + 5, T0 + 6]
+    xi_pose = log_se3(T, reference=screws[2])
+    tensions = [e[2].data for e in got if e[0].endswith('/string_tensions')]
+    np.testing.assert_allclose(tensions[3], model.evaluate(xi_pose).tensions, rtol=1e-12,
+                               atol=ATOL)
+
+
+def test_settings_come_from_the_parameter_table_and_ignore_undeclared_names(
+        tmp_path: Path) -> None:
+    from tensegrity_stiffness import bag, parameters
+
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    use_sim_time: false\n'
+                      '    qos_overrides:\n      /parameter_events:\n        publisher:\n'
+                      '          depth: 1000\n'
+                      '    frames:\n      link1: base\n    joint:\n      stiffness: [80.0]\n')
+    settings = bag.node_settings(params)
+    assert settings.link1_frame == 'base'
+    np.testing.assert_array_equal(settings.model.k, np.full(12, 80.0))
+    values = parameters.values_from_config(params, parameters.STIFFNESS_NODE_PARAMETERS)
+    assert 'use_sim_time' not in values and values['frames.link1'] == 'base'
+    default = bag.node_settings(None)
+    assert default.max_array_length == 1024 and default.link1_frame == FRAME
+    np.testing.assert_array_equal(default.model.rest_lengths, default_model().rest_lengths)
+    params.write_text('frames:\n  link1: 3\n')
+    with pytest.raises(bag.BagError, match=r'config .*frames\.link1 must be a string'):
+        bag.node_settings(params)
+    params.write_text('limits:\n  max_array_length: 2\n')
+    with pytest.raises(bag.BagError, match=r'limits\.max_array_length'):
+        bag.node_settings(params)

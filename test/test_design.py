@@ -259,7 +259,7 @@ def slsqp_best(model: JointModel, xi: np.ndarray, W: np.ndarray, res: DesignResu
 def test_not_worse_than_slsqp_on_100_cases():
     rng = np.random.default_rng(21)
     model = MODELS['hooke']
-    cases = 0
+    cases = unmatched = 0
     while cases < 100:
         xi, W = random_request(rng, model)
         res = design_rest_lengths(model, xi, W, *LIMITS)
@@ -269,7 +269,10 @@ def test_not_worse_than_slsqp_on_100_cases():
         if target is not None:
             res = design_rest_lengths(model, xi, W, *LIMITS, target_stiffness=target)
         best = slsqp_best(model, xi, W, res, target, rng)
-        assert math.isfinite(best)
+        if not math.isfinite(best):  # SLSQP found the feasible set from none of its starts
+            unmatched += 1
+            assert unmatched <= 5, 'SLSQP failed on too many cases to compare'
+            continue
         assert res.objective <= best + 1e-9 * max(1.0, best), (res.objective, best)
         cases += 1
 

@@ -217,7 +217,7 @@ def test_cartesian_stiffness_symmetric_and_definite_at_unloaded_equilibria(model
     assert np.linalg.eigvalsh(0.5 * (Kc + Kc.T)).min() > 0
     # Other stable and unstable unloaded equilibria of the same joint.
     rng = np.random.default_rng(6)
-    kinds = set()
+    stable = converged = 0
     for _ in range(40):
         axis = rng.normal(size=3)
         x0 = np.r_[axis / np.linalg.norm(axis) * rng.uniform(0, math.pi), rng.normal(size=3)
@@ -229,8 +229,10 @@ def test_cartesian_stiffness_symmetric_and_definite_at_unloaded_equilibria(model
         assert np.abs(Kc - Kc.T).max() <= 1e-9 * np.abs(Kc).max()
         eig = np.linalg.eigvalsh(0.5 * (Kc + Kc.T))
         assert res.stable == bool(eig.min() > 0)
-        kinds.add(res.stable)
-    assert True in kinds
+        converged += 1
+        stable += res.stable
+    assert converged >= 30, converged
+    assert stable >= 1, 'no stable unloaded equilibrium found'  # the default joint rests at one
 
 
 def test_k_itself_is_not_symmetric(model, rest_state):

@@ -13,7 +13,7 @@ import pytest
 rclpy = pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
 pytestmark = pytest.mark.ros
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
 from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
 from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
@@ -24,7 +24,7 @@ from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 import msg_tools  # noqa: E402
 from tensegrity_stiffness.design import design_rest_lengths  # noqa: E402
-from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
+from tensegrity_stiffness.equilibrium import solve_equilibrium, stability_margin  # noqa: E402
 from tensegrity_stiffness.interpretation import interpret_stiffness  # noqa: E402
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.planar import PlanarMechanism  # noqa: E402
@@ -90,6 +90,10 @@ class Harness:
         msg = ParameterMsg(name=name)
         if isinstance(value, str):
             msg.value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+        elif isinstance(value, bool):
+            msg.value = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
+        elif isinstance(value, int):
+            msg.value = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=value)
         elif isinstance(value, list):
             msg.value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
                                        double_array_value=[float(v) for v in value])
@@ -432,8 +436,8 @@ def test_parameters_validated_as_a_whole(harness, model):
     assert not bad.successful and 'force_law' in bad.reason
     bad = harness.set_parameter('planar.K1', -5.0)
     assert not bad.successful
-    ro = harness.set_parameter('qos.depth', 3.0)
-    assert not ro.successful
+    ro = harness.set_parameter('qos.depth', 3)  # the right type: refused for being read-only
+    assert not ro.successful and 'read-only' in ro.reason, ro.reason
     before = harness.counts()
     harness.send_screw(xi)
     check_outputs(harness.next_outputs(before), stiffer, xi)  # rejected sets changed nothing
@@ -456,9 +460,33 @@ def test_diagnostics(harness, model):
                       and any(kv.key == 'slack strings' for kv in s.values) for s in m.status),
         timeout=5.0)
     status = next(s for s in msg.status if s.name.endswith('stiffness_node: joint'))
-    keys = {kv.key for kv in status.values}
-    assert {'input rate [Hz]', 'compute time mean [us]', 'slack strings', 'saturated strings',
-            'chart margin 2pi - |omega| [rad]'} <= keys
+    values = {kv.key: kv.value for kv in status.values}
+    # the last configuration is the unloaded equilibrium: all strings taut, stable, level OK
+    assert status.level == DiagnosticStatus.OK and status.message == 'all strings taut, stable'
+    assert values['slack strings'] == 'none' and values['saturated strings'] == 'none'
+    theta = float(np.linalg.norm(model.initial_screw[:3]))
+    assert float(values['chart margin 2pi - |omega| [rad]']) == pytest.approx(
+        2 * math.pi - theta, rel=1e-5)
+    assert float(values['stability margin (min eig of scaled sym K_c)']) == pytest.approx(
+        stability_margin(model.cartesian_stiffness(model.initial_screw)), rel=1e-5)
+    assert float(values['compute time mean [us]']) > 0.0
+    assert int(values['outputs published']) >= 1
+    assert status.hardware_id == 'tensegrity_link1'
+    # a bent configuration with slack strings is a warning naming them
+    bent = np.array([2.3963, 0.4857, -2.3963, 0.0198, -0.0033, 0.0161])
+    slack = [name for name, s in zip(model.string_names, model.evaluate(bent).slack,
+                                     strict=True) if s]
+    assert slack
+    before = harness.counts()
+    harness.send_screw(bent)
+    harness.next_outputs(before)
+    msg = harness.diagnostics.wait_until(
+        lambda m: any(s.name.endswith('stiffness_node: joint') and s.level == DiagnosticStatus.WARN
+                      for s in m.status), timeout=5.0)
+    status = next(s for s in msg.status if s.name.endswith('stiffness_node: joint'))
+    assert f'{len(slack)} slack' in status.message
+    values = {kv.key: kv.value for kv in status.values}
+    assert all(name in values['slack strings'] for name in slack)
 
 
 def test_markers_mark_slack_strings(harness, model):

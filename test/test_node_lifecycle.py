@@ -85,9 +85,11 @@ def _request(wrench: list[float] | None = None) -> SolveEquilibrium.Request:
 
 @pytest.fixture
 def slow_solver_node():
-    """A node whose solves may take 3 s (a load the strings cannot hold uses all of it)."""
+    """A node whose solves may take 3 s (a load the strings cannot hold uses all of it, with
+    iterations enough)."""
     proc = NodeProcess(unique_namespace('worker'), CONFIG,
-                       extra_args=['-p', 'equilibrium.time_budget:=3.0'])
+                       extra_args=['-p', 'equilibrium.time_budget:=3.0',
+                                   '-p', 'equilibrium.max_iterations:=10000'])
     ros = RosClient('worker_test')
     try:
         client = ros.client(SolveEquilibrium, f'{proc.namespace}/stiffness_node/solve_equilibrium')

@@ -5,18 +5,19 @@ Thin layer: validate, convert with :mod:`msg_tools`, call the library
 documented in README.md; the conventions (frames, orderings, signs) in
 :mod:`tensegrity_stiffness.joint`; the parameters in :mod:`tensegrity_stiffness.parameters`.
 
-Concurrency: one single-threaded executor runs every callback, so inputs are answered in order.
-The ``~/screw`` and ``~/pose`` callbacks also take the messages queued behind their own
-(:mod:`.draining_subscription`): rclpy's per-callback cost exceeds the computation itself. The
-equilibrium service is a coroutine: it validates the request, hands the solve to the worker
-process (:class:`.SolverWorker`) and awaits it, so the topics keep being served meanwhile. All the
+Concurrency: ``~/screw`` and ``~/pose`` are served in order on a thread of their own
+(:mod:`.fast_lane`: rclpy's executor costs more per message than the computation itself; with
+``realtime.fast_lane: false`` the executor serves them, draining the queue behind each message).
+A single-threaded executor runs everything else. The equilibrium and design services are
+coroutines: they validate the request, hand the work to the worker process
+(:class:`.SolverWorker`) and await it, so the topics keep being served meanwhile. All the
 configuration a computation needs is one immutable :class:`JointNodeSettings`, swapped as a whole
-when parameters or rest lengths change and read once per callback: no output mixes two sets.
+when parameters or rest lengths change and read once per input; outputs are built and published
+under one lock, so no output mixes two sets and the two threads never interleave a publication.
 """
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections import deque
@@ -45,6 +46,7 @@ from tensegrity_stiffness.parameters import (
 from tensegrity_stiffness.processing import JointOutputs, joint_outputs, pose_input, screw_input
 from tensegrity_stiffness.ros import joint_services, runner
 from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.fast_lane import FastLane
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
 from tensegrity_stiffness.ros.solver_worker import WorkerDiedError
@@ -61,7 +63,7 @@ NODE_NAME = 'stiffness_node'
 STATS_WINDOW = 1000
 #: Wall-clock time a solve may take beyond ``equilibrium.time_budget`` (a loaded machine) before
 #: it counts as an overrun and the worker is replaced.
-SOLVER_GRACE_S = 2.0
+SOLVER_GRACE_S = 5.0
 #: Wall-clock bound of one rest-length design in the worker (it takes milliseconds).
 DESIGN_DEADLINE_S = 5.0
 
@@ -96,6 +98,7 @@ class StiffnessNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.reporter = Reporter(self.get_logger())
         self._state_lock = threading.Lock()
+        self._output_lock = threading.Lock()  # the fast lane and the executor both publish
         self._binding = ParameterBinding(
             self, STIFFNESS_NODE_PARAMETERS, joint_node_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
@@ -104,7 +107,8 @@ class StiffnessNode(Node):
         self._last_stamp = None
         self._last_outputs: JointOutputs | None = None
         self._last_solution: np.ndarray | None = None
-        self._last_marker_time = -math.inf
+        self._marked: JointOutputs | None = None
+        self._clock = self.get_clock()
         self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._published = 0
@@ -127,11 +131,16 @@ class StiffnessNode(Node):
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics', 10)
 
         qos = input_qos(depth, reliability)
+        self._lane = FastLane(self, self.reporter.internal_error) \
+            if values['realtime.fast_lane'] else None
         for msg_type, topic, callback in ((Float64MultiArray, '~/screw', self._on_screw),
                                           (PoseStamped, '~/pose', self._on_pose)):
-            create_draining_subscription(
-                self, msg_type, topic, callback, qos,
-                on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc))
+            if self._lane is not None:
+                self._lane.create_subscription(msg_type, topic, callback, qos)
+            else:
+                create_draining_subscription(
+                    self, msg_type, topic, callback, qos,
+                    on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc))
         self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
                                  LATCHED_QOS)
         # Own group: the coroutine holds its group while it awaits the worker; the default group
@@ -146,17 +155,24 @@ class StiffnessNode(Node):
         self.create_service(PlanarInverseKinematics, '~/planar_inverse_kinematics',
                             self._on_planar_inverse)
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
+        self._marker_timer = self.create_timer(
+            self._settings.marker_period or 1.0, self._publish_markers)
         model = self._settings.model
         # Warm the worker up (imports, first solve) before the first request needs it.
         self._solver.submit(solve_equilibrium, (model, np.zeros(6)), {'time_budget': 1.0},
                             lambda _: None, lambda _: None, deadline_s=1.0 + SOLVER_GRACE_S)
+        if self._lane is not None:
+            self._lane.start()
         self.get_logger().info(
             f'ready: {model.n_strings} strings, force law {model.force_law}, frames '
             f'{self._settings.link1_frame} -> {self._settings.link2_frame}, inputs '
             f'{reliability} depth {depth}')
 
     def close(self) -> None:
-        """End the worker process (called by the runner before the node is destroyed)."""
+        """End the fast lane and the worker process (called by the runner before the node is
+        destroyed)."""
+        if self._lane is not None:
+            self._lane.stop()
         self._solver.close()
 
     # ------------------------------------------------------------------ parameters
@@ -172,6 +188,9 @@ class StiffnessNode(Node):
                         settings.model.n_strings,):
                     settings = replace(settings, model=settings.model.with_rest_lengths(rest))
                 self._settings = settings
+            if 'markers.max_rate' in names:
+                self._marker_timer.timer_period_ns = int(1e9 * (settings.marker_period or 1.0))
+                self._marker_timer.reset()
         except Exception as exc:  # validated before: only a bug gets here; the old set stays
             self.reporter.internal_error('parameters', exc)
             return
@@ -232,37 +251,54 @@ class StiffnessNode(Node):
     def _compute_and_publish(self, settings: JointNodeSettings, xi: np.ndarray, stamp: Any,
                              source: str) -> None:
         """Build and check every output, then publish them all (an input gets all of its
-        outputs or none)."""
-        start = time.perf_counter()
-        messages = self._messages
-        try:
-            outputs = joint_outputs(settings.model, xi)
-            if stamp is None:
-                stamp = self.get_clock().now().to_msg()
-            if messages.string_names != tuple(settings.model.string_names):
-                messages = self._messages = msg_tools.JointOutputMessages(
-                    tuple(settings.model.string_names))
-            messages.fill(outputs, stamp, settings.link1_frame)
-            now = time.monotonic()
-            markers = None
-            if settings.marker_period == 0.0 or \
-                    now - self._last_marker_time >= settings.marker_period:
-                markers = msg_tools.joint_markers(settings.model, outputs.state,
-                                                  settings.link1_frame, stamp)
-        except ValueError as exc:
-            self.reporter.reject(source, str(exc))
-            return
-        for publisher, msg in zip(self._output_publishers, messages.messages(), strict=True):
-            publisher.publish(msg)
-        if markers is not None:
-            self._last_marker_time = now
-            self._pub_markers.publish(markers)
+        outputs or none); topics nobody subscribes to are not filled (a publication there
+        reaches no one: the outputs are volatile)."""
+        with self._output_lock:
+            start = time.perf_counter()
+            messages = self._messages
+            try:
+                outputs = joint_outputs(settings.model, xi)
+                if stamp is None:
+                    stamp = self._clock.now().to_msg()
+                if messages.string_names != tuple(settings.model.string_names):
+                    messages = self._messages = msg_tools.JointOutputMessages(
+                        tuple(settings.model.string_names))
+                wanted = tuple(p.get_subscription_count() > 0 for p in self._output_publishers)
+                messages.fill(outputs, stamp, settings.link1_frame, wanted)
+                markers = None
+                if settings.marker_period == 0.0:  # one per input; else _publish_markers
+                    markers = msg_tools.joint_markers(settings.model, outputs.state,
+                                                      settings.link1_frame, stamp)
+            except ValueError as exc:
+                self.reporter.reject(source, str(exc))
+                return
+            for publisher, msg, publish in zip(self._output_publishers, messages.messages(),
+                                               wanted, strict=True):
+                if publish:
+                    publisher.publish(msg)
+            if markers is not None:
+                self._pub_markers.publish(markers)
+            with self._state_lock:
+                self._last_screw, self._last_stamp = xi, stamp
+                self._last_outputs = outputs
+            self._published += 1
+            self._input_times.append(time.monotonic())
+            self._compute_times.append(time.perf_counter() - start)
+
+    @guarded('~/markers')
+    def _publish_markers(self) -> None:
+        """At most ``markers.max_rate`` Hz, on the executor's thread (a MarkerArray costs as much
+        as all other outputs together): the last configuration, once, if anyone listens."""
+        settings = self._settings
         with self._state_lock:
-            self._last_screw, self._last_stamp = xi, stamp
-            self._last_outputs = outputs
-        self._published += 1
-        self._input_times.append(now)
-        self._compute_times.append(time.perf_counter() - start)
+            outputs, stamp = self._last_outputs, self._last_stamp
+        if (settings.marker_period == 0.0 or outputs is None or outputs is self._marked
+                or self._pub_markers.get_subscription_count() == 0):
+            return
+        self._marked = outputs
+        self._pub_markers.publish(msg_tools.joint_markers(
+            settings.model, outputs.state, settings.link1_frame,
+            stamp if stamp is not None else self._clock.now().to_msg()))
 
     # ------------------------------------------------------------------ services
     async def _in_worker(self, fn: Any, args: tuple, kwargs: dict[str, Any],
