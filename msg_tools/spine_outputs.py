@@ -31,7 +31,7 @@ from tensegrity_stiffness.layouts import (
     matrix_dims,
     stacked_matrix_dims,
 )
-from tensegrity_stiffness.spine_processing import SpineOutputs
+from tensegrity_stiffness.spine_processing import SpineOutputs, output_arrays, require_finite
 
 __all__ = ['SpineOutputMessages', 'spine_markers']
 
@@ -61,19 +61,24 @@ class SpineOutputMessages:
         self.tip_stiffness_base = matrix_to_multiarray(np.zeros((6, 6)),
                                                        *TIP_STIFFNESS_LABELS['base'])
 
-    def fill(self, outputs: SpineOutputs, stamp: Time, base_frame: str) -> None:
-        """Set every message from ``outputs``; ValueError if a value is not finite."""
-        state = outputs.state
-        set_multiarray_data(self.joint_wrenches, state.wrenches)
-        set_multiarray_data(self.joint_stiffness, state.stiffness)
-        set_multiarray_data(self.joint_cartesian_stiffness, state.cartesian_stiffness)
-        set_multiarray_data(self.tip_stiffness, outputs.tip_stiffness_tool)
-        set_multiarray_data(self.tip_stiffness_base, outputs.tip_stiffness_base)
-        self.tip_pose.pose = transform_to_pose(state.tip_transform)
-        set_wrench(self.tip_wrench.wrench, outputs.tip_wrench)
-        for msg in (self.tip_pose, self.tip_wrench):
-            msg.header.stamp = stamp
-            msg.header.frame_id = base_frame
+    def fill(self, outputs: SpineOutputs, stamp: Time, base_frame: str,
+             wanted: tuple[bool, ...] | None = None) -> None:
+        """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
+        order; default all); ValueError if any output is not finite (then none is set)."""
+        require_finite(outputs)
+        arrays = output_arrays(outputs)
+        for k, msg in enumerate(self.messages()):
+            if wanted is not None and not wanted[k]:
+                continue
+            if k == 3:
+                msg.pose = transform_to_pose(arrays[k])
+            elif k == 4:
+                set_wrench(msg.wrench, arrays[k])
+            else:
+                set_multiarray_data(msg, arrays[k])
+            if k in (3, 4):
+                msg.header.stamp = stamp
+                msg.header.frame_id = base_frame
 
     def messages(self) -> tuple[Any, ...]:
         """The messages in topic order: joint_wrenches, joint_stiffness,

@@ -8,6 +8,7 @@ part; this module takes the numbers. Every check names the joint (1-based) it re
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -101,6 +102,31 @@ def spine_outputs(chain: JointChain, screws: FloatArray,
         Ad = adjoint(state.tip_transform)
         tool = Ad.T @ base @ Ad  # as tip_stiffness_from_state(frame='tool')
     return SpineOutputs(screws, state, W, tool, base)
+
+
+def output_arrays(outputs: SpineOutputs) -> tuple[FloatArray, ...]:
+    """The published arrays of ``outputs``, in the order of :data:`OUTPUT_NAMES`."""
+    state = outputs.state
+    return (state.wrenches, state.stiffness, state.cartesian_stiffness, state.tip_transform,
+            outputs.tip_wrench, outputs.tip_stiffness_tool, outputs.tip_stiffness_base)
+
+
+#: Names of :func:`output_arrays` (the topics they are published on).
+OUTPUT_NAMES = ('joint_wrenches', 'joint_stiffness', 'joint_cartesian_stiffness', 'tip_pose',
+                'tip_wrench', 'tip_stiffness', 'tip_stiffness_base')
+
+
+def require_finite(outputs: SpineOutputs) -> None:
+    """ValueError naming the first published array of ``outputs`` that is not finite (an input
+    gets all of its outputs or none). One sum per array on the common, finite path."""
+    arrays = output_arrays(outputs)
+    with np.errstate(all='ignore'):
+        total = sum(float(a.sum()) for a in arrays)
+    if math.isfinite(total):
+        return
+    for name, array in zip(OUTPUT_NAMES, arrays, strict=True):
+        if not np.isfinite(array).all():
+            raise ValueError(f'{name} contains NaN or inf')
 
 
 def joint_health_in_chain(state: ChainState, i: int, string_names: Sequence[str]) -> JointHealth:

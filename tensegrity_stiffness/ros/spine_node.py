@@ -7,14 +7,15 @@ the reporter and guards, draining subscriptions, the worker process and the runn
 validate (:mod:`tensegrity_stiffness.spine_processing`), convert (:mod:`msg_tools`), call the
 library, publish all of an input's outputs or none.
 
-Concurrency as in ``stiffness_node``: one single-threaded executor; the equilibrium service is a
+Concurrency as in ``stiffness_node``: ``~/screws`` and ``~/poses`` on the fast lane's thread
+(``realtime.fast_lane``, else draining subscriptions on the executor), everything else on one
+single-threaded executor; outputs are published under one lock; the equilibrium service is a
 coroutine awaiting the worker process; all configuration is one immutable
 :class:`SpineNodeSettings`, swapped as a whole and read once per callback.
 """
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections import deque
@@ -41,6 +42,7 @@ from tensegrity_stiffness.parameters import (
 )
 from tensegrity_stiffness.ros import runner, spine_services
 from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.fast_lane import FastLane
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
 from tensegrity_stiffness.ros.solver_worker import WorkerDiedError
@@ -51,7 +53,7 @@ from tensegrity_stiffness.ros.stiffness_node import (
     create_output_publisher,
     input_qos,
 )
-from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
+from tensegrity_stiffness.ros.worker_calls import WorkerCalls, answer_worker_failure
 from tensegrity_stiffness.spine_processing import (
     SpineOutputs,
     joint_health_in_chain,
@@ -88,6 +90,7 @@ class SpineNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.reporter = Reporter(self.get_logger())
         self._state_lock = threading.Lock()
+        self._output_lock = threading.Lock()  # the fast lane and the executor both publish
         n_joints = _declared_joint_count(self)
         self._binding = ParameterBinding(
             self, spine_node_parameters(n_joints), spine_node_settings, self._apply_parameters,
@@ -97,7 +100,8 @@ class SpineNode(Node):
         self._last_stamp = None
         self._last_outputs: SpineOutputs | None = None
         self._last_solution: np.ndarray | None = None
-        self._last_marker_time = -math.inf
+        self._marked: SpineOutputs | None = None
+        self._clock = self.get_clock()
         self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._published = 0
@@ -115,28 +119,40 @@ class SpineNode(Node):
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics', 10)
 
         qos = input_qos(depth, reliability)
+        self._lane = FastLane(self, self.reporter.internal_error) \
+            if values['realtime.fast_lane'] else None
         for msg_type, topic, callback in ((Float64MultiArray, '~/screws', self._on_screws),
                                           (PoseArray, '~/poses', self._on_poses)):
-            create_draining_subscription(
-                self, msg_type, topic, callback, qos,
-                on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc))
+            if self._lane is not None:
+                self._lane.create_subscription(msg_type, topic, callback, qos)
+            else:
+                create_draining_subscription(
+                    self, msg_type, topic, callback, qos,
+                    on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc))
         self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
                                  LATCHED_QOS)
         self.create_service(SolveChainEquilibrium, '~/solve_equilibrium',
                             self._on_solve_equilibrium,
                             callback_group=MutuallyExclusiveCallbackGroup())
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
+        self._marker_timer = self.create_timer(
+            self._settings.marker_period or 1.0, self._publish_markers)
         chain = self._settings.chain
         # Warm the worker up (imports, first solve) before the first request needs it.
         self._worker.worker.submit(solve_chain_equilibrium, (chain, np.zeros(6)),
                                    {'time_budget': 1.0}, lambda _: None, lambda _: None,
                                    deadline_s=1.0 + SOLVER_GRACE_S)
+        if self._lane is not None:
+            self._lane.start()
         self.get_logger().info(
             f'ready: {n_joints} joints, frames {self._settings.base_frame} -> '
             f'{self._settings.tool_frame}, inputs {reliability} depth {depth}')
 
     def close(self) -> None:
-        """End the worker process (called by the runner before the node is destroyed)."""
+        """End the fast lane and the worker process (called by the runner before the node is
+        destroyed)."""
+        if self._lane is not None:
+            self._lane.stop()
         self._worker.close()
 
     # ------------------------------------------------------------------ parameters
@@ -152,6 +168,9 @@ class SpineNode(Node):
                         r.shape[0] for r in old.rest_lengths] == settings.n_strings:
                     settings = replace(settings, rest_lengths=old.rest_lengths)
                 self._settings = settings
+            if 'markers.max_rate' in names:
+                self._marker_timer.timer_period_ns = int(1e9 * (settings.marker_period or 1.0))
+                self._marker_timer.reset()
         except Exception as exc:  # validated before: only a bug gets here; the old set stays
             self.reporter.internal_error('parameters', exc)
             return
@@ -213,36 +232,51 @@ class SpineNode(Node):
     def _compute_and_publish(self, settings: SpineNodeSettings, xi: np.ndarray, stamp: Any,
                              source: str) -> None:
         """Build and check every output, then publish them all (an input gets all of its
-        outputs or none)."""
-        start = time.perf_counter()
-        messages = self._messages
-        try:
-            outputs = spine_outputs(settings.chain, xi, settings.rest_lengths)
-            if stamp is None:
-                stamp = self.get_clock().now().to_msg()
-            messages.fill(outputs, stamp, settings.base_frame)
-            now = time.monotonic()
-            markers = None
-            # The whole spine's markers take milliseconds: built only for a subscriber.
-            if (settings.marker_period == 0.0 or
-                    now - self._last_marker_time >= settings.marker_period) and \
-                    self._pub_markers.get_subscription_count():
-                markers = msg_tools.spine_markers(settings.chain, outputs.state,
-                                                  settings.base_frame, stamp)
-        except ValueError as exc:
-            self.reporter.reject(source, str(exc))
-            return
-        for publisher, msg in zip(self._output_publishers, messages.messages(), strict=True):
-            publisher.publish(msg)
-        if markers is not None:
-            self._last_marker_time = now
-            self._pub_markers.publish(markers)
+        outputs or none); topics nobody subscribes to are not filled (the outputs are
+        volatile)."""
+        with self._output_lock:
+            start = time.perf_counter()
+            messages = self._messages
+            try:
+                outputs = spine_outputs(settings.chain, xi, settings.rest_lengths)
+                if stamp is None:
+                    stamp = self._clock.now().to_msg()
+                wanted = tuple(p.get_subscription_count() > 0 for p in self._output_publishers)
+                messages.fill(outputs, stamp, settings.base_frame, wanted)
+                markers = None
+                if settings.marker_period == 0.0:  # one per input; else _publish_markers
+                    markers = msg_tools.spine_markers(settings.chain, outputs.state,
+                                                      settings.base_frame, stamp)
+            except ValueError as exc:
+                self.reporter.reject(source, str(exc))
+                return
+            for publisher, msg, publish in zip(self._output_publishers, messages.messages(),
+                                               wanted, strict=True):
+                if publish:
+                    publisher.publish(msg)
+            if markers is not None:
+                self._pub_markers.publish(markers)
+            with self._state_lock:
+                self._last_screws, self._last_stamp = xi, stamp
+                self._last_outputs = outputs
+            self._published += 1
+            self._input_times.append(time.monotonic())
+            self._compute_times.append(time.perf_counter() - start)
+
+    @guarded('~/markers')
+    def _publish_markers(self) -> None:
+        """At most ``markers.max_rate`` Hz, on the executor's thread (the whole spine's markers
+        take milliseconds): the last configuration, once, if anyone listens."""
+        settings = self._settings
         with self._state_lock:
-            self._last_screws, self._last_stamp = xi, stamp
-            self._last_outputs = outputs
-        self._published += 1
-        self._input_times.append(now)
-        self._compute_times.append(time.perf_counter() - start)
+            outputs, stamp = self._last_outputs, self._last_stamp
+        if (settings.marker_period == 0.0 or outputs is None or outputs is self._marked
+                or self._pub_markers.get_subscription_count() == 0):
+            return
+        self._marked = outputs
+        self._pub_markers.publish(msg_tools.spine_markers(
+            settings.chain, outputs.state, settings.base_frame,
+            stamp if stamp is not None else self._clock.now().to_msg()))
 
     # ------------------------------------------------------------------ services
     @guarded_service('~/solve_equilibrium')
@@ -264,9 +298,7 @@ class SpineNode(Node):
             self.reporter.reject('~/solve_equilibrium', str(exc))
             return spine_services.fail(response, f'invalid request: {exc}')
         except (TimeoutError, WorkerDiedError) as exc:
-            message = worker_failure_message(exc)
-            self.reporter.warn('~/solve_equilibrium', message, error=True)
-            return spine_services.fail(response, message)
+            return answer_worker_failure(self.reporter, '~/solve_equilibrium', response, exc)
         if spine_services.fill_chain_equilibrium(response, result):
             self._last_solution = result.screws
         return response

@@ -50,7 +50,7 @@ from tensegrity_stiffness.ros.fast_lane import FastLane
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
 from tensegrity_stiffness.ros.solver_worker import WorkerDiedError
-from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
+from tensegrity_stiffness.ros.worker_calls import WorkerCalls, answer_worker_failure
 from tensegrity_stiffness_interfaces.srv import (
     DesignRestLengths,
     PlanarForwardKinematics,
@@ -301,11 +301,6 @@ class StiffnessNode(Node):
             stamp if stamp is not None else self._clock.now().to_msg()))
 
     # ------------------------------------------------------------------ services
-    async def _in_worker(self, fn: Any, args: tuple, kwargs: dict[str, Any],
-                         deadline_s: float) -> Any:
-        """``fn(*args, **kwargs)`` awaited from the worker process (:meth:`WorkerCalls.call`)."""
-        return await self._worker.call(fn, args, kwargs, deadline_s)
-
     @guarded_service('~/solve_equilibrium')
     async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
                                     response: SolveEquilibrium.Response
@@ -318,11 +313,11 @@ class StiffnessNode(Node):
             self.reporter.reject('~/solve_equilibrium', str(exc))
             return joint_services.fail(response, f'invalid request: {exc}')
         try:
-            result = await self._in_worker(solve_equilibrium,
-                                           (settings.model, job.external_wrench), job.kwargs(),
-                                           job.time_budget + SOLVER_GRACE_S)
+            result = await self._worker.call(solve_equilibrium,
+                                             (settings.model, job.external_wrench),
+                                             job.kwargs(), job.time_budget + SOLVER_GRACE_S)
         except (TimeoutError, WorkerDiedError) as exc:
-            return self._worker_failure('~/solve_equilibrium', response, exc)
+            return answer_worker_failure(self.reporter, '~/solve_equilibrium', response, exc)
         if joint_services.fill_equilibrium(response, result):
             self._last_solution = result.screw
         return response
@@ -341,19 +336,14 @@ class StiffnessNode(Node):
             self.reporter.reject('~/design_rest_lengths', str(exc))
             return joint_services.fail(response, f'invalid request: {exc}')
         try:
-            result = await self._in_worker(design_rest_lengths, (settings.model,), kwargs,
-                                           DESIGN_DEADLINE_S)
+            result = await self._worker.call(design_rest_lengths, (settings.model,), kwargs,
+                                             DESIGN_DEADLINE_S)
         except ValueError as exc:  # a request the library refuses (e.g. outside the chart)
             self.reporter.reject('~/design_rest_lengths', str(exc))
             return joint_services.fail(response, f'invalid request: {exc}')
         except (TimeoutError, WorkerDiedError) as exc:
-            return self._worker_failure('~/design_rest_lengths', response, exc)
+            return answer_worker_failure(self.reporter, '~/design_rest_lengths', response, exc)
         return joint_services.fill_design(response, result)
-
-    def _worker_failure(self, kind: str, response: Any, exc: BaseException) -> Any:
-        message = worker_failure_message(exc)
-        self.reporter.warn(kind, message, error=True)
-        return joint_services.fail(response, message)
 
     @guarded_service('~/planar_forward_kinematics')
     def _on_planar_forward(self, request: PlanarForwardKinematics.Request,

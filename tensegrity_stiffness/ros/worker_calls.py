@@ -52,3 +52,13 @@ def worker_failure_message(exc: BaseException) -> str:
     """What a service answers when the worker overran (a TimeoutError) or died."""
     return (f'solver overran its budget: {exc}' if isinstance(exc, TimeoutError)
             else f'solver failed: {exc}; try again')
+
+
+def answer_worker_failure(reporter: Any, kind: str, response: Any, exc: BaseException) -> Any:
+    """Log the worker's overrun or death (an error, throttled) and answer ``success: false``
+    with :func:`worker_failure_message`."""
+    message = worker_failure_message(exc)
+    reporter.warn(kind, message, error=True)
+    response.success = False
+    response.message = message
+    return response
