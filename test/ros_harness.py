@@ -308,10 +308,9 @@ class StreamMatcher:
     to the outputs expected for the inputs sent.
 
     The sender calls :meth:`expect` before it publishes an input that must be answered (so an
-    answer can never arrive before its expectation). A message equal (``rtol``, ``atol``,
-    default 1e-12) to the oldest expectation matches it; one equal to a later expectation
-    (within ``LOOKAHEAD``) matches that one and the skipped ones count as ``missing``; one
-    equal to none counts as
+    answer can never arrive before its expectation). A message equal (rtol = atol = 1e-12) to
+    the oldest expectation matches it; one equal to a later expectation (within ``LOOKAHEAD``)
+    matches that one and the skipped ones count as ``missing``; one equal to none counts as
     ``wrong`` (a publication for an invalid input, or a wrong value). ``on_match(seq, t)`` gets
     each match with its arrival time (time.perf_counter).
     """
@@ -319,12 +318,10 @@ class StreamMatcher:
     LOOKAHEAD = 64
 
     def __init__(self, extract: Callable[[Any], Any],
-                 on_match: Callable[[int, float], None] | None = None,
-                 rtol: float = 1e-12, atol: float = 1e-12) -> None:
+                 on_match: Callable[[int, float], None] | None = None) -> None:
         import numpy as np
 
         self._np = np
-        self._rtol, self._atol = rtol, atol
         self._extract = extract
         self._on_match = on_match
         self._expected: deque[tuple[int, Any]] = deque()
@@ -347,8 +344,8 @@ class StreamMatcher:
             self.received += 1
             for j, (seq, expected) in enumerate(itertools.islice(self._expected,
                                                                  self.LOOKAHEAD)):
-                if value.shape == expected.shape and np.allclose(
-                        value, expected, rtol=self._rtol, atol=self._atol):
+                if value.shape == expected.shape and np.allclose(value, expected, rtol=1e-12,
+                                                                 atol=1e-12):
                     for _ in range(j + 1):
                         self._expected.popleft()
                     self.missing += j

@@ -90,7 +90,10 @@ class SpineNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.reporter = Reporter(self.get_logger())
         self._state_lock = threading.Lock()
-        self._output_lock = threading.Lock()  # the fast lane and the executor both publish
+        # The fast lane and the executor both publish; re-entrant: a re-publish holds it while
+        # it reads the last screws, so that it cannot read them between an input's publication
+        # and its state update.
+        self._output_lock = threading.RLock()
         n_joints = _declared_joint_count(self)
         self._binding = ParameterBinding(
             self, spine_node_parameters(n_joints), spine_node_settings, self._apply_parameters,
@@ -223,10 +226,11 @@ class SpineNode(Node):
         self._republish_last()
 
     def _republish_last(self) -> None:
-        with self._state_lock:
-            xi, stamp = self._last_screws, self._last_stamp
-        if xi is not None:
-            self._compute_and_publish(self._settings, xi, stamp, 're-publish')
+        with self._output_lock:
+            with self._state_lock:
+                xi, stamp = self._last_screws, self._last_stamp
+            if xi is not None:
+                self._compute_and_publish(self._settings, xi, stamp, 're-publish')
 
     # ------------------------------------------------------------------ outputs
     def _compute_and_publish(self, settings: SpineNodeSettings, xi: np.ndarray, stamp: Any,
