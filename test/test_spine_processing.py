@@ -204,3 +204,19 @@ def test_service_job_and_response(settings, loaded):
     np.testing.assert_array_equal(response.tip_stiffness_base, result.tip_stiffness.ravel())
     np.testing.assert_array_equal(response.tip_stiffness, result.tip_stiffness_tool.ravel())
     assert len(response.joint_wrenches) == 30 and response.stable
+
+
+def test_require_finite_names_the_output(settings, loaded):
+    from dataclasses import replace
+
+    from tensegrity_stiffness.spine_processing import require_finite
+
+    out = spine_outputs(settings.chain, loaded.screws)
+    require_finite(out)
+    bad = out.tip_stiffness_tool.copy()
+    bad[2, 3] = math.inf
+    with pytest.raises(ValueError, match='tip_stiffness contains NaN or inf'):
+        require_finite(replace(out, tip_stiffness_tool=bad))
+    # Far out the chain's outputs overflow: refused as singular or not finite, never published.
+    with pytest.raises(ValueError, match=r'singular|contains NaN or inf'):
+        require_finite(spine_outputs(settings.chain, loaded.screws + np.r_[0, 0, 0, 1e154, 0, 0]))

@@ -4,5 +4,7 @@
 (:mod:`.parameters`, from the one table in :mod:`tensegrity_stiffness.parameters`), the solver
 worker process (:mod:`.solver_worker`), draining subscriptions (:mod:`.draining_subscription`),
 guarded callbacks and throttled reports (:mod:`.reporting`), the middleware memory settings
-(:mod:`.middleware`) and the process runner with clean stops (:mod:`.runner`).
+(:mod:`.middleware`) and the process runner with clean stops (:mod:`.runner`). ``spine_node``
+(a whole spine, :mod:`tensegrity_stiffness.chain`) is built from the same parts, with
+:mod:`.spine_services`; both nodes await their worker through :mod:`.worker_calls`.
 """
