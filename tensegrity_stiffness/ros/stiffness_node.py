@@ -28,10 +28,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.task import Future
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
@@ -51,6 +48,13 @@ from tensegrity_stiffness.ros.fast_lane import FastLane
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
 from tensegrity_stiffness.ros.solver_worker import SolverWorker, WorkerDiedError
+from tensegrity_stiffness.ros.topics import (
+    LATCHED_QOS,
+    create_output_publisher,
+    input_qos,
+    output_qos,
+)
+from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
 from tensegrity_stiffness_interfaces.srv import (
     DesignRestLengths,
     PlanarForwardKinematics,
@@ -66,29 +70,6 @@ STATS_WINDOW = 1000
 SOLVER_GRACE_S = 5.0
 #: Wall-clock bound of one rest-length design in the worker (it takes milliseconds).
 DESIGN_DEADLINE_S = 5.0
-
-
-def input_qos(depth: int, reliability: str) -> QoSProfile:
-    """Keep-last ``depth``, volatile, reliable or best effort: the streamed inputs."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=(ReliabilityPolicy.BEST_EFFORT if reliability == 'best_effort'
-                                   else ReliabilityPolicy.RELIABLE),
-                      durability=DurabilityPolicy.VOLATILE)
-
-
-#: State inputs (rest lengths): reliable + transient local, depth 1, so that a restarted node
-#: gets the latest value from a latched publisher.
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                         reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def create_output_publisher(node: Node, msg_type: Any, topic: str, qos: QoSProfile | int) -> Any:
-    """A publisher without rclpy's default QoS-event handlers: each would be one more waitable
-    the executor rebuilds its wait set with before every callback (an incompatible subscriber is
-    still reported on its own side)."""
-    return node.create_publisher(msg_type, topic, qos, event_callbacks=PublisherEventCallbacks(
-        use_default_callbacks=False))
 
 
 class StiffnessNode(Node):
@@ -114,13 +95,11 @@ class StiffnessNode(Node):
         self._published = 0
         self._messages = msg_tools.JointOutputMessages(tuple(self._settings.model.string_names))
         self._solver = SolverWorker('equilibrium worker')
-        self._wake = self.create_guard_condition(lambda: None)
+        self._in_worker = WorkerCalls(self, self._solver)
 
         values = self._settings.values
         depth, reliability = values['qos.depth'], values['qos.input_reliability']
-        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                             reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.VOLATILE)
+        out_qos = output_qos(depth)
         self._output_publishers = [
             create_output_publisher(self, t, topic, out_qos) for t, topic in (
                 (WrenchStamped, '~/wrench'), (Float64MultiArray, '~/stiffness'),
@@ -301,29 +280,6 @@ class StiffnessNode(Node):
             stamp if stamp is not None else self._clock.now().to_msg()))
 
     # ------------------------------------------------------------------ services
-    async def _in_worker(self, fn: Any, args: tuple, kwargs: dict[str, Any],
-                         deadline_s: float) -> Any:
-        """``fn(*args, **kwargs)`` computed in the worker process and awaited, so that the
-        executor keeps serving the topics meanwhile; raises the worker's exception, a
-        :class:`WorkerOverrunError` (a TimeoutError) or a :class:`WorkerDiedError`."""
-        done = Future(executor=self.executor)
-        settle_lock = threading.Lock()
-
-        def settle(result: Any = None, error: BaseException | None = None) -> None:
-            with settle_lock:
-                if done.done():
-                    return
-                if error is None:
-                    done.set_result(result)
-                else:  # reported to the caller by `await done`
-                    done.set_exception(error)
-            # The executor polls the awaiting coroutine only when it wakes up: wake it.
-            self._wake.trigger()
-
-        self._solver.submit(fn, args, kwargs, lambda result: settle(result=result),
-                            lambda error: settle(error=error), deadline_s=deadline_s)
-        return await done
-
     @guarded_service('~/solve_equilibrium')
     async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
                                     response: SolveEquilibrium.Response
@@ -369,8 +325,7 @@ class StiffnessNode(Node):
         return joint_services.fill_design(response, result)
 
     def _worker_failure(self, kind: str, response: Any, exc: BaseException) -> Any:
-        message = (f'solver overran its budget: {exc}' if isinstance(exc, TimeoutError)
-                   else f'solver failed: {exc}; try again')
+        message = worker_failure_message(exc)
         self.reporter.warn(kind, message, error=True)
         return joint_services.fail(response, message)
 

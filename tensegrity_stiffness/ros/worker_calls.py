@@ -1,0 +1,50 @@
+"""Awaitable calls into a :class:`.SolverWorker` from a node's coroutine service callbacks: the
+executor keeps serving everything else while the worker computes."""
+
+from __future__ import annotations
+
+import threading
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.task import Future
+
+from tensegrity_stiffness.ros.solver_worker import SolverWorker
+
+
+class WorkerCalls:
+    """``await calls(fn, args, kwargs, deadline_s)``: ``fn(*args, **kwargs)`` computed in the
+    worker; raises the worker's exception, a :class:`.WorkerOverrunError` (a TimeoutError) or a
+    :class:`.WorkerDiedError`."""
+
+    def __init__(self, node: Node, worker: SolverWorker) -> None:
+        self._node = node
+        self._worker = worker
+        # The executor polls an awaiting coroutine only when it wakes up: results wake it.
+        self._wake = node.create_guard_condition(lambda: None)
+
+    async def __call__(self, fn: Any, args: tuple, kwargs: dict[str, Any],
+                       deadline_s: float) -> Any:
+        done = Future(executor=self._node.executor)
+        settle_lock = threading.Lock()
+
+        def settle(result: Any = None, error: BaseException | None = None) -> None:
+            with settle_lock:
+                if done.done():
+                    return
+                if error is None:
+                    done.set_result(result)
+                else:  # reported to the caller by `await done`
+                    done.set_exception(error)
+            self._wake.trigger()
+
+        self._worker.submit(fn, args, kwargs, lambda result: settle(result=result),
+                            lambda error: settle(error=error), deadline_s=deadline_s)
+        return await done
+
+
+def worker_failure_message(exc: BaseException) -> str:
+    """The ``message`` of a service answer whose worker overran or died."""
+    if isinstance(exc, TimeoutError):
+        return f'solver overran its budget: {exc}'
+    return f'solver failed: {exc}; try again'
