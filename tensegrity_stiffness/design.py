@@ -68,6 +68,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.equilibrium import is_stable
 from tensegrity_stiffness.joint import MIN_STRING_LENGTH, JointModel, JointState
+from tensegrity_stiffness.layouts import TWIST_NAMES
 from tensegrity_stiffness.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
 from tensegrity_stiffness.validation import finite_array_of_shape, finite_scalar
@@ -87,7 +88,7 @@ ACTIVE_SET_TOLERANCE = 1e-12
 #: Active-set iterations per QP before giving up (n = 12 strings need about 5-20).
 MAX_ACTIVE_SET_ITERATIONS = 500
 #: Diagonal entries of K_c in ROS order and their units (rows of :class:`StiffnessRange`).
-DIAGONAL_NAMES = ('dx', 'dy', 'dz', 'rx', 'ry', 'rz')
+DIAGONAL_NAMES = TWIST_NAMES
 DIAGONAL_UNITS = ('N/m', 'N/m', 'N/m', 'N m/rad', 'N m/rad', 'N m/rad')
 
 

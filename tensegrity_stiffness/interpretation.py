@@ -7,13 +7,15 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness import layouts
+
 FloatArray = NDArray[np.float64]
 
-#: Block names in the order of :attr:`StiffnessInterpretation.block_norms` (eq. 19).
-BLOCK_NAMES = ('K_fw', 'K_fv', 'K_mw', 'K_mv')
-#: Column labels of K (screw coordinates) and row labels (wrench components), eq. 20.
-COLUMN_NAMES = ('wx', 'wy', 'wz', 'vx', 'vy', 'vz')
-ROW_NAMES = ('fx', 'fy', 'fz', 'mx', 'my', 'mz')
+#: Block names in the order of :attr:`StiffnessInterpretation.block_norms` (eq. 19); column
+#: labels of K (screw coordinates) and row labels (wrench components), eq. 20.
+BLOCK_NAMES = layouts.BLOCK_NAMES
+COLUMN_NAMES = layouts.SCREW_NAMES
+ROW_NAMES = layouts.WRENCH_NAMES
 
 
 @dataclass(frozen=True)

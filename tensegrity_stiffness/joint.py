@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.screw import (
+    CHART_LIMIT,
     _coefficients_scalar,
     _kinematics_batch,
     _kinematics_entries,
@@ -215,7 +216,7 @@ class JointModel:
         if len(self.string_names) != n:
             raise ValueError(f'string_names must have {n} entries, got {len(self.string_names)}')
         x0 = np.zeros(6) if initial_screw is None else as_screws(initial_screw, 'initial_screw')
-        if x0.shape != (6,) or np.linalg.norm(x0[:3]) >= 2.0 * math.pi:
+        if x0.shape != (6,) or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
             raise ValueError('initial_screw must have 6 values with |omega| < 2 pi')
         self.initial_screw = x0
         # Per-string node coordinates, gathered once.
@@ -326,7 +327,7 @@ class JointModel:
         if raw_x0.size not in (0, 6) or not np.all(np.isfinite(raw_x0)):
             raise ValueError(f'joint.initial_screw must be empty or 6 finite values, '
                              f'got {raw_x0.tolist()}')
-        if raw_x0.size and np.linalg.norm(raw_x0[:3]) >= 2.0 * math.pi:
+        if raw_x0.size and np.linalg.norm(raw_x0[:3]) >= CHART_LIMIT:
             raise ValueError('joint.initial_screw must have |omega| < 2 pi')
         return cls(p1, conn, stiffness, rest, link2_nodes=p2, max_lengths=lmax, force_law=law,
                    node_names=names1, link2_node_names=names2, string_names=string_names,

@@ -42,6 +42,7 @@ from tensegrity_stiffness.design import (
     stiffness_range,
 )
 from tensegrity_stiffness.joint import JointModel
+from tensegrity_stiffness.layouts import SCREW_NAMES
 from tensegrity_stiffness.planar import SQRT3, PlanarMechanism
 from tensegrity_stiffness.planar_workspace import (
     actuator_stiffness_map,
@@ -182,6 +183,21 @@ def _finite_rows(curve: FloatArray) -> FloatArray:
 
 
 # ---------------------------------------------------------------------------- six-DOF joint
+def _equal_axes_3d(ax: Any, points: FloatArray, span: float, elevation: float,
+                   azimuth: float) -> None:
+    """Equal-scale 3D axes of side 1.1 ``span`` around ``points`` (mm), y of the base frame up."""
+    centre = 0.5 * (points.max(axis=0) + points.min(axis=0))
+    half = 0.55 * span
+    ax.set_xlim(centre[0] - half, centre[0] + half)
+    ax.set_ylim(centre[1] - half, centre[1] + half)
+    ax.set_zlim(centre[2] - half, centre[2] + half)
+    ax.set_box_aspect((1.0, 1.0, 1.0))
+    ax.view_init(elev=elevation, azim=azimuth, vertical_axis='y')
+    ax.set_xlabel('x (mm)')
+    ax.set_ylabel('y (mm)')
+    ax.set_zlabel('z (mm)')
+
+
 def plot_joint(model: JointModel, screw: ArrayLike, path: str | Path, *,
                rest_lengths: ArrayLike | None = None,
                width: int = DEFAULT_SIZES['joint'][0], height: int = DEFAULT_SIZES['joint'][1],
@@ -227,16 +243,7 @@ def plot_joint(model: JointModel, screw: ArrayLike, path: str | Path, *,
             tip = origin + 0.18 * span * R[:, k]
             ax.plot(*np.vstack([origin, tip]).T, color=colour, linewidth=1.2)
         ax.text(*origin, f' {{{frame}}}', fontsize=8)
-    centre = 0.5 * (np.vstack([p1, p2]).max(axis=0) + np.vstack([p1, p2]).min(axis=0))
-    half = 0.55 * span
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
-    ax.set_zlim(centre[2] - half, centre[2] + half)
-    ax.set_box_aspect((1.0, 1.0, 1.0))
-    ax.view_init(elev=elevation, azim=azimuth, vertical_axis='y')
-    ax.set_xlabel('x (mm)')
-    ax.set_ylabel('y (mm)')
-    ax.set_zlabel('z (mm)')
+    _equal_axes_3d(ax, np.vstack([p1, p2]), span, elevation, azimuth)
     fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.6, pad=0.08,
                  label='string tension (N)')
     n_slack, n_sat = int(state.slack.sum()), int(state.saturated.sum())
@@ -553,7 +560,7 @@ def plot_cartesian_stiffness(mech: PlanarMechanism, path: str | Path, *,
 
 # ---------------------------------------------------------------------------- stiffness design
 #: Screw coordinates a stiffness-range sweep can move along, and their units.
-SCREW_COORDINATES = ('wx', 'wy', 'wz', 'vx', 'vy', 'vz')
+SCREW_COORDINATES = SCREW_NAMES
 SCREW_COORDINATE_UNITS = ('rad', 'rad', 'rad', 'm', 'm', 'm')
 DEFAULT_RANGE_SAMPLES = 31
 
@@ -681,16 +688,7 @@ def plot_spine(chain: JointChain, screws: ArrayLike, path: str | Path, *,
         ax.quiver(*origin, *arrow, color='black', linewidth=1.5)
         handles.append(Line2D([], [], color='black', label=f'tip force '
                               f'{np.linalg.norm(W[:3]):.3g} N'))
-    centre = 0.5 * (cloud.max(axis=0) + cloud.min(axis=0))
-    half = 0.55 * span
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
-    ax.set_zlim(centre[2] - half, centre[2] + half)
-    ax.set_box_aspect((1.0, 1.0, 1.0))
-    ax.view_init(elev=elevation, azim=azimuth, vertical_axis='y')
-    ax.set_xlabel('x (mm)')
-    ax.set_ylabel('y (mm)')
-    ax.set_zlabel('z (mm)')
+    _equal_axes_3d(ax, cloud, span, elevation, azimuth)
     fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.5, pad=0.08,
                  label='string tension (N)')
     ax.legend(handles=handles, loc='upper left', fontsize=8)

@@ -172,3 +172,26 @@ def test_interface_loaded_once(srv: Any) -> None:
         assert venv not in module_file.parents, f'{INTERFACES} imported from the venv'
     copies = list(venv.glob(f'lib/python*/site-packages/{INTERFACES}'))
     assert not copies, f'second copy of {INTERFACES} in the venv: {copies}'
+
+
+@pytest.mark.parametrize('launch_file', ['stiffness_node.launch.py', 'spine_node.launch.py'])
+def test_launch_file_compiles_and_names_the_installed_executable_and_config(
+        prefix: Path, launch_file: str) -> None:
+    """``launch`` is not on PyPI: the launch file is compiled and read, not run. It must name an
+    executable and a config file that the install has."""
+    import ast
+
+    installed = prefix / 'share' / PACKAGE / 'launch' / launch_file
+    assert installed.resolve().is_file(), f'{installed} not installed'
+    source = installed.read_text()
+    tree = ast.parse(source)
+    compile(tree, str(installed), 'exec')
+    constants = {node.targets[0].id: node.value.value for node in tree.body
+                 if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant)}
+    assert constants['PACKAGE'] == PACKAGE
+    assert (prefix / 'lib' / PACKAGE / constants['EXECUTABLE']).is_file()
+    assert (prefix / 'share' / PACKAGE / 'config' / constants['CONFIG']).is_file()
+    functions = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
+    assert 'generate_launch_description' in functions
+    for argument in ('namespace', 'params_file'):
+        assert f"DeclareLaunchArgument('{argument}'" in source

@@ -7,6 +7,7 @@ from __future__ import annotations
 import functools
 import inspect
 import math
+import threading
 import time
 from collections.abc import Callable
 from typing import Any
@@ -17,27 +18,40 @@ WARN_THROTTLE_S = 1.0
 
 class Reporter:
     """Counts rejected inputs by kind and logs ``<kind> rejected: <problem>`` at most once per
-    ``WARN_THROTTLE_S`` per kind; the next warning says how many were left out."""
+    ``WARN_THROTTLE_S`` per kind; the next warning says how many were left out. Thread-safe (a
+    node's fast lane and its executor both report)."""
 
     def __init__(self, logger: Any, throttle_s: float = WARN_THROTTLE_S) -> None:
         self._logger = logger
         self._throttle_s = throttle_s
-        self.rejected: dict[str, int] = {}
+        self._lock = threading.Lock()
+        self._rejected: dict[str, int] = {}
         self._warned: dict[str, tuple[float, int]] = {}
+
+    @property
+    def rejected(self) -> dict[str, int]:
+        """A copy of the rejection counts by kind."""
+        with self._lock:
+            return dict(self._rejected)
+
+    def _count(self, kind: str) -> None:
+        with self._lock:
+            self._rejected[kind] = self._rejected.get(kind, 0) + 1
 
     def reject(self, kind: str, problem: str) -> None:
         """An input of ``kind`` was rejected for ``problem``: counted and warned about."""
-        self.rejected[kind] = self.rejected.get(kind, 0) + 1
+        self._count(kind)
         self.warn(kind, problem)
 
     def warn(self, kind: str, problem: str, error: bool = False) -> None:
         """``<kind> rejected: <problem>`` (throttled per kind), as an error if ``error``."""
         now = time.monotonic()
-        last, left_out = self._warned.get(kind, (-math.inf, 0))
-        if now - last < self._throttle_s:
-            self._warned[kind] = (last, left_out + 1)
-            return
-        self._warned[kind] = (now, 0)
+        with self._lock:
+            last, left_out = self._warned.get(kind, (-math.inf, 0))
+            if now - last < self._throttle_s:
+                self._warned[kind] = (last, left_out + 1)
+                return
+            self._warned[kind] = (now, 0)
         text = f'{kind} rejected: {problem}' + (
             f' ({left_out} more since the last warning)' if left_out else '')
         # One severity per call site: rclpy raises when a call site changes its severity.
@@ -49,7 +63,7 @@ class Reporter:
     def internal_error(self, kind: str, exc: BaseException) -> None:
         """An exception no validation anticipated (a bug): counted and logged, never raised."""
         key = f'{kind} internal error'
-        self.rejected[key] = self.rejected.get(key, 0) + 1
+        self._count(key)
         try:
             self.warn(key, f'{type(exc).__name__}: {exc}', error=True)
         except Exception:  # the safety net must not throw itself

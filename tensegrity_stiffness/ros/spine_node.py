@@ -27,7 +27,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
@@ -45,15 +44,15 @@ from tensegrity_stiffness.ros.draining_subscription import create_draining_subsc
 from tensegrity_stiffness.ros.fast_lane import FastLane
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
-from tensegrity_stiffness.ros.solver_worker import WorkerDiedError
-from tensegrity_stiffness.ros.stiffness_node import (
+from tensegrity_stiffness.ros.solver_worker import SolverWorker, WorkerDiedError
+from tensegrity_stiffness.ros.stiffness_node import SOLVER_GRACE_S, STATS_WINDOW
+from tensegrity_stiffness.ros.topics import (
     LATCHED_QOS,
-    SOLVER_GRACE_S,
-    STATS_WINDOW,
     create_output_publisher,
     input_qos,
+    output_qos,
 )
-from tensegrity_stiffness.ros.worker_calls import WorkerCalls, answer_worker_failure
+from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
 from tensegrity_stiffness.spine_processing import (
     SpineOutputs,
     joint_health_in_chain,
@@ -90,15 +89,14 @@ class SpineNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.reporter = Reporter(self.get_logger())
         self._state_lock = threading.Lock()
-        # The fast lane and the executor both publish; re-entrant: a re-publish holds it while
-        # it reads the last screws, so that it cannot read them between an input's publication
-        # and its state update.
+        # Publication lock: the fast lane and the executor both publish; settings are swapped
+        # (and re-published) under it too. Re-entrant: a swap re-publishes.
         self._output_lock = threading.RLock()
         n_joints = _declared_joint_count(self)
         self._binding = ParameterBinding(
             self, spine_node_parameters(n_joints), spine_node_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
-        self._settings = spine_node_settings(self._binding.values())
+        self._settings: SpineNodeSettings = spine_node_settings(self._binding.values())
         self._last_screws: np.ndarray | None = None
         self._last_stamp = None
         self._last_outputs: SpineOutputs | None = None
@@ -109,13 +107,12 @@ class SpineNode(Node):
         self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._published = 0
         self._messages = msg_tools.SpineOutputMessages(n_joints)
-        self._worker = WorkerCalls(self, 'chain equilibrium worker')
+        self._solver = SolverWorker('chain equilibrium worker')
+        self._in_worker = WorkerCalls(self, self._solver)
 
         values = self._settings.values
         depth, reliability = values['qos.depth'], values['qos.input_reliability']
-        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                             reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.VOLATILE)
+        out_qos = output_qos(depth)
         self._output_publishers = [create_output_publisher(self, t, topic, out_qos)
                                    for t, topic in OUTPUT_TOPICS]
         self._pub_markers = create_output_publisher(self, MarkerArray, '~/markers', out_qos)
@@ -142,9 +139,8 @@ class SpineNode(Node):
             self._settings.marker_period or 1.0, self._publish_markers)
         chain = self._settings.chain
         # Warm the worker up (imports, first solve) before the first request needs it.
-        self._worker.worker.submit(solve_chain_equilibrium, (chain, np.zeros(6)),
-                                   {'time_budget': 1.0}, lambda _: None, lambda _: None,
-                                   deadline_s=1.0 + SOLVER_GRACE_S)
+        self._solver.submit(solve_chain_equilibrium, (chain, np.zeros(6)), {'time_budget': 1.0},
+                            lambda _: None, lambda _: None, deadline_s=1.0 + SOLVER_GRACE_S)
         if self._lane is not None:
             self._lane.start()
         self.get_logger().info(
@@ -156,14 +152,15 @@ class SpineNode(Node):
         destroyed)."""
         if self._lane is not None:
             self._lane.stop()
-        self._worker.close()
+        self._solver.close()
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, values: dict[str, Any], names: set[str]) -> None:
         """After a successful set: swap in the new settings, keeping topic rest lengths unless
-        the change sets rest lengths itself."""
-        try:
-            with self._state_lock:
+        the change sets rest lengths itself, and re-publish the last configuration under them;
+        no input is published in between (the output lock)."""
+        with self._output_lock:
+            try:
                 old = self._settings
                 settings = spine_node_settings(values, old.generation + 1)
                 if old.rest_lengths is not None and not any(
@@ -171,17 +168,18 @@ class SpineNode(Node):
                         r.shape[0] for r in old.rest_lengths] == settings.n_strings:
                     settings = replace(settings, rest_lengths=old.rest_lengths)
                 self._settings = settings
-            if 'markers.max_rate' in names:
-                self._marker_timer.timer_period_ns = int(1e9 * (settings.marker_period or 1.0))
-                self._marker_timer.reset()
-        except Exception as exc:  # validated before: only a bug gets here; the old set stays
-            self.reporter.internal_error('parameters', exc)
-            return
-        self.get_logger().info(f'parameters applied: {sorted(names)}')
-        try:  # an exception here would reach the parameter service, and the executor
-            self._republish_last()
-        except Exception as exc:  # the safety net: no callback may end the node
-            self.reporter.internal_error('re-publish', exc)
+                if 'markers.max_rate' in names:
+                    self._marker_timer.timer_period_ns = int(
+                        1e9 * (settings.marker_period or 1.0))
+                    self._marker_timer.reset()
+            except Exception as exc:  # validated before: only a bug gets here; the old set stays
+                self.reporter.internal_error('parameters', exc)
+                return
+            self.get_logger().info(f'parameters applied: {sorted(names)}')
+            try:  # an exception here would reach the parameter service, and the executor
+                self._republish_last()
+            except Exception as exc:  # the safety net: no callback may end the node
+                self.reporter.internal_error('re-publish', exc)
 
     # ------------------------------------------------------------------ inputs
     @guarded('~/screws')
@@ -193,7 +191,7 @@ class SpineNode(Node):
         except ValueError as exc:
             self.reporter.reject('~/screws', str(exc))
             return
-        self._compute_and_publish(settings, xi, None, '~/screws')
+        self._compute_and_publish(xi, None, '~/screws')
 
     @guarded('~/poses')
     def _on_poses(self, msg: PoseArray) -> None:
@@ -208,12 +206,11 @@ class SpineNode(Node):
             self.reporter.reject('~/poses', str(exc))
             return
         stamp = msg.header.stamp
-        self._compute_and_publish(settings, xi, stamp if stamp.sec or stamp.nanosec else None,
-                                  '~/poses')
+        self._compute_and_publish(xi, stamp if stamp.sec or stamp.nanosec else None, '~/poses')
 
     @guarded('~/rest_lengths')
     def _on_rest_lengths(self, msg: Float64MultiArray) -> None:
-        with self._state_lock:
+        with self._output_lock:  # the swap and its re-publish, with no input in between
             settings = self._settings
             try:
                 rest = rest_lengths_input(msg_tools.multiarray_to_array(
@@ -223,22 +220,19 @@ class SpineNode(Node):
                 return
             self._settings = replace(settings, rest_lengths=rest,
                                      generation=settings.generation + 1)
-        self._republish_last()
+            self._republish_last()
 
     def _republish_last(self) -> None:
-        with self._output_lock:
-            with self._state_lock:
-                xi, stamp = self._last_screws, self._last_stamp
-            if xi is not None:
-                self._compute_and_publish(self._settings, xi, stamp, 're-publish')
+        if self._last_screws is not None:
+            self._compute_and_publish(self._last_screws, self._last_stamp, 're-publish')
 
     # ------------------------------------------------------------------ outputs
-    def _compute_and_publish(self, settings: SpineNodeSettings, xi: np.ndarray, stamp: Any,
-                             source: str) -> None:
-        """Build and check every output, then publish them all (an input gets all of its
-        outputs or none); topics nobody subscribes to are not filled (the outputs are
-        volatile)."""
+    def _compute_and_publish(self, xi: np.ndarray, stamp: Any, source: str) -> None:
+        """Build and check every output under the current settings, then publish them all (an
+        input gets all of its outputs or none); topics nobody subscribes to are not filled (the
+        outputs are volatile)."""
         with self._output_lock:
+            settings = self._settings
             start = time.perf_counter()
             messages = self._messages
             try:
@@ -295,14 +289,16 @@ class SpineNode(Node):
             self.reporter.reject('~/solve_equilibrium', str(exc))
             return spine_services.fail(response, f'invalid request: {exc}')
         try:
-            result = await self._worker.call(solve_chain_equilibrium,
-                                             (settings.chain, *job.args()), job.kwargs(),
-                                             job.time_budget + SOLVER_GRACE_S)
+            result = await self._in_worker(solve_chain_equilibrium,
+                                           (settings.chain, *job.args()), job.kwargs(),
+                                           job.time_budget + SOLVER_GRACE_S)
         except ValueError as exc:  # a request the library refuses
             self.reporter.reject('~/solve_equilibrium', str(exc))
             return spine_services.fail(response, f'invalid request: {exc}')
         except (TimeoutError, WorkerDiedError) as exc:
-            return answer_worker_failure(self.reporter, '~/solve_equilibrium', response, exc)
+            message = worker_failure_message(exc)
+            self.reporter.warn('~/solve_equilibrium', message, error=True)
+            return spine_services.fail(response, message)
         if spine_services.fill_chain_equilibrium(response, result):
             self._last_solution = result.screws
         return response
@@ -313,17 +309,19 @@ class SpineNode(Node):
         settings = self._settings
         with self._state_lock:
             outputs = self._last_outputs
-        computes = list(self._compute_times)
+        with self._output_lock:  # the fast lane appends to these
+            inputs, computes = list(self._input_times), list(self._compute_times)
+            published = self._published
         now = time.monotonic()
         values: list[tuple[str, Any]] = [
             ('joints', settings.n_joints),
-            ('input rate [Hz]', float(sum(1 for t in self._input_times if now - t <= 1.0))),
-            ('outputs published', self._published),
+            ('input rate [Hz]', float(sum(1 for t in inputs if now - t <= 1.0))),
+            ('outputs published', published),
             ('compute time mean [us]', 1e6 * float(np.mean(computes)) if computes else 0.0),
             ('compute time max [us]', 1e6 * float(np.max(computes)) if computes else 0.0),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
             ('parameter generation', settings.generation),
-            ('equilibrium worker restarts', self._worker.worker.restarts),
+            ('equilibrium worker restarts', self._solver.restarts),
         ]
         name = self.get_name()
         statuses = []

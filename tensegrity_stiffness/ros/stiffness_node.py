@@ -28,9 +28,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
@@ -40,7 +38,6 @@ from tensegrity_stiffness.equilibrium import solve_equilibrium
 from tensegrity_stiffness.health import joint_health
 from tensegrity_stiffness.parameters import (
     STIFFNESS_NODE_PARAMETERS,
-    JointNodeSettings,
     joint_node_settings,
 )
 from tensegrity_stiffness.processing import JointOutputs, joint_outputs, pose_input, screw_input
@@ -49,8 +46,14 @@ from tensegrity_stiffness.ros.draining_subscription import create_draining_subsc
 from tensegrity_stiffness.ros.fast_lane import FastLane
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
-from tensegrity_stiffness.ros.solver_worker import WorkerDiedError
-from tensegrity_stiffness.ros.worker_calls import WorkerCalls, answer_worker_failure
+from tensegrity_stiffness.ros.solver_worker import SolverWorker, WorkerDiedError
+from tensegrity_stiffness.ros.topics import (
+    LATCHED_QOS,
+    create_output_publisher,
+    input_qos,
+    output_qos,
+)
+from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
 from tensegrity_stiffness_interfaces.srv import (
     DesignRestLengths,
     PlanarForwardKinematics,
@@ -68,29 +71,6 @@ SOLVER_GRACE_S = 5.0
 DESIGN_DEADLINE_S = 5.0
 
 
-def input_qos(depth: int, reliability: str) -> QoSProfile:
-    """Keep-last ``depth``, volatile, reliable or best effort: the streamed inputs."""
-    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                      reliability=(ReliabilityPolicy.BEST_EFFORT if reliability == 'best_effort'
-                                   else ReliabilityPolicy.RELIABLE),
-                      durability=DurabilityPolicy.VOLATILE)
-
-
-#: State inputs (rest lengths): reliable + transient local, depth 1, so that a restarted node
-#: gets the latest value from a latched publisher.
-LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                         reliability=ReliabilityPolicy.RELIABLE,
-                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
-
-
-def create_output_publisher(node: Node, msg_type: Any, topic: str, qos: QoSProfile | int) -> Any:
-    """A publisher without rclpy's default QoS-event handlers: each would be one more waitable
-    the executor rebuilds its wait set with before every callback (an incompatible subscriber is
-    still reported on its own side)."""
-    return node.create_publisher(msg_type, topic, qos, event_callbacks=PublisherEventCallbacks(
-        use_default_callbacks=False))
-
-
 class StiffnessNode(Node):
     """Publishes wrench, K, K_c, tensions, interpretation, markers and diagnostics per input."""
 
@@ -98,7 +78,9 @@ class StiffnessNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.reporter = Reporter(self.get_logger())
         self._state_lock = threading.Lock()
-        self._output_lock = threading.Lock()  # the fast lane and the executor both publish
+        # Publication lock: the fast lane and the executor both publish; settings are swapped
+        # (and re-published) under it too. Re-entrant: a swap re-publishes.
+        self._output_lock = threading.RLock()
         self._binding = ParameterBinding(
             self, STIFFNESS_NODE_PARAMETERS, joint_node_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
@@ -113,14 +95,12 @@ class StiffnessNode(Node):
         self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
         self._published = 0
         self._messages = msg_tools.JointOutputMessages(tuple(self._settings.model.string_names))
-        self._worker = WorkerCalls(self, 'equilibrium worker')
-        self._solver = self._worker.worker
+        self._solver = SolverWorker('equilibrium worker')
+        self._in_worker = WorkerCalls(self, self._solver)
 
         values = self._settings.values
         depth, reliability = values['qos.depth'], values['qos.input_reliability']
-        out_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
-                             reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.VOLATILE)
+        out_qos = output_qos(depth)
         self._output_publishers = [
             create_output_publisher(self, t, topic, out_qos) for t, topic in (
                 (WrenchStamped, '~/wrench'), (Float64MultiArray, '~/stiffness'),
@@ -178,9 +158,10 @@ class StiffnessNode(Node):
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, values: dict[str, Any], names: set[str]) -> None:
         """After a successful set: swap in the new settings, keeping topic rest lengths unless
-        the change sets joint.rest_lengths itself."""
-        try:
-            with self._state_lock:
+        the change sets joint.rest_lengths itself, and re-publish the last configuration under
+        them; no input is published in between (the output lock)."""
+        with self._output_lock:
+            try:
                 old = self._settings
                 settings = joint_node_settings(values, old.generation + 1)
                 rest = old.model.rest_lengths
@@ -188,17 +169,18 @@ class StiffnessNode(Node):
                         settings.model.n_strings,):
                     settings = replace(settings, model=settings.model.with_rest_lengths(rest))
                 self._settings = settings
-            if 'markers.max_rate' in names:
-                self._marker_timer.timer_period_ns = int(1e9 * (settings.marker_period or 1.0))
-                self._marker_timer.reset()
-        except Exception as exc:  # validated before: only a bug gets here; the old set stays
-            self.reporter.internal_error('parameters', exc)
-            return
-        self.get_logger().info(f'parameters applied: {sorted(names)}')
-        try:  # an exception here would reach the parameter service, and the executor
-            self._republish_last()
-        except Exception as exc:  # the safety net: no callback may end the node
-            self.reporter.internal_error('re-publish', exc)
+                if 'markers.max_rate' in names:
+                    self._marker_timer.timer_period_ns = int(
+                        1e9 * (settings.marker_period or 1.0))
+                    self._marker_timer.reset()
+            except Exception as exc:  # validated before: only a bug gets here; the old set stays
+                self.reporter.internal_error('parameters', exc)
+                return
+            self.get_logger().info(f'parameters applied: {sorted(names)}')
+            try:  # an exception here would reach the parameter service, and the executor
+                self._republish_last()
+            except Exception as exc:  # the safety net: no callback may end the node
+                self.reporter.internal_error('re-publish', exc)
 
     # ------------------------------------------------------------------ inputs
     @guarded('~/screw')
@@ -210,7 +192,7 @@ class StiffnessNode(Node):
         except ValueError as exc:
             self.reporter.reject('~/screw', str(exc))
             return
-        self._compute_and_publish(settings, xi, None, '~/screw')
+        self._compute_and_publish(xi, None, '~/screw')
 
     @guarded('~/pose')
     def _on_pose(self, msg: PoseStamped) -> None:
@@ -224,12 +206,12 @@ class StiffnessNode(Node):
             self.reporter.reject('~/pose', str(exc))
             return
         stamp = msg.header.stamp
-        self._compute_and_publish(settings, xi, stamp if stamp.sec or stamp.nanosec else None,
+        self._compute_and_publish(xi, stamp if stamp.sec or stamp.nanosec else None,
                                   '~/pose')
 
     @guarded('~/rest_lengths')
     def _on_rest_lengths(self, msg: Float64MultiArray) -> None:
-        with self._state_lock:
+        with self._output_lock:  # the swap and its re-publish, with no input in between
             settings = self._settings
             try:
                 rest = msg_tools.multiarray_to_array(msg, expected_length=settings.model.n_strings,
@@ -239,21 +221,19 @@ class StiffnessNode(Node):
                 self.reporter.reject('~/rest_lengths', str(exc))
                 return
             self._settings = replace(settings, model=model, generation=settings.generation + 1)
-        self._republish_last()
+            self._republish_last()
 
     def _republish_last(self) -> None:
-        with self._state_lock:
-            xi, stamp = self._last_screw, self._last_stamp
-        if xi is not None:
-            self._compute_and_publish(self._settings, xi, stamp, 're-publish')
+        if self._last_screw is not None:
+            self._compute_and_publish(self._last_screw, self._last_stamp, 're-publish')
 
     # ------------------------------------------------------------------ outputs
-    def _compute_and_publish(self, settings: JointNodeSettings, xi: np.ndarray, stamp: Any,
-                             source: str) -> None:
-        """Build and check every output, then publish them all (an input gets all of its
-        outputs or none); topics nobody subscribes to are not filled (a publication there
-        reaches no one: the outputs are volatile)."""
+    def _compute_and_publish(self, xi: np.ndarray, stamp: Any, source: str) -> None:
+        """Build and check every output under the current settings, then publish them all (an
+        input gets all of its outputs or none); topics nobody subscribes to are not filled (a
+        publication there reaches no one: the outputs are volatile)."""
         with self._output_lock:
+            settings = self._settings
             start = time.perf_counter()
             messages = self._messages
             try:
@@ -313,11 +293,11 @@ class StiffnessNode(Node):
             self.reporter.reject('~/solve_equilibrium', str(exc))
             return joint_services.fail(response, f'invalid request: {exc}')
         try:
-            result = await self._worker.call(solve_equilibrium,
-                                             (settings.model, job.external_wrench),
-                                             job.kwargs(), job.time_budget + SOLVER_GRACE_S)
+            result = await self._in_worker(solve_equilibrium,
+                                           (settings.model, job.external_wrench), job.kwargs(),
+                                           job.time_budget + SOLVER_GRACE_S)
         except (TimeoutError, WorkerDiedError) as exc:
-            return answer_worker_failure(self.reporter, '~/solve_equilibrium', response, exc)
+            return self._worker_failure('~/solve_equilibrium', response, exc)
         if joint_services.fill_equilibrium(response, result):
             self._last_solution = result.screw
         return response
@@ -336,14 +316,19 @@ class StiffnessNode(Node):
             self.reporter.reject('~/design_rest_lengths', str(exc))
             return joint_services.fail(response, f'invalid request: {exc}')
         try:
-            result = await self._worker.call(design_rest_lengths, (settings.model,), kwargs,
-                                             DESIGN_DEADLINE_S)
+            result = await self._in_worker(design_rest_lengths, (settings.model,), kwargs,
+                                           DESIGN_DEADLINE_S)
         except ValueError as exc:  # a request the library refuses (e.g. outside the chart)
             self.reporter.reject('~/design_rest_lengths', str(exc))
             return joint_services.fail(response, f'invalid request: {exc}')
         except (TimeoutError, WorkerDiedError) as exc:
-            return answer_worker_failure(self.reporter, '~/design_rest_lengths', response, exc)
+            return self._worker_failure('~/design_rest_lengths', response, exc)
         return joint_services.fill_design(response, result)
+
+    def _worker_failure(self, kind: str, response: Any, exc: BaseException) -> Any:
+        message = worker_failure_message(exc)
+        self.reporter.warn(kind, message, error=True)
+        return joint_services.fail(response, message)
 
     @guarded_service('~/planar_forward_kinematics')
     def _on_planar_forward(self, request: PlanarForwardKinematics.Request,
@@ -363,11 +348,13 @@ class StiffnessNode(Node):
         settings = self._settings
         with self._state_lock:
             outputs = self._last_outputs
-        computes = list(self._compute_times)
+        with self._output_lock:  # the fast lane appends to these
+            inputs, computes = list(self._input_times), list(self._compute_times)
+            published = self._published
         now = time.monotonic()
         values: list[tuple[str, Any]] = [
-            ('input rate [Hz]', float(sum(1 for t in self._input_times if now - t <= 1.0))),
-            ('outputs published', self._published),
+            ('input rate [Hz]', float(sum(1 for t in inputs if now - t <= 1.0))),
+            ('outputs published', published),
             ('compute time mean [us]', 1e6 * float(np.mean(computes)) if computes else 0.0),
             ('compute time max [us]', 1e6 * float(np.max(computes)) if computes else 0.0),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
