@@ -4,9 +4,9 @@ Run by hand: ``python3 bench/bench_design.py [--requests N]``. Library part: med
 of ``design_rest_lengths`` over random feasible requests near the default joint's unloaded
 equilibrium (moderate loads, tensions in [0.1, 1.5] N), without and with a target K_c, for both
 force laws, next to the issue's target (median <= 5 ms); ``stiffness_range`` and
-``rest_length_sensitivity`` for reference. Each part is one function in ``PARTS``; the node's
-``~/design_rest_lengths`` service round trip is to be added there as another part (it needs the
-node and ``source scripts/env.sh``). No assertions: numbers only.
+``rest_length_sensitivity`` for reference. Part ``service``: the round trip of the installed
+node's ``~/design_rest_lengths`` (the node as its own process; needs ``source scripts/env.sh``),
+for the same requests, next to the library time of each. No assertions: numbers only.
 """
 
 from __future__ import annotations
@@ -98,8 +98,48 @@ def library_part(args: argparse.Namespace) -> None:
                    times_ms(lambda c, m=model: m.evaluate(c[0], c[3]), cases)))
 
 
-#: The bench's parts, run in this order (a node service part goes here).
-PARTS: dict[str, Callable[[argparse.Namespace], None]] = {'library': library_part}
+def service_part(args: argparse.Namespace) -> None:
+    """Round trips of the node's ``~/design_rest_lengths`` (two processes, real middleware)."""
+    import os
+    import random
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(100, 200)))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
+    from ros_harness import NodeProcess, RosClient, unique_namespace
+
+    import msg_tools
+    from tensegrity_stiffness_interfaces.srv import DesignRestLengths
+
+    model = joint('hooke')
+    cases = requests(model, args.requests, seed=2)
+    ns = unique_namespace('bench_design')
+    proc = NodeProcess(ns)
+    ros = RosClient('bench_design')
+    try:
+        client = ros.client(DesignRestLengths, f'{ns}/stiffness_node/design_rest_lengths')
+
+        def call(case: tuple[np.ndarray, ...], target: bool) -> None:
+            request = DesignRestLengths.Request(
+                target_screw=case[0].tolist(), external_wrench=msg_tools.wrench_to_msg(case[1]),
+                tension_min=LIMITS[0], tension_max=LIMITS[1],
+                target_cartesian_stiffness=case[2].ravel().tolist() if target else [])
+            if not ros.call(client, request, timeout=30.0).success:
+                raise RuntimeError('a feasible design failed in the node')
+
+        print(f'service ~/design_rest_lengths: {len(cases)} requests (hooke), two processes')
+        print(line('round trip, no target', times_ms(lambda c: call(c, False), cases)))
+        print(line('round trip, target K_c', times_ms(lambda c: call(c, True), cases)))
+        print(line('library alone, target K_c', times_ms(lambda c: design_rest_lengths(
+            model, c[0], c[1], *LIMITS, target_stiffness=c[2]), cases)))
+    finally:
+        ros.close()
+        proc.stop()
+
+
+#: The bench's parts, run in this order.
+PARTS: dict[str, Callable[[argparse.Namespace], None]] = {'library': library_part,
+                                                           'service': service_part}
 
 
 def main() -> None:
