@@ -34,7 +34,7 @@ import time
 from collections import Counter, defaultdict
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from io import BytesIO
 from pathlib import Path
 from typing import Any
@@ -43,8 +43,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 import msg_tools
-from tensegrity_stiffness import config, layouts, parameters
-from tensegrity_stiffness.parameters import JointNodeSettings
+from tensegrity_stiffness import config, layouts, parameters, spine_processing
+from tensegrity_stiffness.chain import DEFAULT_SPINE_CONFIG
+from tensegrity_stiffness.parameters import JointNodeSettings, SpineNodeSettings
 from tensegrity_stiffness.processing import (
     JointOutputs,
     finite_rows,
@@ -60,6 +61,7 @@ FloatArray = NDArray[np.float64]
 FLOAT64_MULTIARRAY = 'std_msgs/msg/Float64MultiArray'
 POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
 WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
+POSE_ARRAY = 'geometry_msgs/msg/PoseArray'
 
 DEFAULT_NAMESPACE = '/stiffness_node'
 #: Output storages (rosbag2 storage identifiers).
@@ -88,8 +90,17 @@ NODE_TOPICS: dict[str, NodeTopics] = {
                  'cartesian_stiffness': FLOAT64_MULTIARRAY,
                  'string_tensions': FLOAT64_MULTIARRAY,
                  'stiffness_interpretation': FLOAT64_MULTIARRAY}),
+    # spine_node's per-input outputs, in the order of spine_processing.OUTPUT_NAMES.
+    'spine': NodeTopics(
+        inputs={'screws': FLOAT64_MULTIARRAY, 'poses': POSE_ARRAY,
+                'rest_lengths': FLOAT64_MULTIARRAY},
+        outputs=dict(zip(spine_processing.OUTPUT_NAMES, (
+            FLOAT64_MULTIARRAY, FLOAT64_MULTIARRAY, FLOAT64_MULTIARRAY, POSE_STAMPED,
+            WRENCH_STAMPED, FLOAT64_MULTIARRAY, FLOAT64_MULTIARRAY), strict=True))),
 }
 OUTPUT_NAMES = tuple(NODE_TOPICS['stiffness'].outputs)
+#: Default namespace (the node's name in the root namespace) of each node kind.
+DEFAULT_NAMESPACES = {'stiffness': DEFAULT_NAMESPACE, 'spine': '/spine_node'}
 
 
 class BagError(ValueError):
@@ -447,6 +458,215 @@ class StiffnessProcessor:
         self.emit(answers)
 
 
+# ------------------------------------------------------------------------------ spine
+def spine_settings(path: str | Path | None = None) -> SpineNodeSettings:
+    """The settings ``spine_node`` runs with for ``--params-file path`` (default: the packaged
+    ``config/default_spine.yaml``): the parameter table of the file's ``chain.n_joints``,
+    overridden by the file's parameters; BagError names the file and the field."""
+    path = config.packaged_config_path(DEFAULT_SPINE_CONFIG) if path is None else path
+    try:
+        n = parameters.values_from_config(path, parameters.CHAIN_PARAMETERS)['chain.n_joints']
+        values = parameters.values_from_config(path, parameters.spine_node_parameters(n))
+        return parameters.spine_node_settings(values)
+    except ValueError as exc:
+        text = str(exc)
+        raise BagError(text if str(path) in text else f'config {path}: {text}') from None
+
+
+def rosbags_message(msg: Any, typestore: Any) -> Any:
+    """The rosbags message equal to an rclpy message, field by field (nested messages and
+    sequences of them converted, ``double`` sequences as float64 arrays)."""
+    package = type(msg).__module__.split('.', 1)[0]
+    cls = typestore.types[f'{package}/msg/{type(msg).__name__}']
+    fields = {}
+    for name, field_type in msg.get_fields_and_field_types().items():
+        value = getattr(msg, name)
+        if '/' in field_type:
+            fields[name] = ([rosbags_message(v, typestore) for v in value]
+                            if field_type.startswith('sequence<')
+                            else rosbags_message(value, typestore))
+        elif field_type.startswith('sequence<') or field_type.endswith(']'):
+            if 'double' not in field_type:  # the outputs have double arrays only
+                raise TypeError(f'{name}: {field_type} is not converted')
+            fields[name] = np.array(value, dtype=np.float64)
+        else:
+            fields[name] = value
+    return cls(**fields)
+
+
+@dataclass
+class SpineAnswer:
+    """One answer of the spine node: the input's log time (ns), its source ('screws', 'poses'
+    or 're-publish'), the stamp (ns) of ``tip_pose`` and ``tip_wrench``, the library's outputs
+    and the node's filled messages (rclpy, :class:`msg_tools.SpineOutputMessages` order)."""
+
+    log_time: int
+    source: str
+    stamp: int
+    outputs: spine_processing.SpineOutputs
+    messages: tuple[Any, ...]
+
+
+class SpineProcessor:
+    """``spine_node``'s per-input behaviour (``_on_screws``, ``_on_poses``,
+    ``_on_rest_lengths``, ``_compute_and_publish``) over a recording, one input at a time with
+    the node's functions (:mod:`tensegrity_stiffness.spine_processing`, :mod:`msg_tools`,
+    ``msg_tools.SpineOutputMessages.fill`` for the messages). Each answer goes to ``emit``
+    (:class:`SpineAnswer`, its messages reused by the next answer); rejections are counted in
+    :attr:`rejected` by ``'<topic>: <kind>'`` with the node's text as the example."""
+
+    def __init__(self, settings: SpineNodeSettings, emit: Callable[[SpineAnswer], None]
+                 ) -> None:
+        self.settings = settings
+        self.emit = emit
+        self.messages = msg_tools.SpineOutputMessages(settings.n_joints)
+        self.rejected: Counter[str] = Counter()
+        self.examples: dict[str, str] = {}
+        self.answered: Counter[str] = Counter()
+        self._last_screws: FloatArray | None = None
+        self._last_stamp: int | None = None
+
+    def reject(self, topic: str, problem: str, kind: str | None = None) -> None:
+        key = f'{topic}: {kind or rejection_kind(problem)}'
+        self.rejected[key] += 1
+        self.examples.setdefault(key, problem)
+
+    def screws(self, msg: Any, log_time: int) -> None:
+        """A ``~/screws`` message (the node's ``_on_screws``); stamped with its log time, as the
+        node stamps the time of computation."""
+        settings = self.settings
+        try:
+            xi = spine_processing.screws_input(msg_tools.multiarray_to_array(
+                msg, max_length=settings.max_array_length), settings.n_joints)
+        except ValueError as exc:
+            self.reject('screws', str(exc))
+            return
+        self._compute(xi, log_time, log_time, 'screws')
+
+    def poses(self, msg: Any, log_time: int) -> None:
+        """A ``~/poses`` message (the node's ``_on_poses``): the log map on the branch nearest
+        the last answered screws (the models' initial screws before the first)."""
+        settings = self.settings
+        try:
+            reference = self._last_screws if self._last_screws is not None else np.array(
+                [model.initial_screw for model in settings.chain.joints])
+            xi = spine_processing.poses_input(msg.header.frame_id, msg.poses,
+                                              settings.base_frame, reference,
+                                              msg_tools.pose_to_transform)
+        except ValueError as exc:
+            self.reject('poses', str(exc))
+            return
+        stamp = msg.header.stamp
+        ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+        self._compute(xi, log_time, ns if ns != 0 else log_time, 'poses')
+
+    def rest_lengths(self, msg: Any, log_time: int) -> None:
+        """A ``~/rest_lengths`` message (the node's ``_on_rest_lengths``): in force from its log
+        time on; the last answer is re-published under it, with that answer's stamp."""
+        settings = self.settings
+        try:
+            rest = spine_processing.rest_lengths_input(msg_tools.multiarray_to_array(
+                msg, max_length=settings.max_array_length), settings.chain)
+        except ValueError as exc:
+            self.reject('rest_lengths', str(exc))
+            return
+        self.settings = replace(settings, rest_lengths=rest,
+                                generation=settings.generation + 1)
+        if self._last_screws is not None and self._last_stamp is not None:
+            self._compute(self._last_screws, log_time, self._last_stamp, 're-publish')
+
+    def _compute(self, xi: FloatArray, log_time: int, stamp: int, source: str) -> None:
+        settings = self.settings
+        try:
+            outputs = spine_processing.spine_outputs(settings.chain, xi, settings.rest_lengths)
+            self.messages.fill(outputs, msg_tools.stamp_from_nanoseconds(stamp),
+                               settings.base_frame)
+        except ValueError as exc:
+            text = str(exc)
+            self.reject(source, text, 'singular tip stiffness' if 'singular' in text
+                        else 'non-finite result')
+            return
+        self._last_screws, self._last_stamp = xi, stamp
+        self.answered[source] += 1
+        self.emit(SpineAnswer(log_time, source, stamp, outputs, self.messages.messages()))
+
+
+class _SpineCsvSink:
+    """One row per spine answer: log time, source, stamp, the joints' screws (joint-major),
+    the tip wrench (base frame) and the tip stiffness (tool frame, row-major)."""
+
+    def __init__(self, path: Path, n_joints: int) -> None:
+        self._file = path.open('w', newline='')
+        self._writer = csv.writer(self._file)
+        w, s, t = layouts.WRENCH_NAMES, layouts.SCREW_NAMES, layouts.TWIST_NAMES
+        self._writer.writerow(
+            ['log_time_ns', 'source', 'stamp_ns',
+             *(f'joint_{i}_{c}' for i in range(1, n_joints + 1) for c in s),
+             *(f'tip_{c}' for c in w), *(f'Ktip_{r}_{c}' for r in w for c in t)])
+
+    def write(self, a: SpineAnswer) -> None:
+        o = a.outputs
+        self._writer.writerow([a.log_time, a.source, a.stamp, *np.concatenate(
+            [o.screws.ravel(), o.tip_wrench, o.tip_stiffness_tool.ravel()]).tolist()])
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _run_spine(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, str]],
+               writer: Any, typestore: Any, settings: SpineNodeSettings, outputs: list[str],
+               spec: NodeTopics, prefix: str, csv_sink: _SpineCsvSink | None,
+               summary: BagSummary, total: int,
+               progress: Callable[[int, int], None] | None) -> BagSummary:
+    """The read - process - write loop of :func:`process_bag` for ``spine_node``: one input
+    at a time, each answer's messages converted to rosbags messages and serialized."""
+    names = spine_processing.OUTPUT_NAMES
+    chosen = [names.index(name) for name in outputs]
+    out_connections = [writer.add_connection(f'{prefix}/{names[k]}', spec.outputs[names[k]],
+                                             typestore=typestore) for k in chosen]
+    serialize = typestore.serialize_cdr
+
+    def emit(a: SpineAnswer) -> None:
+        for k, connection in zip(chosen, out_connections, strict=True):
+            writer.write(connection, a.log_time, bytes(serialize(
+                rosbags_message(a.messages[k], typestore), connection.msgtype)))
+        if csv_sink is not None:
+            csv_sink.write(a)
+
+    processor = SpineProcessor(settings, emit)
+    handlers = {'screws': processor.screws, 'poses': processor.poses,
+                'rest_lengths': processor.rest_lengths}
+    inputs: Counter[str] = Counter()
+    next_report = time.perf_counter() + PROGRESS_PERIOD
+    done = 0
+    for connection, log_time, raw in reader.messages(connections=connections):
+        done += 1
+        name, msgtype = wanted[connection.topic]
+        inputs[name] += 1
+        if connection.msgtype != msgtype:
+            processor.reject(name, f'message type {connection.msgtype}, expected {msgtype}',
+                             'wrong message type')
+        else:
+            try:
+                msg = typestore.deserialize_cdr(raw, msgtype)
+            except Exception as exc:  # rosbags raises several types on corrupt CDR
+                processor.reject(name, f'cannot deserialize: {type(exc).__name__}: {exc}',
+                                 'undecodable')
+            else:
+                handlers[name](msg, log_time)
+        if progress is not None and time.perf_counter() >= next_report:
+            next_report = time.perf_counter() + PROGRESS_PERIOD
+            progress(done, total)
+    if progress is not None:
+        progress(done, total)
+    summary.inputs = {name: inputs[name] for name in spec.inputs if inputs[name]}
+    summary.answered = dict(processor.answered)
+    summary.written = {f'{prefix}/{name}': summary.answers for name in outputs}
+    summary.rejected = dict(processor.rejected)
+    summary.rejection_examples = dict(processor.examples)
+    return summary
+
+
 # ------------------------------------------------------------------------------ output messages
 def _multiarray(typestore: Any, dims: Sequence[tuple[str, int, int]], size: int) -> Any:
     """A rosbags ``Float64MultiArray`` with the layout ``dims`` and ``size`` zeros."""
@@ -640,25 +860,27 @@ class _CsvSink:
         self._file.close()
 
 
-def _output_topics(topics: Sequence[str] | None, prefix: str) -> list[str]:
-    """Output names (of :data:`OUTPUT_NAMES`) selected by ``--topics`` (relative or full)."""
+def _output_topics(topics: Sequence[str] | None, prefix: str,
+                   names: Sequence[str] = OUTPUT_NAMES) -> list[str]:
+    """Output names (of ``names``, the node kind's outputs) selected by ``--topics``
+    (relative or full)."""
     if not topics:
-        return list(OUTPUT_NAMES)
+        return list(names)
     chosen = []
     for topic in topics:
         name = topic[len(prefix) + 1:] if prefix and topic.startswith(prefix + '/') else topic
         name = name.lstrip('/') if not prefix else name
-        if name not in OUTPUT_NAMES:
+        if name not in names:
             raise BagError(f"--topics: unknown output '{topic}' (outputs: "
-                           f"{', '.join(OUTPUT_NAMES)})")
+                           f"{', '.join(names)})")
         if name not in chosen:
             chosen.append(name)
-    return [name for name in OUTPUT_NAMES if name in chosen]
+    return [name for name in names if name in chosen]
 
 
 def process_bag(input_path: str | Path, output_path: str | Path, *,
                 config_path: str | Path | None = None,
-                namespace: str = DEFAULT_NAMESPACE, storage: str | None = None,
+                namespace: str | None = None, storage: str | None = None,
                 csv_path: str | Path | None = None, topics: Sequence[str] | None = None,
                 overwrite: bool = False, node: str = 'stiffness',
                 progress: Callable[[int, int], None] | None = None,
@@ -666,8 +888,11 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     """Read the node's inputs from the rosbag2 ``input_path`` and write what the node would
     publish to the rosbag2 ``output_path`` (and ``csv_path``); see the module docstring.
 
+    ``node``: 'stiffness' (``stiffness_node``) or 'spine' (``spine_node``: its inputs and
+    per-input outputs, config ``config/default_spine.yaml`` unless ``config_path``);
+    ``namespace``: the topics' prefix (default :data:`DEFAULT_NAMESPACES` of the node);
     ``storage``: 'mcap' or 'sqlite3' (default: the input's); ``topics``: the outputs to write
-    (default all five); ``progress(done, total)``: inputs read so far of all.
+    (default all); ``progress(done, total)``: inputs read so far of all.
     Raises :class:`BagError` (a ValueError) for the files and options, and when no input
     was answered.
     """
@@ -683,9 +908,10 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     _check_input(src)
     if storage is not None and storage not in STORAGES:
         raise BagError(f"unknown storage '{storage}' (mcap or sqlite3)")
-    prefix = namespace_prefix(namespace)
-    outputs = _output_topics(topics, prefix)
-    settings = node_settings(config_path)
+    prefix = namespace_prefix(DEFAULT_NAMESPACES[node] if namespace is None else namespace)
+    outputs = _output_topics(topics, prefix, tuple(spec.outputs))
+    spine = node == 'spine'
+    settings = spine_settings(config_path) if spine else node_settings(config_path)
     if out.resolve() == src.resolve():
         raise BagError(f'{out}: the output must not be the input')
 
@@ -720,11 +946,16 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
             raise BagError(f'{out}: cannot write: {exc}') from None
         csv_sink = None
         try:
-            csv_sink = _CsvSink(csv_file, settings.model.string_names) if csv_file else None
-            with single_threaded_blas():
-                summary = _run(reader, connections, wanted, writer, typestore, settings,
-                               outputs, spec, prefix, csv_sink, summary, total, progress,
-                               chunk_size)
+            if spine:
+                csv_sink = _SpineCsvSink(csv_file, settings.n_joints) if csv_file else None
+                summary = _run_spine(reader, connections, wanted, writer, typestore, settings,
+                                     outputs, spec, prefix, csv_sink, summary, total, progress)
+            else:
+                csv_sink = _CsvSink(csv_file, settings.model.string_names) if csv_file else None
+                with single_threaded_blas():
+                    summary = _run(reader, connections, wanted, writer, typestore, settings,
+                                   outputs, spec, prefix, csv_sink, summary, total, progress,
+                                   chunk_size)
         finally:
             writer.close()
             if csv_sink is not None:

@@ -718,7 +718,7 @@ def _cmd_bag(args: argparse.Namespace) -> int:
         summary = bag.process_bag(
             args.input, args.out, config_path=args.config, namespace=args.namespace,
             storage=args.storage, csv_path=args.csv, topics=args.topics,
-            overwrite=args.overwrite, progress=progress)
+            overwrite=args.overwrite, node=args.node, progress=progress)
     except ImportError as exc:  # rosbags not installed
         raise ValueError(f'the bag command needs rosbags ({exc})') from None
     finally:
@@ -1081,12 +1081,19 @@ def build_parser() -> argparse.ArgumentParser:
                                    'each answer at the log time of its input (needs rosbags).')
     p.add_argument('input', metavar='INPUT', help='rosbag2 folder (or a .mcap / .db3 file)')
     p.add_argument('--out', required=True, metavar='OUTPUT', help='rosbag2 folder to write')
+    p.add_argument('--node', choices=('stiffness', 'spine'), default='stiffness',
+                   help='the node whose topics are processed: stiffness_node (default; inputs '
+                        'screw, pose, rest_lengths) or spine_node (inputs screws, poses, '
+                        'rest_lengths; outputs joint_wrenches joint_stiffness '
+                        'joint_cartesian_stiffness tip_pose tip_wrench tip_stiffness '
+                        'tip_stiffness_base)')
     p.add_argument('--config', metavar='YAML',
                    help="the node's parameter file (default: the packaged "
-                        'config/default_joint.yaml; a file overrides the parameters it has)')
-    p.add_argument('--namespace', default='/stiffness_node', metavar='NS',
-                   help="the node's topics' prefix (default /stiffness_node: the node in the "
-                        'root namespace)')
+                        'config/default_joint.yaml, with --node spine '
+                        'config/default_spine.yaml; a file overrides the parameters it has)')
+    p.add_argument('--namespace', default=None, metavar='NS',
+                   help="the node's topics' prefix (default /stiffness_node, with --node spine "
+                        '/spine_node: the node in the root namespace)')
     p.add_argument('--storage', metavar='mcap|sqlite3',
                    help="storage of OUTPUT (default: the input's)")
     p.add_argument('--csv', metavar='FILE', help='also write one row per answered input')
