@@ -354,3 +354,113 @@ def test_spine_settings_of_a_three_joint_config(tmp_path: Path) -> None:
     assert settings.n_joints == 3
     assert float(np.ravel(settings.chain.joints[2].k)[0]) == 80.0
     assert float(np.ravel(settings.chain.joints[0].k)[0]) == 77.0
+
+
+@pytest.mark.ros
+def test_spine_bag_output_equals_the_running_spine_nodes_recorded_output(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scenario's inputs sent to the installed ``spine_node`` one by one, its outputs
+    recorded by an rclpy subscriber writing with rosbags, and compared message by message with
+    the bag command's output of the same inputs. Stamps: equal where the node copies them (a
+    pose's stamp, and re-publishes of it); the node's time of computation elsewhere, the log
+    time in the bag."""
+    pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+    import os
+    import time
+
+    from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
+    from rclpy.serialization import deserialize_message, serialize_message
+    from ros_harness import LATCHED, NodeProcess, RosClient, unique_namespace
+    from std_msgs.msg import Float64MultiArray
+
+    ns = unique_namespace('bagspine')
+    base = f'{ns}/spine_node'
+    msgs, expected, _ = scenario()
+    src = write_bag(tmp_path / 'in', msgs, namespace=base)
+    rcl_types = {'screws': Float64MultiArray, 'poses': PoseArray,
+                 'rest_lengths': Float64MultiArray}
+    rcl_out = {'tip_pose': PoseStamped, 'tip_wrench': WrenchStamped}
+    names = spine_processing.OUTPUT_NAMES
+    recorded = tmp_path / 'node_out'
+    paths = [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep)
+             if p and Path(p).resolve() not in (REPO, REPO / 'test')]
+    with monkeypatch.context() as env:  # the installed node with its own sources
+        env.setenv('PYTHONPATH', os.pathsep.join(paths))
+        proc = NodeProcess(ns, REPO / 'config' / 'default_spine.yaml', executable='spine_node')
+    ros = RosClient('bag_spine_test')
+    try:
+        log_time = [0]
+        with Writer(recorded, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            conns = {name: writer.add_connection(f'{base}/{name}', TYPES[name],
+                                                 typestore=TYPESTORE) for name in names}
+            inboxes = {}
+            for name in names:
+                msg_type = rcl_out.get(name, Float64MultiArray)
+
+                def record(msg: Any, name: str = name) -> None:
+                    writer.write(conns[name], log_time[0], serialize_message(msg))
+                inboxes[name] = ros.subscribe(msg_type, f'{base}/{name}')
+                ros.subscribe_callback(msg_type, f'{base}/{name}', record)
+            pubs = {'screws': ros.publisher(Float64MultiArray, f'{base}/screws'),
+                    'poses': ros.publisher(PoseArray, f'{base}/poses'),
+                    'rest_lengths': ros.publisher(Float64MultiArray, f'{base}/rest_lengths',
+                                                  LATCHED)}
+            for pub in pubs.values():
+                ros.wait_for_subscribers(pub)
+            for name in names:
+                ros.wait_for_publishers(f'{base}/{name}')
+            answered_times = {e['t'] for e in expected}
+            count = 0
+            for m in msgs:
+                # Raw bytes and a wrong message type cannot be sent on the node's topics.
+                if isinstance(m.msg, bytes) or m.msgtype != TYPESTORE_TYPES[m.topic]:
+                    continue
+                log_time[0] = m.t
+                raw = bytes(TYPESTORE.serialize_cdr(m.msg, m.msgtype))
+                pubs[m.topic].publish(deserialize_message(raw, rcl_types[m.topic]))
+                if m.t in answered_times:
+                    count += 1
+                    for name in names:
+                        inboxes[name].wait_for(count, timeout=10.0)
+            time.sleep(0.5)  # nothing more may come
+            assert {name: len(inboxes[name]) for name in names} == dict.fromkeys(
+                names, len(expected))
+    finally:
+        ros.close()
+        proc.stop()
+
+    code, _, stderr = run_cli('bag', src, '--out', tmp_path / 'bag_out', '--node', 'spine',
+                              '--namespace', base)
+    assert code == 0, stderr
+
+    def messages(path: Path) -> list[tuple[int, str, Any]]:
+        return sorted(((t, topic, TYPESTORE.deserialize_cdr(raw, msgtype))
+                       for topic, t, msgtype, raw in read_raw(path)), key=lambda m: m[:2])
+
+    node_out, bag_out = messages(recorded), messages(tmp_path / 'bag_out')
+    assert len(node_out) == len(bag_out) == len(names) * len(expected)
+    times = [e['t'] for e in expected]
+    for (t_n, topic_n, n), (t_b, topic_b, b) in zip(node_out, bag_out, strict=True):
+        assert (t_n, topic_n) == (t_b, topic_b) and t_b in times
+        exp = expected[times.index(t_b)]
+        name = topic_b[len(base) + 1:]
+        if name in rcl_out:
+            assert n.header.frame_id == b.header.frame_id == BASE
+            if exp['stamp'] < T0:  # the scenario's pose stamps precede its log times
+                assert (n.header.stamp.sec, n.header.stamp.nanosec) == (
+                    b.header.stamp.sec, b.header.stamp.nanosec)
+            if name == 'tip_pose':
+                vn, vb = ([m.pose.position.x, m.pose.position.y, m.pose.position.z,
+                           m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+                           m.pose.orientation.w] for m in (n, b))
+            else:
+                vn, vb = ([m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
+                           m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
+                          for m in (n, b))
+            np.testing.assert_array_equal(vb, vn)
+        else:
+            assert dims_of(n) == dims_of(b) and n.layout.data_offset == b.layout.data_offset
+            np.testing.assert_array_equal(b.data, n.data)
+
+
+TYPESTORE_TYPES = dict(bag.NODE_TOPICS['spine'].inputs)
