@@ -24,6 +24,12 @@ is decoded with its chunk in one ``frombuffer``; an output message is a serializ
 (layout, labels, frame id; built once with rosbags) whose payload bytes are replaced, and a
 chunk's messages are written as one block (:class:`_BlockWriter`: the bytes rosbags' writer
 writes, assembled with numpy).
+
+``spine_node`` (``node='spine'``, :class:`SpineProcessor`): its inputs (``screws``, ``poses``,
+``rest_lengths``) and per-input outputs (:data:`spine_processing.OUTPUT_NAMES`), one input at a
+time with the node's functions (:mod:`tensegrity_stiffness.spine_processing`) and the node's
+messages (``msg_tools.SpineOutputMessages.fill``), copied into rosbags messages by
+:func:`rosbags_message`; the same stamp rules.
 """
 
 from __future__ import annotations
@@ -74,9 +80,9 @@ PROGRESS_PERIOD = 0.2
 
 @dataclass(frozen=True)
 class NodeTopics:
-    """Input and output topics (names relative to the node, message types) of one node kind.
-    ``stiffness`` is ``stiffness_node``; another node kind (the spine node) gets its own entry
-    in :data:`NODE_TOPICS` and its own processor."""
+    """Input and output topics (names relative to the node, message types) of one node kind:
+    ``stiffness`` is ``stiffness_node`` (:class:`StiffnessProcessor`), ``spine`` is
+    ``spine_node`` (:class:`SpineProcessor`)."""
 
     inputs: Mapping[str, str]
     outputs: Mapping[str, str]

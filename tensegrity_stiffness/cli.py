@@ -1078,7 +1078,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    'rosbag2 (mcap or sqlite3) and write what stiffness_node '
                                    'would publish (wrench, stiffness, cartesian_stiffness, '
                                    'string_tensions, stiffness_interpretation) to a new rosbag2, '
-                                   'each answer at the log time of its input (needs rosbags).')
+                                   'each answer at the log time of its input (needs rosbags); '
+                                   "with --node spine, spine_node's topics.")
     p.add_argument('input', metavar='INPUT', help='rosbag2 folder (or a .mcap / .db3 file)')
     p.add_argument('--out', required=True, metavar='OUTPUT', help='rosbag2 folder to write')
     p.add_argument('--node', choices=('stiffness', 'spine'), default='stiffness',
