@@ -312,14 +312,19 @@ class StreamMatcher:
     the oldest expectation matches it; one equal to a later expectation (within ``LOOKAHEAD``)
     matches that one and the skipped ones count as ``missing``; one equal to none counts as
     ``wrong`` (a publication for an invalid input, or a wrong value). ``on_match(seq, t)`` gets
-    each match with its arrival time (time.perf_counter).
+    each match with its arrival time (time.perf_counter). ``rtol`` / ``atol``: the tolerances of
+    a match (1e-12 for closed-form outputs; a value from a linear solve is as exact as the
+    system's conditioning allows).
     """
 
     LOOKAHEAD = 64
 
     def __init__(self, extract: Callable[[Any], Any],
-                 on_match: Callable[[int, float], None] | None = None) -> None:
+                 on_match: Callable[[int, float], None] | None = None,
+                 rtol: float = 1e-12, atol: float = 1e-12) -> None:
         import numpy as np
+
+        self._rtol, self._atol = rtol, atol
 
         self._np = np
         self._extract = extract
@@ -344,8 +349,8 @@ class StreamMatcher:
             self.received += 1
             for j, (seq, expected) in enumerate(itertools.islice(self._expected,
                                                                  self.LOOKAHEAD)):
-                if value.shape == expected.shape and np.allclose(value, expected, rtol=1e-12,
-                                                                 atol=1e-12):
+                if value.shape == expected.shape and np.allclose(
+                        value, expected, rtol=self._rtol, atol=self._atol):
                     for _ in range(j + 1):
                         self._expected.popleft()
                     self.missing += j
