@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tensegrity_stiffness.equilibrium import is_stable, solve_equilibrium
+from tensegrity_stiffness.equilibrium import MIN_NEWTON_ITERATIONS, is_stable, solve_equilibrium
 from tensegrity_stiffness.joint import JointModel
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
@@ -131,3 +131,14 @@ def test_far_out_start_is_not_reported_as_converged(model):
         res = solve_equilibrium(model, np.zeros(6), initial_screw=np.r_[0.1, 0, 0, 1e200, 0, 0],
                                 time_budget=0.5)
     assert not res.success
+
+
+def test_an_easy_solve_is_not_cut_short_by_a_spent_budget(model):
+    """A worker starved of CPU may reach its deadline before Newton's first steps: the first
+    MIN_NEWTON_ITERATIONS steps are taken anyway, so an easy request still converges."""
+    W = np.array([0.05, 0.0, 0.0, 0.0, 0.0, 0.001])
+    res = solve_equilibrium(model, W, time_budget=1e-9)
+    assert res.success, res.message
+    assert 1 <= res.iterations <= MIN_NEWTON_ITERATIONS
+    hard = solve_equilibrium(model, np.r_[100.0, 0, 0, 0, 0, 0], time_budget=1e-9)
+    assert not hard.success and 'time budget' in hard.message
