@@ -8,7 +8,6 @@ Decoding a message into numbers (length, NaN and size checks, quaternions) is
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -17,6 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness.interpretation import interpretation_vector
 from tensegrity_stiffness.joint import JointModel, JointState
 from tensegrity_stiffness.screw import check_in_chart, log_se3
+from tensegrity_stiffness.validation import require_all_finite
 
 FloatArray = NDArray[np.float64]
 
@@ -72,14 +72,7 @@ def output_arrays(outputs: JointOutputs) -> tuple[FloatArray, ...]:
 def require_finite(outputs: JointOutputs) -> None:
     """ValueError naming the first published array of ``outputs`` that is not finite (an input
     gets all of its outputs or none). One sum per array on the common, finite path."""
-    arrays = output_arrays(outputs)
-    with np.errstate(all='ignore'):
-        total = sum(float(a.sum()) for a in arrays)
-    if math.isfinite(total):
-        return
-    for name, array in zip(OUTPUT_NAMES, arrays, strict=True):
-        if not np.isfinite(array).all():
-            raise ValueError(f'{name} contains NaN or inf')
+    require_all_finite(OUTPUT_NAMES, output_arrays(outputs))
 
 
 def screw_inputs(values: FloatArray) -> tuple[NDArray[np.bool_], dict[int, str]]:

@@ -8,7 +8,6 @@ part; this module takes the numbers. Every check names the joint (1-based) it re
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -20,6 +19,7 @@ from tensegrity_stiffness.chain import ChainState, JointChain, adjoint
 from tensegrity_stiffness.equilibrium import stability_margin
 from tensegrity_stiffness.health import JointHealth
 from tensegrity_stiffness.screw import CHART_LIMIT, check_in_chart, log_se3
+from tensegrity_stiffness.validation import require_all_finite
 
 FloatArray = NDArray[np.float64]
 
@@ -119,14 +119,7 @@ OUTPUT_NAMES = ('joint_wrenches', 'joint_stiffness', 'joint_cartesian_stiffness'
 def require_finite(outputs: SpineOutputs) -> None:
     """ValueError naming the first published array of ``outputs`` that is not finite (an input
     gets all of its outputs or none). One sum per array on the common, finite path."""
-    arrays = output_arrays(outputs)
-    with np.errstate(all='ignore'):
-        total = sum(float(a.sum()) for a in arrays)
-    if math.isfinite(total):
-        return
-    for name, array in zip(OUTPUT_NAMES, arrays, strict=True):
-        if not np.isfinite(array).all():
-            raise ValueError(f'{name} contains NaN or inf')
+    require_all_finite(OUTPUT_NAMES, output_arrays(outputs))
 
 
 def joint_health_in_chain(state: ChainState, i: int, string_names: Sequence[str]) -> JointHealth:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -44,3 +45,15 @@ def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...] | 
     if not np.all(np.isfinite(arr)):
         raise ValueError(f'{name} contains NaN or inf')
     return arr
+
+
+def require_all_finite(names: Sequence[str], arrays: Sequence[NDArray[np.float64]]) -> None:
+    """ValueError ``'<name> contains NaN or inf'`` for the first of ``arrays`` that is not finite
+    (an input gets all of its outputs or none). One sum per array on the common, finite path."""
+    with np.errstate(all='ignore'):
+        total = sum(float(a.sum()) for a in arrays)
+    if math.isfinite(total):
+        return
+    for name, array in zip(names, arrays, strict=True):
+        if not np.isfinite(array).all():
+            raise ValueError(f'{name} contains NaN or inf')
