@@ -287,6 +287,16 @@ class RosClient:
                 raise TimeoutError(f'no subscriber on {publisher.topic_name}')
             time.sleep(0.02)
 
+    def wait_for_executor(self, node: str, timeout: float = 20.0) -> None:
+        """Wait until the executor of the node named ``node`` (its full name) answers a
+        service: inputs sent after this are served by a spinning node (at start-up a fast lane
+        can serve its topics before the executor serves the others, e.g. latched rest lengths)."""
+        from rcl_interfaces.srv import GetParameters
+
+        client = self.client(GetParameters, f'{node}/get_parameters', timeout)
+        self.call(client, GetParameters.Request(names=['qos.depth']), timeout)
+        self.node.destroy_client(client)
+
     def wait_for_publishers(self, topic: str, count: int = 1, timeout: float = 20.0) -> None:
         deadline = time.monotonic() + timeout
         while self.node.count_publishers(topic) < count:

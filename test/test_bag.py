@@ -483,6 +483,7 @@ def test_bag_output_equals_the_running_nodes_recorded_output(
                                                   LATCHED)}
             for pub in pubs.values():
                 ros.wait_for_subscribers(pub)
+            ros.wait_for_executor(base)
             for name in OUTPUTS:
                 ros.wait_for_publishers(f'{base}/{name}')
             answered_times = {e['t'] for e in expected}
