@@ -23,7 +23,6 @@ import argparse
 import gc
 import os
 import random
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -36,7 +35,13 @@ os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this 
 
 import numpy as np  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
-from ros_harness import NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
+from ros_harness import (  # noqa: E402
+    NodeProcess,
+    RosClient,
+    latency_summary,
+    sleep_until,
+    unique_namespace,
+)
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 import msg_tools  # noqa: E402
@@ -51,15 +56,8 @@ from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
 STARTUP_SETTLE_S = 3.0
 
 
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
-def summary(name: str, seconds: list[float]) -> str:
-    ms = [s * 1e3 for s in seconds]
-    return (f'{name:<34} n={len(ms):>6}  median {statistics.median(ms):7.3f} ms  '
-            f'p99 {percentile(ms, 0.99):7.3f} ms  max {max(ms):8.3f} ms')
 
 
 #: The node's outputs besides ~/stiffness (the ``all`` client takes them too).
@@ -155,11 +153,11 @@ def run(path: str, rate: float, client: str, args: argparse.Namespace, model: Jo
     try:
         latencies, sent, drops = stream(ros, base, model, rate, args.seconds, rng,
                                         all_outputs=client == 'all')
-        print(summary(f'{path:<8} {rate:5.0f} Hz  client {client:<9}', latencies)
+        print(latency_summary(f'{path:<8} {rate:5.0f} Hz  client {client:<9}', latencies)
               + f'  drops {drops} of {sent}', flush=True)
         if services:
             for name, times in service_round_trips(ros, base, args.calls, rng).items():
-                print(summary(f'  {name}', times), flush=True)
+                print(latency_summary(f'  {name}', times), flush=True)
     finally:
         ros.close()
         code = proc.stop()

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import gc
 import os
-import statistics
 import sys
 import threading
 import time
@@ -32,7 +31,13 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', '231')  # Fast DDS takes domain ids up to 232
 
 import numpy as np  # noqa: E402
-from ros_harness import NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
+from ros_harness import (  # noqa: E402
+    NodeProcess,
+    RosClient,
+    latency_summary,
+    sleep_until,
+    unique_namespace,
+)
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 import msg_tools  # noqa: E402
@@ -45,15 +50,8 @@ CONFIG = ROOT / 'config' / 'default_spine.yaml'
 STARTUP_SETTLE_S = 3.0
 
 
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
-def summary(name: str, seconds: list[float]) -> str:
-    ms = [s * 1e3 for s in seconds]
-    return (f'{name:<34} n={len(ms):>6}  median {statistics.median(ms):7.3f} ms  '
-            f'p99 {percentile(ms, 0.99):7.3f} ms  max {max(ms):8.3f} ms')
 
 
 class Controller:
@@ -163,10 +161,10 @@ def main() -> None:
             latencies, sent, drops = stream(ros, base, n_joints, args.rate, args.seconds, rng)
             print(f'{n_joints} joints: screws -> tip_stiffness at {args.rate:.0f} Hz for '
                   f'{args.seconds:.0f} s: sent {sent}, drops {drops}')
-            print(summary('  latency', latencies))
+            print(latency_summary('  latency', latencies))
             if index == 0 and args.calls:
                 times, failures = service_round_trips(ros, base, args.calls, rng)
-                print(summary(f'  solve_equilibrium (N = {n_joints})', times)
+                print(latency_summary(f'  solve_equilibrium (N = {n_joints})', times)
                       + f'  failed {failures}')
         finally:
             ros.close()

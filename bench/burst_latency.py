@@ -20,7 +20,6 @@ import argparse
 import itertools
 import os
 import random
-import statistics
 import sys
 import threading
 import time
@@ -33,7 +32,14 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
-from ros_harness import DEEP, NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
+from ros_harness import (  # noqa: E402
+    DEEP,
+    NodeProcess,
+    RosClient,
+    latency_summary,
+    sleep_until,
+    unique_namespace,
+)
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 import msg_tools  # noqa: E402
@@ -50,17 +56,8 @@ def cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else float('nan')
 
 
-def summary(name: str, seconds: list[float]) -> str:
-    if not seconds:
-        return f'{name:<28} n=     0'
-    ms = [1e3 * s for s in seconds]
-    return (f'{name:<28} n={len(ms):>6}  median {statistics.median(ms):8.3f} ms  '
-            f'p99 {percentile(ms, 0.99):8.3f} ms  max {max(ms):8.3f} ms')
 
 
 class Matcher:
@@ -186,9 +183,9 @@ def main() -> None:
     print(f'sent {out["sent"]}, drops {out["drops"]}, unmatched (wrong) {out["unmatched"]}, '
           f'node RSS {out["rss MB"]:.1f} MB')
     for name in ('before the burst', 'during the burst', 'after the burst'):
-        print(summary(f'  latency {name}', out[name]))
+        print(latency_summary(f'  latency {name}', out[name]))
     print(f'  node CPU per screw (before, during, after) [ms]: {out["cpu ms per screw"]}')
-    print(summary('  equilibrium round trip', out['round trips']))
+    print(latency_summary('  equilibrium round trip', out['round trips']))
     print(f'  equilibrium answers: {out["answers"]}')
 
 

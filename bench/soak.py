@@ -33,7 +33,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
-from ros_harness import DEEP, NodeProcess, RosClient, sleep_until, unique_namespace  # noqa: E402
+from ros_harness import DEEP, NodeProcess, RosClient, percentile, sleep_until, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
@@ -84,9 +84,6 @@ class Matcher:
                 self.drops[minute] = self.drops.get(minute, 0) + 1
 
 
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else float('nan')
 
 
 def main() -> int:

@@ -70,6 +70,21 @@ def sleep_until(target: float) -> float:
     return now
 
 
+def percentile(values: list[float], q: float) -> float:
+    """The ``q`` quantile (0..1) of ``values``: the element at rank ``q * n`` when sorted."""
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def latency_summary(name: str, seconds: list[float]) -> str:
+    """One line of a latency bench: count, median, p99 and max in ms."""
+    import statistics
+
+    ms = [s * 1e3 for s in seconds]
+    return (f'{name:<34} n={len(ms):>6}  median {statistics.median(ms):7.3f} ms  '
+            f'p99 {percentile(ms, 0.99):7.3f} ms  max {max(ms):8.3f} ms')
+
+
 def process_children(pid: int) -> list[int]:
     """Child process ids of ``pid`` (from /proc; [] once it is gone)."""
     children = []

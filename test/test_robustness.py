@@ -32,6 +32,7 @@ from ros_harness import (  # noqa: E402
     NodeFuzzer,
     NodeProcess,
     RosClient,
+    percentile,
     reliable_qos,
     unique_namespace,
 )
@@ -463,9 +464,6 @@ def test_rejected_parameter_changes_keep_the_old_set(node, model):
                                atol=1e-12)
 
 
-def _percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 @pytest.mark.slow
@@ -524,8 +522,8 @@ def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_p
     record_property('answered within the solve', f'{inside_answered}/{inside_sent}')
     print(f'\nburst: {len(durations)} solves, median {1e3 * statistics.median(durations):.1f} ms;'
           f' screw latency during the burst: n={len(during)} median '
-          f'{1e3 * statistics.median(during):.2f} ms p99 {1e3 * _percentile(during, 0.99):.2f} ms'
-          f' max {1e3 * worst:.2f} ms (before: p99 {1e3 * _percentile(before, 0.99):.2f} ms, '
+          f'{1e3 * statistics.median(during):.2f} ms p99 {1e3 * percentile(during, 0.99):.2f} ms'
+          f' max {1e3 * worst:.2f} ms (before: p99 {1e3 * percentile(before, 0.99):.2f} ms, '
           f'max {1e3 * max(before):.2f} ms); screws sent during a solve and answered before its '
           f'response: {inside_answered}/{inside_sent}')
     assert len(durations) == 40 and statistics.median(durations) > 0.03  # hard: budget used
