@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections import deque
 from dataclasses import replace
 from typing import Any
 
@@ -42,19 +41,22 @@ from tensegrity_stiffness.parameters import (
 from tensegrity_stiffness.ros import runner, spine_services
 from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
 from tensegrity_stiffness.ros.fast_lane import FastLane
+from tensegrity_stiffness.ros.last_input import LastInput
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
 from tensegrity_stiffness.ros.solver_worker import SolverWorker, WorkerDiedError
-from tensegrity_stiffness.ros.stiffness_node import SOLVER_GRACE_S, STATS_WINDOW
 from tensegrity_stiffness.ros.topics import (
     LATCHED_QOS,
     create_output_publisher,
     input_qos,
     output_qos,
 )
-from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
+from tensegrity_stiffness.ros.worker_calls import (
+    SOLVER_GRACE_S,
+    WorkerCalls,
+    answer_worker_failure,
+)
 from tensegrity_stiffness.spine_processing import (
-    SpineOutputs,
     joint_health_in_chain,
     poses_input,
     rest_lengths_input,
@@ -88,7 +90,6 @@ class SpineNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.reporter = Reporter(self.get_logger())
-        self._state_lock = threading.Lock()
         # Publication lock: the fast lane and the executor both publish; settings are swapped
         # (and re-published) under it too. Re-entrant: a swap re-publishes.
         self._output_lock = threading.RLock()
@@ -97,15 +98,9 @@ class SpineNode(Node):
             self, spine_node_parameters(n_joints), spine_node_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
         self._settings: SpineNodeSettings = spine_node_settings(self._binding.values())
-        self._last_screws: np.ndarray | None = None
-        self._last_stamp = None
-        self._last_outputs: SpineOutputs | None = None
+        self._last = LastInput()
         self._last_solution: np.ndarray | None = None
-        self._marked: SpineOutputs | None = None
         self._clock = self.get_clock()
-        self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
-        self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
-        self._published = 0
         self._messages = msg_tools.SpineOutputMessages(n_joints)
         self._solver = SolverWorker('chain equilibrium worker')
         self._in_worker = WorkerCalls(self, self._solver)
@@ -197,7 +192,7 @@ class SpineNode(Node):
     def _on_poses(self, msg: PoseArray) -> None:
         settings = self._settings
         try:
-            last = self._last_screws
+            last = self._last.screws
             reference = last if last is not None else np.array(
                 [model.initial_screw for model in settings.chain.joints])
             xi = poses_input(msg.header.frame_id, msg.poses, settings.base_frame, reference,
@@ -223,8 +218,8 @@ class SpineNode(Node):
             self._republish_last()
 
     def _republish_last(self) -> None:
-        if self._last_screws is not None:
-            self._compute_and_publish(self._last_screws, self._last_stamp, 're-publish')
+        if self._last.screws is not None:
+            self._compute_and_publish(self._last.screws, self._last.stamp, 're-publish')
 
     # ------------------------------------------------------------------ outputs
     def _compute_and_publish(self, xi: np.ndarray, stamp: Any, source: str) -> None:
@@ -254,24 +249,19 @@ class SpineNode(Node):
                     publisher.publish(msg)
             if markers is not None:
                 self._pub_markers.publish(markers)
-            with self._state_lock:
-                self._last_screws, self._last_stamp = xi, stamp
-                self._last_outputs = outputs
-            self._published += 1
-            self._input_times.append(time.monotonic())
-            self._compute_times.append(time.perf_counter() - start)
+            self._last.record(xi, stamp, outputs, start)
 
     @guarded('~/markers')
     def _publish_markers(self) -> None:
         """At most ``markers.max_rate`` Hz, on the executor's thread (the whole spine's markers
         take milliseconds): the last configuration, once, if anyone listens."""
         settings = self._settings
-        with self._state_lock:
-            outputs, stamp = self._last_outputs, self._last_stamp
-        if (settings.marker_period == 0.0 or outputs is None or outputs is self._marked
-                or self._pub_markers.get_subscription_count() == 0):
+        if settings.marker_period == 0.0 or self._pub_markers.get_subscription_count() == 0:
             return
-        self._marked = outputs
+        last = self._last.unmarked()
+        if last is None:
+            return
+        outputs, stamp = last
         self._pub_markers.publish(msg_tools.spine_markers(
             settings.chain, outputs.state, settings.base_frame,
             stamp if stamp is not None else self._clock.now().to_msg()))
@@ -296,9 +286,7 @@ class SpineNode(Node):
             self.reporter.reject('~/solve_equilibrium', str(exc))
             return spine_services.fail(response, f'invalid request: {exc}')
         except (TimeoutError, WorkerDiedError) as exc:
-            message = worker_failure_message(exc)
-            self.reporter.warn('~/solve_equilibrium', message, error=True)
-            return spine_services.fail(response, message)
+            return answer_worker_failure(self.reporter, '~/solve_equilibrium', response, exc)
         if spine_services.fill_chain_equilibrium(response, result):
             self._last_solution = result.screws
         return response
@@ -307,18 +295,10 @@ class SpineNode(Node):
     @guarded('diagnostics')
     def _publish_diagnostics(self) -> None:
         settings = self._settings
-        with self._state_lock:
-            outputs = self._last_outputs
-        with self._output_lock:  # the fast lane appends to these
-            inputs, computes = list(self._input_times), list(self._compute_times)
-            published = self._published
-        now = time.monotonic()
+        outputs = self._last.outputs
         values: list[tuple[str, Any]] = [
             ('joints', settings.n_joints),
-            ('input rate [Hz]', float(sum(1 for t in inputs if now - t <= 1.0))),
-            ('outputs published', published),
-            ('compute time mean [us]', 1e6 * float(np.mean(computes)) if computes else 0.0),
-            ('compute time max [us]', 1e6 * float(np.max(computes)) if computes else 0.0),
+            *self._last.statistics(),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
             ('parameter generation', settings.generation),
             ('equilibrium worker restarts', self._solver.restarts),

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import threading
 import time
-from collections import deque
 from dataclasses import replace
 from typing import Any
 
@@ -40,10 +39,11 @@ from tensegrity_stiffness.parameters import (
     STIFFNESS_NODE_PARAMETERS,
     joint_node_settings,
 )
-from tensegrity_stiffness.processing import JointOutputs, joint_outputs, pose_input, screw_input
+from tensegrity_stiffness.processing import joint_outputs, pose_input, screw_input
 from tensegrity_stiffness.ros import joint_services, runner
 from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
 from tensegrity_stiffness.ros.fast_lane import FastLane
+from tensegrity_stiffness.ros.last_input import LastInput
 from tensegrity_stiffness.ros.parameters import ParameterBinding
 from tensegrity_stiffness.ros.reporting import Reporter, guarded, guarded_service
 from tensegrity_stiffness.ros.solver_worker import SolverWorker, WorkerDiedError
@@ -53,7 +53,11 @@ from tensegrity_stiffness.ros.topics import (
     input_qos,
     output_qos,
 )
-from tensegrity_stiffness.ros.worker_calls import WorkerCalls, worker_failure_message
+from tensegrity_stiffness.ros.worker_calls import (
+    SOLVER_GRACE_S,
+    WorkerCalls,
+    answer_worker_failure,
+)
 from tensegrity_stiffness_interfaces.srv import (
     DesignRestLengths,
     PlanarForwardKinematics,
@@ -62,11 +66,6 @@ from tensegrity_stiffness_interfaces.srv import (
 )
 
 NODE_NAME = 'stiffness_node'
-#: Window of the input-rate and compute-time statistics in /diagnostics.
-STATS_WINDOW = 1000
-#: Wall-clock time a solve may take beyond ``equilibrium.time_budget`` (a loaded machine) before
-#: it counts as an overrun and the worker is replaced.
-SOLVER_GRACE_S = 5.0
 #: Wall-clock bound of one rest-length design in the worker (it takes milliseconds).
 DESIGN_DEADLINE_S = 5.0
 
@@ -77,7 +76,6 @@ class StiffnessNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.reporter = Reporter(self.get_logger())
-        self._state_lock = threading.Lock()
         # Publication lock: the fast lane and the executor both publish; settings are swapped
         # (and re-published) under it too. Re-entrant: a swap re-publishes.
         self._output_lock = threading.RLock()
@@ -85,15 +83,9 @@ class StiffnessNode(Node):
             self, STIFFNESS_NODE_PARAMETERS, joint_node_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
         self._settings = joint_node_settings(self._binding.values())
-        self._last_screw: np.ndarray | None = None
-        self._last_stamp = None
-        self._last_outputs: JointOutputs | None = None
+        self._last = LastInput()
         self._last_solution: np.ndarray | None = None
-        self._marked: JointOutputs | None = None
         self._clock = self.get_clock()
-        self._input_times: deque[float] = deque(maxlen=STATS_WINDOW)
-        self._compute_times: deque[float] = deque(maxlen=STATS_WINDOW)
-        self._published = 0
         self._messages = msg_tools.JointOutputMessages(tuple(self._settings.model.string_names))
         self._solver = SolverWorker('equilibrium worker')
         self._in_worker = WorkerCalls(self, self._solver)
@@ -198,7 +190,7 @@ class StiffnessNode(Node):
     def _on_pose(self, msg: PoseStamped) -> None:
         settings = self._settings
         try:
-            last = self._last_screw
+            last = self._last.screws
             xi = pose_input(msg.header.frame_id, msg_tools.pose_to_transform(msg.pose),
                             settings.link1_frame,
                             last if last is not None else settings.model.initial_screw)
@@ -224,8 +216,8 @@ class StiffnessNode(Node):
             self._republish_last()
 
     def _republish_last(self) -> None:
-        if self._last_screw is not None:
-            self._compute_and_publish(self._last_screw, self._last_stamp, 're-publish')
+        if self._last.screws is not None:
+            self._compute_and_publish(self._last.screws, self._last.stamp, 're-publish')
 
     # ------------------------------------------------------------------ outputs
     def _compute_and_publish(self, xi: np.ndarray, stamp: Any, source: str) -> None:
@@ -258,24 +250,19 @@ class StiffnessNode(Node):
                     publisher.publish(msg)
             if markers is not None:
                 self._pub_markers.publish(markers)
-            with self._state_lock:
-                self._last_screw, self._last_stamp = xi, stamp
-                self._last_outputs = outputs
-            self._published += 1
-            self._input_times.append(time.monotonic())
-            self._compute_times.append(time.perf_counter() - start)
+            self._last.record(xi, stamp, outputs, start)
 
     @guarded('~/markers')
     def _publish_markers(self) -> None:
         """At most ``markers.max_rate`` Hz, on the executor's thread (a MarkerArray costs as much
         as all other outputs together): the last configuration, once, if anyone listens."""
         settings = self._settings
-        with self._state_lock:
-            outputs, stamp = self._last_outputs, self._last_stamp
-        if (settings.marker_period == 0.0 or outputs is None or outputs is self._marked
-                or self._pub_markers.get_subscription_count() == 0):
+        if settings.marker_period == 0.0 or self._pub_markers.get_subscription_count() == 0:
             return
-        self._marked = outputs
+        last = self._last.unmarked()
+        if last is None:
+            return
+        outputs, stamp = last
         self._pub_markers.publish(msg_tools.joint_markers(
             settings.model, outputs.state, settings.link1_frame,
             stamp if stamp is not None else self._clock.now().to_msg()))
@@ -297,7 +284,7 @@ class StiffnessNode(Node):
                                            (settings.model, job.external_wrench), job.kwargs(),
                                            job.time_budget + SOLVER_GRACE_S)
         except (TimeoutError, WorkerDiedError) as exc:
-            return self._worker_failure('~/solve_equilibrium', response, exc)
+            return answer_worker_failure(self.reporter, '~/solve_equilibrium', response, exc)
         if joint_services.fill_equilibrium(response, result):
             self._last_solution = result.screw
         return response
@@ -308,7 +295,7 @@ class StiffnessNode(Node):
                                       ) -> DesignRestLengths.Response:
         """Validated here, designed in the worker process; the node's rest lengths stay."""
         settings = self._settings
-        last = self._last_screw
+        last = self._last.screws
         try:
             kwargs = joint_services.design_kwargs(
                 request, settings, last if last is not None else settings.model.initial_screw)
@@ -322,13 +309,8 @@ class StiffnessNode(Node):
             self.reporter.reject('~/design_rest_lengths', str(exc))
             return joint_services.fail(response, f'invalid request: {exc}')
         except (TimeoutError, WorkerDiedError) as exc:
-            return self._worker_failure('~/design_rest_lengths', response, exc)
+            return answer_worker_failure(self.reporter, '~/design_rest_lengths', response, exc)
         return joint_services.fill_design(response, result)
-
-    def _worker_failure(self, kind: str, response: Any, exc: BaseException) -> Any:
-        message = worker_failure_message(exc)
-        self.reporter.warn(kind, message, error=True)
-        return joint_services.fail(response, message)
 
     @guarded_service('~/planar_forward_kinematics')
     def _on_planar_forward(self, request: PlanarForwardKinematics.Request,
@@ -346,17 +328,9 @@ class StiffnessNode(Node):
     @guarded('diagnostics')
     def _publish_diagnostics(self) -> None:
         settings = self._settings
-        with self._state_lock:
-            outputs = self._last_outputs
-        with self._output_lock:  # the fast lane appends to these
-            inputs, computes = list(self._input_times), list(self._compute_times)
-            published = self._published
-        now = time.monotonic()
+        outputs = self._last.outputs
         values: list[tuple[str, Any]] = [
-            ('input rate [Hz]', float(sum(1 for t in inputs if now - t <= 1.0))),
-            ('outputs published', published),
-            ('compute time mean [us]', 1e6 * float(np.mean(computes)) if computes else 0.0),
-            ('compute time max [us]', 1e6 * float(np.max(computes)) if computes else 0.0),
+            *self._last.statistics(),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
             ('parameter generation', settings.generation),
             ('equilibrium worker restarts', self._solver.restarts),

@@ -11,6 +11,10 @@ from rclpy.task import Future
 
 from tensegrity_stiffness.ros.solver_worker import SolverWorker
 
+#: Wall-clock time a job may take beyond its own budget (a loaded machine) before it counts as
+#: an overrun and the worker is replaced.
+SOLVER_GRACE_S = 5.0
+
 
 class WorkerCalls:
     """``await calls(fn, args, kwargs, deadline_s)``: ``fn(*args, **kwargs)`` computed in the
@@ -43,8 +47,12 @@ class WorkerCalls:
         return await done
 
 
-def worker_failure_message(exc: BaseException) -> str:
-    """The ``message`` of a service answer whose worker overran or died."""
-    if isinstance(exc, TimeoutError):
-        return f'solver overran its budget: {exc}'
-    return f'solver failed: {exc}; try again'
+def answer_worker_failure(reporter: Any, kind: str, response: Any, exc: BaseException) -> Any:
+    """``success: false`` for a service request whose worker overran (a TimeoutError) or died,
+    logged as an error of ``kind`` by the node's :class:`.Reporter`."""
+    message = (f'solver overran its budget: {exc}' if isinstance(exc, TimeoutError)
+               else f'solver failed: {exc}; try again')
+    reporter.warn(kind, message, error=True)
+    response.success = False
+    response.message = message
+    return response
