@@ -2,14 +2,16 @@
 # Idempotent setup of the development / CI environment of tensegrity_stiffness:
 #   1. .venv/      Python venv with pinned ROS 2 Jazzy wheels from PyPI (rclpy + fastrtps, message
 #                  packages, rosidl/ament build wheels, colcon) and numpy, scipy, PyYAML, pytest, ruff.
-#   2. build/, install/   colcon build (--symlink-install, isolated layout) of both packages:
-#                  tensegrity_stiffness (ament_python, repo root) and tensegrity_stiffness_interfaces
-#                  (ament_cmake + rosidl, sub-folder).
+#   2. build/, install/   colcon build (--symlink-install, isolated layout) of the three packages:
+#                  tensegrity_stiffness (ament_python, repo root), tensegrity_stiffness_interfaces
+#                  (ament_cmake + rosidl, sub-folder) and tensegrity_stiffness_kernel (ament_cmake,
+#                  the compiled joint kernel: a C++ shared library built with cmake and g++).
 # Each step is skipped when its stamp matches (stamps are sha256 hashes of the inputs):
 #   .venv/.tensegrity_venv_stamp       requirement pins + constraints.txt + python version + path
-#   install/.tensegrity_build_stamp    venv stamp + package manifests, setup.py/cfg, srv files, file
-#                                      names in resource/ and config/. Python sources need no
-#                                      rebuild: --symlink-install links the package folders.
+#   install/.tensegrity_build_stamp    venv stamp + package manifests, setup.py/cfg, srv files, the
+#                                      kernel's sources, file names in resource/ and config/.
+#                                      Python sources need no rebuild: --symlink-install links
+#                                      the package folders.
 # Usage: bash scripts/setup_env.sh            (then: source scripts/env.sh)
 # Env:   TENSEGRITY_PYTHON   interpreter used to create the venv (default: python3, must be 3.11)
 #        TENSEGRITY_FORCE=1  ignore the stamps and redo both steps
@@ -24,6 +26,7 @@ PYTHON="${TENSEGRITY_PYTHON:-python3}"
 VENV_STAMP="$VENV/.tensegrity_venv_stamp"
 BUILD_STAMP="$REPO/install/.tensegrity_build_stamp"
 INTERFACES_DIR="tensegrity_stiffness_interfaces"
+KERNEL_DIR="tensegrity_stiffness_kernel"
 
 # Top-level requirements; exact versions come from scripts/constraints.txt (pip -c).
 REQUIREMENTS=(
@@ -123,12 +126,15 @@ build_hash="$( {
   # symlink per file). The Python package folders are symlinked as a whole: no entry needed.
   find "$INTERFACES_DIR" -name '*.srv' -o -name '*.msg' -o -name '*.action' | LC_ALL=C sort \
     | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
+  # The kernel is compiled (not symlinked): every source file counts.
+  find "$KERNEL_DIR" -type f | LC_ALL=C sort | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
   find resource config -type f 2>/dev/null | LC_ALL=C sort
 } | sha)"
 
 EXE="install/tensegrity_stiffness/lib/tensegrity_stiffness/stiffness_node"
+KERNEL_LIB="install/$KERNEL_DIR/lib/libtensegrity_stiffness_kernel.so"
 if [[ "${TENSEGRITY_FORCE:-0}" != 1 && -f "$BUILD_STAMP" && "$(cat "$BUILD_STAMP")" == "$build_hash" \
-  && -e "$EXE" && -d "install/$INTERFACES_DIR" ]]; then
+  && -e "$EXE" && -d "install/$INTERFACES_DIR" && -e "$KERNEL_LIB" ]]; then
   log "colcon build up to date (install/)"
 else
   # build/ and install/ hold absolute paths: start clean when the venv or checkout path changed.
@@ -139,7 +145,7 @@ else
   # --symlink-install leaves links to deleted sources (e.g. a removed config/*.yaml) behind in
   # build/ and install/; setup.py's glob in build/ would then pick them up and fail.
   find build install -xtype l -delete 2>/dev/null || true
-  log "colcon build --symlink-install (both packages)"
+  log "colcon build --symlink-install (three packages)"
   mkdir -p build log
   BUILD_OUT="log/setup_env_colcon_build.txt"
   printf '%s\n' "$VENV" >build/.tensegrity_build_origin
@@ -154,7 +160,7 @@ else
     export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
     unset PYTHONPATH
     colcon build --symlink-install \
-      --base-paths . "$INTERFACES_DIR" \
+      --base-paths . "$INTERFACES_DIR" "$KERNEL_DIR" \
       --event-handlers console_cohesion+ status- \
       --cmake-args -DBUILD_TESTING=OFF \
       "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
@@ -166,6 +172,10 @@ else
   }
   if [[ ! -e "$EXE" ]]; then
     log "colcon build did not produce $EXE (entry point missing in setup.py?)"
+    exit 1
+  fi
+  if [[ ! -e "$KERNEL_LIB" ]]; then
+    log "colcon build did not produce $KERNEL_LIB (the compiled kernel)"
     exit 1
   fi
   printf '%s\n' "$build_hash" >"$BUILD_STAMP"

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness import config
+from tensegrity_stiffness import config, kernel
 from tensegrity_stiffness.screw import (
     CHART_LIMIT,
     _coefficients_scalar,
@@ -153,6 +153,8 @@ class JointModel:
     node_names, link2_node_names, string_names : labels (optional).
     initial_screw : (6,) default starting point of equilibrium solves (e.g. the unloaded
         equilibrium); zeros when omitted.
+    use_kernel : evaluate with the compiled kernel (:mod:`~tensegrity_stiffness.kernel`) when it
+        is available (default); ``False`` keeps the numpy implementation, its reference.
     """
 
     def __init__(
@@ -168,6 +170,7 @@ class JointModel:
         link2_node_names: Sequence[str] | None = None,
         string_names: Sequence[str] | None = None,
         initial_screw: ArrayLike | None = None,
+        use_kernel: bool = True,
     ) -> None:
         p1 = finite_array('link1_nodes', link1_nodes)
         if p1.ndim != 2 or p1.shape[1] != 3 or p1.shape[0] == 0:
@@ -195,7 +198,8 @@ class JointModel:
         self.connections = conn.astype(np.intp)
         self.k = k
         self.force_law = force_law
-        self.rest_lengths = self.validate_rest_lengths(rest_lengths, batched=False)
+        self.rest_lengths = np.ascontiguousarray(
+            self.validate_rest_lengths(rest_lengths, batched=False))
         if max_lengths is None:
             lmax = np.full(n, np.inf)
         else:
@@ -233,6 +237,14 @@ class JointModel:
         self._map_batch = np.stack([sum(linear[:, i, k] for i, k in pairs)
                                     for pairs in _BATCH_ENTRIES]).reshape(10 * n, 42)
         self._no_strings = bytes(n)
+        self._kernel = kernel.joint_kernel(self._p1, self._p2, self.k, self.max_stretch,
+                                           FORCE_LAWS.index(force_law)) if use_kernel else None
+        self._rest_address = kernel.address(self.rest_lengths)
+
+    @property
+    def uses_kernel(self) -> bool:
+        """True when evaluations run in the compiled kernel."""
+        return self._kernel is not None
 
     # ------------------------------------------------------------------ construction
     @property
@@ -346,7 +358,7 @@ class JointModel:
                           link2_nodes=self.link2_nodes, max_lengths=rest + self.max_stretch,
                           force_law=self.force_law, node_names=self.node_names,
                           link2_node_names=self.link2_node_names, string_names=self.string_names,
-                          initial_screw=self.initial_screw)
+                          initial_screw=self.initial_screw, use_kernel=self.uses_kernel)
 
     # ------------------------------------------------------------------ validation
     def validate_rest_lengths(self, rest_lengths: ArrayLike | None, batched: bool = True
@@ -399,11 +411,16 @@ class JointModel:
         """One screw (6,) with validated rest lengths (n,): the :class:`JointState`, or ``K``
         alone when not ``full``. Kinematics in plain floats, the strings in a few array
         operations on (n, 4) arrays and one product with the precomputed map
-        (:func:`_linear_map`)."""
+        (:func:`_linear_map`); or all of it in the compiled kernel."""
         values = xi.tolist()
         if not math.isfinite(sum(values)):
             as_screws(xi)  # names the non-finite entry (a finite sum may overflow: then no error)
+        # Raises OverflowError for a finite screw whose angle overflows (as the array path).
         theta = math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+        if self._kernel is not None:
+            result = self._evaluate_single_kernel(xi, rest, full)
+            if result is not None:
+                return result
         T, J = _kinematics_entries(values, _coefficients_scalar(theta), 0.0, 1.0)
         kin = np.fromiter([*T[0], *T[1], *T[2], *T[3], *J[0], *J[1], *J[2], *J[3], *J[4], *J[5]],
                           np.float64, 52)
@@ -441,6 +458,32 @@ class JointModel:
         Kc = np.negative(Kp.reshape(6, 2, 3)[:, ::-1]).reshape(6, 6)
         return JointState(xi, transform, s, lengths, phi, slack, saturated, out[36:], K, Kc)
 
+    def _evaluate_single_kernel(self, xi: FloatArray, rest: FloatArray, full: bool
+                                ) -> JointState | FloatArray | None:
+        """:meth:`_evaluate_single` in the compiled kernel: ``None`` when a string has zero
+        length (the numpy path then raises the error that names it)."""
+        kn = self._kernel
+        buf = np.empty(kn.size)
+        buf[:6] = xi
+        if rest is self.rest_lengths:
+            rest_address = self._rest_address
+        else:
+            rest = np.ascontiguousarray(rest)
+            rest_address = kernel.address(rest)
+        mode = kernel.MODE_FULL if full else kernel.MODE_STIFFNESS
+        if kn.evaluate_packed(kn.model, rest_address, mode, kernel.address(buf)) != kernel.OK:
+            return None
+        K = buf[kn.stiffness:kn.cartesian].reshape(6, 6)
+        if not full:
+            return K
+        n = kn.n
+        flags = buf[kn.flags:].view(np.bool_)
+        return JointState(xi, buf[kn.transform:kn.strings].reshape(4, 4),
+                          buf[kn.strings:kn.lengths].reshape(n, 3), buf[kn.lengths:kn.tensions],
+                          buf[kn.tensions:kn.wrench], flags[:n], flags[n:2 * n],
+                          buf[kn.wrench:kn.stiffness], K,
+                          buf[kn.cartesian:kn.flags].reshape(6, 6))
+
     def _check_lengths(self, lengths: FloatArray) -> None:
         if lengths.min() < MIN_STRING_LENGTH:
             bad = np.unique(np.nonzero(lengths < MIN_STRING_LENGTH)[-1]).tolist()
@@ -452,7 +495,12 @@ class JointModel:
         ``BATCH_CHUNK`` and with strings on the last axis ((N, 3, n) component layout): the
         10 distinct entries of every string's g (:data:`_BATCH_ENTRIES`) go through one GEMM
         with the precomputed map. With ``wrench_only`` the stiffness matrices are left out (they
-        are NaN): the honest baseline of :meth:`numerical_stiffness`."""
+        are NaN): the honest baseline of :meth:`numerical_stiffness`. With the compiled kernel
+        the whole batch is one call."""
+        if self._kernel is not None:
+            state = self._evaluate_batch_kernel(xi, rest, wrench_only)
+            if state is not None:
+                return state
         N, n = xi.shape[0], self.n_strings
         T = np.empty((N, 4, 4))
         s_out = np.empty((N, n, 3))
@@ -499,6 +547,46 @@ class JointModel:
             np.matmul(Kp, J, out=K[sl])
             np.negative(Kp.reshape(m, 6, 2, 3)[:, :, ::-1], out=Kc[sl].reshape(m, 6, 2, 3))
         return JointState(xi, T, s_out, lengths, phi, slack, saturated, wrench, K, Kc)
+
+    def _evaluate_batch_kernel(self, xi: FloatArray, rest: FloatArray, wrench_only: bool
+                               ) -> JointState | None:
+        """:meth:`_evaluate_batch` in the compiled kernel: ``None`` when a string has zero
+        length (the numpy path then raises the error that names it)."""
+        N, n = xi.shape[0], self.n_strings
+        if N == 0:
+            return None
+        xi = np.ascontiguousarray(xi)
+        rest_c = np.ascontiguousarray(rest)
+        # All outputs in one buffer (one address to look up), each a contiguous block.
+        o_s = 16 * N
+        o_l = o_s + 3 * n * N
+        o_phi = o_l + n * N
+        o_F = o_phi + n * N
+        o_K = o_F + 6 * N
+        o_Kc = o_K + 36 * N
+        o_flags = o_Kc + 36 * N
+        buf = np.empty(o_flags + (2 * N * n + 7) // 8)
+        base = kernel.address(buf)
+        p_flags = base + 8 * o_flags
+        status = self._kernel.evaluate(
+            self._kernel.model, N, kernel.address(xi), kernel.address(rest_c),
+            0 if rest.ndim == 1 else n, kernel.MODE_WRENCH if wrench_only else kernel.MODE_FULL,
+            base, base + 8 * o_s, base + 8 * o_l, base + 8 * o_phi, p_flags, p_flags + N * n,
+            base + 8 * o_F, base + 8 * o_K, base + 8 * o_Kc)
+        if status != kernel.OK:
+            return None
+        K = buf[o_K:o_Kc].reshape(N, 6, 6)
+        Kc = buf[o_Kc:o_flags].reshape(N, 6, 6)
+        if wrench_only:
+            K.fill(np.nan)
+            Kc.fill(np.nan)
+        flags = buf[o_flags:].view(np.bool_)[:2 * N * n].reshape(2, N, n)
+        T = buf[:o_s].reshape(N, 4, 4)
+        s = buf[o_s:o_l].reshape(N, n, 3)
+        lengths = buf[o_l:o_phi].reshape(N, n)
+        phi = buf[o_phi:o_F].reshape(N, n)
+        wrench = buf[o_F:o_K].reshape(N, 6)
+        return JointState(xi, T, s, lengths, phi, flags[0], flags[1], wrench, K, Kc)
 
     # ------------------------------------------------------------------ public shortcuts
     def wrench(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> FloatArray:

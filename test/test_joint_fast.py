@@ -4,6 +4,7 @@
 :mod:`tensegrity_stiffness.joint_reference` (the previous implementation) gives, to 1e-13
 relative: per quantity, relative to its largest entry; for the wrench, relative to the sum of the
 moduli of its string contributions (it cancels to ~0 at an equilibrium). Region masks are equal.
+Every test runs twice: on the compiled kernel and on the numpy path (``implementation``).
 """
 
 import math
@@ -12,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tensegrity_stiffness import joint_reference
+from tensegrity_stiffness import joint_reference, kernel
 from tensegrity_stiffness.interpretation import interpret_stiffness, interpretation_vector
 from tensegrity_stiffness.joint import BATCH_CHUNK, KINEMATICS_CHUNKS, JointModel
 
@@ -23,9 +24,22 @@ FIELDS = ('transform', 'string_vectors', 'lengths', 'tensions', 'stiffness',
 TWO_PI = 2.0 * math.pi
 
 
+@pytest.fixture(scope='module', params=['kernel', 'numpy'], autouse=True)
+def implementation(request):
+    """The compiled kernel (when built) or the numpy path, for every model the tests make."""
+    with pytest.MonkeyPatch.context() as patch:
+        if request.param == 'numpy':
+            patch.setattr(kernel, 'joint_kernel', lambda *args: None)
+        elif not kernel.available():
+            pytest.skip(kernel.status())
+        yield request.param
+
+
 @pytest.fixture(scope='module')
-def model():
-    return JointModel.from_yaml(CONFIG)
+def model(implementation):
+    m = JointModel.from_yaml(CONFIG)
+    assert m.uses_kernel == (implementation == 'kernel')
+    return m
 
 
 def random_model(rng, force_law='hooke', n1=5, n2=4, n=9):

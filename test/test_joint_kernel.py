@@ -1,0 +1,179 @@
+"""The compiled joint kernel (``tensegrity_stiffness_kernel``) against the numpy path.
+
+The numpy implementation of :class:`JointModel` (``use_kernel=False``) is the reference: the
+kernel must give its results to 1e-13 (per quantity, relative to its largest entry; the wrench
+relative to the sum of the moduli of its string contributions) and the same slack / saturated
+decisions, for one screw and for batches, both force laws, every string region and the angle
+branches of the kinematics (series below 0.5 rad, near pi, near 2 pi). ``test_joint_fast.py``
+holds both paths to ``joint_reference`` as well.
+"""
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tensegrity_stiffness import kernel
+from tensegrity_stiffness.joint import JointModel
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'default_joint.yaml'
+RTOL = 1e-13
+FIELDS = ('transform', 'string_vectors', 'lengths', 'tensions', 'stiffness',
+          'cartesian_stiffness')
+
+pytestmark = pytest.mark.skipif(
+    os.environ.get(kernel.KERNEL_ENV, '').lower() in kernel.OFF_VALUES,
+    reason=f'{kernel.KERNEL_ENV} selects the numpy path')
+
+
+def pair(model: JointModel) -> tuple[JointModel, JointModel]:
+    """``model`` with the kernel and the same model on the numpy path."""
+    numpy_model = JointModel(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+                             link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+                             force_law=model.force_law, use_kernel=False)
+    assert model.uses_kernel and not numpy_model.uses_kernel
+    return model, numpy_model
+
+
+def random_model(rng, force_law='hooke', n1=5, n2=4, n=9) -> JointModel:
+    p1 = rng.normal(scale=0.05, size=(n1, 3))
+    p2 = rng.normal(scale=0.04, size=(n2, 3))
+    conn = np.column_stack([rng.integers(0, n1, n), rng.integers(0, n2, n)])
+    rest = rng.uniform(0.02, 0.08, n)
+    lmax = rest + rng.uniform(0.005, 0.05, n)
+    lmax[rng.random(n) < 0.3] = np.inf
+    return JointModel(p1, conn, rng.uniform(20.0, 120.0, n), rest, link2_nodes=p2,
+                      max_lengths=lmax, force_law=force_law)
+
+
+def assert_same(model, state, ref):
+    np.testing.assert_array_equal(state.slack, ref.slack)
+    np.testing.assert_array_equal(state.saturated, ref.saturated)
+    np.testing.assert_array_equal(state.screw, ref.screw)
+    for name in FIELDS:
+        new, old = getattr(state, name), getattr(ref, name)
+        assert new.shape == old.shape and new.dtype == old.dtype, name
+        scale = np.max(np.abs(old), initial=0.0)
+        np.testing.assert_allclose(new, old, rtol=0.0, atol=RTOL * scale, err_msg=name)
+    arm = 1.0 + np.max(np.linalg.norm(model.link1_nodes, axis=1))
+    scale = np.sum(np.abs(ref.tensions), axis=-1, keepdims=True) * arm
+    assert state.wrench.shape == ref.wrench.shape
+    assert np.all(np.abs(state.wrench - ref.wrench) <= RTOL * scale + 1e-300)
+
+
+def angle_screws(rng, count: int) -> np.ndarray:
+    """Screws over the kinematics' branches: tiny angles, the series, pi, near 2 pi."""
+    angles = np.concatenate([[0.0, 1e-12, 1e-6, 0.3, 0.4999999, 0.5, 0.5000001, math.pi,
+                              math.pi - 1e-9, 2 * math.pi - 1e-3],
+                             rng.uniform(0.0, 2 * math.pi - 1e-3, count)])
+    axes = rng.normal(size=(angles.size, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    return np.hstack([axes * angles[:, None], rng.normal(scale=0.03, size=(angles.size, 3))])
+
+
+def test_the_kernel_is_built_and_loaded():
+    """The README's setup builds the kernel: the suite must run on it (or say why not)."""
+    assert kernel.available(), kernel.status()
+    assert JointModel.from_yaml(CONFIG).uses_kernel
+
+
+@pytest.mark.parametrize('force_law', ['hooke', 'paper'])
+def test_single_and_batch_equal_the_numpy_path(force_law):
+    rng = np.random.default_rng(31 if force_law == 'hooke' else 32)
+    regions = np.zeros(3, dtype=int)
+    for _ in range(20):
+        fast, slow = pair(random_model(rng, force_law))
+        X = angle_screws(rng, 30)
+        batch = fast.evaluate(X)
+        assert_same(fast, batch, slow.evaluate(X))
+        for x in X:
+            state = fast.evaluate(x)
+            assert_same(fast, state, slow.evaluate(x))
+            np.testing.assert_array_equal(fast.stiffness(x), state.stiffness)
+        regions += [batch.slack.sum(), batch.saturated.sum(),
+                    (~(batch.slack | batch.saturated)).sum()]
+    assert np.all(regions > 100), regions  # slack, saturated and taut strings all occur
+
+
+def test_default_joint_near_equilibrium_and_per_screw_rest_lengths():
+    rng = np.random.default_rng(33)
+    fast, slow = pair(JointModel.from_yaml(CONFIG))
+    X = fast.initial_screw + rng.normal(scale=0.02, size=(700, 6))
+    rest = fast.rest_lengths * rng.uniform(0.9, 1.1, size=(700, fast.n_strings))
+    assert_same(fast, fast.evaluate(X, rest), slow.evaluate(X, rest))
+    assert_same(fast, fast.evaluate(X), slow.evaluate(X))
+    assert_same(fast, fast.evaluate(X[3], rest[3]), slow.evaluate(X[3], rest[3]))
+    np.testing.assert_allclose(fast.numerical_stiffness(X[:20]), slow.numerical_stiffness(X[:20]),
+                               rtol=0.0, atol=1e-9 * np.abs(slow.stiffness(X[:20])).max())
+
+
+def test_input_layouts_and_read_only_arrays():
+    rng = np.random.default_rng(34)
+    fast, slow = pair(JointModel.from_yaml(CONFIG))
+    X = fast.initial_screw + rng.normal(scale=0.02, size=(40, 6))
+    fortran = np.asfortranarray(X)
+    strided = np.repeat(X, 2, axis=0)[::2]
+    read_only = X.copy()
+    read_only.flags.writeable = False
+    ref = slow.evaluate(X)
+    for form in (fortran, strided, read_only, X.tolist()):
+        assert_same(fast, fast.evaluate(form), ref)
+    column = np.asfortranarray(np.repeat(X[:1], 3, axis=0))[:, :]  # (6,) rows are strided
+    assert_same(fast, fast.evaluate(column[0]), slow.evaluate(X[0]))
+    assert_same(fast, fast.evaluate(read_only[5]), slow.evaluate(X[5]))
+    rest = np.repeat(fast.rest_lengths[None], 2, axis=0).T[:, 0].copy()
+    assert_same(fast, fast.evaluate(X[1], rest[::1]), slow.evaluate(X[1], rest))
+    empty = fast.evaluate(np.zeros((0, 6)))
+    assert empty.stiffness.shape == (0, 6, 6) and empty.lengths.shape == (0, fast.n_strings)
+
+
+def test_outputs_are_independent_arrays_per_call():
+    fast, _ = pair(JointModel.from_yaml(CONFIG))
+    a = fast.evaluate(fast.initial_screw)
+    kept = a.stiffness.copy()
+    b = fast.evaluate(fast.initial_screw + 0.01)
+    np.testing.assert_array_equal(a.stiffness, kept)
+    assert not np.shares_memory(a.stiffness, b.stiffness)
+
+
+def test_zero_length_string_raises_as_the_numpy_path():
+    model = JointModel(np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]), np.array([[0, 0], [1, 1]]),
+                       100.0, [0.05, 0.05], link2_nodes=np.array([[0.0, 0.0, 0.0],
+                                                                  [0.1, 0.0, 0.01]]))
+    fast, slow = pair(model)
+    for xi in (np.zeros(6), np.zeros((3, 6))):
+        with pytest.raises(ValueError) as ref:
+            slow.evaluate(xi)
+        with pytest.raises(ValueError) as new:
+            fast.evaluate(xi)
+        assert str(new.value) == str(ref.value) and 'zero length' in str(new.value)
+
+
+def test_stiffness_is_the_derivative_of_the_kernels_wrench():
+    """Central differences of the kernel's own wrench (eq. 21) against its K (eq. 10)."""
+    rng = np.random.default_rng(35)
+    fast, _ = pair(random_model(rng, 'paper'))
+    h = 1e-6
+    for x in angle_screws(rng, 5)[2:]:
+        K = fast.stiffness(x)
+        numeric = np.column_stack([(fast.wrench(x + h * e) - fast.wrench(x - h * e)) / (2 * h)
+                                   for e in np.eye(6)])
+        np.testing.assert_allclose(K, numeric, rtol=0.0, atol=1e-6 * (1.0 + np.abs(K).max()))
+
+
+def test_library_lookup(monkeypatch, tmp_path):
+    monkeypatch.setenv(kernel.KERNEL_ENV, 'off')
+    assert kernel.library_path() == (None, f'{kernel.KERNEL_ENV}=off')
+    missing = tmp_path / 'nothing.so'
+    monkeypatch.setenv(kernel.KERNEL_ENV, str(missing))
+    path, why = kernel.library_path()
+    assert path is None and 'is not a file' in why
+    monkeypatch.delenv(kernel.KERNEL_ENV)
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path))
+    path, why = kernel.library_path()
+    assert path is None and 'not found on AMENT_PREFIX_PATH' in why
+    (tmp_path / 'lib').mkdir()
+    (tmp_path / 'lib' / kernel.LIBRARY_NAME).write_bytes(b'')
+    assert kernel.library_path() == (tmp_path / 'lib' / kernel.LIBRARY_NAME, 'AMENT_PREFIX_PATH')
