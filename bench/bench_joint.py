@@ -2,11 +2,12 @@
 """Six-DOF core benchmark, run by hand: ``python3 bench/bench_joint.py [--quick]``.
 
 Prints, measured side by side in one run on the default joint:
-* the current paths against the previous implementation (``joint_reference``, the readable
+* the compiled kernel (``tensegrity_stiffness_kernel``, when built), the numpy path
+  (``use_kernel=False``) and the previous implementation (``joint_reference``, the readable
   reference of the tests): per-call ``evaluate`` and ``stiffness``, batched ``evaluate`` at
   N = 10^4 and 10^5 and ``interpretation_vector`` (against ``interpret_stiffness``), with the
-  ratios new / old; new and old are timed in alternation (best of each), so that load on a
-  shared machine falls on both alike;
+  ratios kernel / previous; all are timed in alternation (best of each), so that load on a
+  shared machine falls on all alike;
 * per-call analytic K (eq. 10) vs central-difference K (eq. 21), and their ratio; the
   central-difference baseline is given two ways (one vectorised wrench-only pass over the 12
   perturbed screws, and a loop of 12 single wrench calls) and the faster one is used;
@@ -32,7 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tensegrity_stiffness import joint_reference  # noqa: E402
+from tensegrity_stiffness import joint_reference, kernel  # noqa: E402
 from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
 from tensegrity_stiffness.interpretation import (  # noqa: E402
     interpret_stiffness,
@@ -47,13 +48,13 @@ def per_call_us(fn, repeat: int = 7, number: int = 2000) -> float:
     return min(timeit.repeat(fn, repeat=repeat, number=number)) / number * 1e6
 
 
-def side_by_side(new, old, repeat: int, number: int) -> tuple[float, float]:
-    """Best per-call time (us) of ``new`` and ``old``, timed in alternation."""
-    t_new, t_old = math.inf, math.inf
+def side_by_side(*fns, repeat: int, number: int) -> list[float]:
+    """Best per-call time (us) of each of ``fns``, timed in alternation."""
+    best = [math.inf] * len(fns)
     for _ in range(repeat):
-        t_new = min(t_new, timeit.timeit(new, number=number) / number * 1e6)
-        t_old = min(t_old, timeit.timeit(old, number=number) / number * 1e6)
-    return t_new, t_old
+        for i, fn in enumerate(fns):
+            best[i] = min(best[i], timeit.timeit(fn, number=number) / number * 1e6)
+    return best
 
 
 def old_interpretation(K: np.ndarray) -> np.ndarray:
@@ -62,39 +63,62 @@ def old_interpretation(K: np.ndarray) -> np.ndarray:
     return np.concatenate([it.block_norms, it.column_norms, it.row_norms])
 
 
+def numpy_path(model: JointModel) -> JointModel:
+    """``model`` on the numpy path (``use_kernel=False``)."""
+    return JointModel(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+                      link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+                      force_law=model.force_law, initial_screw=model.initial_screw,
+                      use_kernel=False)
+
+
 def compare_with_previous(model: JointModel, xi: np.ndarray, rng: np.random.Generator,
                           number: int) -> None:
-    """New paths vs :mod:`joint_reference` (the previous implementation), side by side."""
+    """The compiled kernel, the numpy path and :mod:`joint_reference` (the previous
+    implementation), side by side."""
+    plain = numpy_path(model)
+    print(f'joint kernel: {kernel.status()}')
+
     def old_stiffness() -> np.ndarray:
         return joint_reference.evaluate(model, xi).stiffness
 
     K = model.stiffness(xi)
     rows = [
         ('evaluate (everything the node publishes)',
-         *side_by_side(lambda: model.evaluate(xi), lambda: joint_reference.evaluate(model, xi),
-                       7, number)),
-        ('stiffness K (eq. 10)', *side_by_side(lambda: model.stiffness(xi), old_stiffness, 7,
-                                               number)),
+         *side_by_side(lambda: model.evaluate(xi), lambda: plain.evaluate(xi),
+                       lambda: joint_reference.evaluate(model, xi), repeat=7, number=number)),
+        ('stiffness K (eq. 10)',
+         *side_by_side(lambda: model.stiffness(xi), lambda: plain.stiffness(xi), old_stiffness,
+                       repeat=7, number=number)),
         ('interpretation_vector (16 norms)',
-         *side_by_side(lambda: interpretation_vector(K), lambda: old_interpretation(K), 7,
-                       number)),
+         *side_by_side(lambda: interpretation_vector(K), lambda: interpretation_vector(K),
+                       lambda: old_interpretation(K), repeat=7, number=number)),
     ]
-    print('new vs previous implementation           new         old    new/old')
-    for name, t_new, t_old in rows:
-        print(f'  {name:<40} {t_new:7.1f} us  {t_old:7.1f} us   {t_new / t_old:5.2f}')
+    print('kernel / numpy path / previous            kernel       numpy    previous  '
+          'kernel/previous')
+    for name, t_new, t_numpy, t_old in rows:
+        print(f'  {name:<40} {t_new:7.1f} us {t_numpy:7.1f} us {t_old:7.1f} us   '
+              f'{t_new / t_old:5.3f}')
     for n in (10_000, 100_000):
         xs = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(n, 6))
         model.evaluate(xs[:1000])  # warm up
+        plain.evaluate(xs[:1000])
         joint_reference.evaluate(model, xs[:1000])
-        t_new, t_old = side_by_side(lambda xs=xs: model.evaluate(xs),
-                                    lambda xs=xs: joint_reference.evaluate(model, xs), 3, 1)
-        print(f'  batched evaluate, N = {n:>7,} (configs/s)  {n / t_new * 1e6:10,.0f}  '
-              f'{n / t_old * 1e6:10,.0f}   {t_new / t_old:5.2f} (time)')
-    state, ref = model.evaluate(xi), joint_reference.evaluate(model, xi)
-    worst = max(float(np.max(np.abs(getattr(state, f) - getattr(ref, f)))
-                      / np.max(np.abs(getattr(ref, f))))
-                for f in ('wrench', 'stiffness', 'cartesian_stiffness', 'tensions', 'lengths'))
-    print(f'  largest difference new - old (relative to the largest entry): {worst:.1e}\n')
+        t_new, t_numpy, t_old = side_by_side(
+            lambda xs=xs: model.evaluate(xs), lambda xs=xs: plain.evaluate(xs),
+            lambda xs=xs: joint_reference.evaluate(model, xs), repeat=3, number=1)
+        print(f'  batched evaluate, N = {n:>7,} (configs/s) {n / t_new * 1e6:9,.0f} '
+              f'{n / t_numpy * 1e6:9,.0f} {n / t_old * 1e6:9,.0f}      '
+              f'{t_new / t_old:5.3f} (time)')
+    ref = joint_reference.evaluate(model, xi)
+    for label, m in (('kernel', model), ('numpy path', plain)):
+        state = m.evaluate(xi)
+        worst = max(float(np.max(np.abs(getattr(state, f) - getattr(ref, f)))
+                          / np.max(np.abs(getattr(ref, f))))
+                    for f in ('wrench', 'stiffness', 'cartesian_stiffness', 'tensions',
+                              'lengths'))
+        print(f'  largest difference {label} - previous (relative to the largest entry): '
+              f'{worst:.1e}')
+    print()
 
 
 def main() -> None:

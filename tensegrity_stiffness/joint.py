@@ -241,6 +241,11 @@ class JointModel:
                                            FORCE_LAWS.index(force_law)) if use_kernel else None
         self._rest_address = kernel.address(self.rest_lengths)
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickled (e.g. in the solver worker): the rest lengths' address is this process's."""
+        self.__dict__.update(state)
+        self._rest_address = kernel.address(self.rest_lengths)
+
     @property
     def uses_kernel(self) -> bool:
         """True when evaluations run in the compiled kernel."""

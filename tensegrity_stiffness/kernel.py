@@ -143,6 +143,7 @@ class JointKernel:
                  max_stretch: NDArray, law: int) -> None:
         n = p1.shape[0]
         self.n = n
+        self.law = law
         self._arrays = [np.ascontiguousarray(a, dtype=np.float64)
                         for a in (p1, p2, k, max_stretch)]
         self._struct = _ModelStruct(n, *(address(a) for a in self._arrays), law)
@@ -158,6 +159,11 @@ class JointKernel:
         self.cartesian = self.stiffness + 36
         self.flags = self.cartesian + 36
         self.size = self.flags + (2 * n + 7) // 8
+
+    def __reduce__(self) -> tuple:
+        """Pickled as its constants (a model sent to the solver worker process): the receiving
+        process binds them to its own library, or gets ``None`` (numpy) without one."""
+        return joint_kernel, (*self._arrays, self.law)
 
 
 def joint_kernel(p1: NDArray, p2: NDArray, k: NDArray, max_stretch: NDArray, law: int

@@ -10,6 +10,9 @@ holds both paths to ``joint_reference`` as well.
 
 import math
 import os
+import pickle
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -177,3 +180,24 @@ def test_library_lookup(monkeypatch, tmp_path):
     (tmp_path / 'lib').mkdir()
     (tmp_path / 'lib' / kernel.LIBRARY_NAME).write_bytes(b'')
     assert kernel.library_path() == (tmp_path / 'lib' / kernel.LIBRARY_NAME, 'AMENT_PREFIX_PATH')
+
+
+def test_a_pickled_model_keeps_the_kernel_in_another_process():
+    """Models travel to the solver worker process by pickle: there they bind to that process's
+    library and arrays (no address of this process may survive the trip)."""
+    fast, _ = pair(JointModel.from_yaml(CONFIG))
+    x = fast.initial_screw + 0.01
+    code = ('import pickle, sys\n'
+            'model, x = pickle.load(sys.stdin.buffer)\n'
+            'assert model.uses_kernel\n'
+            'state = model.evaluate(x)\n'
+            'sys.stdout.buffer.write(pickle.dumps((state.stiffness, state.wrench, '
+            'model.stiffness(x))))\n')
+    done = subprocess.run([sys.executable, '-c', code], input=pickle.dumps((fast, x)),
+                          capture_output=True, timeout=60, check=False)
+    assert done.returncode == 0, done.stderr.decode()
+    K, F, K_only = pickle.loads(done.stdout)
+    ref = fast.evaluate(x)
+    np.testing.assert_array_equal(K, ref.stiffness)
+    np.testing.assert_array_equal(F, ref.wrench)
+    np.testing.assert_array_equal(K_only, ref.stiffness)
