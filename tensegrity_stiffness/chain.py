@@ -70,7 +70,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness import config
+from tensegrity_stiffness import config, kernel
 from tensegrity_stiffness.equilibrium import (
     CONTINUATION_STEPS,
     MAX_NEWTON_ITERATIONS,
@@ -190,12 +190,16 @@ class JointChain:
     link_coms : (N, 3) centre of mass of link i in {2}_i (m); ``None``: the origins.
     gravity : (3,) m/s^2 in the base frame, used when a call passes ``gravity=None``;
         ``None``: zero.
+    use_kernel : frames, implied tip wrench and tip stiffness in the compiled kernel
+        (:mod:`~tensegrity_stiffness.kernel`) when it is available (default); ``False`` keeps
+        the numpy implementation, its reference. The joints' own models choose for themselves.
     """
 
     def __init__(self, joints: Sequence[JointModel], link_offsets: ArrayLike | None = None,
                  tool: ArrayLike | None = None, link_masses: ArrayLike | None = None,
                  link_coms: ArrayLike | None = None, *, gravity: ArrayLike | None = None,
-                 base_frame: str = 'spine_base', tool_frame: str = 'spine_tool') -> None:
+                 base_frame: str = 'spine_base', tool_frame: str = 'spine_tool',
+                 use_kernel: bool = True) -> None:
         joints = list(joints)
         if not joints or not all(isinstance(j, JointModel) for j in joints):
             raise ValueError('joints must be a non-empty sequence of JointModel')
@@ -244,6 +248,9 @@ class JointChain:
         # Block masks of the 6N x 6N tangent: [j < i] per block, and the joint indices.
         self._strictly_lower = np.kron(np.tri(n, n, -1), np.ones((6, 6)))
         self._index = np.arange(n)
+        self.use_kernel = use_kernel
+        self._offsets_c = np.ascontiguousarray(self.link_offsets, dtype=np.float64)
+        self._tool_c = np.ascontiguousarray(self.tool, dtype=np.float64)
 
     # ------------------------------------------------------------------ construction
     @property
@@ -363,9 +370,23 @@ class JointChain:
         return bool(np.any(self.link_masses > 0.0) and np.any(g != 0.0))
 
     # ------------------------------------------------------------------ kinematics
+    def _library(self) -> Any:
+        """The compiled kernel's library, or ``None`` for the numpy path."""
+        return kernel.library() if self.use_kernel else None
+
     def _frames(self, T: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(P (N, 4, 4), L (N, 4, 4), T_tip) from the joint transforms T_i."""
         n = self.n_joints
+        lib = self._library()
+        if lib is not None:
+            T = np.ascontiguousarray(T, dtype=np.float64)
+            out = np.empty(32 * n + 16)
+            base = kernel.address(out)
+            lib.chain_frames(n, kernel.address(T), kernel.address(self._offsets_c),
+                             kernel.address(self._tool_c), base, base + 128 * n,
+                             base + 256 * n)
+            return (out[:16 * n].reshape(n, 4, 4), out[16 * n:32 * n].reshape(n, 4, 4),
+                    out[32 * n:].reshape(4, 4))
         P = np.empty((n, 4, 4))
         L = np.empty((n, 4, 4))
         current = np.eye(4)
@@ -487,6 +508,41 @@ class JointChain:
         PJ = ScrewKinematics(screws).J[:, _SWAP]
         return np.einsum('ajb,jbc->ajc', D.reshape(6 * n, n, 6), PJ).reshape(6 * n, 6 * n)
 
+    def _tip_in_kernel(self, lib: Any, state: ChainState, W: FloatArray | None, g: FloatArray,
+                       base: bool, tool: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The compiled ``tsk_chain_tip``: (W, K_tip in the base, K_tip in the tool frame);
+        ``W`` None: the implied tip wrench. Singular systems raise ``LinAlgError``."""
+        address = kernel.address
+        inputs = [np.ascontiguousarray(a, dtype=np.float64) for a in (
+            state.joint_frames, state.link_transforms, state.tip_transform, state.wrenches,
+            state.cartesian_stiffness)]
+        weights = self.link_masses[:, None] * g if self._has_weights(g) else None
+        out = np.empty(78)
+        o = address(out)
+        status = lib.chain_tip(
+            self.n_joints, *(address(a) for a in inputs),
+            None if weights is None else address(weights),
+            None if weights is None else address(self.link_coms),
+            None if W is None else address(np.ascontiguousarray(W, dtype=np.float64)), o,
+            o + 48 if base else None, o + 336 if tool else None)
+        if status != 0:
+            raise np.linalg.LinAlgError('Singular matrix')
+        return out[:6], out[6:42].reshape(6, 6), out[42:].reshape(6, 6)
+
+    def tip_outputs_from_state(self, state: ChainState, gravity: ArrayLike | None = None
+                               ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """At an evaluated ``state``: the implied tip wrench ``W`` (base) and the exact tip
+        stiffness under ``W`` and the link weights, in the base and in the tool frame (what
+        ``spine_node`` publishes per input). Singular configurations raise ``LinAlgError``."""
+        g = self._gravity(gravity)
+        lib = self._library()
+        if lib is not None:
+            return self._tip_in_kernel(lib, state, None, g, True, True)
+        W = self.implied_tip_wrench_from_state(state, g)
+        base = self.tip_stiffness_from_state(state, W, g)
+        Ad = _adjoint(state.tip_transform)
+        return W, base, Ad.T @ base @ Ad
+
     def tip_stiffness_from_state(self, state: ChainState, tip_wrench: ArrayLike | None = None,
                                  gravity: ArrayLike | None = None, frame: str = 'base'
                                  ) -> FloatArray:
@@ -495,6 +551,10 @@ class JointChain:
             raise ValueError(f"frame must be 'base' or 'tool', got {frame!r}")
         W = self._wrench(tip_wrench)
         g = self._gravity(gravity)
+        lib = self._library()
+        if lib is not None:
+            outputs = self._tip_in_kernel(lib, state, W, g, frame == 'base', frame == 'tool')
+            return outputs[1] if frame == 'base' else outputs[2]
         _, D, AdT, Ad = self._system(state, W, g)
         n = self.n_joints
         # Twist coordinates: dr = D delta + Ad^T dW = 0, tip twist = sum_j Ad_j delta_j.
@@ -550,6 +610,9 @@ class JointChain:
                                       ) -> FloatArray:
         """:meth:`implied_tip_wrench` at an evaluated ``state`` (no second evaluation)."""
         g = self._gravity(gravity)
+        lib = self._library()
+        if lib is not None:
+            return self._tip_in_kernel(lib, state, None, g, False, False)[0]
         AdT_N = _adjoint(state.joint_frames[-1]).T
         W = -np.linalg.solve(AdT_N, state.wrenches[-1])
         if self._has_weights(g):

@@ -1,10 +1,12 @@
-"""The compiled joint kernel: loader and calling convention (pure Python, ctypes only).
+"""The compiled kernel: loader and calling convention (pure Python, ctypes only).
 
 ``tensegrity_stiffness_kernel`` (a C++ package of this repository, built by colcon with the rest)
 installs ``lib/libtensegrity_stiffness_kernel.so``: the per-string loop of
 :class:`~tensegrity_stiffness.joint.JointModel` (eqs. 6-11: kinematics, string forces, wrench,
-K and K_c) in compiled code, for one screw or a batch. The model uses it when it is found and
-keeps its numpy implementation as the fallback and as the reference the tests compare it with.
+K and K_c) for one screw or a batch, and the frames, implied tip wrench and tip stiffness of a
+:class:`~tensegrity_stiffness.chain.JointChain`, in compiled code. Both use it when it is found
+and keep their numpy implementations as the fallback and as the reference the tests compare it
+with.
 
 Where the library comes from, first match wins:
 
@@ -105,6 +107,12 @@ class _Library:
         self.evaluate_packed = lib.tsk_joint_evaluate_packed
         self.evaluate_packed.restype = _I
         self.evaluate_packed.argtypes = [_P, _P, _I, _P]
+        self.chain_frames = lib.tsk_chain_frames
+        self.chain_frames.restype = None
+        self.chain_frames.argtypes = [_I] + [_P] * 6
+        self.chain_tip = lib.tsk_chain_tip
+        self.chain_tip.restype = _I
+        self.chain_tip.argtypes = [_I] + [_P] * 11
         self.path = path
         self._lib = lib
 
@@ -128,6 +136,15 @@ def status() -> str:
 def available() -> bool:
     """True when the compiled kernel is loaded."""
     return _load()[0] is not None
+
+
+def library() -> _Library | None:
+    """The loaded library, or ``None`` (numpy path)."""
+    return _load()[0]
+
+
+#: Status codes of ``tsk_chain_tip``.
+CHAIN_SINGULAR_SYSTEM, CHAIN_SINGULAR_COMPLIANCE = 1, 2
 
 
 class JointKernel:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.chain import ChainState, JointChain, adjoint
+from tensegrity_stiffness.chain import ChainState, JointChain
 from tensegrity_stiffness.equilibrium import stability_margin
 from tensegrity_stiffness.health import JointHealth
 from tensegrity_stiffness.screw import CHART_LIMIT, check_in_chart, log_se3
@@ -95,12 +95,9 @@ def spine_outputs(chain: JointChain, screws: FloatArray,
     with np.errstate(all='ignore'):
         state = chain.evaluate(screws, None if rest_lengths is None else list(rest_lengths))
         try:
-            W = chain.implied_tip_wrench_from_state(state)
-            base = chain.tip_stiffness_from_state(state, W)
+            W, base, tool = chain.tip_outputs_from_state(state)
         except np.linalg.LinAlgError:
             raise ValueError('the tip stiffness is singular at this configuration') from None
-        Ad = adjoint(state.tip_transform)
-        tool = Ad.T @ base @ Ad  # as tip_stiffness_from_state(frame='tool')
     return SpineOutputs(screws, state, W, tool, base)
 
 
