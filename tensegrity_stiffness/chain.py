@@ -236,7 +236,8 @@ class JointChain:
             if coms.shape != (n, 3):
                 raise ValueError(f'link_coms must have shape ({n}, 3), got {coms.shape}')
         self.link_coms = coms.copy()
-        self.gravity = self._gravity(np.zeros(3) if gravity is None else gravity)
+        self._massive = bool(np.any(self.link_masses > 0.0))
+        self.gravity = np.zeros(3) if gravity is None else gravity
         self.base_frame = str(base_frame)
         self.tool_frame = str(tool_frame)
         # Joints grouped by model (one batched evaluation per distinct model).
@@ -366,8 +367,23 @@ class JointChain:
         return [None if r is None else model.validate_rest_lengths(r, batched=False)
                 for model, r in zip(self.joints, rest_lengths, strict=True)]
 
+    @property
+    def gravity(self) -> FloatArray:
+        """(3,) m/s^2 in the base frame: the default of every ``gravity=None`` (read-only array;
+        assign a new value to change it)."""
+        return self._default_gravity
+
+    @gravity.setter
+    def gravity(self, value: ArrayLike) -> None:
+        g = self._gravity(value).copy()
+        g.flags.writeable = False
+        self._default_gravity = g
+        self._weighted = self._massive and bool(np.any(g != 0.0))
+
     def _has_weights(self, g: FloatArray) -> bool:
-        return bool(np.any(self.link_masses > 0.0) and np.any(g != 0.0))
+        if g is self._default_gravity:
+            return self._weighted
+        return self._massive and bool(np.any(g != 0.0))
 
     # ------------------------------------------------------------------ kinematics
     def _library(self) -> Any:

@@ -51,6 +51,12 @@ def check_in_chart(xi: ArrayLike, name: str = 'screw') -> None:
         if theta < CHART_LIMIT:
             return
         worst = theta if not math.isnan(theta) else math.inf
+    elif arr.ndim == 2 and arr.shape[0] <= SCALAR_KINEMATICS_ROWS:  # a spine's joints
+        thetas = [math.sqrt(wx * wx + wy * wy + wz * wz)
+                  for wx, wy, wz in arr[:, :3].tolist()]
+        if all(theta < CHART_LIMIT for theta in thetas):
+            return
+        worst = max(math.inf if math.isnan(theta) else theta for theta in thetas)
     else:
         omega = arr[..., :3]
         thetas = np.sqrt(np.sum(omega * omega, axis=-1))

@@ -4,7 +4,9 @@
 //   residuals r_i = F_i + Ad_{P_i}^T B_i, B_i = W + sum_{k >= i} w_k (w_k the link weights);
 //   D_ij = -[i = j] K_c,i + Ad_{P_i}^T E_ij Ad_{P_j},
 //   E_ij = [j < i] M(B_i) + sum_{k >= max(i, j)} N_k,
-//   C = -[Ad_{P_1} ... Ad_{P_N}] D^-1 [Ad_{P_1}^T; ...; Ad_{P_N}^T],  K_tip = C^-1 (base frame),
+//   C = -[Ad_{P_1} ... Ad_{P_N}] D^-1 [Ad_{P_1}^T; ...; Ad_{P_N}^T],  K_tip = C^-1 (base frame)
+//   (without weights D is block lower triangular: block forward substitution, O(N); with them
+//   an LU of D with partial pivoting),
 //   K_tool = Ad_{T_tip}^T K_tip Ad_{T_tip}.
 // Twists [dv; dw], wrenches [f; m]; Ad_P = [[R, hat(p) R], [0, R]]. The numpy implementation in
 // chain.py stays the reference and the fallback (test/test_chain_kernel.py).
@@ -155,6 +157,29 @@ bool solve_in_place(double* A, double* B, int64_t m, int64_t r) {
   return true;
 }
 
+// K = C^-1 into K_base and Ad_tip^T K Ad_tip into K_tool (either may be null): 0, or 2 when the
+// compliance C (overwritten) is singular.
+int64_t invert_and_store(double* C, const double* tip, double* K_base, double* K_tool) {
+  double K[36];
+  for (int i = 0; i < 36; ++i) {
+    K[i] = (i % 7 == 0) ? 1.0 : 0.0;
+  }
+  if (!solve_in_place(C, K, 6, 6)) {
+    return 2;
+  }
+  if (K_base) {
+    std::memcpy(K_base, K, sizeof(K));
+  }
+  if (K_tool) {
+    Mat6 At, Kt, out;
+    adjoint(tip, At);
+    std::memcpy(Kt, K, sizeof(K));
+    at_b_c(At, Kt, At, out);
+    std::memcpy(K_tool, out, sizeof(out));
+  }
+  return 0;
+}
+
 }  // namespace
 
 extern "C" {
@@ -275,6 +300,58 @@ int64_t tsk_chain_tip(int64_t n, const double* P, const double* L, const double*
   for (int c = 0; c < 6; ++c) {
     loaded = loaded || W[c] != 0.0;
   }
+  double C[36] = {0.0};
+  if (!weights) {
+    // Without weights D is block lower triangular, D_ij = Ad_i^T M(W) Ad_j (j < i) and
+    // D_ii = -K_c,i: block forward substitution, X_i = -K_c,i^-1 Ad_i^T (I - M(W) S_i) with
+    // S_i = sum_{j < i} Ad_j X_j, and C = -S_N.
+    Mat6 Mw, S = {{0.0}};
+    load_transport(W, Mw);
+    for (int64_t i = 0; i < n; ++i) {
+      const auto A = ad(i);
+      double IMS[6][6];
+      for (int a = 0; a < 6; ++a) {
+        for (int b = 0; b < 6; ++b) {
+          double acc = a == b ? 1.0 : 0.0;
+          if (loaded) {
+            for (int e = 0; e < 6; ++e) {
+              acc -= Mw[a][e] * S[e][b];
+            }
+          }
+          IMS[a][b] = acc;
+        }
+      }
+      double rhs[36], negKc[36];
+      for (int a = 0; a < 6; ++a) {
+        for (int b = 0; b < 6; ++b) {
+          double acc = 0.0;
+          for (int e = 0; e < 6; ++e) {
+            acc += A[e][a] * IMS[e][b];
+          }
+          rhs[6 * a + b] = acc;
+          negKc[6 * a + b] = -Kc[36 * i + 6 * a + b];
+        }
+      }
+      if (!solve_in_place(negKc, rhs, 6, 6)) {
+        return 1;
+      }
+      for (int a = 0; a < 6; ++a) {
+        for (int b = 0; b < 6; ++b) {
+          double acc = 0.0;
+          for (int e = 0; e < 6; ++e) {
+            acc += A[a][e] * rhs[6 * e + b];
+          }
+          S[a][b] += acc;
+        }
+      }
+    }
+    for (int a = 0; a < 6; ++a) {
+      for (int b = 0; b < 6; ++b) {
+        C[6 * a + b] = -S[a][b];
+      }
+    }
+    return invert_and_store(C, tip, K_base, K_tool);
+  }
   std::vector<double> D(m6 * m6, 0.0);
   Mat6 E, block, M;
   for (int64_t i = 0; i < n; ++i) {
@@ -328,7 +405,6 @@ int64_t tsk_chain_tip(int64_t n, const double* P, const double* L, const double*
   if (!solve_in_place(D.data(), X.data(), m6, 6)) {
     return 1;
   }
-  double C[36] = {0.0};
   for (int64_t j = 0; j < n; ++j) {
     const auto A = ad(j);
     for (int a = 0; a < 6; ++a) {
@@ -341,24 +417,7 @@ int64_t tsk_chain_tip(int64_t n, const double* P, const double* L, const double*
       }
     }
   }
-  double K[36];
-  for (int i = 0; i < 36; ++i) {
-    K[i] = (i % 7 == 0) ? 1.0 : 0.0;
-  }
-  if (!solve_in_place(C, K, 6, 6)) {
-    return 2;
-  }
-  if (K_base) {
-    std::memcpy(K_base, K, sizeof(K));
-  }
-  if (K_tool) {
-    Mat6 At, Kt, out;
-    adjoint(tip, At);
-    std::memcpy(Kt, K, sizeof(K));
-    at_b_c(At, Kt, At, out);
-    std::memcpy(K_tool, out, sizeof(out));
-  }
-  return 0;
+  return invert_and_store(C, tip, K_base, K_tool);
 }
 
 }  // extern "C"
