@@ -2,6 +2,7 @@
 """Node latency benchmark (two processes), run by hand after ``source scripts/env.sh``:
 
     python bench/bench_latency.py [--rates 1000 2000] [--seconds 10] [--paths fast executor]
+                                  [--client-loops lane executor]
                                   [--clients stiffness all] [--calls 300]
 
 For each input path (``fast``: ``realtime.fast_lane: true``, the screws on the node's fast lane;
@@ -11,7 +12,10 @@ at 30 Hz and diagnostics at 1 Hz, the defaults). This process publishes screws o
 ``--seconds`` and measures, per screw, the time until its ``~/stiffness`` message arrives (outputs
 come in input order over reliable QoS, so each is matched to its screw by value against the
 library). Client ``stiffness`` subscribes to ``~/stiffness`` alone (a controller); ``all`` also to
-the other four outputs. Then the round trip of each service on the first path. Prints median /
+the other four outputs. The client receives on a lean wait-set loop (``lane``, the node's own
+:class:`FastLane`, as a compiled controller's loop would) or on its rclpy executor
+(``executor``, whose per-message cost then shares the 2 cores with the node). Then the round
+trip of each service on the first path. Prints median /
 p99 / max latency and drops, side by side.
 Targets (issue 12): at 1 kHz median <= 0.8 ms, p99 <= 3 ms, 0 drops; at 2 kHz 0 drops, median
 <= 1.5 ms.
@@ -36,9 +40,12 @@ os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this 
 import numpy as np  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from ros_harness import (  # noqa: E402
+    CLIENT_LOOPS,
+    Inbox,
     NodeProcess,
     RosClient,
     latency_summary,
+    receiving,
     sleep_until,
     unique_namespace,
 )
@@ -52,6 +59,8 @@ from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
     SolveEquilibrium,
 )
 
+#: Seconds the client spins before each send with ``--pacing spin`` (the rest is slept).
+SPIN_S = 2e-4
 #: Seconds between the node being reachable and the start of the stream.
 STARTUP_SETTLE_S = 3.0
 
@@ -67,13 +76,22 @@ OTHER_OUTPUTS = {'wrench': WrenchStamped, 'cartesian_stiffness': Float64MultiArr
 
 
 def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: float,
-           rng: np.random.Generator, all_outputs: bool = False
-           ) -> tuple[list[float], int, int]:
-    """Publish screws at ``rate`` for ``seconds``; returns (latencies, sent, drops)."""
-    inbox = ros.subscribe(Float64MultiArray, f'{base}/stiffness')
-    if all_outputs:
-        for topic, msg_type in OTHER_OUTPUTS.items():
-            ros.subscribe_callback(msg_type, f'{base}/{topic}', lambda _msg: None)
+           rng: np.random.Generator, all_outputs: bool = False, loop: str = 'executor',
+           spin_s: float = 0.0) -> tuple[list[float], int, int]:
+    """Publish screws at ``rate`` for ``seconds``; returns (latencies, sent, drops). The client
+    receives on its rclpy executor (``loop='executor'``) or on a lean wait-set loop of its own
+    (``'lane'``: the node's :class:`FastLane`, as a compiled controller's loop would)."""
+    outputs = {'stiffness': Float64MultiArray, **(OTHER_OUTPUTS if all_outputs else {})}
+    inbox = Inbox()
+    with receiving(ros, [(msg_type, f'{base}/{topic}',
+                          inbox if topic == 'stiffness' else (lambda _msg: None))
+                         for topic, msg_type in outputs.items()], loop):
+        return _stream(ros, base, model, rate, seconds, rng, inbox, spin_s)
+
+
+def _stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: float,
+            rng: np.random.Generator, inbox: Inbox, spin_s: float
+            ) -> tuple[list[float], int, int]:
     pub = ros.publisher(Float64MultiArray, f'{base}/screw')
     ros.wait_for_subscribers(pub)
     ros.wait_for_publishers(f'{base}/stiffness')
@@ -86,7 +104,7 @@ def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: f
     period = 1.0 / rate
     start = time.perf_counter()
     for k in range(n):
-        sleep_until(start + k * period)
+        sleep_until(start + k * period, spin_s)
         sent_at[k] = time.perf_counter()
         pub.publish(Float64MultiArray(data=screws[k].tolist()))
     deadline = time.monotonic() + 5.0
@@ -142,8 +160,8 @@ def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Ge
 PATHS = {'fast': 'true', 'executor': 'false'}
 
 
-def run(path: str, rate: float, client: str, args: argparse.Namespace, model: JointModel,
-        services: bool) -> None:
+def run(path: str, rate: float, client: str, loop: str, args: argparse.Namespace,
+        model: JointModel, services: bool) -> None:
     rng = np.random.default_rng(0)
     ns = unique_namespace('bench')
     extra = ['-p', f'realtime.fast_lane:={PATHS[path]}']
@@ -152,8 +170,10 @@ def run(path: str, rate: float, client: str, args: argparse.Namespace, model: Jo
     base = f'{ns}/stiffness_node'
     try:
         latencies, sent, drops = stream(ros, base, model, rate, args.seconds, rng,
-                                        all_outputs=client == 'all')
-        print(latency_summary(f'{path:<8} {rate:5.0f} Hz  client {client:<9}', latencies)
+                                        all_outputs=client == 'all', loop=loop,
+                                        spin_s=SPIN_S if args.pacing == 'spin' else 0.0)
+        print(latency_summary(f'{path:<8} {rate:5.0f} Hz  client {client:<9} {loop:<8}',
+                              latencies)
               + f'  drops {drops} of {sent}', flush=True)
         if services:
             for name, times in service_round_trips(ros, base, args.calls, rng).items():
@@ -176,6 +196,12 @@ def main() -> None:
     parser.add_argument('--paths', nargs='+', choices=sorted(PATHS), default=['fast', 'executor'])
     parser.add_argument('--clients', nargs='+', choices=['stiffness', 'all'],
                         default=['stiffness'])
+    parser.add_argument('--client-loops', nargs='+', choices=CLIENT_LOOPS,
+                        default=list(CLIENT_LOOPS),
+                        help="the client's receiving loop: a lean wait-set loop, or its executor")
+    parser.add_argument('--pacing', choices=['sleep', 'spin'], default='sleep',
+                        help="the client's send timing: sleep (a timer's, some 60 us late, no "
+                             'core taken) or spin the last 0.2 ms (exact rate, takes a core)')
     parser.add_argument('--calls', type=int, default=300, help='calls per service (0: none)')
     parser.add_argument('--param', action='append', default=[],
                         help='node parameter override NAME:=VALUE (repeatable)')
@@ -187,9 +213,11 @@ def main() -> None:
     first = True
     for client in args.clients:
         for rate in args.rates:
-            for path in args.paths:
-                run(path, rate, client, args, model, services=first and args.calls > 0)
-                first = False
+            for loop in args.client_loops:
+                for path in args.paths:
+                    run(path, rate, client, loop, args, model,
+                        services=first and args.calls > 0)
+                    first = False
 
 
 if __name__ == '__main__':

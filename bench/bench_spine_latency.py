@@ -2,15 +2,18 @@
 """spine_node latency benchmark (two processes), run by hand after ``source scripts/env.sh``:
 
     python bench/bench_spine_latency.py [--rate 1000] [--seconds 10] [--joints 5 10] [--calls 50]
+                                        [--client-loops lane executor] [--pacing sleep|spin]
 
 For each joint count the installed ``spine_node`` runs as its own process on the default spine
 (``config/default_spine.yaml``, ``chain.n_joints`` overridden). This process publishes screws on
 ``~/screws`` at ``--rate`` Hz for ``--seconds``; a controller-like client subscribes to
 ``~/tip_stiffness`` and, per message, forms the tip's restoring wrench ``-K e`` for a small
-error ``e`` (as an impedance controller would). The latency of a screw is the time until its
-``~/tip_stiffness`` arrives (outputs come in input order over reliable QoS; each is matched to
-its input by value against the library, so a drop cannot shift the pairing). Then the round trip
-of ``~/solve_equilibrium`` for the first joint count (random moderate tip wrenches).
+error ``e`` (as an impedance controller would), receiving on a lean wait-set loop (``lane``)
+or on its rclpy executor (``executor``; ``ros_harness.receiving``). The latency of a screw is
+the time until its ``~/tip_stiffness`` arrives (outputs come in input order over reliable QoS;
+each is matched to its input by value against the library, so a drop cannot shift the pairing).
+Then the round trip of ``~/solve_equilibrium`` for the first joint count (random moderate tip
+wrenches).
 Targets (issue 14, 5 joints): median <= 1.5 ms, p99 <= 5 ms, 0 drops; service median <= 30 ms.
 """
 
@@ -32,9 +35,11 @@ os.environ.setdefault('ROS_DOMAIN_ID', '231')  # Fast DDS takes domain ids up to
 
 import numpy as np  # noqa: E402
 from ros_harness import (  # noqa: E402
+    CLIENT_LOOPS,
     NodeProcess,
     RosClient,
     latency_summary,
+    receiving,
     sleep_until,
     unique_namespace,
 )
@@ -86,11 +91,18 @@ def settings_for(n_joints: int) -> parameters.SpineNodeSettings:
 
 
 def stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float,
-           rng: np.random.Generator) -> tuple[list[float], int, int]:
-    """Publish screws at ``rate`` for ``seconds``; returns (latencies, sent, drops)."""
-    chain = settings_for(n_joints).chain
+           rng: np.random.Generator, loop: str, spin_s: float) -> tuple[list[float], int, int]:
+    """Publish screws at ``rate`` for ``seconds`` (``spin_s``: see :func:`sleep_until`), the
+    client receiving on ``loop`` (:func:`receiving`); returns (latencies, sent, drops)."""
     controller = Controller()
-    ros.subscribe_callback(Float64MultiArray, f'{base}/tip_stiffness', controller)
+    with receiving(ros, [(Float64MultiArray, f'{base}/tip_stiffness', controller)], loop):
+        return _stream(ros, base, n_joints, rate, seconds, rng, controller, spin_s)
+
+
+def _stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float,
+            rng: np.random.Generator, controller: Controller, spin_s: float
+            ) -> tuple[list[float], int, int]:
+    chain = settings_for(n_joints).chain
     pub = ros.publisher(Float64MultiArray, f'{base}/screws')
     ros.wait_for_subscribers(pub)
     ros.wait_for_publishers(f'{base}/tip_stiffness')
@@ -103,7 +115,7 @@ def stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float
     period = 1.0 / rate
     start = time.perf_counter()
     for k in range(n):
-        sleep_until(start + k * period)
+        sleep_until(start + k * period, spin_s)
         sent_at[k] = time.perf_counter()
         pub.publish(messages[k])
     deadline = time.monotonic() + 5.0
@@ -143,35 +155,50 @@ def main() -> None:
     parser.add_argument('--rate', type=float, default=1000.0, help='screw rate, Hz')
     parser.add_argument('--seconds', type=float, default=10.0, help='stream duration, s')
     parser.add_argument('--joints', type=int, nargs='+', default=[5, 10], help='joint counts')
+    parser.add_argument('--client-loops', nargs='+', choices=CLIENT_LOOPS,
+                        default=list(CLIENT_LOOPS),
+                        help="the client's receiving loop: a lean wait-set loop, or its executor")
+    parser.add_argument('--pacing', choices=['sleep', 'spin'], default='sleep',
+                        help="the client's send timing: sleep (a timer's, some 60 us late, no "
+                             'core taken) or spin the last 0.2 ms (exact rate, takes a core)')
     parser.add_argument('--calls', type=int, default=50,
                         help='service calls (first joint count; 0: none)')
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}, load average '
           f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')
-    for index, n_joints in enumerate(args.joints):
-        ns = unique_namespace('bench_spine')
-        proc = NodeProcess(ns, CONFIG, extra_args=['-p', f'chain.n_joints:={n_joints}'],
-                           executable='spine_node')
-        ros = RosClient('bench_spine')
-        gc.collect()
-        gc.freeze()
-        base = f'{ns}/spine_node'
-        try:
-            latencies, sent, drops = stream(ros, base, n_joints, args.rate, args.seconds, rng)
-            print(f'{n_joints} joints: screws -> tip_stiffness at {args.rate:.0f} Hz for '
-                  f'{args.seconds:.0f} s: sent {sent}, drops {drops}')
-            print(latency_summary('  latency', latencies))
-            if index == 0 and args.calls:
-                times, failures = service_round_trips(ros, base, args.calls, rng)
-                print(latency_summary(f'  solve_equilibrium (N = {n_joints})', times)
-                      + f'  failed {failures}')
-        finally:
-            ros.close()
-            code = proc.stop()
-            if code != 0:
-                print(f'node exited with {code}:\n{proc.log()}')
+    spin_s = 2e-4 if args.pacing == 'spin' else 0.0
+    first = True
+    for n_joints in args.joints:
+        for loop in args.client_loops:
+            run(n_joints, loop, spin_s, args, rng, services=first and args.calls > 0)
+            first = False
 
+
+def run(n_joints: int, loop: str, spin_s: float, args: argparse.Namespace,
+        rng: np.random.Generator, services: bool) -> None:
+    ns = unique_namespace('bench_spine')
+    proc = NodeProcess(ns, CONFIG, extra_args=['-p', f'chain.n_joints:={n_joints}'],
+                       executable='spine_node')
+    ros = RosClient('bench_spine')
+    gc.collect()
+    gc.freeze()
+    base = f'{ns}/spine_node'
+    try:
+        latencies, sent, drops = stream(ros, base, n_joints, args.rate, args.seconds, rng, loop,
+                                        spin_s)
+        print(f'{n_joints} joints, client {loop:<8}: screws -> tip_stiffness at '
+              f'{args.rate:.0f} Hz for {args.seconds:.0f} s: sent {sent}, drops {drops}')
+        print(latency_summary('  latency', latencies))
+        if services:
+            times, failures = service_round_trips(ros, base, args.calls, rng)
+            print(latency_summary(f'  solve_equilibrium (N = {n_joints})', times)
+                  + f'  failed {failures}')
+    finally:
+        ros.close()
+        code = proc.stop()
+        if code != 0:
+            print(f'node exited with {code}:\n{proc.log()}')
 
 if __name__ == '__main__':
     main()

@@ -20,6 +20,7 @@ import time
 import uuid
 from collections import Counter, deque
 from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +30,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.fast_lane import FastLane
 
 REPO = Path(__file__).resolve().parents[1]
 PACKAGE = 'tensegrity_stiffness'
@@ -60,13 +62,14 @@ def node_executable(executable: str = EXECUTABLE) -> Path:
     return path
 
 
-def sleep_until(target: float) -> float:
-    """Wait until ``time.perf_counter() >= target`` (sleeping while more than 0.2 ms remain,
-    spinning for the rest, so that a paced stream keeps its rate to a few microseconds);
-    returns the time at which it stopped."""
+def sleep_until(target: float, spin_s: float = 2e-4) -> float:
+    """Wait until ``time.perf_counter() >= target`` (sleeping while more than ``spin_s``
+    remain, spinning for the rest, so that a paced stream keeps its rate to a few microseconds;
+    ``spin_s=0``: sleep only, as a controller's timer would, some 60 us late but without taking
+    a core); returns the time at which it stopped."""
     while (now := time.perf_counter()) < target:
-        if target - now > 2e-4:
-            time.sleep(target - now - 1.5e-4)
+        if target - now > spin_s:
+            time.sleep(max(target - now - 0.75 * spin_s, 0.0))
     return now
 
 
@@ -611,3 +614,32 @@ class NodeFuzzer:
             'sync timeouts': self.sync_timeouts,
             'node alive': self.proc.alive(),
         }
+
+
+#: The benches' client receive loops (see :func:`receiving`).
+CLIENT_LOOPS = ('lane', 'executor')
+
+
+@contextmanager
+def receiving(ros: RosClient, subscriptions: Iterable[tuple[Any, str, Callable[[Any], None]]],
+              loop: str) -> Iterator[None]:
+    """The client's subscriptions ``(msg_type, topic, handler)`` for the duration of the block:
+    on its rclpy executor (``loop='executor'``, draining callbacks), or on a lean wait-set loop
+    of their own (``'lane'``: the node's :class:`FastLane`, as a compiled controller's loop
+    would receive, so that the client's executor does not share the 2 cores with the node)."""
+    if loop not in CLIENT_LOOPS:
+        raise ValueError(f'loop must be one of {CLIENT_LOOPS}, got {loop!r}')
+    lane = FastLane(ros.node, lambda topic, exc: print(f'client lane {topic}: {exc!r}')) \
+        if loop == 'lane' else None
+    for msg_type, topic, handler in subscriptions:
+        if lane is not None:
+            lane.create_subscription(msg_type, topic, handler, RELIABLE)
+        else:
+            ros.subscribe_callback(msg_type, topic, handler)
+    if lane is not None:
+        lane.start()
+    try:
+        yield
+    finally:
+        if lane is not None:
+            lane.stop()

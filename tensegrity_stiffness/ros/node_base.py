@@ -28,6 +28,7 @@ from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 import msg_tools
+from tensegrity_stiffness import kernel
 from tensegrity_stiffness.parameters import ParameterSpec
 from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
 from tensegrity_stiffness.ros.fast_lane import FastLane
@@ -112,7 +113,8 @@ class StreamingNode(Node):
     def _start(self, warm_up: Callable[..., Any], warm_up_args: tuple, summary: str) -> None:
         """After the node's services: the timers, a first job for the worker (``warm_up(
         *warm_up_args, time_budget=1.0)``: imports and a first solve before the first request
-        needs them), the fast lane, and the ``ready: <summary>, inputs ...`` log line."""
+        needs them), the fast lane, and the ``ready: <summary>, inputs ...; <kernel>`` log line
+        (which implementation of the library evaluates, :func:`kernel.status`)."""
         values = self._settings.values
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
         self._marker_timer = self.create_timer(
@@ -123,7 +125,7 @@ class StreamingNode(Node):
             self._lane.start()
         self.get_logger().info(
             f'ready: {summary}, inputs {values["qos.input_reliability"]} depth '
-            f'{values["qos.depth"]}')
+            f'{values["qos.depth"]}; {kernel.status()}')
 
     def close(self) -> None:
         """End the fast lane and the worker process (called by the runner before the node is
@@ -286,6 +288,7 @@ class StreamingNode(Node):
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
             ('parameter generation', settings.generation),
             ('equilibrium worker restarts', self._solver.restarts),
+            ('library', 'compiled kernel' if kernel.available() else 'numpy'),
         ]
         statuses = self._diagnostic_statuses(settings, self._last.outputs, values)
         self._pub_diagnostics.publish(msg_tools.diagnostic_array(
