@@ -40,11 +40,12 @@ os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this 
 import numpy as np  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from ros_harness import (  # noqa: E402
-    CLIENT_LOOPS,
     Inbox,
     NodeProcess,
     RosClient,
+    add_client_arguments,
     latency_summary,
+    pacing_spin_s,
     receiving,
     sleep_until,
     unique_namespace,
@@ -59,8 +60,6 @@ from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
     SolveEquilibrium,
 )
 
-#: Seconds the client spins before each send with ``--pacing spin`` (the rest is slept).
-SPIN_S = 2e-4
 #: Seconds between the node being reachable and the start of the stream.
 STARTUP_SETTLE_S = 3.0
 
@@ -171,7 +170,7 @@ def run(path: str, rate: float, client: str, loop: str, args: argparse.Namespace
     try:
         latencies, sent, drops = stream(ros, base, model, rate, args.seconds, rng,
                                         all_outputs=client == 'all', loop=loop,
-                                        spin_s=SPIN_S if args.pacing == 'spin' else 0.0)
+                                        spin_s=pacing_spin_s(args))
         print(latency_summary(f'{path:<8} {rate:5.0f} Hz  client {client:<9} {loop:<8}',
                               latencies)
               + f'  drops {drops} of {sent}', flush=True)
@@ -196,12 +195,7 @@ def main() -> None:
     parser.add_argument('--paths', nargs='+', choices=sorted(PATHS), default=['fast', 'executor'])
     parser.add_argument('--clients', nargs='+', choices=['stiffness', 'all'],
                         default=['stiffness'])
-    parser.add_argument('--client-loops', nargs='+', choices=CLIENT_LOOPS,
-                        default=list(CLIENT_LOOPS),
-                        help="the client's receiving loop: a lean wait-set loop, or its executor")
-    parser.add_argument('--pacing', choices=['sleep', 'spin'], default='sleep',
-                        help="the client's send timing: sleep (a timer's, some 60 us late, no "
-                             'core taken) or spin the last 0.2 ms (exact rate, takes a core)')
+    add_client_arguments(parser)
     parser.add_argument('--calls', type=int, default=300, help='calls per service (0: none)')
     parser.add_argument('--param', action='append', default=[],
                         help='node parameter override NAME:=VALUE (repeatable)')

@@ -35,10 +35,11 @@ os.environ.setdefault('ROS_DOMAIN_ID', '231')  # Fast DDS takes domain ids up to
 
 import numpy as np  # noqa: E402
 from ros_harness import (  # noqa: E402
-    CLIENT_LOOPS,
     NodeProcess,
     RosClient,
+    add_client_arguments,
     latency_summary,
+    pacing_spin_s,
     receiving,
     sleep_until,
     unique_namespace,
@@ -155,19 +156,14 @@ def main() -> None:
     parser.add_argument('--rate', type=float, default=1000.0, help='screw rate, Hz')
     parser.add_argument('--seconds', type=float, default=10.0, help='stream duration, s')
     parser.add_argument('--joints', type=int, nargs='+', default=[5, 10], help='joint counts')
-    parser.add_argument('--client-loops', nargs='+', choices=CLIENT_LOOPS,
-                        default=list(CLIENT_LOOPS),
-                        help="the client's receiving loop: a lean wait-set loop, or its executor")
-    parser.add_argument('--pacing', choices=['sleep', 'spin'], default='sleep',
-                        help="the client's send timing: sleep (a timer's, some 60 us late, no "
-                             'core taken) or spin the last 0.2 ms (exact rate, takes a core)')
+    add_client_arguments(parser)
     parser.add_argument('--calls', type=int, default=50,
                         help='service calls (first joint count; 0: none)')
     args = parser.parse_args()
     rng = np.random.default_rng(0)
     print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}, load average '
           f'{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores')
-    spin_s = 2e-4 if args.pacing == 'spin' else 0.0
+    spin_s = pacing_spin_s(args)
     first = True
     for n_joints in args.joints:
         for loop in args.client_loops:

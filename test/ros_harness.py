@@ -618,6 +618,25 @@ class NodeFuzzer:
 
 #: The benches' client receive loops (see :func:`receiving`).
 CLIENT_LOOPS = ('lane', 'executor')
+#: Seconds a bench client spins before each send with ``--pacing spin`` (the rest is slept).
+PACING_SPIN_S = 2e-4
+
+
+def add_client_arguments(parser: Any) -> None:
+    """The benches' client options: ``--client-loops`` (:func:`receiving`) and ``--pacing``
+    (``sleep``: a timer's way, some 60 us late, no core taken; ``spin``: the last
+    :data:`PACING_SPIN_S` spun for an exact rate, which takes most of a core)."""
+    parser.add_argument('--client-loops', nargs='+', choices=CLIENT_LOOPS,
+                        default=list(CLIENT_LOOPS),
+                        help="the client's receiving loop: a lean wait-set loop, or its executor")
+    parser.add_argument('--pacing', choices=['sleep', 'spin'], default='sleep',
+                        help="the client's send timing: sleep (a timer's, some 60 us late, no "
+                             'core taken) or spin the last 0.2 ms (exact rate, takes a core)')
+
+
+def pacing_spin_s(args: Any) -> float:
+    """The ``spin_s`` of :func:`sleep_until` that ``args.pacing`` selects."""
+    return PACING_SPIN_S if args.pacing == 'spin' else 0.0
 
 
 @contextmanager
