@@ -515,3 +515,26 @@ def test_markers_mark_slack_strings(harness, model):
     harness.rest_pub.publish(Float64MultiArray(data=model.rest_lengths.tolist()))
     out = harness.next_outputs(before)
     assert len({m.ns: m for m in out['markers'].markers}['slack_strings'].points) == 0
+
+
+def test_rate_limited_markers_follow_the_last_input_once(harness, model):
+    """With ``markers.max_rate`` > 0 the markers come from a timer that runs while ~/markers
+    has a subscriber (this harness): one MarkerArray for the last configuration, not repeated
+    while no new input arrives."""
+    assert harness.set_parameter('markers.max_rate', 20.0).successful
+    try:
+        time.sleep(1.0)  # the watch (every 0.5 s) starts the marker timer
+        xi = model.initial_screw + np.array([0.03, 0.0, 0.0, 0.0, 0.001, 0.0])
+        before = harness.counts()
+        harness.send_screw(xi)
+        markers = harness.inbox['markers'].wait_for(before['markers'] + 1, 5.0)
+        out = markers[before['markers']]
+        state = model.evaluate(xi)
+        points = np.array([[p.x, p.y, p.z] for m in out.markers if m.ns == 'link2_nodes'
+                           for p in m.points])
+        np.testing.assert_allclose(points, model.link2_nodes_in_link1(state.transform),
+                                   atol=1e-12)
+        time.sleep(0.5)  # ten timer periods: no second MarkerArray for the same input
+        assert len(harness.inbox['markers']) == before['markers'] + 1
+    finally:
+        assert harness.set_parameter('markers.max_rate', 0.0).successful

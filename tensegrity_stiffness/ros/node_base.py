@@ -54,6 +54,11 @@ from tensegrity_stiffness.ros.worker_calls import (
 Stream = tuple[Any, str, Callable[[Any], None]]
 
 
+#: Seconds between checks whether ``~/markers`` has a subscriber (the marker timer runs only
+#: then; a new subscriber gets its first markers at most this much later).
+MARKER_WATCH_PERIOD_S = 0.5
+
+
 class StreamingNode(Node):
     """Publishes all outputs of every streamed input, under one lock, from one settings object.
 
@@ -117,8 +122,12 @@ class StreamingNode(Node):
         (which implementation of the library evaluates, :func:`kernel.status`)."""
         values = self._settings.values
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
+        # The marker timer runs only while ~/markers has a subscriber (_watch_markers): each of
+        # its ticks costs the executor a wait-set rebuild that competes with the fast lane.
         self._marker_timer = self.create_timer(
             self._settings.marker_period or 1.0, self._publish_markers)
+        self._marker_timer.cancel()
+        self.create_timer(MARKER_WATCH_PERIOD_S, self._watch_markers)
         self._solver.submit(warm_up, warm_up_args, {'time_budget': 1.0},
                             lambda _: None, lambda _: None, deadline_s=1.0 + SOLVER_GRACE_S)
         if self._lane is not None:
@@ -186,7 +195,8 @@ class StreamingNode(Node):
                 if 'markers.max_rate' in names:
                     self._marker_timer.timer_period_ns = int(
                         1e9 * (settings.marker_period or 1.0))
-                    self._marker_timer.reset()
+                    if not self._marker_timer.is_canceled():
+                        self._marker_timer.reset()
             except Exception as exc:  # validated before: only a bug gets here; the old set stays
                 self.reporter.internal_error('parameters', exc)
                 return
@@ -241,6 +251,18 @@ class StreamingNode(Node):
             if markers is not None:
                 self._pub_markers.publish(markers)
             self._last.record(xi, stamp, outputs, start)
+
+    @guarded('~/markers')
+    def _watch_markers(self) -> None:
+        """Every :data:`MARKER_WATCH_PERIOD_S`: run the marker timer while ``~/markers`` has a
+        subscriber and the markers are rate-limited (``markers.max_rate`` > 0), else stop it."""
+        wanted = (self._settings.marker_period != 0.0
+                  and self._pub_markers.get_subscription_count() > 0)
+        if wanted == self._marker_timer.is_canceled():
+            if wanted:
+                self._marker_timer.reset()
+            else:
+                self._marker_timer.cancel()
 
     @guarded('~/markers')
     def _publish_markers(self) -> None:
