@@ -44,6 +44,7 @@ from ros_harness import (  # noqa: E402
     NodeProcess,
     RosClient,
     add_client_arguments,
+    collector_paused,
     latency_summary,
     pacing_spin_s,
     receiving,
@@ -85,7 +86,8 @@ def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: f
     with receiving(ros, [(msg_type, f'{base}/{topic}',
                           inbox if topic == 'stiffness' else (lambda _msg: None))
                          for topic, msg_type in outputs.items()], loop):
-        return _stream(ros, base, model, rate, seconds, rng, inbox, spin_s)
+        with collector_paused():
+            return _stream(ros, base, model, rate, seconds, rng, inbox, spin_s)
 
 
 def _stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: float,

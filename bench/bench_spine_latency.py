@@ -38,6 +38,7 @@ from ros_harness import (  # noqa: E402
     NodeProcess,
     RosClient,
     add_client_arguments,
+    collector_paused,
     latency_summary,
     pacing_spin_s,
     receiving,
@@ -97,7 +98,8 @@ def stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float
     client receiving on ``loop`` (:func:`receiving`); returns (latencies, sent, drops)."""
     controller = Controller()
     with receiving(ros, [(Float64MultiArray, f'{base}/tip_stiffness', controller)], loop):
-        return _stream(ros, base, n_joints, rate, seconds, rng, controller, spin_s)
+        with collector_paused():
+            return _stream(ros, base, n_joints, rate, seconds, rng, controller, spin_s)
 
 
 def _stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float,

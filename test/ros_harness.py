@@ -11,6 +11,7 @@ comes back (shared by ``test/test_robustness.py`` and ``bench/fuzz_node.py``).
 
 from __future__ import annotations
 
+import gc
 import itertools
 import os
 import signal
@@ -632,6 +633,21 @@ def add_client_arguments(parser: Any) -> None:
     parser.add_argument('--pacing', choices=['sleep', 'spin'], default='sleep',
                         help="the client's send timing: sleep (a timer's, some 60 us late, no "
                              'core taken) or spin the last 0.2 ms (exact rate, takes a core)')
+
+
+@contextmanager
+def collector_paused() -> Iterator[None]:
+    """A bench client's measurement window without Python's cyclic garbage collector: what
+    earlier runs left is collected and frozen first, and no collection runs inside the window
+    (a client in a compiled language has none; a collection of the earlier runs' leftovers
+    stalled this one for 100-300 ms and made the node's outputs overflow its reader)."""
+    gc.collect()
+    gc.freeze()
+    gc.disable()
+    try:
+        yield
+    finally:
+        gc.enable()
 
 
 def pacing_spin_s(args: Any) -> float:
