@@ -245,7 +245,9 @@ class JointChain:
         for i, model in enumerate(joints):
             groups.setdefault(id(model), []).append(i)
         self._groups = [(joints[idx[0]], np.array(idx)) for idx in groups.values()]
-        self._unloaded: dict[int, FloatArray] = {}
+        # Keyed by the model itself (identity), not its id: a pickled chain (the solver worker's)
+        # keeps the mapping, where ids would be stale.
+        self._unloaded: dict[JointModel, FloatArray] = {}
         # Block masks of the 6N x 6N tangent: [j < i] per block, and the joint indices.
         self._strictly_lower = np.kron(np.tri(n, n, -1), np.ones((6, 6)))
         self._index = np.arange(n)
@@ -641,14 +643,13 @@ class JointChain:
         rest = self._rest(rest_lengths)
         out = np.empty((self.n_joints, 6))
         for i, (model, r) in enumerate(zip(self.joints, rest, strict=True)):
-            key = id(model)
-            if r is None and key in self._unloaded:
-                out[i] = self._unloaded[key]
+            if r is None and model in self._unloaded:
+                out[i] = self._unloaded[model]
                 continue
             res = solve_equilibrium(model, np.zeros(6), r)
             x = res.screw if res.success else model.initial_screw
             if r is None:
-                self._unloaded[key] = x
+                self._unloaded[model] = x
             out[i] = x
         return out
 

@@ -124,12 +124,15 @@ def test_a_singular_chain_raises_on_both_paths():
             spine_outputs(chain, x)
 
 
-def test_a_pickled_chain_keeps_the_kernel():
+def test_a_pickled_chain_keeps_the_kernel_and_its_cache():
     fast, _ = chains(np.random.default_rng(7), 3, True)
+    x = near_unloaded(fast, np.random.default_rng(8))  # fills the unloaded-screw cache
     copy = pickle.loads(pickle.dumps(fast))
     assert copy._library() is not None
-    x = near_unloaded(fast, np.random.default_rng(8))
     np.testing.assert_array_equal(copy.tip_stiffness(x), fast.tip_stiffness(x))
+    # The cache travels keyed by the copied models themselves, one entry per distinct model.
+    assert set(copy._unloaded) == set(copy.joints)
+    np.testing.assert_array_equal(copy.unloaded_screws(), fast.unloaded_screws())
 
 
 def test_joint_models_in_a_chain_use_the_kernel():
