@@ -526,10 +526,38 @@ class JointChain:
         PJ = ScrewKinematics(screws).J[:, _SWAP]
         return np.einsum('ajb,jbc->ajc', D.reshape(6 * n, n, 6), PJ).reshape(6 * n, 6 * n)
 
+    def _tip(self, state: ChainState, W: FloatArray | None, g: FloatArray, base: bool,
+             tool: bool) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        """The tip at an evaluated ``state`` under the tip wrench ``W`` (None: the implied one,
+        ``-Ad_{P_N}^-T F_N - w_N``) and the weights under ``g``: (W, K_tip in the base frame
+        if ``base``, in the tool frame if ``tool``; else None). In the compiled kernel when it
+        is available; singular systems raise ``LinAlgError``."""
+        lib = self._library()
+        if lib is not None:
+            return self._tip_in_kernel(lib, state, W, g, base, tool)
+        if W is None:
+            AdT_N = _adjoint(state.joint_frames[-1]).T
+            W = -np.linalg.solve(AdT_N, state.wrenches[-1])
+            if self._has_weights(g):
+                W -= self._weights(state.link_transforms, g)[0][-1]
+        if not (base or tool):
+            return W, None, None
+        _, D, AdT, Ad = self._system(state, W, g)
+        n = self.n_joints
+        # Twist coordinates: dr = D delta + Ad^T dW = 0, tip twist = sum_j Ad_j delta_j.
+        X = np.linalg.solve(D, AdT.reshape(6 * n, 6))
+        C = -Ad.transpose(1, 0, 2).reshape(6, 6 * n) @ X
+        K = np.linalg.inv(C)
+        K_tool = None
+        if tool:
+            Ad_tip = _adjoint(state.tip_transform)
+            K_tool = Ad_tip.T @ K @ Ad_tip
+        return W, K if base else None, K_tool
+
     def _tip_in_kernel(self, lib: Any, state: ChainState, W: FloatArray | None, g: FloatArray,
-                       base: bool, tool: bool) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """The compiled ``tsk_chain_tip``: (W, K_tip in the base, K_tip in the tool frame);
-        ``W`` None: the implied tip wrench. Singular systems raise ``LinAlgError``."""
+                       base: bool, tool: bool
+                       ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
+        """:meth:`_tip` in the compiled ``tsk_chain_tip``."""
         address = kernel.address
         inputs = [np.ascontiguousarray(a, dtype=np.float64) for a in (
             state.joint_frames, state.link_transforms, state.tip_transform, state.wrenches,
@@ -545,21 +573,15 @@ class JointChain:
             o + 48 if base else None, o + 336 if tool else None)
         if status != 0:
             raise np.linalg.LinAlgError('Singular matrix')
-        return out[:6], out[6:42].reshape(6, 6), out[42:].reshape(6, 6)
+        return (out[:6], out[6:42].reshape(6, 6) if base else None,
+                out[42:].reshape(6, 6) if tool else None)
 
     def tip_outputs_from_state(self, state: ChainState, gravity: ArrayLike | None = None
                                ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """At an evaluated ``state``: the implied tip wrench ``W`` (base) and the exact tip
         stiffness under ``W`` and the link weights, in the base and in the tool frame (what
         ``spine_node`` publishes per input). Singular configurations raise ``LinAlgError``."""
-        g = self._gravity(gravity)
-        lib = self._library()
-        if lib is not None:
-            return self._tip_in_kernel(lib, state, None, g, True, True)
-        W = self.implied_tip_wrench_from_state(state, g)
-        base = self.tip_stiffness_from_state(state, W, g)
-        Ad = _adjoint(state.tip_transform)
-        return W, base, Ad.T @ base @ Ad
+        return self._tip(state, None, self._gravity(gravity), True, True)
 
     def tip_stiffness_from_state(self, state: ChainState, tip_wrench: ArrayLike | None = None,
                                  gravity: ArrayLike | None = None, frame: str = 'base'
@@ -567,22 +589,9 @@ class JointChain:
         """:meth:`tip_stiffness` at an evaluated ``state`` (no second evaluation)."""
         if frame not in ('base', 'tool'):
             raise ValueError(f"frame must be 'base' or 'tool', got {frame!r}")
-        W = self._wrench(tip_wrench)
-        g = self._gravity(gravity)
-        lib = self._library()
-        if lib is not None:
-            outputs = self._tip_in_kernel(lib, state, W, g, frame == 'base', frame == 'tool')
-            return outputs[1] if frame == 'base' else outputs[2]
-        _, D, AdT, Ad = self._system(state, W, g)
-        n = self.n_joints
-        # Twist coordinates: dr = D delta + Ad^T dW = 0, tip twist = sum_j Ad_j delta_j.
-        X = np.linalg.solve(D, AdT.reshape(6 * n, 6))
-        C = -Ad.transpose(1, 0, 2).reshape(6, 6 * n) @ X
-        K = np.linalg.inv(C)
-        if frame == 'tool':
-            Ad = _adjoint(state.tip_transform)
-            K = Ad.T @ K @ Ad
-        return K
+        _, base, tool = self._tip(state, self._wrench(tip_wrench), self._gravity(gravity),
+                                  frame == 'base', frame == 'tool')
+        return base if frame == 'base' else tool
 
     def tip_stiffness(self, screws: ArrayLike, tip_wrench: ArrayLike | None = None,
                       gravity: ArrayLike | None = None, frame: str = 'base',
@@ -627,15 +636,7 @@ class JointChain:
     def implied_tip_wrench_from_state(self, state: ChainState, gravity: ArrayLike | None = None
                                       ) -> FloatArray:
         """:meth:`implied_tip_wrench` at an evaluated ``state`` (no second evaluation)."""
-        g = self._gravity(gravity)
-        lib = self._library()
-        if lib is not None:
-            return self._tip_in_kernel(lib, state, None, g, False, False)[0]
-        AdT_N = _adjoint(state.joint_frames[-1]).T
-        W = -np.linalg.solve(AdT_N, state.wrenches[-1])
-        if self._has_weights(g):
-            W -= self._weights(state.link_transforms, g)[0][-1]
-        return W
+        return self._tip(state, None, self._gravity(gravity), False, False)[0]
 
     def unloaded_screws(self, rest_lengths: Any = None) -> FloatArray:
         """Each joint's unloaded equilibrium (single-joint solver from its ``initial_screw``;
