@@ -12,6 +12,7 @@ geometry     ``geometry_msgs`` Wrench / Pose <-> numpy; rotation matrix <-> quat
 stamps       ``builtin_interfaces/Time`` <-> nanoseconds / seconds.
 diagnostics  ``diagnostic_msgs/DiagnosticStatus`` and ``DiagnosticArray`` builders.
 markers      ``visualization_msgs/MarkerArray`` of nodes and tension-coloured strings for RViz.
+outputs      refilling preallocated output messages per input (after one finite check).
 joint_outputs  the joint node's five per-input output messages and its markers.
 spine_outputs  the spine node's seven per-input output messages and its markers.
 

@@ -46,9 +46,13 @@ def wrench_to_msg(wrench: ArrayLike) -> Wrench:
 
 def set_wrench(msg: Wrench, wrench: ArrayLike) -> Wrench:
     """Write a (6,) array ``[fx fy fz mx my mz]`` into an existing ``Wrench`` (reused messages)."""
-    w = finite_array_of_shape('wrench', wrench, (6,)).tolist()
+    return write_wrench(msg, finite_array_of_shape('wrench', wrench, (6,)))
+
+
+def write_wrench(msg: Wrench, wrench: NDArray[np.float64]) -> Wrench:
+    """:func:`set_wrench` without its checks, for a (6,) array already checked finite."""
     f, t = msg.force, msg.torque
-    f.x, f.y, f.z, t.x, t.y, t.z = w
+    f.x, f.y, f.z, t.x, t.y, t.z = wrench.tolist()
     return msg
 
 

@@ -16,8 +16,9 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import WrenchStamped
 from visualization_msgs.msg import MarkerArray
 
-from msg_tools.arrays import matrix_to_multiarray, payload, vector_to_multiarray
+from msg_tools.arrays import matrix_to_multiarray, vector_to_multiarray
 from msg_tools.markers import marker_array
+from msg_tools.outputs import fill_outputs, write_payload, write_wrench_stamped
 from tensegrity_stiffness.joint import JointModel, JointState
 from tensegrity_stiffness.layouts import (
     CARTESIAN_STIFFNESS_COL_LABEL,
@@ -47,22 +48,16 @@ class JointOutputMessages:
         self.interpretation = vector_to_multiarray(np.zeros(INTERPRETATION_SIZE),
                                                    INTERPRETATION_LABEL)
 
+    #: The writer of each message, in :meth:`messages` order.
+    WRITERS = (write_wrench_stamped, write_payload, write_payload, write_payload, write_payload)
+
     def fill(self, outputs: JointOutputs, stamp: Time, frame_id: str,
              wanted: tuple[bool, ...] | None = None) -> None:
         """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
         order; default all); ValueError if any output is not finite (then none is set)."""
         require_finite(outputs)
-        arrays = output_arrays(outputs)
-        for k, msg in enumerate(self.messages()):
-            if wanted is not None and not wanted[k]:
-                continue
-            if k == 0:
-                msg.header.stamp = stamp
-                msg.header.frame_id = frame_id
-                f, t = msg.wrench.force, msg.wrench.torque
-                f.x, f.y, f.z, t.x, t.y, t.z = arrays[0].tolist()
-            else:
-                msg.data = payload(arrays[k])
+        fill_outputs(self.messages(), output_arrays(outputs), self.WRITERS, stamp, frame_id,
+                     wanted)
 
     def messages(self) -> tuple[Any, ...]:
         """The messages in topic order: wrench, stiffness, cartesian_stiffness, tensions,

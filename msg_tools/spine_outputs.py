@@ -3,8 +3,9 @@
 ``~/tip_stiffness``, ``~/tip_stiffness_base``) and its markers.
 
 One preallocated message per topic, its layout labelled once from
-:mod:`tensegrity_stiffness.layouts`; per input only the data and the headers are refilled, and
-every array is checked finite as it is set (ValueError: nothing is published yet).
+:mod:`tensegrity_stiffness.layouts`; per input only the data and the headers are refilled, after
+one finite check of every output (:func:`spine_processing.require_finite`: ValueError naming the
+output, and nothing is published).
 """
 
 from __future__ import annotations
@@ -17,9 +18,14 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
 from visualization_msgs.msg import MarkerArray
 
-from msg_tools.arrays import matrix_to_multiarray, set_multiarray_data
-from msg_tools.geometry import set_wrench, transform_to_pose
+from msg_tools.arrays import matrix_to_multiarray
 from msg_tools.markers import marker_array
+from msg_tools.outputs import (
+    fill_outputs,
+    write_payload,
+    write_pose_stamped,
+    write_wrench_stamped,
+)
 from tensegrity_stiffness.chain import ChainState, JointChain
 from tensegrity_stiffness.layouts import (
     CARTESIAN_STIFFNESS_COL_LABEL,
@@ -61,24 +67,17 @@ class SpineOutputMessages:
         self.tip_stiffness_base = matrix_to_multiarray(np.zeros((6, 6)),
                                                        *TIP_STIFFNESS_LABELS['base'])
 
+    #: The writer of each message, in :meth:`messages` order.
+    WRITERS = (write_payload, write_payload, write_payload, write_pose_stamped,
+               write_wrench_stamped, write_payload, write_payload)
+
     def fill(self, outputs: SpineOutputs, stamp: Time, base_frame: str,
              wanted: tuple[bool, ...] | None = None) -> None:
         """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
         order; default all); ValueError if any output is not finite (then none is set)."""
         require_finite(outputs)
-        arrays = output_arrays(outputs)
-        for k, msg in enumerate(self.messages()):
-            if wanted is not None and not wanted[k]:
-                continue
-            if k == 3:
-                msg.pose = transform_to_pose(arrays[k])
-            elif k == 4:
-                set_wrench(msg.wrench, arrays[k])
-            else:
-                set_multiarray_data(msg, arrays[k])
-            if k in (3, 4):
-                msg.header.stamp = stamp
-                msg.header.frame_id = base_frame
+        fill_outputs(self.messages(), output_arrays(outputs), self.WRITERS, stamp, base_frame,
+                     wanted)
 
     def messages(self) -> tuple[Any, ...]:
         """The messages in topic order: joint_wrenches, joint_stiffness,
