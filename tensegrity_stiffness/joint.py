@@ -239,12 +239,6 @@ class JointModel:
         self._no_strings = bytes(n)
         self._kernel = kernel.joint_kernel(self._p1, self._p2, self.k, self.max_stretch,
                                            FORCE_LAWS.index(force_law)) if use_kernel else None
-        self._rest_address = kernel.address(self.rest_lengths)
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        """Unpickled (e.g. in the solver worker): the rest lengths' address is this process's."""
-        self.__dict__.update(state)
-        self._rest_address = kernel.address(self.rest_lengths)
 
     @property
     def uses_kernel(self) -> bool:
@@ -470,13 +464,10 @@ class JointModel:
         kn = self._kernel
         buf = np.empty(kn.size)
         buf[:6] = xi
-        if rest is self.rest_lengths:
-            rest_address = self._rest_address
-        else:
-            rest = np.ascontiguousarray(rest)
-            rest_address = kernel.address(rest)
         mode = kernel.MODE_FULL if full else kernel.MODE_STIFFNESS
-        if kn.evaluate_packed(kn.model, rest_address, mode, kernel.address(buf)) != kernel.OK:
+        status = kn.evaluate_packed(kn.model, kernel.address(np.ascontiguousarray(rest)), mode,
+                                    kernel.address(buf))
+        if status != kernel.OK:
             return None
         K = buf[kn.stiffness:kn.cartesian].reshape(6, 6)
         if not full:
