@@ -31,8 +31,11 @@ def screws_input(values: FloatArray, n_joints: int) -> FloatArray:
         raise ValueError(f'expected 6 N = {6 * n_joints} values (one screw per joint), got '
                          f'{values.size}')
     xi = values.reshape(n_joints, 6)
-    for i, screw in enumerate(xi):
-        check_in_chart(screw, f'joint {i + 1} screw')
+    try:
+        check_in_chart(xi, 'screws')
+    except ValueError:  # name the first joint outside
+        for i, screw in enumerate(xi):
+            check_in_chart(screw, f'joint {i + 1} screw')
     return xi
 
 

@@ -197,6 +197,7 @@ class StreamingNode(Node):
                         1e9 * (settings.marker_period or 1.0))
                     if not self._marker_timer.is_canceled():
                         self._marker_timer.reset()
+                    self._watch_markers()  # at once: 0 (one per input) stops the timer
             except Exception as exc:  # validated before: only a bug gets here; the old set stays
                 self.reporter.internal_error('parameters', exc)
                 return
@@ -267,11 +268,9 @@ class StreamingNode(Node):
     @guarded('~/markers')
     def _publish_markers(self) -> None:
         """At most ``markers.max_rate`` Hz, on the executor's thread (markers cost as much as all
-        other outputs together, milliseconds for a spine): the last configuration, once, if
-        anyone listens."""
+        other outputs together, milliseconds for a spine): the last configuration, once. The
+        timer runs only while someone listens (:meth:`_watch_markers`)."""
         settings = self._settings
-        if settings.marker_period == 0.0 or self._pub_markers.get_subscription_count() == 0:
-            return
         last = self._last.unmarked()
         if last is None:
             return
