@@ -26,8 +26,10 @@ from pathlib import Path
 from typing import Any
 
 import rclpy
+from rcl_interfaces.srv import SetParameters
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
@@ -283,6 +285,17 @@ class RosClient:
 
     def publisher(self, msg_type: Any, topic: str, qos: QoSProfile = RELIABLE) -> Any:
         return self.node.create_publisher(msg_type, topic, qos)
+
+    def set_parameter(self, client: Any, name: str, value: Any) -> Any:
+        """Set one parameter through a node's ``SetParameters`` service ``client``; its type as
+        rclpy infers it from ``value`` (lists as double arrays, also when empty). Returns the
+        ``SetParametersResult``."""
+        if isinstance(value, list):
+            parameter = Parameter(name, Parameter.Type.DOUBLE_ARRAY, [float(v) for v in value])
+        else:
+            parameter = Parameter(name, value=value)
+        request = SetParameters.Request(parameters=[parameter.to_parameter_msg()])
+        return self.call(client, request).results[0]
 
     def client(self, srv_type: Any, name: str, timeout: float = 20.0) -> Any:
         client = self.node.create_client(srv_type, name)

@@ -15,8 +15,6 @@ pytestmark = pytest.mark.ros
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
-from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
-from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
 from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
 from ros_harness import LATCHED, REPO, NodeProcess, RosClient, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -87,19 +85,7 @@ class Harness:
         assert self.proc.alive(), self.proc.log()
 
     def set_parameter(self, name: str, value) -> object:
-        msg = ParameterMsg(name=name)
-        if isinstance(value, str):
-            msg.value = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
-        elif isinstance(value, bool):
-            msg.value = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
-        elif isinstance(value, int):
-            msg.value = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=value)
-        elif isinstance(value, list):
-            msg.value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
-                                       double_array_value=[float(v) for v in value])
-        else:
-            msg.value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
-        return self.ros.call(self.set_params, SetParameters.Request(parameters=[msg])).results[0]
+        return self.ros.set_parameter(self.set_params, name, value)
 
     def close(self) -> int:
         self.ros.close()

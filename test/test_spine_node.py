@@ -19,8 +19,6 @@ pytestmark = pytest.mark.ros
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import Pose, PoseArray, PoseStamped, WrenchStamped  # noqa: E402
-from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
-from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
 from ros_harness import (  # noqa: E402
     DEEP,
@@ -122,15 +120,7 @@ class Harness:
         assert self.proc.alive(), self.proc.log()
 
     def set_parameter(self, name: str, value) -> object:
-        msg = ParameterMsg(name=name)
-        if isinstance(value, list):
-            msg.value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE_ARRAY,
-                                       double_array_value=[float(v) for v in value])
-        elif isinstance(value, int):
-            msg.value = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=value)
-        else:
-            msg.value = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
-        return self.ros.call(self.set_params, SetParameters.Request(parameters=[msg])).results[0]
+        return self.ros.set_parameter(self.set_params, name, value)
 
     def call(self, **fields) -> SolveChainEquilibrium.Response:
         request = SolveChainEquilibrium.Request()
