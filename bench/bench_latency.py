@@ -45,10 +45,11 @@ from ros_harness import (  # noqa: E402
     RosClient,
     add_client_arguments,
     collector_paused,
+    latencies_in_order,
     latency_summary,
     pacing_spin_s,
+    publish_paced,
     receiving,
-    sleep_until,
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -101,30 +102,12 @@ def _stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: 
     time.sleep(STARTUP_SETTLE_S)
     n = int(rate * seconds)
     screws = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(n, 6))
-    sent_at = np.empty(n)
-    period = 1.0 / rate
-    start = time.perf_counter()
-    for k in range(n):
-        sleep_until(start + k * period, spin_s)
-        sent_at[k] = time.perf_counter()
-        pub.publish(Float64MultiArray(data=screws[k].tolist()))
-    deadline = time.monotonic() + 5.0
-    while len(inbox) < n and time.monotonic() < deadline:
-        time.sleep(0.05)
-    # Outputs come in input order; match each to its input by value (a dropped input leaves a
-    # gap), so that a drop cannot shift the pairing.
+    sent_at = publish_paced(pub, [Float64MultiArray(data=x.tolist()) for x in screws], rate,
+                            spin_s, lambda: len(inbox))
     # One screw at a time, as the node computes (the batched path rounds differently).
     expected = np.array([model.stiffness(x).ravel() for x in screws])
-    latencies = []
-    k = 0
-    for msg, arrived in zip(list(inbox.messages), list(inbox.times), strict=True):
-        K = np.asarray(msg.data)
-        while k < n and not np.allclose(K, expected[k], rtol=1e-12, atol=1e-12):
-            k += 1
-        if k == n:
-            raise AssertionError('an output matches no input')
-        latencies.append(arrived - sent_at[k])
-        k += 1
+    latencies = latencies_in_order([np.asarray(m.data) for m in list(inbox.messages)],
+                                   list(inbox.times), expected, sent_at)
     return latencies, n, n - len(latencies)
 
 

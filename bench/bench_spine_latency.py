@@ -39,10 +39,11 @@ from ros_harness import (  # noqa: E402
     RosClient,
     add_client_arguments,
     collector_paused,
+    latencies_in_order,
     latency_summary,
     pacing_spin_s,
+    publish_paced,
     receiving,
-    sleep_until,
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -94,7 +95,7 @@ def settings_for(n_joints: int) -> parameters.SpineNodeSettings:
 
 def stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float,
            rng: np.random.Generator, loop: str, spin_s: float) -> tuple[list[float], int, int]:
-    """Publish screws at ``rate`` for ``seconds`` (``spin_s``: see :func:`sleep_until`), the
+    """Publish screws at ``rate`` for ``seconds`` (``spin_s``: see :func:`publish_paced`), the
     client receiving on ``loop`` (:func:`receiving`); returns (latencies, sent, drops)."""
     controller = Controller()
     with receiving(ros, [(Float64MultiArray, f'{base}/tip_stiffness', controller)], loop):
@@ -113,28 +114,11 @@ def _stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: floa
     n = int(rate * seconds)
     center = chain.unloaded_screws()
     screws = center + rng.normal(scale=[0.02] * 3 + [0.0005] * 3, size=(n, n_joints, 6))
-    messages = [Float64MultiArray(data=x.ravel().tolist()) for x in screws]
-    sent_at = np.empty(n)
-    period = 1.0 / rate
-    start = time.perf_counter()
-    for k in range(n):
-        sleep_until(start + k * period, spin_s)
-        sent_at[k] = time.perf_counter()
-        pub.publish(messages[k])
-    deadline = time.monotonic() + 5.0
-    while len(controller) < n and time.monotonic() < deadline:
-        time.sleep(0.05)
-    latencies = []
-    k = 0
-    for K, arrived in zip(list(controller.messages), list(controller.times), strict=True):
-        while k < n and not np.allclose(
-                K, spine_outputs(chain, screws[k]).tip_stiffness_tool.ravel(), rtol=1e-12,
-                atol=1e-12):
-            k += 1
-        if k == n:
-            raise AssertionError('an output matches no input')
-        latencies.append(arrived - sent_at[k])
-        k += 1
+    sent_at = publish_paced(pub, [Float64MultiArray(data=x.ravel().tolist()) for x in screws],
+                            rate, spin_s, lambda: len(controller))
+    expected = [spine_outputs(chain, x).tip_stiffness_tool.ravel() for x in screws]
+    latencies = latencies_in_order(list(controller.messages), list(controller.times), expected,
+                                   sent_at)
     return latencies, n, n - len(latencies)
 
 

@@ -25,6 +25,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import rclpy
 from rcl_interfaces.srv import SetParameters
 from rclpy.context import Context
@@ -74,6 +75,42 @@ def sleep_until(target: float, spin_s: float = 2e-4) -> float:
         if target - now > spin_s:
             time.sleep(max(target - now - 0.75 * spin_s, 0.0))
     return now
+
+
+def publish_paced(publisher: Any, messages: list[Any], rate: float, spin_s: float,
+                  received: Callable[[], int], timeout: float = 5.0) -> list[float]:
+    """Publish ``messages`` at ``rate`` Hz (``spin_s``: see :func:`sleep_until`), then wait up to
+    ``timeout`` s until ``received()`` counts one answer each; returns the send times
+    (time.perf_counter)."""
+    sent_at = []
+    period = 1.0 / rate
+    start = time.perf_counter()
+    for k, msg in enumerate(messages):
+        sleep_until(start + k * period, spin_s)
+        sent_at.append(time.perf_counter())
+        publisher.publish(msg)
+    deadline = time.monotonic() + timeout
+    while received() < len(messages) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return sent_at
+
+
+def latencies_in_order(outputs: Iterable[Any], arrivals: Iterable[float], expected: Any,
+                       sent_at: list[float]) -> list[float]:
+    """Latency of each output (in arrival order) from the send time of its input: outputs come
+    in input order, so each is matched by value (rtol = atol = 1e-12) to the first expected one
+    it equals after the previous match; a dropped input leaves a gap and cannot shift the
+    pairing. AssertionError for an output that matches no input."""
+    latencies = []
+    k, n = 0, len(expected)
+    for values, arrived in zip(outputs, arrivals, strict=True):
+        while k < n and not np.allclose(values, expected[k], rtol=1e-12, atol=1e-12):
+            k += 1
+        if k == n:
+            raise AssertionError('an output matches no input')
+        latencies.append(arrived - sent_at[k])
+        k += 1
+    return latencies
 
 
 def percentile(values: list[float], q: float) -> float:
