@@ -10,6 +10,8 @@ exits 0, or raises.
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -72,6 +74,25 @@ def main(install: Path) -> None:
     assert code == 0, f'node exit code {code}:\n{proc.log()}'
     print(f'K relative error {error:.1e}, equilibrium gap {gap:.1e} m, '
           f'residual {response.residual:.1e}')
+
+    # The other executables start from the install space as `ros2 run` starts them.
+    spine = NodeProcess(unique_namespace('ws'), config.with_name('default_spine.yaml'),
+                        executable='spine_node')
+    try:
+        deadline = time.monotonic() + 30.0
+        while 'ready:' not in spine.log() and time.monotonic() < deadline:
+            assert spine.alive(), spine.log()
+            time.sleep(0.05)
+        assert 'ready:' in spine.log() and 'compiled kernel' in spine.log(), spine.log()
+    finally:
+        code = spine.stop()
+    assert code == 0, f'spine_node exit code {code}:\n{spine.log()}'
+    for command in (prefix / 'lib' / 'tensegrity_stiffness' / 'tensegrity-stiffness',
+                    Path(shutil.which('tensegrity-stiffness') or 'missing')):
+        assert install in command.parents, f'{command} is not from the workspace'
+        ran = subprocess.run([str(command), 'joint', '--help'], capture_output=True,
+                             text=True, timeout=60)
+        assert ran.returncode == 0, ran.stdout + ran.stderr
     print('WORKSPACE OK')
 
 
