@@ -28,7 +28,7 @@ CONSUMER_PACKAGE_XML = """<?xml version="1.0"?>
 <package format="3">
   <name>tensegrity_consumer</name>
   <version>0.0.1</version>
-  <description>A package beside tensegrity_stiffness in the workspace that depends on it.</description>
+  <description>Beside tensegrity_stiffness in the workspace, depends on it.</description>
   <maintainer email="nobody@example.invalid">nobody</maintainer>
   <license>Apache-2.0</license>
   <buildtool_depend>ament_cmake</buildtool_depend>

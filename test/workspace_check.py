@@ -23,12 +23,12 @@ def main(install: Path) -> None:
     from ament_index_python.packages import get_package_prefix, get_package_share_directory
     from ros_harness import NodeProcess, RosClient, unique_namespace
     from std_msgs.msg import Float64MultiArray
+    from tensegrity_stiffness.srv import SolveEquilibrium
 
     import tensegrity_stiffness
     from tensegrity_stiffness import kernel
     from tensegrity_stiffness.equilibrium import solve_equilibrium
     from tensegrity_stiffness.joint import JointModel
-    from tensegrity_stiffness.srv import SolveEquilibrium
 
     prefix = Path(get_package_prefix('tensegrity_stiffness'))
     assert prefix == install / 'tensegrity_stiffness', f'ament index finds {prefix}'
