@@ -84,6 +84,7 @@ def main(install: Path) -> None:
             assert spine.alive(), spine.log()
             time.sleep(0.05)
         assert 'ready:' in spine.log() and 'compiled kernel' in spine.log(), spine.log()
+        time.sleep(0.5)  # spinning (a stop within milliseconds of start-up is not clean yet)
     finally:
         code = spine.stop()
     assert code == 0, f'spine_node exit code {code}:\n{spine.log()}'
