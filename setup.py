@@ -1,4 +1,10 @@
-"""ament_python setup for tensegrity_stiffness."""
+"""``pip install .``: the library and the command line alone (no ROS needed).
+
+colcon builds the ROS package from CMakeLists.txt (interfaces, compiled kernel, nodes, launch
+files); this file is not used there. A pip install has the numpy path of the library (the compiled
+kernel is built by colcon), the ``tensegrity-stiffness`` command (``bag`` included) and the
+packaged configs under ``<prefix>/share/tensegrity_stiffness/config``.
+"""
 
 from glob import glob
 
@@ -9,25 +15,18 @@ PACKAGE_NAME = 'tensegrity_stiffness'
 setup(
     name=PACKAGE_NAME,
     version='0.1.0',
-    packages=[PACKAGE_NAME, PACKAGE_NAME + '.ros', 'msg_tools'],
-    data_files=[
-        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
-        ('share/' + PACKAGE_NAME, ['package.xml']),
-        ('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml')),
-        ('share/' + PACKAGE_NAME + '/launch', glob('launch/*.launch.py')),
-    ],
-    install_requires=['setuptools', 'numpy', 'scipy', 'PyYAML', 'rosbags'],
+    packages=[PACKAGE_NAME],
+    data_files=[('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml'))],
+    python_requires='>=3.10',
+    install_requires=['numpy', 'scipy', 'PyYAML', 'rosbags'],
     extras_require={'plots': ['matplotlib']},
-    zip_safe=True,
+    zip_safe=False,
     maintainer='tensegrity_stiffness maintainers',
     maintainer_email='maintainers@tensegrity-stiffness.invalid',
     description='Screw-theory stiffness of tensegrity joints for ROS 2 control stacks.',
     license='Apache-2.0',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'stiffness_node = tensegrity_stiffness.ros.stiffness_node:main',
-            'spine_node = tensegrity_stiffness.ros.spine_node:main',
             'tensegrity-stiffness = tensegrity_stiffness.cli:main',
         ],
     },

@@ -109,7 +109,7 @@ def service_part(args: argparse.Namespace) -> None:
     from ros_harness import NodeProcess, RosClient, unique_namespace
 
     import msg_tools
-    from tensegrity_stiffness_interfaces.srv import DesignRestLengths
+    from tensegrity_stiffness.srv import DesignRestLengths
 
     model = joint('hooke')
     cases = requests(model, args.requests, seed=2)

@@ -56,7 +56,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 import msg_tools  # noqa: E402
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
-from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
+from tensegrity_stiffness.srv import (  # noqa: E402
     PlanarForwardKinematics,
     PlanarInverseKinematics,
     SolveEquilibrium,

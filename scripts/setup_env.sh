@@ -2,16 +2,17 @@
 # Idempotent setup of the development / CI environment of tensegrity_stiffness:
 #   1. .venv/      Python venv with pinned ROS 2 Jazzy wheels from PyPI (rclpy + fastrtps, message
 #                  packages, rosidl/ament build wheels, colcon) and numpy, scipy, PyYAML, pytest, ruff.
-#   2. build/, install/   colcon build (--symlink-install, isolated layout) of the three packages:
-#                  tensegrity_stiffness (ament_python, repo root), tensegrity_stiffness_interfaces
-#                  (ament_cmake + rosidl, sub-folder) and tensegrity_stiffness_kernel (ament_cmake,
-#                  the compiled joint kernel: a C++ shared library built with cmake and g++).
+#   2. build/, install/   colcon build --symlink-install of the one ament_cmake package at the
+#                  repository root, tensegrity_stiffness (its service interfaces, the compiled
+#                  kernel, the Python packages, executables, launch and config files), exactly as a
+#                  workspace builds it (`colcon build` finds the package.xml at the root).
 # Each step is skipped when its stamp matches (stamps are sha256 hashes of the inputs):
 #   .venv/.tensegrity_venv_stamp       requirement pins + constraints.txt + python version + path
-#   install/.tensegrity_build_stamp    venv stamp + package manifests, setup.py/cfg, srv files, the
-#                                      kernel's sources, file names in resource/ and config/.
-#                                      Python sources need no rebuild: --symlink-install links
-#                                      the package folders.
+#   install/.tensegrity_build_stamp    venv stamp + the build files (package.xml, CMakeLists.txt,
+#                                      cmake/), srv/ and the kernel's sources (contents), and the
+#                                      names of the Python, config and launch files (installed as
+#                                      one symlink per file: a new file needs a build, an edited
+#                                      one does not).
 # Usage: bash scripts/setup_env.sh            (then: source scripts/env.sh)
 # Env:   TENSEGRITY_PYTHON   interpreter used to create the venv (default: python3, must be 3.11)
 #        TENSEGRITY_FORCE=1  ignore the stamps and redo both steps
@@ -25,8 +26,6 @@ CONSTRAINTS="$REPO/scripts/constraints.txt"
 PYTHON="${TENSEGRITY_PYTHON:-python3}"
 VENV_STAMP="$VENV/.tensegrity_venv_stamp"
 BUILD_STAMP="$REPO/install/.tensegrity_build_stamp"
-INTERFACES_DIR="tensegrity_stiffness_interfaces"
-KERNEL_DIR="tensegrity_stiffness_kernel"
 
 # Top-level requirements; exact versions come from scripts/constraints.txt (pip -c).
 REQUIREMENTS=(
@@ -117,38 +116,38 @@ fi
 build_hash="$( {
   cat "$VENV_STAMP"
   printf '%s\n' "$REPO"
-  for f in package.xml setup.py setup.cfg colcon_defaults.yaml \
-    "$INTERFACES_DIR/package.xml" "$INTERFACES_DIR/CMakeLists.txt"; do
+  for f in package.xml CMakeLists.txt setup.cfg; do
     printf '== %s\n' "$f"
     cat "$f" 2>/dev/null || true
   done
-  # interface definitions: contents. resource/ and config/: file names (installed as one
-  # symlink per file). The Python package folders are symlinked as a whole: no entry needed.
-  find "$INTERFACES_DIR" -name '*.srv' -o -name '*.msg' -o -name '*.action' | LC_ALL=C sort \
+  # Compiled or generated: contents count.
+  find cmake srv src include -type f 2>/dev/null | LC_ALL=C sort \
     | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
-  # The kernel is compiled (not symlinked): every source file counts.
-  find "$KERNEL_DIR" -type f | LC_ALL=C sort | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
-  find resource config -type f 2>/dev/null | LC_ALL=C sort
+  # Installed as symlinks: names count.
+  find tensegrity_stiffness msg_tools config launch -type f ! -path '*__pycache__*' 2>/dev/null \
+    | LC_ALL=C sort
 } | sha)"
 
 EXE="install/tensegrity_stiffness/lib/tensegrity_stiffness/stiffness_node"
-KERNEL_LIB="install/$KERNEL_DIR/lib/libtensegrity_stiffness_kernel.so"
+BUILD_ORIGIN="$VENV one-package"
+KERNEL_LIB="install/tensegrity_stiffness/lib/libtensegrity_stiffness_kernel.so"
 if [[ "${TENSEGRITY_FORCE:-0}" != 1 && -f "$BUILD_STAMP" && "$(cat "$BUILD_STAMP")" == "$build_hash" \
-  && -e "$EXE" && -d "install/$INTERFACES_DIR" && -e "$KERNEL_LIB" ]]; then
+  && -e "$EXE" && -e "$KERNEL_LIB" ]]; then
   log "colcon build up to date (install/)"
 else
-  # build/ and install/ hold absolute paths: start clean when the venv or checkout path changed.
-  if [[ -f build/.tensegrity_build_origin && "$(cat build/.tensegrity_build_origin)" != "$VENV" ]]; then
-    log "checkout or venv moved: removing stale build/ install/"
+  # build/ and install/ hold absolute paths: start clean when the venv, the checkout path or the
+  # package layout changed (before: three packages, the Python one ament_python).
+  if [[ -d build && "$(cat build/.tensegrity_build_origin 2>/dev/null)" != "$BUILD_ORIGIN" ]]; then
+    log "checkout, venv or layout changed: removing stale build/ install/"
     rm -rf build install
   fi
   # --symlink-install leaves links to deleted sources (e.g. a removed config/*.yaml) behind in
   # build/ and install/; setup.py's glob in build/ would then pick them up and fail.
   find build install -xtype l -delete 2>/dev/null || true
-  log "colcon build --symlink-install (three packages)"
+  log "colcon build --symlink-install (package tensegrity_stiffness)"
   mkdir -p build log
   BUILD_OUT="log/setup_env_colcon_build.txt"
-  printf '%s\n' "$VENV" >build/.tensegrity_build_origin
+  printf '%s\n' "$BUILD_ORIGIN" >build/.tensegrity_build_origin
   # Environment for the build only (subshell): venv tools first, the wheels' ament prefix for
   # cmake and ament_index. The venv python is passed to cmake so that rosidl_generator_py builds
   # against the venv's numpy and this interpreter's headers.
@@ -160,7 +159,7 @@ else
     export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
     unset PYTHONPATH
     colcon build --symlink-install \
-      --base-paths . "$INTERFACES_DIR" "$KERNEL_DIR" \
+      --base-paths . \
       --event-handlers console_cohesion+ status- \
       --cmake-args -DBUILD_TESTING=OFF \
       "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
@@ -171,7 +170,7 @@ else
     exit 1
   }
   if [[ ! -e "$EXE" ]]; then
-    log "colcon build did not produce $EXE (entry point missing in setup.py?)"
+    log "colcon build did not produce $EXE (executable missing in CMakeLists.txt?)"
     exit 1
   fi
   if [[ ! -e "$KERNEL_LIB" ]]; then

@@ -7,12 +7,13 @@ sections (``joint``, ``planar``, ...) at the top level. :func:`parameters` retur
 either form, :func:`section` one section of it.
 
 No ROS import: the packaged files are found through ``AMENT_PREFIX_PATH`` (as the ament index
-does) or next to the source tree.
+does), under the Python prefix (``pip install .``) or next to the source tree.
 """
 
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -26,8 +27,10 @@ ROS_PARAMETERS = 'ros__parameters'
 
 def packaged_config_path(name: str = DEFAULT_JOINT_CONFIG) -> Path:
     """``config/<name>`` of the installed package (``<prefix>/share/tensegrity_stiffness/config``
-    of the first ``AMENT_PREFIX_PATH`` entry that has it), else of the source tree."""
-    for prefix in filter(None, os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep)):
+    of the first ``AMENT_PREFIX_PATH`` entry that has it, then of the Python prefix of a
+    ``pip install``), else of the source tree."""
+    prefixes = os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) + [sys.prefix]
+    for prefix in filter(None, prefixes):
         path = Path(prefix) / 'share' / PACKAGE / 'config' / name
         if path.is_file():
             return path

@@ -97,17 +97,17 @@ def to_message(case: Case) -> Any:
         o.x, o.y, o.z, o.w = p['orientation']
         return msg
     if case.target == 'forward':
-        from tensegrity_stiffness_interfaces.srv import PlanarForwardKinematics
+        from tensegrity_stiffness.srv import PlanarForwardKinematics
 
         return PlanarForwardKinematics.Request(actuator_length=p['L3'], actuator_angle=p['theta1'])
     if case.target == 'inverse':
-        from tensegrity_stiffness_interfaces.srv import PlanarInverseKinematics
+        from tensegrity_stiffness.srv import PlanarInverseKinematics
 
         return PlanarInverseKinematics.Request(x=p['x'], y=p['y'])
     if case.target == 'equilibrium':
         import array
 
-        from tensegrity_stiffness_interfaces.srv import SolveEquilibrium
+        from tensegrity_stiffness.srv import SolveEquilibrium
 
         req = SolveEquilibrium.Request()
         f, t = req.external_wrench.force, req.external_wrench.torque

@@ -491,7 +491,7 @@ class NodeFuzzer:
         from std_msgs.msg import Float64MultiArray
 
         import msg_tools
-        from tensegrity_stiffness_interfaces.srv import (
+        from tensegrity_stiffness.srv import (
             PlanarForwardKinematics,
             PlanarInverseKinematics,
             SolveEquilibrium,

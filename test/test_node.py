@@ -27,7 +27,7 @@ from tensegrity_stiffness.interpretation import interpret_stiffness  # noqa: E40
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.planar import PlanarMechanism  # noqa: E402
 from tensegrity_stiffness.screw import exp_se3, log_se3  # noqa: E402
-from tensegrity_stiffness_interfaces.srv import (  # noqa: E402
+from tensegrity_stiffness.srv import (  # noqa: E402
     DesignRestLengths,
     PlanarForwardKinematics,
     PlanarInverseKinematics,

@@ -23,7 +23,7 @@ from ros_harness import (  # noqa: E402
     unique_namespace,
 )
 
-from tensegrity_stiffness_interfaces.srv import SolveEquilibrium  # noqa: E402
+from tensegrity_stiffness.srv import SolveEquilibrium  # noqa: E402
 
 pytestmark = pytest.mark.ros
 

@@ -3,7 +3,8 @@
 ``ros2 run tensegrity_stiffness stiffness_node`` resolves ``<prefix>/lib/tensegrity_stiffness/
 stiffness_node`` through the ament index (``AMENT_PREFIX_PATH``, set by scripts/env.sh); the
 parameter files are looked up under ``share/tensegrity_stiffness/config``; the service
-definitions come from the tensegrity_stiffness_interfaces package built next to it.
+definitions are generated into the same package (types ``tensegrity_stiffness/srv/<Name>``,
+Python ``tensegrity_stiffness.srv``), and so is the compiled kernel (``lib/``).
 
 Outside the set-up environment (plain ``pytest`` without ``source scripts/env.sh``) these tests
 skip with a reason; inside it (``TENSEGRITY_ENV_SOURCED`` set by env.sh, as in scripts/test.sh)
@@ -20,7 +21,7 @@ from typing import Any
 import pytest
 
 PACKAGE = 'tensegrity_stiffness'
-INTERFACES = 'tensegrity_stiffness_interfaces'
+INTERFACES = 'tensegrity_stiffness.srv'
 EXECUTABLE = 'stiffness_node'
 SPINE_EXECUTABLE = 'spine_node'
 ENV_REQUIRED = bool(os.environ.get('TENSEGRITY_ENV_SOURCED'))
@@ -55,13 +56,9 @@ def prefix(ament: Any) -> Path:
 @pytest.fixture(scope='module')
 def srv() -> Any:
     try:
-        import tensegrity_stiffness_interfaces.srv as module
+        import tensegrity_stiffness.srv as module
     except ImportError as exc:
         _unavailable(f'{INTERFACES} not importable: {exc}')
-    if getattr(module, '__file__', None) is None:
-        # Only the source folder of the repo root was found (a PEP 420 namespace package), not
-        # the generated package of install/.
-        _unavailable(f'{INTERFACES}.srv resolves to the source folder {list(module.__path__)}')
     return module
 
 
@@ -92,13 +89,22 @@ def test_config_files_installed(prefix: Path) -> None:
         assert path.resolve().is_file(), f'{path} is a dangling link'
 
 
-def test_interface_package_in_ament_index(ament: Any) -> None:
-    try:
-        share = Path(ament.get_package_share_directory(INTERFACES))
-    except (ament.PackageNotFoundError, OSError):
-        _unavailable(f'{INTERFACES} not in the ament index')
-    assert (share / 'package.xml').is_file()
+def test_interfaces_kernel_and_command_line_in_the_one_package(prefix: Path) -> None:
+    share = prefix / 'share' / PACKAGE
     assert (share / 'srv' / 'SolveEquilibrium.srv').is_file()
+    assert (prefix / 'lib' / 'libtensegrity_stiffness_kernel.so').is_file()
+    command = prefix / 'bin' / 'tensegrity-stiffness'
+    assert command.is_file() and os.access(command, os.X_OK), f'{command} missing'
+
+
+def test_interfaces_and_library_are_one_python_package(srv: Any) -> None:
+    """The generated ``srv`` module sits in the installed folder of the library itself."""
+    import tensegrity_stiffness
+    import tensegrity_stiffness.joint
+    installed = Path(os.path.abspath(srv.__file__)).parents[1]
+    assert installed.name == PACKAGE
+    assert str(installed) in [os.path.abspath(p) for p in tensegrity_stiffness.__path__]
+    assert (installed / 'joint.py').exists()
 
 
 EXPECTED_FIELDS = {
@@ -170,7 +176,7 @@ def test_interface_loaded_once(srv: Any) -> None:
     venv = Path(sys.prefix).resolve()
     if ENV_REQUIRED:
         assert venv not in module_file.parents, f'{INTERFACES} imported from the venv'
-    copies = list(venv.glob(f'lib/python*/site-packages/{INTERFACES}'))
+    copies = list(venv.glob(f'lib/python*/site-packages/{PACKAGE}/srv'))
     assert not copies, f'second copy of {INTERFACES} in the venv: {copies}'
 
 

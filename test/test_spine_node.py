@@ -50,7 +50,7 @@ from tensegrity_stiffness.spine_processing import (  # noqa: E402
     screws_input,
     spine_outputs,
 )
-from tensegrity_stiffness_interfaces.srv import SolveChainEquilibrium  # noqa: E402
+from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
 
 CONFIG = REPO / 'config' / 'default_spine.yaml'
 EXECUTABLE = 'spine_node'

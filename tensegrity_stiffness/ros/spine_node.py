@@ -47,7 +47,7 @@ from tensegrity_stiffness.spine_processing import (
     screws_input,
     spine_outputs,
 )
-from tensegrity_stiffness_interfaces.srv import SolveChainEquilibrium
+from tensegrity_stiffness.srv import SolveChainEquilibrium
 
 NODE_NAME = 'spine_node'
 #: Output topics in the order of :meth:`msg_tools.SpineOutputMessages.messages`.

@@ -39,7 +39,7 @@ from tensegrity_stiffness.ros import joint_services, runner
 from tensegrity_stiffness.ros.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.reporting import guarded, guarded_service
 from tensegrity_stiffness.ros.worker_calls import SOLVER_GRACE_S
-from tensegrity_stiffness_interfaces.srv import (
+from tensegrity_stiffness.srv import (
     DesignRestLengths,
     PlanarForwardKinematics,
     PlanarInverseKinematics,
