@@ -100,3 +100,23 @@ def test_errata_page_names_tests_that_exist():
             module = name[0] or module
             source = (REPO / 'test' / module).read_text(encoding='utf-8')
             assert f'def {name[1]}(' in source, f'{module}::{name[1]}'
+
+
+def _cells(row: str) -> int:
+    return len(re.split(r'(?<!\\)\|', row.strip().strip('|')))
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: p.name)
+def test_table_rows_have_the_header_s_cells(page: Path):
+    """A pipe inside a table cell (even in code, e.g. |omega|) must be escaped as \\|, else it
+    splits the cell."""
+    header = None
+    text = FENCE.sub(lambda m: '\n' * m[0].count('\n'), page.read_text(encoding='utf-8'))
+    for number, line in enumerate(text.splitlines(), 1):
+        if not line.startswith('|'):
+            header = None
+            continue
+        if header is None:
+            header = _cells(line)
+            continue
+        assert _cells(line) == header, f'{page.name}:{number}: {line[:80]}'
