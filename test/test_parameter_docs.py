@@ -9,8 +9,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
-
 from tensegrity_stiffness import parameter_docs, parameters
 from tensegrity_stiffness.parameters import NodeTable, ParameterSpec
 
@@ -89,7 +87,6 @@ def test_command_writes_and_checks(tmp_path, capsys):
     assert parameter_docs.main(['--write', '--out', str(tmp_path / 'no' / 'p.md')]) == 2
 
 
-@pytest.mark.slow
 def test_module_command_checks_the_committed_page():
     """``python -m tensegrity_stiffness.parameter_docs --check`` from the repository root, as a
     user (or CI) runs it."""
