@@ -107,9 +107,9 @@ def service_part(args: argparse.Namespace) -> None:
     os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(100, 200)))
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
     from ros_harness import NodeProcess, RosClient, unique_namespace
+    from tensegrity_stiffness.srv import DesignRestLengths
 
     import msg_tools
-    from tensegrity_stiffness.srv import DesignRestLengths
 
     model = joint('hooke')
     cases = requests(model, args.requests, seed=2)

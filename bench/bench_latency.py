@@ -53,14 +53,14 @@ from ros_harness import (  # noqa: E402
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
-
-import msg_tools  # noqa: E402
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.srv import (  # noqa: E402
     PlanarForwardKinematics,
     PlanarInverseKinematics,
     SolveEquilibrium,
 )
+
+import msg_tools  # noqa: E402
+from tensegrity_stiffness.joint import JointModel  # noqa: E402
 
 #: Seconds between the node being reachable and the start of the stream.
 STARTUP_SETTLE_S = 3.0

@@ -47,11 +47,11 @@ from ros_harness import (  # noqa: E402
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
 
 import msg_tools  # noqa: E402
 from tensegrity_stiffness import parameters  # noqa: E402
 from tensegrity_stiffness.spine_processing import spine_outputs  # noqa: E402
-from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_spine.yaml'
 #: Seconds between the node being reachable and the start of the stream (the worker's warm-up).

@@ -41,10 +41,10 @@ from ros_harness import (  # noqa: E402
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from tensegrity_stiffness.srv import SolveEquilibrium  # noqa: E402
 
 import msg_tools  # noqa: E402
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
-from tensegrity_stiffness.srv import SolveEquilibrium  # noqa: E402
 
 HARD_WRENCH = np.r_[50.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 

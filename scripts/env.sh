@@ -1,7 +1,9 @@
 # shellcheck shell=bash
 # Source this file (after `bash scripts/setup_env.sh`) to use the built workspace:
 #   source scripts/env.sh
-# It activates .venv (ROS 2 Jazzy wheels), sources the colcon overlay install/setup.bash, and sets
+# It activates .venv (ROS 2 Jazzy wheels), sources the colcon overlay install/setup.bash (which puts
+# the executables' folder install/tensegrity_stiffness/bin, with `tensegrity-stiffness`, on PATH,
+# and the package on PYTHONPATH, LD_LIBRARY_PATH and AMENT_PREFIX_PATH), and sets
 #   AMENT_PREFIX_PATH             install/<pkg> prefixes (from setup.bash) + $VIRTUAL_ENV (the wheels'
 #                                 ament prefix; nothing else sets it for the wheels)
 #   ROS_AUTOMATIC_DISCOVERY_RANGE LOCALHOST (DDS discovery on loopback only; override with

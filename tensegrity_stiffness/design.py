@@ -52,8 +52,8 @@ HiGHS. :func:`rest_length_sensitivity` is ``dK_c/dl0_j = M_j dt_j/dl0_j`` and
 have ``A = (t/l)(I - u u^T)``, and ``dt/dl0 = 0`` for Hooke, ``-k m / lmax^2`` for the paper law).
 
 The service helpers :func:`design_request_from_service` and :func:`design_response_fields` map the
-fields of ``srv/DesignRestLengths.srv`` (type ``tensegrity_stiffness/srv/DesignRestLengths``) to and from this module
-(plain Python and numpy values, no rclpy).
+fields of ``srv/DesignRestLengths.srv`` (type ``tensegrity_stiffness/srv/DesignRestLengths``) to
+and from this module (plain Python and numpy values, no rclpy).
 """
 
 from __future__ import annotations

@@ -489,13 +489,13 @@ class NodeFuzzer:
         import fuzz_inputs
         from geometry_msgs.msg import PoseStamped, WrenchStamped
         from std_msgs.msg import Float64MultiArray
-
-        import msg_tools
         from tensegrity_stiffness.srv import (
             PlanarForwardKinematics,
             PlanarInverseKinematics,
             SolveEquilibrium,
         )
+
+        import msg_tools
 
         self.fi = fuzz_inputs
         self.ros, self.proc, self.base = ros, proc, base

@@ -18,6 +18,12 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped  # noqa: E402
 from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
 from ros_harness import LATCHED, REPO, NodeProcess, RosClient, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from tensegrity_stiffness.srv import (  # noqa: E402
+    DesignRestLengths,
+    PlanarForwardKinematics,
+    PlanarInverseKinematics,
+    SolveEquilibrium,
+)
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 import msg_tools  # noqa: E402
@@ -27,12 +33,6 @@ from tensegrity_stiffness.interpretation import interpret_stiffness  # noqa: E40
 from tensegrity_stiffness.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.planar import PlanarMechanism  # noqa: E402
 from tensegrity_stiffness.screw import exp_se3, log_se3  # noqa: E402
-from tensegrity_stiffness.srv import (  # noqa: E402
-    DesignRestLengths,
-    PlanarForwardKinematics,
-    PlanarInverseKinematics,
-    SolveEquilibrium,
-)
 
 CONFIG = REPO / 'config' / 'default_joint.yaml'
 QUIET_S = 0.4  # how long "nothing is published" is watched after a bad input

@@ -22,7 +22,6 @@ from ros_harness import (  # noqa: E402
     process_alive,
     unique_namespace,
 )
-
 from tensegrity_stiffness.srv import SolveEquilibrium  # noqa: E402
 
 pytestmark = pytest.mark.ros

@@ -201,3 +201,14 @@ def test_launch_file_compiles_and_names_the_installed_executable_and_config(
     assert 'generate_launch_description' in functions
     for argument in ('namespace', 'params_file'):
         assert f"DeclareLaunchArgument('{argument}'" in source
+
+
+def test_command_line_on_path_after_sourcing(prefix: Path) -> None:
+    """``source scripts/env.sh`` (and a workspace's ``install/setup.bash``) put
+    ``tensegrity-stiffness`` on PATH: colcon adds the package's ``bin/``."""
+    import shutil
+
+    found = shutil.which('tensegrity-stiffness')
+    if found is None:
+        _unavailable('tensegrity-stiffness not on PATH')
+    assert Path(found).parent == prefix / 'bin', found

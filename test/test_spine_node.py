@@ -30,6 +30,7 @@ from ros_harness import (  # noqa: E402
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
 from visualization_msgs.msg import MarkerArray  # noqa: E402
 
 import msg_tools  # noqa: E402
@@ -50,7 +51,6 @@ from tensegrity_stiffness.spine_processing import (  # noqa: E402
     screws_input,
     spine_outputs,
 )
-from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
 
 CONFIG = REPO / 'config' / 'default_spine.yaml'
 EXECUTABLE = 'spine_node'
