@@ -120,3 +120,19 @@ def test_table_rows_have_the_header_s_cells(page: Path):
             header = _cells(line)
             continue
         assert _cells(line) == header, f'{page.name}:{number}: {line[:80]}'
+
+
+LIBRARY_EXAMPLES = [(page, i, code) for page in PAGES
+                    for i, code in enumerate(re.findall(r'```python\n(.*?)```',
+                                                        page.read_text(encoding='utf-8'), re.S))
+                    if 'rclpy' not in code]
+
+
+@pytest.mark.parametrize('page, index, code', LIBRARY_EXAMPLES,
+                         ids=[f'{p.name}-{i}' for p, i, _ in LIBRARY_EXAMPLES])
+def test_library_examples_run(page: Path, index: int, code: str, monkeypatch, capsys):
+    """Every Python example of the docs that needs no ROS graph runs as printed (from the
+    repository root, as the examples' relative config paths assume)."""
+    monkeypatch.chdir(REPO)
+    exec(compile(code, f'{page.name} example {index}', 'exec'), {})
+    capsys.readouterr()
