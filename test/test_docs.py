@@ -18,10 +18,12 @@ SKIPPED_DIRS = {'.git', '.venv', 'build', 'install', 'log', '__pycache__', '.pyt
                 '.ruff_cache', 'figures'}
 TEXT_SUFFIXES = {'.py', '.md', '.sh', '.txt', '.yaml', '.yml', '.xml', '.cfg', '.toml', '.cpp',
                  '.hpp', '.h', '.srv', '.msg', '.in', ''}
-#: Paths of the machine this project was written on, outside the repository (built from pieces
-#: so that this file does not match itself).
+#: Paths of the machine this project was written on, outside the repository, and the files
+#: there that docs/errata.md and docs/install.md replace (built from pieces so that this file
+#: does not match itself).
 OUTSIDE = [re.compile(p) for p in ('/' + 'work/', r'\.\./' + 'shared', 'shared/' + 'papers',
-                                   'shared/' + 'ros2-from-pypi', 'shared/' + 'STYLE')]
+                                   'shared/' + 'ros2-from-pypi', 'shared/' + 'STYLE',
+                                   r'\bERRATA' + r'\.md', r'\bNOTES' + r'\.md')]
 LINK = re.compile(r'!?\[[^\]]*\]\(([^)\s]+)\)')
 FENCE = re.compile(r'^```.*?^```', re.S | re.M)
 
