@@ -1,5 +1,5 @@
-# Workaround for the ROS 2 PyPI wheels (shared notes of the project): their exported cmake targets
-# list include directories of the machine that built them (for example
+# Workaround for the ROS 2 PyPI wheels (docs/install.md, "The ROS 2 wheels from PyPI"): their
+# exported cmake targets list include directories of the machine that built them (for example
 # /opt/python/cp311-cp311/include/python3.11), which makes cmake's generate step fail. Drop every
 # INTERFACE_INCLUDE_DIRECTORIES entry of an imported target that does not exist here; generator
 # expressions are kept untouched. On a stock ROS install every entry exists, so this is a no-op.

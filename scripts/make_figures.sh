@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerate the README figures docs/figures/*.png with the tensegrity-stiffness CLI (one command):
+# Regenerate the figures docs/figures/*.png (shown in docs/figures.md) with the tensegrity-stiffness CLI (one command):
 #   bash scripts/make_figures.sh [extra options of `tensegrity-stiffness figures`, e.g. --scale 1.5]
 # Runs scripts/setup_env.sh (idempotent; installs the pinned matplotlib), sources scripts/env.sh,
 # then `python -m tensegrity_stiffness.cli figures --out docs/figures`. The PNGs are deterministic

@@ -1,5 +1,5 @@
 // Compiled kernel of the six-DOF tensegrity joint (Monke & Vikas, eqs. 6-11 with the corrections
-// of ERRATA.md): for each screw xi = [omega; v], T = exp(hat(xi)) and the SE(3) left Jacobian J
+// of docs/errata.md): for each screw xi = [omega; v], T = exp(hat(xi)) and the SE(3) left Jacobian J
 // (eqs. 3, 4, 14-18), the string vectors s_j = p1_j - T p2_j (eq. 7), lengths, tensions (eq. 8),
 // the wrench F = sum [f_j; p1_j x f_j] (eq. 9), K = dF/dxi (eq. 10) and K_c = -dF/d[dv; dw].
 //

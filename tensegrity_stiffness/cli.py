@@ -15,7 +15,7 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
   (reachable diagonal of K_c along a screw sweep)
 * ``chain``        a spine of joints: tip pose and exact tip stiffness at screws, or at the chain
   equilibrium under a tip wrench and link weights (``plot spine`` draws it)
-* ``figures``      every figure of the README into a folder (``docs/figures``)
+* ``figures``      every figure of docs/figures.md into a folder (``docs/figures``)
 * ``bag``          what the node would publish, for a whole rosbag2 recording (needs rosbags)
 
 Numbers accept arithmetic with ``pi`` (``pi/10``, ``-3*pi/4``, ``-1e-3``). ``--json`` prints
@@ -72,8 +72,8 @@ MAX_EXPRESSION_LENGTH = 100
 KC_COLUMN_NAMES = TWIST_NAMES
 #: Keys of the planar mechanism (the node's ``planar.*`` parameters without the prefix).
 PLANAR_KEYS = tuple(spec.name[len('planar.'):] for spec in parameters.PLANAR_PARAMETERS)
-#: Screw of the README's joint figure: the default joint's unloaded equilibrium bent by 0.4 rad
-#: about the x axis of {1} (two strings go slack).
+#: Screw of the joint figure (docs/figures.md): the default joint's unloaded equilibrium bent by
+#: 0.4 rad about the x axis of {1} (two strings go slack).
 README_JOINT_SCREW = (2.3963, 0.4857, -2.3963, 0.0198, -0.0033, 0.0161)
 #: PNG file of each figure (``plot`` default output name and ``figures`` file name).
 FIGURE_FILES = {
@@ -313,7 +313,7 @@ def _screw(args: argparse.Namespace, model: JointModel) -> FloatArray:
 
 def joint_report(model: JointModel, state: JointState, rest: FloatArray,
                  config: Path | str) -> dict[str, Any]:
-    """Everything ``joint`` prints, as a JSON-ready dict (orderings as in the README)."""
+    """Everything ``joint`` prints, as a JSON-ready dict (orderings as in docs/conventions.md)."""
     interp = interpret_stiffness(state.stiffness)
     T = state.transform
     strings = [
@@ -745,7 +745,7 @@ def _cmd_bag(args: argparse.Namespace) -> int:
 
 
 # ------------------------------------------------------------------------------ chains
-#: Tip wrench of the README's spine figure (N, N m in the base frame): a sideways push.
+#: Tip wrench of the spine figure (docs/figures.md) (N, N m in the base frame): a sideways push.
 README_SPINE_TIP_WRENCH = (0.1, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
@@ -1113,7 +1113,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_json(p)
     p.set_defaults(handler=_cmd_chain)
 
-    p = sub.add_parser('figures', help="regenerate every README figure into a folder",
+    p = sub.add_parser('figures', help="regenerate every figure of docs/figures.md into a folder",
                        description='Write every figure at its default parameters (the '
                                    "papers' sets) into a folder (needs matplotlib).")
     p.add_argument('--out', default='docs/figures', metavar='DIR',

@@ -2,7 +2,7 @@
 
 Solves ``F(xi) + W = 0`` directly: ``F`` is the string wrench on link 2 and ``W`` an external
 wrench on link 2, both expressed in {1} about its origin, ordered [force; moment]. (The paper
-minimises energy; with a constant wrench that is not equivalent on SE(3), see ``ERRATA.md``.)
+minimises energy; with a constant wrench that is not equivalent on SE(3), see ``docs/errata.md``.)
 
 Method: damped Newton with the analytical ``K = dF/dxi`` as Jacobian and a backtracking line
 search on ``|F + W|``, steps clipped to a trust radius; if that stalls, scipy's trust-region

@@ -1,6 +1,6 @@
 """Six-DOF tensegrity joint: string forces, wrench and analytical stiffness (Monke & Vikas).
 
-Model (eqs. 6-11, with the corrections of ``ERRATA.md``)
+Model (eqs. 6-11, with the corrections of ``docs/errata.md``)
 ---------------------------------------------------------
 Two rigid links carry nodes ``p1`` (in {1}) and ``p2`` (in {2}). String j joins link-1 node
 ``a_j`` to link-2 node ``b_j``; with ``T = exp(hat(xi))`` (maps {2} into {1}):

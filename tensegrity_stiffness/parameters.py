@@ -97,8 +97,8 @@ def _is_number(value: Any) -> bool:
 
 
 # ---------------------------------------------------------------------------------- the table
-#: The default joint: the sub-vertebra of the authors' published code (README, "The default
-#: joint"); nodes A, B, C, D, the same set on both links.
+#: The default joint: the sub-vertebra of the authors' published code (docs/conventions.md, "The
+#: default joint"); nodes A, B, C, D, the same set on both links.
 _DEFAULT_NODES = [-0.030162, 0.0, 0.0, -0.01524, -0.026035, 0.0,
                   0.01524, -0.026035, 0.0, 0.030162, 0.0, 0.0]
 #: Its unloaded equilibrium (solve_equilibrium, |F| < 1e-13): a rotation by pi about
@@ -356,6 +356,36 @@ def spine_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, ...]:
 
 #: The parameters of ``spine_node`` with the default ``chain.n_joints``.
 SPINE_NODE_PARAMETERS: tuple[ParameterSpec, ...] = spine_node_parameters()
+
+
+# ------------------------------------------------------------- the documented tables (registry)
+@dataclass(frozen=True)
+class NodeTable:
+    """One node's parameter table as ``docs/parameters.md`` shows it: the ``node`` (executable)
+    name, its ``parameters`` in declaration order, the packaged ``config`` file that agrees with
+    their defaults (empty: none) and a one-line ``summary``."""
+
+    node: str
+    parameters: tuple[ParameterSpec, ...]
+    config: str = ''
+    summary: str = ''
+
+
+def node_tables() -> tuple[NodeTable, ...]:
+    """Every node's parameter table, in the order of ``docs/parameters.md``: the one registry
+    the page is generated from (:mod:`tensegrity_stiffness.parameter_docs`). A node's table is
+    listed here once; after a change run ``python -m tensegrity_stiffness.parameter_docs
+    --write`` (``test/test_parameter_docs.py`` fails while the committed page differs). A
+    function, so that tables defined further down this module can be listed too."""
+    return (
+        NodeTable('stiffness_node', STIFFNESS_NODE_PARAMETERS, 'config/default_joint.yaml',
+                  'one joint: wrench, K, K_c per screw or pose; equilibrium, design and planar '
+                  'services'),
+        NodeTable('spine_node', SPINE_NODE_PARAMETERS, 'config/default_spine.yaml',
+                  'a spine of chain.n_joints joints (the table for the default N = 5): '
+                  'per-joint outputs, tip pose, tip wrench and tip stiffness; chain '
+                  'equilibrium service'),
+    )
 
 
 def chain_document(values: Mapping[str, Any]) -> dict[str, Any]:

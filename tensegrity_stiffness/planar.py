@@ -1,6 +1,6 @@
 """Planar tensegrity parallel mechanism (Ji, Li & Lin): kinematics, singularities, stiffness.
 
-Model (eqs. 1-7, with the corrections of ``ERRATA.md``)
+Model (eqs. 1-7, with the corrections of ``docs/errata.md``)
 --------------------------------------------------------
 Base triangle ``C1 C2 C3`` (side ``2L``, ``C1`` at the origin, ``C2 = (-L, -sqrt3 L)``,
 ``C3 = (L, -sqrt3 L)``), mobile triangle ``D1 D2 D3`` (side ``L``). The prismatic actuator

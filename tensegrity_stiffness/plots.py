@@ -446,7 +446,8 @@ def plot_theta2_curves(mech: PlanarMechanism, path: str | Path, *,
                        height: int = DEFAULT_SIZES['theta2'][1]) -> Path:
     """Ji, Li & Lin Figs. 4-6: U, tau = dU/dtheta2 and K = d2U/dtheta2^2 against theta2 (rad)
     with the actuators locked at (L3, theta1) (the captions' "theta2 = pi/10" is theta1, see
-    ERRATA). Vertical lines: theta2_m (stable equilibrium) and theta2_0 (K = 0) in range."""
+    docs/errata.md). Vertical lines: theta2_m (stable equilibrium) and theta2_0 (K = 0) in
+    range."""
     path = _output(path)
     samples = _check_count('samples', samples)
     if not (math.isfinite(theta2_min) and math.isfinite(theta2_max) and theta2_max > theta2_min):

@@ -355,7 +355,7 @@ def dexp_se3(xi: ArrayLike) -> FloatArray:
     """Closed-form ``dT/dxi`` (eqs. 12-18): ``(6,) -> (4, 4, 6)``, ``[:, :, i] = dT/dxi_i``.
 
     Rotation block: ``dR/d omega_i = hat(G e_i) R``, equal to Gallego and Yezzi's eq. (13) read
-    as a sum of three terms (see ERRATA; checked in the tests). Translation column:
+    as a sum of three terms (docs/errata.md; checked in the tests). Translation column:
     ``d(G v)/d omega_i = D e_i`` (eqs. 15-17), ``dT/dv_i = [0, G e_i]`` (eq. 18). Batched input
     ``(N, 6)`` gives ``(N, 4, 4, 6)``. Exact at ``theta = 0`` (series branch).
     """

@@ -36,7 +36,7 @@ from tensegrity_stiffness.screw import exp_se3
 
 REPO = Path(__file__).resolve().parents[1]
 CONFIG = REPO / 'config' / 'default_joint.yaml'
-#: A screw near the unloaded equilibrium with two slack strings (the README's joint figure).
+#: A screw near the unloaded equilibrium with two slack strings (docs/figures.md, the joint).
 SCREW = np.array(cli.README_JOINT_SCREW)
 #: Small PNG size used by the plot tests (pixels).
 SMALL = (240, 180)
@@ -386,11 +386,11 @@ def test_missing_matplotlib_is_exit_3_with_clear_message(capsys, tmp_path, monke
 
 
 def test_committed_figures_and_docs():
-    """README.md shows every committed figure (made by `bash scripts/make_figures.sh`)."""
-    doc = (REPO / 'README.md').read_text(encoding='utf-8')
+    """docs/figures.md shows every committed figure (made by `bash scripts/make_figures.sh`)."""
+    doc = (REPO / 'docs' / 'figures.md').read_text(encoding='utf-8')
     for figure, name in cli.FIGURE_FILES.items():
         path = REPO / 'docs' / 'figures' / name
-        assert f'](docs/figures/{name})' in doc, name
+        assert f'](figures/{name})' in doc, name
         assert png_header_size(path) == plots.DEFAULT_SIZES[figure], name
         assert path.stat().st_size < MAX_FIGURE_BYTES, name
     assert 'bash scripts/make_figures.sh' in doc

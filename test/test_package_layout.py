@@ -171,7 +171,7 @@ def test_solve_equilibrium_defaults(srv: Any) -> None:
 
 def test_interface_loaded_once(srv: Any) -> None:
     """The interfaces live in install/ only, never also in the venv (two copies of the C
-    libraries would load in random order, see NOTES.md)."""
+    libraries would load in random order: docs/install.md, "The ROS 2 wheels from PyPI")."""
     module_file = Path(srv.__file__).resolve()
     venv = Path(sys.prefix).resolve()
     if ENV_REQUIRED:

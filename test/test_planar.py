@@ -1,6 +1,6 @@
 """Planar mechanism: geometry, energy, forward kinematics, Jacobian and stiffness (Ji, Li & Lin).
 
-Printed equations that are wrong (``ERRATA.md``, second paper) are kept here as ``_printed_*``
+Printed equations that are wrong (``docs/errata.md``, second paper) are kept here as ``_printed_*``
 helpers; each has a test showing the printed form fails and the corrected form passes.
 """
 
@@ -150,7 +150,8 @@ def test_forward_returns_stable_equilibrium(mech):
 
 
 def test_paper_root_in_0_pi_is_stable_only_where_eta1_negative(mech):
-    """ERRATA: the root of eq. (5) in [0, pi] is the energy minimum only where eta1 < 0."""
+    """Errata (docs/errata.md): the root of eq. (5) in [0, pi] is the energy minimum only where
+    eta1 < 0."""
     L3, t1, _ = random_states(2000, seed=7)
     e1, e2 = mech.eta(L3, t1)
     paper_root = np.mod(np.arctan2(e1, e2), math.pi)  # arctan of eq. (5) in [0, pi)

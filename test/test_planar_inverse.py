@@ -1,7 +1,7 @@
 """Planar mechanism: inverse kinematics, its cross-check with the paper's closed form (eqs. 9-16,
 Appendix A) and the stiffness as a function of (x, y) (eqs. 48-52).
 
-Printed coefficients found wrong (``ERRATA.md``): F3 of eq. (12) (a sqrt3 is missing), phi3 of
+Printed coefficients found wrong (``docs/errata.md``): F3 of eq. (12) (a sqrt3 is missing), phi3 of
 (C.3) (brackets lost: it is a product of two factors), eq. (49) (overall sign and the sign of the
 y term). Each is kept below as a ``printed`` variant with a test that shows it fails.
 """
@@ -261,8 +261,8 @@ def test_eq11_with_printed_F3_fails_at_true_solutions(mech):
 
 @pytest.mark.parametrize('K1, K2', [(200.0, 100.0), (100.0, 10.0), (1.0, 3.0)])
 def test_paper_closed_form_gives_the_same_solutions(K1, K2):
-    """Eqs. (14)-(16) with the corrected coefficients, filtered as ERRATA says (unstable and
-    negative-L3 candidates dropped), give the same set as :meth:`inverse`."""
+    """Eqs. (14)-(16) with the corrected coefficients, filtered as docs/errata.md says (unstable
+    and negative-L3 candidates dropped), give the same set as :meth:`inverse`."""
     m = PlanarMechanism(L=1.0, K1=K1, K2=K2)
     rng = np.random.default_rng(26)
     compared = 0

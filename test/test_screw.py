@@ -94,8 +94,8 @@ def test_coefficients_match_closed_forms_and_series_at_the_threshold():
 
 
 def test_closed_form_c_loses_all_digits_at_small_angles_the_series_does_not():
-    # ERRATA: c = (t - sin t) / t^3 in closed form loses its digits at small t, and the
-    # derivative coefficient c1 = (3 sin t - t cos t - 2 t) / t^5 far earlier.
+    # Errata (docs/errata.md): c = (t - sin t) / t^3 in closed form loses its digits at small t,
+    # and the derivative coefficient c1 = (3 sin t - t cos t - 2 t) / t^5 far earlier.
     t = 1e-6
     closed = (t - math.sin(t)) / t**3
     series = rotation_coefficients(np.array([t]))[2][0]
@@ -158,7 +158,7 @@ def test_dexp_exact_at_special_angles(theta):
 
 
 def test_dexp_at_zero_is_not_zero():
-    # ERRATA: the authors' code sets dT/domega = 0 near theta = 0; the truth is
+    # Errata (docs/errata.md): the authors' code sets dT/domega = 0 near theta = 0; the truth is
     # dR/domega_i = hat(e_i) and dp/domega_i = (e_i x v) / 2.
     v = np.array([0.3, -0.1, 0.2])
     d = dexp_se3(np.r_[0, 0, 0, v])

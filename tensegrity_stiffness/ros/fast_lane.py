@@ -13,7 +13,7 @@ Subscriptions join the lane through :meth:`FastLane.create_subscription`: they b
 callback group that no executor may run (:class:`LaneCallbackGroup`), so the executor never
 waits on them. ``rclpy.experimental.EventsExecutor`` was measured as the alternative and fails
 in this rclpy build: it raises "Guard conditions not supported" for a node with a guard
-condition, and without one its spin delivered neither timers nor messages (README, figures).
+condition, and without one its spin delivered neither timers nor messages (docs/nodes.md, QoS).
 """
 
 from __future__ import annotations

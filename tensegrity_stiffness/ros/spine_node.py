@@ -2,7 +2,7 @@
 
 A spine is a :class:`~tensegrity_stiffness.chain.JointChain` (conventions, frames and loads in
 :mod:`tensegrity_stiffness.chain`; parameters in :mod:`tensegrity_stiffness.parameters`; topics,
-services and QoS in README.md). Thin layer: validate
+services and QoS in docs/nodes.md). Thin layer: validate
 (:mod:`tensegrity_stiffness.spine_processing`), convert (:mod:`msg_tools`), call the library,
 publish all of an input's outputs or none.
 

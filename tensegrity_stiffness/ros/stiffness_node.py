@@ -2,7 +2,7 @@
 
 Thin layer: validate, convert with :mod:`msg_tools`, call the library
 (:mod:`tensegrity_stiffness.processing`), publish. Topics, services, parameters and QoS are
-documented in README.md; the conventions (frames, orderings, signs) in
+documented in docs/nodes.md; the conventions (frames, orderings, signs) in
 :mod:`tensegrity_stiffness.joint`; the parameters in :mod:`tensegrity_stiffness.parameters`.
 
 Built on :class:`.StreamingNode` (:mod:`.node_base`: concurrency, the settings swap, the
