@@ -477,7 +477,8 @@ class _Simulation:
         self._loaded = bool(np.any(W))
         self.data.qfrc_applied[:] = 0.0
         self.data.qfrc_applied[self._load_dof:self._load_dof + 3] = W[:3]
-        self._forward()
+        self._apply_load()  # at the current pose (no other quantity depends on the load)
+        self._acceleration_stale = True
 
     def _apply_load(self) -> None:
         """The load on the last link as its free joint's generalised force (module docstring):
@@ -623,6 +624,11 @@ class JointSimulation:
     def time(self) -> float:
         """Simulated time (s)."""
         return self._sim.time
+
+    @property
+    def gravity(self) -> FloatArray:
+        """(3,) m/s^2 in {1}, as simulated (compensated on link 2; the IMU senses it)."""
+        return self._sim._gravity.copy()
 
     @property
     def rest_lengths(self) -> FloatArray:
