@@ -14,6 +14,7 @@ import os
 import re
 import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -265,3 +266,29 @@ def test_run_twin_prints_summary_lines_and_stops_cleanly() -> None:
     assert live, out.stdout
     assert re.search(r'input +\d+ Hz', live[-1]) and 'slack 0/12' in live[-1]
     assert 'stiffness_node exit 0, sim_node exit 0' in out.stdout
+
+
+@pytest.mark.parametrize(('launch_file', 'partner', 'config'), [
+    ('twin.launch.py', 'stiffness_node', 'default_joint.yaml'),
+    ('twin_spine.launch.py', 'spine_node', 'default_spine.yaml')])
+def test_twin_launch_files_name_the_installed_executables(launch_file, partner, config) -> None:
+    """``launch`` is not on PyPI: the file is compiled and read, not run (as
+    test_package_layout does for the node launch files)."""
+    import ast
+
+    from ament_index_python.packages import get_package_prefix
+
+    prefix = Path(get_package_prefix('tensegrity_stiffness'))
+    installed = prefix / 'share' / 'tensegrity_stiffness' / 'launch' / launch_file
+    tree = ast.parse(installed.read_text())
+    compile(tree, str(installed), 'exec')
+    constants = {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
+                 if isinstance(node, ast.Assign) and isinstance(node.value, (ast.Constant,
+                                                                            ast.Tuple))}
+    assert constants['EXECUTABLE'] == 'sim_node' and constants['PARTNER'] == partner
+    for exe in ('sim_node', partner):
+        assert (prefix / 'lib' / 'tensegrity_stiffness' / exe).is_file()
+    assert constants['CONFIG'] == config
+    assert (prefix / 'share' / 'tensegrity_stiffness' / 'config' / config).is_file()
+    topic = 'poses' if partner == 'spine_node' else 'pose'
+    assert constants['REMAPPING'] == (f'~/{topic}', f'sim_node/{topic}')

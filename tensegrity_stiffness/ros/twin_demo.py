@@ -200,8 +200,8 @@ def main(argv: list[str] | None = None) -> int:
         n_strings = JointModel.from_yaml(params).n_strings
 
     stiffness = 'spine_node' if args.spine else 'stiffness_node'
-    wired = (f'{NAMESPACE}/spine_node/poses:={NAMESPACE}/sim_node/poses' if args.spine else
-             f'{NAMESPACE}/stiffness_node/pose:={NAMESPACE}/sim_node/pose')
+    # As launch/twin*.launch.py: the partner's input is the twin's truth (same namespace).
+    wired = '~/poses:=sim_node/poses' if args.spine else '~/pose:=sim_node/pose'
     sim_args = [_executable('sim_node'), '--ros-args', '--params-file', str(params),
                 '-r', f'__ns:={NAMESPACE}', '-p', f'sim.spine:={str(args.spine).lower()}',
                 '-p', f'sim.rate:={args.rate}', '-p', f'load.swing_amplitude:={amplitude}',
