@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tensegrity_stiffness import config
+from tensegrity_stiffness import cli, config
 from tensegrity_stiffness.chain import JointChain, solve_chain_equilibrium
 from tensegrity_stiffness.equilibrium import solve_equilibrium
 from tensegrity_stiffness.joint import JointModel
@@ -345,3 +345,15 @@ def test_spine_falls_away_where_the_library_says_unstable() -> None:
         departures[mass] = departure
     assert departures[0.02] >= 0.05      # fell away (0.05 rad within 8 s)
     assert departures[0.004] < 1e-5      # stayed for the 8 s
+
+
+def test_export_mjcf_command(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    out = tmp_path / 'joint.xml'
+    assert cli.main(['export-mjcf', '--out', str(out)]) == 0
+    m = mujoco.MjModel.from_xml_string(out.read_text())
+    assert m.ntendon == 12 and m.nbody == 2 and np.all(m.tendon_limited)
+    assert cli.main(['export-mjcf', '--spine', '--max-length', 'ignore']) == 0
+    spine = mujoco.MjModel.from_xml_string(capsys.readouterr().out)
+    assert spine.ntendon == 60 and spine.nbody == 6 and not np.any(spine.tendon_limited)
+    assert cli.main(['export-mjcf', '--config', str(tmp_path / 'missing.yaml')]) == 2
+    assert 'missing.yaml' in capsys.readouterr().err
