@@ -850,6 +850,13 @@ class ChainSimulation:
         """(N, 4, 4) pose of each {2}_i in the base."""
         return self._sim._link_transforms()
 
+    def joint_transforms(self) -> FloatArray:
+        """(N, 4, 4) ``T_i``: each {2}_i in {1}_i (``exp(hat(xi_i))`` of :meth:`screws`, without
+        the log map)."""
+        L = self._sim._link_transforms()
+        P = self._sim._joint_frames(L)
+        return np.linalg.solve(P, L)
+
     def tip_pose(self) -> FloatArray:
         """(4, 4) pose of the tool frame in the base."""
         return self.link_poses()[-1] @ self.chain.tool

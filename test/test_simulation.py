@@ -293,6 +293,7 @@ def test_spine_string_wrenches_and_tip_load_equilibrium(chain: JointChain) -> No
     np.testing.assert_allclose(sim.string_lengths(), state.lengths, atol=1e-15)
     np.testing.assert_allclose(sim.link_poses(), state.link_transforms, atol=1e-15)
     np.testing.assert_allclose(sim.screws(), x, atol=1e-12)
+    np.testing.assert_allclose(sim.joint_transforms(), state.transforms, atol=1e-14)
     W = np.array([0.04, 0.0, -0.02, 0.0, 5e-4, 0.0])
     res = solve_chain_equilibrium(chain, W)
     assert res.success and res.stable

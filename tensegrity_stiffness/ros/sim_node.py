@@ -47,7 +47,6 @@ from tensegrity_stiffness.ros.topics import (
     input_qos,
     output_qos,
 )
-from tensegrity_stiffness.screw import exp_se3
 from tensegrity_stiffness.simulation import ChainSimulation, JointSimulation, SensorNoise
 from tensegrity_stiffness.spine_processing import rest_lengths_input
 
@@ -325,7 +324,7 @@ class SimNode(Node):
                 msg = PoseArray()
                 msg.header.stamp = stamp
                 msg.header.frame_id = settings.base_frame
-                msg.poses = [msg_tools.transform_to_pose(T) for T in exp_se3(sim.screws())]
+                msg.poses = [msg_tools.transform_to_pose(T) for T in sim.joint_transforms()]
             else:
                 msg = PoseStamped()
                 msg.header.stamp = stamp
