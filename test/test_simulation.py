@@ -157,9 +157,9 @@ def test_string_wrench_equals_the_library_at_200_configurations(model: JointMode
 
 
 def test_settled_equilibria_equal_solve_equilibrium_under_50_loads(model: JointModel) -> None:
-    """50 seeded loads: from a start 1e-4 off the library's solution, the twin settles
-    (net force and moment below 1e-10, at rest) within 1e-8 m and 1e-7 rad of it; three of them
-    from the unloaded equilibrium, the whole way."""
+    """50 seeded loads (every fifth on a model with drawn k and rest lengths): from the
+    unloaded equilibrium the twin settles (net force and moment below 1e-10, at rest; about
+    0.7 s simulated) within 1e-8 m and 1e-7 rad of the library's solution."""
     rng = np.random.default_rng(50)
     sim = JointSimulation(model)
     true_model = drawn_model(model, rng)
@@ -169,8 +169,7 @@ def test_settled_equilibria_equal_solve_equilibrium_under_50_loads(model: JointM
         W = np.concatenate([rng.uniform(-0.08, 0.08, 3), rng.uniform(-1.5e-3, 1.5e-3, 3)])
         res = solve_equilibrium(m, W)
         assert res.success and res.stable, res.message
-        start = m.initial_screw if trial < 3 else res.screw + rng.normal(0, 1e-4, 6)
-        s.set_screw(start)
+        s.set_screw(m.initial_screw)  # from the unloaded equilibrium, the whole way
         s.apply_wrench(W)
         assert s.settle(tolerance=1e-10, max_time=10.0), (trial, s.net_force())
         dp, dr = pose_errors(s.pose(), res.state.transform)

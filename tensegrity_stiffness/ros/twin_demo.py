@@ -181,6 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--swing-period', type=float, default=None,
                         help='period of the swinging load, s (default 10)')
     parser.add_argument('--rate', type=float, default=1000.0, help='simulation rate, Hz')
+    parser.add_argument('--publish-every', type=int, default=1, metavar='N',
+                        help='the twin publishes every N-th step (default 1)')
     args = parser.parse_args(argv)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         parser.error(f'--duration must be a positive number of seconds, got {args.duration}')
@@ -205,7 +207,8 @@ def main(argv: list[str] | None = None) -> int:
     sim_args = [_executable('sim_node'), '--ros-args', '--params-file', str(params),
                 '-r', f'__ns:={NAMESPACE}', '-p', f'sim.spine:={str(args.spine).lower()}',
                 '-p', f'sim.rate:={args.rate}', '-p', f'load.swing_amplitude:={amplitude}',
-                '-p', f'load.swing_period:={period}']
+                '-p', f'load.swing_period:={period}',
+                '-p', f'sim.publish_every:={args.publish_every}']
     node_args = [_executable(stiffness), '--ros-args', '--params-file', str(params),
                  '-r', f'__ns:={NAMESPACE}', '-r', wired]
     logs = Path(tempfile.mkdtemp(prefix='twin_demo_'))
