@@ -292,3 +292,19 @@ def test_twin_launch_files_name_the_installed_executables(launch_file, partner, 
     assert (prefix / 'share' / 'tensegrity_stiffness' / 'config' / config).is_file()
     topic = 'poses' if partner == 'spine_node' else 'pose'
     assert constants['REMAPPING'] == (f'~/{topic}', f'sim_node/{topic}')
+
+
+def test_imu_message_round_trip() -> None:
+    msg = msg_tools.imu_message('link', gyro_std=0.01, accelerometer_std=0.2)
+    msg_tools.write_imu(msg, [0.1, -0.2, 0.3], [0.0, 9.81, 0.5],
+                        msg_tools.stamp_from_seconds(1.5))
+    w, a = msg_tools.imu_to_arrays(msg)
+    np.testing.assert_array_equal(w, [0.1, -0.2, 0.3])
+    np.testing.assert_array_equal(a, [0.0, 9.81, 0.5])
+    assert msg.header.frame_id == 'link' and msg.header.stamp.sec == 1
+    assert msg.orientation_covariance[0] == -1.0
+    assert msg.angular_velocity_covariance[0] == pytest.approx(1e-4)
+    assert msg.linear_acceleration_covariance[8] == pytest.approx(0.04)
+    with pytest.raises(ValueError, match='specific_force'):
+        msg_tools.write_imu(msg, [0.0, 0.0, 0.0], [0.0, float('nan'), 0.0],
+                            msg_tools.stamp_from_seconds(0.0))
