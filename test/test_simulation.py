@@ -126,11 +126,15 @@ def test_bad_options_and_models_are_named(model: JointModel) -> None:
 
 def test_string_wrench_equals_the_library_at_200_configurations(model: JointModel) -> None:
     """Seeded configurations around the unloaded equilibrium (some far enough for slack
-    strings), half of them on models with drawn k and rest lengths: MuJoCo's tendon lengths,
-    tensions and string wrench equal the library's (1e-10 relative), and so does the wrench
-    taken from MuJoCo's own generalised spring forces."""
+    strings), on the default model, one with its own link-2 nodes and three with drawn k and
+    rest lengths: MuJoCo's tendon lengths, tensions and string wrench equal the library's
+    (1e-10 relative), and so does the wrench taken from MuJoCo's own generalised spring
+    forces."""
     rng = np.random.default_rng(21)
-    models = [model] + [drawn_model(model, rng) for _ in range(4)]
+    other_link2 = JointModel(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+                             link2_nodes=model.link2_nodes * 1.1, max_lengths=model.max_lengths,
+                             initial_screw=model.initial_screw)  # its own link-2 node set
+    models = [model, other_link2] + [drawn_model(model, rng) for _ in range(3)]
     sims = [JointSimulation(m, max_length='ignore') for m in models]
     slack_total = 0
     checked = 0
