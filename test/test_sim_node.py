@@ -195,10 +195,28 @@ def test_parameters_are_validated_and_diagnostics_count_missed_steps(joint_loop)
     spread = np.std(np.array([m.data for m in lengths]), axis=0)
     assert 3e-5 < spread.mean() < 3e-4  # the noise is on
     assert ros.set_parameter(loop['params'], 'noise.lengths', 0.0).successful
+    loop['diagnostics'].clear()  # a fresh one (the node has run for seconds by now)
     status = loop['diagnostics'].wait_until(
         lambda m: any(s.name.endswith('sim_node: twin') for s in m.status), timeout=5.0)
     values = {kv.key: kv.value for s in status.status for kv in s.values}
     assert int(values['steps']) > 1000 and 'missed steps' in values
+
+
+def test_a_model_change_rebuilds_the_twin(joint_loop) -> None:
+    """joint.stiffness changed at run time: the twin is rebuilt at its configuration with the
+    new model (and its configured rest lengths) and settles where the library says."""
+    loop = joint_loop
+    model = JointModel.from_yaml(JOINT_CONFIG)
+    k = (model.k * np.linspace(0.9, 1.1, model.n_strings)).tolist()
+    before = len(loop['screw'])
+    result = loop['ros'].set_parameter(loop['params'], 'joint.stiffness', k)
+    assert result.successful, result.reason
+    xi = wait_settled(loop['screw'], after=before + 5)
+    changed = JointModel(model.link1_nodes, model.connections, k, model.rest_lengths,
+                         max_lengths=model.max_lengths, initial_screw=model.initial_screw)
+    res = solve_equilibrium(changed, W_JOINT)
+    assert np.abs(xi - res.screw).max() < 1e-8
+    assert log_has(loop['sim'], r'parameters applied: \[.joint.stiffness.\]')
 
 
 def test_spine_twin_drives_spine_node() -> None:
