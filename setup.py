@@ -19,7 +19,7 @@ setup(
     data_files=[('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml'))],
     python_requires='>=3.10',
     install_requires=['numpy', 'scipy', 'PyYAML', 'rosbags'],
-    extras_require={'plots': ['matplotlib']},
+    extras_require={'plots': ['matplotlib'], 'simulation': ['mujoco']},
     zip_safe=False,
     maintainer='tensegrity_stiffness maintainers',
     maintainer_email='maintainers@tensegrity-stiffness.invalid',
