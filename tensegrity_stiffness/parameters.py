@@ -385,6 +385,9 @@ def node_tables() -> tuple[NodeTable, ...]:
                   'a spine of chain.n_joints joints (the table for the default N = 5): '
                   'per-joint outputs, tip pose, tip wrench and tip stiffness; chain '
                   'equilibrium service'),
+        NodeTable('sim_node', sim_node_parameters(), 'config/default_joint.yaml',
+                  'the MuJoCo twin of the joint (with sim.spine true and a spine config, of the '
+                  'spine): truth in the nodes\' input formats and simulated sensors'),
     )
 
 
