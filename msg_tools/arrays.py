@@ -7,7 +7,9 @@ Layout convention (``std_msgs/MultiArrayLayout``, row-major): for a matrix of sh
 The labels name the orderings, e.g. ``'rows: wrench [fx fy fz mx my mz]'``.
 
 Incoming arrays are validated before use: the element count is checked against ``max_length``
-before anything is converted, then against the expected length / shape, then for NaN and inf.
+before anything is converted, then against the expected length / shape, then for NaN and inf
+(:func:`multiarray_to_array` and ``DEFAULT_MAX_LENGTH`` live in
+:mod:`tensegrity_stiffness.messages`, which reads any message implementation; re-exported here).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from tensegrity_stiffness.layouts import (
     STIFFNESS_ROW_LABEL,
     WRENCH_LABEL,
 )
+from tensegrity_stiffness.messages import DEFAULT_MAX_LENGTH, multiarray_to_array
 from tensegrity_stiffness.validation import finite_array_of_shape
 
 __all__ = [
@@ -42,9 +45,6 @@ __all__ = [
     'set_multiarray_data',
     'vector_to_multiarray',
 ]
-
-#: Largest element count accepted from an incoming message unless the caller says otherwise.
-DEFAULT_MAX_LENGTH = 4096
 
 #: Labels of the orderings (wrench rows, screw / twist columns): tensegrity_stiffness.layouts.
 WRENCH_ROW_LABEL = STIFFNESS_ROW_LABEL
@@ -124,31 +124,6 @@ def set_multiarray_data(msg: Float64MultiArray, values: ArrayLike) -> Float64Mul
         raise ValueError(f'layout holds {expected} values, got {arr.size}')
     msg.data = payload(arr)
     return msg
-
-
-def multiarray_to_array(msg: Float64MultiArray, expected_length: int | None = None,
-                        max_length: int = DEFAULT_MAX_LENGTH) -> FloatArray:
-    """Validated flat copy of the payload of a Float64MultiArray, shape (n,).
-
-    ``layout.data_offset`` is honoured (elements before it are skipped). Checks, in order:
-    the payload length against ``max_length`` (before any conversion, so an oversized message
-    costs nothing), the data offset, the length against ``expected_length``, then NaN / inf.
-
-    Raises
-    ------
-    ValueError
-        ``'too many elements'``, ``'data_offset'``, ``'expected N values'`` or ``'NaN or inf'``.
-    """
-    n_total = len(msg.data)
-    if n_total > max_length:
-        raise ValueError(f'too many elements: {n_total} > max_length {max_length}')
-    offset = int(msg.layout.data_offset)
-    if offset > n_total:
-        raise ValueError(f'data_offset {offset} exceeds the {n_total} data elements')
-    n = n_total - offset
-    if expected_length is not None and n != expected_length:
-        raise ValueError(f'expected {expected_length} values, got {n}')
-    return finite_array_of_shape('array', np.array(msg.data, dtype=np.float64)[offset:], None)
 
 
 def multiarray_to_matrix(msg: Float64MultiArray,
