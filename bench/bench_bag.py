@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
 """Throughput of ``tensegrity-stiffness bag``, run by hand:
-``python3 bench/bench_bag.py [--n N] [--repeat R] [--baseline CHECKOUT]``.
+``python3 bench/bench_bag.py [--n N] [--repeat R] [--storage mcap|sqlite3] [--baseline CHECKOUT]``.
 
-Writes an mcap rosbag2 of N screws (default 100,000, 1 kHz log times, near the default joint's
-unloaded equilibrium) to a temporary folder, then measures side by side in one run:
+Writes a rosbag2 (default mcap) of N screws (default 100,000, 1 kHz log times, near the default
+joint's unloaded equilibrium) to a temporary folder, then measures side by side in one run:
 * end to end: :func:`tensegrity_stiffness.bag.process_bag` (read, decode and validate as the
   node does, batched evaluation, write five outputs per input), in inputs per second, best of
   R runs; with ``--baseline CHECKOUT`` (a checkout of another commit, e.g. a ``git worktree``)
@@ -58,6 +58,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--n', type=int, default=100_000, help='screws in the bag')
     parser.add_argument('--repeat', type=int, default=3, help='end-to-end runs of each')
+    parser.add_argument('--storage', choices=bag.STORAGES, default='mcap',
+                        help="the input's storage (the output's follows)")
     parser.add_argument('--baseline', type=Path, metavar='CHECKOUT',
                         help="another checkout whose bag.py runs side by side")
     args = parser.parse_args()
@@ -71,8 +73,8 @@ def main() -> None:
         src = Path(tmp) / 'in'
         start = time.perf_counter()
         write_bag(src, [In('screw', 1_000_000 * (i + 1), multiarray(xi))
-                        for i, xi in enumerate(screws)])
-        print(f'wrote {n} screws in {time.perf_counter() - start:.1f} s')
+                        for i, xi in enumerate(screws)], args.storage)
+        print(f'wrote {n} screws ({args.storage}) in {time.perf_counter() - start:.1f} s')
 
         runs: dict[str, list[float]] = {'this': [], 'baseline': []}
         modules = {'this': bag, 'baseline': baseline}
@@ -123,7 +125,8 @@ def main() -> None:
         templates = {name: bag._Template(typestore, output_layouts[name],
                                          settings.link1_frame) for name in bag.OUTPUT_NAMES}
         start = time.perf_counter()
-        with Writer(Path(tmp) / 'w', version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        with Writer(Path(tmp) / 'w', version=9,
+                    storage_plugin=StoragePlugin[args.storage.upper()]) as writer:
             conns = [writer.add_connection(f'/t/{name}', outputs_spec[name],
                                            typestore=typestore) for name in bag.OUTPUT_NAMES]
             for b, out in enumerate(outputs):
