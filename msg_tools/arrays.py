@@ -14,21 +14,23 @@ before anything is converted, then against the expected length / shape, then for
 
 from __future__ import annotations
 
-import array
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+from std_msgs.msg import Float64MultiArray
 
+from msg_tools.outputs import RCLPY_TYPES, payload
 from tensegrity_stiffness.layouts import (
     CARTESIAN_STIFFNESS_COL_LABEL,
     SCREW_LABEL,
     STIFFNESS_COL_LABEL,
     STIFFNESS_ROW_LABEL,
     WRENCH_LABEL,
+    matrix_dims,
+    vector_dims,
 )
-from tensegrity_stiffness.messages import DEFAULT_MAX_LENGTH, multiarray_to_array
+from tensegrity_stiffness.messages import DEFAULT_MAX_LENGTH, multiarray, multiarray_to_array
 from tensegrity_stiffness.validation import finite_array_of_shape
 
 __all__ = [
@@ -54,14 +56,6 @@ CARTESIAN_TWIST_COL_LABEL = CARTESIAN_STIFFNESS_COL_LABEL
 FloatArray = NDArray[np.float64]
 
 
-def payload(arr: FloatArray) -> array.array:
-    """Row-major float64 payload for ``Float64MultiArray.data`` (one memcpy, no Python loop; no
-    checks: for arrays already checked finite and of the layout's size)."""
-    data = array.array('d')
-    data.frombytes(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
-    return data
-
-
 def vector_to_multiarray(values: ArrayLike, label: str = '') -> Float64MultiArray:
     """Pack a 1-D array of n values into a Float64MultiArray with one labelled dimension.
 
@@ -78,10 +72,7 @@ def vector_to_multiarray(values: ArrayLike, label: str = '') -> Float64MultiArra
     arr = finite_array_of_shape('vector', values, None)
     if arr.ndim != 1:
         raise ValueError(f'vector must be 1-D, got shape {arr.shape}')
-    n = arr.shape[0]
-    layout = MultiArrayLayout(
-        dim=[MultiArrayDimension(label=label, size=n, stride=n)], data_offset=0)
-    return Float64MultiArray(layout=layout, data=payload(arr))
+    return multiarray(vector_dims(arr.shape[0], label), arr, RCLPY_TYPES)
 
 
 def matrix_to_multiarray(matrix: ArrayLike, row_label: str = WRENCH_ROW_LABEL,
@@ -101,12 +92,7 @@ def matrix_to_multiarray(matrix: ArrayLike, row_label: str = WRENCH_ROW_LABEL,
     arr = finite_array_of_shape('matrix', matrix, None)
     if arr.ndim != 2:
         raise ValueError(f'matrix must be 2-D, got shape {arr.shape}')
-    rows, cols = arr.shape
-    layout = MultiArrayLayout(
-        dim=[MultiArrayDimension(label=row_label, size=rows, stride=rows * cols),
-             MultiArrayDimension(label=col_label, size=cols, stride=cols)],
-        data_offset=0)
-    return Float64MultiArray(layout=layout, data=payload(arr))
+    return multiarray(matrix_dims(*arr.shape, row_label, col_label), arr, RCLPY_TYPES)
 
 
 def set_multiarray_data(msg: Float64MultiArray, values: ArrayLike) -> Float64MultiArray:

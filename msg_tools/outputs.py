@@ -1,18 +1,29 @@
-"""The nodes' output messages with rclpy's message classes: :data:`RCLPY_TYPES` for
-:mod:`tensegrity_stiffness.messages`, which builds them from the layouts of
-:mod:`tensegrity_stiffness.layouts` and refills them per input (the bag command does the same
-with rosbags' types)."""
+"""rclpy's message classes for :mod:`tensegrity_stiffness.messages` (:data:`RCLPY_TYPES`), which
+builds the nodes' output messages from the layouts of :mod:`tensegrity_stiffness.layouts` and
+refills them per input (the bag command does the same with rosbags' types)."""
 
 from __future__ import annotations
 
+import array
+
+import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, Wrench, WrenchStamped
+from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
 
-from msg_tools.arrays import payload
 from tensegrity_stiffness.messages import MESSAGE_CLASS_NAMES, MessageTypes
 
-__all__ = ['RCLPY_TYPES']
+__all__ = ['RCLPY_TYPES', 'payload']
+
+
+def payload(arr: NDArray[np.float64]) -> array.array:
+    """Row-major float64 payload for ``Float64MultiArray.data`` (one memcpy, no Python loop; no
+    checks: for arrays already checked finite and of the layout's size)."""
+    data = array.array('d')
+    data.frombytes(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
+    return data
+
 
 #: rclpy's classes of the output messages, ``float64[]`` fields as ``array.array('d')``.
 RCLPY_TYPES = MessageTypes(

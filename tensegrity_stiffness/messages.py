@@ -173,18 +173,27 @@ MESSAGE_CLASS_NAMES = (
     'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Pose', POSE_STAMPED)
 
 
+def multiarray(dims: Sequence[tuple[str, int, int]], values: FloatArray,
+               types: MessageTypes) -> Any:
+    """A ``Float64MultiArray`` with the layout ``dims`` ((label, size, stride) each, e.g.
+    :func:`~tensegrity_stiffness.layouts.matrix_dims`) and the payload ``values`` (checked
+    by the caller)."""
+    c = types.classes
+    dim = c['std_msgs/msg/MultiArrayDimension']
+    return c[FLOAT64_MULTIARRAY](
+        layout=c['std_msgs/msg/MultiArrayLayout'](
+            dim=[dim(label=label, size=size, stride=stride) for label, size, stride in dims],
+            data_offset=0),
+        data=types.payload(values))
+
+
 def new_message(layout: OutputLayout, types: MessageTypes) -> Any:
     """A message of ``layout`` with every field set: a ``Float64MultiArray`` with the layout's
     dimensions and a zero payload, or a stamped wrench / pose of zeros (identity orientation)
     with a zero stamp and an empty frame id."""
     c = types.classes
     if layout.msgtype == FLOAT64_MULTIARRAY:
-        dim = c['std_msgs/msg/MultiArrayDimension']
-        return c[FLOAT64_MULTIARRAY](
-            layout=c['std_msgs/msg/MultiArrayLayout'](
-                dim=[dim(label=label, size=size, stride=stride)
-                     for label, size, stride in layout.dims], data_offset=0),
-            data=types.payload(np.zeros(layout.size)))
+        return multiarray(layout.dims, np.zeros(layout.size), types)
     header = c['std_msgs/msg/Header'](stamp=types.time(0), frame_id='')
     if layout.msgtype == WRENCH_STAMPED:
         vector3 = c['geometry_msgs/msg/Vector3']
