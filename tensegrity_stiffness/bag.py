@@ -98,6 +98,8 @@ class NodeTopics:
 
 
 NODE_TOPICS: dict[str, NodeTopics] = {
+    # The outputs' types (from the node's layouts) do not depend on the string names or the
+    # joint count.
     'stiffness': NodeTopics(
         inputs={'screw': FLOAT64_MULTIARRAY, 'pose': POSE_STAMPED,
                 'rest_lengths': FLOAT64_MULTIARRAY},
@@ -358,7 +360,7 @@ class StiffnessProcessor:
             for i in np.flatnonzero(~finite):
                 try:  # raises the node's 'array contains NaN or inf'
                     multiarray_to_array(self.deserialize(raws[i]), expected_length=6,
-                                                  max_length=max_length)
+                                        max_length=max_length)
                 except ValueError as exc:
                     self.reject('screw', str(exc))
             values, times = values[finite], [t for t, ok in zip(times, finite.tolist(),
@@ -402,7 +404,7 @@ class StiffnessProcessor:
         self.flush()  # inputs logged before apply the old rest lengths
         try:
             rest = multiarray_to_array(msg, expected_length=self.model.n_strings,
-                                                 max_length=self.settings.max_array_length)
+                                       max_length=self.settings.max_array_length)
             self.model = self.model.with_rest_lengths(rest)
         except ValueError as exc:
             self.reject('rest_lengths', str(exc))
