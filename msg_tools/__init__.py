@@ -13,9 +13,13 @@ stamps       ``builtin_interfaces/Time`` <-> nanoseconds / seconds.
 diagnostics  ``diagnostic_msgs/DiagnosticStatus`` and ``DiagnosticArray`` builders.
 markers      ``visualization_msgs/MarkerArray`` of nodes and tension-coloured strings for RViz.
 imu          ``sensor_msgs/Imu`` of the twin's IMU (angular velocity, specific force).
-outputs      refilling preallocated output messages per input (after one finite check).
+outputs      rclpy's message classes for :mod:`tensegrity_stiffness.messages`.
 joint_outputs  the joint node's five per-input output messages and its markers.
 spine_outputs  the spine node's seven per-input output messages and its markers.
+
+The readers and the output messages themselves read and write by attribute and need no ROS
+message package: they live in :mod:`tensegrity_stiffness.messages` (the bag command uses them
+with rosbags' types) and are re-exported here for rclpy.
 
 Orderings: wrench ``[fx fy fz mx my mz]``, screw ``[wx wy wz vx vy vz]``, quaternion
 ``[x y z w]``.

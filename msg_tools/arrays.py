@@ -7,25 +7,30 @@ Layout convention (``std_msgs/MultiArrayLayout``, row-major): for a matrix of sh
 The labels name the orderings, e.g. ``'rows: wrench [fx fy fz mx my mz]'``.
 
 Incoming arrays are validated before use: the element count is checked against ``max_length``
-before anything is converted, then against the expected length / shape, then for NaN and inf.
+before anything is converted, then against the expected length / shape, then for NaN and inf
+(:func:`multiarray_to_array` and ``DEFAULT_MAX_LENGTH`` live in
+:mod:`tensegrity_stiffness.messages`, which reads any message implementation; re-exported here).
 """
 
 from __future__ import annotations
 
-import array
 from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension, MultiArrayLayout
+from std_msgs.msg import Float64MultiArray
 
+from msg_tools.outputs import RCLPY_TYPES, payload
 from tensegrity_stiffness.layouts import (
     CARTESIAN_STIFFNESS_COL_LABEL,
     SCREW_LABEL,
     STIFFNESS_COL_LABEL,
     STIFFNESS_ROW_LABEL,
     WRENCH_LABEL,
+    matrix_dims,
+    vector_dims,
 )
+from tensegrity_stiffness.messages import DEFAULT_MAX_LENGTH, multiarray, multiarray_to_array
 from tensegrity_stiffness.validation import finite_array_of_shape
 
 __all__ = [
@@ -43,23 +48,12 @@ __all__ = [
     'vector_to_multiarray',
 ]
 
-#: Largest element count accepted from an incoming message unless the caller says otherwise.
-DEFAULT_MAX_LENGTH = 4096
-
 #: Labels of the orderings (wrench rows, screw / twist columns): tensegrity_stiffness.layouts.
 WRENCH_ROW_LABEL = STIFFNESS_ROW_LABEL
 SCREW_COL_LABEL = STIFFNESS_COL_LABEL
 CARTESIAN_TWIST_COL_LABEL = CARTESIAN_STIFFNESS_COL_LABEL
 
 FloatArray = NDArray[np.float64]
-
-
-def payload(arr: FloatArray) -> array.array:
-    """Row-major float64 payload for ``Float64MultiArray.data`` (one memcpy, no Python loop; no
-    checks: for arrays already checked finite and of the layout's size)."""
-    data = array.array('d')
-    data.frombytes(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
-    return data
 
 
 def vector_to_multiarray(values: ArrayLike, label: str = '') -> Float64MultiArray:
@@ -78,10 +72,7 @@ def vector_to_multiarray(values: ArrayLike, label: str = '') -> Float64MultiArra
     arr = finite_array_of_shape('vector', values, None)
     if arr.ndim != 1:
         raise ValueError(f'vector must be 1-D, got shape {arr.shape}')
-    n = arr.shape[0]
-    layout = MultiArrayLayout(
-        dim=[MultiArrayDimension(label=label, size=n, stride=n)], data_offset=0)
-    return Float64MultiArray(layout=layout, data=payload(arr))
+    return multiarray(vector_dims(arr.shape[0], label), arr, RCLPY_TYPES)
 
 
 def matrix_to_multiarray(matrix: ArrayLike, row_label: str = WRENCH_ROW_LABEL,
@@ -101,12 +92,7 @@ def matrix_to_multiarray(matrix: ArrayLike, row_label: str = WRENCH_ROW_LABEL,
     arr = finite_array_of_shape('matrix', matrix, None)
     if arr.ndim != 2:
         raise ValueError(f'matrix must be 2-D, got shape {arr.shape}')
-    rows, cols = arr.shape
-    layout = MultiArrayLayout(
-        dim=[MultiArrayDimension(label=row_label, size=rows, stride=rows * cols),
-             MultiArrayDimension(label=col_label, size=cols, stride=cols)],
-        data_offset=0)
-    return Float64MultiArray(layout=layout, data=payload(arr))
+    return multiarray(matrix_dims(*arr.shape, row_label, col_label), arr, RCLPY_TYPES)
 
 
 def set_multiarray_data(msg: Float64MultiArray, values: ArrayLike) -> Float64MultiArray:
@@ -124,31 +110,6 @@ def set_multiarray_data(msg: Float64MultiArray, values: ArrayLike) -> Float64Mul
         raise ValueError(f'layout holds {expected} values, got {arr.size}')
     msg.data = payload(arr)
     return msg
-
-
-def multiarray_to_array(msg: Float64MultiArray, expected_length: int | None = None,
-                        max_length: int = DEFAULT_MAX_LENGTH) -> FloatArray:
-    """Validated flat copy of the payload of a Float64MultiArray, shape (n,).
-
-    ``layout.data_offset`` is honoured (elements before it are skipped). Checks, in order:
-    the payload length against ``max_length`` (before any conversion, so an oversized message
-    costs nothing), the data offset, the length against ``expected_length``, then NaN / inf.
-
-    Raises
-    ------
-    ValueError
-        ``'too many elements'``, ``'data_offset'``, ``'expected N values'`` or ``'NaN or inf'``.
-    """
-    n_total = len(msg.data)
-    if n_total > max_length:
-        raise ValueError(f'too many elements: {n_total} > max_length {max_length}')
-    offset = int(msg.layout.data_offset)
-    if offset > n_total:
-        raise ValueError(f'data_offset {offset} exceeds the {n_total} data elements')
-    n = n_total - offset
-    if expected_length is not None and n != expected_length:
-        raise ValueError(f'expected {expected_length} values, got {n}')
-    return finite_array_of_shape('array', np.array(msg.data, dtype=np.float64)[offset:], None)
 
 
 def multiarray_to_matrix(msg: Float64MultiArray,

@@ -2,68 +2,31 @@
 ``~/cartesian_stiffness``, ``~/string_tensions``, ``~/stiffness_interpretation``) and its markers.
 
 One preallocated message per topic, its layout labelled once from
-:mod:`tensegrity_stiffness.layouts`; per input only the data and the header are refilled, after
-one finite check of every output (:func:`processing.require_finite`: ValueError naming the
-output, and nothing is published).
+:func:`tensegrity_stiffness.layouts.joint_output_layouts`; per input only the data and the header
+are refilled, after one finite check of every output (:func:`processing.require_finite`:
+ValueError naming the output, and nothing is published). The messages are
+:class:`tensegrity_stiffness.messages.JointOutputMessages` with rclpy's classes.
 """
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import WrenchStamped
 from visualization_msgs.msg import MarkerArray
 
-from msg_tools.arrays import matrix_to_multiarray, vector_to_multiarray
 from msg_tools.markers import marker_array
-from msg_tools.outputs import fill_outputs, write_payload, write_wrench_stamped
+from msg_tools.outputs import RCLPY_TYPES
+from tensegrity_stiffness import messages
 from tensegrity_stiffness.joint import JointModel, JointState
-from tensegrity_stiffness.layouts import (
-    CARTESIAN_STIFFNESS_COL_LABEL,
-    INTERPRETATION_LABEL,
-    INTERPRETATION_SIZE,
-    STIFFNESS_COL_LABEL,
-    STIFFNESS_ROW_LABEL,
-    tensions_label,
-)
-from tensegrity_stiffness.processing import JointOutputs, output_arrays, require_finite
 
 __all__ = ['JointOutputMessages', 'joint_markers']
 
 
-class JointOutputMessages:
-    """The five output messages of one joint, refilled per input by :meth:`fill`."""
+class JointOutputMessages(messages.JointOutputMessages):
+    """The five output messages of one joint (rclpy), refilled per input by :meth:`fill`."""
 
     def __init__(self, string_names: tuple[str, ...]) -> None:
-        self.string_names = tuple(string_names)
-        self.wrench = WrenchStamped()
-        self.stiffness = matrix_to_multiarray(np.zeros((6, 6)), STIFFNESS_ROW_LABEL,
-                                              STIFFNESS_COL_LABEL)
-        self.cartesian_stiffness = matrix_to_multiarray(
-            np.zeros((6, 6)), STIFFNESS_ROW_LABEL, CARTESIAN_STIFFNESS_COL_LABEL)
-        self.tensions = vector_to_multiarray(np.zeros(len(self.string_names)),
-                                             tensions_label(self.string_names))
-        self.interpretation = vector_to_multiarray(np.zeros(INTERPRETATION_SIZE),
-                                                   INTERPRETATION_LABEL)
-
-    #: The writer of each message, in :meth:`messages` order.
-    WRITERS = (write_wrench_stamped, write_payload, write_payload, write_payload, write_payload)
-
-    def fill(self, outputs: JointOutputs, stamp: Time, frame_id: str,
-             wanted: tuple[bool, ...] | None = None) -> None:
-        """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
-        order; default all); ValueError if any output is not finite (then none is set)."""
-        require_finite(outputs)
-        fill_outputs(self.messages(), output_arrays(outputs), self.WRITERS, stamp, frame_id,
-                     wanted)
-
-    def messages(self) -> tuple[Any, ...]:
-        """The messages in topic order: wrench, stiffness, cartesian_stiffness, tensions,
-        interpretation."""
-        return (self.wrench, self.stiffness, self.cartesian_stiffness, self.tensions,
-                self.interpretation)
+        super().__init__(string_names, RCLPY_TYPES)
 
 
 def joint_markers(model: JointModel, state: JointState, frame_id: str, stamp: Time

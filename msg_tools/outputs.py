@@ -1,46 +1,33 @@
-"""Refilling a node's preallocated output messages per input (``JointOutputMessages``,
-``SpineOutputMessages``): after one finite check of every output by the caller, each wanted
-message gets its array without a second check (the node's per-message path)."""
+"""rclpy's message classes for :mod:`tensegrity_stiffness.messages` (:data:`RCLPY_TYPES`), which
+builds the nodes' output messages from the layouts of :mod:`tensegrity_stiffness.layouts` and
+refills them per input (the bag command does the same with rosbags' types)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import Any
+import array
 
+import numpy as np
 from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, Wrench, WrenchStamped
+from numpy.typing import NDArray
+from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
 
-from msg_tools.arrays import FloatArray, payload
-from msg_tools.geometry import transform_to_pose, write_wrench
+from tensegrity_stiffness.messages import MESSAGE_CLASS_NAMES, MessageTypes
 
-#: Writes one checked array into its message: ``writer(msg, values, stamp, frame_id)``.
-Writer = Callable[[Any, FloatArray, Time, str], None]
-
-
-def write_payload(msg: Any, values: FloatArray, stamp: Time, frame_id: str) -> None:
-    """A Float64MultiArray's data (its layout, labelled once, stays)."""
-    msg.data = payload(values)
+__all__ = ['RCLPY_TYPES', 'payload']
 
 
-def write_wrench_stamped(msg: Any, values: FloatArray, stamp: Time, frame_id: str) -> None:
-    """A WrenchStamped's header and ``[fx fy fz mx my mz]``."""
-    msg.header.stamp = stamp
-    msg.header.frame_id = frame_id
-    write_wrench(msg.wrench, values)
+def payload(arr: NDArray[np.float64]) -> array.array:
+    """Row-major float64 payload for ``Float64MultiArray.data`` (one memcpy, no Python loop; no
+    checks: for arrays already checked finite and of the layout's size)."""
+    data = array.array('d')
+    data.frombytes(np.ascontiguousarray(arr, dtype=np.float64).tobytes())
+    return data
 
 
-def write_pose_stamped(msg: Any, values: FloatArray, stamp: Time, frame_id: str) -> None:
-    """A PoseStamped's header and the pose of a (4, 4) transform (ValueError if its rotation
-    block is not a rotation)."""
-    msg.pose = transform_to_pose(values)
-    msg.header.stamp = stamp
-    msg.header.frame_id = frame_id
-
-
-def fill_outputs(messages: Sequence[Any], arrays: Sequence[FloatArray],
-                 writers: Sequence[Writer], stamp: Time, frame_id: str,
-                 wanted: Sequence[bool] | None = None) -> None:
-    """Write ``arrays[k]`` into ``messages[k]`` with ``writers[k]`` for every ``k`` flagged in
-    ``wanted`` (default all)."""
-    for k, (msg, values, write) in enumerate(zip(messages, arrays, writers, strict=True)):
-        if wanted is None or wanted[k]:
-            write(msg, values, stamp, frame_id)
+#: rclpy's classes of the output messages, ``float64[]`` fields as ``array.array('d')``.
+RCLPY_TYPES = MessageTypes(
+    classes=dict(zip(MESSAGE_CLASS_NAMES, (
+        Time, Header, MultiArrayDimension, MultiArrayLayout, Float64MultiArray, Vector3, Wrench,
+        WrenchStamped, Point, Quaternion, Pose, PoseStamped), strict=True)),
+    payload=payload)

@@ -10,6 +10,8 @@ import math
 
 from builtin_interfaces.msg import Time
 
+from tensegrity_stiffness.messages import NANOSECONDS_PER_SECOND, stamp_parts
+
 __all__ = [
     'NANOSECONDS_PER_SECOND',
     'stamp_from_nanoseconds',
@@ -18,9 +20,6 @@ __all__ = [
     'stamp_to_seconds',
 ]
 
-NANOSECONDS_PER_SECOND = 1_000_000_000
-_MAX_SECONDS = 2**31 - 1  # Time.sec is int32
-
 
 def stamp_from_nanoseconds(nanoseconds: int) -> Time:
     """``Time`` of a non-negative integer count of nanoseconds (e.g. ``time.time_ns()``).
@@ -28,14 +27,10 @@ def stamp_from_nanoseconds(nanoseconds: int) -> Time:
     Raises
     ------
     ValueError
-        If negative or beyond the int32 seconds range of ``Time.sec``.
+        If negative or beyond the int32 seconds range of ``Time.sec``
+        (:func:`tensegrity_stiffness.messages.stamp_parts`).
     """
-    ns = int(nanoseconds)
-    if ns < 0:
-        raise ValueError(f'stamp must be non-negative, got {ns} ns')
-    sec, nanosec = divmod(ns, NANOSECONDS_PER_SECOND)
-    if sec > _MAX_SECONDS:
-        raise ValueError(f'stamp {sec} s exceeds the int32 range of Time.sec')
+    sec, nanosec = stamp_parts(nanoseconds)
     return Time(sec=sec, nanosec=nanosec)
 
 

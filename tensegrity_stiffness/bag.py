@@ -1,14 +1,16 @@
 """Offline: what ``stiffness_node`` would publish, for a whole rosbag2 recording.
 
 Reads ``<namespace>/screw``, ``<namespace>/pose`` and ``<namespace>/rest_lengths`` from a rosbag2
-(mcap or sqlite3) with ``rosbags`` (pure Python, no ROS install), in log-time order, and writes a
+(mcap or sqlite3) with ``rosbags`` (pure Python, no ROS install: neither rclpy nor a ROS
+message package is imported), in log-time order, and writes a
 rosbag2 with the node's five array outputs (``wrench``, ``stiffness``, ``cartesian_stiffness``,
 ``string_tensions``, ``stiffness_interpretation``): the same message types, layouts, labels
 (:mod:`tensegrity_stiffness.layouts`) and frame ids as the node, one of each per answered input,
 written at the log time of the input it answers.
 
 The node's behaviour, input by input, with the node's functions: inputs are decoded with
-:mod:`msg_tools` (it reads messages by attribute, so rosbags' messages do as well as rclpy's),
+:mod:`tensegrity_stiffness.messages` (the node's readers: they read messages by attribute, so
+rosbags' messages do as well as rclpy's),
 checked and computed with :mod:`tensegrity_stiffness.processing`, configured from the node's
 parameter table (:mod:`tensegrity_stiffness.parameters`); a bad input is skipped and counted by
 kind, with the node's text as the example. A pose is turned into a screw on the branch nearest
@@ -21,15 +23,16 @@ the stamp of the answer it repeats, as the node does.
 Speed: answers are computed in chunks with one batched evaluation
 (:func:`processing.joint_outputs_batch`, OpenBLAS on one thread); a screw of the plain layout
 is decoded with its chunk in one ``frombuffer``; an output message is a serialized template
-(layout, labels, frame id; built once with rosbags) whose payload bytes are replaced, and a
-chunk's messages are written as one block (:class:`_BlockWriter`: the bytes rosbags' writer
-writes, assembled with numpy).
+(the node's message of :func:`layouts.joint_output_layouts`, built and filled once with
+rosbags' types by :mod:`tensegrity_stiffness.messages` and serialized by rosbags) whose payload
+bytes are replaced; a chunk's messages are written with rosbags' public ``Writer.write``
+(:func:`write_blocks`).
 
 ``spine_node`` (``node='spine'``, :class:`SpineProcessor`): its inputs (``screws``, ``poses``,
 ``rest_lengths``) and per-input outputs (:data:`spine_processing.OUTPUT_NAMES`), one input at a
 time with the node's functions (:mod:`tensegrity_stiffness.spine_processing`) and the node's
-messages (``msg_tools.SpineOutputMessages.fill``), copied into rosbags messages by
-:func:`rosbags_message`; the same stamp rules.
+messages (:class:`messages.SpineOutputMessages`, filled as the node fills them, with rosbags'
+types); the same stamp rules.
 """
 
 from __future__ import annotations
@@ -37,20 +40,26 @@ from __future__ import annotations
 import csv
 import shutil
 import time
-from collections import Counter, defaultdict
+from collections import Counter
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
-from io import BytesIO
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-import msg_tools
 from tensegrity_stiffness import config, layouts, parameters, spine_processing
 from tensegrity_stiffness.chain import DEFAULT_SPINE_CONFIG
+from tensegrity_stiffness.messages import (
+    MessageTypes,
+    SpineOutputMessages,
+    multiarray_to_array,
+    new_message,
+    output_writer,
+    pose_to_transform,
+)
 from tensegrity_stiffness.parameters import JointNodeSettings, SpineNodeSettings
 from tensegrity_stiffness.processing import (
     JointOutputs,
@@ -58,15 +67,15 @@ from tensegrity_stiffness.processing import (
     joint_outputs,
     joint_outputs_batch,
     pose_input,
+    require_finite,
     screw_input,
     screw_inputs,
 )
 
 FloatArray = NDArray[np.float64]
 
-FLOAT64_MULTIARRAY = 'std_msgs/msg/Float64MultiArray'
-POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
-WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
+FLOAT64_MULTIARRAY = layouts.FLOAT64_MULTIARRAY
+POSE_STAMPED = layouts.POSE_STAMPED
 POSE_ARRAY = 'geometry_msgs/msg/PoseArray'
 
 DEFAULT_NAMESPACE = '/stiffness_node'
@@ -89,20 +98,19 @@ class NodeTopics:
 
 
 NODE_TOPICS: dict[str, NodeTopics] = {
+    # The outputs' types (from the node's layouts) do not depend on the string names or the
+    # joint count.
     'stiffness': NodeTopics(
         inputs={'screw': FLOAT64_MULTIARRAY, 'pose': POSE_STAMPED,
                 'rest_lengths': FLOAT64_MULTIARRAY},
-        outputs={'wrench': WRENCH_STAMPED, 'stiffness': FLOAT64_MULTIARRAY,
-                 'cartesian_stiffness': FLOAT64_MULTIARRAY,
-                 'string_tensions': FLOAT64_MULTIARRAY,
-                 'stiffness_interpretation': FLOAT64_MULTIARRAY}),
+        outputs={name: layout.msgtype for name, layout in
+                 layouts.joint_output_layouts(()).items()}),
     # spine_node's per-input outputs, in the order of spine_processing.OUTPUT_NAMES.
     'spine': NodeTopics(
         inputs={'screws': FLOAT64_MULTIARRAY, 'poses': POSE_ARRAY,
                 'rest_lengths': FLOAT64_MULTIARRAY},
-        outputs=dict(zip(spine_processing.OUTPUT_NAMES, (
-            FLOAT64_MULTIARRAY, FLOAT64_MULTIARRAY, FLOAT64_MULTIARRAY, POSE_STAMPED,
-            WRENCH_STAMPED, FLOAT64_MULTIARRAY, FLOAT64_MULTIARRAY), strict=True))),
+        outputs={name: layout.msgtype for name, layout in
+                 layouts.spine_output_layouts(1).items()}),
 }
 OUTPUT_NAMES = tuple(NODE_TOPICS['stiffness'].outputs)
 #: Default namespace (the node's name in the root namespace) of each node kind.
@@ -255,7 +263,7 @@ class Answers:
 class StiffnessProcessor:
     """The node's per-input behaviour (``_on_screw``, ``_on_pose``, ``_on_rest_lengths``,
     ``_compute_and_publish``) over a recording, answering in batches with the node's functions
-    (:mod:`tensegrity_stiffness.processing`, :mod:`msg_tools`).
+    (:mod:`tensegrity_stiffness.processing`, :mod:`tensegrity_stiffness.messages`).
 
     Feed inputs in log-time order with :meth:`screw_raw` (serialized) or :meth:`screw`,
     :meth:`pose`, :meth:`rest_lengths`; answers go to ``emit`` in chunks (:class:`Answers`),
@@ -339,7 +347,7 @@ class StiffnessProcessor:
 
     def _decode(self) -> None:
         """Check the pending plain screws as :meth:`screw` does, in one batch: the decoded
-        values are exactly what ``msg_tools.multiarray_to_array`` returns for them (no data
+        values are exactly what ``messages.multiarray_to_array`` returns for them (no data
         offset, six values); a non-finite one goes through that function for its message."""
         if not self._raw:
             return
@@ -351,8 +359,8 @@ class StiffnessProcessor:
             max_length = self.settings.max_array_length
             for i in np.flatnonzero(~finite):
                 try:  # raises the node's 'array contains NaN or inf'
-                    msg_tools.multiarray_to_array(self.deserialize(raws[i]), expected_length=6,
-                                                  max_length=max_length)
+                    multiarray_to_array(self.deserialize(raws[i]), expected_length=6,
+                                        max_length=max_length)
                 except ValueError as exc:
                     self.reject('screw', str(exc))
             values, times = values[finite], [t for t, ok in zip(times, finite.tolist(),
@@ -370,7 +378,7 @@ class StiffnessProcessor:
         """A deserialized ``~/screw`` message (the node's ``_on_screw``)."""
         self._decode()
         try:
-            xi = screw_input(msg_tools.multiarray_to_array(
+            xi = screw_input(multiarray_to_array(
                 msg, expected_length=6, max_length=self.settings.max_array_length))
         except ValueError as exc:
             self.reject('screw', str(exc))
@@ -381,7 +389,7 @@ class StiffnessProcessor:
         """A deserialized ``~/pose`` message (the node's ``_on_pose``)."""
         self._decode()
         try:
-            T = msg_tools.pose_to_transform(msg.pose)
+            T = pose_to_transform(msg.pose)
             xi = pose_input(msg.header.frame_id, T, self.settings.link1_frame,
                             self._reference())
         except ValueError as exc:
@@ -395,8 +403,8 @@ class StiffnessProcessor:
         """A deserialized ``~/rest_lengths`` message (the node's ``_on_rest_lengths``)."""
         self.flush()  # inputs logged before apply the old rest lengths
         try:
-            rest = msg_tools.multiarray_to_array(msg, expected_length=self.model.n_strings,
-                                                 max_length=self.settings.max_array_length)
+            rest = multiarray_to_array(msg, expected_length=self.model.n_strings,
+                                       max_length=self.settings.max_array_length)
             self.model = self.model.with_rest_lengths(rest)
         except ValueError as exc:
             self.reject('rest_lengths', str(exc))
@@ -412,8 +420,8 @@ class StiffnessProcessor:
     def flush(self) -> None:
         """Answer the pending inputs with one :func:`joint_outputs_batch`. The first row the
         node's publishers would refuse (a non-finite output) splits the chunk: the rows before
-        it are answered, it goes through the node's single path (``joint_outputs`` and
-        ``msg_tools.JointOutputMessages.fill``, whose ValueError is the rejection), and the
+        it are answered, it goes through the node's single path (``joint_outputs`` and the
+        finite check of ``JointOutputMessages.fill``, whose ValueError is the rejection), and the
         poses after it get their branch again from the last answer."""
         self._decode()
         while self._count:
@@ -442,10 +450,8 @@ class StiffnessProcessor:
     def _single(self, source: str, log_time: int, stamp: int | None, xi: FloatArray) -> None:
         """One input through the node's own single-screw path."""
         outputs = joint_outputs(self.model, xi)
-        messages = msg_tools.JointOutputMessages(tuple(self.model.string_names))
-        try:
-            messages.fill(outputs, msg_tools.stamp_from_nanoseconds(0),
-                          self.settings.link1_frame)
+        try:  # the check of JointOutputMessages.fill (filling the joint's messages cannot fail)
+            require_finite(outputs)
         except ValueError as exc:
             self.reject(source, str(exc), 'non-finite result')
             return
@@ -479,32 +485,18 @@ def spine_settings(path: str | Path | None = None) -> SpineNodeSettings:
         raise BagError(text if str(path) in text else f'config {path}: {text}') from None
 
 
-def rosbags_message(msg: Any, typestore: Any) -> Any:
-    """The rosbags message equal to an rclpy message, field by field (nested messages and
-    sequences of them converted, ``double`` sequences as float64 arrays)."""
-    package = type(msg).__module__.split('.', 1)[0]
-    cls = typestore.types[f'{package}/msg/{type(msg).__name__}']
-    fields = {}
-    for name, field_type in msg.get_fields_and_field_types().items():
-        value = getattr(msg, name)
-        if '/' in field_type:
-            fields[name] = ([rosbags_message(v, typestore) for v in value]
-                            if field_type.startswith('sequence<')
-                            else rosbags_message(value, typestore))
-        elif field_type.startswith('sequence<') or field_type.endswith(']'):
-            if 'double' not in field_type:  # the outputs have double arrays only
-                raise TypeError(f'{name}: {field_type} is not converted')
-            fields[name] = np.array(value, dtype=np.float64)
-        else:
-            fields[name] = value
-    return cls(**fields)
+def rosbags_types(typestore: Any) -> MessageTypes:
+    """rosbags' message classes of ``typestore`` for :mod:`tensegrity_stiffness.messages`
+    (``float64[]`` fields as float64 arrays)."""
+    return MessageTypes(classes=typestore.types,
+                        payload=lambda values: np.array(values, dtype=np.float64).reshape(-1))
 
 
 @dataclass
 class SpineAnswer:
     """One answer of the spine node: the input's log time (ns), its source ('screws', 'poses'
     or 're-publish'), the stamp (ns) of ``tip_pose`` and ``tip_wrench``, the library's outputs
-    and the node's filled messages (rclpy, :class:`msg_tools.SpineOutputMessages` order)."""
+    and the node's filled messages (rosbags', in :class:`SpineOutputMessages` order)."""
 
     log_time: int
     source: str
@@ -516,16 +508,18 @@ class SpineAnswer:
 class SpineProcessor:
     """``spine_node``'s per-input behaviour (``_on_screws``, ``_on_poses``,
     ``_on_rest_lengths``, ``_compute_and_publish``) over a recording, one input at a time with
-    the node's functions (:mod:`tensegrity_stiffness.spine_processing`, :mod:`msg_tools`,
-    ``msg_tools.SpineOutputMessages.fill`` for the messages). Each answer goes to ``emit``
+    the node's functions (:mod:`tensegrity_stiffness.spine_processing`,
+    :mod:`tensegrity_stiffness.messages`; the node's ``SpineOutputMessages`` with rosbags'
+    ``types``, default Jazzy's, for the messages). Each answer goes to ``emit``
     (:class:`SpineAnswer`, its messages reused by the next answer); rejections are counted in
     :attr:`rejected` by ``'<topic>: <kind>'`` with the node's text as the example."""
 
-    def __init__(self, settings: SpineNodeSettings, emit: Callable[[SpineAnswer], None]
-                 ) -> None:
+    def __init__(self, settings: SpineNodeSettings, emit: Callable[[SpineAnswer], None],
+                 types: MessageTypes | None = None) -> None:
         self.settings = settings
         self.emit = emit
-        self.messages = msg_tools.SpineOutputMessages(settings.n_joints)
+        self.types = rosbags_types(_typestore()) if types is None else types
+        self.messages = SpineOutputMessages(settings.n_joints, self.types)
         self.rejected: Counter[str] = Counter()
         self.examples: dict[str, str] = {}
         self.answered: Counter[str] = Counter()
@@ -542,7 +536,7 @@ class SpineProcessor:
         node stamps the time of computation."""
         settings = self.settings
         try:
-            xi = spine_processing.screws_input(msg_tools.multiarray_to_array(
+            xi = spine_processing.screws_input(multiarray_to_array(
                 msg, max_length=settings.max_array_length), settings.n_joints)
         except ValueError as exc:
             self.reject('screws', str(exc))
@@ -558,7 +552,7 @@ class SpineProcessor:
                 [model.initial_screw for model in settings.chain.joints])
             xi = spine_processing.poses_input(msg.header.frame_id, msg.poses,
                                               settings.base_frame, reference,
-                                              msg_tools.pose_to_transform)
+                                              pose_to_transform)
         except ValueError as exc:
             self.reject('poses', str(exc))
             return
@@ -571,7 +565,7 @@ class SpineProcessor:
         time on; the last answer is re-published under it, with that answer's stamp."""
         settings = self.settings
         try:
-            rest = spine_processing.rest_lengths_input(msg_tools.multiarray_to_array(
+            rest = spine_processing.rest_lengths_input(multiarray_to_array(
                 msg, max_length=settings.max_array_length), settings.chain)
         except ValueError as exc:
             self.reject('rest_lengths', str(exc))
@@ -585,8 +579,7 @@ class SpineProcessor:
         settings = self.settings
         try:
             outputs = spine_processing.spine_outputs(settings.chain, xi, settings.rest_lengths)
-            self.messages.fill(outputs, msg_tools.stamp_from_nanoseconds(stamp),
-                               settings.base_frame)
+            self.messages.fill(outputs, self.types.time(stamp), settings.base_frame)
         except ValueError as exc:
             text = str(exc)
             self.reject(source, text, 'singular tip stiffness' if 'singular' in text
@@ -625,7 +618,7 @@ def _run_spine(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[s
                summary: BagSummary, total: int,
                progress: Callable[[int, int], None] | None) -> BagSummary:
     """The read - process - write loop of :func:`process_bag` for ``spine_node``: one input
-    at a time, each answer's messages converted to rosbags messages and serialized."""
+    at a time, each answer's messages (rosbags') serialized."""
     names = spine_processing.OUTPUT_NAMES
     chosen = [names.index(name) for name in outputs]
     out_connections = [writer.add_connection(f'{prefix}/{names[k]}', spec.outputs[names[k]],
@@ -634,12 +627,12 @@ def _run_spine(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[s
 
     def emit(a: SpineAnswer) -> None:
         for k, connection in zip(chosen, out_connections, strict=True):
-            writer.write(connection, a.log_time, bytes(serialize(
-                rosbags_message(a.messages[k], typestore), connection.msgtype)))
+            writer.write(connection, a.log_time,
+                         bytes(serialize(a.messages[k], connection.msgtype)))
         if csv_sink is not None:
             csv_sink.write(a)
 
-    processor = SpineProcessor(settings, emit)
+    processor = SpineProcessor(settings, emit, rosbags_types(typestore))
     handlers = {'screws': processor.screws, 'poses': processor.poses,
                 'rest_lengths': processor.rest_lengths}
     inputs: Counter[str] = Counter()
@@ -674,70 +667,34 @@ def _run_spine(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[s
 
 
 # ------------------------------------------------------------------------------ output messages
-def _multiarray(typestore: Any, dims: Sequence[tuple[str, int, int]], size: int) -> Any:
-    """A rosbags ``Float64MultiArray`` with the layout ``dims`` and ``size`` zeros."""
-    types = typestore.types
-    dim_type = types['std_msgs/msg/MultiArrayDimension']
-    layout = types['std_msgs/msg/MultiArrayLayout'](
-        dim=[dim_type(label=label, size=n, stride=stride) for label, n, stride in dims],
-        data_offset=0)
-    return types[FLOAT64_MULTIARRAY](layout=layout, data=np.zeros(size))
-
-
-def output_messages(typestore: Any, string_names: Sequence[str], link1_frame: str
-                    ) -> dict[str, Any]:
-    """The node's output messages (zero payload) as rosbags messages: layouts and labels of
-    :mod:`tensegrity_stiffness.layouts`, the wrench in ``link1_frame``."""
-    types = typestore.types
-    vector3 = types['geometry_msgs/msg/Vector3']
-    header = types['std_msgs/msg/Header'](
-        stamp=types['builtin_interfaces/msg/Time'](sec=0, nanosec=0), frame_id=link1_frame)
-    wrench = types[WRENCH_STAMPED](
-        header=header, wrench=types['geometry_msgs/msg/Wrench'](
-            force=vector3(x=0.0, y=0.0, z=0.0), torque=vector3(x=0.0, y=0.0, z=0.0)))
-    n = len(string_names)
-    return {
-        'wrench': wrench,
-        'stiffness': _multiarray(typestore, layouts.matrix_dims(
-            6, 6, layouts.STIFFNESS_ROW_LABEL, layouts.STIFFNESS_COL_LABEL), 36),
-        'cartesian_stiffness': _multiarray(typestore, layouts.matrix_dims(
-            6, 6, layouts.STIFFNESS_ROW_LABEL, layouts.CARTESIAN_STIFFNESS_COL_LABEL), 36),
-        'string_tensions': _multiarray(
-            typestore, layouts.vector_dims(n, layouts.tensions_label(string_names)), n),
-        'stiffness_interpretation': _multiarray(
-            typestore, layouts.vector_dims(layouts.INTERPRETATION_SIZE,
-                                           layouts.INTERPRETATION_LABEL),
-            layouts.INTERPRETATION_SIZE),
-    }
-
-
 class _Template:
-    """Serialized bytes of one output message whose payload ends the message: ``size`` float64
-    values (little-endian CDR, no padding after them), and for a ``WrenchStamped`` the header
-    stamp (sec int32, nanosec uint32) right after the 4-byte encapsulation header. Rows of a
-    chunk are this template with those bytes replaced (checked against rosbags at build)."""
+    """Serialized bytes of one output message of ``layout`` whose payload ends the message:
+    ``layout.size`` float64 values (little-endian CDR, no padding after them), and for a
+    ``WrenchStamped`` the header stamp (sec int32, nanosec uint32) right after the 4-byte
+    encapsulation header. The message is built and filled as the node's
+    (:func:`messages.new_message`, :func:`messages.output_writer`, rosbags' types) and
+    serialized by rosbags; rows of a chunk are this template with those bytes replaced
+    (checked against rosbags at build)."""
 
-    def __init__(self, typestore: Any, msgtype: str, msg: Any, size: int,
-                 stamped: bool) -> None:
-        self.size, self.stamped = size, stamped
+    _PROBE_STAMP = (1234567, 89)
+
+    def __init__(self, typestore: Any, layout: layouts.OutputLayout, frame_id: str) -> None:
+        types = rosbags_types(typestore)
+        self.size = size = layout.size
+        self.stamped = layout.msgtype == layouts.WRENCH_STAMPED
+        if layout.msgtype not in (FLOAT64_MULTIARRAY, layouts.WRENCH_STAMPED):
+            raise ValueError(f'{layout.msgtype}: no template')
+        msg = new_message(layout, types)
         probe = np.arange(1.0, size + 1.0)
-        self._set(msg, probe)
-        if stamped:
-            msg.header.stamp.sec, msg.header.stamp.nanosec = 1234567, 89
-        raw = np.frombuffer(bytes(typestore.serialize_cdr(msg, msgtype)), dtype=np.uint8)
+        sec, nanosec = self._PROBE_STAMP
+        output_writer(layout, types)(msg, probe, types.time(sec * 1_000_000_000 + nanosec),
+                                     frame_id)
+        raw = np.frombuffer(bytes(typestore.serialize_cdr(msg, layout.msgtype)), dtype=np.uint8)
         payload = raw[raw.size - 8 * size:].view('<f8')
-        stamp_ok = not stamped or raw[4:12].view('<i4').tolist() == [1234567, 89]
+        stamp_ok = not self.stamped or raw[4:12].view('<i4').tolist() == [sec, nanosec]
         if raw[:2].tolist() != [0, 1] or not np.array_equal(payload, probe) or not stamp_ok:
-            raise RuntimeError(f'{msgtype}: unexpected CDR layout')  # a rosbags change
+            raise RuntimeError(f'{layout.msgtype}: unexpected CDR layout')  # a rosbags change
         self.raw = raw
-
-    @staticmethod
-    def _set(msg: Any, values: FloatArray) -> None:
-        if hasattr(msg, 'wrench'):
-            f, t = msg.wrench.force, msg.wrench.torque
-            f.x, f.y, f.z, t.x, t.y, t.z = (float(v) for v in values)
-        else:
-            msg.data = values.copy()
 
     def rows(self, values: FloatArray, stamps: NDArray[np.int64] | None = None
              ) -> NDArray[np.uint8]:
@@ -978,173 +935,19 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     return summary
 
 
-def _mcap_parts() -> bool:
-    """Whether the installed rosbags' ``McapWriter`` has the parts :class:`_BlockWriter`
-    extends (else it writes message by message)."""
-    try:
-        from rosbags.rosbag2 import storage_mcap as m
-    except ImportError:
-        return False
-    names = ('write_uint16', 'write_uint32', 'write_uint64', 'write_string', 'write_record',
-             'PendingChunk', 'McapWriter')
-    return all(hasattr(m, name) for name in names) and all(
-        hasattr(m.McapWriter, name) for name in ('close_chunk', 'write', 'close'))
-
-
-_MCAP_PARTS_CHECKED = _mcap_parts()
-
-
-class _BlockWriter:
-    """Writes blocks of messages (``rows[k]`` (N, bytes) on ``connections[k]``, the k messages
-    of input i at ``log_times[i]``, in that order) to a rosbags ``Writer``: the records rosbags
-    writes, message by message, but built for a whole block at once.
-
-    mcap: message records of rosbags' ``McapWriter`` (opcode 0x05, length, channel id, sequence
-    0, log and publish time, data) assembled with numpy and appended to its open chunk, the
-    chunk closed where rosbags closes it (its size past 1 MiB after a message), the message
-    index, the chunk and channel statistics and the writer's counts and time range updated as
-    ``Writer.write`` updates them; sqlite3: one ``executemany`` of rosbags' insert. Any other
-    storage (or a rosbags whose writers lack these parts) is written message by message."""
-
-    _MCAP_CHUNK_LIMIT = 2**20
-    _RECORD_HEAD = 1 + 8 + 2 + 4 + 8 + 8
-
-    def __init__(self, writer: Any) -> None:
-        from rosbags.rosbag2.storage_mcap import McapWriter
-        from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
-
-        self.writer = writer
-        storage = writer.storage
-        self._index: dict[int, list[tuple[NDArray[np.int64], NDArray[np.int64]]]] = {}
-        if type(storage) is McapWriter and _MCAP_PARTS_CHECKED:
-            # Only this class writes messages to the bag: its index replaces chunk.msgs.
-            storage.close_chunk = self._close_mcap_chunk
-            self._write = self._mcap
-        elif type(storage) is Sqlite3Writer and hasattr(storage, 'cursor'):
-            self._write = self._sqlite3
-        else:
-            self._write = self._each
-
-    def write(self, connections: Sequence[Any], log_times: NDArray[np.int64],
-              rows: Sequence[NDArray[np.uint8]]) -> None:
-        if len(log_times):
-            self._write(connections, np.asarray(log_times, dtype=np.int64), rows)
-            w = self.writer
-            for connection in connections:
-                w.counts[connection.id] += len(log_times)
-            w.min_timestamp = min(int(log_times.min()), w.min_timestamp)
-            w.max_timestamp = max(int(log_times.max()), w.max_timestamp)
-
-    def _each(self, connections: Sequence[Any], log_times: NDArray[np.int64],
-              rows: Sequence[NDArray[np.uint8]]) -> None:
-        write = self.writer.storage.write
-        for i, t in enumerate(log_times.tolist()):
-            for connection, block in zip(connections, rows, strict=True):
-                write(connection, t, block[i].tobytes())
-
-    def _sqlite3(self, connections: Sequence[Any], log_times: NDArray[np.int64],
+def write_blocks(writer: Any, connections: Sequence[Any], log_times: NDArray[np.int64],
                  rows: Sequence[NDArray[np.uint8]]) -> None:
-        times = log_times.tolist()
-        blocks = [(c.id, block) for c, block in zip(connections, rows, strict=True)]
-        self.writer.storage.cursor.executemany(
-            'INSERT INTO messages (topic_id, timestamp, data) VALUES(?, ?, ?)',
-            [(cid, t, block[i].tobytes()) for i, t in enumerate(times) for cid, block in blocks])
-
-    def _mcap(self, connections: Sequence[Any], log_times: NDArray[np.int64],
-              rows: Sequence[NDArray[np.uint8]]) -> None:
-        n, k, head = len(log_times), len(connections), self._RECORD_HEAD
-        sizes = [head + block.shape[1] for block in rows]
-        records = np.empty((n, sum(sizes)), dtype=np.uint8)
-        at = 0
-        stamps = log_times.astype('<u8').view(np.uint8).reshape(n, 8)
-        for connection, block, size in zip(connections, rows, sizes, strict=True):
-            record = records[:, at:at + size]
-            record[:, 0] = 0x05
-            record[:, 1:9] = np.frombuffer((size - 9).to_bytes(8, 'little'), np.uint8)
-            record[:, 9:11] = np.frombuffer(connection.id.to_bytes(2, 'little'), np.uint8)
-            record[:, 11:15] = 0
-            record[:, 15:23] = stamps
-            record[:, 23:31] = stamps
-            record[:, head:] = block
-            at += size
-        flat_sizes = np.tile(np.array(sizes, dtype=np.int64), n)
-        ends = np.cumsum(flat_sizes)  # end of each message in the block, in write order
-        starts = ends - flat_sizes
-        which = np.tile(np.arange(k), n)  # connection of each message
-        times = np.repeat(log_times, k)
-        flat = records.reshape(-1)
-        storage, first = self.writer.storage, 0
-        while first < len(ends):
-            chunk = storage.chunk
-            start, base = chunk.bio.tell(), int(starts[first])
-            # rosbags closes the chunk after the first message that takes it past the limit
-            past = np.flatnonzero(ends[first:] - base + start > self._MCAP_CHUNK_LIMIT)
-            last = first + int(past[0]) if past.size else len(ends) - 1
-            seg = slice(first, last + 1)
-            chunk.bio.write(flat[base:int(ends[last])].tobytes())
-            offsets, seg_times, seg_which = starts[seg] - base + start, times[seg], which[seg]
-            for r in range(k):  # in the order of first appearance, as chunk.msgs fills
-                j = (int(seg_which[0]) + r) % k
-                connection, chosen = connections[j], seg_which == j
-                if chosen.any():
-                    self._index.setdefault(connection.id, []).append(
-                        (seg_times[chosen], offsets[chosen]))
-                    storage.channel_stats[connection.id] += int(chosen.sum())
-            t_lo, t_hi = int(seg_times.min()), int(seg_times.max())
-            chunk.message_start_time = min(t_lo, chunk.message_start_time)
-            chunk.message_end_time = max(t_hi, chunk.message_end_time)
-            storage.message_start_time = min(t_lo, storage.message_start_time)
-            storage.message_end_time = max(t_hi, storage.message_end_time)
-            if past.size:
-                storage.close_chunk()
-            first = last + 1
-
-    def _close_mcap_chunk(self) -> None:
-        """rosbags' ``McapWriter.close_chunk`` (chunk record, message indexes, chunk index)
-        with the message indexes of :meth:`_mcap`'s blocks written as arrays."""
-        from rosbags.rosbag2 import storage_mcap as m
-
-        storage = self.writer.storage
-        chunk = storage.chunk
-        rec = BytesIO()
-        m.write_uint64(rec, chunk.message_start_time)
-        m.write_uint64(rec, chunk.message_end_time)
-        m.write_uint64(rec, chunk.bio.tell())
-        m.write_uint32(rec, 0)
-        compressed = storage.compressor(chunk.bio.getvalue())
-        m.write_string(rec, storage.compression)
-        m.write_uint64(rec, len(compressed))
-        rec.write(compressed)
-        chunk_start = storage.bio.tell()
-        m.write_record(storage.bio, 0x06, rec)
-        chunk_end = storage.bio.tell()
-        offsets: list[tuple[int, int]] = []
-        for cid, parts in self._index.items():
-            offsets.append((cid, storage.bio.tell()))
-            entries = np.empty((sum(len(t) for t, _ in parts), 2), dtype='<u8')
-            entries[:, 0] = np.concatenate([t for t, _ in parts])
-            entries[:, 1] = np.concatenate([o for _, o in parts])
-            rec = BytesIO()
-            m.write_uint16(rec, cid)
-            m.write_uint32(rec, entries.nbytes)
-            rec.write(entries.tobytes())
-            m.write_record(storage.bio, 0x07, rec)
-        self._index = {}
-        rec = BytesIO()
-        m.write_uint64(rec, chunk.message_start_time)
-        m.write_uint64(rec, chunk.message_end_time)
-        m.write_uint64(rec, chunk_start)
-        m.write_uint64(rec, chunk_end - chunk_start)
-        m.write_uint32(rec, len(offsets) * 10)
-        for cid, offset in offsets:
-            m.write_uint16(rec, cid)
-            m.write_uint64(rec, offset)
-        m.write_uint64(rec, storage.bio.tell() - chunk_end)
-        m.write_string(rec, storage.compression)
-        m.write_uint64(rec, len(compressed))
-        m.write_uint64(rec, chunk.bio.tell())
-        storage.chunks.append(rec)
-        storage.chunk = m.PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+    """Write a block of messages through rosbags' public ``Writer.write``: ``rows[k]``
+    (N, bytes) on ``connections[k]``, the messages of input i at ``log_times[i]`` in
+    connection order (the order the node publishes them)."""
+    write = writer.write
+    columns = []
+    for block in rows:
+        data, width = np.ascontiguousarray(block).tobytes(), block.shape[1]
+        columns.append([data[at:at + width] for at in range(0, len(data), width)])
+    for t, *datas in zip(log_times.tolist(), *columns, strict=True):
+        for connection, data in zip(connections, datas, strict=True):
+            write(connection, t, data)
 
 
 def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, str]],
@@ -1153,15 +956,11 @@ def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, st
          total: int, progress: Callable[[int, int], None] | None,
          chunk_size: int) -> BagSummary:
     """The read - process - write loop of :func:`process_bag`."""
-    messages = output_messages(typestore, settings.model.string_names, settings.link1_frame)
-    sizes = {'wrench': 6, 'stiffness': 36, 'cartesian_stiffness': 36,
-             'string_tensions': settings.model.n_strings,
-             'stiffness_interpretation': layouts.INTERPRETATION_SIZE}
-    templates = {name: _Template(typestore, spec.outputs[name], messages[name], sizes[name],
-                                 name == 'wrench') for name in outputs}
+    output_layouts = layouts.joint_output_layouts(settings.model.string_names)
+    templates = {name: _Template(typestore, output_layouts[name], settings.link1_frame)
+                 for name in outputs}
     out_connections = [writer.add_connection(f'{prefix}/{name}', spec.outputs[name],
                                              typestore=typestore) for name in outputs]
-    block_writer = _BlockWriter(writer)
     written = Counter()
 
     def emit(a: Answers) -> None:
@@ -1169,7 +968,7 @@ def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, st
                     'cartesian_stiffness': a.cartesian_stiffness,
                     'string_tensions': a.tensions,
                     'stiffness_interpretation': a.interpretation}
-        block_writer.write(out_connections, a.log_times, [templates[name].rows(
+        write_blocks(writer, out_connections, a.log_times, [templates[name].rows(
             payloads[name], a.stamps if name == 'wrench' else None) for name in outputs])
         for name in outputs:
             written[name] += len(a)

@@ -11,6 +11,7 @@ a matrix of shape (rows, cols) has ``dim[0] = (row_label, rows, rows*cols)`` and
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 #: Component names of a wrench (rows of K and K_c), of a screw (columns of K) and of a spatial
 #: twist in {1}, linear first as ROS orders 6-vectors (columns of K_c).
@@ -74,3 +75,64 @@ def stacked_matrix_dims(n: int, rows: int, cols: int, stack_label: str, row_labe
     """``(label, size, stride)`` of ``n`` dense row-major (rows, cols) matrices, one after
     the other (shape (n, rows, cols))."""
     return [(stack_label, n, n * rows * cols), *matrix_dims(rows, cols, row_label, col_label)]
+
+
+# ------------------------------------------------------------------------------ output messages
+#: ROS 2 type names of the nodes' output messages (``package/msg/Name``, as rosbag2 records them).
+FLOAT64_MULTIARRAY = 'std_msgs/msg/Float64MultiArray'
+WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
+POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+
+
+@dataclass(frozen=True)
+class OutputLayout:
+    """One output message of a node: its type and, for a ``Float64MultiArray``, its layout
+    ``dims`` ((label, size, stride) each; the payload holds ``dims[0][2]`` values). A stamped
+    message (``WrenchStamped``, ``PoseStamped``) carries the frame id the node is configured
+    with (``link1_frame`` of ``stiffness_node``, ``base_frame`` of ``spine_node``), given when
+    it is filled."""
+
+    msgtype: str
+    dims: tuple[tuple[str, int, int], ...] = ()
+
+    @property
+    def size(self) -> int:
+        """Values in the payload (6 for a wrench, 16 for a pose's (4, 4) transform)."""
+        if self.msgtype == FLOAT64_MULTIARRAY:
+            return self.dims[0][2]
+        return 6 if self.msgtype == WRENCH_STAMPED else 16
+
+
+def _array(dims: Sequence[tuple[str, int, int]]) -> OutputLayout:
+    return OutputLayout(FLOAT64_MULTIARRAY, tuple(dims))
+
+
+def joint_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
+    """``stiffness_node``'s per-input outputs by topic (relative to the node), in the order of
+    :func:`processing.output_arrays`: wrench, K, K_c, tensions, interpretation."""
+    n = len(string_names)
+    return {
+        'wrench': OutputLayout(WRENCH_STAMPED),
+        'stiffness': _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
+        'cartesian_stiffness': _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL,
+                                                  CARTESIAN_STIFFNESS_COL_LABEL)),
+        'string_tensions': _array(vector_dims(n, tensions_label(string_names))),
+        'stiffness_interpretation': _array(vector_dims(INTERPRETATION_SIZE,
+                                                       INTERPRETATION_LABEL)),
+    }
+
+
+def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
+    """``spine_node``'s per-input outputs by topic, in the order of
+    :func:`spine_processing.output_arrays` (and its ``OUTPUT_NAMES``)."""
+    return {
+        'joint_wrenches': _array(matrix_dims(n_joints, 6, JOINTS_LABEL, WRENCH_LABEL)),
+        'joint_stiffness': _array(stacked_matrix_dims(
+            n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
+        'joint_cartesian_stiffness': _array(stacked_matrix_dims(
+            n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, CARTESIAN_STIFFNESS_COL_LABEL)),
+        'tip_pose': OutputLayout(POSE_STAMPED),
+        'tip_wrench': OutputLayout(WRENCH_STAMPED),
+        'tip_stiffness': _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['tool'])),
+        'tip_stiffness_base': _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['base'])),
+    }

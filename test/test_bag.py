@@ -552,11 +552,12 @@ def _rewrite_message_by_message(src: Path, dst: Path, storage: str) -> None:
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
-def test_block_writer_writes_what_rosbags_writes_message_by_message(
+def test_blocks_are_written_as_rosbags_writes_them_message_by_message(
         tmp_path: Path, storage: str) -> None:
-    """Blocks straddling mcap chunk boundaries (about 1.1 kB per input, 1 MiB chunks): the bag
-    is byte for byte the one rosbags' Writer writes for the same messages (sqlite3: the same
-    messages and metadata read back)."""
+    """Chunks of 333 answers (``write_blocks``) across mcap chunk boundaries (about 1.1 kB per
+    input, 1 MiB chunks), two inputs per log time: the bag is byte for byte the one rosbags'
+    Writer writes when the messages read back are written again one at a time, in the order
+    read (sqlite3: the same messages and metadata read back)."""
     from tensegrity_stiffness import bag
 
     screws = screw_stream(2500, seed=9)
