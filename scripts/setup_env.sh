@@ -5,7 +5,9 @@
 #   2. build/, install/   colcon build (--symlink-install, isolated layout) of the three packages:
 #                  tensegrity_stiffness (ament_python, repo root), tensegrity_stiffness_interfaces
 #                  (ament_cmake + rosidl, sub-folder) and tensegrity_stiffness_kernel (ament_cmake,
-#                  the compiled joint kernel: a C++ shared library built with cmake and g++).
+#                  the compiled joint kernel: a C++ shared library built with cmake and g++, and
+#                  its gtest build/tensegrity_stiffness_kernel/test_kernel_math, BUILD_TESTING=ON;
+#                  test/test_kernel_gtest.py runs it).
 # Each step is skipped when its stamp matches (stamps are sha256 hashes of the inputs):
 #   .venv/.tensegrity_venv_stamp       requirement pins + constraints.txt + python version + path
 #   install/.tensegrity_build_stamp    venv stamp + package manifests, setup.py/cfg, srv files, the
@@ -133,8 +135,9 @@ build_hash="$( {
 
 EXE="install/tensegrity_stiffness/lib/tensegrity_stiffness/stiffness_node"
 KERNEL_LIB="install/$KERNEL_DIR/lib/libtensegrity_stiffness_kernel.so"
+KERNEL_GTEST="build/$KERNEL_DIR/test_kernel_math"
 if [[ "${TENSEGRITY_FORCE:-0}" != 1 && -f "$BUILD_STAMP" && "$(cat "$BUILD_STAMP")" == "$build_hash" \
-  && -e "$EXE" && -d "install/$INTERFACES_DIR" && -e "$KERNEL_LIB" ]]; then
+  && -e "$EXE" && -d "install/$INTERFACES_DIR" && -e "$KERNEL_LIB" && -x "$KERNEL_GTEST" ]]; then
   log "colcon build up to date (install/)"
 else
   # build/ and install/ hold absolute paths: start clean when the venv or checkout path changed.
@@ -162,7 +165,7 @@ else
     colcon build --symlink-install \
       --base-paths . "$INTERFACES_DIR" "$KERNEL_DIR" \
       --event-handlers console_cohesion+ status- \
-      --cmake-args -DBUILD_TESTING=OFF \
+      --cmake-args -DBUILD_TESTING=ON \
       "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
       >"$BUILD_OUT" 2>&1
   ) || {
@@ -176,6 +179,10 @@ else
   fi
   if [[ ! -e "$KERNEL_LIB" ]]; then
     log "colcon build did not produce $KERNEL_LIB (the compiled kernel)"
+    exit 1
+  fi
+  if [[ ! -x "$KERNEL_GTEST" ]]; then
+    log "colcon build did not produce $KERNEL_GTEST (the kernel's gtest, BUILD_TESTING=ON)"
     exit 1
   fi
   printf '%s\n' "$build_hash" >"$BUILD_STAMP"
