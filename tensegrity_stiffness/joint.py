@@ -172,7 +172,8 @@ class JointModel:
         self._p1 = p1[self.connections[:, 0]]
         self._p2 = p2[self.connections[:, 1]]
 
-        self._hat_p1 = hat3(self._p1)  # (n, 3, 3)
+        # Z_j = [I; hat(p1_j)] (n, 6, 3): the wrench of a force f_j at p1_j is Z_j f_j.
+        self._Z = np.concatenate([np.broadcast_to(_EYE3, (n, 3, 3)), hat3(self._p1)], axis=1)
         self._kernel = kernel.joint_kernel(
             self._p1, self._p2, self.k, self.max_stretch, FORCE_LAWS.index(force_law),
             MIN_STRING_LENGTH) if use_kernel else None
@@ -364,12 +365,11 @@ class JointModel:
         ``None`` when a string has zero length (the numpy path then raises the error that
         names it)."""
         kn = self._kernel
+        # Inputs are copied into the one buffer (nothing else for C to read).
         buf = np.empty(kn.size)
-        buf[:6] = xi
-        # Bound to a name: the (possibly copied) rest lengths must outlive the call.
-        rest_c = np.ascontiguousarray(rest)
-        status = kn.evaluate_packed(kn.model, kernel.address(rest_c), kn.n,
-                                    kernel.MODE_FULL if full else kernel.MODE_STIFFNESS,
+        buf[:kn.rest] = xi
+        buf[kn.rest:kn.transform] = rest
+        status = kn.evaluate_packed(kn.model, kernel.MODE_FULL if full else kernel.MODE_STIFFNESS,
                                     kernel.address(buf), kn.size)
         if status != kernel.OK:
             if status == kernel.ERROR_ZERO_LENGTH:
@@ -422,20 +422,20 @@ class JointModel:
         self._check_lengths(lengths)
         # eq. 8: tensions phi_j, their derivatives phi'_j and the regions.
         phi, dphi, slack, saturated = self._string_forces(lengths, rest)
-        # eq. 9: f_j = phi_j s_j / l_j, F = sum_j [f_j; p1_j x f_j].
+        # eq. 9: f_j = phi_j s_j / l_j, F = sum_j [f_j; p1_j x f_j] = sum_j Z_j f_j.
         beta = phi / lengths
         f = beta[..., None] * s
-        wrench = np.concatenate([f.sum(axis=-2), np.cross(self._p1, f).sum(axis=-2)], axis=-1)
+        wrench = np.sum(self._Z @ f[..., None], axis=-3)[..., 0]
         if wrench_only:
             nan = np.full(xi.shape[:-1] + (6, 6), np.nan)
             return JointState(xi, kin.T, s, lengths, phi, slack, saturated, wrench, nan,
                               nan.copy())
         # eq. 10: A_j = df/ds = gamma_j s_j s_j^T + beta_j I, gamma = (phi' - beta) / l^2;
-        # H_D = sum [I; hat(p1_j)] A_j, H_G = sum [I; hat(p1_j)] A_j hat(q_j).
+        # H_D = sum_j Z_j A_j, H_G = sum_j Z_j A_j hat(q_j).
         gamma = (dphi - beta) / l2
         A = (gamma[..., None, None] * s[..., :, None] * s[..., None, :]
              + beta[..., None, None] * _EYE3)
-        ZA = np.concatenate([A, self._hat_p1 @ A], axis=-2)  # (..., n, 6, 3)
+        ZA = self._Z @ A  # (..., n, 6, 3)
         H_D = ZA.sum(axis=-3)
         H_G = (ZA @ hat3(q)).sum(axis=-3)
         # K = [H_G G - H_D Q, -H_D G], K_c = [H_D, -H_G].

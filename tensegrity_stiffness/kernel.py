@@ -156,7 +156,7 @@ class _Library:
         self.evaluate.argtypes = [_P, _I, _P, _P, _I, _I, _P, _I]
         self.evaluate_packed = lib.tsk_joint_evaluate_packed
         self.evaluate_packed.restype = _I
-        self.evaluate_packed.argtypes = [_P, _P, _I, _I, _P, _I]
+        self.evaluate_packed.argtypes = [_P, _I, _P, _I]
         self.chain_frames = lib.tsk_chain_frames
         self.chain_frames.restype = _I
         self.chain_frames.argtypes = [_I, _P, _P, _P, _P, _I]
@@ -198,9 +198,10 @@ class JointKernel:
 
     ``p1``, ``p2`` (n, 3) string ends in {1} and {2}, ``k`` (n,) N/m, ``max_stretch`` (n,) m
     (inf: no limit), ``law`` 0 (Hooke) or 1 (paper), ``min_string_length`` (m). The packed
-    buffer of one screw holds ``xi`` (6), ``T`` (16), ``s`` (3n), lengths (n), tensions (n),
-    wrench (6), ``K`` (36), ``K_c`` (36), then the slack and saturated flags as 2n bytes; the
-    offsets are attributes (``size`` is ``tsk_joint_packed_size(n)``).
+    buffer of one screw holds the inputs ``xi`` (6) and the rest lengths (n), then ``T`` (16),
+    ``s`` (3n), lengths (n), tensions (n), wrench (6), ``K`` (36), ``K_c`` (36), then the slack
+    and saturated flags as 2n bytes; the offsets are attributes (``size`` is
+    ``tsk_joint_packed_size(n)``). Inputs copied into it need no lifetime care.
     """
 
     def __init__(self, library: _Library, p1: NDArray, p2: NDArray, k: NDArray,
@@ -220,7 +221,8 @@ class JointKernel:
         self.evaluate = library.evaluate
         self.evaluate_packed = library.evaluate_packed
         self.batch_size = library.batch_size
-        self.transform = 6
+        self.rest = 6
+        self.transform = self.rest + n
         self.strings = self.transform + 16
         self.lengths = self.strings + 3 * n
         self.tensions = self.lengths + n

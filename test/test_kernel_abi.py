@@ -74,7 +74,8 @@ def test_buffer_sizes_mirror_the_library():
                                  np.full(n, np.inf), 0, joint.MIN_STRING_LENGTH)
         assert kn.size == library.packed_size(n)
         for N in (1, 3, 1000):
-            # joint.py's batch buffer: 16 + 5n + 78 doubles per screw, then 2nN flag bytes.
+            # joint.py's batch buffer: 16 + 5n + 78 doubles per screw, then 2nN flag bytes
+            # (its offsets: _evaluate_batch_kernel).
             assert (16 + 5 * n + 78) * N + (2 * N * n + 7) // 8 == library.batch_size(n, N)
     assert library.packed_size(0) == library.batch_size(3, 0) == -2  # TSK_ERROR_COUNT
 
@@ -99,16 +100,16 @@ def test_the_library_refuses_bad_counts_and_short_buffers():
     kn = model._kernel
     rest = model.rest_lengths
     buf = np.zeros(kn.size)
-    buf[:6] = model.initial_screw
-    args = (kn.model, kernel.address(rest))
-    assert kn.evaluate_packed(*args, kn.n, 0, kernel.address(buf), kn.size) == kernel.OK
+    buf[:kn.rest] = model.initial_screw
+    buf[kn.rest:kn.transform] = rest
+    assert kn.evaluate_packed(kn.model, 0, kernel.address(buf), kn.size) == kernel.OK
+    np.testing.assert_array_equal(buf[kn.cartesian:kn.flags].reshape(6, 6),
+                                  model.evaluate(model.initial_screw).cartesian_stiffness)
     short = np.full(kn.size - 1, 7.0)
-    assert kn.evaluate_packed(*args, kn.n, 0, kernel.address(short), short.size) == -3
+    assert kn.evaluate_packed(kn.model, 0, kernel.address(short), short.size) == -3
     assert (short == 7.0).all()  # nothing written
-    assert kn.evaluate_packed(*args, kn.n - 1, 0, kernel.address(buf), kn.size) == -3
-    assert kn.evaluate_packed(*args, kn.n, 5, kernel.address(buf), kn.size) == -4
-    assert kn.evaluate_packed(None, kernel.address(rest), kn.n, 0, kernel.address(buf),
-                              kn.size) == -1
+    assert kn.evaluate_packed(kn.model, 5, kernel.address(buf), kn.size) == -4
+    assert kn.evaluate_packed(None, 0, kernel.address(buf), kn.size) == -1
     out = np.zeros(kernel.library().batch_size(kn.n, 2))
     xi = np.zeros((2, 6))
     assert kn.evaluate(kn.model, 0, kernel.address(xi), kernel.address(rest), kn.n, 0,

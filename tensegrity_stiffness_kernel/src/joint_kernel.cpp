@@ -291,11 +291,11 @@ int64_t tsk_joint_packed_size(int64_t n_strings) {
   if (n_strings < 1 || n_strings > kMaxCount) {
     return TSK_ERROR_COUNT;
   }
-  return 6 + 16 + 5 * n_strings + 6 + 36 + 36 + doubles_for_bytes(2 * n_strings);
+  return 6 + n_strings + 16 + 5 * n_strings + 6 + 36 + 36 + doubles_for_bytes(2 * n_strings);
 }
 
-int64_t tsk_joint_evaluate_packed(const tsk_joint_model* model, const double* rest,
-                                  int64_t rest_len, int64_t mode, double* buf, int64_t buf_len) {
+int64_t tsk_joint_evaluate_packed(const tsk_joint_model* model, int64_t mode, double* buf,
+                                  int64_t buf_len) {
   // No allocation and no throwing call below: nothing can raise (the try is the rule of the
   // boundary, at no cost on the normal path).
   try {
@@ -303,17 +303,18 @@ int64_t tsk_joint_evaluate_packed(const tsk_joint_model* model, const double* re
     if (status != TSK_OK) {
       return status;
     }
-    if (rest == nullptr || buf == nullptr) {
+    if (buf == nullptr) {
       return TSK_ERROR_NULL_POINTER;
     }
     if (!valid_mode(mode)) {
       return TSK_ERROR_ARGUMENT;
     }
     const int64_t n = model->n_strings;
-    if (rest_len != n || buf_len < tsk_joint_packed_size(n)) {
+    if (buf_len < tsk_joint_packed_size(n)) {
       return TSK_ERROR_BUFFER_SIZE;
     }
-    double* T = buf + 6;
+    const double* rest = buf + 6;
+    double* T = buf + 6 + n;
     double* s = T + 16;
     double* lengths = s + 3 * n;
     double* phi = lengths + n;

@@ -69,7 +69,8 @@ struct Packed {
   std::vector<double> buf;
   explicit Packed(int64_t strings) : n(strings), buf(tsk_joint_packed_size(strings), 0.0) {}
   double* xi() { return buf.data(); }
-  const double* T() const { return buf.data() + 6; }
+  double* rest() { return buf.data() + 6; }
+  const double* T() const { return buf.data() + 6 + n; }
   const double* s() const { return T() + 16; }
   const double* lengths() const { return s() + 3 * n; }
   const double* tensions() const { return lengths() + n; }
@@ -85,8 +86,11 @@ int64_t evaluate(const Joint& joint, Packed& out, const std::vector<double>& xi,
   for (int i = 0; i < 6; ++i) {
     out.xi()[i] = xi[i];
   }
-  return tsk_joint_evaluate_packed(&joint.model, rest.data(), static_cast<int64_t>(rest.size()),
-                                   mode, out.buf.data(), static_cast<int64_t>(out.buf.size()));
+  for (size_t j = 0; j < rest.size() && j < static_cast<size_t>(out.n); ++j) {
+    out.rest()[j] = rest[j];
+  }
+  return tsk_joint_evaluate_packed(&joint.model, mode, out.buf.data(),
+                                   static_cast<int64_t>(out.buf.size()));
 }
 
 void expect_near(const double* got, const std::vector<double>& want, double tol,
@@ -134,7 +138,7 @@ TEST(KernelAbi, VersionAndModelLayout) {
   EXPECT_EQ(layout[2], static_cast<int64_t>(offsetof(tsk_joint_model, p1)));
   EXPECT_EQ(layout[10], static_cast<int64_t>(offsetof(tsk_joint_model, min_string_length)));
   EXPECT_EQ(tsk_joint_model_layout(layout, TSK_MODEL_FIELDS), TSK_ERROR_BUFFER_SIZE);
-  EXPECT_EQ(tsk_joint_packed_size(12), 6 + 16 + 60 + 6 + 36 + 36 + 3);
+  EXPECT_EQ(tsk_joint_packed_size(12), 6 + 12 + 16 + 60 + 6 + 36 + 36 + 3);
   EXPECT_EQ(tsk_joint_batch_size(12, 2), 2 * (16 + 60 + 6 + 36 + 36) + 6);
   EXPECT_EQ(tsk_joint_packed_size(0), TSK_ERROR_COUNT);
   EXPECT_EQ(tsk_joint_batch_size(12, 0), TSK_ERROR_COUNT);
@@ -290,18 +294,17 @@ TEST(JointKernel, RefusesBadCountsBuffersModesAndPointers) {
   Packed out(1);
   const std::vector<double> rest = {0.05};
   std::vector<double> short_buf(out.buf.size() - 1, 7.0);
-  EXPECT_EQ(tsk_joint_evaluate_packed(&joint.model, rest.data(), 1, TSK_MODE_FULL,
-                                      short_buf.data(), static_cast<int64_t>(short_buf.size())),
+  EXPECT_EQ(tsk_joint_evaluate_packed(&joint.model, TSK_MODE_FULL, short_buf.data(),
+                                      static_cast<int64_t>(short_buf.size())),
             TSK_ERROR_BUFFER_SIZE);
   for (double v : short_buf) {
     EXPECT_EQ(v, 7.0);  // nothing written
   }
-  EXPECT_EQ(tsk_joint_evaluate_packed(&joint.model, rest.data(), 2, TSK_MODE_FULL,
-                                      out.buf.data(), static_cast<int64_t>(out.buf.size())),
-            TSK_ERROR_BUFFER_SIZE);
   EXPECT_EQ(evaluate(joint, out, {0, 0, 0, 0, 0, 0}, rest, 3), TSK_ERROR_ARGUMENT);
-  EXPECT_EQ(tsk_joint_evaluate_packed(nullptr, rest.data(), 1, TSK_MODE_FULL, out.buf.data(),
+  EXPECT_EQ(tsk_joint_evaluate_packed(nullptr, TSK_MODE_FULL, out.buf.data(),
                                       static_cast<int64_t>(out.buf.size())),
+            TSK_ERROR_NULL_POINTER);
+  EXPECT_EQ(tsk_joint_evaluate_packed(&joint.model, TSK_MODE_FULL, nullptr, 100),
             TSK_ERROR_NULL_POINTER);
   Joint bad_law({0.0, 0.0, 0.1}, {0.0, 0.0, 0.0}, {100.0}, {kInf}, 7);
   EXPECT_EQ(evaluate(bad_law, out, {0, 0, 0, 0, 0, 0}, rest), TSK_ERROR_ARGUMENT);

@@ -80,15 +80,15 @@ int64_t tsk_abi_version(void);
  * order, written to out (capacity >= 1 + TSK_MODEL_FIELDS); returns the number written. */
 int64_t tsk_joint_model_layout(int64_t* out, int64_t capacity);
 
-/* Doubles of the packed buffer of one screw for n strings: xi 6, T 16, s 3n, lengths n,
- * tensions n, wrench 6, K 36, K_c 36, then slack n and saturated n as bytes (rounded up to
- * whole doubles). */
+/* Doubles of the packed buffer of one screw for n strings: the inputs xi 6 and the rest
+ * lengths n, then the outputs T 16, s 3n, lengths n, tensions n, wrench 6, K 36, K_c 36, then
+ * slack n and saturated n as bytes (rounded up to whole doubles). */
 int64_t tsk_joint_packed_size(int64_t n_strings);
 
-/* One screw: buf (buf_len >= tsk_joint_packed_size(n)) holds xi on entry and the outputs after;
- * rest (rest_len == n) the rest lengths. */
-int64_t tsk_joint_evaluate_packed(const tsk_joint_model* model, const double* rest,
-                                  int64_t rest_len, int64_t mode, double* buf, int64_t buf_len);
+/* One screw, everything in one buffer (buf_len >= tsk_joint_packed_size(n)): it holds xi and
+ * the rest lengths on entry and the outputs after. */
+int64_t tsk_joint_evaluate_packed(const tsk_joint_model* model, int64_t mode, double* buf,
+                                  int64_t buf_len);
 
 /* Doubles of the output buffer of a batch: blocks of all screws one after the other, T 16N,
  * s 3nN, lengths nN, tensions nN, wrench 6N, K 36N, K_c 36N, then slack nN and saturated nN as
