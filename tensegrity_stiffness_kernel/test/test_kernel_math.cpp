@@ -263,6 +263,16 @@ TEST(JointKernel, StiffnessIsContinuousAcrossTheSeriesEdge) {
   for (int i = 0; i < 36; ++i) {
     EXPECT_NEAR(below.K()[i], above.K()[i], 1e-10 * scale) << "K entry " << i;
   }
+  // And at 0: K moves by O(theta) from K(0) (the series keep b1, c1 and c accurate where their
+  // closed forms cancel catastrophically).
+  Packed zero(2), tiny(2);
+  const double t = 1e-6;
+  ASSERT_EQ(evaluate(joint, zero, {0, 0, 0, 0.01, -0.02, 0.03}, {0.05, 0.05}), TSK_OK);
+  ASSERT_EQ(evaluate(joint, tiny, {t * e[0], t * e[1], t * e[2], 0.01, -0.02, 0.03},
+                     {0.05, 0.05}), TSK_OK);
+  for (int i = 0; i < 36; ++i) {
+    EXPECT_NEAR(tiny.K()[i], zero.K()[i], 1e-4 * scale) << "K entry " << i;
+  }
 }
 
 // A batch of two screws with per-screw rest lengths equals two single evaluations.
