@@ -563,13 +563,16 @@ class JointChain:
         inputs = [np.ascontiguousarray(a, dtype=np.float64) for a in (
             state.joint_frames, state.link_transforms, state.tip_transform, state.wrenches,
             state.cartesian_stiffness)]
-        weights = self.link_masses[:, None] * g if self._has_weights(g) else None
+        weights = coms = None
+        if self._has_weights(g):
+            weights = self.link_masses[:, None] * g
+            coms = np.ascontiguousarray(self.link_coms, dtype=np.float64).reshape(self.n_joints, 3)
         W_c = None if W is None else np.ascontiguousarray(W, dtype=np.float64)
         out = np.empty(kernel.TIP_SIZE)
         status = lib.chain_tip(
             self.n_joints, *(address(a) for a in inputs),
             None if weights is None else address(weights),
-            None if weights is None else address(self.link_coms),
+            None if coms is None else address(coms),
             None if W_c is None else address(W_c),
             (kernel.TIP_BASE if base else 0) | (kernel.TIP_TOOL if tool else 0),
             address(out), out.size)
