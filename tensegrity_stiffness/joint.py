@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -406,8 +406,8 @@ class JointModel:
                                        rest if rest.ndim == 1 else rest[i:i + BATCH_CHUNK],
                                        wrench_only)
                   for i in range(0, xi.shape[0], BATCH_CHUNK)]
-        return JointState(*(np.concatenate([getattr(c, f) for c in chunks])
-                            for f in JointState.__slots__))
+        return JointState(*(np.concatenate([getattr(c, f.name) for c in chunks])
+                            for f in fields(JointState)))
 
     def _evaluate_numpy(self, xi: FloatArray, rest: FloatArray, wrench_only: bool = False
                         ) -> JointState:
