@@ -1,13 +1,16 @@
 #!/usr/bin/env python3
-"""Six-DOF core benchmark, run by hand: ``python3 bench/bench_joint.py [--quick]``.
+"""Six-DOF core benchmark, run by hand:
+``python3 bench/bench_joint.py [--quick] [--previous DIR [--previous-kernel LIB]]``.
 
 Prints, measured side by side in one run on the default joint:
-* the compiled kernel (``tensegrity_stiffness_kernel``, when built), the numpy path
-  (``use_kernel=False``) and the previous implementation (``joint_reference``, the readable
-  reference of the tests): per-call ``evaluate`` and ``stiffness``, batched ``evaluate`` at
-  N = 10^4 and 10^5 and ``interpretation_vector`` (against ``interpret_stiffness``), with the
-  ratios kernel / previous; all are timed in alternation (best of each), so that load on a
-  shared machine falls on all alike;
+* the compiled kernel (``tensegrity_stiffness_kernel``, when built) and the numpy path
+  (``use_kernel=False``, the readable implementation): per-call ``evaluate`` and ``stiffness``,
+  batched ``evaluate`` at N = 10^4 and 10^5 and ``interpretation_vector`` (against
+  ``interpret_stiffness``); with ``--previous DIR`` also the same figures of an earlier checkout
+  (e.g. ``mkdir DIR && git archive 5525cc4 | tar -x -C DIR``), imported in this process from
+  DIR with its own kernel (compiled here from DIR's sources with the CMakeLists' flags, or
+  ``--previous-kernel LIB``), and the ratios new / previous. All are timed in alternation (best
+  of each), so that load on a shared machine falls on all alike;
 * per-call analytic K (eq. 10) vs central-difference K (eq. 21), and their ratio; the
   central-difference baseline is given two ways (one vectorised wrench-only pass over the 12
   perturbed screws, and a loop of 12 single wrench calls) and the faster one is used;
@@ -21,19 +24,24 @@ differences, batched >= 500,000 configs/s at N = 10^4, equilibrium median <= 2 m
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
+import os
 import statistics
+import subprocess
 import sys
+import tempfile
 import time
 import timeit
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tensegrity_stiffness import joint_reference, kernel  # noqa: E402
+from tensegrity_stiffness import kernel  # noqa: E402
 from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
 from tensegrity_stiffness.interpretation import (  # noqa: E402
     interpret_stiffness,
@@ -63,60 +71,109 @@ def old_interpretation(K: np.ndarray) -> np.ndarray:
     return np.concatenate([it.block_norms, it.column_norms, it.row_norms])
 
 
-def numpy_path(model: JointModel) -> JointModel:
-    """``model`` on the numpy path (``use_kernel=False``)."""
-    return JointModel(model.link1_nodes, model.connections, model.k, model.rest_lengths,
-                      link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
-                      force_law=model.force_law, initial_screw=model.initial_screw,
-                      use_kernel=False)
+def numpy_path(model) -> JointModel:
+    """``model`` on the numpy path (``use_kernel=False``), of the model's own package."""
+    return type(model)(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+                       link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+                       force_law=model.force_law, initial_screw=model.initial_screw,
+                       use_kernel=False)
+
+
+def build_previous_kernel(root: Path, out_dir: Path) -> Path:
+    """The kernel of the checkout ``root`` compiled with its CMakeLists' flags (g++)."""
+    folder = root / 'tensegrity_stiffness_kernel'
+    sources = sorted(str(p) for p in (folder / 'src').glob('*.cpp'))
+    includes = [f'-I{folder / "include"}'] if (folder / 'include').is_dir() else []
+    library = out_dir / kernel.LIBRARY_NAME
+    subprocess.run(['g++', '-std=c++17', '-O2', '-ffp-contract=off', '-fno-fast-math', '-fPIC',
+                    '-shared', *includes, *sources, '-o', str(library)], check=True)
+    return library
+
+
+def import_previous(root: Path, library: Path) -> tuple[ModuleType, ModuleType]:
+    """``tensegrity_stiffness.joint`` and ``.kernel`` of the checkout ``root``, imported beside
+    this package (its modules swapped out of ``sys.modules`` meanwhile), bound to ``library``."""
+    prefix = 'tensegrity_stiffness'
+    ours = {k: v for k, v in sys.modules.items() if k == prefix or k.startswith(prefix + '.')}
+    for name in ours:
+        del sys.modules[name]
+    setting = os.environ.get(kernel.KERNEL_ENV)
+    os.environ[kernel.KERNEL_ENV] = str(library)
+    sys.path.insert(0, str(root))
+    try:
+        joint = importlib.import_module(f'{prefix}.joint')
+        previous_kernel = importlib.import_module(f'{prefix}.kernel')
+        previous_kernel.status()  # loads the library now, under the setting above
+        assert Path(joint.__file__).resolve().is_relative_to(root.resolve()), joint.__file__
+    finally:
+        sys.path.remove(str(root))
+        for name in [k for k in sys.modules if k == prefix or k.startswith(prefix + '.')]:
+            del sys.modules[name]
+        sys.modules.update(ours)
+        if setting is None:
+            del os.environ[kernel.KERNEL_ENV]
+        else:
+            os.environ[kernel.KERNEL_ENV] = setting
+    return joint, previous_kernel
 
 
 def compare_with_previous(model: JointModel, xi: np.ndarray, rng: np.random.Generator,
-                          number: int) -> None:
-    """The compiled kernel, the numpy path and :mod:`joint_reference` (the previous
-    implementation), side by side."""
-    plain = numpy_path(model)
+                          number: int, previous: ModuleType | None) -> None:
+    """The compiled kernel and the numpy path (and those of the previous checkout), side by
+    side."""
+    paths = [('kernel', model), ('numpy', numpy_path(model))]
     print(f'joint kernel: {kernel.status()}')
-
-    def old_stiffness() -> np.ndarray:
-        return joint_reference.evaluate(model, xi).stiffness
-
+    if previous is not None:
+        joint, previous_kernel = previous
+        old = joint.JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
+        paths += [('prev kernel', old), ('prev numpy', numpy_path(old))]
+        print(f'previous: {Path(joint.__file__).parents[1]}, {previous_kernel.status()}')
+    assert [m.uses_kernel for _, m in paths] == [True, False] * (len(paths) // 2), \
+        'the kernel is not loaded (build it: bash scripts/setup_env.sh)'
     K = model.stiffness(xi)
     rows = [
-        ('evaluate (everything the node publishes)',
-         *side_by_side(lambda: model.evaluate(xi), lambda: plain.evaluate(xi),
-                       lambda: joint_reference.evaluate(model, xi), repeat=7, number=number)),
-        ('stiffness K (eq. 10)',
-         *side_by_side(lambda: model.stiffness(xi), lambda: plain.stiffness(xi), old_stiffness,
-                       repeat=7, number=number)),
-        ('interpretation_vector (16 norms)',
-         *side_by_side(lambda: interpretation_vector(K), lambda: interpretation_vector(K),
-                       lambda: old_interpretation(K), repeat=7, number=number)),
+        ('evaluate (us per call)', side_by_side(*(lambda m=m: m.evaluate(xi) for _, m in paths),
+                                                repeat=7, number=number)),
+        ('stiffness K (us per call)', side_by_side(*(lambda m=m: m.stiffness(xi)
+                                                     for _, m in paths),
+                                                   repeat=7, number=number)),
     ]
-    print('kernel / numpy path / previous            kernel       numpy    previous  '
-          'kernel/previous')
-    for name, t_new, t_numpy, t_old in rows:
-        print(f'  {name:<40} {t_new:7.1f} us {t_numpy:7.1f} us {t_old:7.1f} us   '
-              f'{t_new / t_old:5.3f}')
+    print(f'  {"":<34}' + ''.join(f'{name:>13}' for name, _ in paths)
+          + ('  time new/prev: kernel  numpy' if previous else ''))
+
+    def line(name: str, values: list[float], fmt: str, ratios: list[float]) -> None:
+        print(f'  {name:<34}' + ''.join(f'{v:{fmt}}' for v in values)
+              + ''.join(f'{r:7.3f}' if i else f'{r:24.3f}' for i, r in enumerate(ratios)))
+
+    for name, times in rows:
+        ratios = [times[0] / times[2], times[1] / times[3]] if previous else []
+        line(name, times, '13.1f', ratios)
     for n in (10_000, 100_000):
         xs = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(n, 6))
-        model.evaluate(xs[:1000])  # warm up
-        plain.evaluate(xs[:1000])
-        joint_reference.evaluate(model, xs[:1000])
-        t_new, t_numpy, t_old = side_by_side(
-            lambda xs=xs: model.evaluate(xs), lambda xs=xs: plain.evaluate(xs),
-            lambda xs=xs: joint_reference.evaluate(model, xs), repeat=3, number=1)
-        print(f'  batched evaluate, N = {n:>7,} (configs/s) {n / t_new * 1e6:9,.0f} '
-              f'{n / t_numpy * 1e6:9,.0f} {n / t_old * 1e6:9,.0f}      '
-              f'{t_new / t_old:5.3f} (time)')
-    ref = joint_reference.evaluate(model, xi)
-    for label, m in (('kernel', model), ('numpy path', plain)):
+        for _, m in paths:
+            m.evaluate(xs[:1000])  # warm up
+        # Kernels with kernels, numpy with numpy: a large numpy run between two kernel runs
+        # changes malloc's state (its mmap threshold) for the next one.
+        times = [math.inf] * len(paths)
+        for group in (paths[0::2], paths[1::2]):
+            best = side_by_side(*(lambda m=m, xs=xs: m.evaluate(xs) for _, m in group),
+                                repeat=5, number=1)
+            for (name, _), t in zip(group, best, strict=True):
+                times[[p[0] for p in paths].index(name)] = t
+        ratios = [times[0] / times[2], times[1] / times[3]] if previous else []
+        line(f'batched evaluate, N = {n:,} (cfg/s)', [n / t * 1e6 for t in times], '13,.0f',
+             ratios)
+    t_new, t_old = side_by_side(lambda: interpretation_vector(K), lambda: old_interpretation(K),
+                                repeat=7, number=number)
+    print(f'  interpretation_vector {t_new:.1f} us, interpret_stiffness {t_old:.1f} us')
+    ref = paths[1][1].evaluate(xi)
+    for label, m in paths[:1] + paths[2:]:
         state = m.evaluate(xi)
         worst = max(float(np.max(np.abs(getattr(state, f) - getattr(ref, f)))
                           / np.max(np.abs(getattr(ref, f))))
                     for f in ('wrench', 'stiffness', 'cartesian_stiffness', 'tensions',
                               'lengths'))
-        print(f'  largest difference {label} - previous (relative to the largest entry): '
+        print(f'  largest difference {label} - numpy (relative to the largest entry): '
               f'{worst:.1e}')
     print()
 
@@ -124,13 +181,22 @@ def compare_with_previous(model: JointModel, xi: np.ndarray, rng: np.random.Gene
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='fewer repetitions')
+    parser.add_argument('--previous', type=Path, metavar='DIR',
+                        help='a checkout of an earlier commit to measure side by side')
+    parser.add_argument('--previous-kernel', type=Path, metavar='LIB',
+                        help="its compiled kernel (default: compiled here from DIR's sources)")
     args = parser.parse_args()
+    previous = None
+    if args.previous is not None:
+        with tempfile.TemporaryDirectory() as tmp:
+            library = args.previous_kernel or build_previous_kernel(args.previous, Path(tmp))
+            previous = import_previous(args.previous, library)
     number = 300 if args.quick else 2000
     model = JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
     rng = np.random.default_rng(0)
     xi = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3)
     step = 1e-6
-    compare_with_previous(model, xi, rng, number)
+    compare_with_previous(model, xi, rng, number, previous)
 
     def cd_loop() -> np.ndarray:
         cols = []

@@ -5,7 +5,9 @@
 #   2. build/, install/   colcon build --symlink-install of the one ament_cmake package at the
 #                  repository root, tensegrity_stiffness (its service interfaces, the compiled
 #                  kernel, the Python packages, executables, launch and config files), exactly as a
-#                  workspace builds it (`colcon build` finds the package.xml at the root).
+#                  workspace builds it (`colcon build` finds the package.xml at the root), with
+#                  BUILD_TESTING=ON: the kernel's gtest build/tensegrity_stiffness/test_kernel_math
+#                  (test/test_kernel_gtest.py runs it).
 # Each step is skipped when its stamp matches (stamps are sha256 hashes of the inputs):
 #   .venv/.tensegrity_venv_stamp       requirement pins + constraints.txt + python version + path
 #   install/.tensegrity_build_stamp    venv stamp + the build files (package.xml, CMakeLists.txt,
@@ -134,8 +136,9 @@ build_hash="$( {
 EXE="install/tensegrity_stiffness/lib/tensegrity_stiffness/stiffness_node"
 BUILD_ORIGIN="$VENV one-package"
 KERNEL_LIB="install/tensegrity_stiffness/lib/libtensegrity_stiffness_kernel.so"
+KERNEL_GTEST="build/tensegrity_stiffness/test_kernel_math"
 if [[ "${TENSEGRITY_FORCE:-0}" != 1 && -f "$BUILD_STAMP" && "$(cat "$BUILD_STAMP")" == "$build_hash" \
-  && -e "$EXE" && -e "$KERNEL_LIB" ]]; then
+  && -e "$EXE" && -e "$KERNEL_LIB" && -x "$KERNEL_GTEST" ]]; then
   log "colcon build up to date (install/)"
 else
   # build/ and install/ hold absolute paths: start clean when the venv, the checkout path or the
@@ -164,7 +167,7 @@ else
     colcon build --symlink-install \
       --base-paths . \
       --event-handlers console_cohesion+ status- \
-      --cmake-args -DBUILD_TESTING=OFF \
+      --cmake-args -DBUILD_TESTING=ON \
       "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
       >"$BUILD_OUT" 2>&1
   ) || {
@@ -178,6 +181,10 @@ else
   fi
   if [[ ! -e "$KERNEL_LIB" ]]; then
     log "colcon build did not produce $KERNEL_LIB (the compiled kernel)"
+    exit 1
+  fi
+  if [[ ! -x "$KERNEL_GTEST" ]]; then
+    log "colcon build did not produce $KERNEL_GTEST (the kernel's gtest, BUILD_TESTING=ON)"
     exit 1
   fi
   printf '%s\n' "$build_hash" >"$BUILD_STAMP"

@@ -9,7 +9,10 @@
 //   an LU of D with partial pivoting),
 //   K_tool = Ad_{T_tip}^T K_tip Ad_{T_tip}.
 // Twists [dv; dw], wrenches [f; m]; Ad_P = [[R, hat(p) R], [0, R]]. The numpy implementation in
-// chain.py stays the reference and the fallback (test/test_chain_kernel.py).
+// chain.py stays the reference and the fallback (test/test_chain_kernel.py). The C ABI is declared
+// in include/tensegrity_stiffness/kernel.h.
+
+#include "tensegrity_stiffness/kernel.h"
 
 #include <cmath>
 #include <cstdint>
@@ -157,15 +160,15 @@ bool solve_in_place(double* A, double* B, int64_t m, int64_t r) {
   return true;
 }
 
-// K = C^-1 into K_base and Ad_tip^T K Ad_tip into K_tool (either may be null): 0, or 2 when the
-// compliance C (overwritten) is singular.
+// K = C^-1 into K_base and Ad_tip^T K Ad_tip into K_tool (either may be null): TSK_OK, or
+// TSK_ERROR_SINGULAR_COMPLIANCE when the compliance C (overwritten) is singular.
 int64_t invert_and_store(double* C, const double* tip, double* K_base, double* K_tool) {
   double K[36];
   for (int i = 0; i < 36; ++i) {
     K[i] = (i % 7 == 0) ? 1.0 : 0.0;
   }
   if (!solve_in_place(C, K, 6, 6)) {
-    return 2;
+    return TSK_ERROR_SINGULAR_COMPLIANCE;
   }
   if (K_base) {
     std::memcpy(K_base, K, sizeof(K));
@@ -177,39 +180,51 @@ int64_t invert_and_store(double* C, const double* tip, double* K_base, double* K
     at_b_c(At, Kt, At, out);
     std::memcpy(K_tool, out, sizeof(out));
   }
-  return 0;
+  return TSK_OK;
 }
 
 }  // namespace
 
 extern "C" {
 
-// Frames of an n-joint spine from its joint transforms T (n x 16): P (n x 16) the poses of {1}_i,
-// L (n x 16) those of {2}_i, tip (16) the tool's; offsets (n - 1) x 16, tool 16.
-void tsk_chain_frames(int64_t n, const double* T, const double* offsets, const double* tool,
-                      double* P, double* L, double* tip) {
-  double current[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
-  for (int64_t i = 0; i < n; ++i) {
-    std::memcpy(P + 16 * i, current, sizeof(current));
-    compose(current, T + 16 * i, L + 16 * i);
-    if (i < n - 1) {
-      compose(L + 16 * i, offsets + 16 * i, current);
+int64_t tsk_chain_frames(int64_t n_joints, const double* T, const double* offsets,
+                         const double* tool, double* out, int64_t out_len) {
+  try {
+    const int64_t n = n_joints;
+    if (n < 1 || n > (int64_t{1} << 40)) {
+      return TSK_ERROR_COUNT;
     }
+    if (T == nullptr || tool == nullptr || out == nullptr || (n > 1 && offsets == nullptr)) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (out_len < 32 * n + 16) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    double* P = out;
+    double* L = out + 16 * n;
+    double current[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    for (int64_t i = 0; i < n; ++i) {
+      std::memcpy(P + 16 * i, current, sizeof(current));
+      compose(current, T + 16 * i, L + 16 * i);
+      if (i < n - 1) {
+        compose(L + 16 * i, offsets + 16 * i, current);
+      }
+    }
+    compose(L + 16 * (n - 1), tool, out + 32 * n);
+    return TSK_OK;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
   }
-  compose(L + 16 * (n - 1), tool, tip);
 }
 
-// The tip of an n-joint spine at an evaluated configuration: joint frames P (n x 16), link
-// frames L (n x 16), tool pose tip (16), joint wrenches F (n x 6, each in {1}_i), K_c (n x 36).
-// weights: null, or the link weights G_k = m_k g (n x 3) with the centres of mass coms (n x 3,
-// in {2}_k). W_in: the tip wrench (6, base); null to use the implied one, -Ad_{P_N}^-T F_N - w_N,
-// which is written to W_out (when W_out is not null). K_base / K_tool (36 each, null to skip):
-// the tip stiffness in the base and tool frames under that wrench and the weights.
-// Returns 0, or 1 when the 6N x 6N system is singular, 2 when the compliance is.
-int64_t tsk_chain_tip(int64_t n, const double* P, const double* L, const double* tip,
-                      const double* F, const double* Kc, const double* weights,
-                      const double* coms, const double* W_in, double* W_out, double* K_base,
-                      double* K_tool) {
+}  // extern "C"
+
+namespace {
+
+// The computation of tsk_chain_tip (its contract is in kernel.h), on checked arguments.
+int64_t chain_tip(int64_t n, const double* P, const double* L, const double* tip, const double* F,
+                  const double* Kc, const double* weights, const double* coms, const double* W_in,
+                  double* W_out, double* K_base, double* K_tool) {
   // Link weights as base wrenches w_k = [G_k; x_k x G_k], x_k = L_k c_k.
   std::vector<double> w(weights ? 6 * n : 0), x(weights ? 3 * n : 0);
   if (weights) {
@@ -260,7 +275,7 @@ int64_t tsk_chain_tip(int64_t n, const double* P, const double* L, const double*
     std::memcpy(W_out, W, sizeof(W));
   }
   if (!K_base && !K_tool) {
-    return 0;
+    return TSK_OK;
   }
   const int64_t m6 = 6 * n;
   std::vector<double> Ad(36 * n);
@@ -333,7 +348,7 @@ int64_t tsk_chain_tip(int64_t n, const double* P, const double* L, const double*
         }
       }
       if (!solve_in_place(negKc, rhs, 6, 6)) {
-        return 1;
+        return TSK_ERROR_SINGULAR_SYSTEM;
       }
       for (int a = 0; a < 6; ++a) {
         for (int b = 0; b < 6; ++b) {
@@ -403,7 +418,7 @@ int64_t tsk_chain_tip(int64_t n, const double* P, const double* L, const double*
     }
   }
   if (!solve_in_place(D.data(), X.data(), m6, 6)) {
-    return 1;
+    return TSK_ERROR_SINGULAR_SYSTEM;
   }
   for (int64_t j = 0; j < n; ++j) {
     const auto A = ad(j);
@@ -418,6 +433,37 @@ int64_t tsk_chain_tip(int64_t n, const double* P, const double* L, const double*
     }
   }
   return invert_and_store(C, tip, K_base, K_tool);
+}
+
+}  // namespace
+
+extern "C" {
+
+int64_t tsk_chain_tip(int64_t n_joints, const double* P, const double* L, const double* tip,
+                      const double* F, const double* Kc, const double* weights,
+                      const double* coms, const double* W_in, int64_t outputs, double* out,
+                      int64_t out_len) {
+  // std::vector may throw std::bad_alloc: caught here, never across the C boundary.
+  try {
+    if (n_joints < 1 || n_joints > (int64_t{1} << 20)) {
+      return TSK_ERROR_COUNT;
+    }
+    if (P == nullptr || L == nullptr || tip == nullptr || F == nullptr || Kc == nullptr ||
+        out == nullptr || (weights != nullptr && coms == nullptr)) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if ((outputs & ~int64_t{TSK_TIP_BASE | TSK_TIP_TOOL}) != 0) {
+      return TSK_ERROR_ARGUMENT;
+    }
+    if (out_len < 6 + 36 + 36) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    return chain_tip(n_joints, P, L, tip, F, Kc, weights, coms, W_in, out,
+                     (outputs & TSK_TIP_BASE) ? out + 6 : nullptr,
+                     (outputs & TSK_TIP_TOOL) ? out + 42 : nullptr);
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
 }
 
 }  // extern "C"

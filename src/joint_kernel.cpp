@@ -9,35 +9,34 @@
 //   H_D = sum [A; P A],  H_G = sum [A hat(q); P A hat(q)]  (P = hat(p1_j), q_j = T p2_j),
 //   K = [H_G G - H_D Q, -H_D G],  K_c = [H_D, -H_G].
 // The numpy implementation in joint.py stays the reference and the fallback; the tests hold this
-// kernel to it (test/test_joint_kernel.py). C ABI only (loaded with ctypes): no Python headers.
+// kernel to it (test/test_joint_kernel.py); test/test_kernel_math.cpp to closed forms. The C ABI
+// is declared in include/tensegrity_stiffness/kernel.h (loaded with ctypes: no Python headers).
+
+#include "tensegrity_stiffness/kernel.h"
 
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 
 namespace {
-
-constexpr int kSeriesTerms = 12;
-constexpr double kSeriesThreshold = 0.5;      // screw.SERIES_THRESHOLD
-constexpr double kMinStringLength = 1e-12;     // joint.MIN_STRING_LENGTH
-
-// Taylor coefficients (in theta^2, highest power first) of a, b, c, b1, c1: set once from
-// screw.py's tables by tsk_set_series, so that both implementations use the same numbers.
-double g_series[5][kSeriesTerms];
-bool g_series_set = false;
 
 struct Coefficients {
   double a, b, c, b1, c1;
 };
 
-Coefficients rotation_coefficients(double theta) {
+// a = sin t / t, b = (1 - cos t) / t^2, c = (t - sin t) / t^3, b1 = b' / t, c1 = c' / t; below
+// the model's series_threshold from its Taylor tables (Horner in t^2, as screw.py).
+Coefficients rotation_coefficients(const tsk_joint_model& model, double theta) {
   Coefficients k;
-  if (theta < kSeriesThreshold) {
+  if (theta < model.series_threshold) {
     const double t2 = theta * theta;
-    double out[5];
-    for (int i = 0; i < 5; ++i) {
+    const int64_t terms = model.series_terms;
+    double out[TSK_SERIES_ROWS];
+    for (int i = 0; i < TSK_SERIES_ROWS; ++i) {
+      const double* row = model.series + terms * i;
       double acc = 0.0;
-      for (int j = 0; j < kSeriesTerms; ++j) {
-        acc = acc * t2 + g_series[i][j];
+      for (int64_t j = 0; j < terms; ++j) {
+        acc = acc * t2 + row[j];
       }
       out[i] = acc;
     }
@@ -54,10 +53,11 @@ Coefficients rotation_coefficients(double theta) {
 }
 
 // T (4x4 row-major) and the blocks G, Q of J = [[G, 0], [Q, G]] (eqs. 3, 4, 15-17).
-void kinematics(const double* xi, double* T, double G[3][3], double Q[3][3]) {
+void kinematics(const tsk_joint_model& model, const double* xi, double* T, double G[3][3],
+                double Q[3][3]) {
   const double wx = xi[0], wy = xi[1], wz = xi[2], vx = xi[3], vy = xi[4], vz = xi[5];
   const double theta = std::sqrt(wx * wx + wy * wy + wz * wz);
-  const Coefficients k = rotation_coefficients(theta);
+  const Coefficients k = rotation_coefficients(model, theta);
   const double a = k.a, b = k.b, c = k.c, b1 = k.b1, c1 = k.c1;
   const double xx = wx * wx, yy = wy * wy, zz = wz * wz, xy = wx * wy, xz = wx * wz,
                yz = wy * wz;
@@ -111,22 +111,13 @@ void kinematics(const double* xi, double* T, double G[3][3], double Q[3][3]) {
   }
 }
 
-struct Model {
-  int64_t n;                 // strings
-  const double* p1;          // n x 3, link-1 end of each string in {1}
-  const double* p2;          // n x 3, link-2 end of each string in {2}
-  const double* k;           // n, N/m
-  const double* max_stretch; // n, lmax - l0 (inf for no limit)
-  int64_t law;               // 0 Hooke, 1 the paper's k (l - l0) / l
-};
-
-// One screw: returns false when a string is shorter than kMinStringLength.
-bool evaluate_one(const Model& model, const double* x, const double* r, int64_t mode, double* T,
+// One screw: returns false when a string is shorter than min_string_length.
+bool evaluate_one(const tsk_joint_model& model, const double* x, const double* r, int64_t mode, double* T,
                   double* s, double* lengths, double* phi, uint8_t* slack, uint8_t* saturated,
                   double* wrench, double* K, double* Kc) {
-  const int64_t n = model.n;
+  const int64_t n = model.n_strings;
   double G[3][3], Q[3][3];
-  kinematics(x, T, G, Q);
+  kinematics(model, x, T, G, Q);
   double F[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
   double HD[6][3] = {{0.0}};
   double HG[6][3] = {{0.0}};
@@ -141,7 +132,7 @@ bool evaluate_one(const Model& model, const double* x, const double* r, int64_t 
     }
     const double l2 = sv[0] * sv[0] + sv[1] * sv[1] + sv[2] * sv[2];
     const double l = std::sqrt(l2);
-    if (l < kMinStringLength) {
+    if (l < model.min_string_length) {
       return false;
     }
     lengths[j] = l;
@@ -155,7 +146,7 @@ bool evaluate_one(const Model& model, const double* x, const double* r, int64_t 
     const double clipped = std::fmin(std::fmax(l, r0), lmax);
     const double kj = model.k[j];
     double tension, dtension;
-    if (model.law == 0) {
+    if (model.law == TSK_LAW_HOOKE) {
       tension = kj * (clipped - r0);
       dtension = taut ? kj : 0.0;
     } else {
@@ -171,7 +162,7 @@ bool evaluate_one(const Model& model, const double* x, const double* r, int64_t 
     F[3] += a1[1] * f[2] - a1[2] * f[1];
     F[4] += a1[2] * f[0] - a1[0] * f[2];
     F[5] += a1[0] * f[1] - a1[1] * f[0];
-    if (mode == 2) {
+    if (mode == TSK_MODE_WRENCH) {
       continue;
     }
     // A = gamma s s^T + beta I and P A with P = hat(p1).
@@ -207,7 +198,7 @@ bool evaluate_one(const Model& model, const double* x, const double* r, int64_t 
   for (int i = 0; i < 6; ++i) {
     wrench[i] = F[i];
   }
-  if (mode == 2) {
+  if (mode == TSK_MODE_WRENCH) {
     return true;
   }
   // K = [H_G G - H_D Q, -H_D G].
@@ -223,7 +214,7 @@ bool evaluate_one(const Model& model, const double* x, const double* r, int64_t 
       K[6 * i + 3 + c] = -hdg;
     }
   }
-  if (mode == 0) {
+  if (mode == TSK_MODE_FULL) {
     // K_c = [H_D, -H_G].
     for (int i = 0; i < 6; ++i) {
       for (int c = 0; c < 3; ++c) {
@@ -235,70 +226,165 @@ bool evaluate_one(const Model& model, const double* x, const double* r, int64_t 
   return true;
 }
 
+
+// The model's own checks (counts, pointers, law, series): TSK_OK or the error.
+int64_t check_model(const tsk_joint_model* model) {
+  if (model == nullptr) {
+    return TSK_ERROR_NULL_POINTER;
+  }
+  if (model->n_strings < 1 || model->series_terms < 1) {
+    return TSK_ERROR_COUNT;
+  }
+  if (model->p1 == nullptr || model->p2 == nullptr || model->k == nullptr ||
+      model->max_stretch == nullptr || model->series == nullptr) {
+    return TSK_ERROR_NULL_POINTER;
+  }
+  if (model->law != TSK_LAW_HOOKE && model->law != TSK_LAW_PAPER) {
+    return TSK_ERROR_ARGUMENT;
+  }
+  return TSK_OK;
+}
+
+bool valid_mode(int64_t mode) {
+  return mode == TSK_MODE_FULL || mode == TSK_MODE_STIFFNESS || mode == TSK_MODE_WRENCH;
+}
+
+// Doubles that hold `bytes` bytes.
+int64_t doubles_for_bytes(int64_t bytes) { return (bytes + 7) / 8; }
+
+// Largest count for which the buffer sizes below fit in int64_t with room to spare.
+constexpr int64_t kMaxCount = int64_t{1} << 40;
+
 }  // namespace
 
 extern "C" {
 
-// Version of the ABI below; the Python loader refuses a library with another one.
-int64_t tsk_abi_version() { return 1; }
+int64_t tsk_abi_version(void) { return TSK_ABI_VERSION; }
 
-// The Taylor tables of screw.py: 5 rows (a, b, c, b1, c1) of 12 coefficients, highest power
-// first. Must be called once before the evaluations.
-void tsk_set_series(const double* series) {
-  for (int i = 0; i < 5; ++i) {
-    for (int j = 0; j < kSeriesTerms; ++j) {
-      g_series[i][j] = series[i * kSeriesTerms + j];
-    }
+int64_t tsk_joint_model_layout(int64_t* out, int64_t capacity) {
+  if (out == nullptr) {
+    return TSK_ERROR_NULL_POINTER;
   }
-  g_series_set = true;
+  const int64_t layout[1 + TSK_MODEL_FIELDS] = {
+      sizeof(tsk_joint_model),
+      offsetof(tsk_joint_model, n_strings),
+      offsetof(tsk_joint_model, p1),
+      offsetof(tsk_joint_model, p2),
+      offsetof(tsk_joint_model, k),
+      offsetof(tsk_joint_model, max_stretch),
+      offsetof(tsk_joint_model, law),
+      offsetof(tsk_joint_model, series_terms),
+      offsetof(tsk_joint_model, series),
+      offsetof(tsk_joint_model, series_threshold),
+      offsetof(tsk_joint_model, min_string_length),
+  };
+  if (capacity < 1 + TSK_MODEL_FIELDS) {
+    return TSK_ERROR_BUFFER_SIZE;
+  }
+  for (int i = 0; i < 1 + TSK_MODEL_FIELDS; ++i) {
+    out[i] = layout[i];
+  }
+  return 1 + TSK_MODEL_FIELDS;
 }
 
-// Modes: 0 everything; 1 K without K_c; 2 the wrench without K and K_c.
-// Return values: -1 success, -2 the series tables are not set, m >= 0 the first screw with a
-// string shorter than 1e-12 m (outputs from it on are undefined; the caller reports it).
-
-// A batch of n_screws screws xi (n_screws x 6); rest: n values for all screws (rest_stride 0) or
-// one row of n per screw (rest_stride n). Outputs row-major per screw: T 16, s 3n, lengths n,
-// phi n, slack n and saturated n (bytes 0 / 1), wrench 6, K 36 (unused in mode 2), Kc 36 (mode 0).
-int64_t tsk_joint_evaluate(const Model* model, int64_t n_screws, const double* xi,
-                           const double* rest, int64_t rest_stride, int64_t mode, double* T,
-                           double* s, double* lengths, double* phi, uint8_t* slack,
-                           uint8_t* saturated, double* wrench, double* K, double* Kc) {
-  if (!g_series_set) {
-    return -2;
+int64_t tsk_joint_packed_size(int64_t n_strings) {
+  if (n_strings < 1 || n_strings > kMaxCount) {
+    return TSK_ERROR_COUNT;
   }
-  const int64_t n = model->n;
-  for (int64_t m = 0; m < n_screws; ++m) {
-    if (!evaluate_one(*model, xi + 6 * m, rest + rest_stride * m, mode, T + 16 * m,
-                      s + 3 * n * m, lengths + n * m, phi + n * m, slack + n * m,
-                      saturated + n * m, wrench + 6 * m, mode == 2 ? nullptr : K + 36 * m,
-                      mode == 0 ? Kc + 36 * m : nullptr)) {
-      return m;
-    }
-  }
-  return -1;
+  return 6 + n_strings + 16 + 5 * n_strings + 6 + 36 + 36 + doubles_for_bytes(2 * n_strings);
 }
 
-// One screw with all inputs and outputs in one buffer of doubles (the per-call path: one
-// address for Python to look up): xi 6 at buf[0], then T 16, s 3n, lengths n, phi n, wrench 6,
-// K 36, Kc 36, then slack n and saturated n as bytes. rest points to n rest lengths.
-int64_t tsk_joint_evaluate_packed(const Model* model, const double* rest, int64_t mode,
-                                  double* buf) {
-  if (!g_series_set) {
-    return -2;
+int64_t tsk_joint_evaluate_packed(const tsk_joint_model* model, int64_t mode, double* buf,
+                                  int64_t buf_len) {
+  // No allocation and no throwing call below: nothing can raise (the try is the rule of the
+  // boundary, at no cost on the normal path).
+  try {
+    const int64_t status = check_model(model);
+    if (status != TSK_OK) {
+      return status;
+    }
+    if (buf == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (!valid_mode(mode)) {
+      return TSK_ERROR_ARGUMENT;
+    }
+    const int64_t n = model->n_strings;
+    if (buf_len < tsk_joint_packed_size(n)) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    const double* rest = buf + 6;
+    double* T = buf + 6 + n;
+    double* s = T + 16;
+    double* lengths = s + 3 * n;
+    double* phi = lengths + n;
+    double* wrench = phi + n;
+    double* K = wrench + 6;
+    double* Kc = K + 36;
+    uint8_t* slack = reinterpret_cast<uint8_t*>(Kc + 36);
+    uint8_t* saturated = slack + n;
+    return evaluate_one(*model, buf, rest, mode, T, s, lengths, phi, slack, saturated, wrench, K,
+                        Kc) ? TSK_OK : TSK_ERROR_ZERO_LENGTH;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
   }
-  const int64_t n = model->n;
-  double* T = buf + 6;
-  double* s = T + 16;
-  double* lengths = s + 3 * n;
-  double* phi = lengths + n;
-  double* wrench = phi + n;
-  double* K = wrench + 6;
-  double* Kc = K + 36;
-  uint8_t* slack = reinterpret_cast<uint8_t*>(Kc + 36);
-  uint8_t* saturated = slack + n;
-  return evaluate_one(*model, buf, rest, mode, T, s, lengths, phi, slack, saturated, wrench, K,
-                      Kc) ? -1 : 0;
+}
+
+int64_t tsk_joint_batch_size(int64_t n_strings, int64_t n_screws) {
+  if (n_strings < 1 || n_screws < 1 || n_strings > kMaxCount || n_screws > kMaxCount ||
+      n_strings > kMaxCount / n_screws) {
+    return TSK_ERROR_COUNT;
+  }
+  const int64_t per_screw = 16 + 5 * n_strings + 6 + 36 + 36;
+  return per_screw * n_screws + doubles_for_bytes(2 * n_strings * n_screws);
+}
+
+int64_t tsk_joint_evaluate(const tsk_joint_model* model, int64_t n_screws, const double* xi,
+                           const double* rest, int64_t rest_len, int64_t mode, double* out,
+                           int64_t out_len) {
+  try {
+    const int64_t status = check_model(model);
+    if (status != TSK_OK) {
+      return status;
+    }
+    if (xi == nullptr || rest == nullptr || out == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (!valid_mode(mode)) {
+      return TSK_ERROR_ARGUMENT;
+    }
+    const int64_t n = model->n_strings;
+    const int64_t size = tsk_joint_batch_size(n, n_screws);
+    if (size < 0) {
+      return size;
+    }
+    if (out_len < size || (rest_len != n && rest_len != n * n_screws)) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    const int64_t rest_stride = rest_len == n && n_screws > 1 ? 0 : n;
+    const int64_t N = n_screws;
+    double* T = out;
+    double* s = T + 16 * N;
+    double* lengths = s + 3 * n * N;
+    double* phi = lengths + n * N;
+    double* wrench = phi + n * N;
+    double* K = wrench + 6 * N;
+    double* Kc = K + 36 * N;
+    uint8_t* slack = reinterpret_cast<uint8_t*>(Kc + 36 * N);
+    uint8_t* saturated = slack + n * N;
+    for (int64_t m = 0; m < N; ++m) {
+      if (!evaluate_one(*model, xi + 6 * m, rest + rest_stride * m, mode, T + 16 * m,
+                        s + 3 * n * m, lengths + n * m, phi + n * m, slack + n * m,
+                        saturated + n * m, wrench + 6 * m,
+                        mode == TSK_MODE_WRENCH ? nullptr : K + 36 * m,
+                        mode == TSK_MODE_FULL ? Kc + 36 * m : nullptr)) {
+        return TSK_ERROR_ZERO_LENGTH;
+      }
+    }
+    return TSK_OK;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
 }
 
 }  // extern "C"

@@ -397,12 +397,11 @@ class JointChain:
         n = self.n_joints
         lib = self._library()
         if lib is not None:
-            T = np.ascontiguousarray(T, dtype=np.float64)
+            T = np.ascontiguousarray(T, dtype=np.float64)  # a name: it outlives the call
             out = np.empty(32 * n + 16)
-            base = kernel.address(out)
-            lib.chain_frames(n, kernel.address(T), kernel.address(self._offsets_c),
-                             kernel.address(self._tool_c), base, base + 128 * n,
-                             base + 256 * n)
+            kernel.check(lib.chain_frames(n, kernel.address(T), kernel.address(self._offsets_c),
+                                          kernel.address(self._tool_c), kernel.address(out),
+                                          out.size), 'tsk_chain_frames')
             return (out[:16 * n].reshape(n, 4, 4), out[16 * n:32 * n].reshape(n, 4, 4),
                     out[32 * n:].reshape(4, 4))
         P = np.empty((n, 4, 4))
@@ -559,20 +558,27 @@ class JointChain:
                        ) -> tuple[FloatArray, FloatArray | None, FloatArray | None]:
         """:meth:`_tip` in the compiled ``tsk_chain_tip``."""
         address = kernel.address
+        # Every array whose address goes to C is bound to a name that outlives the call (a
+        # copy made inside the argument list would be freed before C reads it).
         inputs = [np.ascontiguousarray(a, dtype=np.float64) for a in (
             state.joint_frames, state.link_transforms, state.tip_transform, state.wrenches,
             state.cartesian_stiffness)]
-        weights = self.link_masses[:, None] * g if self._has_weights(g) else None
-        out = np.empty(78)
-        o = address(out)
+        weights = coms = None
+        if self._has_weights(g):
+            weights = self.link_masses[:, None] * g
+            coms = np.ascontiguousarray(self.link_coms, dtype=np.float64).reshape(self.n_joints, 3)
+        W_c = None if W is None else np.ascontiguousarray(W, dtype=np.float64)
+        out = np.empty(kernel.TIP_SIZE)
         status = lib.chain_tip(
             self.n_joints, *(address(a) for a in inputs),
             None if weights is None else address(weights),
-            None if weights is None else address(self.link_coms),
-            None if W is None else address(np.ascontiguousarray(W, dtype=np.float64)), o,
-            o + 48 if base else None, o + 336 if tool else None)
-        if status != 0:
+            None if coms is None else address(coms),
+            None if W_c is None else address(W_c),
+            (kernel.TIP_BASE if base else 0) | (kernel.TIP_TOOL if tool else 0),
+            address(out), out.size)
+        if status in (kernel.ERROR_SINGULAR_SYSTEM, kernel.ERROR_SINGULAR_COMPLIANCE):
             raise np.linalg.LinAlgError('Singular matrix')
+        kernel.check(status, 'tsk_chain_tip')
         return (out[:6], out[6:42].reshape(6, 6) if base else None,
                 out[42:].reshape(6, 6) if tool else None)
 

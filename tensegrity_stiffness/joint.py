@@ -23,21 +23,18 @@ Two rigid links carry nodes ``p1`` (in {1}) and ``p2`` (in {2}). String j joins 
 
 Implementation: with ``A_j = df/ds`` and ``q_j = T p2_{b_j}``, ``ds_j/dxi = [hat(q_j) G - Q, -G]``
 (``G``, ``Q`` from :class:`~tensegrity_stiffness.screw.ScrewKinematics`), so that both matrices
-follow from two 6x3 sums ``H_G = sum [I; hat(p1)] A hat(q)`` and ``H_D = sum [I; hat(p1)] A``:
-``K = [H_G G - H_D Q, -H_D G]`` and ``K_c = [H_D, -H_G]``. These sums and ``F`` are linear in the
-per-string entries of ``[gamma s; beta] [s; 1]^T`` (``A = gamma s s^T + beta I``), so one
-product with a map precomputed from the link-1 nodes (:func:`_linear_map`) gives
-``K' = [H_G, -H_D]`` and ``F``; then ``K = K' J``. A single screw takes its kinematics in plain
-floats and the strings in a few array operations; a batch (leading axis N) is processed in
-chunks with one GEMM each. :mod:`tensegrity_stiffness.joint_reference` keeps the step-by-step
-computation that both are tested against.
+follow from two 6x3 sums ``H_D = sum [I; hat(p1_j)] A_j`` and ``H_G = sum [I; hat(p1_j)] A_j
+hat(q_j)``: ``K = [H_G G - H_D Q, -H_D G]`` and ``K_c = [H_D, -H_G]``. Two implementations of
+exactly this computation: the compiled kernel (:mod:`~tensegrity_stiffness.kernel`, used when it
+is built) and :meth:`JointModel._evaluate_numpy`, written step by step in numpy for one screw or
+a batch (the fallback and the reference the tests hold the kernel to, 1e-13).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -45,14 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config, kernel
-from tensegrity_stiffness.screw import (
-    CHART_LIMIT,
-    _coefficients_scalar,
-    _kinematics_batch,
-    _kinematics_entries,
-    as_screws,
-    exp_se3,
-)
+from tensegrity_stiffness.screw import CHART_LIMIT, ScrewKinematics, as_screws, exp_se3, hat3
 from tensegrity_stiffness.validation import finite_array
 
 FloatArray = NDArray[np.float64]
@@ -60,10 +50,8 @@ FloatArray = NDArray[np.float64]
 FORCE_LAWS = ('hooke', 'paper')
 #: Strings shorter than this (m) have no defined direction: evaluation raises ValueError.
 MIN_STRING_LENGTH = 1e-12
-#: Screws per chunk of the batched evaluation (keeps the working set in cache).
-BATCH_CHUNK = 512
-#: Chunks whose screw kinematics are computed together in the batched evaluation.
-KINEMATICS_CHUNKS = 8
+#: Screws per chunk of the numpy evaluation of a batch (bounds its temporaries to a few MB).
+BATCH_CHUNK = 1024
 #: Default central-difference step of :meth:`JointModel.numerical_stiffness` (eq. 21).
 NUMERICAL_STEP = 1e-6
 
@@ -90,50 +78,7 @@ class JointState:
     cartesian_stiffness: FloatArray
 
 
-def _linear_map(p1: FloatArray) -> FloatArray:
-    """Map C (n, 4, 4, 42): ``[K' | F] = sum_j sum_ik g_jik C[j, i, k]`` with the per-string
-    outer product ``g_j = [gamma_j s_j; beta_j] [s_j; 1]^T`` (4x4).
-
-    With ``A_j = gamma_j s_j s_j^T + beta_j I`` (``df/ds``, ``gamma = (phi' - beta) / l^2``,
-    ``beta = phi / l``), ``P_j = hat(p1_j)`` and ``b_j = beta_j s_j = f_j``:
-    ``H_D = sum [A; P A]`` and, as ``hat(q) = P - hat(s)`` and ``A hat(s) = beta hat(s)``,
-    ``H_G = sum [A P - hat(b); P (A P - hat(b))]``; columns 0-35 of C give
-    ``K' = [H_G, -H_D]`` (row-major, ``K = K' J``, ``K_c = -K' P_swap``) and columns 36-41 the
-    wrench ``F = sum [b; P b]`` (eq. 9). The entries ``gamma_j s_j`` (column 3 of g) map to 0.
-    """
-    n = p1.shape[0]
-    basis = np.eye(16).reshape(16, 4, 4)
-    M = basis[:, :3, :3]
-    b = basis[:, 3, :3]
-    beta = basis[:, 3, 3]
-    A = M + beta[:, None, None] * _EYE3  # (16, 3, 3)
-    P = _hat(p1)  # (n, 3, 3)
-    APb = np.einsum('bik,jkl->jbil', A, P) - _hat(b)[None]  # (n, 16, 3, 3)
-    out = np.zeros((n, 16, 42))
-    Kp = out[:, :, :36].reshape(n, 16, 6, 6)
-    Kp[..., :3, :3] = APb
-    Kp[..., 3:, :3] = np.einsum('jik,jbkl->jbil', P, APb)
-    Kp[..., :3, 3:] = -A[None]
-    Kp[..., 3:, 3:] = -np.einsum('jik,bkl->jbil', P, A)
-    out[:, :, 36:39] = b[None]
-    out[:, :, 39:42] = np.einsum('jik,bk->jbi', P, b)
-    return out.reshape(n, 4, 4, 42)
-
-
 _EYE3 = np.eye(3)
-#: (row, column) pairs of the 4x4 outer product g that hold the 10 distinct per-string entries
-#: of the batched layout: gamma s s^T (6, upper triangle), beta s (3), beta.
-_BATCH_ENTRIES = (((0, 0),), ((1, 1),), ((2, 2),), ((0, 1), (1, 0)), ((0, 2), (2, 0)),
-                  ((1, 2), (2, 1)), ((3, 0),), ((3, 1),), ((3, 2),), ((3, 3),))
-
-
-def _hat(w: FloatArray) -> FloatArray:
-    """hat3 for (..., 3) arrays (local to keep the hot path free of extra conversions)."""
-    out = np.zeros(w.shape[:-1] + (3, 3))
-    out[..., 0, 1], out[..., 0, 2] = -w[..., 2], w[..., 1]
-    out[..., 1, 0], out[..., 1, 2] = w[..., 2], -w[..., 0]
-    out[..., 2, 0], out[..., 2, 1] = -w[..., 1], w[..., 0]
-    return out
 
 
 class JointModel:
@@ -227,18 +172,11 @@ class JointModel:
         self._p1 = p1[self.connections[:, 0]]
         self._p2 = p2[self.connections[:, 1]]
 
-        # Fast paths: homogeneous link-2 ends [p2, 1], link-1 ends [p1, 2] (so that
-        # [p1, 2] - T [p2, 1] = [s, 1]) and the linear maps of _linear_map in the single (16 per
-        # string) and batched (10 per string, component-major) layouts.
-        self._p2h = np.hstack([self._p2, np.ones((n, 1))])
-        self._p1w = np.hstack([self._p1, np.full((n, 1), 2.0)])
-        linear = _linear_map(self._p1)
-        self._map_single = linear.reshape(16 * n, 42)
-        self._map_batch = np.stack([sum(linear[:, i, k] for i, k in pairs)
-                                    for pairs in _BATCH_ENTRIES]).reshape(10 * n, 42)
-        self._no_strings = bytes(n)
-        self._kernel = kernel.joint_kernel(self._p1, self._p2, self.k, self.max_stretch,
-                                           FORCE_LAWS.index(force_law)) if use_kernel else None
+        # Z_j = [I; hat(p1_j)] (n, 6, 3): the wrench of a force f_j at p1_j is Z_j f_j.
+        self._Z = np.concatenate([np.broadcast_to(_EYE3, (n, 3, 3)), hat3(self._p1)], axis=1)
+        self._kernel = kernel.joint_kernel(
+            self._p1, self._p2, self.k, self.max_stretch, FORCE_LAWS.index(force_law),
+            MIN_STRING_LENGTH) if use_kernel else None
 
     @property
     def uses_kernel(self) -> bool:
@@ -408,67 +346,35 @@ class JointModel:
     def _evaluate_single(self, xi: FloatArray, rest: FloatArray, full: bool
                          ) -> JointState | FloatArray:
         """One screw (6,) with validated rest lengths (n,): the :class:`JointState`, or ``K``
-        alone when not ``full``. Kinematics in plain floats, the strings in a few array
-        operations on (n, 4) arrays and one product with the precomputed map
-        (:func:`_linear_map`); or all of it in the compiled kernel."""
+        alone when not ``full``; in the compiled kernel when it is loaded."""
         values = xi.tolist()
         if not math.isfinite(sum(values)):
             as_screws(xi)  # names the non-finite entry (a finite sum may overflow: then no error)
         # Raises OverflowError for a finite screw whose angle overflows (as the array path).
-        theta = math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+        math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
         if self._kernel is not None:
             result = self._evaluate_single_kernel(xi, rest, full)
             if result is not None:
                 return result
-        T, J = _kinematics_entries(values, _coefficients_scalar(theta), 0.0, 1.0)
-        kin = np.fromiter([*T[0], *T[1], *T[2], *T[3], *J[0], *J[1], *J[2], *J[3], *J[4], *J[5]],
-                          np.float64, 52)
-        transform = kin[:16].reshape(4, 4)
-        # w_j = [p1_j, 2] - T [p2_j, 1] = [s_j, 1] (eq. 7).
-        w = self._p1w - self._p2h @ transform.T
-        s = w[:, :3]
-        l2 = np.add.reduce(s * s, axis=1)
-        lengths = np.sqrt(l2)
-        if np.minimum.reduce(lengths) < MIN_STRING_LENGTH:
-            self._check_lengths(lengths)
-        slack = lengths <= rest
-        saturated = lengths >= rest + self.max_stretch
-        if slack.tobytes() == self._no_strings and saturated.tobytes() == self._no_strings:
-            # Every string taut: the taut branch of _string_forces, without the masks.
-            stretch = lengths - rest
-            if self.force_law == 'hooke':
-                phi = self.k * stretch
-                dphi = self.k
-            else:
-                phi = self.k * stretch / lengths
-                dphi = self.k * rest / (lengths * lengths)
-        else:
-            phi, dphi, slack, saturated = self._string_forces(lengths, rest)
-        # g_j = [gamma_j s_j; beta_j] [s_j; 1]^T, gamma = (phi' - beta) / l^2, beta = phi / l.
-        a = np.empty((self.connections.shape[0], 4))
-        beta = np.divide(phi, lengths, out=a[:, 3])
-        np.multiply(s, ((dphi - beta) / l2)[:, None], out=a[:, :3])
-        out = (a[:, :, None] * w[:, None, :]).reshape(-1) @ self._map_single
-        Kp = out[:36].reshape(6, 6)
-        K = Kp @ kin[16:].reshape(6, 6)
-        if not full:
-            return K
-        # K_c = [H_D, -H_G] = -[K'[:, 3:], K'[:, :3]] (the two column blocks swapped).
-        Kc = np.negative(Kp.reshape(6, 2, 3)[:, ::-1]).reshape(6, 6)
-        return JointState(xi, transform, s, lengths, phi, slack, saturated, out[36:], K, Kc)
+        state = self._evaluate_numpy(xi, rest)
+        return state if full else state.stiffness
 
     def _evaluate_single_kernel(self, xi: FloatArray, rest: FloatArray, full: bool
                                 ) -> JointState | FloatArray | None:
-        """:meth:`_evaluate_single` in the compiled kernel: ``None`` when a string has zero
-        length (the numpy path then raises the error that names it)."""
+        """:meth:`_evaluate_single` in the compiled kernel (``tsk_joint_evaluate_packed``):
+        ``None`` when a string has zero length (the numpy path then raises the error that
+        names it)."""
         kn = self._kernel
+        # Inputs are copied into the one buffer (nothing else for C to read).
         buf = np.empty(kn.size)
-        buf[:6] = xi
-        mode = kernel.MODE_FULL if full else kernel.MODE_STIFFNESS
-        status = kn.evaluate_packed(kn.model, kernel.address(np.ascontiguousarray(rest)), mode,
-                                    kernel.address(buf))
+        buf[:kn.rest] = xi
+        buf[kn.rest:kn.transform] = rest
+        status = kn.evaluate_packed(kn.model, kernel.MODE_FULL if full else kernel.MODE_STIFFNESS,
+                                    kernel.address(buf), kn.size)
         if status != kernel.OK:
-            return None
+            if status == kernel.ERROR_ZERO_LENGTH:
+                return None
+            kernel.check(status, 'tsk_joint_evaluate_packed')
         K = buf[kn.stiffness:kn.cartesian].reshape(6, 6)
         if not full:
             return K
@@ -481,79 +387,76 @@ class JointModel:
                           buf[kn.cartesian:kn.flags].reshape(6, 6))
 
     def _check_lengths(self, lengths: FloatArray) -> None:
-        if lengths.min() < MIN_STRING_LENGTH:
+        if lengths.min(initial=math.inf) < MIN_STRING_LENGTH:
             bad = np.unique(np.nonzero(lengths < MIN_STRING_LENGTH)[-1]).tolist()
             raise ValueError(f'strings {bad} have zero length at this screw')
 
     def _evaluate_batch(self, xi: FloatArray, rest: FloatArray, wrench_only: bool = False
                         ) -> JointState:
-        """The same computation as the single path for (N, 6) screws, in chunks of
-        ``BATCH_CHUNK`` and with strings on the last axis ((N, 3, n) component layout): the
-        10 distinct entries of every string's g (:data:`_BATCH_ENTRIES`) go through one GEMM
-        with the precomputed map. With ``wrench_only`` the stiffness matrices are left out (they
-        are NaN): the honest baseline of :meth:`numerical_stiffness`. With the compiled kernel
-        the whole batch is one call."""
+        """(N, 6) screws with validated rest lengths (n,) or (N, n). With ``wrench_only`` the
+        stiffness matrices are left out (they are NaN): the honest baseline of
+        :meth:`numerical_stiffness`. With the compiled kernel the whole batch is one call."""
         if self._kernel is not None:
             state = self._evaluate_batch_kernel(xi, rest, wrench_only)
             if state is not None:
                 return state
-        N, n = xi.shape[0], self.n_strings
-        T = np.empty((N, 4, 4))
-        s_out = np.empty((N, n, 3))
-        lengths = np.empty((N, n))
-        phi = np.empty((N, n))
-        slack = np.empty((N, n), dtype=bool)
-        saturated = np.empty((N, n), dtype=bool)
-        wrench = np.empty((N, 6))
-        K = np.full((N, 6, 6), np.nan) if wrench_only else np.empty((N, 6, 6))
-        Kc = np.full((N, 6, 6), np.nan) if wrench_only else np.empty((N, 6, 6))
-        p1 = self._p1.T
-        p2h = self._p2h.T
-        # Kinematics in blocks of KINEMATICS_CHUNKS chunks (their cost is mostly per operation).
-        block = KINEMATICS_CHUNKS * BATCH_CHUNK
-        for start in range(0, N, BATCH_CHUNK):
-            sl = slice(start, min(start + BATCH_CHUNK, N))
-            m = sl.stop - sl.start
-            r = rest if rest.ndim == 1 else rest[sl]
-            if start % block == 0:
-                kb = slice(start, min(start + block, N))
-                T[kb], J_block = _kinematics_batch(xi[kb])
-            J = J_block[start - kb.start:sl.stop - kb.start]
-            s = p1 - (T[sl, :3].reshape(-1, 4) @ p2h).reshape(m, 3, n)
-            s_out[sl] = np.swapaxes(s, 1, 2)
-            l2 = np.einsum('mkj,mkj->mj', s, s)
-            ln = np.sqrt(l2, out=lengths[sl])
-            self._check_lengths(ln)
-            ph, dph, slack[sl], saturated[sl] = self._string_forces(ln, r)
-            phi[sl] = ph
-            beta = ph / ln
-            g = np.empty((m, 10, n))
-            np.multiply(s, beta[:, None], out=g[:, 6:9])
-            if wrench_only:
-                wrench[sl] = g[:, 6:9].reshape(m, -1) @ self._map_batch[6 * n:9 * n, 36:]
-                continue
-            g[:, 9] = beta
-            gs = s * ((dph - beta) / l2)[:, None]
-            np.multiply(gs, s, out=g[:, :3])
-            np.multiply(gs[:, :1], s[:, 1:], out=g[:, 3:5])
-            np.multiply(gs[:, 1], s[:, 2], out=g[:, 5])
-            out = g.reshape(m, -1) @ self._map_batch
-            wrench[sl] = out[:, 36:]
-            Kp = out[:, :36].reshape(m, 6, 6)
-            np.matmul(Kp, J, out=K[sl])
-            np.negative(Kp.reshape(m, 6, 2, 3)[:, :, ::-1], out=Kc[sl].reshape(m, 6, 2, 3))
-        return JointState(xi, T, s_out, lengths, phi, slack, saturated, wrench, K, Kc)
+        if xi.shape[0] <= BATCH_CHUNK:
+            return self._evaluate_numpy(xi, rest, wrench_only)
+        chunks = [self._evaluate_numpy(xi[i:i + BATCH_CHUNK],
+                                       rest if rest.ndim == 1 else rest[i:i + BATCH_CHUNK],
+                                       wrench_only)
+                  for i in range(0, xi.shape[0], BATCH_CHUNK)]
+        return JointState(*(np.concatenate([getattr(c, f.name) for c in chunks])
+                            for f in fields(JointState)))
+
+    def _evaluate_numpy(self, xi: FloatArray, rest: FloatArray, wrench_only: bool = False
+                        ) -> JointState:
+        """The model's equations step by step for one screw (6,) or a batch (N, 6) (leading
+        axes ``...``): the numpy implementation, fallback of the kernel and its reference."""
+        kin = ScrewKinematics(xi)
+        # eq. 7: q_j = T p2_j (link-2 ends in {1}), s_j = p1_j - q_j, l_j = |s_j|.
+        q = self._p2 @ np.swapaxes(kin.R, -1, -2) + kin.t[..., None, :]  # (..., n, 3)
+        s = self._p1 - q
+        l2 = np.sum(s * s, axis=-1)
+        lengths = np.sqrt(l2)
+        self._check_lengths(lengths)
+        # eq. 8: tensions phi_j, their derivatives phi'_j and the regions.
+        phi, dphi, slack, saturated = self._string_forces(lengths, rest)
+        # eq. 9: f_j = phi_j s_j / l_j, F = sum_j [f_j; p1_j x f_j] = sum_j Z_j f_j.
+        beta = phi / lengths
+        f = beta[..., None] * s
+        wrench = np.sum(self._Z @ f[..., None], axis=-3)[..., 0]
+        if wrench_only:
+            nan = np.full(xi.shape[:-1] + (6, 6), np.nan)
+            return JointState(xi, kin.T, s, lengths, phi, slack, saturated, wrench, nan,
+                              nan.copy())
+        # eq. 10: A_j = df/ds = gamma_j s_j s_j^T + beta_j I, gamma = (phi' - beta) / l^2;
+        # H_D = sum_j Z_j A_j, H_G = sum_j Z_j A_j hat(q_j).
+        gamma = (dphi - beta) / l2
+        A = (gamma[..., None, None] * s[..., :, None] * s[..., None, :]
+             + beta[..., None, None] * _EYE3)
+        ZA = self._Z @ A  # (..., n, 6, 3)
+        H_D = ZA.sum(axis=-3)
+        H_G = (ZA @ hat3(q)).sum(axis=-3)
+        # K = [H_G G - H_D Q, -H_D G], K_c = [H_D, -H_G].
+        K = np.concatenate([H_G @ kin.G - H_D @ kin.Q, -(H_D @ kin.G)], axis=-1)
+        Kc = np.concatenate([H_D, -H_G], axis=-1)
+        return JointState(xi, kin.T, s, lengths, phi, slack, saturated, wrench, K, Kc)
 
     def _evaluate_batch_kernel(self, xi: FloatArray, rest: FloatArray, wrench_only: bool
                                ) -> JointState | None:
-        """:meth:`_evaluate_batch` in the compiled kernel: ``None`` when a string has zero
-        length (the numpy path then raises the error that names it)."""
+        """:meth:`_evaluate_batch` in the compiled kernel (``tsk_joint_evaluate``): ``None``
+        for no screws or when a string has zero length (the numpy path then raises the error
+        that names it)."""
         N, n = xi.shape[0], self.n_strings
         if N == 0:
             return None
+        kn = self._kernel
+        # Bound to names: the (possibly copied) inputs must outlive the call.
         xi = np.ascontiguousarray(xi)
         rest_c = np.ascontiguousarray(rest)
-        # All outputs in one buffer (one address to look up), each a contiguous block.
+        # All outputs in one buffer (kernel.h: blocks T, s, lengths, tensions, wrench, K, K_c,
+        # then the flags as bytes).
         o_s = 16 * N
         o_l = o_s + 3 * n * N
         o_phi = o_l + n * N
@@ -562,15 +465,14 @@ class JointModel:
         o_Kc = o_K + 36 * N
         o_flags = o_Kc + 36 * N
         buf = np.empty(o_flags + (2 * N * n + 7) // 8)
-        base = kernel.address(buf)
-        p_flags = base + 8 * o_flags
-        status = self._kernel.evaluate(
-            self._kernel.model, N, kernel.address(xi), kernel.address(rest_c),
-            0 if rest.ndim == 1 else n, kernel.MODE_WRENCH if wrench_only else kernel.MODE_FULL,
-            base, base + 8 * o_s, base + 8 * o_l, base + 8 * o_phi, p_flags, p_flags + N * n,
-            base + 8 * o_F, base + 8 * o_K, base + 8 * o_Kc)
+        status = kn.evaluate(kn.model, N, kernel.address(xi), kernel.address(rest_c),
+                             rest_c.size,
+                             kernel.MODE_WRENCH if wrench_only else kernel.MODE_FULL,
+                             kernel.address(buf), buf.size)
         if status != kernel.OK:
-            return None
+            if status == kernel.ERROR_ZERO_LENGTH:
+                return None
+            kernel.check(status, 'tsk_joint_evaluate')
         K = buf[o_K:o_Kc].reshape(N, 6, 6)
         Kc = buf[o_Kc:o_flags].reshape(N, 6, 6)
         if wrench_only:

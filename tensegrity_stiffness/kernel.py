@@ -34,31 +34,74 @@ from tensegrity_stiffness import screw
 KERNEL_ENV = 'TENSEGRITY_STIFFNESS_KERNEL'
 #: File name of the library under ``<prefix>/lib``.
 LIBRARY_NAME = 'libtensegrity_stiffness_kernel.so'
-#: ABI version this module speaks (``tsk_abi_version`` of the library).
-ABI_VERSION = 1
 #: Values of :data:`KERNEL_ENV` that select the numpy path.
 OFF_VALUES = ('off', '0', 'no', 'false', 'numpy')
-#: Modes of the kernel: everything; K without K_c; the wrench alone.
+
+# The mirror of include/tensegrity_stiffness/kernel.h (test/test_kernel_abi.py holds it to the
+# library: version, struct layout, buffer sizes, status codes).
+#: ABI version this module speaks (``TSK_ABI_VERSION``, ``tsk_abi_version()``).
+ABI_VERSION = 2
+#: Status codes (``TSK_OK``, ``TSK_ERROR_*``): 0 success, negative errors.
+OK = 0
+ERRORS = {-1: 'NULL_POINTER', -2: 'COUNT', -3: 'BUFFER_SIZE', -4: 'ARGUMENT', -5: 'ZERO_LENGTH',
+          -6: 'SINGULAR_SYSTEM', -7: 'SINGULAR_COMPLIANCE', -8: 'INTERNAL'}
+ERROR_ZERO_LENGTH, ERROR_SINGULAR_SYSTEM, ERROR_SINGULAR_COMPLIANCE = -5, -6, -7
+#: Modes of the joint evaluation (``TSK_MODE_*``): everything; K without K_c; the wrench alone.
 MODE_FULL, MODE_STIFFNESS, MODE_WRENCH = 0, 1, 2
-#: Return value of a successful kernel call (else: index of the first screw with a zero-length
-#: string, or -2 when the series tables were not set).
-OK = -1
+#: Outputs of ``tsk_chain_tip`` besides the tip wrench (``TSK_TIP_*``, a bit mask).
+TIP_BASE, TIP_TOOL = 1, 2
+#: Doubles of ``tsk_chain_tip``'s output buffer: tip wrench 6, K_tip base 36, tool 36.
+TIP_SIZE = 78
 
 _P = ctypes.c_void_p
 _I = ctypes.c_int64
+_D = ctypes.c_double
+
+#: The Taylor tables of the rotation coefficients a, b, c, b1, c1 (``TSK_SERIES_ROWS`` x
+#: terms), taken from :mod:`~tensegrity_stiffness.screw` (their one home); every model points
+#: to this array, which lives as long as the module.
+SERIES = np.ascontiguousarray(np.stack([
+    screw._A_SERIES, screw._B_SERIES, screw._C_SERIES, screw._B1_SERIES, screw._C1_SERIES]))
+SERIES.flags.writeable = False
+
+
+class KernelError(RuntimeError):
+    """A kernel call refused its arguments (a bug of the caller: the numpy path is the
+    reference; never raised for a model's own conditions, which have their own errors)."""
 
 
 class _ModelStruct(ctypes.Structure):
-    """``struct Model`` of ``joint_kernel.cpp``: pointers into arrays the owner keeps alive."""
+    """``tsk_joint_model`` of ``kernel.h``: pointers into arrays the owner keeps alive."""
 
-    _fields_ = [('n', _I), ('p1', _P), ('p2', _P), ('k', _P), ('max_stretch', _P), ('law', _I)]
+    _fields_ = [('n_strings', _I), ('p1', _P), ('p2', _P), ('k', _P), ('max_stretch', _P),
+                ('law', _I), ('series_terms', _I), ('series', _P), ('series_threshold', _D),
+                ('min_string_length', _D)]
+
+
+def model_layout() -> list[int]:
+    """This module's mirror of ``tsk_joint_model_layout``: its size and field offsets."""
+    return [ctypes.sizeof(_ModelStruct)] + [getattr(_ModelStruct, name).offset
+                                            for name, _ in _ModelStruct._fields_]
+
+
+def check(status: int, call: str) -> None:
+    """:class:`KernelError` naming ``call`` and the status unless it is ``OK``."""
+    if status != OK:
+        raise KernelError(f'{call} returned {status} '
+                          f'(TSK_ERROR_{ERRORS.get(status, "UNKNOWN")})')
 
 
 def address(arr: NDArray) -> int:
-    """Data address of a C-contiguous array (for the kernel's pointer arguments); a writable
-    one through ctypes' buffer view (a third of the time of ``__array_interface__``)."""
+    """Data address of a C-contiguous array for a pointer argument of the kernel (a writable
+    one through ctypes' buffer view: a third of the time of ``__array_interface__``).
+
+    The address is valid only while ``arr`` lives: bind every array to a name that outlives
+    the call (never ``address(np.ascontiguousarray(x))``: a copy is freed before C reads it).
+    """
     if arr.flags.writeable and arr.nbytes:
         return _addressof(_char_view(arr))
+    if not arr.flags.c_contiguous:
+        raise ValueError('kernel.address needs a C-contiguous array')
     return arr.__array_interface__['data'][0]
 
 
@@ -85,7 +128,7 @@ def library_path() -> tuple[Path | None, str]:
 
 
 class _Library:
-    """The loaded library with its two entry points typed."""
+    """The loaded library with its entry points typed (``kernel.h``)."""
 
     def __init__(self, path: Path) -> None:
         lib = ctypes.CDLL(str(path))
@@ -94,25 +137,32 @@ class _Library:
         version = lib.tsk_abi_version()
         if version != ABI_VERSION:
             raise OSError(f'{path} speaks ABI {version}, this package {ABI_VERSION}')
-        lib.tsk_set_series.restype = None
-        lib.tsk_set_series.argtypes = [_P]
-        # The same Taylor coefficients as screw.rotation_coefficients (a, b, c, b1, c1).
-        self._series = np.ascontiguousarray(np.stack([
-            screw._A_SERIES, screw._B_SERIES, screw._C_SERIES, screw._B1_SERIES,
-            screw._C1_SERIES]))
-        lib.tsk_set_series(address(self._series))
+        lib.tsk_joint_model_layout.restype = _I
+        lib.tsk_joint_model_layout.argtypes = [_P, _I]
+        layout = np.zeros(32, dtype=np.int64)
+        count = lib.tsk_joint_model_layout(address(layout), layout.size)
+        self.model_layout = layout[:max(count, 0)].tolist()
+        if self.model_layout != model_layout():
+            raise OSError(f'{path}: tsk_joint_model layout {self.model_layout} differs from '
+                          f'the ctypes mirror {model_layout()}')
+        for name in ('tsk_joint_packed_size', 'tsk_joint_batch_size'):
+            getattr(lib, name).restype = _I
+        lib.tsk_joint_packed_size.argtypes = [_I]
+        lib.tsk_joint_batch_size.argtypes = [_I, _I]
+        self.packed_size = lib.tsk_joint_packed_size
+        self.batch_size = lib.tsk_joint_batch_size
         self.evaluate = lib.tsk_joint_evaluate
         self.evaluate.restype = _I
-        self.evaluate.argtypes = [_P, _I, _P, _P, _I, _I] + [_P] * 9
+        self.evaluate.argtypes = [_P, _I, _P, _P, _I, _I, _P, _I]
         self.evaluate_packed = lib.tsk_joint_evaluate_packed
         self.evaluate_packed.restype = _I
-        self.evaluate_packed.argtypes = [_P, _P, _I, _P]
+        self.evaluate_packed.argtypes = [_P, _I, _P, _I]
         self.chain_frames = lib.tsk_chain_frames
-        self.chain_frames.restype = None
-        self.chain_frames.argtypes = [_I] + [_P] * 6
+        self.chain_frames.restype = _I
+        self.chain_frames.argtypes = [_I, _P, _P, _P, _P, _I]
         self.chain_tip = lib.tsk_chain_tip
         self.chain_tip.restype = _I
-        self.chain_tip.argtypes = [_I] + [_P] * 11
+        self.chain_tip.argtypes = [_I] + [_P] * 8 + [_I, _P, _I]
         self.path = path
         self._lib = lib
 
@@ -143,31 +193,36 @@ def library() -> _Library | None:
     return _load()[0]
 
 
-#: Status codes of ``tsk_chain_tip``.
-CHAIN_SINGULAR_SYSTEM, CHAIN_SINGULAR_COMPLIANCE = 1, 2
-
-
 class JointKernel:
     """The compiled evaluation of one joint model: its per-string constants, bound once.
 
     ``p1``, ``p2`` (n, 3) string ends in {1} and {2}, ``k`` (n,) N/m, ``max_stretch`` (n,) m
-    (inf: no limit), ``law`` 0 (Hooke) or 1 (paper). The packed buffer of one screw holds
-    ``xi`` (6), ``T`` (16), ``s`` (3n), lengths (n), tensions (n), wrench (6), ``K`` (36),
-    ``K_c`` (36), then the slack and saturated flags as 2n bytes; the offsets are attributes.
+    (inf: no limit), ``law`` 0 (Hooke) or 1 (paper), ``min_string_length`` (m). The packed
+    buffer of one screw holds the inputs ``xi`` (6) and the rest lengths (n), then ``T`` (16),
+    ``s`` (3n), lengths (n), tensions (n), wrench (6), ``K`` (36), ``K_c`` (36), then the slack
+    and saturated flags as 2n bytes; the offsets are attributes (``size`` is
+    ``tsk_joint_packed_size(n)``). Inputs copied into it need no lifetime care.
     """
 
     def __init__(self, library: _Library, p1: NDArray, p2: NDArray, k: NDArray,
-                 max_stretch: NDArray, law: int) -> None:
+                 max_stretch: NDArray, law: int, min_string_length: float) -> None:
         n = p1.shape[0]
         self.n = n
         self.law = law
+        self.min_string_length = min_string_length
+        # The struct points into these arrays (and SERIES): they live as long as this object.
         self._arrays = [np.ascontiguousarray(a, dtype=np.float64)
                         for a in (p1, p2, k, max_stretch)]
-        self._struct = _ModelStruct(n, *(address(a) for a in self._arrays), law)
+        self._series = SERIES
+        self._struct = _ModelStruct(n, *(address(a) for a in self._arrays), law,
+                                    SERIES.shape[1], address(SERIES), screw.SERIES_THRESHOLD,
+                                    min_string_length)
         self.model = ctypes.addressof(self._struct)
         self.evaluate = library.evaluate
         self.evaluate_packed = library.evaluate_packed
-        self.transform = 6
+        self.batch_size = library.batch_size
+        self.rest = 6
+        self.transform = self.rest + n
         self.strings = self.transform + 16
         self.lengths = self.strings + 3 * n
         self.tensions = self.lengths + n
@@ -180,13 +235,13 @@ class JointKernel:
     def __reduce__(self) -> tuple:
         """Pickled as its constants (a model sent to the solver worker process): the receiving
         process binds them to its own library, or gets ``None`` (numpy) without one."""
-        return joint_kernel, (*self._arrays, self.law)
+        return joint_kernel, (*self._arrays, self.law, self.min_string_length)
 
 
-def joint_kernel(p1: NDArray, p2: NDArray, k: NDArray, max_stretch: NDArray, law: int
-                 ) -> JointKernel | None:
+def joint_kernel(p1: NDArray, p2: NDArray, k: NDArray, max_stretch: NDArray, law: int,
+                 min_string_length: float) -> JointKernel | None:
     """A :class:`JointKernel` for these constants, or ``None`` when the library is not loaded."""
     library = _load()[0]
     if library is None:
         return None
-    return JointKernel(library, p1, p2, k, max_stretch, law)
+    return JointKernel(library, p1, p2, k, max_stretch, law, min_string_length)

@@ -31,11 +31,8 @@ _SERIES_TERMS = 12
 _INVERSE_SERIES_THRESHOLD = 0.5
 #: |theta - pi| below which log_so3 takes the rotation axis from the symmetric part of R.
 _LOG_SYMMETRIC_BRANCH = 0.5 * math.pi
-#: Batches of at most this many screws take the plain-float kinematics row by row.
+#: Batches of at most this many screws (a spine's joints) take the plain-float chart check.
 SCALAR_KINEMATICS_ROWS = 16
-#: ... when every angle is below this (rad; beyond it math.sin loses no more than numpy, but
-#: huge or non-finite angles keep the array path's inf / NaN behaviour).
-_SCALAR_KINEMATICS_MAX_ANGLE = 1e6
 #: The chart of screw coordinates: |omega| < CHART_LIMIT (the left Jacobian G, eq. 4, is singular
 #: at 2 pi, so neither dT/dxi nor K can be inverted there).
 CHART_LIMIT = 2.0 * math.pi
@@ -275,28 +272,6 @@ def _kinematics_entries(xi6: list, coeffs: tuple, zero: Any, one: Any) -> tuple[
          [g20, g21, g22, zero, zero, zero], q[0] + [g00, g01, g02], q[1] + [g10, g11, g12],
          q[2] + [g20, g21, g22]]
     return T, J
-
-
-def _kinematics_batch(xi: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """``T`` (N, 4, 4) and ``J`` (N, 6, 6) of (N, 6) screws as C-contiguous arrays: the
-    entries of :class:`ScrewKinematics` (same formulas), gathered in one copy."""
-    n = xi.shape[0]
-    theta = np.sqrt(np.einsum('ij,ij->i', xi[:, :3], xi[:, :3]))
-    if n <= SCALAR_KINEMATICS_ROWS and np.all(theta < _SCALAR_KINEMATICS_MAX_ANGLE):
-        # A few screws (a spine's joints): the single screw's plain-float path per row is
-        # cheaper than ~50 array operations on short arrays (5 screws: 35 us against 300 us).
-        flat: list[float] = []
-        for values, angle in zip(xi.tolist(), theta.tolist(), strict=True):
-            T, J = _kinematics_entries(values, _coefficients_scalar(angle), 0.0, 1.0)
-            for row in T + J:
-                flat.extend(row)
-        out = np.array(flat).reshape(n, 52)
-    else:
-        rows = np.ascontiguousarray(xi.T)
-        T, J = _kinematics_entries(list(rows), rotation_coefficients(theta), np.zeros(n),
-                                   np.ones(n))
-        out = np.stack([entry for row in T + J for entry in row], axis=-1)
-    return out[:, :16].reshape(n, 4, 4), out[:, 16:].reshape(n, 6, 6)
 
 
 class ScrewKinematics:

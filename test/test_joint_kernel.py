@@ -5,7 +5,7 @@ kernel must give its results to 1e-13 (per quantity, relative to its largest ent
 relative to the sum of the moduli of its string contributions) and the same slack / saturated
 decisions, for one screw and for batches, both force laws, every string region and the angle
 branches of the kinematics (series below 0.5 rad, near pi, near 2 pi). ``test_joint_fast.py``
-holds both paths to ``joint_reference`` as well.
+holds every evaluation path to the numpy implementation screw by screw as well.
 """
 
 import math

@@ -1,0 +1,126 @@
+/* The C ABI of the compiled kernel of tensegrity_stiffness (libtensegrity_stiffness_kernel.so).
+ *
+ * One header for the library (src/joint_kernel.cpp, src/chain_kernel.cpp include it) and for its
+ * callers: tensegrity_stiffness/kernel.py mirrors it with ctypes, and test/test_kernel_abi.py holds
+ * that mirror to the library (tsk_abi_version, tsk_joint_model_layout, the buffer sizes).
+ *
+ * Conventions:
+ * - every entry point returns int64_t: TSK_OK (0) or a negative TSK_ERROR_* code (sizes and the
+ *   version are non-negative values); no C++ exception crosses this boundary (a failed
+ *   allocation is TSK_ERROR_INTERNAL);
+ * - arrays are row-major float64 (flags: bytes 0 / 1) that the caller owns and keeps alive for
+ *   the whole call; lengths are in elements; counts (strings, screws, joints, series terms) must
+ *   be >= 1 and every output buffer is at least the size the call needs, else
+ *   TSK_ERROR_COUNT / TSK_ERROR_BUFFER_SIZE and nothing is written;
+ * - no global state: everything a call reads comes through its arguments.
+ */
+#ifndef TENSEGRITY_STIFFNESS__KERNEL_H_
+#define TENSEGRITY_STIFFNESS__KERNEL_H_
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Version of this ABI: bumped with every change below (1: the series tables set through a
+ * global tsk_set_series, positive return values as screw indices). */
+#define TSK_ABI_VERSION 2
+
+/* Status codes. */
+#define TSK_OK 0
+#define TSK_ERROR_NULL_POINTER (-1)        /* a required pointer is null */
+#define TSK_ERROR_COUNT (-2)               /* a count is < 1 */
+#define TSK_ERROR_BUFFER_SIZE (-3)         /* a buffer is shorter than the call needs, or rest
+                                              lengths are neither n nor n x n_screws */
+#define TSK_ERROR_ARGUMENT (-4)            /* an unknown mode, force law or output selection */
+#define TSK_ERROR_ZERO_LENGTH (-5)         /* a string shorter than min_string_length */
+#define TSK_ERROR_SINGULAR_SYSTEM (-6)     /* tsk_chain_tip: the 6N x 6N system is singular */
+#define TSK_ERROR_SINGULAR_COMPLIANCE (-7) /* tsk_chain_tip: the tip compliance is singular */
+#define TSK_ERROR_INTERNAL (-8)            /* a C++ exception, caught at the boundary */
+
+/* Evaluation modes: everything; K without K_c; the wrench alone (K, K_c not written). */
+#define TSK_MODE_FULL 0
+#define TSK_MODE_STIFFNESS 1
+#define TSK_MODE_WRENCH 2
+
+/* Force laws: Hooke k (l - l0); the paper's k (l - l0) / l (joint.py's FORCE_LAWS). */
+#define TSK_LAW_HOOKE 0
+#define TSK_LAW_PAPER 1
+
+/* Rows of the series table: the Taylor coefficients of a, b, c, b1, c1 (screw.py). */
+#define TSK_SERIES_ROWS 5
+
+/* Outputs of tsk_chain_tip besides the tip wrench (a bit mask). */
+#define TSK_TIP_BASE 1
+#define TSK_TIP_TOOL 2
+
+/* One joint model: pointers into arrays the caller keeps alive while the model is used. */
+typedef struct tsk_joint_model {
+  int64_t n_strings;          /* n >= 1 */
+  const double* p1;           /* n x 3, link-1 end of each string in {1} (m) */
+  const double* p2;           /* n x 3, link-2 end of each string in {2} (m) */
+  const double* k;            /* n, stiffness (N/m) */
+  const double* max_stretch;  /* n, lmax - l0 (m; inf for no limit) */
+  int64_t law;                /* TSK_LAW_* */
+  int64_t series_terms;       /* terms per row of series, >= 1 */
+  const double* series;       /* TSK_SERIES_ROWS x series_terms: coefficients in theta^2 of a,
+                                 b, c, b1, c1, highest power first (screw.py's tables) */
+  double series_threshold;    /* angles below it take the series (screw.SERIES_THRESHOLD) */
+  double min_string_length;   /* shorter strings: TSK_ERROR_ZERO_LENGTH (joint.MIN_STRING_LENGTH) */
+} tsk_joint_model;
+
+/* Fields of tsk_joint_model in declaration order (indices into tsk_joint_model_layout). */
+#define TSK_MODEL_FIELDS 10
+
+/* TSK_ABI_VERSION of the library. */
+int64_t tsk_abi_version(void);
+
+/* sizeof(tsk_joint_model), then the offsetof of its TSK_MODEL_FIELDS fields in declaration
+ * order, written to out (capacity >= 1 + TSK_MODEL_FIELDS); returns the number written. */
+int64_t tsk_joint_model_layout(int64_t* out, int64_t capacity);
+
+/* Doubles of the packed buffer of one screw for n strings: the inputs xi 6 and the rest
+ * lengths n, then the outputs T 16, s 3n, lengths n, tensions n, wrench 6, K 36, K_c 36, then
+ * slack n and saturated n as bytes (rounded up to whole doubles). */
+int64_t tsk_joint_packed_size(int64_t n_strings);
+
+/* One screw, everything in one buffer (buf_len >= tsk_joint_packed_size(n)): it holds xi and
+ * the rest lengths on entry and the outputs after. */
+int64_t tsk_joint_evaluate_packed(const tsk_joint_model* model, int64_t mode, double* buf,
+                                  int64_t buf_len);
+
+/* Doubles of the output buffer of a batch: blocks of all screws one after the other, T 16N,
+ * s 3nN, lengths nN, tensions nN, wrench 6N, K 36N, K_c 36N, then slack nN and saturated nN as
+ * bytes (rounded up to whole doubles). */
+int64_t tsk_joint_batch_size(int64_t n_strings, int64_t n_screws);
+
+/* A batch of n_screws screws xi (n_screws x 6); rest: n values for every screw (rest_len n) or
+ * a row of n per screw (rest_len n x n_screws); out (out_len >= tsk_joint_batch_size) as above.
+ * On TSK_ERROR_ZERO_LENGTH the outputs are partly written. */
+int64_t tsk_joint_evaluate(const tsk_joint_model* model, int64_t n_screws, const double* xi,
+                           const double* rest, int64_t rest_len, int64_t mode, double* out,
+                           int64_t out_len);
+
+/* Frames of an n-joint spine from its joint transforms T (n x 16): out (out_len >= 32n + 16)
+ * receives P (n x 16, the poses of {1}_i), L (n x 16, those of {2}_i) and the tool's pose (16);
+ * offsets (n - 1) x 16 (null when n == 1), tool 16. */
+int64_t tsk_chain_frames(int64_t n_joints, const double* T, const double* offsets,
+                         const double* tool, double* out, int64_t out_len);
+
+/* The tip of an n-joint spine at an evaluated configuration: P, L (n x 16), tip (16), joint
+ * wrenches F (n x 6, each in {1}_i), K_c (n x 36). weights: null, or the link weights m_k g
+ * (n x 3) with the centres of mass coms (n x 3, in {2}_k). W_in: the tip wrench (6, base), or
+ * null for the implied one, -Ad_{P_N}^-T F_N - w_N. out (out_len >= 78): the tip wrench used
+ * (6), then K_tip in the base frame (36, when outputs has TSK_TIP_BASE) and in the tool frame
+ * (36, TSK_TIP_TOOL). */
+int64_t tsk_chain_tip(int64_t n_joints, const double* P, const double* L, const double* tip,
+                      const double* F, const double* Kc, const double* weights,
+                      const double* coms, const double* W_in, int64_t outputs, double* out,
+                      int64_t out_len);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  /* TENSEGRITY_STIFFNESS__KERNEL_H_ */
