@@ -102,6 +102,8 @@ RESIDUAL_UNITS = {'position': 'm', 'rotation': 'rad', 'force': 'N', 'moment': 'N
 ROBUST_SCALE = 3.0
 #: A sample is an outlier when its chi-square has this upper-tail probability or less.
 OUTLIER_PROBABILITY = 1e-4
+#: Known loads measure a force when their chi-square has this upper-tail probability or less.
+SCALE_TEST_PROBABILITY = 1e-3
 #: Robust losses of scipy.optimize.least_squares.
 LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
 #: Gauss-Newton iterations of the per-sample screw refinement.
@@ -599,12 +601,17 @@ class Identifiability:
 
 
 def identifiability(information: FloatArray, names: Sequence[str],
-                    describe: Callable[[FloatArray], str] | None = None) -> Identifiability:
+                    describe: Callable[[FloatArray], str] | None = None,
+                    held: FloatArray | None = None) -> Identifiability:
     """Split the scaled parameter space into what the information ``S`` (P, P) determines and
     what it does not: parameters no measurement depends on (zero diagonal) first, each on its
     own, then the eigen-directions of the rest whose singular value ``sqrt(lambda)`` is below
-    :data:`RANK_TOLERANCE` of the largest or below 1 (std above one scaled unit)."""
+    :data:`RANK_TOLERANCE` of the largest or below 1 (std above one scaled unit). ``held``
+    (P, h) orthonormal: directions known to be unidentifiable (their information is removed)."""
     P = information.shape[0]
+    if held is not None and held.shape[1]:
+        project = np.eye(P) - held @ held.T
+        information = project @ information @ project
     diag = np.diag(information)
     top = float(diag.max()) if P else 0.0
     zero = np.flatnonzero(diag <= (RANK_TOLERANCE ** 2) * max(top, 1e-300))
@@ -637,16 +644,16 @@ def _combination_words(v: FloatArray, names: Sequence[str], limit: int = 6) -> s
 
 
 def _describe(v: FloatArray, names: Sequence[str], model: JointModel, data: _Data,
-              kinds: Sequence[str]) -> str:
+              kinds: Sequence[str], noise: CalibrationNoise) -> str:
     """Words for one unidentifiable direction ``v`` of the scaled parameters."""
     n = model.n_strings
-    measures_force = bool(data.has_wrench.any() or np.isfinite(data.tensions).any())
+    force = measures_force(data, noise)
     nz = np.flatnonzero(np.abs(v) > 1e-9)
     if nz.size == 1:
         name = names[nz[0]]
         j = int(re.search(r'\[(\d+)\]', name).group(1))
         what = (f"{name} (string {model.string_names[j]}): no measurement depends on it")
-        if name.startswith('stiffness') or not measures_force:
+        if name.startswith('stiffness') or not force:
             if not np.isfinite(data.tensions[:, j]).any() and not data.has_wrench.any():
                 what += ' (its tension is not measured and no sample has a known load)'
         return what
@@ -654,7 +661,7 @@ def _describe(v: FloatArray, names: Sequence[str], model: JointModel, data: _Dat
         ks = v[:n] if kinds[0] == 'stiffness' else np.zeros(n)
         if np.linalg.norm(ks) > 0.99 * np.linalg.norm(v) and \
                 abs(ks.sum()) > 0.99 * math.sqrt(n) * np.linalg.norm(ks):
-            reason = ('no sample measures a force' if not measures_force
+            reason = ('no sample measures a force' if not force
                       else 'the forces measured do not fix it')
             return (f'the common scale of all stiffnesses: {reason} (a tension or a known '
                     'load); the ratios between them are fitted, the scale is held at nominal')
@@ -662,6 +669,21 @@ def _describe(v: FloatArray, names: Sequence[str], model: JointModel, data: _Dat
 
 
 # ------------------------------------------------------------------------------ the fit
+def measures_force(data: _Data, noise: CalibrationNoise,
+                   probability: float = SCALE_TEST_PROBABILITY) -> bool:
+    """Whether the samples measure a force: a load cell, or known loads that differ from zero
+    beyond their noise (their whitened chi-square exceeds its ``1 - probability`` quantile).
+    Without one, the common scale of the stiffnesses is unidentifiable: ``F(c k) = c F(k)`` and
+    ``F = -W = 0`` at every sample, whatever ``c``."""
+    if np.isfinite(data.tensions).any():
+        return True
+    loads = data.wrench[data.has_wrench]
+    if loads.size == 0:
+        return False
+    std = np.concatenate([np.full(3, noise.force), np.full(3, noise.moment)])
+    return float(np.sum((loads / std) ** 2)) > chdtri(loads.size, probability)
+
+
 def initial_screws(model: JointModel, data: _Data) -> FloatArray:
     """A starting screw per sample: the measured pose's (on the rotation branch nearest the
     previous sample's screw), else the nominal model's equilibrium under the measured load
@@ -822,7 +844,12 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     before = problem.evaluate(z_nominal, xi)
     rms_before = _rms_by_kind(before.raw, problem.mask, n)
     info = problem.information(before, columns)
-    ident = identifiability(info, names, lambda v: _describe(v, names, model, data, kinds))
+    held = np.zeros((P, 0))
+    if 'stiffness' in kinds and not measures_force(data, noise):
+        held = np.zeros((P, 1))
+        held[:n, 0] = 1.0 / math.sqrt(n)  # stiffness columns come first
+    ident = identifiability(info, names, lambda v: _describe(v, names, model, data, kinds, noise),
+                            held)
     basis_full = np.zeros((2 * n, ident.basis.shape[1]))
     basis_full[columns] = ident.basis
     if progress:

@@ -1,0 +1,165 @@
+"""Calibration recovers known parameters (:mod:`tensegrity_stiffness.calibration`): accuracy
+against the reported std, the std against the Cramer-Rao bound, identifiability of what the data
+cannot determine, robustness to gross outliers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from calibration_recordings import (
+    configurations,
+    measure,
+    nominal_model,
+    true_parameters,
+)
+
+from tensegrity_stiffness import calibration as cal
+
+SEED = 11
+#: Every identifiable parameter within this many reported std of the truth ...
+MAX_ERROR_STD = 3.5
+#: ... and each reported std within this factor of the Cramer-Rao bound.
+MAX_CRB_FACTOR = 1.5
+
+
+@pytest.fixture(scope='module')
+def truth():
+    model = nominal_model()
+    k, d = true_parameters(model, SEED)
+    rest, loads, screws = configurations(model, k, d, 260, SEED)
+    return model, k, d, rest, loads, screws
+
+
+def _values(result, kind):
+    n = result.model.n_strings
+    name = cal.PARAMETER_NAMES[kind]
+    return (np.array([result.parameters[name.format(j=j)] for j in range(n)]),
+            np.array([result.std[name.format(j=j)] for j in range(n)]),
+            np.array([result.identifiable[name.format(j=j)] for j in range(n)]))
+
+
+def _check_against_truth(result, k, d, crb=None):
+    kf, ks, kid = _values(result, 'stiffness')
+    df, ds, did = _values(result, 'rest_length_offsets')
+    assert np.all(np.abs(kf - k)[kid] <= MAX_ERROR_STD * ks[kid]), (kf - k) / ks
+    assert np.all(np.abs(df - d)[did] <= MAX_ERROR_STD * ds[did]), (df - d) / ds
+    if crb is not None:
+        ratio = np.concatenate([ks, ds]) / crb
+        assert np.all((ratio < MAX_CRB_FACTOR) & (ratio > 1 / MAX_CRB_FACTOR)), ratio
+    return kf, df
+
+
+def test_pose_and_wrench(truth):
+    model, k, d, rest, loads, screws = truth
+    noise = cal.CalibrationNoise()
+    samples = measure(model, k, d, rest, loads, screws, SEED, noise)
+    fit, held_out = samples[:200], samples[200:]
+    result = cal.calibrate_joint(model, fit)
+    assert result.success, result.message
+    assert all(result.identifiable.values()) and not result.unidentifiable
+    crb = cal.cramer_rao_std(model, k, d, screws[:200], fit)
+    _check_against_truth(result, k, d, crb)
+    assert result.residual_rms_after['force'] < result.residual_rms_before['force']
+    assert 0.7 < result.chi2 / result.dof < 1.3
+    # Held-out samples: the wrench predicted at the measured pose and commanded rest lengths.
+    errors = {}
+    for name, m, offsets in (('nominal', model, np.zeros(model.n_strings)),
+                             ('calibrated', result.model, result.offsets)):
+        err = [m.wrench(cal.log_se3(s.pose, reference=x), s.rest_lengths + offsets)
+               + s.external_wrench for s, x in zip(held_out, screws[200:], strict=True)]
+        errors[name] = float(np.sqrt(np.mean(np.square(err)[:, :3])))
+    assert errors['calibrated'] * 3 < errors['nominal'], errors
+
+
+@pytest.mark.parametrize('strings', [tuple(range(12)), (0, 3, 5, 10)])
+def test_pose_and_tensions_with_a_measured_load(truth, strings):
+    model, k, d, rest, loads, screws = truth
+    samples = measure(model, k, d, rest[:200], loads[:200], screws[:200], SEED,
+                      cal.CalibrationNoise(), tensions=strings)
+    result = cal.calibrate_joint(model, samples)
+    assert result.success and all(result.identifiable.values())
+    crb = cal.cramer_rao_std(model, k, d, screws[:200], samples)
+    _check_against_truth(result, k, d, crb)
+
+
+def test_pose_and_four_tensions_with_unknown_loads(truth):
+    model, k, d, rest, loads, screws = truth
+    strings = (0, 3, 5, 10)
+    samples = measure(model, k, d, rest[:200], loads[:200], screws[:200], SEED,
+                      cal.CalibrationNoise(), wrench=False, tensions=strings)
+    result = cal.calibrate_joint(model, samples)
+    assert result.success
+    kf, ks, kid = _values(result, 'stiffness')
+    df, _, did = _values(result, 'rest_length_offsets')
+    measured = np.isin(np.arange(model.n_strings), strings)
+    np.testing.assert_array_equal(kid, measured)
+    np.testing.assert_array_equal(did, measured)
+    np.testing.assert_array_equal(kf[~measured], model.k[~measured])  # held at nominal
+    np.testing.assert_array_equal(df[~measured], 0.0)
+    assert np.all(np.isnan(ks[~measured]))
+    assert len(result.unidentifiable) == 16
+    assert all('no measurement depends on it' in text for text in result.unidentifiable)
+    _check_against_truth(result, k, d)
+
+
+def test_poses_only_unloaded_fits_ratios_and_offsets_not_the_scale(truth):
+    model, k, d = truth[:3]
+    noise = cal.CalibrationNoise()
+    rest, loads, screws = configurations(model, k, d, 200, SEED, force=noise.force,
+                                         moment=noise.moment, rest_spread=6e-3)
+    samples = measure(model, k, d, rest, loads, screws, SEED, noise, unloaded_disturbance=True)
+    result = cal.calibrate_joint(model, samples)
+    assert result.success
+    assert len(result.unidentifiable) == 1
+    assert result.unidentifiable[0].startswith('the common scale of all stiffnesses')
+    assert 'no sample measures a force' in result.unidentifiable[0]
+    kf, ks, kid = _values(result, 'stiffness')
+    df, ds, did = _values(result, 'rest_length_offsets')
+    assert not kid.any() and did.all()
+    # The scale is held at nominal: the mean ratio to nominal is 1.
+    assert np.mean(kf / model.k) == pytest.approx(1.0, abs=1e-9)
+    true_ratio = (k / model.k) / np.mean(k / model.k)
+    assert np.all(np.abs(kf / model.k - true_ratio) <= MAX_ERROR_STD * ks / model.k), \
+        (kf / model.k - true_ratio) / (ks / model.k)
+    assert np.all(np.abs(df - d) <= MAX_ERROR_STD * ds), (df - d) / ds
+
+
+def test_gross_outliers_are_listed_and_do_not_bias(truth):
+    model, k, d, rest, loads, screws = truth
+    rng = np.random.default_rng(5)
+    samples = measure(model, k, d, rest[:200], loads[:200], screws[:200], SEED,
+                      cal.CalibrationNoise())
+    bad = np.sort(rng.choice(200, 10, replace=False))
+    for i in bad[:5]:  # a motion-capture glitch: 5 mm off
+        T = np.array(samples[i].pose)
+        T[:3, 3] += rng.choice([-1, 1], 3) * 5e-3
+        samples[i] = cal.CalibrationSample(samples[i].rest_lengths, pose=T,
+                                           external_wrench=samples[i].external_wrench)
+    for i in bad[5:]:  # a force-sensor spike: 0.5 N
+        W = np.array(samples[i].external_wrench)
+        W[:3] += rng.choice([-1, 1], 3) * 0.5
+        samples[i] = cal.CalibrationSample(samples[i].rest_lengths, pose=samples[i].pose,
+                                           external_wrench=W)
+    result = cal.calibrate_joint(model, samples)
+    assert result.success
+    assert result.outliers == bad.tolist()
+    keep = np.setdiff1d(np.arange(200), bad)
+    crb = cal.cramer_rao_std(model, k, d, screws[keep], [samples[i] for i in keep])
+    _check_against_truth(result, k, d, crb)
+    plain = cal.calibrate_joint(model, samples, loss='linear')
+    assert plain.outliers == []
+    kf = _values(plain, 'stiffness')[0]
+    assert np.max(np.abs(kf - k) / k) > np.max(np.abs(_values(result, 'stiffness')[0] - k) / k)
+
+
+def test_low_noise_recovers_stiffness_within_1_percent_and_offsets_within_50_um(truth):
+    model, k, d, rest, loads, screws = truth
+    base = cal.CalibrationNoise()
+    noise = cal.CalibrationNoise(**{kind: getattr(base, kind) / 100 for kind in
+                                    cal.RESIDUAL_KINDS})
+    samples = measure(model, k, d, rest[:200], loads[:200], screws[:200], SEED, noise)
+    result = cal.calibrate_joint(model, samples, noise=noise)
+    kf = _values(result, 'stiffness')[0]
+    df = _values(result, 'rest_length_offsets')[0]
+    assert np.max(np.abs(kf - k) / k) < 0.01
+    assert np.max(np.abs(df - d)) < 5e-5
