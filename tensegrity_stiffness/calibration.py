@@ -19,14 +19,17 @@ measurement gives whitened residuals (measurement noise std ``sigma`` from
   model's force law);
 * string lengths: ``(l_j(xi) - l_m) / sigma`` (eq. 7).
 
-Jacobians (analytic, checked by central differences in the tests). With ``u_j = s_j / l_j``,
-``m_j = p1_j x u_j``, ``w_j = [u_j; m_j]`` and ``J`` the SE(3) left Jacobian (twist
-``[omega; v] = J dxi``): ``d l_j / d xi = -[m_j^T, u_j^T] J``, ``d phi_j / d xi =
-phi_j' d l_j / d xi``, ``d F / d xi = K`` (eq. 10), pose ``[[-hat(p), I], [Jl^-1(phi), 0]] J``.
-Parameters (:func:`string_parameter_jacobians`): ``d phi_j / d k_j = phi_j / k_j`` (the tension is
-linear in ``k``), ``d phi_j / d d_j = d phi_j / d l0_j`` (Hooke taut: ``-k_j``; paper law taut:
-``-k_j / l_j``; saturated paper law: ``-k_j s_max / lmax^2``; slack and saturated Hooke: 0),
-``d F / d k_j = (phi_j / k_j) w_j``, ``d F / d d_j = (d phi_j / d l0_j) w_j``.
+Jacobians (analytic). :mod:`tensegrity_stiffness.sensor_models` defines every measurement model
+and its Jacobians for one screw (shared with the estimator); the calibration evaluates the same
+models for all samples at once (:class:`_Problem`, one batched :meth:`JointModel.evaluate` per
+iteration), held to ``sensor_models`` sample by sample and to central differences in
+``test/test_calibration_jacobians.py``. With ``u_j = s_j / l_j``, ``m_j = p1_j x u_j``,
+``w_j = [u_j; m_j]`` and ``J`` the SE(3) left Jacobian (twist ``[omega; v] = J dxi``):
+``d l_j / d xi = -[m_j^T, u_j^T] J``, ``d phi_j / d xi = phi_j' d l_j / d xi``,
+``d F / d xi = K`` (eq. 10), pose ``[[-hat(p), I], [Jl^-1(phi), 0]] J``; parameters
+(``sensor_models.string_parameter_jacobians``): ``d phi_j / d k_j = phi_j / k_j``,
+``d phi_j / d d_j = d phi_j / d l0_j``, ``d F / d k_j = (phi_j / k_j) w_j``,
+``d F / d d_j = (d phi_j / d l0_j) w_j``.
 
 Method
 ------
@@ -295,8 +298,10 @@ def model_with_parameters(model: JointModel, stiffness: ArrayLike,
 
 def _force_law_slopes(model: JointModel, state: JointState, rest: FloatArray
                       ) -> tuple[FloatArray, FloatArray]:
-    """``d phi / d l`` and ``d phi / d l0`` of every string (eq. 8 and the model's force law;
-    the maximum stretch ``lmax - l0`` is held, as :class:`JointModel` does)."""
+    """``d phi / d l`` and ``d phi / d l0`` of every string for a batch of states (eq. 8 and
+    the model's force law; the maximum stretch ``lmax - l0`` is held, as :class:`JointModel`
+    does): the batched form of ``sensor_models.string_predictions(...).tension_slope`` and
+    ``sensor_models.string_parameter_jacobians(...).tension_rest_length``."""
     k = model.k
     lengths = state.lengths
     taut = ~(state.slack | state.saturated)
@@ -316,25 +321,6 @@ def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArra
     """``w_j = [u_j; p1_j x u_j]`` (..., n, 6): the wrench of a unit tension in string j."""
     u = state.string_vectors / state.lengths[..., None]
     return np.concatenate([u, np.cross(model._p1, u)], axis=-1)
-
-
-def string_parameter_jacobians(model: JointModel, xi: ArrayLike,
-                               rest_lengths: ArrayLike | None = None
-                               ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Derivatives of the tensions and the wrench w.r.t. each string's stiffness and rest length.
-
-    Returns ``(dphi_dk, dphi_dl0, dF_dk, dF_dl0)``: tensions (..., n) -- string j depends only
-    on its own parameters, so these are the diagonals -- and the wrench (..., 6, n), at screw
-    ``xi`` (6,) or (N, 6) with true rest lengths (n,) or (N, n). A rest-length offset ``d_j``
-    has the derivatives of ``l0_j``.
-    """
-    state = model.evaluate(xi, rest_lengths)
-    rest = model.validate_rest_lengths(rest_lengths)
-    _, dphi_dl0 = _force_law_slopes(model, state, rest)
-    dphi_dk = state.tensions / model.k
-    w = _string_wrench_directions(model, state)
-    return (dphi_dk, dphi_dl0, np.swapaxes(w * dphi_dk[..., None], -1, -2),
-            np.swapaxes(w * dphi_dl0[..., None], -1, -2))
 
 
 def rotation_log_batch(R: FloatArray) -> FloatArray:

@@ -27,18 +27,11 @@ from tensegrity_stiffness.screw import exp_so3
 REST_SPREAD = 3e-3
 FORCE_SPREAD = 0.6
 MOMENT_SPREAD = 0.01
-
-
-@dataclass
-class Recording:
-    """Samples with the truth behind them."""
-
-    nominal: JointModel
-    true_stiffness: np.ndarray
-    true_offsets: np.ndarray
-    true_screws: np.ndarray
-    true_loads: np.ndarray
-    samples: list[CalibrationSample]
+#: The twin's state counts as quasi-static when the net force and moment on link 2 are below
+#: this (N, N m; far below the sensors' noise) ...
+SETTLE_TOLERANCE = 1e-9
+#: ... within this much simulated time (s).
+SETTLE_TIME = 20.0
 
 
 def nominal_model() -> JointModel:
@@ -51,52 +44,86 @@ def true_parameters(model: JointModel, seed: int) -> tuple[np.ndarray, np.ndarra
     return model.k * (1.0 + rng.uniform(-0.2, 0.2, n)), rng.uniform(-1e-3, 1e-3, n)
 
 
+@dataclass
+class States:
+    """True quasi-static states: commanded rest lengths (N, n), applied loads (N, 6), screws
+    (N, 6), poses (N, 4, 4) and tensions (N, n)."""
+
+    rest: np.ndarray
+    loads: np.ndarray
+    screws: np.ndarray
+    poses: np.ndarray
+    tensions: np.ndarray
+
+    def __getitem__(self, rows: slice) -> States:
+        return States(self.rest[rows], self.loads[rows], self.screws[rows], self.poses[rows],
+                      self.tensions[rows])
+
+
+def twin_available() -> bool:
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
 def configurations(model: JointModel, k: np.ndarray, d: np.ndarray, count: int, seed: int,
                    force: float = FORCE_SPREAD, moment: float = MOMENT_SPREAD,
-                   rest_spread: float = REST_SPREAD
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(commanded rest lengths (count, n), loads (count, 6), true screws (count, 6)): stable
-    equilibria of the true joint (library solver) under random loads of std ``force`` (N) and
-    ``moment`` (N m)."""
+                   rest_spread: float = REST_SPREAD, backend: str = 'twin') -> States:
+    """``count`` stable quasi-static states of the true joint (stiffness ``k``, rest lengths
+    commanded + ``d``) under random commanded rest lengths (uniform, +-``rest_spread``) and
+    loads (normal, std ``force`` N and ``moment`` N m): settled in the MuJoCo twin
+    (``backend='twin'``, when mujoco is installed) or solved by the library."""
     rng = np.random.default_rng(seed + 1000)
     true = model_with_parameters(model, k, model.rest_lengths + d)
     n = model.n_strings
-    rest, loads, screws = [], [], []
-    previous = solve_equilibrium(true, np.zeros(6)).screw
-    while len(rest) < count:
+    rows: list[tuple] = []
+    start = solve_equilibrium(true, np.zeros(6)).screw
+    sim = None
+    if backend == 'twin' and twin_available():
+        from tensegrity_stiffness.simulation import JointSimulation
+
+        sim = JointSimulation(true, initial_screw=start)
+    previous = start
+    while len(rows) < count:
         command = model.rest_lengths + rng.uniform(-rest_spread, rest_spread, n)
         W = np.concatenate([rng.normal(0.0, force, 3), rng.normal(0.0, moment, 3)])
         eq = solve_equilibrium(true, W, command + d, initial_screw=previous)
         if not (eq.success and eq.stable):
             continue
-        previous = eq.screw
-        rest.append(command)
-        loads.append(W)
-        screws.append(eq.screw)
-    return np.array(rest), np.array(loads), np.array(screws)
+        if sim is None:
+            rows.append((command, W, eq.screw, eq.state.transform, eq.state.tensions))
+        else:
+            sim.set_rest_lengths(command + d)
+            sim.apply_wrench(W)
+            if not sim.settle(tolerance=SETTLE_TOLERANCE, max_time=SETTLE_TIME):
+                sim.set_screw(eq.screw)  # start the next one from a state at rest
+                continue
+            rows.append((command, W, sim.screw(), sim.pose(), sim.tensions()))
+        previous = rows[-1][2]
+    return States(*(np.array(column) for column in zip(*rows, strict=True)))
 
 
-def measure(model: JointModel, k: np.ndarray, d: np.ndarray, rest: np.ndarray,
-            loads: np.ndarray, screws: np.ndarray, seed: int, noise: CalibrationNoise,
+def measure(model: JointModel, states: States, seed: int, noise: CalibrationNoise,
             pose: bool = True, wrench: bool = True, tensions: tuple[int, ...] = (),
             unloaded_disturbance: bool = False) -> list[CalibrationSample]:
-    """Noisy samples of the true states. ``unloaded_disturbance``: the recorded wrench is zero
-    while the joint carried small random loads of the wrench noise (an "unloaded" joint)."""
+    """Noisy samples of the true states: poses (PoseWithCovariance convention), the applied
+    load and the tensions of the strings ``tensions``. ``unloaded_disturbance``: the recorded
+    wrench is zero (the joint carried small random loads: an "unloaded" joint)."""
     rng = np.random.default_rng(seed + 2000)
-    true = model_with_parameters(model, k, model.rest_lengths + d)
-    states = true.evaluate(screws, rest + d)
     samples = []
-    for i in range(len(rest)):
-        T = states.transform[i].copy()
+    for i in range(len(states.rest)):
+        T = states.poses[i].copy()
         T[:3, :3] = exp_so3(rng.normal(0.0, noise.rotation, 3)) @ T[:3, :3]
         T[:3, 3] += rng.normal(0.0, noise.position, 3)
-        W = loads[i] + np.concatenate([rng.normal(0.0, noise.force, 3),
-                                       rng.normal(0.0, noise.moment, 3)])
+        W = states.loads[i] + np.concatenate([rng.normal(0.0, noise.force, 3),
+                                              rng.normal(0.0, noise.moment, 3)])
         t = np.full(model.n_strings, np.nan)
         idx = list(tensions)
         t[idx] = states.tensions[i, idx] + rng.normal(0.0, noise.tension, len(idx))
         samples.append(CalibrationSample(
-            rest_lengths=rest[i], pose=T if pose else None,
+            rest_lengths=states.rest[i], pose=T if pose else None,
             tensions=t if idx else None,
             external_wrench=(np.zeros(6) if unloaded_disturbance else W) if wrench else None))
     return samples

@@ -22,12 +22,13 @@ MAX_ERROR_STD = 3.5
 MAX_CRB_FACTOR = 1.5
 
 
-@pytest.fixture(scope='module')
+@pytest.fixture(scope='session')
 def truth():
+    """260 quasi-static states of a joint with drawn parameters, settled in the MuJoCo twin
+    (the library's equilibria when mujoco is missing)."""
     model = nominal_model()
     k, d = true_parameters(model, SEED)
-    rest, loads, screws = configurations(model, k, d, 260, SEED)
-    return model, k, d, rest, loads, screws
+    return model, k, d, configurations(model, k, d, 260, SEED)
 
 
 def _values(result, kind):
@@ -50,14 +51,14 @@ def _check_against_truth(result, k, d, crb=None):
 
 
 def test_pose_and_wrench(truth):
-    model, k, d, rest, loads, screws = truth
+    model, k, d, states = truth
     noise = cal.CalibrationNoise()
-    samples = measure(model, k, d, rest, loads, screws, SEED, noise)
+    samples = measure(model, states, SEED, noise)
     fit, held_out = samples[:200], samples[200:]
     result = cal.calibrate_joint(model, fit)
     assert result.success, result.message
     assert all(result.identifiable.values()) and not result.unidentifiable
-    crb = cal.cramer_rao_std(model, k, d, screws[:200], fit)
+    crb = cal.cramer_rao_std(model, k, d, states.screws[:200], fit)
     _check_against_truth(result, k, d, crb)
     assert result.residual_rms_after['force'] < result.residual_rms_before['force']
     assert 0.7 < result.chi2 / result.dof < 1.3
@@ -66,26 +67,26 @@ def test_pose_and_wrench(truth):
     for name, m, offsets in (('nominal', model, np.zeros(model.n_strings)),
                              ('calibrated', result.model, result.offsets)):
         err = [m.wrench(cal.log_se3(s.pose, reference=x), s.rest_lengths + offsets)
-               + s.external_wrench for s, x in zip(held_out, screws[200:], strict=True)]
+               + s.external_wrench for s, x in zip(held_out, states.screws[200:], strict=True)]
         errors[name] = float(np.sqrt(np.mean(np.square(err)[:, :3])))
     assert errors['calibrated'] * 3 < errors['nominal'], errors
 
 
 @pytest.mark.parametrize('strings', [tuple(range(12)), (0, 3, 5, 10)])
 def test_pose_and_tensions_with_a_measured_load(truth, strings):
-    model, k, d, rest, loads, screws = truth
-    samples = measure(model, k, d, rest[:200], loads[:200], screws[:200], SEED,
+    model, k, d, states = truth
+    samples = measure(model, states[:200], SEED,
                       cal.CalibrationNoise(), tensions=strings)
     result = cal.calibrate_joint(model, samples)
     assert result.success and all(result.identifiable.values())
-    crb = cal.cramer_rao_std(model, k, d, screws[:200], samples)
+    crb = cal.cramer_rao_std(model, k, d, states.screws[:200], samples)
     _check_against_truth(result, k, d, crb)
 
 
 def test_pose_and_four_tensions_with_unknown_loads(truth):
-    model, k, d, rest, loads, screws = truth
+    model, k, d, states = truth
     strings = (0, 3, 5, 10)
-    samples = measure(model, k, d, rest[:200], loads[:200], screws[:200], SEED,
+    samples = measure(model, states[:200], SEED,
                       cal.CalibrationNoise(), wrench=False, tensions=strings)
     result = cal.calibrate_joint(model, samples)
     assert result.success
@@ -105,9 +106,9 @@ def test_pose_and_four_tensions_with_unknown_loads(truth):
 def test_poses_only_unloaded_fits_ratios_and_offsets_not_the_scale(truth):
     model, k, d = truth[:3]
     noise = cal.CalibrationNoise()
-    rest, loads, screws = configurations(model, k, d, 200, SEED, force=noise.force,
-                                         moment=noise.moment, rest_spread=6e-3)
-    samples = measure(model, k, d, rest, loads, screws, SEED, noise, unloaded_disturbance=True)
+    states = configurations(model, k, d, 200, SEED, force=noise.force, moment=noise.moment,
+                            rest_spread=6e-3)
+    samples = measure(model, states, SEED, noise, unloaded_disturbance=True)
     result = cal.calibrate_joint(model, samples)
     assert result.success
     assert len(result.unidentifiable) == 1
@@ -125,9 +126,9 @@ def test_poses_only_unloaded_fits_ratios_and_offsets_not_the_scale(truth):
 
 
 def test_gross_outliers_are_listed_and_do_not_bias(truth):
-    model, k, d, rest, loads, screws = truth
+    model, k, d, states = truth
     rng = np.random.default_rng(5)
-    samples = measure(model, k, d, rest[:200], loads[:200], screws[:200], SEED,
+    samples = measure(model, states[:200], SEED,
                       cal.CalibrationNoise())
     bad = np.sort(rng.choice(200, 10, replace=False))
     for i in bad[:5]:  # a motion-capture glitch: 5 mm off
@@ -144,7 +145,7 @@ def test_gross_outliers_are_listed_and_do_not_bias(truth):
     assert result.success
     assert result.outliers == bad.tolist()
     keep = np.setdiff1d(np.arange(200), bad)
-    crb = cal.cramer_rao_std(model, k, d, screws[keep], [samples[i] for i in keep])
+    crb = cal.cramer_rao_std(model, k, d, states.screws[keep], [samples[i] for i in keep])
     _check_against_truth(result, k, d, crb)
     plain = cal.calibrate_joint(model, samples, loss='linear')
     assert plain.outliers == []
@@ -153,11 +154,11 @@ def test_gross_outliers_are_listed_and_do_not_bias(truth):
 
 
 def test_low_noise_recovers_stiffness_within_1_percent_and_offsets_within_50_um(truth):
-    model, k, d, rest, loads, screws = truth
+    model, k, d, states = truth
     base = cal.CalibrationNoise()
     noise = cal.CalibrationNoise(**{kind: getattr(base, kind) / 100 for kind in
                                     cal.RESIDUAL_KINDS})
-    samples = measure(model, k, d, rest[:200], loads[:200], screws[:200], SEED, noise)
+    samples = measure(model, states[:200], SEED, noise)
     result = cal.calibrate_joint(model, samples, noise=noise)
     kf = _values(result, 'stiffness')[0]
     df = _values(result, 'rest_length_offsets')[0]

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tensegrity_stiffness import calibration as cal
+from tensegrity_stiffness import sensor_models
 from tensegrity_stiffness.config import packaged_config_path
 from tensegrity_stiffness.joint import JointModel
 from tensegrity_stiffness.screw import exp_se3, exp_so3
@@ -24,66 +25,10 @@ def _model(force_law: str = 'hooke') -> JointModel:
                       initial_screw=model.initial_screw)
 
 
-def _screws(model: JointModel, rng: np.random.Generator, count: int) -> np.ndarray:
-    return model.initial_screw + rng.normal(0.0, [0.05] * 3 + [0.002] * 3, (count, 6))
-
-
 @pytest.mark.parametrize('force_law', ['hooke', 'paper'])
-def test_string_parameter_jacobians_match_central_differences(force_law):
-    rng = np.random.default_rng(3)
-    model = _model(force_law)
-    n = model.n_strings
-    xi = _screws(model, rng, 4)
-    # Rest lengths that make some strings slack and, for the paper law, some saturated.
-    rest = model.rest_lengths + rng.uniform(-4e-3, 4e-3, (4, n))
-    rest[0, 0] = 0.08
-    dphi_dk, dphi_dl0, dF_dk, dF_dl0 = cal.string_parameter_jacobians(model, xi, rest)
-    for j in range(n):
-        k_plus, k_minus = model.k.copy(), model.k.copy()
-        h = STEP * model.k[j] * 1e3
-        k_plus[j] += h
-        k_minus[j] -= h
-        plus = cal.model_with_parameters(model, k_plus).evaluate(xi, rest)
-        minus = cal.model_with_parameters(model, k_minus).evaluate(xi, rest)
-        np.testing.assert_allclose(dphi_dk[:, j], (plus.tensions - minus.tensions)[:, j] / (2 * h),
-                                   rtol=1e-7, atol=1e-9)
-        np.testing.assert_allclose(dF_dk[:, :, j], (plus.wrench - minus.wrench) / (2 * h),
-                                   rtol=1e-7, atol=1e-9)
-        r_plus, r_minus = rest.copy(), rest.copy()
-        r_plus[:, j] += STEP
-        r_minus[:, j] -= STEP
-        plus = model.evaluate(xi, r_plus)
-        minus = model.evaluate(xi, r_minus)
-        np.testing.assert_allclose(dphi_dl0[:, j],
-                                   (plus.tensions - minus.tensions)[:, j] / (2 * STEP),
-                                   rtol=1e-6, atol=1e-6)
-        np.testing.assert_allclose(dF_dl0[:, :, j], (plus.wrench - minus.wrench) / (2 * STEP),
-                                   rtol=1e-6, atol=1e-6)
-    assert np.all(dphi_dl0[0, 0] == 0.0)  # the slack string: no dependence
-
-
-def _problem(rng: np.random.Generator, count: int = 3) -> tuple[cal._Problem, np.ndarray]:
-    model = _model()
-    n = model.n_strings
-    xi = _screws(model, rng, count)
-    samples = []
-    for x in xi:
-        T = exp_se3(x + rng.normal(0.0, 1e-3, 6))
-        T[:3, :3] = exp_so3(rng.normal(0.0, 0.02, 3)) @ T[:3, :3]
-        tensions = rng.normal(0.4, 0.1, n)
-        tensions[rng.random(n) < 0.5] = np.nan
-        lengths = rng.normal(0.03, 0.005, n)
-        lengths[rng.random(n) < 0.5] = np.nan
-        samples.append(cal.CalibrationSample(
-            rest_lengths=model.rest_lengths + rng.uniform(-2e-3, 2e-3, n), pose=T,
-            tensions=tensions, lengths=lengths, external_wrench=rng.normal(0.0, 0.2, 6)))
-    problem = cal._Problem(model, cal._samples_data(model, samples), cal.CalibrationNoise())
-    return problem, xi
-
-
-def test_residual_jacobians_match_central_differences():
+def test_residual_jacobians_match_central_differences(force_law):
     rng = np.random.default_rng(7)
-    problem, xi = _problem(rng)
+    problem, xi = _problem(rng, force_law=force_law)
     n = problem.n
     z = rng.normal(0.0, 0.2, 2 * n)
     ev = problem.evaluate(z, xi)
@@ -104,3 +49,61 @@ def test_residual_jacobians_match_central_differences():
                    - problem.evaluate(minus, xi, False).residuals) / (2 * h)
         np.testing.assert_allclose(ev.jac_parameters[:, :, c], numeric, rtol=1e-5,
                                    atol=1e-6 * max(np.abs(numeric).max(), 1.0))
+
+
+def _screws(model: JointModel, rng: np.random.Generator, count: int) -> np.ndarray:
+    return model.initial_screw + rng.normal(0.0, [0.05] * 3 + [0.002] * 3, (count, 6))
+
+
+def test_batched_models_equal_sensor_models_sample_by_sample():
+    """The calibration's batched residuals and Jacobians are sensor_models' per screw."""
+    rng = np.random.default_rng(5)
+    problem, xi = _problem(rng, count=4)
+    n = problem.n
+    z = rng.normal(0.0, 0.2, 2 * n)
+    ev = problem.evaluate(z, xi)
+    k, d = problem.parameters(z)
+    model = cal.model_with_parameters(problem.model, k)
+    data = problem.data
+    std = problem.std
+    for i in range(len(xi)):
+        rest = data.rest[i] + d
+        r, jr = sensor_models.pose_residual(xi[i], data.poses[i])
+        e, je = sensor_models.equilibrium_residual(model, xi[i], data.wrench[i], rest)
+        pred = sensor_models.string_predictions(model, xi[i], rest)
+        par = sensor_models.string_parameter_jacobians(model, xi[i], rest)
+        raw = np.concatenate([r, e, pred.tensions - data.tensions[i],
+                              pred.lengths - data.lengths[i]])
+        jx = np.vstack([jr, je[:, :6], pred.tension_jacobian, pred.length_jacobian])
+        jk = np.vstack([np.zeros((6, n)), par.wrench_stiffness, np.diag(par.tension_stiffness),
+                        np.zeros((n, n))])
+        jd = np.vstack([np.zeros((6, n)), par.wrench_rest_length,
+                        np.diag(par.tension_rest_length), np.zeros((n, n))])
+        m = problem.mask[i]
+        np.testing.assert_allclose(ev.residuals[i][m], (raw / std)[m], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(ev.jac_screw[i][m], (jx / std[:, None])[m], rtol=1e-8,
+                                   atol=1e-8)
+        jp = np.hstack([jk, jd]) * problem.unit / std[:, None]
+        np.testing.assert_allclose(ev.jac_parameters[i][m], jp[m], rtol=1e-8, atol=1e-8)
+
+
+def _problem(rng: np.random.Generator, count: int = 3, force_law: str = 'hooke'
+             ) -> tuple[cal._Problem, np.ndarray]:
+    """Samples with every kind of measurement (some strings slack, some tensions and lengths
+    missing) around the nominal unloaded equilibrium."""
+    model = _model(force_law)
+    n = model.n_strings
+    xi = _screws(model, rng, count)
+    samples = []
+    for x in xi:
+        T = exp_se3(x + rng.normal(0.0, 1e-3, 6))
+        T[:3, :3] = exp_so3(rng.normal(0.0, 0.02, 3)) @ T[:3, :3]
+        tensions = rng.normal(0.4, 0.1, n)
+        tensions[rng.random(n) < 0.5] = np.nan
+        lengths = rng.normal(0.03, 0.005, n)
+        lengths[rng.random(n) < 0.5] = np.nan
+        samples.append(cal.CalibrationSample(
+            rest_lengths=model.rest_lengths + rng.uniform(-4e-3, 4e-3, n), pose=T,
+            tensions=tensions, lengths=lengths, external_wrench=rng.normal(0.0, 0.2, 6)))
+    problem = cal._Problem(model, cal._samples_data(model, samples), cal.CalibrationNoise())
+    return problem, xi
