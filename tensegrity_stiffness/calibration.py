@@ -531,7 +531,16 @@ class CalibrationResult:
     dof: int
     nominal: dict[str, float] = field(default_factory=dict)
     offsets: FloatArray = field(default_factory=lambda: np.zeros(0))
+    residuals_before: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    residuals_after: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     seconds: float = 0.0
+
+    def residuals(self, kind: str, after: bool = True) -> FloatArray:
+        """Residuals (N, m) of one measurement kind (:data:`RESIDUAL_KINDS`, its unit) of every
+        sample, NaN where not measured; outliers included (``after``: at the estimate, else at
+        nominal)."""
+        table = self.residuals_after if after else self.residuals_before
+        return table[:, residual_block(kind, self.model.n_strings)]
 
     def table(self) -> list[dict[str, Any]]:
         """Rows ``name, string, nominal, fitted, std, identifiable`` (units of the name)."""
@@ -544,11 +553,20 @@ class CalibrationResult:
         return rows
 
 
-def _rms_by_kind(raw: FloatArray, mask: NDArray[np.bool_], n: int) -> dict[str, float]:
+def residual_block(kind: str, n: int) -> slice:
+    """Columns of one measurement kind in a sample's residual rows (pose 6, wrench 6,
+    tensions n, lengths n)."""
     blocks = {'position': slice(0, 3), 'rotation': slice(3, 6), 'force': slice(6, 9),
               'moment': slice(9, 12), 'tension': slice(12, 12 + n), 'length': slice(12 + n, None)}
+    if kind not in blocks:
+        raise ValueError(f'unknown residual kind {kind!r} (known: {", ".join(RESIDUAL_KINDS)})')
+    return blocks[kind]
+
+
+def _rms_by_kind(raw: FloatArray, mask: NDArray[np.bool_], n: int) -> dict[str, float]:
     out = {}
-    for kind, sl in blocks.items():
+    for kind in RESIDUAL_KINDS:
+        sl = residual_block(kind, n)
         m = mask[:, sl]
         if m.any():
             out[kind] = float(np.sqrt(np.mean(raw[:, sl][m] ** 2)))
@@ -907,6 +925,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
                 success = False
                 message = f'{name} = {parameters[name]:.6g} is outside bounds [{low}, {high}]'
     calibrated = model_with_parameters(model, k, model.rest_lengths + d)
+    after_all = problem.evaluate(z, xi_fit, jacobians=False).raw
     if progress:
         progress(4, stages)
     return CalibrationResult(
@@ -916,7 +935,10 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         unidentifiable=ident.descriptions, singular_values=ident.singular_values,
         residual_rms_before=rms_before, residual_rms_after=rms_after,
         outliers=outliers.tolist(), iterations=iterations, screws=xi_fit, chi2=chi2_value,
-        dof=dof, nominal=nominal, offsets=d, seconds=time.perf_counter() - started)
+        dof=dof, nominal=nominal, offsets=d,
+        residuals_before=np.where(problem.mask, before.raw, np.nan),
+        residuals_after=np.where(problem.mask, after_all, np.nan),
+        seconds=time.perf_counter() - started)
 
 
 def _only_scale_unidentifiable(ident: Identifiability, names: Sequence[str], name: str) -> bool:
