@@ -21,12 +21,12 @@ CSV columns (a header row; one row per instant; :data:`CSV_TIME` in seconds):
 string's index is its position in the config.
 
 Quasi-static rule (:func:`quasi_static_indices`): an instant with a pose is quasi-static when the
-rest lengths have not changed for at least ``window`` seconds before it and the pose moved by
-less than ``max_speed`` (m/s) and ``max_angular_speed`` (rad/s) on average over that window
-(its change since the pose nearest ``window`` seconds earlier); without poses, when the rest
-lengths have been held for ``window`` seconds. Of each run of consecutive quasi-static instants
-the last one is the sample (the most settled; one per hold, so that the samples' noise is
-independent).
+rest lengths have not changed for at least ``window`` seconds before it and every pose of that
+window lies within ``max_speed * window`` (m) and ``max_angular_speed * window`` (rad) of the
+instant's pose (the poses of the window must span at least half of it); without poses, when the
+rest lengths have been held for ``window`` seconds. Of each run of consecutive quasi-static
+instants the last one is the sample (the most settled; one per hold, so that the samples' noise
+is independent).
 """
 
 from __future__ import annotations
@@ -131,15 +131,17 @@ def quasi_static_indices(recording: Recording, window: float = DEFAULT_WINDOW,
         pose_t = t[pose_idx]
         quiet &= has_pose
         for i in np.flatnonzero(quiet):
-            j = pose_idx[max(int(np.searchsorted(pose_t, t[i] - window, 'right')) - 1, 0)]
-            dt = t[i] - t[j]
-            if dt < 0.5 * window:
+            lo = int(np.searchsorted(pose_t, t[i] - window, 'left'))
+            hi = int(np.searchsorted(pose_t, t[i], 'right'))
+            inside = pose_idx[lo:hi]
+            if inside.size < 2 or t[i] - t[inside[0]] < 0.5 * window:
                 quiet[i] = False
                 continue
-            A, B = recording.poses[j], recording.poses[i]
-            speed = np.linalg.norm(B[:3, 3] - A[:3, 3]) / dt
-            turn = np.linalg.norm(log_so3(B[:3, :3] @ A[:3, :3].T)) / dt
-            quiet[i] = speed <= max_speed and turn <= max_angular_speed
+            P = recording.poses[inside]
+            B = recording.poses[i]
+            drift = np.max(np.linalg.norm(P[:, :3, 3] - B[:3, 3], axis=1))
+            turn = max(np.linalg.norm(log_so3(R @ B[:3, :3].T)) for R in P[:, :3, :3])
+            quiet[i] = drift <= max_speed * window and turn <= max_angular_speed * window
     # The last instant of each run of quiet instants with the same rest lengths.
     picked = []
     for i in np.flatnonzero(quiet):

@@ -17,6 +17,7 @@ from tensegrity_stiffness.calibration import (
     CalibrationSample,
     model_with_parameters,
 )
+from tensegrity_stiffness.calibration_recording import Recording
 from tensegrity_stiffness.config import packaged_config_path
 from tensegrity_stiffness.equilibrium import solve_equilibrium
 from tensegrity_stiffness.joint import JointModel
@@ -127,3 +128,116 @@ def measure(model: JointModel, states: States, seed: int, noise: CalibrationNois
             tensions=t if idx else None,
             external_wrench=(np.zeros(6) if unloaded_disturbance else W) if wrench else None))
     return samples
+
+
+#: Time series of the command tests: samples per second, instants moving into each hold and
+#: held instants per hold (the hold outlasts the quasi-static window of 0.5 s).
+RATE = 20.0
+MOVING = 3
+HELD = 12
+
+
+def time_series(model: JointModel, states: States, seed: int, noise: CalibrationNoise,
+                tensions: tuple[int, ...] = (), wrench: bool = True) -> Recording:
+    """A recording that moves from one state to the next (poses interpolated, rest lengths
+    commanded at the start of the move) and holds each: every instant measured with noise.
+    The last held instant of hold i is the sample the quasi-static rule should pick."""
+    rng = np.random.default_rng(seed + 3000)
+    n = model.n_strings
+    rows = []
+    previous = states.poses[0]
+    t = 0.0
+    for i in range(len(states.rest)):
+        target = states.poses[i]
+        for step in range(MOVING + HELD):
+            t += 1.0 / RATE
+            if step < MOVING:  # on the way: a straight-line motion between the poses
+                a = (step + 1) / (MOVING + 1)
+                T = target.copy()
+                T[:3, 3] = (1 - a) * previous[:3, 3] + a * target[:3, 3]
+                T[:3, :3] = previous[:3, :3] if a < 0.5 else target[:3, :3]
+            else:
+                T = target.copy()
+            T[:3, :3] = exp_so3(rng.normal(0.0, noise.rotation, 3)) @ T[:3, :3]
+            T[:3, 3] += rng.normal(0.0, noise.position, 3)
+            W = states.loads[i] + np.concatenate([rng.normal(0.0, noise.force, 3),
+                                                  rng.normal(0.0, noise.moment, 3)])
+            tt = np.full(n, np.nan)
+            idx = list(tensions)
+            tt[idx] = states.tensions[i, idx] + rng.normal(0.0, noise.tension, len(idx))
+            rows.append((t, states.rest[i], T, W if wrench else np.full(6, np.nan), tt))
+        previous = target
+    times, rest, poses, loads, tens = (np.array(c) for c in zip(*rows, strict=True))
+    return Recording(times, rest, poses, loads, tens, np.full((len(times), n), np.nan),
+                     'synthetic')
+
+
+def write_bag(path, recording: Recording, storage: str = 'mcap',
+              topics: dict[str, str] | None = None, pose_type: str = 'PoseStamped') -> None:
+    """``recording`` as a rosbag2: poses (header stamps), rest lengths when they change,
+    tensions and wrench (when recorded) at every instant."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    from tensegrity_stiffness.calibration_recording import DEFAULT_TOPICS
+    from tensegrity_stiffness.quaternion import rotation_to_quaternion
+
+    names = dict(DEFAULT_TOPICS, **(topics or {}))
+    store = get_typestore(Stores.ROS2_JAZZY)
+    ty = store.types
+
+    def header(t: float):
+        ns = round(float(t) * 1e9)
+        return ty['std_msgs/msg/Header'](
+            stamp=ty['builtin_interfaces/msg/Time'](sec=ns // 10**9, nanosec=ns % 10**9),
+            frame_id='tensegrity_link1')
+
+    def array(values):
+        return ty['std_msgs/msg/Float64MultiArray'](
+            layout=ty['std_msgs/msg/MultiArrayLayout'](dim=[], data_offset=0),
+            data=np.asarray(values, dtype=np.float64))
+
+    pose_msgtype = f'geometry_msgs/msg/{pose_type}'
+    with Writer(path, version=9, storage_plugin=StoragePlugin[storage.upper()]) as writer:
+        conn = {
+            'pose': writer.add_connection(names['pose'], pose_msgtype, typestore=store),
+            'rest_lengths': writer.add_connection(names['rest_lengths'],
+                                                  'std_msgs/msg/Float64MultiArray',
+                                                  typestore=store)}
+        if np.isfinite(recording.tensions).any():
+            conn['tensions'] = writer.add_connection(
+                names['tensions'], 'std_msgs/msg/Float64MultiArray', typestore=store)
+        if np.isfinite(recording.wrench).all():
+            conn['wrench'] = writer.add_connection(names['wrench'],
+                                                   'geometry_msgs/msg/WrenchStamped',
+                                                   typestore=store)
+        last_rest = None
+        for i, t in enumerate(recording.times):
+            log = round(float(t) * 1e9)
+            if last_rest is None or not np.array_equal(recording.rest[i], last_rest):
+                last_rest = recording.rest[i]
+                writer.write(conn['rest_lengths'], log - 1000, store.serialize_cdr(
+                    array(last_rest), 'std_msgs/msg/Float64MultiArray'))
+            T = recording.poses[i]
+            q = rotation_to_quaternion(T[:3, :3])
+            pose = ty['geometry_msgs/msg/Pose'](
+                position=ty['geometry_msgs/msg/Point'](x=T[0, 3], y=T[1, 3], z=T[2, 3]),
+                orientation=ty['geometry_msgs/msg/Quaternion'](x=q[0], y=q[1], z=q[2], w=q[3]))
+            if pose_type == 'PoseStamped':
+                msg = ty[pose_msgtype](header=header(t), pose=pose)
+            else:
+                msg = ty[pose_msgtype](header=header(t), pose=ty[
+                    'geometry_msgs/msg/PoseWithCovariance'](pose=pose,
+                                                            covariance=np.zeros(36)))
+            writer.write(conn['pose'], log, store.serialize_cdr(msg, pose_msgtype))
+            if 'tensions' in conn:
+                writer.write(conn['tensions'], log, store.serialize_cdr(
+                    array(recording.tensions[i]), 'std_msgs/msg/Float64MultiArray'))
+            if 'wrench' in conn:
+                w = recording.wrench[i]
+                msg = ty['geometry_msgs/msg/WrenchStamped'](
+                    header=header(t), wrench=ty['geometry_msgs/msg/Wrench'](
+                        force=ty['geometry_msgs/msg/Vector3'](x=w[0], y=w[1], z=w[2]),
+                        torque=ty['geometry_msgs/msg/Vector3'](x=w[3], y=w[4], z=w[5])))
+                writer.write(conn['wrench'], log, store.serialize_cdr(
+                    msg, 'geometry_msgs/msg/WrenchStamped'))
