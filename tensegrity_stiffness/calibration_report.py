@@ -129,11 +129,11 @@ def _cell(value: float, scale: float = 1.0) -> str:
 def table_lines(result: CalibrationResult) -> list[str]:
     """The parameter table (name, string, nominal, fitted, std, identifiable) and the residuals
     before and after, as text lines (stiffness in N/m, offsets in mm)."""
-    lines = [f"{'parameter':<24}{'string':<14}{'nominal':>11}{'fitted':>11}{'std':>11}"
+    lines = [f"{'parameter':<27}{'string':<14}{'nominal':>11}{'fitted':>11}{'std':>11}"
              f"  identifiable"]
     for row in result.table():
         scale, unit = (1.0, 'N/m') if row['name'].startswith('stiffness') else (1e3, 'mm')
-        lines.append(f"{row['name'] + ' ' + unit:<24}{row['string']:<14}"
+        lines.append(f"{row['name'] + ' ' + unit:<27}{row['string']:<14}"
                      f"{_cell(row['nominal'], scale):>11}{_cell(row['fitted'], scale):>11}"
                      f"{_cell(row['std'], scale):>11}  {'yes' if row['identifiable'] else 'no'}")
     lines.append('residual RMS (before: nominal parameters, every sample; after: calibrated, '

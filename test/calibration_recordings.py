@@ -91,14 +91,17 @@ def configurations(model: JointModel, k: np.ndarray, d: np.ndarray, count: int, 
         command = model.rest_lengths + rng.uniform(-rest_spread, rest_spread, n)
         W = np.concatenate([rng.normal(0.0, force, 3), rng.normal(0.0, moment, 3)])
         eq = solve_equilibrium(true, W, command + d, initial_screw=previous)
-        if not (eq.success and eq.stable):
+        # A string at its maximum length is beyond the model (the twin stops it, the library
+        # saturates its tension): such states are left out, as a lab avoids them.
+        if not (eq.success and eq.stable) or eq.state.saturated.any():
             continue
         if sim is None:
             rows.append((command, W, eq.screw, eq.state.transform, eq.state.tensions))
         else:
             sim.set_rest_lengths(command + d)
             sim.apply_wrench(W)
-            if not sim.settle(tolerance=SETTLE_TOLERANCE, max_time=SETTLE_TIME):
+            if not sim.settle(tolerance=SETTLE_TOLERANCE, max_time=SETTLE_TIME) or \
+                    true.evaluate(sim.screw(), command + d).saturated.any():
                 sim.set_screw(eq.screw)  # start the next one from a state at rest
                 continue
             rows.append((command, W, sim.screw(), sim.pose(), sim.tensions()))
