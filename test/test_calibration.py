@@ -164,3 +164,66 @@ def test_low_noise_recovers_stiffness_within_1_percent_and_offsets_within_50_um(
     df = _values(result, 'rest_length_offsets')[0]
     assert np.max(np.abs(kf - k) / k) < 0.01
     assert np.max(np.abs(df - d)) < 5e-5
+
+
+def test_reported_covariance_is_honest_over_seeded_trials():
+    """NEES of all 24 parameters over 16 noise draws of the same 120 states: the mean lies in
+    the chi-square 95 % band for 24 degrees of freedom (the covariance is neither too small nor
+    too large)."""
+    from scipy.stats import chi2
+
+    model = nominal_model()
+    k, d = true_parameters(model, 41)
+    states = configurations(model, k, d, 120, 41, backend='library')
+    truth = np.concatenate([k, d])
+    trials = 16
+    nees = []
+    for trial in range(trials):
+        samples = measure(model, states, 100 + trial, cal.CalibrationNoise())
+        result = cal.calibrate_joint(model, samples, loss='linear')
+        error = np.array([result.parameters[name] for name in result.names]) - truth
+        nees.append(float(error @ np.linalg.solve(result.covariance, error)))
+    low, high = chi2.ppf([0.025, 0.975], 24 * trials) / trials
+    assert low <= np.mean(nees) <= high, (np.mean(nees), low, high)
+
+
+def test_bad_input_raises_value_error_naming_the_field(truth):
+    model = truth[0]
+    n = model.n_strings
+    good = cal.CalibrationSample(rest_lengths=model.rest_lengths, pose=np.eye(4),
+                                 external_wrench=np.zeros(6))
+    cases = [
+        (cal.CalibrationSample(model.rest_lengths[:5]), r'samples\[0\]\.rest_lengths'),
+        (cal.CalibrationSample(-model.rest_lengths), r'samples\[0\]\.rest_lengths'),
+        (cal.CalibrationSample(model.rest_lengths, pose=np.ones((3, 3))), r'samples\[0\]\.pose'),
+        (cal.CalibrationSample(model.rest_lengths, pose=[0, 0, 0, 0, 0, 0, 2.0]), 'quaternion'),
+        (cal.CalibrationSample(model.rest_lengths, pose=np.eye(4), screw=np.zeros(6)),
+         'pose or screw'),
+        (cal.CalibrationSample(model.rest_lengths, tensions=np.full(n, np.inf)),
+         r'samples\[0\]\.tensions'),
+        (cal.CalibrationSample(model.rest_lengths, external_wrench=[0, 0, np.nan, 0, 0, 0]),
+         r'samples\[0\]\.external_wrench'),
+    ]
+    for sample, match in cases:
+        with pytest.raises(ValueError, match=match):
+            cal.calibrate_joint(model, [sample, good])
+    with pytest.raises(ValueError, match='fit must name'):
+        cal.calibrate_joint(model, [good], fit=('stretch',))
+    with pytest.raises(ValueError, match=r'noise\.tension must be > 0'):
+        cal.calibrate_joint(model, [good], noise={'tension': 0.0})
+    with pytest.raises(ValueError, match='loss must be one of'):
+        cal.calibrate_joint(model, [good], loss='l2')
+    with pytest.raises(ValueError, match='too few measurements'):
+        cal.calibrate_joint(model, [good] * 3)
+    with pytest.raises(ValueError, match='no samples'):
+        cal.calibrate_joint(model, [])
+
+
+def test_bounds_flag_a_fitted_value_outside_them(truth):
+    model, k, _, states = truth
+    samples = measure(model, states[:100], SEED, cal.CalibrationNoise())
+    inside = cal.calibrate_joint(model, samples, bounds={'stiffness': (50.0, 110.0)})
+    assert inside.success
+    worst = int(np.argmax(k))
+    outside = cal.calibrate_joint(model, samples, bounds={'stiffness': (50.0, k[worst] - 3.0)})
+    assert not outside.success and f'stiffness[{worst}]' in outside.message
