@@ -244,3 +244,43 @@ def write_bag(path, recording: Recording, storage: str = 'mcap',
                         torque=ty['geometry_msgs/msg/Vector3'](x=w[3], y=w[4], z=w[5])))
                 writer.write(conn['wrench'], log, store.serialize_cdr(
                     msg, 'geometry_msgs/msg/WrenchStamped'))
+
+
+def chain_states(chain, true_joints: list[JointModel], offsets: np.ndarray, count: int,
+                 seed: int, force: float, moment: float, backend: str = 'twin'
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(commanded rest lengths (count, N, n), tip loads (count, 6), link poses (count, N, 4,
+    4)) of a spine whose joints are ``true_joints`` (rest lengths commanded + ``offsets``
+    (N, n)): settled in the twin's ChainSimulation (or solved by the library)."""
+    from tensegrity_stiffness.chain import JointChain, solve_chain_equilibrium
+
+    rng = np.random.default_rng(seed + 4000)
+    true = JointChain(true_joints, chain.link_offsets, chain.tool, chain.link_masses,
+                      chain.link_coms, gravity=chain.gravity)
+    N, n = chain.n_joints, chain.joints[0].n_strings
+    sim = None
+    if backend == 'twin' and twin_available():
+        from tensegrity_stiffness.simulation import ChainSimulation
+
+        sim = ChainSimulation(true)
+    nominal_rest = np.array([j.rest_lengths for j in chain.joints])
+    rows = []
+    previous = None
+    while len(rows) < count:
+        command = nominal_rest + rng.uniform(-REST_SPREAD, REST_SPREAD, (N, n))
+        W = np.concatenate([rng.normal(0.0, force, 3), rng.normal(0.0, moment, 3)])
+        eq = solve_chain_equilibrium(true, W, rest_lengths=command + offsets,
+                                     initial_screws=previous)
+        if not (eq.success and eq.stable) or np.any(eq.state.saturated):
+            continue
+        if sim is None:
+            rows.append((command, W, eq.state.link_transforms))
+        else:
+            sim.set_rest_lengths(command + offsets)
+            sim.apply_wrench(W)
+            if not sim.settle(tolerance=SETTLE_TOLERANCE, max_time=SETTLE_TIME):
+                sim.set_screws(eq.screws)
+                continue
+            rows.append((command, W, sim.link_poses()))
+        previous = eq.screws
+    return tuple(np.array(c) for c in zip(*rows, strict=True))

@@ -227,3 +227,40 @@ def test_bounds_flag_a_fitted_value_outside_them(truth):
     worst = int(np.argmax(k))
     outside = cal.calibrate_joint(model, samples, bounds={'stiffness': (50.0, k[worst] - 3.0)})
     assert not outside.success and f'stiffness[{worst}]' in outside.message
+
+
+def test_spine_every_joint_fitted_from_link_poses_and_the_tip_load():
+    """A 3-vertebra spine (the packaged spine's first three, settled in the twin) with every
+    joint's parameters drawn: each joint is fitted from the link poses and the tip load moved
+    into its frame."""
+    from calibration_recordings import chain_states
+
+    from tensegrity_stiffness.chain import DEFAULT_SPINE_CONFIG, JointChain
+    from tensegrity_stiffness.config import packaged_config_path
+    from tensegrity_stiffness.screw import exp_so3
+
+    spine = JointChain.from_yaml(packaged_config_path(DEFAULT_SPINE_CONFIG))
+    chain = JointChain(spine.joints[:3], spine.link_offsets[:2], gravity=spine.gravity)
+    N = chain.n_joints
+    drawn = [true_parameters(j, 50 + i) for i, j in enumerate(chain.joints)]
+    true_joints = [cal.model_with_parameters(j, k, j.rest_lengths + d)
+                   for j, (k, d) in zip(chain.joints, drawn, strict=True)]
+    offsets = np.array([d for _, d in drawn])
+    rest, loads, poses = chain_states(chain, true_joints, offsets, 100, 51, force=0.15,
+                                      moment=0.004)
+    noise = cal.CalibrationNoise()
+    rng = np.random.default_rng(52)
+    samples = []
+    for r, W, L in zip(rest, loads, poses, strict=True):
+        measured = L.copy()
+        for T in measured:
+            T[:3, :3] = exp_so3(rng.normal(0.0, noise.rotation, 3)) @ T[:3, :3]
+            T[:3, 3] += rng.normal(0.0, noise.position, 3)
+        W_m = W + np.concatenate([rng.normal(0, noise.force, 3), rng.normal(0, noise.moment, 3)])
+        samples.append(cal.ChainCalibrationSample(r, measured, tip_wrench=W_m))
+    results = cal.calibrate_chain(chain, samples)
+    assert len(results) == N
+    for (k, d), result in zip(drawn, results, strict=True):
+        assert result.success and all(result.identifiable.values())
+        _check_against_truth(result, k, d)
+        assert 0.8 < result.chi2 / result.dof < 1.25
