@@ -10,7 +10,8 @@ Bag topics (each optional except the rest lengths; a bag needs a pose, a wrench 
 * rest lengths: ``std_msgs/Float64MultiArray`` (n commanded values, the node's
   ``~/rest_lengths``), held from their time on;
 * tensions: ``std_msgs/Float64MultiArray`` (n values, NaN for a string without a load cell);
-* wrench: ``geometry_msgs/WrenchStamped`` (on link 2, in {1} about its origin, [N; N m]).
+* wrench: ``geometry_msgs/WrenchStamped`` (on link 2, in {1} about its origin, [N; N m]);
+* lengths: ``std_msgs/Float64MultiArray`` (n measured string lengths, m, NaN where none).
 
 Times: a message's header stamp when it has a non-zero one, else its log time.
 
@@ -59,6 +60,7 @@ DEFAULT_TOPICS = {
     'rest_lengths': '/stiffness_node/rest_lengths',
     'tensions': '/stiffness_node/measured_tensions',
     'wrench': '/stiffness_node/measured_wrench',
+    'lengths': '/stiffness_node/measured_lengths',
 }
 POSE_TYPES = ('geometry_msgs/msg/PoseStamped', 'geometry_msgs/msg/PoseWithCovarianceStamped')
 ARRAY_TYPE = 'std_msgs/msg/Float64MultiArray'
@@ -297,10 +299,11 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
              required: Sequence[str] = (), max_age: float = 0.1,
              progress: Callable[[int, int], None] | None = None) -> Recording:
     """A :class:`Recording` from a rosbag2 (mcap or sqlite3) folder or file: one instant per
-    pose message (per tensions or wrench message when the bag has no poses), with the rest
-    lengths in force then and the latest tensions and wrench no older than ``max_age`` s.
+    pose message (else per tensions, wrench or lengths message), with the rest lengths in
+    force then and the latest tensions, wrench and lengths no older than ``max_age`` s.
 
-    ``topics`` maps ``pose``, ``rest_lengths``, ``tensions``, ``wrench`` to topic names
+    ``topics`` maps ``pose``, ``rest_lengths``, ``tensions``, ``wrench``, ``lengths`` to topic
+    names
     (default :data:`DEFAULT_TOPICS`; None leaves a signal out); ``required``: the signals whose
     topic must be in the bag (else :class:`RecordingError` naming it); the rest lengths always
     are. Messages that cannot be decoded or have the wrong size are skipped and counted
@@ -327,7 +330,8 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
     try:
         present = {c.topic: c.msgtype for c in reader.connections}
         expected = {'pose': POSE_TYPES, 'rest_lengths': (ARRAY_TYPE,),
-                    'tensions': (ARRAY_TYPE,), 'wrench': (WRENCH_TYPE,)}
+                    'tensions': (ARRAY_TYPE,), 'wrench': (WRENCH_TYPE,),
+                    'lengths': (ARRAY_TYPE,)}
         use: dict[str, str] = {}
         for signal, topic in wanted.items():
             if topic is None:
@@ -342,7 +346,7 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
                 raise RecordingError(f'{path}: topic {topic} has type {present[topic]}, '
                                      f'expected {" or ".join(expected[signal])} for {signal}')
             use[signal] = topic
-        if not {'pose', 'tensions', 'wrench'} & set(use):
+        if not {'pose', 'tensions', 'wrench', 'lengths'} & set(use):
             raise RecordingError(f'{path}: none of the pose, tensions, wrench topics '
                                  f'({wanted["pose"]}, {wanted["tensions"]}, '
                                  f'{wanted["wrench"]}) is in the bag: nothing to fit to')
@@ -389,7 +393,7 @@ def _align(series: dict[str, list[tuple[float, Any]]], n: int, max_age: float,
     rests = series.get('rest_lengths', [])
     if not rests:
         raise RecordingError(f'{source}: no rest lengths recorded')
-    clock = next(s for s in ('pose', 'tensions', 'wrench') if series.get(s))
+    clock = next(s for s in ('pose', 'tensions', 'wrench', 'lengths') if series.get(s))
     times = np.array([t for t, _ in series[clock]])
     rest_t = np.array([t for t, _ in rests])
     k = np.searchsorted(rest_t, times, 'right') - 1
@@ -400,7 +404,7 @@ def _align(series: dict[str, list[tuple[float, Any]]], n: int, max_age: float,
     rec.rest = np.array([rests[i][1] for i in k[keep]]).reshape(-1, n)
     clock_values = [v for (_, v), ok in zip(series[clock], keep, strict=True) if ok]
     for signal, target in (('pose', rec.poses), ('wrench', rec.wrench),
-                           ('tensions', rec.tensions)):
+                           ('tensions', rec.tensions), ('lengths', rec.lengths)):
         items = series.get(signal)
         if not items:
             continue

@@ -764,9 +764,9 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
         return bars[-1]
 
     topics = {'pose': args.pose_topic, 'rest_lengths': args.rest_lengths_topic,
-              'tensions': args.tensions_topic, 'wrench': args.wrench_topic}
-    required = [name for name, flag in (('pose', args.pose_topic), ('tensions',
-                args.tensions_topic), ('wrench', args.wrench_topic)) if flag is not None]
+              'tensions': args.tensions_topic, 'wrench': args.wrench_topic,
+              'lengths': args.lengths_topic}
+    required = [name for name, topic in topics.items() if topic is not None]
     topics = {k: v for k, v in topics.items() if v is not None}
     try:
         result, report, lines = calibration_report.run(
@@ -1171,7 +1171,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name, text in (('pose', 'PoseStamped or PoseWithCovarianceStamped of link 2 in {1}'),
                        ('rest-lengths', 'Float64MultiArray of the commanded rest lengths'),
                        ('tensions', 'Float64MultiArray of load-cell tensions, NaN = none'),
-                       ('wrench', 'WrenchStamped on link 2 in {1}')):
+                       ('wrench', 'WrenchStamped on link 2 in {1}'),
+                       ('lengths', 'Float64MultiArray of measured string lengths, NaN = none')):
         p.add_argument(f'--{name}-topic', metavar='TOPIC',
                        help=f"{text} (default {DEFAULT_TOPICS[name.replace('-', '_')]}"
                             + ('' if name == 'rest-lengths' else ', used when present')

@@ -107,3 +107,26 @@ def _problem(rng: np.random.Generator, count: int = 3, force_law: str = 'hooke'
             tensions=tensions, lengths=lengths, external_wrench=rng.normal(0.0, 0.2, 6)))
     problem = cal._Problem(model, cal._samples_data(model, samples), cal.CalibrationNoise())
     return problem, xi
+
+
+def test_identifiability_separates_dead_parameters_combinations_and_weak_directions():
+    """A synthetic information (scaled units): parameter 0 no measurement sees, the combination
+    (p1 - p2) / sqrt(2) determined to std 10 (unidentifiable: above one unit), and p3 ... p5
+    well determined; the held direction p5 is removed."""
+    names = [f'stiffness[{j}]' for j in range(6)]
+    v = np.array([0.0, 1.0, -1.0, 0.0, 0.0, 0.0]) / np.sqrt(2.0)
+    w = np.array([0.0, 1.0, 1.0, 0.0, 0.0, 0.0]) / np.sqrt(2.0)
+    S = 1e-2 * np.outer(v, v) + 400.0 * np.outer(w, w)
+    S[3, 3] = S[4, 4] = S[5, 5] = 900.0
+    ident = cal.identifiability(S, names)
+    assert ident.zero_columns.tolist() == [0]
+    assert ident.basis.shape == (6, 4) and ident.null.shape == (6, 2)
+    assert 'stiffness[0]' in ident.descriptions[0]
+    assert '+0.71 stiffness[1]' in ident.descriptions[1] or '-0.71 stiffness[1]' in \
+        ident.descriptions[1]
+    assert np.allclose(np.abs(ident.null[:, 1]), np.abs(v))
+    held = np.zeros((6, 1))
+    held[5, 0] = 1.0
+    ident = cal.identifiability(S, names, held=held)
+    assert ident.basis.shape == (6, 3)
+    assert np.allclose(ident.basis[5], 0.0)
