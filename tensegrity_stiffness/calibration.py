@@ -886,7 +886,10 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         z, xi_fit, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear', rows_in)
         iterations += used
     success = True
-    if basis_full.shape[1] and not converged:
+    if not basis_full.shape[1]:
+        success, message = False, ('no parameter is identifiable from these samples: all held '
+                                   'at nominal')
+    elif not converged:
         success, message = False, f'no convergence in {MAX_ITERATIONS} iterations'
     if progress:
         progress(3, stages)

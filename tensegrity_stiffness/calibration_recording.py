@@ -42,9 +42,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tensegrity_stiffness.calibration import CalibrationSample, pose_transform
+from tensegrity_stiffness.calibration import (
+    CalibrationSample,
+    pose_transform,
+    rotation_log_batch,
+)
 from tensegrity_stiffness.quaternion import quaternion_to_rotation
-from tensegrity_stiffness.screw import log_so3
 
 FloatArray = NDArray[np.float64]
 
@@ -142,7 +145,8 @@ def quasi_static_indices(recording: Recording, window: float = DEFAULT_WINDOW,
             P = recording.poses[inside]
             B = recording.poses[i]
             drift = np.max(np.linalg.norm(P[:, :3, 3] - B[:3, 3], axis=1))
-            turn = max(np.linalg.norm(log_so3(R @ B[:3, :3].T)) for R in P[:, :3, :3])
+            turn = np.max(np.linalg.norm(rotation_log_batch(P[:, :3, :3] @ B[:3, :3].T),
+                                         axis=1))
             quiet[i] = drift <= max_speed * window and turn <= max_angular_speed * window
     # The last instant of each run of quiet instants with the same rest lengths.
     picked = []
