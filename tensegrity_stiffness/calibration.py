@@ -112,7 +112,9 @@ LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
 #: Gauss-Newton iterations of the per-sample screw refinement.
 SCREW_ITERATIONS = 8
 #: The fit has converged when an iteration lowers the cost by less than this fraction.
-FIT_TOLERANCE = 1e-10
+FIT_TOLERANCE = 1e-8
+#: ... and the robust stage (followed by the final plain least-squares stage).
+ROBUST_TOLERANCE = 1e-6
 #: Levenberg-Marquardt iterations of one fit stage.
 MAX_ITERATIONS = 100
 
@@ -729,8 +731,8 @@ def _robust_weights(residuals: FloatArray, loss: str) -> tuple[FloatArray, Float
 
 
 def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray, loss: str,
-           rows: NDArray[np.bool_], max_iterations: int = MAX_ITERATIONS
-           ) -> tuple[FloatArray, FloatArray, int, bool]:
+           rows: NDArray[np.bool_], max_iterations: int = MAX_ITERATIONS,
+           tolerance: float = FIT_TOLERANCE) -> tuple[FloatArray, FloatArray, int, bool]:
     """Levenberg-Marquardt over ``z = z0 + basis y`` and every sample's screw, with the screws
     eliminated per sample (Schur complement: one q x q system per iteration) and the robust
     ``loss`` by iteratively re-weighted least squares (a descent method for these concave
@@ -788,7 +790,7 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
         z, xi, ev, weight = z_trial, xi_trial, ev_trial, weight_trial
         cost = cost_trial
         lam = max(lam / 10.0, 1e-12)
-        if decrease <= FIT_TOLERANCE * max(cost, 1.0):
+        if decrease <= tolerance * max(cost, 1.0):
             converged = True
             break
     return z, xi, iterations, converged
@@ -864,7 +866,10 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     converged = True
     z, xi_fit = z_nominal, xi
     if basis_full.shape[1]:
-        z, xi_fit, used, converged = _solve(problem, z_nominal, basis_full, xi, loss, rows)
+        # A robust stage only finds the outliers (the final stage polishes): a looser tolerance.
+        z, xi_fit, used, converged = _solve(
+            problem, z_nominal, basis_full, xi, loss, rows,
+            tolerance=FIT_TOLERANCE if loss == 'linear' else ROBUST_TOLERANCE)
         iterations += used
     if progress:
         progress(2, stages)

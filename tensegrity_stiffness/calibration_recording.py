@@ -2,7 +2,7 @@
 time series, and picking the quasi-static instants that become calibration samples.
 
 No rclpy and no ROS message package: rosbag2 files (mcap or sqlite3) are read with ``rosbags``
-(its own message types, read by attribute), as the bag command does.
+(its own message types for ROS 2 Jazzy, read by attribute), as the bag command does.
 
 Bag topics (each optional except the rest lengths; a bag needs a pose, a wrench or tensions):
 
@@ -315,14 +315,18 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
     """
     from rosbags.rosbag2 import Reader
     from rosbags.rosbag2.errors import ReaderError
-
-    from tensegrity_stiffness.bag import _check_input, _typestore
+    from rosbags.typesys import Stores, get_typestore
 
     path = Path(path)
-    try:
-        _check_input(path)
-    except ValueError as exc:
-        raise RecordingError(str(exc)) from None
+    # The checks of the bag command's input (tensegrity_stiffness.bag is not imported: its
+    # message conversion needs the ROS message packages, which this reader does without).
+    if not path.exists():
+        raise RecordingError(f'{path}: no such rosbag2 folder')
+    if path.is_dir() and not (path / 'metadata.yaml').is_file():
+        raise RecordingError(f'{path}: not a rosbag2 (no metadata.yaml)')
+    if path.is_file() and path.suffix not in ('.mcap', '.db3'):
+        raise RecordingError(f'{path}: not a rosbag2 (a folder with metadata.yaml, or a .mcap '
+                             'or .db3 file)')
     wanted = dict(DEFAULT_TOPICS)
     wanted.update(topics or {})
     try:
@@ -330,7 +334,7 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
         reader.open()
     except (ReaderError, OSError, KeyError, ValueError) as exc:
         raise RecordingError(f'{path}: not a readable rosbag2: {exc}') from None
-    deserialize = _typestore().deserialize_cdr
+    deserialize = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr
     try:
         present = {c.topic: c.msgtype for c in reader.connections}
         expected = {'pose': POSE_TYPES, 'rest_lengths': (ARRAY_TYPE,),

@@ -153,3 +153,20 @@ def test_bad_input_exits_2_and_says_what_is_missing(recording, tmp_path: Path):
     bad.write_text('time,x,y,z,qx,qy,qz,qw\n0,0,0,0,0,0,0,1\n')
     code, _, err = run_cli('calibrate', bad)
     assert code == 2 and "missing columns ['rest_length_0'" in err
+
+
+def test_the_command_imports_no_rclpy_and_no_ros_message_package(recording, tmp_path: Path):
+    import subprocess
+    import sys
+
+    bag = tmp_path / 'bag'
+    write_bag(bag, recording[3], 'sqlite3')
+    code = ('import sys\n'
+            'from tensegrity_stiffness import cli\n'
+            f'assert cli.main(["calibrate", r"{bag}", "--json"]) == 0\n'
+            'bad = [m for m in sys.modules if m.split(".")[0] in ("rclpy", "geometry_msgs", '
+            '"std_msgs", "msg_tools")]\n'
+            'assert not bad, bad\n')
+    done = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
