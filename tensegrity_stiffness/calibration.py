@@ -83,7 +83,6 @@ from tensegrity_stiffness.screw import (
     left_jacobian_se3,
     left_jacobian_so3_inverse,
     log_se3,
-    log_so3,
     vee3,
 )
 from tensegrity_stiffness.validation import finite_array, finite_scalar
@@ -331,8 +330,10 @@ def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArra
 
 
 def rotation_log_batch(R: FloatArray) -> FloatArray:
-    """Rotation vectors (N, 3) of rotations (N, 3, 3) (principal branch, ``|phi| <= pi``)."""
-    v = vee3(R)
+    """Rotation vectors (N, 3) of rotations (N, 3, 3), principal branch (``|phi| <= pi``): the
+    batched :func:`~tensegrity_stiffness.screw.log_so3` (the same two branches: ``theta /
+    sin(theta)`` times the skew part below pi/2, the axis from the symmetric part above)."""
+    v = vee3(R)  # sin(theta) u
     sin_t = np.linalg.norm(v, axis=-1)
     cos_t = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
     theta = np.arctan2(sin_t, cos_t)
@@ -340,9 +341,34 @@ def rotation_log_batch(R: FloatArray) -> FloatArray:
     with np.errstate(invalid='ignore', divide='ignore'):
         ratio = np.where(small, 1.0 + theta * theta / 6.0, theta / np.where(small, 1.0, sin_t))
     out = ratio[:, None] * v
-    for i in np.flatnonzero(theta > 0.5 * math.pi):  # far from identity: the robust branch
-        out[i] = log_so3(R[i])
+    large = np.flatnonzero(theta >= 0.5 * math.pi)
+    if large.size:
+        Rl, cl = R[large], cos_t[large]
+        uu = (0.5 * (Rl + np.swapaxes(Rl, -1, -2)) - cl[:, None, None] * np.eye(3)) / \
+            (1.0 - cl)[:, None, None]
+        rows = np.arange(large.size)
+        k = np.argmax(np.diagonal(uu, axis1=-2, axis2=-1), axis=1)
+        u = uu[rows, :, k] / np.sqrt(np.maximum(uu[rows, k, k], np.finfo(float).tiny))[:, None]
+        u /= np.linalg.norm(u, axis=1)[:, None]
+        u *= np.where(np.einsum('ij,ij->i', u, v[large]) < 0.0, -1.0, 1.0)[:, None]
+        out[large] = theta[large, None] * u
     return out
+
+
+def screws_of_poses(poses: FloatArray, reference: ArrayLike) -> FloatArray:
+    """Screws (N, 6) of poses (N, 4, 4), each on the rotation branch nearest the previous one
+    (the first nearest ``reference``): :func:`~tensegrity_stiffness.screw.log_se3` in a batch."""
+    omega = rotation_log_batch(poses[:, :3, :3])
+    previous = np.asarray(reference, dtype=np.float64)[:3]
+    for i, w in enumerate(omega):
+        norm = math.sqrt(float(w @ w))
+        if norm > 0.0:
+            other = w * ((norm - 2.0 * math.pi) / norm)
+            if np.linalg.norm(other - previous) < np.linalg.norm(w - previous):
+                omega[i] = other
+        previous = omega[i]
+    v = (left_jacobian_so3_inverse(omega) @ poses[:, :3, 3, None])[:, :, 0]
+    return np.concatenate([omega, v], axis=1)
 
 
 @dataclass
@@ -699,6 +725,8 @@ def initial_screws(model: JointModel, data: _Data) -> FloatArray:
     """A starting screw per sample: the measured pose's (on the rotation branch nearest the
     previous sample's screw), else the nominal model's equilibrium under the measured load
     (zero when unknown) from the previous screw."""
+    if data.has_pose.all():
+        return screws_of_poses(data.poses, model.initial_screw)
     xi = np.empty((data.n_samples, 6))
     previous = model.initial_screw
     for i in range(data.n_samples):
