@@ -105,6 +105,12 @@ def test_pose_and_four_tensions_with_unknown_loads(truth):
     assert len(result.unidentifiable) == 16
     assert all('no measurement depends on it' in text for text in result.unidentifiable)
     _check_against_truth(result, k, d)
+    columns = np.concatenate([np.flatnonzero(measured), 12 + np.flatnonzero(measured)])
+    crb = cal.cramer_rao_std(model, k, d, states.screws[:200], samples,
+                             basis=np.eye(24)[:, columns])[columns]
+    ratio = np.concatenate([ks[measured], _values(result, 'rest_length_offsets')[1][measured]])
+    ratio /= crb
+    assert np.all((ratio < MAX_CRB_FACTOR) & (ratio > 1 / MAX_CRB_FACTOR)), ratio
 
 
 def test_poses_only_unloaded_fits_ratios_and_offsets_not_the_scale(truth):
