@@ -17,6 +17,8 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
   equilibrium under a tip wrench and link weights (``plot spine`` draws it)
 * ``figures``      every figure of docs/figures.md into a folder (``docs/figures``)
 * ``bag``          what the node would publish, for a whole rosbag2 recording (needs rosbags)
+* ``calibrate``    each string's stiffness and rest-length offset from a recording (rosbag2 or
+  CSV), with identifiability and std (:mod:`tensegrity_stiffness.calibration_report`)
 
 Numbers accept arithmetic with ``pi`` (``pi/10``, ``-3*pi/4``, ``-1e-3``). ``--json`` prints
 machine-readable output (NaN and inf as null). Exit codes: 0 success, 1 no solution (equilibrium
@@ -744,6 +746,47 @@ def _cmd_bag(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+# ------------------------------------------------------------------------------ calibration
+def _noise_option(text: str) -> tuple[str, float]:
+    kind, sep, value = text.partition('=')
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected KIND=STD, got '{text}'")
+    return kind.strip(), parse_number(value)
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from tensegrity_stiffness import calibration_report
+
+    bars: list[TerminalProgress] = []
+
+    def progress(label: str) -> TerminalProgress:
+        bars.append(TerminalProgress(f'calibrate: {label}'))
+        return bars[-1]
+
+    topics = {'pose': args.pose_topic, 'rest_lengths': args.rest_lengths_topic,
+              'tensions': args.tensions_topic, 'wrench': args.wrench_topic,
+              'lengths': args.lengths_topic}
+    required = [name for name, topic in topics.items() if topic is not None]
+    topics = {k: v for k, v in topics.items() if v is not None}
+    try:
+        result, report, lines = calibration_report.run(
+            args.recording, args.config, fmt=args.format, topics=topics, required=required,
+            fit=args.fit, noise=dict(args.noise or []), loss=args.loss,
+            rule={'window': args.window, 'max_speed': args.max_speed,
+                  'max_angular_speed': args.max_angular_speed},
+            max_age=args.max_age, out=args.out, plot=args.plot, progress=progress)
+    except ImportError as exc:  # rosbags not installed
+        raise ValueError(f'reading a bag needs rosbags ({exc})') from None
+    finally:
+        for bar in bars:
+            bar.finish()
+    if args.json:
+        _print_json(report)
+    else:
+        print('\n'.join(lines))
+    return EXIT_OK if result.success else EXIT_NO_SOLUTION
+
+
 # ------------------------------------------------------------------------------ chains
 #: Tip wrench of the spine figure (docs/figures.md) (N, N m in the base frame): a sideways push.
 README_SPINE_TIP_WRENCH = (0.1, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -1118,6 +1161,59 @@ def build_parser() -> argparse.ArgumentParser:
                    help='replace OUTPUT (a rosbag2) and FILE if they exist')
     _add_json(p)
     p.set_defaults(handler=_cmd_bag)
+    p = sub.add_parser('calibrate', help="each string's stiffness and rest-length offset from "
+                       'a recording', description=(
+                           "Fit each string's stiffness and rest-length offset to the "
+                           'quasi-static instants of a recording (rosbag2 mcap/sqlite3, or CSV '
+                           'with the columns of tensegrity_stiffness.calibration_recording), '
+                           'print the table and the residuals, write a calibrated config and a '
+                           'residual plot. Exit 1 when the fit does not converge.'))
+    p.add_argument('recording', metavar='RECORDING',
+                   help='rosbag2 folder (or .mcap / .db3 file), or a .csv file')
+    p.add_argument('--config', metavar='YAML',
+                   help='nominal joint config (default: the packaged default_joint.yaml)')
+    p.add_argument('--format', choices=('bag', 'csv'),
+                   help='recording format (default: csv for a .csv file, else bag)')
+    from tensegrity_stiffness.calibration import FIT_KINDS, LOSSES
+    from tensegrity_stiffness.calibration_recording import (
+        DEFAULT_MAX_ANGULAR_SPEED,
+        DEFAULT_MAX_SPEED,
+        DEFAULT_TOPICS,
+        DEFAULT_WINDOW,
+    )
+    for name, text in (('pose', 'PoseStamped or PoseWithCovarianceStamped of link 2 in {1}'),
+                       ('rest-lengths', 'Float64MultiArray of the commanded rest lengths'),
+                       ('tensions', 'Float64MultiArray of load-cell tensions, NaN = none'),
+                       ('wrench', 'WrenchStamped on link 2 in {1}'),
+                       ('lengths', 'Float64MultiArray of measured string lengths, NaN = none')):
+        p.add_argument(f'--{name}-topic', metavar='TOPIC',
+                       help=f"{text} (default {DEFAULT_TOPICS[name.replace('-', '_')]}"
+                            + ('' if name == 'rest-lengths' else ', used when present')
+                            + '; given: required)')
+    p.add_argument('--fit', nargs='+', choices=FIT_KINDS, default=list(FIT_KINDS),
+                   help='parameters to fit (default both)')
+    p.add_argument('--noise', nargs='+', type=_noise_option, metavar='KIND=STD',
+                   help='measurement std: position (m), rotation (rad), force (N), moment '
+                        '(N m), tension (N), length (m) (defaults 1e-4, 0.1 deg, 0.01, 5e-4, '
+                        '0.005, 1e-4)')
+    p.add_argument('--loss', choices=LOSSES, default='soft_l1',
+                   help='robust loss (default soft_l1; linear: plain least squares)')
+    p.add_argument('--window', type=parse_number, default=DEFAULT_WINDOW, metavar='S',
+                   help=f'quasi-static: rest lengths held and pose still for this long '
+                        f'(default {DEFAULT_WINDOW} s)')
+    p.add_argument('--max-speed', type=parse_number, default=DEFAULT_MAX_SPEED, metavar='M/S',
+                   help=f'quasi-static: largest mean pose speed (default {DEFAULT_MAX_SPEED})')
+    p.add_argument('--max-angular-speed', type=parse_number, default=DEFAULT_MAX_ANGULAR_SPEED,
+                   metavar='RAD/S', help='quasi-static: largest mean angular speed (default '
+                                         f'{DEFAULT_MAX_ANGULAR_SPEED:.4g})')
+    p.add_argument('--max-age', type=parse_number, default=0.1, metavar='S',
+                   help='tensions and wrench older than this at a pose are not used '
+                        '(default 0.1 s)')
+    p.add_argument('--out', metavar='YAML', help='write the calibrated config here')
+    p.add_argument('--plot', metavar='PNG', help='write the residual plot here (matplotlib)')
+    _add_json(p)
+    p.set_defaults(handler=_cmd_calibrate)
+
     p = sub.add_parser('chain', help='a spine of joints: tip pose and tip stiffness',
                        description='Tip pose and exact tip stiffness of a chain of joints at '
                                    '--screws (under the given loads), or at its equilibrium '
