@@ -608,27 +608,12 @@ class _Simulation:
                           R.T @ (d.qacc[dof:dof + 3] - self._gravity))
 
 
-class JointSimulation:
-    """A six-DOF joint in MuJoCo (see the module docstring): link 1 fixed, link 2 free.
+class _Twin:
+    """What :class:`JointSimulation` and :class:`ChainSimulation` share: MuJoCo's own objects
+    (for anything they do not wrap), the clock, stepping and settling."""
 
-    ``model`` is simulated as it is: its per-string stiffness, rest and maximum lengths (e.g.
-    "true" parameters drawn for a test). Starts at rest at ``model.initial_screw`` (or
-    ``initial_screw``). ``options`` / keywords: :class:`SimulationOptions`.
-    """
+    _sim: _Simulation
 
-    def __init__(self, model: JointModel, options: SimulationOptions | None = None, *,
-                 initial_screw: ArrayLike | None = None, **overrides: Any) -> None:
-        if model.force_law != 'hooke':
-            raise ValueError(f"force_law: the twin simulates Hooke's law only (MuJoCo tendons), "
-                             f'got {model.force_law!r}')
-        self.joint_model = model
-        self.options = _options(options, overrides)
-        layout = _joint_layout(model, self.options)
-        self._sim = _Simulation(layout, self.options, 'tensegrity_joint')
-        if initial_screw is not None:
-            self.set_screw(initial_screw)
-
-    # MuJoCo's own objects, for anything this class does not wrap.
     @property
     def mjcf(self) -> str:
         """The MJCF text this simulation was built from."""
@@ -648,6 +633,37 @@ class JointSimulation:
     def time(self) -> float:
         """Simulated time (s)."""
         return self._sim.time
+
+    def step(self, n: int = 1) -> None:
+        """Advance ``n`` time steps."""
+        self._sim.step(n)
+
+    def settle(self, tolerance: float = 1e-10, max_time: float = 60.0) -> bool:
+        """Step until the net force and moment on every moving link (strings plus load) are at
+        most ``tolerance`` (N, N m) and it is at rest; False if ``max_time`` (s, simulated)
+        passes."""
+        return self._sim.settle(tolerance, max_time)
+
+
+class JointSimulation(_Twin):
+    """A six-DOF joint in MuJoCo (see the module docstring): link 1 fixed, link 2 free.
+
+    ``model`` is simulated as it is: its per-string stiffness, rest and maximum lengths (e.g.
+    "true" parameters drawn for a test). Starts at rest at ``model.initial_screw`` (or
+    ``initial_screw``). ``options`` / keywords: :class:`SimulationOptions`.
+    """
+
+    def __init__(self, model: JointModel, options: SimulationOptions | None = None, *,
+                 initial_screw: ArrayLike | None = None, **overrides: Any) -> None:
+        if model.force_law != 'hooke':
+            raise ValueError(f"force_law: the twin simulates Hooke's law only (MuJoCo tendons), "
+                             f'got {model.force_law!r}')
+        self.joint_model = model
+        self.options = _options(options, overrides)
+        layout = _joint_layout(model, self.options)
+        self._sim = _Simulation(layout, self.options, 'tensegrity_joint')
+        if initial_screw is not None:
+            self.set_screw(initial_screw)
 
     @property
     def gravity(self) -> FloatArray:
@@ -686,15 +702,6 @@ class JointSimulation:
         if T.shape != (4, 4):
             raise ValueError(f'transform must have shape (4, 4), got {T.shape}')
         self.set_screw(log_se3(T, reference=self._sim._screws[0]))
-
-    def step(self, n: int = 1) -> None:
-        """Advance ``n`` time steps."""
-        self._sim.step(n)
-
-    def settle(self, tolerance: float = 1e-10, max_time: float = 60.0) -> bool:
-        """Step until the net force and moment on link 2 (strings plus load) are at most
-        ``tolerance`` (N, N m) and it is at rest; False if ``max_time`` (s, simulated) passes."""
-        return self._sim.settle(tolerance, max_time)
 
     def net_force(self) -> FloatArray:
         """[|net force| N, |net moment about the link-2 origin| N m] on link 2."""
@@ -747,7 +754,7 @@ class JointSimulation:
         return self._sim._imu(0)
 
 
-class ChainSimulation:
+class ChainSimulation(_Twin):
     """A spine in MuJoCo: the base fixed, every link free (see the module docstring).
 
     The chain's joint models are simulated as they are (per-joint ``k``, rest and maximum
@@ -769,29 +776,9 @@ class ChainSimulation:
             self.set_screws(initial_screws)
 
     @property
-    def mjcf(self) -> str:
-        """The MJCF text this simulation was built from."""
-        return self._sim.mjcf
-
-    @property
-    def mj_model(self) -> Any:
-        """``mujoco.MjModel``."""
-        return self._sim.model
-
-    @property
-    def mj_data(self) -> Any:
-        """``mujoco.MjData``."""
-        return self._sim.data
-
-    @property
     def n_joints(self) -> int:
         """N."""
         return self._sim._n
-
-    @property
-    def time(self) -> float:
-        """Simulated time (s)."""
-        return self._sim.time
 
     @property
     def gravity(self) -> FloatArray:
@@ -828,15 +815,6 @@ class ChainSimulation:
         if x.shape != (self.n_joints, 6):
             raise ValueError(f'screws must have shape ({self.n_joints}, 6), got {x.shape}')
         self._sim._set_screws(x)
-
-    def step(self, n: int = 1) -> None:
-        """Advance ``n`` time steps."""
-        self._sim.step(n)
-
-    def settle(self, tolerance: float = 1e-10, max_time: float = 60.0) -> bool:
-        """Step until the net force and moment on every link are at most ``tolerance`` and the
-        chain is at rest; False if ``max_time`` (s, simulated) passes."""
-        return self._sim.settle(tolerance, max_time)
 
     def net_forces(self) -> FloatArray:
         """(N, 2): [|net force| N, |net moment about the link origin| N m] per link."""
