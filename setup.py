@@ -28,6 +28,7 @@ setup(
         'console_scripts': [
             'stiffness_node = tensegrity_stiffness.ros.stiffness_node:main',
             'spine_node = tensegrity_stiffness.ros.spine_node:main',
+            'stiffness_bridge = tensegrity_stiffness.ros.stiffness_bridge:main',
             'tensegrity-stiffness = tensegrity_stiffness.cli:main',
         ],
     },

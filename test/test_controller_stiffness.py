@@ -201,7 +201,8 @@ def test_conditioner_reports_an_unstable_joint_and_outputs_spd(model):
     unstable = None
     for _ in range(60):
         axis = rng.normal(size=3)
-        x0 = np.r_[axis / np.linalg.norm(axis) * rng.uniform(0, math.pi), rng.normal(size=3) * 0.02]
+        x0 = np.r_[axis / np.linalg.norm(axis) * rng.uniform(0, math.pi),
+                   rng.normal(size=3) * 0.02]
         res = solve_equilibrium(model, np.zeros(6), initial_screw=x0)
         if res.success and not res.stable:
             unstable = res
