@@ -317,10 +317,11 @@ class StiffnessBridge(Node):
                     problems.append(f'{self._refused} updates refused')
             message = '; '.join(problems) or ('no input yet' if last is None else
                                               'positive definite input, delivered')
+        status = msg_tools.diagnostic_status(
+            f'{self.get_fully_qualified_name()}: controller stiffness', level, message, values,
+            hardware_id=settings.input_frame)
         self._pub_diagnostics.publish(msg_tools.diagnostic_array(
-            [msg_tools.diagnostic_status(f'{self.get_name()}: controller stiffness', level,
-                                         message, values, hardware_id=settings.input_frame)],
-            self._clock.now().to_msg()))
+            [status], self._clock.now().to_msg()))
 
 
 def _off_diagonal_share(K: np.ndarray) -> float:
