@@ -287,10 +287,11 @@ class Conditioner:
 
 
 class LowPass:
-    """First-order low-pass of matrices, ``tau dy/dt = x - y``, with the input ``x`` held
-    constant between updates: ``y <- x + (y - x) exp(-dt / tau)`` (exact for a held input;
-    ``tau = 0``: ``y = x``). Each output is a convex combination of the inputs so far, so it stays
-    symmetric positive definite when they are."""
+    """First-order low-pass of matrices, ``tau dy/dt = x - y``, each input ``x`` held from its
+    arrival until the next one (the exact solution: ``y <- x_held + (y - x_held) exp(-dt /
+    tau)`` up to each update, then the new input is held; ``tau = 0``: ``y = x``). Each output is
+    a convex combination of the inputs so far, so it stays symmetric positive definite when they
+    are."""
 
     def __init__(self, time_constant: float) -> None:
         self.time_constant = float(time_constant)
@@ -301,18 +302,21 @@ class LowPass:
         self._time: float | None = None
 
     def update(self, x: ArrayLike | None, now: float) -> FloatArray:
-        """The output at time ``now`` (s, monotonic) after the input ``x`` (None: the last one
-        held; at least one input first)."""
-        if x is not None:
-            self.target = np.array(x, dtype=np.float64)
-        if self.target is None:
-            raise ValueError('the low-pass has no input yet')
-        if self.value is None or self.time_constant == 0.0 or self._time is None:
+        """The output at time ``now`` (s, monotonic); then ``x`` (None: no new input) is held
+        from ``now`` on. The first input is taken as it is."""
+        new = None if x is None else np.array(x, dtype=np.float64)
+        if self.value is None or self._time is None or self.time_constant == 0.0:
+            if new is None and self.target is None:
+                raise ValueError('the low-pass has no input yet')
+            if new is not None:
+                self.target = new
             self.value = self.target.copy()
         else:
             dt = max(0.0, now - self._time)
             self.value = self.target + (self.value - self.target) * math.exp(
                 -dt / self.time_constant)
+            if new is not None:
+                self.target = new
         self._time = now
         return self.value
 

@@ -18,7 +18,8 @@ Where each definition comes from (read with the ``fetch`` tool on 2026-12-01):
   cycle and uses them as a diagonal in ``compliance_ref_link``'s orientation.
 * ``admittance``: ros-controls/ros2_controllers commit 94e74de35f9d04f313aca8f29df66c3a76004aa7
   (admittance_controller 6.9.0),
-  ``admittance_controller/src/admittance_controller_parameters.yaml`` (generate_parameter_library): ``admittance.stiffness`` double_array, ``fixed_size<>: 6``,
+  ``admittance_controller/src/admittance_controller_parameters.yaml`` (generate_parameter_library):
+  ``admittance.stiffness`` double_array, ``fixed_size<>: 6``,
   ``element_bounds<>: [0.0, 100000000.0]``; ``admittance.mass`` element_bounds [0.0001, 1e6];
   ``control.frame.id`` string. Reason texts of the validators: PickNikRobotics/RSL 1.3.0 (commit
   b127ab1), ``include/rsl/parameter_validators.hpp`` (``fixed_size``, ``element_bounds``,

@@ -263,10 +263,13 @@ def test_low_pass_step_response_and_positive_definiteness():
     lp = LowPass(tau)
     A, B = np.diag([1.0, 2, 3, 4, 5, 6]), np.diag([10.0, 20, 30, 40, 50, 60])
     np.testing.assert_array_equal(lp.update(A, 0.0), A)
-    y = lp.update(B, 0.05)
+    np.testing.assert_array_equal(lp.update(B, 0.05), A)  # A held until now, then B
+    y = lp.update(None, 0.1)
     np.testing.assert_allclose(y, B + (A - B) * math.exp(-0.5), rtol=1e-14)
-    y = lp.update(None, 0.1)  # held input
+    y = lp.update(None, 0.15)
     np.testing.assert_allclose(y, B + (A - B) * math.exp(-1.0), rtol=1e-14)
+    for k in range(1, 6):  # PD all along the way
+        assert np.linalg.eigvalsh(lp.update(None, 0.15 + 0.01 * k)).min() > 0
     assert not lp.settled()
     lp.update(None, 10.0)
     assert lp.settled()
