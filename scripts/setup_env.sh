@@ -9,7 +9,7 @@
 # Each step is skipped when its stamp matches (stamps are sha256 hashes of the inputs):
 #   .venv/.tensegrity_venv_stamp       requirement pins + constraints.txt + python version + path
 #   install/.tensegrity_build_stamp    venv stamp + package manifests, setup.py/cfg, srv files, the
-#                                      kernel's sources, file names in resource/ and config/.
+#                                      kernel's sources, file names in resource/, config/, launch/.
 #                                      Python sources need no rebuild: --symlink-install links
 #                                      the package folders.
 # Usage: bash scripts/setup_env.sh            (then: source scripts/env.sh)
@@ -122,13 +122,13 @@ build_hash="$( {
     printf '== %s\n' "$f"
     cat "$f" 2>/dev/null || true
   done
-  # interface definitions: contents. resource/ and config/: file names (installed as one
+  # interface definitions: contents. resource/, config/ and launch/: file names (installed as one
   # symlink per file). The Python package folders are symlinked as a whole: no entry needed.
   find "$INTERFACES_DIR" -name '*.srv' -o -name '*.msg' -o -name '*.action' | LC_ALL=C sort \
     | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
   # The kernel is compiled (not symlinked): every source file counts.
   find "$KERNEL_DIR" -type f | LC_ALL=C sort | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
-  find resource config -type f 2>/dev/null | LC_ALL=C sort
+  find resource config launch -type f 2>/dev/null | LC_ALL=C sort
 } | sha)"
 
 EXE="install/tensegrity_stiffness/lib/tensegrity_stiffness/stiffness_node"
