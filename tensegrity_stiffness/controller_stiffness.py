@@ -89,12 +89,18 @@ def nearest_positive_definite(K: ArrayLike, min_eigenvalue: float = 0.0
         raise ValueError(f'min_eigenvalue must be finite and >= 0, got {min_eigenvalue}')
     S = 0.5 * (K + K.T)
     eigenvalues, vectors = np.linalg.eigh(S)
-    if eigenvalues[0] >= m:
-        X = S
-    else:
-        X = (vectors * np.maximum(eigenvalues, m)) @ vectors.T
-        X = 0.5 * (X + X.T)
+    X = _eigenvalues_clipped(S, eigenvalues, vectors, m)
     return X, float(np.linalg.norm(X - K))
+
+
+def _eigenvalues_clipped(S: FloatArray, eigenvalues: FloatArray, vectors: FloatArray,
+                         floor: float) -> FloatArray:
+    """``S`` (symmetric, ``S = V diag(eigenvalues) V^T``) with its eigenvalues clipped below
+    at ``floor``; ``S`` itself when none is below."""
+    if eigenvalues[0] >= floor:
+        return S
+    X = (vectors * np.maximum(eigenvalues, floor)) @ vectors.T
+    return 0.5 * (X + X.T)
 
 
 def transform_cartesian_stiffness(K_c: ArrayLike, T: ArrayLike) -> FloatArray:
@@ -264,26 +270,35 @@ class Conditioner:
             raise ValueError(f'min_eigenvalue must be finite and >= 0, got {self.min_eigenvalue}')
         object.__setattr__(self, 'translational', _bounds('translational', self.translational))
         object.__setattr__(self, 'rotational', _bounds('rotational', self.rotational))
+        # Ad_T once: apply() is on a 1 kHz path
+        object.__setattr__(self, '_adjoint', None if self.pose is None else adjoint(self.pose))
 
     def apply(self, K: ArrayLike) -> Conditioned:
-        """The conditioned stiffness of the input ``K`` (ValueError: not 6x6 or not finite)."""
+        """The conditioned stiffness of the input ``K`` (ValueError: not 6x6 or not finite).
+        The steps of :func:`transform_cartesian_stiffness` and
+        :func:`nearest_positive_definite`, with one eigen-decomposition for the projection and
+        the report."""
         K = stiffness_matrix(K)
-        if self.pose is not None:
-            K = transform_cartesian_stiffness(K, self.pose)
-        norm = float(np.linalg.norm(K))
+        Ad = self._adjoint
+        if Ad is not None:
+            K = Ad.T @ K @ Ad
         S = 0.5 * (K + K.T)
-        input_min = float(np.linalg.eigvalsh(S)[0])
-        projected, distance = nearest_positive_definite(K, self.min_eigenvalue)
-        out = projected * self.scale
+        eigenvalues, vectors = np.linalg.eigh(S)
+        projected = _eigenvalues_clipped(S, eigenvalues, vectors, self.min_eigenvalue)
+        norm = math.sqrt(float(np.vdot(K, K)))
+        D = projected - K
+        distance = math.sqrt(float(np.vdot(D, D)))
+        A = K - K.T
+        asymmetry = math.sqrt(float(np.vdot(A, A)))
+        out = projected * self.scale if self.scale != 1.0 else projected
         clamps = {'translational': False, 'rotational': False, 'coupling_scaled': False}
         if self.translational is not None or self.rotational is not None:
             out, clamps = clamp(out, self.translational, self.rotational)
         return Conditioned(
             matrix=out, projection_distance=distance,
             relative_projection=distance / norm if norm > 0.0 else 0.0,
-            input_min_eigenvalue=input_min,
-            asymmetry=float(np.linalg.norm(K - K.T)) / norm if norm > 0.0 else 0.0,
-            clamps=clamps)
+            input_min_eigenvalue=float(eigenvalues[0]),
+            asymmetry=asymmetry / norm if norm > 0.0 else 0.0, clamps=clamps)
 
 
 class LowPass:
