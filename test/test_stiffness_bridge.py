@@ -277,6 +277,10 @@ def test_admittance_from_the_spine_tip_and_refusals_are_reported(world):
                 resend=lambda: world.send_spine_screws(screws))
     # scaled beyond element_bounds [0, 1e8]: the controller refuses, the bridge says so
     setter = world.ros.client(SetParameters, f'{bridge_ns}/stiffness_bridge/set_parameters')
+    bad = world.ros.set_parameter(setter, 'output.pose', [0.0, 0, 0, 0, 0, 0, 2])
+    assert not bad.successful and 'output.pose' in bad.reason, bad.reason
+    bad = world.ros.set_parameter(setter, 'output.rotational_clamp', [2.0, 1.0])
+    assert not bad.successful and 'output.rotational_clamp' in bad.reason, bad.reason
     assert world.ros.set_parameter(setter, 'output.scale', 1e9).successful
     status = repeat_until(lambda: world.send_spine_screws(screws), lambda: world.bridge_status(
         bridge_ns, lambda s: kv(s)['updates refused'] != '0', timeout=1.0))
@@ -411,7 +415,7 @@ def test_rate_limit_and_low_pass_hold(world, loaded_screw):
         n_inputs += 1
         time.sleep(0.005)
     out.wait_until(lambda m: np.allclose(np.asarray(m.data).reshape(6, 6), P_new, rtol=1e-7,
-                                         atol=1e-7 * np.abs(P_new).max()), timeout=10)
+                                         atol=1e-7 * np.abs(P_new).max()), timeout=30)
     with out._cond:
         messages, times = list(out.messages), list(out.times)
     # rate: outputs during the 1 s stream at most rate + 2 (timer phase), far below the inputs

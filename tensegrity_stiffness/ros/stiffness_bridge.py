@@ -184,8 +184,9 @@ class StiffnessBridge(Node):
                 self._lost += 1
                 self._reachable = False
                 self._client.remove_pending_request(future)
-                self.reporter.warn('target', f'{settings.target_node}/set_parameters gave no '
-                                   f'answer within target.timeout = {settings.timeout:g} s')
+                self.reporter.warn('set_parameters call',
+                                   f'{settings.target_node}/set_parameters gave no answer within '
+                                   f'target.timeout = {settings.timeout:g} s')
             if self._filter.target is None:
                 return
             if not self._filter.settled():
@@ -255,7 +256,7 @@ class StiffnessBridge(Node):
                 name, reason = refused[0]
                 shown = ' '.join(f'{v:.6g}' for v in values)
                 self._last_refusal = f'{name}: {reason}'
-                self.reporter.warn('target', f'{settings.target_node} refused {name} '
+                self.reporter.warn('set_parameters', f'{settings.target_node} refused {name} '
                                    f'(values [{shown}]): {reason or "no reason given"}')
             else:
                 self._outputs += 1
