@@ -1,5 +1,6 @@
-"""stiffness_bridge across processes: a running stiffness_node (``~/cartesian_stiffness``) or
-spine_node (``~/tip_stiffness``) feeds the installed bridge, which feeds a stand-in controller
+"""stiffness_bridge across processes: a running stiffness_node (``~/cartesian_stiffness``) and
+spine_node (``~/tip_stiffness``; every parameter preset gets both) feed the installed bridge,
+which feeds a stand-in controller
 (``test/controller_standins.py``: real rclpy nodes in processes of their own, with the real
 controllers' parameter names, types, ranges and refusal texts; the definitions and their sources
 are cited there). Every delivered value is checked against the library

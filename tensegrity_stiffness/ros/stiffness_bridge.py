@@ -209,12 +209,14 @@ class StiffnessBridge(Node):
             return
         self._dropped_off_diagonal = _off_diagonal_share(K)
         values = diagonal(K)
-        if not moved_beyond(values, self._acknowledged, settings.deadband):
+        # against what the controller will hold: the values in flight, else the last accepted
+        reference = self._in_flight[2] if self._in_flight is not None else self._acknowledged
+        if not moved_beyond(values, reference, settings.deadband):
             self._pending = False
             self._skipped += 1
             return
         if self._in_flight is not None:
-            return  # sent when the answer is in (the next tick)
+            return  # sent when the answer is in (a later tick)
         if not self._client.service_is_ready():
             self._reachable = False
             self.reporter.warn('target', f'{settings.target_node}/set_parameters is not '
