@@ -4,7 +4,8 @@ process by the tests (``python test/controller_standins.py KIND --ros-args -r __
 declare the controller's stiffness parameters with the same names, types, defaults and ranges and
 refuse what the controller would refuse, with the controller's own reason text. Each publishes
 every stiffness it accepted on ``~/accepted_stiffness`` (36 values, row-major, diagonal for
-diagonal forms) so that a test can count and time the updates.
+diagonal forms) so that a test can count and time the updates. ``--slow S`` (after KIND): every
+parameter set takes S seconds (a controller that answers late).
 
 Where each definition comes from (read with the ``fetch`` tool on 2026-12-01):
 
@@ -38,6 +39,7 @@ Where each definition comes from (read with the ``fetch`` tool on 2026-12-01):
 from __future__ import annotations
 
 import sys
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -103,6 +105,9 @@ class ControllerStandIn(Node):
     ``validators`` (name -> value -> reason, '' when valid); publishes the stiffness it holds
     after each accepted set that touched ``stiffness_names``."""
 
+    #: Seconds each set takes (``--slow S``: a controller that answers late).
+    answer_delay = 0.0
+
     def __init__(self, name: str, declarations: dict[str, Any],
                  validators: dict[str, Callable[[Any], str]],
                  stiffness_names: tuple[str, ...]) -> None:
@@ -116,6 +121,8 @@ class ControllerStandIn(Node):
         self.add_post_set_parameters_callback(self._applied)
 
     def _validate(self, parameters: list[Parameter]) -> SetParametersResult:
+        if self.answer_delay:
+            time.sleep(self.answer_delay)
         for p in parameters:
             check = self._validators.get(p.name)
             reason = check(p.value) if check is not None else ''
@@ -201,8 +208,12 @@ def make_node(kind: str) -> Node:
 def main(argv: list[str] | None = None) -> None:
     argv = list(sys.argv if argv is None else argv)
     if len(argv) < 2 or argv[1].startswith('-'):
-        raise SystemExit(f'usage: {argv[0]} KIND [--ros-args ...]; KIND: {sorted(NODE_NAMES)}')
+        raise SystemExit(f'usage: {argv[0]} KIND [--slow S] [--ros-args ...]; KIND: '
+                         f'{sorted(NODE_NAMES)}')
     kind = argv.pop(1)
+    if len(argv) > 2 and argv[1] == '--slow':
+        ControllerStandIn.answer_delay = float(argv[2])
+        del argv[1:3]
     rclpy.init(args=argv)
     node = make_node(kind)
     try:

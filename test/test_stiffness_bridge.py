@@ -49,7 +49,8 @@ QUIET_S = 0.4
 class StandIn:
     """A stand-in controller (``controller_standins.py KIND``) as a process of its own."""
 
-    def __init__(self, kind: str, namespace: str, name: str | None = None) -> None:
+    def __init__(self, kind: str, namespace: str, name: str | None = None,
+                 slow: float = 0.0) -> None:
         from controller_standins import NODE_NAMES
 
         self.name = name or NODE_NAMES[kind]
@@ -57,7 +58,8 @@ class StandIn:
         self.log_path = Path(os.environ.get('TMPDIR', '/tmp')) / (
             f'standin{self.full_name.replace("/", "_")}_{os.getpid()}.log')
         self._log = self.log_path.open('w')
-        args = [sys.executable, str(STANDINS), kind, '--ros-args', '-r', f'__ns:={namespace}',
+        args = [sys.executable, str(STANDINS), kind, *(['--slow', str(slow)] if slow else []),
+                '--ros-args', '-r', f'__ns:={namespace}',
                 '-r', f'__node:={self.name}']
         self.process = subprocess.Popen(args, stdout=self._log, stderr=subprocess.STDOUT,
                                         env=os.environ.copy())
@@ -155,6 +157,14 @@ class World:
 
         array = self.diagnostics.wait_until(match, timeout)
         return next(s for s in array.status if s.name == name)
+
+    def bridge_status_now(self, namespace: str, predicate):
+        """The bridge's status satisfying ``predicate`` if one came within a second, else None
+        (for :func:`repeat_until`)."""
+        try:
+            return self.bridge_status(namespace, predicate, timeout=1.0)
+        except TimeoutError:
+            return None
 
     def close(self) -> None:
         self.ros.close()
@@ -260,8 +270,8 @@ def test_cartesian_controllers_get_the_diagonal_from_a_loaded_joint(world, loade
     wait_values(world, ctrl.full_name, names, np.diag(expected(K)),
                 resend=lambda: world.send_screw(loaded_screw))
     # the same screw again and again: no more updates, all inside the deadband
-    status = repeat_until(lambda: world.send_screw(loaded_screw), lambda: world.bridge_status(
-        bridge_ns, lambda s: kv(s)['updates inside the deadband'] != '0', timeout=1.0))
+    status = repeat_until(lambda: world.send_screw(loaded_screw), lambda: world.bridge_status_now(
+        bridge_ns, lambda s: kv(s)['updates inside the deadband'] != '0'))
     values = kv(status)
     assert values['updates sent'] == '3'  # joint, spine tip, joint again
     assert values['target reachable'] == 'true'
@@ -293,8 +303,8 @@ def test_admittance_from_the_spine_tip_and_refusals_are_reported(world):
     bad = world.ros.set_parameter(setter, 'output.rotational_clamp', [2.0, 1.0])
     assert not bad.successful and 'output.rotational_clamp' in bad.reason, bad.reason
     assert world.ros.set_parameter(setter, 'output.scale', 1e9).successful
-    status = repeat_until(lambda: world.send_spine_screws(screws), lambda: world.bridge_status(
-        bridge_ns, lambda s: kv(s)['updates refused'] != '0', timeout=1.0))
+    status = repeat_until(lambda: world.send_spine_screws(screws), lambda: world.bridge_status_now(
+        bridge_ns, lambda s: kv(s)['updates refused'] != '0'))
     assert status.level == DiagnosticStatus.WARN
     assert 'must be within bounds' in kv(status)['last refusal']
     log = bridge.log()
@@ -458,3 +468,20 @@ def test_rate_limit_and_low_pass_hold(world, loaded_screw):
         assert fractions[-1] <= 1 - math.exp(-(t - t_step) / tau) + 1e-6, (t - t_step, f)
     assert all(b >= a - 1e-12 for a, b in itertools.pairwise(fractions))
     assert fractions[0] < 0.9 and fractions[-1] == pytest.approx(1.0, abs=1e-4)
+
+
+def test_a_controller_that_answers_late_counts_as_lost_and_is_retried(world, loaded_screw):
+    """target.timeout 0.3 s, the controller takes 0.6 s per set: every call is given up on,
+    counted, warned about, and the bridge keeps going (the late answers are ignored)."""
+    ctrl = world.start(StandIn('cartesian_controllers', world.ns, name='slow_compliance',
+                               slow=0.6))
+    bridge_ns = world.ns + '/slow'
+    bridge = world.start(start_bridge(world.tmp, bridge_ns, world.source, {
+        'preset': 'cartesian_controllers', 'target.node': ctrl.full_name,
+        'target.timeout': 0.3}))
+    world.bridge_status(bridge_ns)
+    status = repeat_until(lambda: world.send_screw(loaded_screw), lambda: world.bridge_status_now(
+        bridge_ns, lambda s: kv(s)['calls lost'] not in ('0', '1')))
+    assert kv(status)['target reachable'] == 'false'
+    assert 'gave no answer within target.timeout = 0.3 s' in bridge.log()
+    assert bridge.alive()
