@@ -212,3 +212,58 @@ def test_command_line_on_path_after_sourcing(prefix: Path) -> None:
     if found is None:
         _unavailable('tensegrity-stiffness not on PATH')
     assert Path(found).parent == prefix / 'bin', found
+
+
+def _launch_tree(prefix: Path, launch_file: str) -> tuple[str, Any, dict[str, Any]]:
+    """The installed launch file's source, syntax tree (compiled) and module-level constants."""
+    import ast
+
+    installed = prefix / 'share' / PACKAGE / 'launch' / launch_file
+    assert installed.resolve().is_file(), f'{installed} not installed'
+    source = installed.read_text()
+    tree = ast.parse(source)
+    compile(tree, str(installed), 'exec')
+    constants = {node.targets[0].id: node.value.value for node in tree.body
+                 if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant)}
+    functions = {node.name for node in tree.body if isinstance(node, ast.FunctionDef)}
+    assert 'generate_launch_description' in functions
+    return source, tree, constants
+
+
+def test_bridge_launch_file_names_the_executable_and_its_arguments(prefix: Path) -> None:
+    """``stiffness_bridge.launch.py``: the installed executable, a default preset the bridge
+    knows, every argument the per-preset files and docs/controllers.md use."""
+    import ast
+
+    from tensegrity_stiffness.parameters import BRIDGE_PRESETS
+
+    source, tree, constants = _launch_tree(prefix, 'stiffness_bridge.launch.py')
+    assert constants['PACKAGE'] == PACKAGE
+    assert (prefix / 'lib' / PACKAGE / constants['EXECUTABLE']).is_file()
+    arguments = next(ast.literal_eval(node.value) for node in tree.body
+                     if isinstance(node, ast.Assign) and node.targets[0].id == 'ARGUMENTS')
+    assert set(arguments) == {'preset', 'namespace', 'input_topic', 'output_topic',
+                              'target_node', 'params_file'}
+    assert arguments['preset'][0] in BRIDGE_PRESETS
+    for topic in ('~/input_stiffness', '~/output_stiffness'):
+        assert topic in source
+
+
+def _bridge_presets() -> list[str]:
+    try:
+        from tensegrity_stiffness.parameters import BRIDGE_PRESETS
+    except ImportError:  # outside the set-up environment: the tests below skip anyway
+        return []
+    return sorted(BRIDGE_PRESETS)
+
+
+@pytest.mark.parametrize('preset', _bridge_presets())
+def test_a_launch_file_per_bridge_preset(prefix: Path, preset: str) -> None:
+    """``stiffness_bridge_<preset>.launch.py`` includes the bridge's launch file with its
+    preset."""
+    source, _, constants = _launch_tree(prefix, f'stiffness_bridge_{preset}.launch.py')
+    assert constants['PACKAGE'] == PACKAGE
+    assert constants['PRESET'] == preset
+    assert (prefix / 'lib' / PACKAGE / constants['EXECUTABLE']).is_file()
+    assert (prefix / 'share' / PACKAGE / 'launch' / constants['INCLUDED']).resolve().is_file()
+    assert "launch_arguments={'preset': PRESET}" in source
