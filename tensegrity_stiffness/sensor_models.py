@@ -117,20 +117,31 @@ def string_predictions(model: JointModel, xi: ArrayLike,
     """Lengths and tensions of every string at screw ``xi`` with their Jacobians (one
     evaluation). ``dl_j/dxi = -[(q_j x u_j)^T, u_j^T] J`` (``u_j^T ds_j/dxi`` with
     ``ds_j/dxi = -dq_j/dxi``), ``dphi_j/dxi = phi_j'(l_j) dl_j/dxi`` (eq. 8)."""
-    xi = _screw(xi)
-    rest = model.validate_rest_lengths(rest_lengths, batched=False)
+    return string_predictions_unchecked(
+        model, _screw(xi), model.validate_rest_lengths(rest_lengths, batched=False))
+
+
+def string_predictions_unchecked(model: JointModel, xi: FloatArray, rest: FloatArray
+                                 ) -> StringPrediction:
+    """:func:`string_predictions` for a validated screw (6,) and rest lengths (n,) (the
+    estimator's per-iteration path)."""
     state = model.evaluate(xi, rest)
     kin = ScrewKinematics(xi)
     s = state.string_vectors
     lengths = state.lengths
     u = s / lengths[:, None]
-    q = model._p1 - s
+    # q x u = (p1 - s) x s / l = (p1 x s) / l
+    p1 = model._p1
     row = np.empty((lengths.shape[0], 6))
-    row[:, :3] = np.cross(q, u)
+    row[:, 0] = p1[:, 1] * u[:, 2] - p1[:, 2] * u[:, 1]
+    row[:, 1] = p1[:, 2] * u[:, 0] - p1[:, 0] * u[:, 2]
+    row[:, 2] = p1[:, 0] * u[:, 1] - p1[:, 1] * u[:, 0]
     row[:, 3:] = u
-    length_jacobian = -(row @ kin.J)
-    _, slope, _, _ = model._string_forces(lengths, rest)
-    slope = np.broadcast_to(slope, lengths.shape).astype(np.float64)
+    length_jacobian = row @ kin.J
+    np.negative(length_jacobian, out=length_jacobian)
+    slope = model._string_forces(lengths, rest)[1]
+    if np.ndim(slope) == 0 or slope.shape != lengths.shape:
+        slope = np.broadcast_to(slope, lengths.shape).astype(np.float64)
     return StringPrediction(state, lengths, length_jacobian, state.tensions,
                             slope[:, None] * length_jacobian, slope, kin)
 

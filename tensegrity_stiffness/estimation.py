@@ -1,0 +1,820 @@
+"""Pose, load and stiffness of a tensegrity joint (or a spine) estimated from what robots
+measure, with their uncertainty (no rclpy).
+
+Measurements (:class:`Measurements`, models and Jacobians in :mod:`~tensegrity_stiffness.
+sensor_models`): string tensions (load cells), string lengths (stretch sensors), a pose (motion
+capture), the direction of gravity in link 2 (an accelerometer at rest) and the external wrench
+(known, e.g. zero, or measured by a force-torque sensor; ``None`` = unknown). Rest lengths
+(motor encoders) are known inputs of the model.
+
+Method: weighted nonlinear least squares over the screw ``xi`` (Gauss-Newton with Levenberg-
+Marquardt damping, analytic Jacobians), warm-started. Each measurement ``z`` with covariance
+``S`` contributes the whitened residual ``L^-1 (h(xi) - z)`` (``S = L L^T``). A known or measured
+load ``W_m`` enters as the quasi-static residual ``F(xi) + W_m`` with the load's covariance (at
+the truth ``F + W = 0``, Section VI). An unknown load is a free unknown of the equilibrium
+``F(xi) + W = 0``, which then carries no information on ``xi``: it is eliminated exactly and
+recovered as ``W = -F(xi)`` with covariance ``K C K^T`` (``K = dF/dxi``, eq. 10).
+
+Uncertainty: the screw covariance is the inverse of the weighted normal matrix ``C = (J^T J)^-1``
+at the estimate (the Cramer-Rao bound of the linearised problem); the pose covariance follows the
+ROS ``PoseWithCovariance`` convention (``[dp; dtheta]`` in {1}, ``p -> p + dp``,
+``R -> exp(hat(dtheta)) R``): ``P C P^T`` with ``P`` = :func:`~tensegrity_stiffness.
+sensor_models.pose_jacobian`. ``K_c``'s std is the first-order propagation of ``C`` through
+central differences of ``K_c(xi)``.
+
+Observability: the rank and condition number of the whitened Jacobian with the translation
+columns scaled by the mean rest length (so that radians and metres weigh alike). A set that
+cannot determine the pose (fewer than 6 independent measured degrees of freedom, e.g. 3 tensions
+and an unknown load, or gravity alone) gets ``success=False, observable=False`` and a message
+naming what is missing; it never gets a number.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tensegrity_stiffness import sensor_models as sm
+from tensegrity_stiffness.chain import ChainState, JointChain
+from tensegrity_stiffness.equilibrium import (
+    MAX_ROTATION_STEP,
+    MAX_TRANSLATION_STEP,
+    solve_equilibrium,
+)
+from tensegrity_stiffness.joint import JointModel, JointState
+from tensegrity_stiffness.screw import (
+    CHART_LIMIT,
+    ScrewKinematics,
+    as_screws,
+    hat3,
+    left_jacobian_so3_inverse,
+    log_se3,
+    log_so3,
+)
+from tensegrity_stiffness.validation import finite_array
+
+FloatArray = NDArray[np.float64]
+
+#: Converged when the Gauss-Newton decrement ``g^T A^-1 g`` (the squared length of the step in
+#: units of its own std) is below this: the step is under 1e-3 standard deviations.
+DECREMENT_TOLERANCE = 1e-6
+#: Gauss-Newton / Levenberg-Marquardt iterations before giving up.
+MAX_ITERATIONS = 30
+#: Singular values of the scaled whitened Jacobian below this fraction of the largest count as
+#: zero (an unobservable direction).
+RANK_TOLERANCE = 1e-9
+#: Damping factor of the first rejected step and the factor it grows by.
+INITIAL_DAMPING = 1e-4
+DAMPING_GROWTH = 10.0
+#: Beyond this damping (a step a 1e-10 fraction of the gradient step) the iterate is a minimum.
+MAX_DAMPING = 1e10
+#: Central-difference step (rad, m) of dK_c/dxi for the std of K_c.
+STIFFNESS_STEP = 1e-6
+#: Std of the chain's quasi-static equilibrium when it is imposed as a pseudo-measurement (N, and
+#: N m for moments): far below any sensor, so the equilibrium holds exactly in effect.
+CHAIN_EQUILIBRIUM_STD = (1e-6, 1e-7)
+#: Names of the pose coordinates in the PoseWithCovariance order.
+POSE_AXES = ('x', 'y', 'z', 'rx', 'ry', 'rz')
+
+
+# ---------------------------------------------------------------------------------- inputs
+def _std(name: str, value: Any, size: int) -> FloatArray:
+    """A std given as a scalar or one per entry: (size,) array, finite and > 0."""
+    if value is None:
+        raise ValueError(f'{name} is required with its measurement')
+    arr = finite_array(name, value).ravel()
+    if arr.size == 1:
+        arr = np.full(size, arr[0])
+    if arr.size != size:
+        raise ValueError(f'{name} must be a scalar or have {size} entries, got {arr.size}')
+    if np.any(arr <= 0.0):
+        raise ValueError(f'{name} must be > 0, got minimum {arr.min()}')
+    return arr
+
+
+def _covariance(name: str, value: Any, size: int) -> FloatArray:
+    """A symmetric positive definite (size, size) covariance; ValueError naming ``name``."""
+    if value is None:
+        raise ValueError(f'{name} is required with its measurement')
+    arr = finite_array(name, value)
+    if arr.shape != (size, size):
+        raise ValueError(f'{name} must have shape ({size}, {size}), got {arr.shape}')
+    if not np.allclose(arr, arr.T, rtol=1e-9, atol=0.0):
+        raise ValueError(f'{name} must be symmetric')
+    try:
+        np.linalg.cholesky(arr)
+    except np.linalg.LinAlgError:
+        raise ValueError(f'{name} must be positive definite') from None
+    return 0.5 * (arr + arr.T)
+
+
+def _whitener(covariance: FloatArray) -> FloatArray:
+    """``L^-1`` with ``covariance = L L^T`` (whitened residual ``L^-1 r``)."""
+    return np.linalg.inv(np.linalg.cholesky(covariance))
+
+
+def _per_string(name: str, value: Any, n: int) -> FloatArray:
+    arr = np.asarray(value, dtype=np.float64).ravel() if value is not None else None
+    if arr is None:
+        return np.full(n, np.nan)
+    if arr.size != n:
+        raise ValueError(f'{name} must have {n} entries (one per string, NaN = not measured), '
+                         f'got {arr.size}')
+    if np.any(np.isinf(arr)):
+        raise ValueError(f'{name} must be finite or NaN (not measured), got inf')
+    return arr
+
+
+@dataclass
+class Measurements:
+    """One instant's sensor readings (see the module docstring).
+
+    ``tensions`` (n,) N and ``lengths`` (n,) m in the config's string order, NaN where a string
+    is not measured; ``tension_std`` / ``length_std`` a scalar or one per string. ``pose`` the
+    measured pose of {2} in {1} ((4, 4) or ``[x y z qx qy qz qw]``) with ``pose_covariance``
+    (6, 6) in the PoseWithCovariance convention. ``gravity`` (3,) the direction of gravity
+    measured in link 2's frame by an accelerometer at rest (normalised here), ``gravity_std`` a
+    scalar or (3,) std of its unit-vector components, ``gravity_base`` (3,) its known direction
+    in {1}. ``external_wrench`` (6,) [N; N m] on link 2 in {1} about its origin with
+    ``wrench_covariance`` (6, 6): a known (zeros with a small covariance for "unloaded") or
+    measured (force-torque) load; ``None`` for an unknown load.
+    """
+
+    tensions: ArrayLike | None = None
+    tension_std: ArrayLike | float | None = None
+    lengths: ArrayLike | None = None
+    length_std: ArrayLike | float | None = None
+    pose: ArrayLike | None = None
+    pose_covariance: ArrayLike | None = None
+    gravity: ArrayLike | None = None
+    gravity_std: ArrayLike | float | None = None
+    gravity_base: ArrayLike | None = None
+    external_wrench: ArrayLike | None = None
+    wrench_covariance: ArrayLike | None = None
+
+    def prepared(self, n_strings: int) -> PreparedMeasurements:
+        """Validated and whitened for a joint with ``n_strings`` strings; bad input raises
+        ValueError naming the field."""
+        return PreparedMeasurements(self, n_strings)
+
+
+class PreparedMeasurements:
+    """:class:`Measurements` validated for one joint, with their whitening (reusable)."""
+
+    def __init__(self, m: Measurements, n: int) -> None:
+        self.n_strings = n
+        self._description: tuple[tuple[str, ...], str] | None = None
+        tensions = _per_string('tensions', m.tensions, n)
+        self.tension_index = np.flatnonzero(~np.isnan(tensions))
+        self.tensions = tensions[self.tension_index]
+        self.tension_weight = (1.0 / _std('tension_std', m.tension_std, n)[self.tension_index]
+                               if self.tension_index.size else np.empty(0))
+        lengths = _per_string('lengths', m.lengths, n)
+        self.length_index = np.flatnonzero(~np.isnan(lengths))
+        self.lengths = lengths[self.length_index]
+        if np.any(self.lengths <= 0.0):
+            raise ValueError('lengths must be > 0 where measured')
+        self.length_weight = (1.0 / _std('length_std', m.length_std, n)[self.length_index]
+                              if self.length_index.size else np.empty(0))
+        self.pose = None
+        if m.pose is not None:
+            self.pose = sm.as_transform(m.pose, 'pose')
+            self.pose_whitener = _whitener(_covariance('pose_covariance', m.pose_covariance, 6))
+        self.gravity = None
+        if m.gravity is not None:
+            self.gravity = sm.unit_vector(m.gravity, 'gravity')
+            if m.gravity_base is None:
+                raise ValueError('gravity_base (the direction of gravity in {1}) is required '
+                                 'with gravity')
+            self.gravity_base = sm.unit_vector(m.gravity_base, 'gravity_base')
+            self.gravity_weight = 1.0 / _std('gravity_std', m.gravity_std, 3)
+        self.wrench = None
+        if m.external_wrench is not None:
+            W = finite_array('external_wrench', m.external_wrench)
+            if W.shape != (6,):
+                raise ValueError(f'external_wrench must have shape (6,), got {W.shape}')
+            self.wrench = W
+            self.wrench_covariance = _covariance('wrench_covariance', m.wrench_covariance, 6)
+            self.wrench_whitener = _whitener(self.wrench_covariance)
+        nt, nl = self.tension_index.size, self.length_index.size
+        self.rows = nt + nl + (6 if self.pose is not None else 0) + (
+            3 if self.gravity is not None else 0) + (6 if self.wrench is not None else 0)
+        #: Independent measured degrees of freedom (a gravity direction counts 2).
+        self.dof = nt + nl + (6 if self.pose is not None else 0) + (
+            sm.GRAVITY_DOF if self.gravity is not None else 0) + (
+            6 if self.wrench is not None else 0)
+
+    @property
+    def needs_strings(self) -> bool:
+        return bool(self.tension_index.size or self.length_index.size)
+
+    def describe(self, string_names: Sequence[str]) -> str:
+        """The inputs in words, e.g. ``'3 tensions (a, b, c), unknown load'`` (cached)."""
+        key = tuple(string_names)
+        if self._description is None or self._description[0] != key:
+            self._description = (key, self._describe(key))
+        return self._description[1]
+
+    def _describe(self, string_names: Sequence[str]) -> str:
+        parts = []
+        for label, index in (('tension', self.tension_index), ('length', self.length_index)):
+            if index.size:
+                names = ', '.join(string_names[i] for i in index)
+                parts.append(f'{index.size} {label}{"s" if index.size > 1 else ""} ({names})')
+        if self.pose is not None:
+            parts.append('a pose')
+        if self.gravity is not None:
+            parts.append('gravity')
+        parts.append('a known load' if self.wrench is not None else 'unknown load')
+        return ', '.join(parts)
+
+
+# ---------------------------------------------------------------------------------- joint
+@dataclass
+class JointEstimate:
+    """Outcome of :func:`estimate_joint_state`.
+
+    ``screw`` (6,), ``transform`` (4, 4) and ``covariance`` (6, 6) of the pose in the
+    PoseWithCovariance convention; ``screw_covariance`` (6, 6) of the screw coordinates;
+    ``external_wrench`` (6,) the load implied at the estimate (``-F(xi)``) with
+    ``wrench_covariance`` (6, 6); ``state`` the :class:`JointState` at the estimate (wrench, K,
+    K_c, tensions, slack ...); ``cartesian_stiffness_std`` (6, 6) the first-order std of K_c;
+    ``chi2`` the weighted squared residual and ``dof`` its degrees of freedom (measured degrees
+    of freedom minus 6); ``observable``, ``rank`` (of 6) and ``condition_number`` of the scaled
+    whitened Jacobian; ``iterations``. When ``success`` is False the numbers are NaN (never a
+    guess) and ``message`` says why.
+    """
+
+    success: bool
+    message: str
+    screw: FloatArray
+    transform: FloatArray
+    covariance: FloatArray
+    screw_covariance: FloatArray
+    external_wrench: FloatArray
+    wrench_covariance: FloatArray
+    state: JointState | None
+    cartesian_stiffness_std: FloatArray
+    chi2: float
+    dof: int
+    observable: bool
+    rank: int
+    condition_number: float
+    iterations: int
+    inputs: str = ''
+    singular_values: FloatArray = field(default_factory=lambda: np.empty(0), repr=False)
+
+
+def _nan(*shape: int) -> FloatArray:
+    return np.full(shape, np.nan)
+
+
+class _JointProblem:
+    """The whitened residual and Jacobian of one joint's measurements at a screw."""
+
+    def __init__(self, model: JointModel, prep: PreparedMeasurements, rest: FloatArray) -> None:
+        self.model = model
+        self.prep = prep
+        self.rest = rest
+        self.length_scale = float(np.mean(rest))
+        self.r = np.empty(prep.rows)
+        self.J = np.empty((prep.rows, 6))
+
+    def evaluate(self, xi: FloatArray) -> tuple[FloatArray, FloatArray, JointState,
+                                                 ScrewKinematics]:
+        """Whitened residual (rows,), Jacobian (rows, 6), joint state and kinematics at xi."""
+        p = self.prep
+        r, J = self.r, self.J
+        row = 0
+        if p.needs_strings:
+            pred = sm.string_predictions_unchecked(self.model, xi, self.rest)
+            state, kin = pred.state, pred.kinematics
+            for index, values, weight, h, dh in (
+                    (p.tension_index, p.tensions, p.tension_weight, pred.tensions,
+                     pred.tension_jacobian),
+                    (p.length_index, p.lengths, p.length_weight, pred.lengths,
+                     pred.length_jacobian)):
+                k = index.size
+                if k:
+                    r[row:row + k] = (h[index] - values) * weight
+                    J[row:row + k] = dh[index] * weight[:, None]
+                    row += k
+        else:
+            state = self.model.evaluate(xi, self.rest)
+            kin = ScrewKinematics(xi)
+        if p.pose is not None:
+            res, jac = sm.pose_residual(xi, p.pose)
+            r[row:row + 6] = p.pose_whitener @ res
+            J[row:row + 6] = p.pose_whitener @ jac
+            row += 6
+        if p.gravity is not None:
+            g2, jac = sm.predicted_gravity(xi, p.gravity_base, kin)
+            r[row:row + 3] = (g2 - p.gravity) * p.gravity_weight
+            J[row:row + 3] = jac * p.gravity_weight[:, None]
+            row += 3
+        if p.wrench is not None:
+            # e = F(xi) + W_m, de/dxi = K (sensor_models.equilibrium_residual, from this state)
+            r[row:row + 6] = p.wrench_whitener @ (state.wrench + p.wrench)
+            J[row:row + 6] = p.wrench_whitener @ state.stiffness
+        return r, J, state, kin
+
+
+def _scaled_svd(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatArray]:
+    """Singular values (6,) and right singular vectors (rows, in screw coordinates) of the
+    whitened Jacobian with the translation columns scaled by ``length_scale`` (zero rows added
+    when there are fewer than 6, so that every direction gets a singular value)."""
+    scale = np.array([1.0] * 3 + [length_scale] * 3)
+    Js = J * scale
+    if Js.shape[0] < 6:
+        Js = np.vstack([Js, np.zeros((6 - Js.shape[0], 6))])
+    _, s, Vt = np.linalg.svd(Js, full_matrices=False)
+    return s, Vt * scale
+
+
+def _describe_direction(pose_change: FloatArray, length_scale: float) -> str:
+    """A pose change [dp; dtheta] in words: the translation or rotation that dominates."""
+    dp, dth = pose_change[:3], pose_change[3:]
+    if np.linalg.norm(dth) * length_scale >= np.linalg.norm(dp):
+        axis = dth / np.linalg.norm(dth)
+        kind = 'rotation about'
+    else:
+        axis = dp / np.linalg.norm(dp)
+        kind = 'translation along'
+    return f'{kind} ({axis[0]:.2f}, {axis[1]:.2f}, {axis[2]:.2f})'
+
+
+def _missing_message(prep: PreparedMeasurements, names: Sequence[str], rank: int,
+                     null_directions: list[str], slack: Sequence[str]) -> str:
+    """Why a joint's measurement set cannot determine the pose, and what would."""
+    inputs = prep.describe(names)
+    if prep.dof < 6:
+        head = (f'{inputs}: {prep.dof} measured degree{"s" if prep.dof != 1 else ""} of '
+                f'freedom cannot determine the 6 of the pose')
+    else:
+        head = f'{inputs}: they determine only {rank} of the 6 pose coordinates'
+    if null_directions:
+        head += '; undetermined: ' + '; '.join(null_directions)
+    if slack:
+        head += f'; slack strings carry no tension information ({", ".join(slack)})'
+    need = 6 - rank
+    load = '' if prep.wrench is not None else ', or the load (external_wrench: zero or measured)'
+    return (f'{head}. Add at least {need} independent measurement{"s" if need > 1 else ""}: '
+            f'more string tensions or lengths, a pose, gravity (fixes 2 rotations){load}')
+
+
+def _observability(problem: _JointProblem, J: FloatArray, state: JointState,
+                   kin: ScrewKinematics, rank_tolerance: float
+                   ) -> tuple[int, float, FloatArray, str]:
+    """(rank, condition number, singular values, message when rank < 6)."""
+    prep = problem.prep
+    s, Vt = _scaled_svd(J, problem.length_scale)
+    largest = s[0]
+    rank = int(np.sum(s > rank_tolerance * largest)) if largest > 0 else 0
+    cond = float(largest / s[-1]) if s[-1] > 0 else math.inf
+    if rank == 6:
+        return rank, cond, s, ''
+    P = sm.pose_jacobian(state.screw, kin)
+    null = Vt[rank:]
+    words = [_describe_direction(P @ v, problem.length_scale) for v in null]
+    slack = [problem.model.string_names[i] for i in prep.tension_index if state.slack[i]]
+    return rank, cond, s, _missing_message(prep, problem.model.string_names, rank, words,
+                                                slack)
+
+
+def _clip(step: FloatArray, length_scale: float) -> FloatArray:
+    worst = max(np.linalg.norm(step[:3]) / MAX_ROTATION_STEP,
+                np.linalg.norm(step[3:]) / (MAX_TRANSLATION_STEP * length_scale), 1.0)
+    return step / worst
+
+
+class _InitialPointError(ValueError):
+    """The starting point of :func:`_gauss_newton` cannot be evaluated."""
+
+
+def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterations: int,
+                  tolerance: float, clip: Any = None
+                  ) -> tuple[FloatArray, Any, int, bool, str]:
+    """Levenberg-Marquardt on the whitened residual of ``evaluate(x) -> (r, J, *extra)``.
+
+    Returns (x, the last evaluation at x, iterations, converged, message). The damping scales
+    the normal matrix's diagonal (Marquardt); it is zero while steps reduce the cost.
+    """
+    x = x0.copy()
+    try:
+        ev = evaluate(x)
+    except ValueError as exc:  # the trial steps below catch theirs: this one is the caller's
+        raise _InitialPointError(str(exc)) from None
+    cost = float(ev[0] @ ev[0])
+    damping = 0.0
+    for it in range(1, max_iterations + 1):
+        r, J = ev[0], ev[1]
+        A = J.T @ J
+        g = J.T @ r
+        try:
+            full_step = -np.linalg.solve(A, g)
+        except np.linalg.LinAlgError:
+            return x, ev, it - 1, False, 'singular normal matrix'
+        decrement = float(-g @ full_step)
+        if decrement < tolerance:
+            return x, ev, it - 1, True, ''
+        while True:
+            if damping == 0.0:
+                step = full_step
+            else:
+                step = -np.linalg.solve(A + damping * np.diag(np.diag(A)), g)
+            step = clip(step) if clip is not None else _clip(step, length_scale)
+            trial = x + step
+            try:
+                trial_ev = evaluate(trial)
+            except ValueError:  # a string of zero length, outside the chart: step too long
+                trial_ev = None
+            if trial_ev is not None:
+                trial_cost = float(trial_ev[0] @ trial_ev[0])
+                if trial_cost <= cost:
+                    x, ev, cost = trial, trial_ev, trial_cost
+                    damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
+                    break
+            damping = INITIAL_DAMPING if damping == 0.0 else damping * DAMPING_GROWTH
+            if damping > MAX_DAMPING:
+                # Not even a short gradient step lowers the cost: a minimum, where the cost has
+                # a kink (a string at its slack or saturation boundary) or is flat to rounding.
+                return x, ev, it, True, ''
+    return x, ev, max_iterations, False, f'not converged in {max_iterations} iterations'
+
+
+def cartesian_stiffness_jacobian(model: JointModel, xi: ArrayLike,
+                                 rest_lengths: ArrayLike | None = None,
+                                 step: float = STIFFNESS_STEP) -> FloatArray:
+    """``dK_c/dxi`` (6, 6, 6) by central differences (one batched evaluation of 12 screws)."""
+    xi = as_screws(xi)
+    eye = np.eye(6) * step
+    Kc = model.evaluate(np.concatenate([xi + eye, xi - eye]), rest_lengths).cartesian_stiffness
+    return np.moveaxis((Kc[:6] - Kc[6:]) / (2.0 * step), 0, -1)
+
+
+def _entry_std(jacobian: FloatArray, covariance: FloatArray) -> FloatArray:
+    """sqrt(diag(g C g^T)) per entry of a matrix with Jacobian (a, b, k)."""
+    return np.sqrt(np.maximum(np.einsum('abk,kl,abl->ab', jacobian, covariance, jacobian), 0.0))
+
+
+def _failed_joint(message: str, prep: PreparedMeasurements | None, names: Sequence[str],
+                  observable: bool, rank: int, cond: float, iterations: int = 0,
+                  s: FloatArray | None = None) -> JointEstimate:
+    return JointEstimate(False, message, _nan(6), _nan(4, 4), _nan(6, 6), _nan(6, 6), _nan(6),
+                         _nan(6, 6), None, _nan(6, 6), math.nan,
+                         0 if prep is None else prep.dof - 6, observable, rank, cond,
+                         iterations, '' if prep is None else prep.describe(names),
+                         np.empty(0) if s is None else s)
+
+
+def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
+                   initial_screw: ArrayLike | None) -> FloatArray:
+    if initial_screw is not None:
+        x0 = as_screws(initial_screw, 'initial_screw')
+        if x0.shape != (6,) or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
+            raise ValueError('initial_screw must have shape (6,) with |omega| < 2 pi')
+        return x0.copy()
+    if prep.pose is not None:
+        return log_se3(prep.pose, model.initial_screw)
+    if prep.wrench is not None:
+        res = solve_equilibrium(model, prep.wrench, rest)
+        if res.success:
+            return res.screw
+    return model.initial_screw.copy()
+
+
+def estimate_joint_state(model: JointModel, measurements: Measurements | PreparedMeasurements,
+                         rest_lengths: ArrayLike | None = None,
+                         initial_screw: ArrayLike | None = None, *,
+                         tolerance: float = DECREMENT_TOLERANCE,
+                         max_iterations: int = MAX_ITERATIONS,
+                         rank_tolerance: float = RANK_TOLERANCE,
+                         stiffness_std: bool = True) -> JointEstimate:
+    """Estimate the screw, the pose, the load and the stiffness from ``measurements``.
+
+    ``rest_lengths`` (n,) the encoders' values (default: the model's); ``initial_screw`` the warm
+    start (a tracker's previous estimate; default: the measured pose, else the equilibrium under
+    a known load, else ``model.initial_screw``). ``stiffness_std=False`` skips the std of K_c
+    (NaN). Bad input raises ValueError naming the field; an unobservable set returns
+    ``success=False, observable=False`` with a message naming what is missing.
+    """
+    prep = (measurements if isinstance(measurements, PreparedMeasurements)
+            else Measurements.prepared(measurements, model.n_strings))
+    if prep.n_strings != model.n_strings:
+        raise ValueError(f'measurements were prepared for {prep.n_strings} strings, the model '
+                         f'has {model.n_strings}')
+    rest = model.validate_rest_lengths(rest_lengths, batched=False)
+    names = model.string_names
+    if prep.dof < 6:
+        return _failed_joint(_missing_message(prep, names, prep.dof, [], []), prep, names,
+                             False, min(prep.dof, 6), math.inf)
+    x0 = _initial_screw(model, prep, rest, initial_screw)
+    problem = _JointProblem(model, prep, rest)
+    try:
+        x, ev, iterations, converged, why = _gauss_newton(
+            problem.evaluate, x0, problem.length_scale, max_iterations, tolerance)
+    except _InitialPointError as exc:
+        raise ValueError(f'initial_screw: {exc}') from None
+    r, J, state, kin = ev
+    C, s = _information(J, problem.length_scale)
+    rank = int(np.sum(s > rank_tolerance * s[0])) if s[0] > 0 else 0
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+    if rank < 6:
+        rank, cond, s, message = _observability(problem, J, state, kin, rank_tolerance)
+        return _failed_joint(message, prep, names, False, rank, cond, iterations, s)
+    if not converged:
+        return _failed_joint(f'{prep.describe(names)}: {why}', prep, names, True, rank, cond,
+                             iterations, s)
+    P = sm.pose_jacobian(x, kin)
+    pose_cov = P @ C @ P.T
+    K = state.stiffness
+    Kc_std = (_entry_std(cartesian_stiffness_jacobian(model, x, rest), C) if stiffness_std
+              else _nan(6, 6))
+    return JointEstimate(True, 'ok', x, state.transform.copy(), 0.5 * (pose_cov + pose_cov.T), C,
+                         -state.wrench, K @ C @ K.T, state, Kc_std, float(r @ r), prep.dof - 6,
+                         True, rank, cond, iterations, prep.describe(names), s)
+
+
+def _information(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatArray]:
+    """Covariance ``(J^T J)^-1`` (6, 6) (NaN when singular) and the singular values (6,) of
+    the whitened Jacobian with its translation columns scaled by ``length_scale`` (one
+    symmetric eigendecomposition of the scaled normal matrix)."""
+    scale = np.array([1.0] * 3 + [length_scale] * 3)
+    A = (J.T @ J) * np.outer(scale, scale)
+    w, V = np.linalg.eigh(A)
+    w, V = w[::-1], V[:, ::-1]
+    s = np.sqrt(np.maximum(w, 0.0))
+    if w[-1] <= 0.0:
+        return _nan(6, 6), s
+    C = (V / w) @ V.T * np.outer(scale, scale)
+    return 0.5 * (C + C.T), s
+
+
+# ---------------------------------------------------------------------------------- spine
+@dataclass
+class ChainEstimate:
+    """Outcome of :func:`estimate_chain_state` (N joints).
+
+    ``screws`` (N, 6) with ``screw_covariance`` (6N, 6N) (joint-major); ``joint_covariances``
+    (N, 6, 6) each joint's pose covariance in its own {1}_i (PoseWithCovariance convention);
+    ``tip_wrench`` (6,) in the base about its origin with ``tip_wrench_covariance``;
+    ``tip_transform`` (4, 4) with ``tip_pose_covariance`` (6, 6) in the base;
+    ``tip_stiffness`` (6, 6) the exact tip stiffness under the estimated load (base frame, rows
+    [f; m], columns [dv; dw]) with ``tip_stiffness_std`` (first order, central differences);
+    ``chi2``, ``dof``, ``observable``, ``rank`` (of 6N + 6), ``condition_number``,
+    ``iterations``; ``state`` the :class:`ChainState` at the estimate.
+    """
+
+    success: bool
+    message: str
+    screws: FloatArray
+    screw_covariance: FloatArray
+    joint_covariances: FloatArray
+    tip_wrench: FloatArray
+    tip_wrench_covariance: FloatArray
+    tip_transform: FloatArray
+    tip_pose_covariance: FloatArray
+    tip_stiffness: FloatArray
+    tip_stiffness_std: FloatArray
+    chi2: float
+    dof: int
+    observable: bool
+    rank: int
+    condition_number: float
+    iterations: int
+    state: ChainState | None = field(default=None, repr=False)
+
+
+class _ChainProblem:
+    """Unknowns ``z = [xi_1 .. xi_N, W]``; residuals: each joint's measurements, each joint's
+    equilibrium ``F_i + Ad_{P_i}^T B_i`` (pseudo-measurement, :data:`CHAIN_EQUILIBRIUM_STD`),
+    the tip pose and the tip load when measured."""
+
+    def __init__(self, chain: JointChain, preps: list[PreparedMeasurements | None],
+                 rest: list[FloatArray | None], gravity: FloatArray,
+                 tip_pose: FloatArray | None, tip_pose_whitener: FloatArray | None,
+                 tip_wrench: FloatArray | None, tip_wrench_whitener: FloatArray | None,
+                 equilibrium_std: tuple[float, float]) -> None:
+        self.chain = chain
+        self.n = chain.n_joints
+        self.preps = preps
+        self.rest = rest
+        self.gravity = gravity
+        self.tip_pose = tip_pose
+        self.tip_pose_whitener = tip_pose_whitener
+        self.tip_wrench = tip_wrench
+        self.tip_wrench_whitener = tip_wrench_whitener
+        self.eq_weight = 1.0 / np.array([equilibrium_std[0]] * 3 + [equilibrium_std[1]] * 3)
+        self.problems = [
+            None if p is None else _JointProblem(model, p, model.validate_rest_lengths(r, False))
+            for model, p, r in zip(chain.joints, preps, rest, strict=True)]
+        self.length_scale = float(np.mean([np.mean(m.rest_lengths) for m in chain.joints]))
+
+    def evaluate(self, z: FloatArray) -> tuple[FloatArray, FloatArray, ChainState]:
+        n = self.n
+        xi = z[:6 * n].reshape(n, 6)
+        W = z[6 * n:]
+        rows_r: list[FloatArray] = []
+        rows_J: list[FloatArray] = []
+        for i, problem in enumerate(self.problems):
+            if problem is None or problem.prep.rows == 0:
+                continue
+            r, J, _, _ = problem.evaluate(xi[i])
+            block = np.zeros((r.size, 6 * n + 6))
+            block[:, 6 * i:6 * i + 6] = J
+            rows_r.append(r.copy())
+            rows_J.append(block)
+        chain = self.chain
+        state = chain.evaluate(xi, self.rest)
+        res, D, AdT, _ = chain._system(state, W, self.gravity)
+        Jeq = np.empty((6 * n, 6 * n + 6))
+        Jeq[:, :6 * n] = chain._screw_jacobian(D, xi)
+        Jeq[:, 6 * n:] = AdT.reshape(6 * n, 6)
+        weight = np.tile(self.eq_weight, n)
+        rows_r.append(res.reshape(-1) * weight)
+        rows_J.append(Jeq * weight[:, None])
+        if self.tip_pose is not None:
+            T = state.tip_transform
+            E = log_so3(T[:3, :3] @ self.tip_pose[:3, :3].T)
+            r = np.concatenate([T[:3, 3] - self.tip_pose[:3, 3], E])
+            twist = chain.jacobian(xi)  # tip [dv; dw] per screw change
+            jac = np.zeros((6, 6 * n + 6))
+            jac[:3, :6 * n] = twist[:3] - hat3(T[:3, 3]) @ twist[3:]
+            jac[3:, :6 * n] = left_jacobian_so3_inverse(E) @ twist[3:]
+            rows_r.append(self.tip_pose_whitener @ r)
+            rows_J.append(self.tip_pose_whitener @ jac)
+        if self.tip_wrench is not None:
+            jac = np.zeros((6, 6 * n + 6))
+            jac[:, 6 * n:] = self.tip_wrench_whitener
+            rows_r.append(self.tip_wrench_whitener @ (W - self.tip_wrench))
+            rows_J.append(jac)
+        return np.concatenate(rows_r), np.vstack(rows_J), state
+
+
+def _chain_clip(n: int, length_scale: float) -> Any:
+    def clip(step: FloatArray) -> FloatArray:
+        out = step.copy()
+        for i in range(n):
+            out[6 * i:6 * i + 6] = _clip(step[6 * i:6 * i + 6], length_scale)
+        return out
+    return clip
+
+
+def _chain_observability(J: FloatArray, n: int, length_scale: float, rank_tolerance: float
+                         ) -> tuple[int, float, str]:
+    """Rank and condition of the chain's scaled whitened Jacobian and a message naming the
+    undetermined unknowns."""
+    size = 6 * n + 6
+    scale = np.array(([1.0] * 3 + [length_scale] * 3) * n + [1.0] * 6)
+    Js = J * scale
+    if Js.shape[0] < size:
+        Js = np.vstack([Js, np.zeros((size - Js.shape[0], size))])
+    _, s, Vt = np.linalg.svd(Js)
+    rank = int(np.sum(s > rank_tolerance * s[0])) if s[0] > 0 else 0
+    cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+    if rank == size:
+        return rank, cond, ''
+    weight = np.zeros(n + 1)
+    for v in Vt[rank:]:
+        weight += np.sqrt(np.sum((v.reshape(n + 1, 6)) ** 2, axis=1))
+    involved = [f'joint {i + 1}' for i in range(n) if weight[i] > 0.1 * weight.max()]
+    if weight[n] > 0.1 * weight.max():
+        involved.append('the tip load')
+    return rank, cond, (f'the measurements determine only {rank} of the {size} unknowns '
+                        f'(6 per joint and the tip load); undetermined: {", ".join(involved)}. '
+                        f'Add string tensions or lengths on those joints, a tip pose, or the tip '
+                        f'load (tip_wrench)')
+
+
+def estimate_chain_state(chain: JointChain,
+                         joint_measurements: Sequence[Measurements | None],
+                         tip_pose: ArrayLike | None = None,
+                         tip_pose_covariance: ArrayLike | None = None,
+                         tip_wrench: ArrayLike | None = None,
+                         tip_wrench_covariance: ArrayLike | None = None,
+                         gravity: ArrayLike | None = None, *,
+                         rest_lengths: Any = None,
+                         initial_screws: ArrayLike | None = None,
+                         initial_tip_wrench: ArrayLike | None = None,
+                         equilibrium_std: tuple[float, float] = CHAIN_EQUILIBRIUM_STD,
+                         tolerance: float = DECREMENT_TOLERANCE,
+                         max_iterations: int = MAX_ITERATIONS,
+                         rank_tolerance: float = RANK_TOLERANCE,
+                         stiffness_std: bool = True) -> ChainEstimate:
+    """Every joint's screw, the tip load, the tip pose and the exact tip stiffness of a spine,
+    each with its covariance.
+
+    ``joint_measurements``: one :class:`Measurements` (or None) per joint with its strings'
+    tensions / lengths and optionally the joint's own pose (of {2}_i in {1}_i); the load is
+    the spine's: ``tip_wrench`` (6,) in the base about its origin with
+    ``tip_wrench_covariance``, or None for an unknown tip load, shared by every joint's
+    equilibrium (which is what makes a few load cells per vertebra enough). ``tip_pose`` (the
+    tool frame in the base, (4, 4) or 7 values) with ``tip_pose_covariance`` (6, 6,
+    PoseWithCovariance convention). ``gravity`` (3,) for the link weights (default
+    ``chain.gravity``). ``initial_screws`` (N, 6) and ``initial_tip_wrench`` warm-start (default:
+    the unloaded screws and zero).
+    """
+    n = chain.n_joints
+    if len(joint_measurements) != n:
+        raise ValueError(f'joint_measurements must hold one entry per joint ({n}), '
+                         f'got {len(joint_measurements)}')
+    preps: list[PreparedMeasurements | None] = []
+    for i, (model, m) in enumerate(zip(chain.joints, joint_measurements, strict=True)):
+        if m is None:
+            preps.append(None)
+            continue
+        if m.external_wrench is not None or m.gravity is not None:
+            raise ValueError(f'joint_measurements[{i}]: a spine takes its load as tip_wrench '
+                             'and gravity as gravity (per-joint external_wrench / gravity are '
+                             'not supported)')
+        try:
+            preps.append(m.prepared(model.n_strings))
+        except ValueError as exc:
+            raise ValueError(f'joint_measurements[{i}].{exc}') from None
+    g = chain._gravity(gravity)
+    rest = chain._rest(rest_lengths)
+    pose_T = pose_whitener = None
+    if tip_pose is not None:
+        pose_T = sm.as_transform(tip_pose, 'tip_pose')
+        pose_whitener = _whitener(_covariance('tip_pose_covariance', tip_pose_covariance, 6))
+    W_m = W_whitener = None
+    W_cov_m = None
+    if tip_wrench is not None:
+        W_m = finite_array('tip_wrench', tip_wrench)
+        if W_m.shape != (6,):
+            raise ValueError(f'tip_wrench must have shape (6,), got {W_m.shape}')
+        W_cov_m = _covariance('tip_wrench_covariance', tip_wrench_covariance, 6)
+        W_whitener = _whitener(W_cov_m)
+    eq_std = finite_array('equilibrium_std', equilibrium_std)
+    if eq_std.shape != (2,) or np.any(eq_std <= 0):
+        raise ValueError('equilibrium_std must be two values > 0 (N, N m)')
+    x0 = (chain.unloaded_screws(rest) if initial_screws is None
+          else chain._screws(initial_screws).copy())
+    W0 = (W_m if W_m is not None else np.zeros(6)) if initial_tip_wrench is None else \
+        finite_array('initial_tip_wrench', initial_tip_wrench)
+    if W0.shape != (6,):
+        raise ValueError(f'initial_tip_wrench must have shape (6,), got {W0.shape}')
+    problem = _ChainProblem(chain, preps, rest, g, pose_T, pose_whitener, W_m, W_whitener,
+                            (float(eq_std[0]), float(eq_std[1])))
+    measured = sum(p.dof for p in preps if p is not None) + (6 if pose_T is not None else 0) + (
+        6 if W_m is not None else 0)
+    size = 6 * n + 6
+    z0 = np.concatenate([x0.reshape(-1), W0])
+    _, J0, _ = problem.evaluate(z0)
+    rank, cond, message = _chain_observability(J0, n, problem.length_scale, rank_tolerance)
+
+    def failed(msg: str, observable: bool, iterations: int = 0) -> ChainEstimate:
+        return ChainEstimate(False, msg, _nan(n, 6), _nan(6 * n, 6 * n), _nan(n, 6, 6),
+                             _nan(6), _nan(6, 6), _nan(4, 4), _nan(6, 6), _nan(6, 6),
+                             _nan(6, 6), math.nan, measured - 6, observable, rank, cond,
+                             iterations)
+
+    if rank < size:
+        return failed(message, False)
+    z, ev, iterations, converged, why = _gauss_newton(
+        problem.evaluate, z0, problem.length_scale, max_iterations, tolerance,
+        _chain_clip(n, problem.length_scale))
+    r, J, state = ev
+    rank, cond, message = _chain_observability(J, n, problem.length_scale, rank_tolerance)
+    if rank < size:
+        return failed(message, False, iterations)
+    if not converged:
+        return failed(why, True, iterations)
+    C = np.linalg.inv(J.T @ J)
+    C = 0.5 * (C + C.T)
+    xi = z[:6 * n].reshape(n, 6)
+    W = z[6 * n:]
+    joint_cov = np.empty((n, 6, 6))
+    for i in range(n):
+        P = sm.pose_jacobian(xi[i])
+        joint_cov[i] = P @ C[6 * i:6 * i + 6, 6 * i:6 * i + 6] @ P.T
+    T_tip = state.tip_transform
+    twist = chain.jacobian(xi)
+    M = np.zeros((6, size))
+    M[:3, :6 * n] = twist[:3] - hat3(T_tip[:3, 3]) @ twist[3:]
+    M[3:, :6 * n] = twist[3:]
+    tip_cov = M @ C @ M.T
+    K_tip = chain.tip_stiffness_from_state(state, W, g)
+    if stiffness_std:
+        h = STIFFNESS_STEP
+        grads = np.empty((6, 6, size))
+        for k in range(size):
+            zp, zm = z.copy(), z.copy()
+            zp[k] += h
+            zm[k] -= h
+            grads[:, :, k] = (chain.tip_stiffness(zp[:6 * n].reshape(n, 6), zp[6 * n:], g,
+                                                  rest_lengths=rest)
+                              - chain.tip_stiffness(zm[:6 * n].reshape(n, 6), zm[6 * n:], g,
+                                                    rest_lengths=rest)) / (2 * h)
+        K_tip_std = _entry_std(grads, C)
+    else:
+        K_tip_std = _nan(6, 6)
+    return ChainEstimate(True, 'ok', xi.copy(), C[:6 * n, :6 * n], joint_cov, W.copy(),
+                         C[6 * n:, 6 * n:], T_tip.copy(), 0.5 * (tip_cov + tip_cov.T), K_tip,
+                         K_tip_std, float(r @ r), measured - 6, True, rank, cond,
+                         iterations, state)
