@@ -71,13 +71,17 @@ RANK_TOLERANCE = 1e-9
 #: Damping factor of the first rejected step and the factor it grows by.
 INITIAL_DAMPING = 1e-4
 DAMPING_GROWTH = 10.0
+#: An accepted step that lowers the cost by less than this fraction of it ends the iteration:
+#: the iterate creeps along a kink of the cost (a string at its slack or saturation boundary).
+STALL_TOLERANCE = 1e-9
 #: Beyond this damping (a step a 1e-10 fraction of the gradient step) the iterate is a minimum.
 MAX_DAMPING = 1e10
 #: Central-difference step (rad, m) of dK_c/dxi for the std of K_c.
 STIFFNESS_STEP = 1e-6
-#: Std of the chain's quasi-static equilibrium when it is imposed as a pseudo-measurement (N, and
-#: N m for moments): far below any sensor, so the equilibrium holds exactly in effect.
-CHAIN_EQUILIBRIUM_STD = (1e-6, 1e-7)
+#: The chain's equilibria count as met when every residual is below this (N, N m).
+CHAIN_EQUILIBRIUM_TOLERANCE = 1e-9
+#: Newton corrections onto the chain's equilibria after each step.
+MAX_RESTORATION_STEPS = 8
 #: Names of the pose coordinates in the PoseWithCovariance order.
 POSE_AXES = ('x', 'y', 'z', 'rx', 'ry', 'rz')
 
@@ -168,7 +172,7 @@ class PreparedMeasurements:
 
     def __init__(self, m: Measurements, n: int) -> None:
         self.n_strings = n
-        self._description: tuple[tuple[str, ...], str] | None = None
+        self._description: tuple[tuple[tuple[str, ...], bool], str] | None = None
         tensions = _per_string('tensions', m.tensions, n)
         self.tension_index = np.flatnonzero(~np.isnan(tensions))
         self.tensions = tensions[self.tension_index]
@@ -213,14 +217,15 @@ class PreparedMeasurements:
     def needs_strings(self) -> bool:
         return bool(self.tension_index.size or self.length_index.size)
 
-    def describe(self, string_names: Sequence[str]) -> str:
-        """The inputs in words, e.g. ``'3 tensions (a, b, c), unknown load'`` (cached)."""
-        key = tuple(string_names)
+    def describe(self, string_names: Sequence[str], load: bool = True) -> str:
+        """The inputs in words, e.g. ``'3 tensions (a, b, c), unknown load'`` (cached; without
+        the load when not ``load``)."""
+        key = (tuple(string_names), load)
         if self._description is None or self._description[0] != key:
-            self._description = (key, self._describe(key))
+            self._description = (key, self._describe(string_names, load))
         return self._description[1]
 
-    def _describe(self, string_names: Sequence[str]) -> str:
+    def _describe(self, string_names: Sequence[str], load: bool) -> str:
         parts = []
         for label, index in (('tension', self.tension_index), ('length', self.length_index)):
             if index.size:
@@ -230,7 +235,8 @@ class PreparedMeasurements:
             parts.append('a pose')
         if self.gravity is not None:
             parts.append('gravity')
-        parts.append('a known load' if self.wrench is not None else 'unknown load')
+        if load:
+            parts.append('a known load' if self.wrench is not None else 'unknown load')
         return ', '.join(parts)
 
 
@@ -282,14 +288,13 @@ class _JointProblem:
         self.prep = prep
         self.rest = rest
         self.length_scale = float(np.mean(rest))
-        self.r = np.empty(prep.rows)
-        self.J = np.empty((prep.rows, 6))
 
     def evaluate(self, xi: FloatArray) -> tuple[FloatArray, FloatArray, JointState,
                                                  ScrewKinematics]:
         """Whitened residual (rows,), Jacobian (rows, 6), joint state and kinematics at xi."""
         p = self.prep
-        r, J = self.r, self.J
+        r = np.empty(p.rows)
+        J = np.empty((p.rows, 6))
         row = 0
         if p.needs_strings:
             pred = sm.string_predictions_unchecked(self.model, xi, self.rest)
@@ -436,7 +441,10 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
             if trial_ev is not None:
                 trial_cost = float(trial_ev[0] @ trial_ev[0])
                 if trial_cost <= cost:
+                    stalled = cost - trial_cost <= STALL_TOLERANCE * max(cost, 1.0)
                     x, ev, cost = trial, trial_ev, trial_cost
+                    if stalled:  # creeping along a kink (a string at its slack boundary)
+                        return x, ev, it, True, ''
                     damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
                     break
             damping = INITIAL_DAMPING if damping == 0.0 else damping * DAMPING_GROWTH
@@ -591,104 +599,204 @@ class ChainEstimate:
 
 
 class _ChainProblem:
-    """Unknowns ``z = [xi_1 .. xi_N, W]``; residuals: each joint's measurements, each joint's
-    equilibrium ``F_i + Ad_{P_i}^T B_i`` (pseudo-measurement, :data:`CHAIN_EQUILIBRIUM_STD`),
-    the tip pose and the tip load when measured."""
+    """Unknowns ``z = [xi_1 .. xi_N, W]``. Measurement residuals (whitened): each joint's
+    tensions, lengths and pose, the tip pose, the tip load when it is known; constraints: each
+    joint's equilibrium ``c_i = F_i + Ad_{P_i}^T B_i = 0`` (exact, Jacobian from
+    :meth:`JointChain.residual_jacobian`'s blocks and ``dc_i/dW = Ad_{P_i}^T``)."""
 
     def __init__(self, chain: JointChain, preps: list[PreparedMeasurements | None],
                  rest: list[FloatArray | None], gravity: FloatArray,
                  tip_pose: FloatArray | None, tip_pose_whitener: FloatArray | None,
-                 tip_wrench: FloatArray | None, tip_wrench_whitener: FloatArray | None,
-                 equilibrium_std: tuple[float, float]) -> None:
+                 tip_wrench: FloatArray | None, tip_wrench_whitener: FloatArray | None) -> None:
         self.chain = chain
         self.n = chain.n_joints
-        self.preps = preps
         self.rest = rest
         self.gravity = gravity
         self.tip_pose = tip_pose
         self.tip_pose_whitener = tip_pose_whitener
         self.tip_wrench = tip_wrench
         self.tip_wrench_whitener = tip_wrench_whitener
-        self.eq_weight = 1.0 / np.array([equilibrium_std[0]] * 3 + [equilibrium_std[1]] * 3)
         self.problems = [
-            None if p is None else _JointProblem(model, p, model.validate_rest_lengths(r, False))
+            None if p is None or p.rows == 0
+            else _JointProblem(model, p, model.validate_rest_lengths(r, False))
             for model, p, r in zip(chain.joints, preps, rest, strict=True)]
         self.length_scale = float(np.mean([np.mean(m.rest_lengths) for m in chain.joints]))
+        size = 6 * self.n + 6
+        #: Column scale of z for rank and clipping: radians, metres / length_scale, the load.
+        self.scale = np.array(([1.0] * 3 + [self.length_scale] * 3) * self.n + [1.0] * 6)
+        self.size = size
 
-    def evaluate(self, z: FloatArray) -> tuple[FloatArray, FloatArray, ChainState]:
+    def constraints(self, z: FloatArray) -> tuple[FloatArray, FloatArray, ChainState]:
+        """(c (6N,), dc/dz (6N, size), chain state) at z."""
         n = self.n
+        xi = z[:6 * n].reshape(n, 6)
+        chain = self.chain
+        state = chain.evaluate(xi, self.rest)
+        c, D, AdT, _ = chain._system(state, z[6 * n:], self.gravity)
+        Jc = np.empty((6 * n, self.size))
+        Jc[:, :6 * n] = chain._screw_jacobian(D, xi)
+        Jc[:, 6 * n:] = AdT.reshape(6 * n, 6)
+        return c.reshape(-1), Jc, state
+
+    def measurements(self, z: FloatArray, state: ChainState) -> tuple[FloatArray, FloatArray]:
+        """(r, dr/dz) whitened at z (``state`` the chain's at z)."""
+        n, size = self.n, self.size
         xi = z[:6 * n].reshape(n, 6)
         W = z[6 * n:]
         rows_r: list[FloatArray] = []
         rows_J: list[FloatArray] = []
         for i, problem in enumerate(self.problems):
-            if problem is None or problem.prep.rows == 0:
+            if problem is None:
                 continue
             r, J, _, _ = problem.evaluate(xi[i])
-            block = np.zeros((r.size, 6 * n + 6))
+            block = np.zeros((r.size, size))
             block[:, 6 * i:6 * i + 6] = J
-            rows_r.append(r.copy())
+            rows_r.append(r)
             rows_J.append(block)
-        chain = self.chain
-        state = chain.evaluate(xi, self.rest)
-        res, D, AdT, _ = chain._system(state, W, self.gravity)
-        Jeq = np.empty((6 * n, 6 * n + 6))
-        Jeq[:, :6 * n] = chain._screw_jacobian(D, xi)
-        Jeq[:, 6 * n:] = AdT.reshape(6 * n, 6)
-        weight = np.tile(self.eq_weight, n)
-        rows_r.append(res.reshape(-1) * weight)
-        rows_J.append(Jeq * weight[:, None])
         if self.tip_pose is not None:
             T = state.tip_transform
             E = log_so3(T[:3, :3] @ self.tip_pose[:3, :3].T)
             r = np.concatenate([T[:3, 3] - self.tip_pose[:3, 3], E])
-            twist = chain.jacobian(xi)  # tip [dv; dw] per screw change
-            jac = np.zeros((6, 6 * n + 6))
-            jac[:3, :6 * n] = twist[:3] - hat3(T[:3, 3]) @ twist[3:]
-            jac[3:, :6 * n] = left_jacobian_so3_inverse(E) @ twist[3:]
+            jac = np.zeros((6, size))
+            jac[:, :6 * n] = _tip_pose_jacobian(self.chain, xi, T)
+            jac[3:] = left_jacobian_so3_inverse(E) @ jac[3:]
             rows_r.append(self.tip_pose_whitener @ r)
             rows_J.append(self.tip_pose_whitener @ jac)
         if self.tip_wrench is not None:
-            jac = np.zeros((6, 6 * n + 6))
+            jac = np.zeros((6, size))
             jac[:, 6 * n:] = self.tip_wrench_whitener
             rows_r.append(self.tip_wrench_whitener @ (W - self.tip_wrench))
             rows_J.append(jac)
-        return np.concatenate(rows_r), np.vstack(rows_J), state
+        r = np.concatenate(rows_r) if rows_r else np.empty(0)
+        J = np.vstack(rows_J) if rows_J else np.empty((0, size))
+        return r, J
+
+    def restore(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, ChainState
+                                               ] | None:
+        """Newton's minimum-norm corrections onto the equilibria from z: (z, c, dc/dz, state)
+        once every residual is below :data:`CHAIN_EQUILIBRIUM_TOLERANCE`; None when that fails
+        (or a string collapses)."""
+        z = z.copy()
+        for _ in range(MAX_RESTORATION_STEPS):
+            try:
+                c, Jc, state = self.constraints(z)
+            except ValueError:
+                return None
+            if not np.all(np.isfinite(c)):
+                return None
+            if np.max(np.abs(c)) < CHAIN_EQUILIBRIUM_TOLERANCE:
+                return z, c, Jc, state
+            try:
+                Q1, _, R = _tangent(Jc)
+                step = Q1 @ np.linalg.solve(R.T, -c)
+            except np.linalg.LinAlgError:
+                return None
+            for i in range(self.n):
+                step[6 * i:6 * i + 6] = _clip(step[6 * i:6 * i + 6], self.length_scale)
+            z = z + step
+        return None
 
 
-def _chain_clip(n: int, length_scale: float) -> Any:
-    def clip(step: FloatArray) -> FloatArray:
-        out = step.copy()
-        for i in range(n):
-            out[6 * i:6 * i + 6] = _clip(step[6 * i:6 * i + 6], length_scale)
-        return out
-    return clip
+def _tip_pose_jacobian(chain: JointChain, xi: FloatArray, tip: FloatArray) -> FloatArray:
+    """``d[dp; dtheta]/dxi`` (6, 6N) of the tip pose (PoseWithCovariance convention in the base)
+    from the tip's spatial twist ``[dv; dw]`` (:meth:`JointChain.jacobian`):
+    ``dp = dv + dw x p``, ``dtheta = dw``."""
+    twist = chain.jacobian(xi)
+    out = np.empty_like(twist)
+    out[:3] = twist[:3] - hat3(tip[:3, 3]) @ twist[3:]
+    out[3:] = twist[3:]
+    return out
 
 
-def _chain_observability(J: FloatArray, n: int, length_scale: float, rank_tolerance: float
-                         ) -> tuple[int, float, str]:
-    """Rank and condition of the chain's scaled whitened Jacobian and a message naming the
-    undetermined unknowns."""
-    size = 6 * n + 6
-    scale = np.array(([1.0] * 3 + [length_scale] * 3) * n + [1.0] * 6)
-    Js = J * scale
-    if Js.shape[0] < size:
-        Js = np.vstack([Js, np.zeros((size - Js.shape[0], size))])
-    _, s, Vt = np.linalg.svd(Js)
-    rank = int(np.sum(s > rank_tolerance * s[0])) if s[0] > 0 else 0
-    cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
-    if rank == size:
-        return rank, cond, ''
+def _tangent(Jc: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Orthonormal bases of the range (Q1) and null space (Q2) of ``Jc^T`` and ``R`` with
+    ``Jc^T = Q1 R`` (complete QR)."""
+    m = Jc.shape[0]
+    Q, R = np.linalg.qr(Jc.T, mode='complete')
+    return Q[:, :m], Q[:, m:], R[:m]
+
+
+def _constrained_gauss_newton(problem: _ChainProblem, z0: FloatArray, max_iterations: int,
+                              tolerance: float) -> tuple[FloatArray, Any, int, bool, str]:
+    """Levenberg-Marquardt on the measurements over the equilibria (a manifold of dimension 6):
+    each step lies in the tangent (the null space of dc/dz) and is followed by Newton's
+    restoration onto the equilibria (:meth:`_ChainProblem.restore`); a step is kept when the
+    restored point lowers the cost. Converged when the decrement is below ``tolerance``.
+    Returns (z, (r, J, c, dc/dz, state), iterations, converged, message)."""
+    restored = problem.restore(z0)
+    if restored is None:
+        return z0, None, 0, False, ('no equilibrium of the chain near the initial screws and '
+                                    'tip load')
+    z, c, Jc, state = restored
+    r, J = problem.measurements(z, state)
+    cost = float(r @ r)
+    damping = 0.0
+    for it in range(1, max_iterations + 1):
+        _, Q2, _ = _tangent(Jc)
+        M = J @ Q2
+        A = M.T @ M
+        g = M.T @ r
+        try:
+            full = -np.linalg.solve(A, g)
+        except np.linalg.LinAlgError:
+            return z, (r, J, c, Jc, state), it - 1, False, 'singular normal matrix'
+        if float(-g @ full) < tolerance:
+            return z, (r, J, c, Jc, state), it - 1, True, ''
+        while True:
+            y = full if damping == 0.0 else -np.linalg.solve(A + damping * np.diag(np.diag(A)), g)
+            step = Q2 @ y
+            for i in range(problem.n):
+                step[6 * i:6 * i + 6] = _clip(step[6 * i:6 * i + 6], problem.length_scale)
+            trial = problem.restore(z + step)
+            if trial is not None:
+                trial_r, trial_J = problem.measurements(trial[0], trial[3])
+                trial_cost = float(trial_r @ trial_r)
+                if trial_cost <= cost:
+                    stalled = cost - trial_cost <= STALL_TOLERANCE * max(cost, 1.0)
+                    z, c, Jc, state = trial
+                    r, J, cost = trial_r, trial_J, trial_cost
+                    if stalled:  # see _gauss_newton
+                        return z, (r, J, c, Jc, state), it, True, ''
+                    damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
+                    break
+            damping = INITIAL_DAMPING if damping == 0.0 else damping * DAMPING_GROWTH
+            if damping > MAX_DAMPING:  # a minimum (see _gauss_newton)
+                return z, (r, J, c, Jc, state), it, True, ''
+    return z, (r, J, c, Jc, state), max_iterations, False, (
+        f'not converged in {max_iterations} iterations')
+
+
+def _chain_information(problem: _ChainProblem, J: FloatArray, Jc: FloatArray,
+                       rank_tolerance: float) -> tuple[FloatArray, int, float, FloatArray]:
+    """Covariance of z (size, size) on the equilibria, ``Q2 (M^T M)^-1 Q2^T`` with
+    ``M = J Q2``, the rank (of 6: the equilibria leave 6 directions, those of the load), the
+    condition number and the scaled null directions (rows, in z) when rank < 6."""
+    scale = problem.scale
+    _, Q2, _ = _tangent(Jc * scale)  # the tangent in scaled coordinates
+    M = (J * scale) @ Q2
+    k = Q2.shape[1]
+    Ms = M if M.shape[0] >= k else np.vstack([M, np.zeros((k - M.shape[0], k))])
+    _, s, Vt = np.linalg.svd(Ms)
+    rank = int(np.sum(s > rank_tolerance * s[0])) if s.size and s[0] > 0 else 0
+    cond = float(s[0] / s[-1]) if s.size and s[-1] > 0 else math.inf
+    if rank < k:
+        return _nan(problem.size, problem.size), rank, cond, (Q2 @ Vt[rank:].T).T * scale
+    C = Q2 @ np.linalg.inv(M.T @ M) @ Q2.T
+    C = C * np.outer(scale, scale)
+    return 0.5 * (C + C.T), rank, cond, np.empty((0, problem.size))
+
+
+def _chain_missing_message(null: FloatArray, n: int, inputs: str, rank: int) -> str:
     weight = np.zeros(n + 1)
-    for v in Vt[rank:]:
-        weight += np.sqrt(np.sum((v.reshape(n + 1, 6)) ** 2, axis=1))
+    for v in null:
+        weight += np.sqrt(np.sum(v.reshape(n + 1, 6) ** 2, axis=1))
     involved = [f'joint {i + 1}' for i in range(n) if weight[i] > 0.1 * weight.max()]
     if weight[n] > 0.1 * weight.max():
         involved.append('the tip load')
-    return rank, cond, (f'the measurements determine only {rank} of the {size} unknowns '
-                        f'(6 per joint and the tip load); undetermined: {", ".join(involved)}. '
-                        f'Add string tensions or lengths on those joints, a tip pose, or the tip '
-                        f'load (tip_wrench)')
+    return (f'{inputs}: with the equilibria they determine only {rank} of the 6 remaining '
+            f'unknowns (the tip load, or the configuration it implies); undetermined: '
+            f'{", ".join(involved)}. Add string tensions or lengths on those joints, a joint or '
+            f'tip pose, or the tip load (tip_wrench)')
 
 
 def estimate_chain_state(chain: JointChain,
@@ -701,7 +809,6 @@ def estimate_chain_state(chain: JointChain,
                          rest_lengths: Any = None,
                          initial_screws: ArrayLike | None = None,
                          initial_tip_wrench: ArrayLike | None = None,
-                         equilibrium_std: tuple[float, float] = CHAIN_EQUILIBRIUM_STD,
                          tolerance: float = DECREMENT_TOLERANCE,
                          max_iterations: int = MAX_ITERATIONS,
                          rank_tolerance: float = RANK_TOLERANCE,
@@ -710,14 +817,16 @@ def estimate_chain_state(chain: JointChain,
     each with its covariance.
 
     ``joint_measurements``: one :class:`Measurements` (or None) per joint with its strings'
-    tensions / lengths and optionally the joint's own pose (of {2}_i in {1}_i); the load is
-    the spine's: ``tip_wrench`` (6,) in the base about its origin with
-    ``tip_wrench_covariance``, or None for an unknown tip load, shared by every joint's
-    equilibrium (which is what makes a few load cells per vertebra enough). ``tip_pose`` (the
-    tool frame in the base, (4, 4) or 7 values) with ``tip_pose_covariance`` (6, 6,
-    PoseWithCovariance convention). ``gravity`` (3,) for the link weights (default
-    ``chain.gravity``). ``initial_screws`` (N, 6) and ``initial_tip_wrench`` warm-start (default:
-    the unloaded screws and zero).
+    tensions / lengths and optionally the joint's own pose (of {2}_i in {1}_i). The load is the
+    spine's: ``tip_wrench`` (6,) in the base about its origin with ``tip_wrench_covariance``, or
+    None for an unknown tip load, shared by every joint's equilibrium (which is what makes a few
+    load cells per vertebra enough). The equilibria ``F_i + Ad_{P_i}^T B_i = 0`` are exact
+    constraints (null-space Gauss-Newton), so 6 unknowns remain whatever N: the tip load (or
+    the configuration it implies). ``tip_pose`` (the tool frame in the base, (4, 4) or 7
+    values) with ``tip_pose_covariance`` (6, 6, PoseWithCovariance convention). ``gravity``
+    (3,) for the link weights (default ``chain.gravity``). ``initial_screws`` (N, 6) and
+    ``initial_tip_wrench`` warm-start (default: the unloaded screws and the known load or
+    zero).
     """
     n = chain.n_joints
     if len(joint_measurements) != n:
@@ -743,50 +852,54 @@ def estimate_chain_state(chain: JointChain,
         pose_T = sm.as_transform(tip_pose, 'tip_pose')
         pose_whitener = _whitener(_covariance('tip_pose_covariance', tip_pose_covariance, 6))
     W_m = W_whitener = None
-    W_cov_m = None
     if tip_wrench is not None:
         W_m = finite_array('tip_wrench', tip_wrench)
         if W_m.shape != (6,):
             raise ValueError(f'tip_wrench must have shape (6,), got {W_m.shape}')
-        W_cov_m = _covariance('tip_wrench_covariance', tip_wrench_covariance, 6)
-        W_whitener = _whitener(W_cov_m)
-    eq_std = finite_array('equilibrium_std', equilibrium_std)
-    if eq_std.shape != (2,) or np.any(eq_std <= 0):
-        raise ValueError('equilibrium_std must be two values > 0 (N, N m)')
+        W_whitener = _whitener(_covariance('tip_wrench_covariance', tip_wrench_covariance, 6))
     x0 = (chain.unloaded_screws(rest) if initial_screws is None
           else chain._screws(initial_screws).copy())
-    W0 = (W_m if W_m is not None else np.zeros(6)) if initial_tip_wrench is None else \
-        finite_array('initial_tip_wrench', initial_tip_wrench)
-    if W0.shape != (6,):
-        raise ValueError(f'initial_tip_wrench must have shape (6,), got {W0.shape}')
-    problem = _ChainProblem(chain, preps, rest, g, pose_T, pose_whitener, W_m, W_whitener,
-                            (float(eq_std[0]), float(eq_std[1])))
+    if initial_tip_wrench is None:
+        W0 = W_m.copy() if W_m is not None else np.zeros(6)
+    else:
+        W0 = finite_array('initial_tip_wrench', initial_tip_wrench)
+        if W0.shape != (6,):
+            raise ValueError(f'initial_tip_wrench must have shape (6,), got {W0.shape}')
+    problem = _ChainProblem(chain, preps, rest, g, pose_T, pose_whitener, W_m, W_whitener)
+    names = [f'joint {i + 1}: {p.describe(model.string_names, load=False)}'
+             for i, (model, p) in enumerate(zip(chain.joints, preps, strict=True))
+             if p is not None and p.rows]
+    if pose_T is not None:
+        names.append('a tip pose')
+    names.append('a known tip load' if W_m is not None else 'unknown tip load')
+    inputs = '; '.join(names)
     measured = sum(p.dof for p in preps if p is not None) + (6 if pose_T is not None else 0) + (
         6 if W_m is not None else 0)
     size = 6 * n + 6
-    z0 = np.concatenate([x0.reshape(-1), W0])
-    _, J0, _ = problem.evaluate(z0)
-    rank, cond, message = _chain_observability(J0, n, problem.length_scale, rank_tolerance)
 
-    def failed(msg: str, observable: bool, iterations: int = 0) -> ChainEstimate:
+    def failed(msg: str, observable: bool, rank: int, cond: float, iterations: int = 0
+               ) -> ChainEstimate:
         return ChainEstimate(False, msg, _nan(n, 6), _nan(6 * n, 6 * n), _nan(n, 6, 6),
                              _nan(6), _nan(6, 6), _nan(4, 4), _nan(6, 6), _nan(6, 6),
                              _nan(6, 6), math.nan, measured - 6, observable, rank, cond,
                              iterations)
 
-    if rank < size:
-        return failed(message, False)
-    z, ev, iterations, converged, why = _gauss_newton(
-        problem.evaluate, z0, problem.length_scale, max_iterations, tolerance,
-        _chain_clip(n, problem.length_scale))
-    r, J, state = ev
-    rank, cond, message = _chain_observability(J, n, problem.length_scale, rank_tolerance)
-    if rank < size:
-        return failed(message, False, iterations)
+    if measured < 6:
+        return failed(f'{inputs}: {measured} measured degrees of freedom cannot determine the 6 '
+                      'unknowns left by the equilibria (the tip load). Add string tensions or '
+                      'lengths, a pose, or the tip load (tip_wrench)', False, measured, math.inf)
+    z0 = np.concatenate([x0.reshape(-1), W0])
+    z, ev, iterations, converged, why = _constrained_gauss_newton(problem, z0, max_iterations,
+                                                                  tolerance)
+    if ev is None:
+        return failed(f'{inputs}: {why}', True, 0, math.inf, iterations)
+    r, J, _, Jc, state = ev
+    C, rank, cond, null = _chain_information(problem, J, Jc, rank_tolerance)
+    if rank < 6:
+        return failed(_chain_missing_message(null, n, inputs, rank), False, rank, cond,
+                      iterations)
     if not converged:
-        return failed(why, True, iterations)
-    C = np.linalg.inv(J.T @ J)
-    C = 0.5 * (C + C.T)
+        return failed(f'{inputs}: {why}', True, rank, cond, iterations)
     xi = z[:6 * n].reshape(n, 6)
     W = z[6 * n:]
     joint_cov = np.empty((n, 6, 6))
@@ -794,27 +907,29 @@ def estimate_chain_state(chain: JointChain,
         P = sm.pose_jacobian(xi[i])
         joint_cov[i] = P @ C[6 * i:6 * i + 6, 6 * i:6 * i + 6] @ P.T
     T_tip = state.tip_transform
-    twist = chain.jacobian(xi)
     M = np.zeros((6, size))
-    M[:3, :6 * n] = twist[:3] - hat3(T_tip[:3, 3]) @ twist[3:]
-    M[3:, :6 * n] = twist[3:]
+    M[:, :6 * n] = _tip_pose_jacobian(chain, xi, T_tip)
     tip_cov = M @ C @ M.T
     K_tip = chain.tip_stiffness_from_state(state, W, g)
-    if stiffness_std:
-        h = STIFFNESS_STEP
-        grads = np.empty((6, 6, size))
-        for k in range(size):
-            zp, zm = z.copy(), z.copy()
-            zp[k] += h
-            zm[k] -= h
-            grads[:, :, k] = (chain.tip_stiffness(zp[:6 * n].reshape(n, 6), zp[6 * n:], g,
-                                                  rest_lengths=rest)
-                              - chain.tip_stiffness(zm[:6 * n].reshape(n, 6), zm[6 * n:], g,
-                                                    rest_lengths=rest)) / (2 * h)
-        K_tip_std = _entry_std(grads, C)
-    else:
-        K_tip_std = _nan(6, 6)
+    K_tip_std = _tip_stiffness_std(chain, z, C, g, rest) if stiffness_std else _nan(6, 6)
     return ChainEstimate(True, 'ok', xi.copy(), C[:6 * n, :6 * n], joint_cov, W.copy(),
                          C[6 * n:, 6 * n:], T_tip.copy(), 0.5 * (tip_cov + tip_cov.T), K_tip,
-                         K_tip_std, float(r @ r), measured - 6, True, rank, cond,
-                         iterations, state)
+                         K_tip_std, float(r @ r), measured - 6, True, rank, cond, iterations,
+                         state)
+
+
+def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,
+                       rest: Any) -> FloatArray:
+    """First-order std (6, 6) of the exact tip stiffness: central differences of
+    :meth:`JointChain.tip_stiffness` over ``z = [xi; W]`` propagated with ``C``."""
+    n = chain.n_joints
+    grads = np.empty((6, 6, z.size))
+    for k in range(z.size):
+        values = []
+        for sign in (1.0, -1.0):
+            zk = z.copy()
+            zk[k] += sign * STIFFNESS_STEP
+            values.append(chain.tip_stiffness(zk[:6 * n].reshape(n, 6), zk[6 * n:], g,
+                                              rest_lengths=rest))
+        grads[:, :, k] = (values[0] - values[1]) / (2.0 * STIFFNESS_STEP)
+    return _entry_std(grads, C)
