@@ -28,6 +28,8 @@ setup(
         'console_scripts': [
             'stiffness_node = tensegrity_stiffness.ros.stiffness_node:main',
             'spine_node = tensegrity_stiffness.ros.spine_node:main',
+            'sim_node = tensegrity_stiffness.ros.sim_node:main',
+            'twin_demo = tensegrity_stiffness.ros.twin_demo:main',
             'tensegrity-stiffness = tensegrity_stiffness.cli:main',
         ],
     },

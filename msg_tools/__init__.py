@@ -12,6 +12,7 @@ geometry     ``geometry_msgs`` Wrench / Pose <-> numpy; rotation matrix <-> quat
 stamps       ``builtin_interfaces/Time`` <-> nanoseconds / seconds.
 diagnostics  ``diagnostic_msgs/DiagnosticStatus`` and ``DiagnosticArray`` builders.
 markers      ``visualization_msgs/MarkerArray`` of nodes and tension-coloured strings for RViz.
+imu          ``sensor_msgs/Imu`` of the twin's IMU (angular velocity, specific force).
 outputs      refilling preallocated output messages per input (after one finite check).
 joint_outputs  the joint node's five per-input output messages and its markers.
 spine_outputs  the spine node's seven per-input output messages and its markers.
@@ -45,6 +46,7 @@ from msg_tools.geometry import (
     transform_to_pose,
     wrench_to_msg,
 )
+from msg_tools.imu import imu_message, imu_to_arrays, write_imu
 from msg_tools.joint_outputs import JointOutputMessages, joint_markers
 from msg_tools.markers import marker_array, tension_color
 from msg_tools.spine_outputs import SpineOutputMessages, spine_markers
@@ -69,6 +71,8 @@ __all__ = [
     'diagnostic_array',
     'diagnostic_status',
     'format_value',
+    'imu_message',
+    'imu_to_arrays',
     'joint_markers',
     'marker_array',
     'matrix_to_multiarray',
@@ -89,4 +93,5 @@ __all__ = [
     'transform_to_pose',
     'vector_to_multiarray',
     'wrench_to_msg',
+    'write_imu',
 ]

@@ -62,6 +62,9 @@ REQUIREMENTS=(
   'matplotlib==3.11.2'
   # rosbag2 reading and writing of the bag command (pure Python, no ROS install needed)
   'rosbags==0.11.9'
+  # the digital twin (tensegrity_stiffness.simulation, sim_node): MuJoCo physics, sensor_msgs/Imu
+  'mujoco==4.0.0'
+  'ros-sensor-msgs==5.3.6'
 )
 
 log() { printf '[setup_env %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }

@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# The whole loop without hardware: set up (idempotent), then start the MuJoCo twin (sim_node,
+# slowly swinging a load) and the stiffness node wired together, and print a live one-line
+# summary once a second (input rate, pose, smallest and largest eigenvalue of K_c, slack
+# strings, latency). Ctrl-C stops both nodes cleanly.
+#   bash scripts/run_twin.sh [--spine] [--duration SECONDS] [--swing N] [--swing-period S]
+#                            [--rate HZ] [--config FILE.yaml]
+# Environment: see scripts/env.sh (LOCALHOST discovery, ROS_DOMAIN_ID default 42 if unset).
+set -euo pipefail
+
+REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$REPO"
+
+bash scripts/setup_env.sh
+# shellcheck disable=SC1091
+source scripts/env.sh
+
+exec "$REPO/install/tensegrity_stiffness/lib/tensegrity_stiffness/twin_demo" "$@"

@@ -1,0 +1,386 @@
+"""``sim_node``: the MuJoCo digital twin of a joint or a spine over ROS 2.
+
+Thin layer around :mod:`tensegrity_stiffness.simulation`: it steps the twin on a thread of its
+own (paced by the wall clock, or as fast as possible publishing ``/clock``), validates and hands
+on the inputs, and publishes the truth in exactly the input formats of ``stiffness_node``
+(``~/screw``, ``~/pose``) or ``spine_node`` (``~/screws``, ``~/poses``) and the simulated sensors
+with their noise (``~/measured_lengths``, ``~/measured_tensions``, ``~/imu``). Parameters:
+:func:`tensegrity_stiffness.parameters.sim_node_parameters` (``sim.*``, ``load.*``, ``noise.*``,
+``limits.*`` and the model's own, from the same config files as the other nodes).
+
+Inputs are taken by the executor (``~/rest_lengths``, latched as the stiffness node's;
+``~/external_wrench``): validated there (bad input: a throttled warning naming the problem, the
+twin keeps its state and keeps running) and handed to the stepping thread, which applies them
+before its next step. Only the stepping thread touches the simulation.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
+from rclpy.node import Node
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray
+
+import msg_tools
+from tensegrity_stiffness.parameters import (
+    CHAIN_PARAMETERS,
+    SIM_PARAMETERS,
+    SimNodeSettings,
+    by_name,
+    sim_node_parameters,
+    sim_node_settings,
+)
+from tensegrity_stiffness.ros import runner
+from tensegrity_stiffness.ros.parameters import ParameterBinding
+from tensegrity_stiffness.ros.reporting import Reporter, guarded
+from tensegrity_stiffness.ros.topics import (
+    LATCHED_QOS,
+    create_output_publisher,
+    input_qos,
+    output_qos,
+)
+from tensegrity_stiffness.screw import exp_se3
+from tensegrity_stiffness.simulation import ChainSimulation, JointSimulation, SensorNoise
+from tensegrity_stiffness.spine_processing import rest_lengths_input
+
+NODE_NAME = 'sim_node'
+#: Seconds between /diagnostics messages (steps, missed steps, real-time factor, rejections).
+DIAGNOSTICS_PERIOD_S = 1.0
+#: Sleep no closer than this to a step's deadline; wait the rest by spinning (s). The loop keeps
+#: its 1 kHz to tens of microseconds at the cost of this much CPU per period.
+SPIN_S = 1e-4
+#: Label of the measured arrays (string order of the config, joint-major for a spine).
+LENGTHS_LABEL = 'measured string lengths [m], string order of the config'
+TENSIONS_LABEL = 'measured string tensions [N], string order of the config'
+
+
+def _declared_layout(node: Node) -> tuple[bool, int]:
+    """``sim.spine`` and ``chain.n_joints`` as the parameter file sets them (the table depends
+    on them), read before the table is declared."""
+    spine_spec = by_name(SIM_PARAMETERS)['sim.spine']
+    spine = spine_spec.check(node.declare_parameter(spine_spec.name, False).value)
+    node.undeclare_parameter(spine_spec.name)
+    if not spine:
+        return False, 1
+    n_spec = by_name(CHAIN_PARAMETERS)['chain.n_joints']
+    n = n_spec.check(node.declare_parameter(n_spec.name, n_spec.default).value)
+    node.undeclare_parameter(n_spec.name)
+    return True, n
+
+
+def swing_plane(gravity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two orthonormal directions normal to ``gravity`` (normal to y of the base without it)."""
+    axis = gravity / np.linalg.norm(gravity) if np.any(gravity) else np.array([0.0, 1.0, 0.0])
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    e1 = np.cross(axis, helper)
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(axis, e1)
+
+
+class SimNode(Node):
+    """Steps the twin and publishes its truth and its sensors (see the module docstring)."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.reporter = Reporter(self.get_logger())
+        spine, n_joints = _declared_layout(self)
+        self._binding = ParameterBinding(
+            self, sim_node_parameters(spine, n_joints), sim_node_settings,
+            self._apply_parameters, lambda reason: self.reporter.warn('parameter change', reason))
+        settings = sim_node_settings(self._binding.values())
+        values = settings.values
+        self._settings = settings
+        self._period = 1.0 / values['sim.rate']
+        self._real_time = values['sim.real_time']
+        self._rng = np.random.default_rng(values['noise.seed'])
+        self._noise = SensorNoise(**settings.noise())
+        self._sim = self._simulation(settings, None)
+        # Inputs handed from the executor to the stepping thread (one reference each: an
+        # assignment is atomic; the thread takes and clears it).
+        self._pending_rest: Any = None
+        self._pending_settings: tuple[SimNodeSettings, bool] | None = None
+        self._topic_wrench = np.zeros(6)
+        self._swing_origin = self._load_point()
+        self.steps = 0
+        self.missed_steps = 0
+        self.publications = 0
+
+        depth = values['qos.depth']
+        out = output_qos(depth)
+        if spine:
+            self._pub_truth = create_output_publisher(self, Float64MultiArray, '~/screws', out)
+            self._pub_pose = create_output_publisher(self, PoseArray, '~/poses', out)
+        else:
+            self._pub_truth = create_output_publisher(self, Float64MultiArray, '~/screw', out)
+            self._pub_pose = create_output_publisher(self, PoseStamped, '~/pose', out)
+        self._pub_lengths = create_output_publisher(self, Float64MultiArray,
+                                                    '~/measured_lengths', out)
+        self._pub_tensions = create_output_publisher(self, Float64MultiArray,
+                                                     '~/measured_tensions', out)
+        self._pub_imu = create_output_publisher(self, Imu, '~/imu', out)
+        self._pub_clock = None if self._real_time else create_output_publisher(
+            self, Clock, '/clock', 10)
+        self._messages(settings)
+        self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics',
+                                                        10)
+        self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
+        self._diagnosed = (time.perf_counter(), 0, 0.0)
+        self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
+                                 LATCHED_QOS)
+        self.create_subscription(WrenchStamped, '~/external_wrench', self._on_external_wrench,
+                                 input_qos(depth, 'reliable'))
+        self._stop = threading.Event()
+        self.context.on_shutdown(self._stop.set)  # SIGINT shuts the context down first
+        self._thread = threading.Thread(target=self._run, name='sim_node stepping',
+                                        daemon=True)
+        self._thread.start()
+        kind = f'spine of {n_joints} joints' if spine else 'joint'
+        self.get_logger().info(
+            f'ready: MuJoCo twin of the {kind}, {values["sim.rate"]:g} Hz '
+            f'{"real time" if self._real_time else "as fast as possible (/clock)"}, publishing '
+            f'every {values["sim.publish_every"]} steps, max_length {values["sim.max_length"]}')
+
+    # ------------------------------------------------------------------ construction
+    def _simulation(self, settings: SimNodeSettings, screws: np.ndarray | None
+                    ) -> JointSimulation | ChainSimulation:
+        values = settings.values
+        options = {'timestep': 1.0 / values['sim.rate'], 'max_length': values['sim.max_length'],
+                   'tendon_damping': values['sim.tendon_damping'],
+                   'joint_damping': values['sim.joint_damping'],
+                   'link_mass': values['sim.link_mass']}
+        if settings.chain is not None:
+            return ChainSimulation(settings.chain, initial_screws=screws, **options)
+        return JointSimulation(settings.model, initial_screw=None if screws is None
+                               else screws[0], **options)
+
+    def _messages(self, settings: SimNodeSettings) -> None:
+        n = settings.n_strings
+        width = 6 * (settings.chain.n_joints if settings.chain is not None else 1)
+        self._msg_truth = msg_tools.vector_to_multiarray(np.zeros(width), msg_tools.SCREW_LABEL)
+        self._msg_lengths = msg_tools.vector_to_multiarray(np.zeros(n), LENGTHS_LABEL)
+        self._msg_tensions = msg_tools.vector_to_multiarray(np.zeros(n), TENSIONS_LABEL)
+        noise = settings.noise()
+        self._msg_imu = msg_tools.imu_message(settings.imu_frame, noise['gyro'],
+                                              noise['accelerometer'])
+
+    def close(self) -> None:
+        """Stop the stepping thread (called by the runner before the node is destroyed)."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout=5.0)
+
+    # ------------------------------------------------------------------ parameters
+    def _apply_parameters(self, values: Any, names: set[str]) -> None:
+        """A validated change: swapped in by the stepping thread before its next step; a
+        change of the model (``joint*.*``, ``chain.*``) rebuilds the twin at its current
+        configuration."""
+        try:
+            settings = sim_node_settings(values)
+        except Exception as exc:  # validated before: only a bug gets here; the old set stays
+            self.reporter.internal_error('parameters', exc)
+            return
+        rebuild = any(name.startswith(('joint', 'chain.')) for name in names)
+        self._pending_settings = (settings, rebuild)
+        self.get_logger().info(f'parameters applied: {sorted(names)}')
+
+    # ------------------------------------------------------------------ inputs
+    @guarded('~/rest_lengths')
+    def _on_rest_lengths(self, msg: Float64MultiArray) -> None:
+        settings = self._settings
+        try:
+            values = msg_tools.multiarray_to_array(
+                msg, expected_length=settings.n_strings,
+                max_length=settings.values['limits.max_array_length'])
+            if settings.chain is not None:
+                rest: Any = list(rest_lengths_input(values, settings.chain))
+            else:
+                rest = settings.model.validate_rest_lengths(values, batched=False)
+        except ValueError as exc:
+            self.reporter.reject('~/rest_lengths', str(exc))
+            return
+        self._pending_rest = rest
+
+    @guarded('~/external_wrench')
+    def _on_external_wrench(self, msg: WrenchStamped) -> None:
+        settings = self._settings
+        values = settings.values
+        try:
+            frame = msg.header.frame_id
+            if frame and frame != settings.base_frame:
+                raise ValueError(f"header.frame_id '{frame}' is not the base frame "
+                                 f"'{settings.base_frame}'")
+            W = msg_tools.msg_to_wrench(msg.wrench)
+            force, moment = float(np.linalg.norm(W[:3])), float(np.linalg.norm(W[3:]))
+            if force > values['limits.max_force']:
+                raise ValueError(f'|force| = {force:.6g} N exceeds limits.max_force = '
+                                 f'{values["limits.max_force"]:g} N')
+            if moment > values['limits.max_moment']:
+                raise ValueError(f'|moment| = {moment:.6g} N m exceeds limits.max_moment = '
+                                 f'{values["limits.max_moment"]:g} N m')
+        except ValueError as exc:
+            self.reporter.reject('~/external_wrench', str(exc))
+            return
+        self._topic_wrench = W
+
+    # ------------------------------------------------------------------ stepping
+    def _load_point(self) -> np.ndarray:
+        """Where the swinging load hangs: the origin of the last link at the start."""
+        sim = self._sim
+        pose = sim.link_poses()[-1] if isinstance(sim, ChainSimulation) else sim.pose()
+        return pose[:3, 3].copy()
+
+    def _take_inputs(self) -> None:
+        pending = self._pending_settings
+        if pending is not None:
+            self._pending_settings = None
+            settings, rebuild = pending
+            if rebuild:
+                sim = self._sim
+                screws = sim.screws() if isinstance(sim, ChainSimulation) else sim.screw()[None]
+                self._sim = self._simulation(settings, screws)
+            self._settings = settings
+            self._noise = SensorNoise(**settings.noise())
+            self._messages(settings)
+        rest = self._pending_rest
+        if rest is not None:
+            self._pending_rest = None
+            rate = self._settings.values['sim.rest_length_rate']
+            self._sim.set_rest_lengths(rest, rate=rate if rate > 0.0 else math.inf)
+
+    def _wrench_at(self, sim_time: float) -> np.ndarray:
+        """The topic's wrench plus the swinging load at ``sim_time``."""
+        values = self._settings.values
+        amplitude = values['load.swing_amplitude']
+        W = self._topic_wrench
+        if amplitude <= 0.0:
+            return W
+        e1, e2 = swing_plane(self._sim.gravity)
+        phase = 2.0 * math.pi * sim_time / values['load.swing_period']
+        force = amplitude * (math.cos(phase) * e1 + math.sin(phase) * e2)
+        return W + np.concatenate([force, np.cross(self._swing_origin, force)])
+
+    def _advance(self, n: int) -> None:
+        """``n`` steps under the current inputs (the swinging load updated every step)."""
+        self._take_inputs()
+        sim = self._sim
+        if self._settings.values['load.swing_amplitude'] > 0.0:
+            for _ in range(n):
+                sim.apply_wrench(self._wrench_at(sim.time))
+                sim.step()
+        else:
+            if not np.array_equal(sim.external_wrench, self._topic_wrench):
+                sim.apply_wrench(self._topic_wrench)
+            sim.step(n)
+        self.steps += n
+
+    def _run(self) -> None:
+        """The stepping loop: real time (absolute deadlines; a step whose deadline has passed by
+        a whole period is caught up at once and counted missed) or as fast as possible."""
+        try:
+            start = time.perf_counter()
+            while not self._stop.is_set() and self.context.ok():
+                n = 1
+                if self._real_time:
+                    deadline = start + (self.steps + 1) * self._period
+                    now = _wait_until(deadline)
+                    due = int((now - start) / self._period) - self.steps
+                    if due > 1:
+                        self.missed_steps += due - 1
+                        n = due
+                before = self.steps
+                self._advance(n)
+                every = self._settings.values['sim.publish_every']
+                if self.steps // every != before // every:
+                    self._publish()
+        except Exception as exc:  # the stepping thread must not die silently
+            if self.context.ok() and not self._stop.is_set():
+                self.reporter.internal_error('stepping', exc)
+
+    # ------------------------------------------------------------------ outputs
+    def _stamp(self) -> Any:
+        if self._real_time:
+            return self.get_clock().now().to_msg()
+        return msg_tools.stamp_from_seconds(self._sim.time)
+
+    def _publish(self) -> None:
+        settings, sim = self._settings, self._sim
+        stamp = self._stamp()
+        if self._pub_clock is not None:
+            self._pub_clock.publish(Clock(clock=stamp))
+        spine = isinstance(sim, ChainSimulation)
+        if self._pub_truth.get_subscription_count():
+            screws = sim.screws() if spine else sim.screw()
+            msg_tools.set_multiarray_data(self._msg_truth, screws.ravel())
+            self._pub_truth.publish(self._msg_truth)
+        if self._pub_pose.get_subscription_count():
+            if spine:
+                msg = PoseArray()
+                msg.header.stamp = stamp
+                msg.header.frame_id = settings.base_frame
+                msg.poses = [msg_tools.transform_to_pose(T) for T in exp_se3(sim.screws())]
+            else:
+                msg = PoseStamped()
+                msg.header.stamp = stamp
+                msg.header.frame_id = settings.base_frame
+                msg.pose = msg_tools.transform_to_pose(sim.pose())
+            self._pub_pose.publish(msg)
+        noise, rng = self._noise, self._rng
+        if self._pub_lengths.get_subscription_count():
+            lengths = noise.add(np.ravel(sim.string_lengths()), 'lengths', rng)
+            msg_tools.set_multiarray_data(self._msg_lengths, lengths)
+            self._pub_lengths.publish(self._msg_lengths)
+        if self._pub_tensions.get_subscription_count():
+            tensions = noise.add(np.ravel(sim.tensions()), 'tensions', rng)
+            msg_tools.set_multiarray_data(self._msg_tensions, tensions)
+            self._pub_tensions.publish(self._msg_tensions)
+        if self._pub_imu.get_subscription_count():
+            imu = sim.imu()
+            msg_tools.write_imu(self._msg_imu, noise.add(imu.angular_velocity, 'gyro', rng),
+                                noise.add(imu.specific_force, 'accelerometer', rng), stamp)
+            self._pub_imu.publish(self._msg_imu)
+        self.publications += 1
+
+
+    @guarded('diagnostics')
+    def _publish_diagnostics(self) -> None:
+        """Steps, missed steps, publications, simulated time and the real-time factor of the
+        last period, the rejected inputs."""
+        now, steps, sim_time = time.perf_counter(), self.steps, self.steps * self._period
+        then, _, sim_then = self._diagnosed
+        self._diagnosed = (now, steps, sim_time)
+        factor = (sim_time - sim_then) / (now - then) if now > then else 0.0
+        rejected = self.reporter.rejected
+        level = 'WARN' if self.missed_steps and self._real_time else 'OK'
+        values = [('steps', steps), ('missed steps', self.missed_steps),
+                  ('publications', self.publications), ('simulated time', sim_time),
+                  ('real-time factor', factor), ('rejected inputs', rejected or 0)]
+        message = (f'{steps} steps, {self.missed_steps} missed, real-time factor {factor:.3g}')
+        self._pub_diagnostics.publish(msg_tools.diagnostic_array(
+            [msg_tools.diagnostic_status(f'{self.get_name()}: twin', level, message, values,
+                                         hardware_id=self._settings.base_frame)],
+            self.get_clock().now().to_msg()))
+
+
+def _wait_until(deadline: float) -> float:
+    """Sleep until :data:`SPIN_S` before ``deadline``, spin the rest; the time it stopped."""
+    while (now := time.perf_counter()) < deadline:
+        if deadline - now > SPIN_S:
+            time.sleep(deadline - now - SPIN_S)
+    return now
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run tensegrity_stiffness sim_node``."""
+    runner.run(SimNode, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,272 @@
+"""``twin_demo``: the whole loop without hardware, in one command (``scripts/run_twin.sh``).
+
+Starts ``sim_node`` (the MuJoCo twin, slowly swinging a load) and ``stiffness_node`` (or, with
+``--spine``, ``spine_node``) wired together in one namespace: the stiffness node's ``~/pose``
+(``~/poses``) is the twin's. Then prints a one-line summary once a second: the input rate the
+stiffness node gets, the pose, the smallest and largest eigenvalue of the symmetric part of
+``K_c`` (the tip stiffness for a spine), the slack strings and the latency from the twin's
+publication to the stiffness node's output. Ctrl-C (or ``--duration``) stops both nodes cleanly
+(SIGINT, then a wait) and exits 0.
+
+The nodes' own logs go to files (their paths are printed first), the terminal keeps the summary.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from std_msgs.msg import Float64MultiArray
+
+import msg_tools
+from tensegrity_stiffness import config
+from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.topics import output_qos
+
+PACKAGE = 'tensegrity_stiffness'
+NAMESPACE = '/twin'
+#: Default swinging load: amplitude (N) and period (s) for the joint and the spine.
+JOINT_SWING = (0.1, 10.0)
+SPINE_SWING = (0.01, 10.0)
+#: Seconds a node gets to stop after SIGINT before it is killed.
+STOP_TIMEOUT_S = 10.0
+
+
+def _executable(name: str) -> str:
+    from ament_index_python.packages import get_package_prefix
+
+    path = Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / name
+    if not os.access(path, os.X_OK):
+        raise SystemExit(f'twin_demo: {path} is not an executable (run scripts/setup_env.sh)')
+    return str(path)
+
+
+def subscribe(node: Any, msg_type: Any, topic: str, callback: Any, qos: Any) -> Any:
+    """A subscription that also takes what queued behind each message (the monitor gets four
+    1 kHz streams: one executor wake-up per message would not keep up on a busy machine)."""
+    return create_draining_subscription(node, msg_type, topic, callback, qos)
+
+
+class Monitor:
+    """Subscribes to the twin and the stiffness node; :meth:`summary` is one line per call."""
+
+    def __init__(self, node: Any, spine: bool, n_strings: int) -> None:
+        self.node = node
+        self.spine = spine
+        self.n_strings = n_strings
+        self._lock = threading.Lock()
+        self._inputs = 0
+        self._pose: np.ndarray | None = None
+        self._stiffness: np.ndarray | None = None
+        self._tensions: np.ndarray | None = None
+        self._latencies: list[float] = []
+        qos = output_qos(100)
+        sim, spine_node = f'{NAMESPACE}/sim_node', f'{NAMESPACE}/spine_node'
+        joint_node = f'{NAMESPACE}/stiffness_node'
+        if spine:
+            subscribe(node, PoseArray, f'{sim}/poses', self._on_poses, qos)
+            subscribe(node, PoseStamped, f'{spine_node}/tip_pose',
+                                     self._on_tip_pose, qos)
+            subscribe(node, Float64MultiArray, f'{spine_node}/tip_stiffness_base',
+                                     self._on_stiffness, qos)
+            subscribe(node, Float64MultiArray, f'{sim}/measured_tensions',
+                                     self._on_tensions, qos)
+        else:
+            subscribe(node, PoseStamped, f'{sim}/pose', self._on_pose, qos)
+            subscribe(node, WrenchStamped, f'{joint_node}/wrench',
+                                     self._on_output, qos)
+            subscribe(node, Float64MultiArray, f'{joint_node}/cartesian_stiffness',
+                                     self._on_stiffness, qos)
+            subscribe(node, Float64MultiArray, f'{joint_node}/string_tensions',
+                                     self._on_tensions, qos)
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        with self._lock:
+            self._inputs += 1
+            self._pose = msg_tools.pose_to_transform(msg.pose)
+
+    def _on_poses(self, msg: PoseArray) -> None:
+        with self._lock:
+            self._inputs += 1
+
+    def _on_tip_pose(self, msg: PoseStamped) -> None:
+        self._on_output(msg)
+        with self._lock:
+            self._pose = msg_tools.pose_to_transform(msg.pose)
+
+    def _on_output(self, msg: Any) -> None:
+        now = self.node.get_clock().now().nanoseconds
+        stamp = msg.header.stamp
+        latency = (now - (stamp.sec * 1_000_000_000 + stamp.nanosec)) * 1e-9
+        with self._lock:
+            self._latencies.append(latency)
+
+    def _on_stiffness(self, msg: Float64MultiArray) -> None:
+        K = np.asarray(msg.data, dtype=np.float64).reshape(6, 6)
+        with self._lock:
+            self._stiffness = K
+
+    def _on_tensions(self, msg: Float64MultiArray) -> None:
+        with self._lock:
+            self._tensions = np.asarray(msg.data, dtype=np.float64)
+
+    def summary(self, elapsed: float, period: float) -> str:
+        """One line: rate, pose, K_c eigenvalues, slack strings, latency (and resets the
+        counters of the period)."""
+        with self._lock:
+            inputs, self._inputs = self._inputs, 0
+            latencies, self._latencies = self._latencies, []
+            pose, K, tensions = self._pose, self._stiffness, self._tensions
+        parts = [f't {elapsed:6.1f} s', f'input {inputs / period:6.0f} Hz']
+        if pose is not None:
+            p = pose[:3, 3] * 1e3
+            angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(pose[:3, :3]) - 1) / 2))))
+            parts.append(f'{"tip" if self.spine else "pose"} [{p[0]:6.2f} {p[1]:6.2f} '
+                         f'{p[2]:6.2f}] mm {angle:6.2f} deg')
+        else:
+            parts.append('pose -')
+        if K is not None:
+            eig = np.linalg.eigvalsh(0.5 * (K + K.T))
+            parts.append(f'{"K_tip" if self.spine else "K_c"} eig {eig[0]:.4g} .. {eig[-1]:.4g}')
+        else:
+            parts.append('K_c -')
+        slack = '-' if tensions is None else f'{int(np.count_nonzero(tensions <= 0.0))}'
+        parts.append(f'slack {slack}/{self.n_strings}')
+        if latencies:
+            parts.append(f'latency median {statistics.median(latencies) * 1e3:.2f} ms '
+                         f'max {max(latencies) * 1e3:.2f} ms')
+        else:
+            parts.append('latency -')
+        return '  '.join(parts)
+
+
+def _stop(process: subprocess.Popen) -> int:
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait(STOP_TIMEOUT_S)
+    return process.returncode
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog='twin_demo', description='MuJoCo twin + stiffness node, wired together, with a '
+        'live one-line summary once a second (Ctrl-C stops both).')
+    parser.add_argument('--spine', action='store_true',
+                        help='the 5-joint spine (config/default_spine.yaml) and spine_node')
+    parser.add_argument('--config', type=Path, default=None,
+                        help='ROS parameter file (default: config/default_joint.yaml or '
+                        'config/default_spine.yaml)')
+    parser.add_argument('--duration', type=float, default=None,
+                        help='stop after this many seconds (default: until Ctrl-C)')
+    parser.add_argument('--swing', type=float, default=None,
+                        help='amplitude of the swinging load, N (default 0.1 joint, 0.01 spine)')
+    parser.add_argument('--swing-period', type=float, default=None,
+                        help='period of the swinging load, s (default 10)')
+    parser.add_argument('--rate', type=float, default=1000.0, help='simulation rate, Hz')
+    args = parser.parse_args(argv)
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        parser.error(f'--duration must be a positive number of seconds, got {args.duration}')
+    amplitude, period = SPINE_SWING if args.spine else JOINT_SWING
+    amplitude = amplitude if args.swing is None else args.swing
+    period = period if args.swing_period is None else args.swing_period
+    name = 'default_spine.yaml' if args.spine else 'default_joint.yaml'
+    params = args.config or config.packaged_config_path(name)
+    if not Path(params).is_file():
+        parser.error(f'--config {params}: no such file')
+    if args.spine:
+        chain_doc = config.parameters(config.load_yaml(params))
+        from tensegrity_stiffness.chain import JointChain
+        n_strings = sum(m.n_strings for m in JointChain.from_dict(chain_doc).joints)
+    else:
+        from tensegrity_stiffness.joint import JointModel
+        n_strings = JointModel.from_yaml(params).n_strings
+
+    stiffness = 'spine_node' if args.spine else 'stiffness_node'
+    wired = (f'{NAMESPACE}/spine_node/poses:={NAMESPACE}/sim_node/poses' if args.spine else
+             f'{NAMESPACE}/stiffness_node/pose:={NAMESPACE}/sim_node/pose')
+    sim_args = [_executable('sim_node'), '--ros-args', '--params-file', str(params),
+                '-r', f'__ns:={NAMESPACE}', '-p', f'sim.spine:={str(args.spine).lower()}',
+                '-p', f'sim.rate:={args.rate}', '-p', f'load.swing_amplitude:={amplitude}',
+                '-p', f'load.swing_period:={period}']
+    node_args = [_executable(stiffness), '--ros-args', '--params-file', str(params),
+                 '-r', f'__ns:={NAMESPACE}', '-r', wired]
+    logs = Path(tempfile.mkdtemp(prefix='twin_demo_'))
+    print(f'twin_demo: sim_node + {stiffness} in {NAMESPACE} (ROS_DOMAIN_ID='
+          f'{os.environ.get("ROS_DOMAIN_ID", "0")}), swinging {amplitude:g} N every '
+          f'{period:g} s; logs in {logs}', flush=True)
+
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    processes = []
+    for exe_args, log in ((node_args, logs / f'{stiffness}.log'),
+                          (sim_args, logs / 'sim_node.log')):
+        with log.open('w') as out:
+            # Own process group: a Ctrl-C on the terminal reaches this script, which stops them.
+            processes.append(subprocess.Popen(exe_args, stdout=out, stderr=subprocess.STDOUT,
+                                              env=os.environ.copy(), start_new_session=True))
+    rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node('twin_monitor')
+    monitor = Monitor(node, args.spine, n_strings)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=_spin, args=(executor, stop), daemon=True)
+    spinner.start()
+    start = time.monotonic()
+    code = 0
+    try:
+        next_line = start + 1.0
+        while not stop.is_set():
+            if stop.wait(max(0.0, next_line - time.monotonic())):
+                break
+            now = time.monotonic()
+            print(monitor.summary(now - start, 1.0), flush=True)
+            next_line += 1.0
+            dead = [p.args[0] for p in processes if p.poll() is not None]
+            if dead:
+                print(f'twin_demo: {", ".join(Path(d).name for d in dead)} exited; see {logs}',
+                      flush=True)
+                code = 1
+                break
+            if args.duration is not None and now - start >= args.duration:
+                break
+    finally:
+        stop.set()
+        codes = [_stop(p) for p in processes]
+        spinner.join(timeout=2.0)
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    print(f'twin_demo: stopped ({stiffness} exit {codes[0]}, sim_node exit {codes[1]})',
+          flush=True)
+    return code or int(any(codes))
+
+
+def _spin(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
+    try:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.1)
+    except (ExternalShutdownException, Exception):
+        pass
+
+
+if __name__ == '__main__':
+    sys.exit(main())
