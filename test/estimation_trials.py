@@ -57,19 +57,33 @@ def nees(error: np.ndarray, covariance: np.ndarray) -> float:
 
 @dataclass
 class Truth:
-    """What the sensors see: screw, transform, tensions, lengths, wrench on link 2 (strings)."""
+    """What the sensors see: screw, transform, tensions, lengths, wrench of the strings on link
+    2, the direction of gravity in link 2 (an accelerometer at rest) and the external load."""
 
     screw: np.ndarray
     transform: np.ndarray
     tensions: np.ndarray
     lengths: np.ndarray
     string_wrench: np.ndarray
+    gravity: np.ndarray
+    external_wrench: np.ndarray
 
 
 def truth_from_model(model, xi) -> Truth:
+    """The forward model's sensors at ``xi`` (the quasi-static load ``-F``)."""
     state = model.evaluate(xi)
     return Truth(np.array(xi), state.transform.copy(), state.tensions.copy(),
-                 state.lengths.copy(), state.wrench.copy())
+                 state.lengths.copy(), state.wrench.copy(),
+                 state.transform[:3, :3].T @ GRAVITY_BASE, -state.wrench)
+
+
+def truth_from_twin(simulation) -> Truth:
+    """The MuJoCo twin's sensors (a settled :class:`JointSimulation`): its tendon tensions and
+    lengths, its IMU's specific force (gravity = its opposite) and its applied load."""
+    a = simulation.imu().specific_force
+    return Truth(simulation.screw(), simulation.pose(), simulation.tensions(),
+                 simulation.string_lengths(), simulation.string_wrench(),
+                 -a / np.linalg.norm(a), simulation.external_wrench)
 
 
 def perturbed_pose(transform, covariance, rng) -> np.ndarray:
@@ -97,14 +111,13 @@ def measure(truth: Truth, sensor_set, rng, n_strings: int = 12) -> Measurements:
         ln[idx] = truth.lengths[idx] + rng.normal(scale=LENGTH_STD, size=idx.size)
         kw.update(lengths=ln, length_std=LENGTH_STD)
     if imu:
-        g2 = truth.transform[:3, :3].T @ GRAVITY_BASE
-        kw.update(gravity=g2 + rng.normal(scale=GRAVITY_STD, size=3), gravity_std=GRAVITY_STD,
-                  gravity_base=GRAVITY_BASE)
+        kw.update(gravity=truth.gravity + rng.normal(scale=GRAVITY_STD, size=3),
+                  gravity_std=GRAVITY_STD, gravity_base=GRAVITY_BASE)
     if pose:
         kw.update(pose=perturbed_pose(truth.transform, POSE_COVARIANCE, rng),
                   pose_covariance=POSE_COVARIANCE)
     if wrench:
-        kw.update(external_wrench=-truth.string_wrench + rng.multivariate_normal(
+        kw.update(external_wrench=truth.external_wrench + rng.multivariate_normal(
             np.zeros(6), WRENCH_COVARIANCE), wrench_covariance=WRENCH_COVARIANCE)
     return Measurements(**kw)
 
