@@ -30,6 +30,7 @@ setup(
             'spine_node = tensegrity_stiffness.ros.spine_node:main',
             'sim_node = tensegrity_stiffness.ros.sim_node:main',
             'twin_demo = tensegrity_stiffness.ros.twin_demo:main',
+            'estimator_node = tensegrity_stiffness.ros.estimator_node:main',
             'tensegrity-stiffness = tensegrity_stiffness.cli:main',
         ],
     },

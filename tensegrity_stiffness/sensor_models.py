@@ -277,3 +277,10 @@ def equilibrium_residual(model: JointModel, xi: ArrayLike, external_wrench: Arra
     J[:, :6] = state.stiffness
     J[:, 6:] = np.eye(6)
     return state.wrench + W, J
+
+
+def gravity_from_specific_force(specific_force: ArrayLike) -> FloatArray:
+    """The unit direction of gravity (3,) in the accelerometer's frame from its specific force
+    at rest (``a - g`` = ``-g``: it points up), ``-a / |a|``; ValueError when it is not three
+    finite numbers or zero."""
+    return -unit_vector(specific_force, 'specific_force')
