@@ -33,6 +33,7 @@ Every Jacobian is held to central differences in ``test/test_sensor_models.py``.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -121,23 +122,33 @@ def string_predictions(model: JointModel, xi: ArrayLike,
         model, _screw(xi), model.validate_rest_lengths(rest_lengths, batched=False))
 
 
+_UNIT_ROWS: weakref.WeakKeyDictionary[JointModel, FloatArray] = weakref.WeakKeyDictionary()
+
+
+def _unit_rows(model: JointModel) -> FloatArray:
+    """``[hat(p1_j)^T, I]`` (n, 3, 6) per string of ``model`` (cached per model): ``u_j^T``
+    times it is ``[(p1_j x u_j)^T, u_j^T]``."""
+    rows = _UNIT_ROWS.get(model)
+    if rows is None:
+        p1 = model._p1
+        rows = np.zeros((p1.shape[0], 3, 6))
+        rows[:, :, :3] = np.swapaxes(hat3(p1), 1, 2)
+        rows[:, :, 3:] = np.eye(3)
+        _UNIT_ROWS[model] = rows
+    return rows
+
+
 def string_predictions_unchecked(model: JointModel, xi: FloatArray, rest: FloatArray
                                  ) -> StringPrediction:
     """:func:`string_predictions` for a validated screw (6,) and rest lengths (n,) (the
     estimator's per-iteration path)."""
     state = model.evaluate(xi, rest)
     kin = ScrewKinematics(xi)
-    s = state.string_vectors
     lengths = state.lengths
-    u = s / lengths[:, None]
-    # q x u = (p1 - s) x s / l = (p1 x s) / l
-    p1 = model._p1
-    row = np.empty((lengths.shape[0], 6))
-    row[:, 0] = p1[:, 1] * u[:, 2] - p1[:, 2] * u[:, 1]
-    row[:, 1] = p1[:, 2] * u[:, 0] - p1[:, 0] * u[:, 2]
-    row[:, 2] = p1[:, 0] * u[:, 1] - p1[:, 1] * u[:, 0]
-    row[:, 3:] = u
-    length_jacobian = row @ kin.J
+    u = state.string_vectors / lengths[:, None]
+    # [q x u, u] = u^T [hat(p1)^T, I] (q x u = (p1 - s) x u = p1 x u): one batched product with
+    # the per-string constant blocks, then -(...) J.
+    length_jacobian = (u[:, None, :] @ _unit_rows(model))[:, 0, :] @ kin.J
     np.negative(length_jacobian, out=length_jacobian)
     slope = model._string_forces(lengths, rest)[1]
     if np.ndim(slope) == 0 or slope.shape != lengths.shape:
@@ -214,8 +225,10 @@ def pose_jacobian(xi: ArrayLike, kinematics: ScrewKinematics | None = None) -> F
     the PoseWithCovariance convention, per change of screw coordinates (``D = dt/domega``,
     eqs. 15-17; ``G`` the SO(3) left Jacobian, eq. 4)."""
     kin = ScrewKinematics(_screw(xi)) if kinematics is None else kinematics
+    tx, ty, tz = kin.t.tolist()
     out = np.zeros((6, 6))
-    out[:3, :3] = kin.D
+    # D = Q - hat(t) G (ScrewKinematics.D, written out for the estimator's per-estimate path)
+    out[:3, :3] = kin.Q - np.array([[0.0, -tz, ty], [tz, 0.0, -tx], [-ty, tx, 0.0]]) @ kin.G
     out[:3, 3:] = kin.G
     out[3:, :3] = kin.G
     return out
