@@ -31,6 +31,7 @@ setup(
             'sim_node = tensegrity_stiffness.ros.sim_node:main',
             'twin_demo = tensegrity_stiffness.ros.twin_demo:main',
             'estimator_node = tensegrity_stiffness.ros.estimator_node:main',
+            'spine_estimator_node = tensegrity_stiffness.ros.spine_estimator_node:main',
             'tensegrity-stiffness = tensegrity_stiffness.cli:main',
         ],
     },

@@ -21,12 +21,19 @@ from msg_tools.arrays import matrix_to_multiarray, payload, vector_to_multiarray
 from msg_tools.geometry import msg_to_wrench, pose_to_transform, transform_to_pose
 from msg_tools.imu import imu_to_arrays
 from msg_tools.outputs import fill_outputs, write_payload, write_wrench_stamped
-from tensegrity_stiffness.estimation_processing import EstimatorOutputs, output_arrays
+from tensegrity_stiffness.estimation_processing import (
+    EstimatorOutputs,
+    SpineEstimatorOutputs,
+    output_arrays,
+    spine_output_arrays,
+)
 from tensegrity_stiffness.layouts import (
     CARTESIAN_STIFFNESS_COL_LABEL,
+    JOINTS_LABEL,
     SCREW_LABEL,
     STIFFNESS_COL_LABEL,
     STIFFNESS_ROW_LABEL,
+    TIP_STIFFNESS_LABELS,
     tensions_label,
 )
 
@@ -34,6 +41,7 @@ FloatArray = NDArray[np.float64]
 
 __all__ = [
     'EstimatorOutputMessages',
+    'SpineEstimatorOutputMessages',
     'imu_specific_force',
     'measured_values',
     'pose_with_covariance_to_arrays',
@@ -122,3 +130,36 @@ class EstimatorOutputMessages:
         fill_outputs(self.messages()[1:], rest, (write_wrench_stamped,) + (write_payload,) * 5,
                      stamp, frame_id, None if wanted is None else wanted[1:])
 
+
+
+class SpineEstimatorOutputMessages:
+    """The five per-estimate messages of ``spine_estimator_node``: ``~/screws_estimate`` (N x 6,
+    joint-major), ``~/tip_pose_estimate`` (tool frame in the base, with covariance),
+    ``~/tip_wrench_estimate`` (base, about its origin), ``~/tip_stiffness_base`` and
+    ``~/tip_stiffness_base_std`` (labelled as ``spine_node``'s ``~/tip_stiffness_base``)."""
+
+    def __init__(self, n_joints: int) -> None:
+        self.screws = matrix_to_multiarray(np.zeros((n_joints, 6)), JOINTS_LABEL, SCREW_LABEL)
+        self.pose = PoseWithCovarianceStamped()
+        self.wrench = WrenchStamped()
+        rows, cols = TIP_STIFFNESS_LABELS['base']
+        self.stiffness = matrix_to_multiarray(np.zeros((6, 6)), rows, cols)
+        self.stiffness_std = matrix_to_multiarray(np.zeros((6, 6)), rows, cols)
+
+    def messages(self) -> tuple[Any, ...]:
+        """The messages in topic order (see the class docstring)."""
+        return (self.screws, self.pose, self.wrench, self.stiffness, self.stiffness_std)
+
+    def fill(self, outputs: SpineEstimatorOutputs, stamp: Time, frame_id: str,
+             wanted: tuple[bool, ...] | None = None) -> None:
+        """Set the messages (those flagged in ``wanted``) from one estimate whose arrays
+        :func:`~tensegrity_stiffness.estimation_processing.spine_estimator_outputs` checked
+        finite."""
+        screws, transform, covariance, wrench, stiffness, std = spine_output_arrays(outputs)
+        if wanted is None or wanted[1]:
+            write_pose_with_covariance(self.pose, transform, covariance, stamp, frame_id)
+        messages = self.messages()
+        fill_outputs((messages[0], *messages[2:]), (screws, wrench, stiffness, std),
+                     (write_payload, write_wrench_stamped, write_payload, write_payload),
+                     stamp, frame_id,
+                     None if wanted is None else (wanted[0], *wanted[2:]))

@@ -17,9 +17,21 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness import sensor_models as sm
-from tensegrity_stiffness.estimation import JointEstimate, Measurements, estimate_joint_state
+from tensegrity_stiffness.chain import ChainState
+from tensegrity_stiffness.estimation import (
+    ChainEstimate,
+    JointEstimate,
+    Measurements,
+    estimate_chain_state,
+    estimate_joint_state,
+)
 from tensegrity_stiffness.joint import JointState
-from tensegrity_stiffness.parameters import ESTIMATOR_INPUTS, EstimatorNodeSettings
+from tensegrity_stiffness.parameters import (
+    ESTIMATOR_INPUTS,
+    SPINE_ESTIMATOR_INPUTS,
+    EstimatorNodeSettings,
+    SpineEstimatorNodeSettings,
+)
 from tensegrity_stiffness.validation import require_all_finite
 
 FloatArray = NDArray[np.float64]
@@ -109,15 +121,24 @@ def measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading
     if 'imu' in readings:
         kw.update(gravity=readings['imu'].value, gravity_std=settings.gravity_std,
                   gravity_base=settings.gravity_base)
-    load = np.diag([settings.force_std ** 2] * 3 + [settings.moment_std ** 2] * 3)
+    W, covariance = load_measurement(settings, readings)
+    return Measurements(**kw, external_wrench=W, wrench_covariance=covariance)
+
+
+def load_measurement(settings: EstimatorNodeSettings, readings: Mapping[str, Reading]
+                     ) -> tuple[FloatArray | None, FloatArray | None]:
+    """(wrench, covariance) of the load under ``estimation.external_wrench``: (None, None) when
+    unknown, zero or the fresh ``measured_wrench`` with the force-torque stds; ValueError when
+    'measured' and none is fresh."""
+    if settings.load_mode == 'unknown':
+        return None, None
+    covariance = np.diag([settings.force_std ** 2] * 3 + [settings.moment_std ** 2] * 3)
     if settings.load_mode == 'zero':
-        kw.update(external_wrench=np.zeros(6), wrench_covariance=load)
-    elif settings.load_mode == 'measured':
-        if 'measured_wrench' not in readings:
-            raise ValueError("estimation.external_wrench is 'measured' but no ~/measured_wrench "
-                             'arrived within estimation.max_age')
-        kw.update(external_wrench=readings['measured_wrench'].value, wrench_covariance=load)
-    return Measurements(**kw)
+        return np.zeros(6), covariance
+    if 'measured_wrench' not in readings:
+        raise ValueError("estimation.external_wrench is 'measured' but no ~/measured_wrench "
+                         'arrived within estimation.max_age')
+    return readings['measured_wrench'].value, covariance
 
 
 @dataclass(frozen=True)
@@ -178,8 +199,9 @@ def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput
     return outputs
 
 
-def diagnostic_values(outputs: EstimatorOutputs) -> list[tuple[str, Any]]:
-    """``(key, value)`` pairs of the last estimate for /diagnostics."""
+def diagnostic_values(outputs: EstimatorOutputs | SpineEstimatorOutputs
+                      ) -> list[tuple[str, Any]]:
+    """``(key, value)`` pairs of the last estimate (a joint's or a spine's) for /diagnostics."""
     est = outputs.estimate
     ratio = est.chi2 / est.dof if est.dof > 0 else math.nan
     values: list[tuple[str, Any]] = [
@@ -190,3 +212,84 @@ def diagnostic_values(outputs: EstimatorOutputs) -> list[tuple[str, Any]]:
     ]
     values += [(f'age of {name} [ms]', 1e3 * age) for name, age in sorted(outputs.ages.items())]
     return values
+
+
+# ---------------------------------------------------------------------------------- spines
+@dataclass(frozen=True)
+class SpineEstimatorOutputs:
+    """One spine estimate (:class:`~tensegrity_stiffness.estimation.ChainEstimate`), the inputs
+    used and every input's age (s)."""
+
+    estimate: ChainEstimate
+    used: tuple[str, ...]
+    ages: Mapping[str, float] = field(default_factory=dict)
+
+    @property
+    def state(self) -> ChainState:
+        return self.estimate.state
+
+    @property
+    def screw(self) -> tuple[FloatArray, FloatArray]:
+        """The warm start of the next estimate: (screws, tip wrench)."""
+        return self.estimate.screws, self.estimate.tip_wrench
+
+
+#: Names of the spine's published arrays, in :func:`spine_output_arrays` order.
+SPINE_OUTPUT_NAMES = ('screws_estimate', 'tip_pose_estimate', 'tip pose covariance',
+                      'tip_wrench_estimate', 'tip_stiffness_base', 'tip_stiffness_base_std')
+
+
+def spine_output_arrays(outputs: SpineEstimatorOutputs) -> tuple[FloatArray, ...]:
+    """The published arrays in :data:`SPINE_OUTPUT_NAMES` order."""
+    est = outputs.estimate
+    return (est.screws, est.tip_transform, est.tip_pose_covariance, est.tip_wrench,
+            est.tip_stiffness, est.tip_stiffness_std)
+
+
+def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput
+                            ) -> SpineEstimatorOutputs:
+    """The spine estimate of the fresh readings of ``snapshot`` (per-string arrays of every
+    joint, joint-major; ``measured_pose`` the tool frame in the base; ``measured_wrench`` the
+    tip load); ValueError (nothing is published) as :func:`estimator_outputs`."""
+    options = settings.estimator
+    readings, ages = fresh_readings(snapshot, options.max_age)
+    if not readings:
+        raise ValueError('no input within estimation.max_age')
+    stale = sorted(set(snapshot.readings) - set(readings))
+    counts = settings.n_strings
+    bounds = np.cumsum([0, *counts])
+    joints: list[Measurements | None] = []
+    for i in range(settings.n_joints):
+        part = slice(bounds[i], bounds[i + 1])
+        kw: dict[str, Any] = {}
+        for name, key, std in (('measured_tensions', 'tensions', options.tension_std),
+                               ('measured_lengths', 'lengths', options.length_std)):
+            if name in readings:
+                values = readings[name].value[part]
+                if not np.all(np.isnan(values)):
+                    kw.update({key: values, f'{key[:-1]}_std': std})
+        joints.append(Measurements(**kw) if kw else None)
+    tip_pose = tip_cov = None
+    if 'measured_pose' in readings:
+        tip_pose, tip_cov = readings['measured_pose'].value
+        if tip_cov is None:
+            tip_cov = np.diag([options.pose_position_std ** 2] * 3
+                              + [options.pose_angle_std ** 2] * 3)
+    load, load_covariance = load_measurement(options, readings)
+    initial_screws = initial_wrench = None
+    if snapshot.initial_screw is not None:
+        initial_screws, initial_wrench = snapshot.initial_screw
+    est = estimate_chain_state(
+        settings.chain, joints, tip_pose, tip_cov, load, load_covariance,
+        rest_lengths=settings.current_rest_lengths(), initial_screws=initial_screws,
+        initial_tip_wrench=initial_wrench, stiffness_std=options.stiffness_std)
+    if not est.success:
+        left_out = f' (left out as older than {options.max_age:g} s: {", ".join(stale)})' \
+            if stale else ''
+        raise ValueError(f'no estimate: {est.message}{left_out}')
+    outputs = SpineEstimatorOutputs(
+        est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages)
+    arrays = spine_output_arrays(outputs)
+    count = len(arrays) if options.stiffness_std else len(arrays) - 1
+    require_all_finite(SPINE_OUTPUT_NAMES[:count], arrays[:count])
+    return outputs

@@ -664,3 +664,67 @@ def estimator_node_settings(values: Mapping[str, Any], generation: int = 0
         max_array_length=checked['limits.max_array_length'],
         marker_period=marker_period(checked['markers.max_rate']),
         generation=generation, values=checked)
+
+
+# --------------------------------------------------------------------------- spine_estimator_node
+#: Inputs of ``spine_estimator_node`` (no IMU on a spine yet): per-string arrays of every joint,
+#: joint-major; ``measured_pose`` is the tool frame in the base; ``measured_wrench`` the tip load.
+SPINE_ESTIMATOR_INPUTS = ('measured_tensions', 'measured_lengths', 'measured_pose',
+                          'measured_wrench')
+
+
+def spine_estimator_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, ...]:
+    """Every parameter of ``spine_estimator_node``: the spine's (as ``spine_node``) and the
+    estimator's (``estimation.*``, ``sensors.*``; the IMU's are not used)."""
+    return spine_node_parameters(n_joints) + ESTIMATION_PARAMETERS
+
+
+@dataclass(frozen=True)
+class SpineEstimatorNodeSettings:
+    """Everything one estimate of ``spine_estimator_node`` needs, swapped as a whole: the spine
+    (``chain``, frames, topic-set ``rest_lengths`` as :class:`SpineNodeSettings`) and the
+    estimator's settings (``estimator``: the sensors' stds, load mode, trigger, max age)."""
+
+    chain: JointChain
+    base_frame: str
+    tool_frame: str
+    max_array_length: int
+    marker_period: float
+    estimator: EstimatorNodeSettings
+    rest_lengths: tuple[Any, ...] | None = None
+    generation: int = 0
+    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def n_joints(self) -> int:
+        return self.chain.n_joints
+
+    @property
+    def n_strings(self) -> list[int]:
+        """String count of every joint."""
+        return [model.n_strings for model in self.chain.joints]
+
+    def current_rest_lengths(self) -> list[Any]:
+        """Every joint's rest lengths now (topic-set or configured)."""
+        if self.rest_lengths is not None:
+            return list(self.rest_lengths)
+        return [model.rest_lengths for model in self.chain.joints]
+
+
+def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
+                                  ) -> SpineEstimatorNodeSettings:
+    """Validate a whole parameter set of ``spine_estimator_node``; ValueError names the bad
+    field (an ``estimation.trigger`` the spine has no input for among them)."""
+    spine = spine_node_settings(values, generation)
+    if values['estimation.trigger'] not in SPINE_ESTIMATOR_INPUTS:
+        raise ValueError(f'estimation.trigger must be one of {" | ".join(SPINE_ESTIMATOR_INPUTS)}'
+                         f' for a spine, got {values["estimation.trigger"]!r}')
+    joint_values = {name: values[name] for name in (spec.name for spec in JOINT_PARAMETERS)}
+    estimator = estimator_node_settings({
+        **defaults(ESTIMATOR_NODE_PARAMETERS), **joint_values,
+        **{spec.name: values[spec.name] for spec in ESTIMATION_PARAMETERS + COMMON_PARAMETERS}})
+    return SpineEstimatorNodeSettings(
+        chain=spine.chain, base_frame=spine.base_frame, tool_frame=spine.tool_frame,
+        max_array_length=spine.max_array_length, marker_period=spine.marker_period,
+        estimator=estimator, generation=generation, values=spine.values | {
+            spec.name: estimator.values[spec.name] for spec in ESTIMATION_PARAMETERS})

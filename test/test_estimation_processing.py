@@ -147,3 +147,36 @@ def test_output_messages(settings):
     assert Kc_std.layout.dim[1].label == Kc.layout.dim[1].label
     assert wrench.header.frame_id == 'link1' and len(tensions.data) == 12
     np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.state.stiffness)
+
+
+def test_spine_settings_and_outputs():
+    """spine_estimator_node's settings (no IMU trigger) and one estimate of a 3-joint spine's
+    tensions, split per joint from the joint-major array."""
+    from tensegrity_stiffness.estimation_processing import spine_estimator_outputs
+    from tensegrity_stiffness.parameters import (
+        spine_estimator_node_parameters,
+        spine_estimator_node_settings,
+    )
+
+    values = parameters.defaults(spine_estimator_node_parameters(3))
+    values['chain.n_joints'] = 3
+    settings = spine_estimator_node_settings(values)
+    assert settings.n_joints == 3 and settings.estimator.load_mode == 'unknown'
+    with pytest.raises(ValueError, match=r'estimation\.trigger'):
+        spine_estimator_node_settings({**values, 'estimation.trigger': 'imu'})
+    screws = settings.chain.unloaded_screws()
+    state = settings.chain.evaluate(screws)
+    now = time.monotonic()
+    tensions = np.concatenate(list(state.tensions))
+    tensions[12:24] = np.nan  # joint 2 without load cells
+    out = spine_estimator_outputs(settings, EstimatorInput(
+        {'measured_tensions': Reading(tensions, now)}, now, (screws, np.zeros(6))))
+    assert out.estimate.success and out.used == ('measured_tensions',)
+    np.testing.assert_allclose(out.estimate.tip_wrench, 0.0, atol=1e-7)
+    messages = estimation_msgs.SpineEstimatorOutputMessages(3)
+    messages.fill(out, PoseWithCovarianceStamped().header.stamp, 'spine_base')
+    screws_msg, pose, wrench, K, K_std = messages.messages()
+    np.testing.assert_allclose(np.reshape(screws_msg.data, (3, 6)), out.estimate.screws)
+    np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.estimate.tip_stiffness)
+    assert pose.header.frame_id == wrench.header.frame_id == 'spine_base'
+    assert len(K_std.data) == 36

@@ -65,6 +65,8 @@ class EstimatorNode(StreamingNode):
         (Float64MultiArray, '~/cartesian_stiffness'), (Float64MultiArray, '~/string_tensions'),
         (Float64MultiArray, '~/cartesian_stiffness_std'))
     WORKER_NAME = 'equilibrium worker'
+    #: What the frame of ~/measured_pose and ~/measured_wrench is called in warnings.
+    INPUT_FRAME_NAME = "link 1's frame"
     _build_settings = staticmethod(estimator_node_settings)
     _output_frame = attrgetter('link1_frame')
     _settings: EstimatorNodeSettings
@@ -72,14 +74,29 @@ class EstimatorNode(StreamingNode):
     _keep_topic_rest_lengths = StiffnessNode._keep_topic_rest_lengths
     _with_rest_lengths = StiffnessNode._with_rest_lengths
 
-    def __init__(self, **kwargs: Any) -> None:
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         self._readings: dict[str, Reading] = {}
-        super().__init__(NODE_NAME, **kwargs)
-        settings = self._settings
+        super().__init__(node_name, **kwargs)
+        self._start(*self._warm_up(self._settings))
+
+    def _warm_up(self, settings: EstimatorNodeSettings) -> tuple[Any, tuple, str]:
+        """The worker's first job and the ready line's summary (see ``StreamingNode._start``)."""
         model = settings.model
-        self._start(solve_equilibrium, (model, np.zeros(6)),
-                    f'{model.n_strings} strings, load {settings.load_mode}, trigger '
-                    f'~/{settings.trigger}, max age {settings.max_age:g} s')
+        return (solve_equilibrium, (model, np.zeros(6)),
+                f'{model.n_strings} strings, load {settings.load_mode}, trigger '
+                f'~/{settings.trigger}, max age {settings.max_age:g} s')
+
+    def _options(self, settings: Any) -> EstimatorNodeSettings:
+        """The estimator's settings (sensors, load mode, trigger, max age)."""
+        return settings
+
+    def _string_count(self, settings: Any) -> int:
+        """Values of a measured-array input."""
+        return settings.model.n_strings
+
+    def _input_frames(self, settings: Any) -> tuple[str, str]:
+        """(frame of the pose and the wrench inputs, frame of the IMU)."""
+        return settings.link1_frame, settings.link2_frame
 
     # ------------------------------------------------------------------ declarations
     def _parameter_table(self) -> tuple[ParameterSpec, ...]:
@@ -109,8 +126,7 @@ class EstimatorNode(StreamingNode):
         (warm-started from the last estimate) and publish."""
         now = time.monotonic()
         self._readings[name] = Reading(value, now)
-        settings = self._settings
-        if name != settings.trigger:
+        if name != self._options(self._settings).trigger:
             return
         last = self._last.outputs
         snapshot = EstimatorInput(dict(self._readings), now,
@@ -123,7 +139,7 @@ class EstimatorNode(StreamingNode):
         try:
             values = measured_array(
                 estimation_msgs.measured_values(msg, settings.max_array_length),
-                settings.model.n_strings, f'~/{name}')
+                self._string_count(settings), f'~/{name}')
         except ValueError as exc:
             self.reporter.reject(f'~/{name}', str(exc))
             return
@@ -145,7 +161,8 @@ class EstimatorNode(StreamingNode):
     def _on_pose(self, msg: PoseWithCovarianceStamped) -> None:
         settings = self._settings
         try:
-            self._check_frame(msg.header.frame_id, settings.link1_frame, "link 1's frame")
+            self._check_frame(msg.header.frame_id, self._input_frames(settings)[0],
+                              self.INPUT_FRAME_NAME)
             value = estimation_msgs.pose_with_covariance_to_arrays(msg.pose)
         except ValueError as exc:
             self.reporter.reject('~/measured_pose', str(exc))
@@ -156,7 +173,8 @@ class EstimatorNode(StreamingNode):
     def _on_imu(self, msg: Imu) -> None:
         settings = self._settings
         try:
-            self._check_frame(msg.header.frame_id, settings.link2_frame, "link 2's frame")
+            self._check_frame(msg.header.frame_id, self._input_frames(settings)[1],
+                              "link 2's frame")
             gravity = gravity_reading(estimation_msgs.imu_specific_force(msg),
                                       settings.imu_rest_tolerance)
         except ValueError as exc:
@@ -168,7 +186,8 @@ class EstimatorNode(StreamingNode):
     def _on_wrench(self, msg: WrenchStamped) -> None:
         settings = self._settings
         try:
-            self._check_frame(msg.header.frame_id, settings.link1_frame, "link 1's frame")
+            self._check_frame(msg.header.frame_id, self._input_frames(settings)[0],
+                              self.INPUT_FRAME_NAME)
             wrench = estimation_msgs.wrench_stamped_to_array(msg)
         except ValueError as exc:
             self.reporter.reject('~/measured_wrench', str(exc))
@@ -176,9 +195,9 @@ class EstimatorNode(StreamingNode):
         self._store('measured_wrench', wrench, msg.header.stamp)
 
     # ------------------------------------------------------------------ diagnostics
-    def _diagnostic_statuses(self, settings: EstimatorNodeSettings,
-                             outputs: EstimatorOutputs | None,
+    def _diagnostic_statuses(self, settings: Any, outputs: Any,
                              values: list[tuple[str, Any]]) -> list[Any]:
+        options = self._options(settings)
         level, message = 'WARN', 'no estimate yet'
         if outputs is not None:
             values += diagnostic_values(outputs)
@@ -186,10 +205,10 @@ class EstimatorNode(StreamingNode):
             level = 'OK'
             message = (f'estimating from {", ".join(outputs.used)}; chi2/dof '
                        f'{est.chi2:.3g}/{est.dof}, rank {est.rank}')
-        values += [('load', settings.load_mode), ('trigger', f'~/{settings.trigger}'),
-                   ('max age [s]', settings.max_age)]
+        values += [('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
+                   ('max age [s]', options.max_age)]
         return [msg_tools.diagnostic_status(f'{self.get_name()}: estimator', level, message,
-                                            values, hardware_id=settings.link1_frame)]
+                                            values, hardware_id=self._output_frame(settings))]
 
 
 def main(args: list[str] | None = None) -> None:
