@@ -295,46 +295,55 @@ class _JointProblem:
         self.rest = rest
         self.length_scale = float(rest.sum()) / rest.size
 
-    def evaluate(self, xi: FloatArray) -> tuple[FloatArray, FloatArray, JointState,
-                                                 ScrewKinematics]:
-        """Whitened residual (rows,), Jacobian (rows, 6), joint state and kinematics at xi."""
+    def evaluate(self, xi: FloatArray, jacobian: bool = True
+                 ) -> tuple[FloatArray, FloatArray | None, JointState, ScrewKinematics | None]:
+        """Whitened residual (rows,), Jacobian (rows, 6), joint state and kinematics at xi;
+        without ``jacobian`` the residual and the state alone (Jacobian and kinematics None)."""
         p = self.prep
         r = np.empty(p.rows)
-        J = np.empty((p.rows, 6))
+        J = np.empty((p.rows, 6)) if jacobian else None
+        kin = None
         row = 0
-        if p.needs_strings:
+        if p.needs_strings and jacobian:
             pred = sm.string_predictions_unchecked(self.model, xi, self.rest)
             state, kin = pred.state, pred.kinematics
-            for index, values, weight, h, dh in (
-                    (p.tension_index, p.tensions, p.tension_weight, pred.tensions,
-                     pred.tension_jacobian),
-                    (p.length_index, p.lengths, p.length_weight, pred.lengths,
-                     pred.length_jacobian)):
-                k = index.size
-                if k == p.n_strings:  # every string measured: no gather
-                    np.multiply(h - values, weight, out=r[row:row + k])
-                    np.multiply(dh, weight[:, None], out=J[row:row + k])
-                elif k:
-                    r[row:row + k] = (h[index] - values) * weight
-                    J[row:row + k] = dh[index] * weight[:, None]
-                row += k
+            strings = ((pred.tensions, pred.tension_jacobian),
+                       (pred.lengths, pred.length_jacobian))
         else:
             state = self.model.evaluate(xi, self.rest)
-            kin = ScrewKinematics(xi)
+            strings = ((state.tensions, None), (state.lengths, None))
+            if jacobian:
+                kin = ScrewKinematics(xi)
+        for (index, values, weight), (h, dh) in zip(
+                ((p.tension_index, p.tensions, p.tension_weight),
+                 (p.length_index, p.lengths, p.length_weight)), strings, strict=True):
+            k = index.size
+            if k == p.n_strings:  # every string measured: no gather
+                np.multiply(h - values, weight, out=r[row:row + k])
+                if J is not None:
+                    np.multiply(dh, weight[:, None], out=J[row:row + k])
+            elif k:
+                r[row:row + k] = (h[index] - values) * weight
+                if J is not None:
+                    J[row:row + k] = dh[index] * weight[:, None]
+            row += k
         if p.pose is not None:
             res, jac = sm.pose_residual(xi, p.pose)
             r[row:row + 6] = p.pose_whitener @ res
-            J[row:row + 6] = p.pose_whitener @ jac
+            if J is not None:
+                J[row:row + 6] = p.pose_whitener @ jac
             row += 6
         if p.gravity is not None:
             g2, jac = sm.predicted_gravity(xi, p.gravity_base, kin)
             r[row:row + 3] = (g2 - p.gravity) * p.gravity_weight
-            J[row:row + 3] = jac * p.gravity_weight[:, None]
+            if J is not None:
+                J[row:row + 3] = jac * p.gravity_weight[:, None]
             row += 3
         if p.wrench is not None:
             # e = F(xi) + W_m, de/dxi = K (sensor_models.equilibrium_residual, from this state)
             r[row:row + 6] = p.wrench_whitener @ (state.wrench + p.wrench)
-            J[row:row + 6] = p.wrench_whitener @ state.stiffness
+            if J is not None:
+                J[row:row + 6] = p.wrench_whitener @ state.stiffness
         return r, J, state, kin
 
 
@@ -421,58 +430,68 @@ class _InitialPointError(ValueError):
 
 
 def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterations: int,
-                  tolerance: float, clip: Any = None
-                  ) -> tuple[FloatArray, Any, int, bool, str]:
-    """Levenberg-Marquardt on the whitened residual of ``evaluate(x) -> (r, J, *extra)``.
+                  tolerance: float) -> tuple[FloatArray, Any, int, bool, str]:
+    """Levenberg-Marquardt on the whitened residual of ``evaluate(x, jacobian) -> (r, J,
+    state, kinematics)``.
 
-    Returns (x, the last evaluation at x, iterations, converged, message). The damping scales
-    the normal matrix's diagonal (Marquardt); it is zero while steps reduce the cost.
+    Trial points are evaluated without their Jacobian (the cost decides); at an accepted point
+    the decrement is first taken with the Jacobian it was stepped from (a chord step), and only
+    when that is not below ``tolerance`` is the Jacobian evaluated there. So a warm start near
+    the optimum costs one evaluation with the Jacobian and one without, and the covariance is
+    linearised at the last point where the Jacobian was evaluated (within ``tolerance`` of the
+    optimum in units of its own std). The damping scales the normal matrix's diagonal
+    (Marquardt); it is zero while steps reduce the cost. Returns (x, (r, J, state,
+    kinematics) with J and kinematics of the linearisation point, iterations, converged,
+    message).
     """
     x = x0.copy()
     try:
-        ev = evaluate(x)
+        r, J, state, kin = evaluate(x)
     except ValueError as exc:  # the trial steps below catch theirs: this one is the caller's
         raise _InitialPointError(str(exc)) from None
-    cost = float(ev[0] @ ev[0])
+    cost = float(r @ r)
     damping = 0.0
     for it in range(1, max_iterations + 1):
-        r, J = ev[0], ev[1]
         A = J.T @ J
         g = J.T @ r
         full_step = _normal_solve(A, g)
         if full_step is None:
-            return x, ev, it - 1, False, 'singular normal matrix'
-        decrement = float(-g @ full_step)
-        if decrement < tolerance:
-            return x, ev, it - 1, True, ''
+            return x, (r, J, state, kin), it - 1, False, 'singular normal matrix'
+        if float(-g @ full_step) < tolerance:
+            return x, (r, J, state, kin), it - 1, True, ''
         while True:
             if damping == 0.0:
                 step = full_step
             else:
                 step = _normal_solve(A + damping * np.diag(np.diag(A)), g)
                 if step is None:
-                    return x, ev, it, False, 'singular normal matrix'
-            step = clip(step) if clip is not None else _clip(step, length_scale)
-            trial = x + step
+                    return x, (r, J, state, kin), it, False, 'singular normal matrix'
+            trial = x + _clip(step, length_scale)
             try:
-                trial_ev = evaluate(trial)
+                trial_r, _, trial_state, _ = evaluate(trial, False)
             except ValueError:  # a string of zero length, outside the chart: step too long
-                trial_ev = None
-            if trial_ev is not None:
-                trial_cost = float(trial_ev[0] @ trial_ev[0])
+                trial_r = None
+            if trial_r is not None:
+                trial_cost = float(trial_r @ trial_r)
                 if trial_cost <= cost:
                     stalled = cost - trial_cost <= STALL_TOLERANCE * max(cost, 1.0)
-                    x, ev, cost = trial, trial_ev, trial_cost
+                    x, r, state, cost = trial, trial_r, trial_state, trial_cost
                     if stalled:  # creeping along a kink (a string at its slack boundary)
-                        return x, ev, it, True, ''
+                        return x, (r, J, state, kin), it, True, ''
                     damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
                     break
             damping = INITIAL_DAMPING if damping == 0.0 else damping * DAMPING_GROWTH
             if damping > MAX_DAMPING:
                 # Not even a short gradient step lowers the cost: a minimum, where the cost has
                 # a kink (a string at its slack or saturation boundary) or is flat to rounding.
-                return x, ev, it, True, ''
-    return x, ev, max_iterations, False, f'not converged in {max_iterations} iterations'
+                return x, (r, J, state, kin), it, True, ''
+        chord_g = J.T @ r
+        chord = _normal_solve(A, chord_g)
+        if chord is not None and float(-chord_g @ chord) < tolerance:
+            return x, (r, J, state, kin), it, True, ''
+        r, J, state, kin = evaluate(x)
+    return x, (r, J, state, kin), max_iterations, False, (
+        f'not converged in {max_iterations} iterations')
 
 
 def cartesian_stiffness_jacobian(model: JointModel, xi: ArrayLike,
@@ -560,7 +579,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     if not converged:
         return _failed_joint(f'{prep.describe(names)}: {why}', prep, names, True, rank, cond,
                              iterations, s)
-    P = sm.pose_jacobian(x, kin)
+    P = sm.pose_jacobian(x, ScrewKinematics(x))  # at the estimate (kin: at the linearisation)
     pose_cov = P @ C @ P.T
     K = state.stiffness
     Kc_std = (_entry_std(cartesian_stiffness_jacobian(model, x, rest), C) if stiffness_std
