@@ -95,7 +95,7 @@ def library(model: JointModel, repeats: int) -> None:
               f'x{np.median(times) / base:6.1f}{extra}', flush=True)
 
 
-def node(model: JointModel, rate: float, seconds: float, loop: str) -> None:
+def node(model: JointModel, rate: float, seconds: float, loop: str, params: list[str]) -> None:
     from builtin_interfaces.msg import Time
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from ros_harness import (
@@ -115,7 +115,8 @@ def node(model: JointModel, rate: float, seconds: float, loop: str) -> None:
     truth = truth_from_model(model, xi)
     ns = unique_namespace('bench_estimator')
     proc = NodeProcess(ns, CONFIG, executable='estimator_node',
-                       extra_args=['-p', 'estimation.trigger:=imu'])
+                       extra_args=['-p', 'estimation.trigger:=imu',
+                                   *[a for p in params for a in ('-p', p)]])
     ros = RosClient('bench_estimator')
     base = f'{ns}/estimator_node'
     arrivals: dict[int, float] = {}
@@ -157,7 +158,8 @@ def node(model: JointModel, rate: float, seconds: float, loop: str) -> None:
             sent = publish_paced(Both(), pairs, 2 * rate, 0.0, lambda: 2 * len(arrivals))
         imu_sent = sent[1::2]
         latencies = [arrivals[k + 1] - imu_sent[k] for k in range(n) if k + 1 in arrivals]
-        print(latency_summary(f'  estimator_node {rate:.0f} Hz, client {loop}', latencies)
+        label = f'  estimator_node {rate:.0f} Hz {" ".join(params)}, client {loop}'
+        print(latency_summary(label, latencies)
               + f'  drops {n - len(latencies)} of {n}', flush=True)
     finally:
         ros.close()
@@ -175,17 +177,21 @@ def main() -> None:
     parser.add_argument('--client-loops', nargs='+', choices=['lane', 'executor'],
                         default=['lane'])
     parser.add_argument('--no-node', action='store_true', help='the library part only')
+    parser.add_argument('--no-library', action='store_true', help='the node part only')
+    parser.add_argument('--param', action='append', default=[],
+                        help='node parameter override NAME:=VALUE (repeatable)')
     args = parser.parse_args()
     model = JointModel.from_yaml(CONFIG)
     print(f'compiled kernel: {model.uses_kernel}; load average {os.getloadavg()[0]:.1f} '
           f'on {os.cpu_count()} cores')
     gc.collect()
     gc.freeze()
-    library(model, args.repeats)
+    if not args.no_library:
+        library(model, args.repeats)
     if not args.no_node:
         print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}; ~/imu -> ~/pose_estimate latency')
         for loop in args.client_loops:
-            node(model, args.rate, args.seconds, loop)
+            node(model, args.rate, args.seconds, loop, args.param)
 
 
 if __name__ == '__main__':

@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray
 
 from msg_tools.arrays import matrix_to_multiarray, payload, vector_to_multiarray
-from msg_tools.geometry import msg_to_wrench, pose_to_transform, transform_to_pose
+from msg_tools.geometry import msg_to_wrench, pose_to_transform, rotation_to_quaternion
 from msg_tools.imu import imu_to_arrays
 from msg_tools.outputs import fill_outputs, write_payload, write_wrench_stamped
 from tensegrity_stiffness.estimation_processing import (
@@ -80,7 +80,10 @@ def write_pose_with_covariance(msg: PoseWithCovarianceStamped, transform: FloatA
     """Header, pose of a (4, 4) transform and the (6, 6) covariance (row-major)."""
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
-    msg.pose.pose = transform_to_pose(transform)
+    pose = msg.pose.pose
+    pose.position.x, pose.position.y, pose.position.z = transform[:3, 3].tolist()
+    o = pose.orientation
+    o.x, o.y, o.z, o.w = rotation_to_quaternion(transform[:3, :3]).tolist()
     msg.pose.covariance = payload(covariance)
 
 

@@ -334,10 +334,12 @@ class _JointProblem:
                 J[row:row + 6] = p.pose_whitener @ jac
             row += 6
         if p.gravity is not None:
-            g2, jac = sm.predicted_gravity(xi, p.gravity_base, kin)
-            r[row:row + 3] = (g2 - p.gravity) * p.gravity_weight
             if J is not None:
+                g2, jac = sm.gravity_prediction_unchecked(kin, p.gravity_base)
                 J[row:row + 3] = jac * p.gravity_weight[:, None]
+            else:  # g_2 = R^T g_1 with R of the evaluated state
+                g2 = state.transform[:3, :3].T @ p.gravity_base
+            r[row:row + 3] = (g2 - p.gravity) * p.gravity_weight
             row += 3
         if p.wrench is not None:
             # e = F(xi) + W_m, de/dxi = K (sensor_models.equilibrium_residual, from this state)
@@ -499,14 +501,22 @@ def cartesian_stiffness_jacobian(model: JointModel, xi: ArrayLike,
                                  step: float = STIFFNESS_STEP) -> FloatArray:
     """``dK_c/dxi`` (6, 6, 6) by central differences (one batched evaluation of 12 screws)."""
     xi = as_screws(xi)
-    eye = np.eye(6) * step
-    Kc = model.evaluate(np.concatenate([xi + eye, xi - eye]), rest_lengths).cartesian_stiffness
+    steps = _STIFFNESS_STEPS if step == STIFFNESS_STEP else np.vstack(
+        [np.eye(6), -np.eye(6)]) * step
+    Kc = model.evaluate(xi + steps, rest_lengths).cartesian_stiffness
     return np.moveaxis((Kc[:6] - Kc[6:]) / (2.0 * step), 0, -1)
+
+
+#: The 12 central-difference steps of :func:`cartesian_stiffness_jacobian` (+ then -).
+_STIFFNESS_STEPS = np.vstack([np.eye(6), -np.eye(6)]) * STIFFNESS_STEP
 
 
 def _entry_std(jacobian: FloatArray, covariance: FloatArray) -> FloatArray:
     """sqrt(diag(g C g^T)) per entry of a matrix with Jacobian (a, b, k)."""
-    return np.sqrt(np.maximum(np.einsum('abk,kl,abl->ab', jacobian, covariance, jacobian), 0.0))
+    a, b, k = jacobian.shape
+    G = jacobian.reshape(a * b, k)
+    variance = np.add.reduce((G @ covariance) * G, axis=1)
+    return np.sqrt(np.maximum(variance, 0.0, out=variance)).reshape(a, b)
 
 
 def _failed_joint(message: str, prep: PreparedMeasurements | None, names: Sequence[str],
@@ -593,8 +603,7 @@ def _information(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatA
     """Covariance ``(J^T J)^-1`` (6, 6) (NaN when singular) and the singular values (6,) of
     the whitened Jacobian with its translation columns scaled by ``length_scale`` (one
     symmetric eigendecomposition of the scaled normal matrix)."""
-    scale = np.array([1.0, 1.0, 1.0, length_scale, length_scale, length_scale])
-    outer = scale[:, None] * scale
+    outer = _column_scales(length_scale)
     w, V, info = lapack.dsyevd(J.T @ J * outer)  # ascending eigenvalues (LAPACK)
     if info != 0:
         raise np.linalg.LinAlgError('eigendecomposition of the normal matrix failed')
@@ -602,8 +611,21 @@ def _information(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatA
     s = np.sqrt(np.maximum(w, 0.0))
     if w[-1] <= 0.0:
         return _nan(6, 6), s
-    C = (V / w) @ V.T * outer
-    return 0.5 * (C + C.T), s
+    return (V / w) @ V.T * outer, s  # symmetric: V diag(1/w) V^T, scaled on both sides
+
+
+_COLUMN_SCALES: dict[float, FloatArray] = {}
+
+
+def _column_scales(length_scale: float) -> FloatArray:
+    """``outer(c, c)`` (6, 6) of the column scale ``c = [1 1 1 L L L]`` (cached per L)."""
+    outer = _COLUMN_SCALES.get(length_scale)
+    if outer is None:
+        scale = np.array([1.0, 1.0, 1.0, length_scale, length_scale, length_scale])
+        outer = _COLUMN_SCALES[length_scale] = scale[:, None] * scale
+        if len(_COLUMN_SCALES) > 64:  # rest lengths change: keep the cache small
+            _COLUMN_SCALES.pop(next(iter(_COLUMN_SCALES)))
+    return outer
 
 
 # ---------------------------------------------------------------------------------- spine

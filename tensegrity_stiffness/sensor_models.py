@@ -271,10 +271,18 @@ def predicted_gravity(xi: ArrayLike, gravity_base: ArrayLike,
     (``R -> exp(hat(G domega)) R``, eq. 4)."""
     g1 = unit_vector(gravity_base, 'gravity_base')
     kin = ScrewKinematics(_screw(xi)) if kinematics is None else kinematics
-    Rt = kin.R.T
+    return gravity_prediction_unchecked(kin, g1)
+
+
+def gravity_prediction_unchecked(kinematics: ScrewKinematics, gravity_base: FloatArray
+                                 ) -> tuple[FloatArray, FloatArray]:
+    """:func:`predicted_gravity` for the kinematics of a screw and a unit ``gravity_base`` (3,)
+    already checked (the estimator's per-iteration path)."""
+    Rt = kinematics.R.T
+    gx, gy, gz = gravity_base.tolist()
     J = np.zeros((3, 6))
-    J[:, :3] = Rt @ hat3(g1) @ kin.G
-    return Rt @ g1, J
+    J[:, :3] = Rt @ np.array([[0.0, -gz, gy], [gz, 0.0, -gx], [-gy, gx, 0.0]]) @ kinematics.G
+    return Rt @ gravity_base, J
 
 
 # ---------------------------------------------------------------------------------- statics
