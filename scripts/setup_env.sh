@@ -125,13 +125,13 @@ build_hash="$( {
     printf '== %s\n' "$f"
     cat "$f" 2>/dev/null || true
   done
-  # interface definitions: contents. resource/ and config/: file names (installed as one
+  # interface definitions: contents. resource/, config/ and launch/: file names (installed as one
   # symlink per file). The Python package folders are symlinked as a whole: no entry needed.
   find "$INTERFACES_DIR" -name '*.srv' -o -name '*.msg' -o -name '*.action' | LC_ALL=C sort \
     | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
   # The kernel is compiled (not symlinked): every source file counts.
   find "$KERNEL_DIR" -type f | LC_ALL=C sort | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
-  find resource config -type f 2>/dev/null | LC_ALL=C sort
+  find resource config launch -type f 2>/dev/null | LC_ALL=C sort
 } | sha)"
 
 EXE="install/tensegrity_stiffness/lib/tensegrity_stiffness/stiffness_node"

@@ -807,6 +807,19 @@ def _cmd_chain(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_export_mjcf(args: argparse.Namespace) -> int:
+    from tensegrity_stiffness.simulation import export_mjcf
+
+    text = export_mjcf(args.config, spine=args.spine, max_length=args.max_length)
+    if args.out:
+        Path(args.out).write_text(text)
+        print(f'{PROG}: wrote {args.out}; view it with: python -m mujoco.viewer --mjcf '
+              f'{args.out}', file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    return EXIT_OK
+
+
 def _print_chain(report: dict[str, Any]) -> None:
     print(f"chain: {report['config']} ({report['n_joints']} joints)")
     print(f"tip wrench W (N, N m, base frame): {_vector(report['tip_wrench'])}; gravity "
@@ -1112,6 +1125,19 @@ def build_parser() -> argparse.ArgumentParser:
     _add_chain_options(p, (0.0,) * 6)
     _add_json(p)
     p.set_defaults(handler=_cmd_chain)
+
+    p = sub.add_parser('export-mjcf', help="MuJoCo model (MJCF) of the joint or the spine",
+                       description="Write the MuJoCo model of the digital twin "
+                                   "(tensegrity_stiffness.simulation) built from a config; "
+                                   "open it with: python -m mujoco.viewer --mjcf FILE.xml")
+    p.add_argument('--config', metavar='YAML', help='config file (default: the packaged '
+                   'default_joint.yaml, or default_spine.yaml with --spine)')
+    p.add_argument('--spine', action='store_true', help='the spine (a chain config)')
+    p.add_argument('--out', metavar='FILE.xml', help='output file (default: standard output)')
+    p.add_argument('--max-length', choices=('limit', 'ignore'), default='limit',
+                   help="strings past lmax: 'limit' an inextensible stop (default), 'ignore' "
+                        "Hooke's law goes on (docs/simulation.md)")
+    p.set_defaults(handler=_cmd_export_mjcf)
 
     p = sub.add_parser('figures', help="regenerate every README figure into a folder",
                        description='Write every figure at its default parameters (the '

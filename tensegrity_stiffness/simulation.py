@@ -44,12 +44,14 @@ import math
 import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.chain import JointChain
+from tensegrity_stiffness import config
+from tensegrity_stiffness.chain import DEFAULT_SPINE_CONFIG, JointChain
 from tensegrity_stiffness.joint import JointModel
 from tensegrity_stiffness.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.screw import exp_se3, log_se3
@@ -292,6 +294,28 @@ def chain_mjcf(chain: JointChain, options: SimulationOptions | None = None,
     :func:`joint_mjcf`."""
     opts = _options(options, overrides)
     return _build_mjcf(_chain_layout(chain, opts), opts, 'tensegrity_spine')
+
+
+def export_mjcf(config_path: str | Path | None = None, spine: bool = False,
+                options: SimulationOptions | None = None, **overrides: Any) -> str:
+    """MJCF of the joint (``spine``: the spine) of a config file (default: the packaged
+    ``default_joint.yaml`` / ``default_spine.yaml``), for MuJoCo's viewer (``python -m
+    mujoco.viewer --mjcf FILE.xml``); the command line's ``export-mjcf``. ValueError names
+    a bad field of the config."""
+    if spine:
+        path = Path(config_path) if config_path else config.packaged_config_path(
+            DEFAULT_SPINE_CONFIG)
+        try:
+            chain = JointChain.from_yaml(path)
+        except ValueError as exc:
+            raise ValueError(f'config {path}: {exc}') from None
+        return chain_mjcf(chain, options, **overrides)
+    path = Path(config_path) if config_path else config.packaged_config_path()
+    try:
+        model = JointModel.from_yaml(path)
+    except ValueError as exc:
+        raise ValueError(f'config {path}: {exc}') from None
+    return joint_mjcf(model, options, **overrides)
 
 
 @dataclass(frozen=True)
@@ -825,6 +849,13 @@ class ChainSimulation:
     def link_poses(self) -> FloatArray:
         """(N, 4, 4) pose of each {2}_i in the base."""
         return self._sim._link_transforms()
+
+    def joint_transforms(self) -> FloatArray:
+        """(N, 4, 4) ``T_i``: each {2}_i in {1}_i (``exp(hat(xi_i))`` of :meth:`screws`, without
+        the log map)."""
+        L = self._sim._link_transforms()
+        P = self._sim._joint_frames(L)
+        return np.linalg.solve(P, L)
 
     def tip_pose(self) -> FloatArray:
         """(4, 4) pose of the tool frame in the base."""

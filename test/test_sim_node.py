@@ -14,6 +14,7 @@ import os
 import re
 import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -194,10 +195,28 @@ def test_parameters_are_validated_and_diagnostics_count_missed_steps(joint_loop)
     spread = np.std(np.array([m.data for m in lengths]), axis=0)
     assert 3e-5 < spread.mean() < 3e-4  # the noise is on
     assert ros.set_parameter(loop['params'], 'noise.lengths', 0.0).successful
+    loop['diagnostics'].clear()  # a fresh one (the node has run for seconds by now)
     status = loop['diagnostics'].wait_until(
         lambda m: any(s.name.endswith('sim_node: twin') for s in m.status), timeout=5.0)
     values = {kv.key: kv.value for s in status.status for kv in s.values}
     assert int(values['steps']) > 1000 and 'missed steps' in values
+
+
+def test_a_model_change_rebuilds_the_twin(joint_loop) -> None:
+    """joint.stiffness changed at run time: the twin is rebuilt at its configuration with the
+    new model (and its configured rest lengths) and settles where the library says."""
+    loop = joint_loop
+    model = JointModel.from_yaml(JOINT_CONFIG)
+    k = (model.k * np.linspace(0.9, 1.1, model.n_strings)).tolist()
+    before = len(loop['screw'])
+    result = loop['ros'].set_parameter(loop['params'], 'joint.stiffness', k)
+    assert result.successful, result.reason
+    xi = wait_settled(loop['screw'], after=before + 5)
+    changed = JointModel(model.link1_nodes, model.connections, k, model.rest_lengths,
+                         max_lengths=model.max_lengths, initial_screw=model.initial_screw)
+    res = solve_equilibrium(changed, W_JOINT)
+    assert np.abs(xi - res.screw).max() < 1e-8
+    assert log_has(loop['sim'], r'parameters applied: \[.joint.stiffness.\]')
 
 
 def test_spine_twin_drives_spine_node() -> None:
@@ -265,3 +284,45 @@ def test_run_twin_prints_summary_lines_and_stops_cleanly() -> None:
     assert live, out.stdout
     assert re.search(r'input +\d+ Hz', live[-1]) and 'slack 0/12' in live[-1]
     assert 'stiffness_node exit 0, sim_node exit 0' in out.stdout
+
+
+@pytest.mark.parametrize(('launch_file', 'partner', 'config'), [
+    ('twin.launch.py', 'stiffness_node', 'default_joint.yaml'),
+    ('twin_spine.launch.py', 'spine_node', 'default_spine.yaml')])
+def test_twin_launch_files_name_the_installed_executables(launch_file, partner, config) -> None:
+    """``launch`` is not on PyPI: the file is compiled and read, not run (as
+    test_package_layout does for the node launch files)."""
+    import ast
+
+    from ament_index_python.packages import get_package_prefix
+
+    prefix = Path(get_package_prefix('tensegrity_stiffness'))
+    installed = prefix / 'share' / 'tensegrity_stiffness' / 'launch' / launch_file
+    tree = ast.parse(installed.read_text())
+    compile(tree, str(installed), 'exec')
+    constants = {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
+                 if isinstance(node, ast.Assign) and isinstance(node.value, (ast.Constant,
+                                                                            ast.Tuple))}
+    assert constants['EXECUTABLE'] == 'sim_node' and constants['PARTNER'] == partner
+    for exe in ('sim_node', partner):
+        assert (prefix / 'lib' / 'tensegrity_stiffness' / exe).is_file()
+    assert constants['CONFIG'] == config
+    assert (prefix / 'share' / 'tensegrity_stiffness' / 'config' / config).is_file()
+    topic = 'poses' if partner == 'spine_node' else 'pose'
+    assert constants['REMAPPING'] == (f'~/{topic}', f'sim_node/{topic}')
+
+
+def test_imu_message_round_trip() -> None:
+    msg = msg_tools.imu_message('link', gyro_std=0.01, accelerometer_std=0.2)
+    msg_tools.write_imu(msg, [0.1, -0.2, 0.3], [0.0, 9.81, 0.5],
+                        msg_tools.stamp_from_seconds(1.5))
+    w, a = msg_tools.imu_to_arrays(msg)
+    np.testing.assert_array_equal(w, [0.1, -0.2, 0.3])
+    np.testing.assert_array_equal(a, [0.0, 9.81, 0.5])
+    assert msg.header.frame_id == 'link' and msg.header.stamp.sec == 1
+    assert msg.orientation_covariance[0] == -1.0
+    assert msg.angular_velocity_covariance[0] == pytest.approx(1e-4)
+    assert msg.linear_acceleration_covariance[8] == pytest.approx(0.04)
+    with pytest.raises(ValueError, match='specific_force'):
+        msg_tools.write_imu(msg, [0.0, 0.0, 0.0], [0.0, float('nan'), 0.0],
+                            msg_tools.stamp_from_seconds(0.0))

@@ -47,11 +47,13 @@ from tensegrity_stiffness.ros.topics import (
     input_qos,
     output_qos,
 )
-from tensegrity_stiffness.screw import exp_se3
 from tensegrity_stiffness.simulation import ChainSimulation, JointSimulation, SensorNoise
 from tensegrity_stiffness.spine_processing import rest_lengths_input
 
 NODE_NAME = 'sim_node'
+#: Seconds between the questions which outputs have a subscriber (outputs nobody reads are
+#: neither filled nor published).
+SUBSCRIBERS_PERIOD_S = 0.25
 #: Seconds between /diagnostics messages (steps, missed steps, real-time factor, rejections).
 DIAGNOSTICS_PERIOD_S = 1.0
 #: Sleep no closer than this to a step's deadline; wait the rest by spinning (s). The loop keeps
@@ -129,6 +131,8 @@ class SimNode(Node):
         self._pub_clock = None if self._real_time else create_output_publisher(
             self, Clock, '/clock', 10)
         self._messages(settings)
+        self._wanted_until = -math.inf
+        self._wanted_cache: tuple[bool, ...] = ()
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics',
                                                         10)
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
@@ -310,22 +314,34 @@ class SimNode(Node):
             return self.get_clock().now().to_msg()
         return msg_tools.stamp_from_seconds(self._sim.time)
 
+    def _wanted(self) -> tuple[bool, ...]:
+        """Which outputs have a subscriber, asked at most every :data:`SUBSCRIBERS_PERIOD_S`
+        (each question costs microseconds; a new subscriber waits at most that long)."""
+        now = time.perf_counter()
+        if now >= self._wanted_until:
+            self._wanted_cache = tuple(p.get_subscription_count() > 0 for p in (
+                self._pub_truth, self._pub_pose, self._pub_lengths, self._pub_tensions,
+                self._pub_imu))
+            self._wanted_until = now + SUBSCRIBERS_PERIOD_S
+        return self._wanted_cache
+
     def _publish(self) -> None:
         settings, sim = self._settings, self._sim
         stamp = self._stamp()
         if self._pub_clock is not None:
             self._pub_clock.publish(Clock(clock=stamp))
         spine = isinstance(sim, ChainSimulation)
-        if self._pub_truth.get_subscription_count():
+        truth, pose, lengths_wanted, tensions_wanted, imu_wanted = self._wanted()
+        if truth:
             screws = sim.screws() if spine else sim.screw()
             msg_tools.set_multiarray_data(self._msg_truth, screws.ravel())
             self._pub_truth.publish(self._msg_truth)
-        if self._pub_pose.get_subscription_count():
+        if pose:
             if spine:
                 msg = PoseArray()
                 msg.header.stamp = stamp
                 msg.header.frame_id = settings.base_frame
-                msg.poses = [msg_tools.transform_to_pose(T) for T in exp_se3(sim.screws())]
+                msg.poses = [msg_tools.transform_to_pose(T) for T in sim.joint_transforms()]
             else:
                 msg = PoseStamped()
                 msg.header.stamp = stamp
@@ -333,15 +349,15 @@ class SimNode(Node):
                 msg.pose = msg_tools.transform_to_pose(sim.pose())
             self._pub_pose.publish(msg)
         noise, rng = self._noise, self._rng
-        if self._pub_lengths.get_subscription_count():
+        if lengths_wanted:
             lengths = noise.add(np.ravel(sim.string_lengths()), 'lengths', rng)
             msg_tools.set_multiarray_data(self._msg_lengths, lengths)
             self._pub_lengths.publish(self._msg_lengths)
-        if self._pub_tensions.get_subscription_count():
+        if tensions_wanted:
             tensions = noise.add(np.ravel(sim.tensions()), 'tensions', rng)
             msg_tools.set_multiarray_data(self._msg_tensions, tensions)
             self._pub_tensions.publish(self._msg_tensions)
-        if self._pub_imu.get_subscription_count():
+        if imu_wanted:
             imu = sim.imu()
             msg_tools.write_imu(self._msg_imu, noise.add(imu.angular_velocity, 'gyro', rng),
                                 noise.add(imu.specific_force, 'accelerometer', rng), stamp)

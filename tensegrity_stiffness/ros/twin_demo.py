@@ -42,6 +42,10 @@ NAMESPACE = '/twin'
 #: Default swinging load: amplitude (N) and period (s) for the joint and the spine.
 JOINT_SWING = (0.1, 10.0)
 SPINE_SWING = (0.01, 10.0)
+#: The spine's twin publishes every this many steps by default (200 Hz of a 1 kHz simulation:
+#: five poses and 60 tensions per publication are more than a 1 kHz Python loop carries on a
+#: shared 2-core machine).
+SPINE_PUBLISH_EVERY = 5
 #: Seconds a node gets to stop after SIGINT before it is killed.
 STOP_TIMEOUT_S = 10.0
 
@@ -181,9 +185,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--swing-period', type=float, default=None,
                         help='period of the swinging load, s (default 10)')
     parser.add_argument('--rate', type=float, default=1000.0, help='simulation rate, Hz')
+    parser.add_argument('--publish-every', type=int, default=None, metavar='N',
+                        help='the twin publishes every N-th step (default 1 for the joint, '
+                             f'{SPINE_PUBLISH_EVERY} for the spine)')
     args = parser.parse_args(argv)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         parser.error(f'--duration must be a positive number of seconds, got {args.duration}')
+    every = args.publish_every or (SPINE_PUBLISH_EVERY if args.spine else 1)
+    if every < 1:
+        parser.error(f'--publish-every must be >= 1, got {every}')
     amplitude, period = SPINE_SWING if args.spine else JOINT_SWING
     amplitude = amplitude if args.swing is None else args.swing
     period = period if args.swing_period is None else args.swing_period
@@ -200,12 +210,13 @@ def main(argv: list[str] | None = None) -> int:
         n_strings = JointModel.from_yaml(params).n_strings
 
     stiffness = 'spine_node' if args.spine else 'stiffness_node'
-    wired = (f'{NAMESPACE}/spine_node/poses:={NAMESPACE}/sim_node/poses' if args.spine else
-             f'{NAMESPACE}/stiffness_node/pose:={NAMESPACE}/sim_node/pose')
+    # As launch/twin*.launch.py: the partner's input is the twin's truth (same namespace).
+    wired = '~/poses:=sim_node/poses' if args.spine else '~/pose:=sim_node/pose'
     sim_args = [_executable('sim_node'), '--ros-args', '--params-file', str(params),
                 '-r', f'__ns:={NAMESPACE}', '-p', f'sim.spine:={str(args.spine).lower()}',
                 '-p', f'sim.rate:={args.rate}', '-p', f'load.swing_amplitude:={amplitude}',
-                '-p', f'load.swing_period:={period}']
+                '-p', f'load.swing_period:={period}',
+                '-p', f'sim.publish_every:={every}']
     node_args = [_executable(stiffness), '--ros-args', '--params-file', str(params),
                  '-r', f'__ns:={NAMESPACE}', '-r', wired]
     logs = Path(tempfile.mkdtemp(prefix='twin_demo_'))
