@@ -32,6 +32,7 @@ naming what is missing; it never gets a number.
 from __future__ import annotations
 
 import math
+import weakref
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -507,6 +508,34 @@ def cartesian_stiffness_jacobian(model: JointModel, xi: ArrayLike,
     return np.moveaxis((Kc[:6] - Kc[6:]) / (2.0 * step), 0, -1)
 
 
+#: dK_c/dxi is reused for the std of K_c while the screw stays within this distance (rad, and
+#: metres over the mean rest length) of where it was computed: it changes on the scale of the
+#: joint (radians, its size), so the std's relative error stays below about this much (1%: a
+#: tracker's consecutive estimates differ by their noise, a few mrad, and reuse it).
+STIFFNESS_JACOBIAN_REUSE = 1e-2
+_STIFFNESS_JACOBIANS: weakref.WeakKeyDictionary[JointModel, tuple[FloatArray, FloatArray,
+                                                                   FloatArray]] = \
+    weakref.WeakKeyDictionary()
+
+
+def _stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray) -> FloatArray:
+    """:func:`cartesian_stiffness_jacobian` at ``xi``, or the one computed last for this model
+    and rest lengths when ``xi`` is within :data:`STIFFNESS_JACOBIAN_REUSE` of its screw (a
+    tracker's consecutive estimates: 12 evaluations saved per estimate)."""
+    cached = _STIFFNESS_JACOBIANS.get(model)
+    if cached is not None:
+        at, cached_rest, G = cached
+        d = xi - at
+        length = float(rest.sum()) / rest.size
+        wx, wy, wz, vx, vy, vz = d.tolist()
+        if (max(abs(wx), abs(wy), abs(wz), abs(vx) / length, abs(vy) / length, abs(vz) / length)
+                <= STIFFNESS_JACOBIAN_REUSE and np.array_equal(rest, cached_rest)):
+            return G
+    G = cartesian_stiffness_jacobian(model, xi, rest)
+    _STIFFNESS_JACOBIANS[model] = (xi.copy(), rest.copy(), G)
+    return G
+
+
 #: The 12 central-difference steps of :func:`cartesian_stiffness_jacobian` (+ then -).
 _STIFFNESS_STEPS = np.vstack([np.eye(6), -np.eye(6)]) * STIFFNESS_STEP
 
@@ -592,7 +621,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     P = sm.pose_jacobian(x, ScrewKinematics(x))  # at the estimate (kin: at the linearisation)
     pose_cov = P @ C @ P.T
     K = state.stiffness
-    Kc_std = (_entry_std(cartesian_stiffness_jacobian(model, x, rest), C) if stiffness_std
+    Kc_std = (_entry_std(_stiffness_jacobian_near(model, x, rest), C) if stiffness_std
               else _nan(6, 6))
     return JointEstimate(True, 'ok', x, state.transform.copy(), 0.5 * (pose_cov + pose_cov.T), C,
                          -state.wrench, K @ C @ K.T, state, Kc_std, float(r @ r), prep.dof - 6,

@@ -24,9 +24,11 @@ from estimation_trials import (
     truth_from_model,
 )
 
+from tensegrity_stiffness import estimation
 from tensegrity_stiffness import sensor_models as sm
 from tensegrity_stiffness.equilibrium import solve_equilibrium
 from tensegrity_stiffness.estimation import (
+    STIFFNESS_JACOBIAN_REUSE,
     Measurements,
     cartesian_stiffness_jacobian,
     estimate_joint_state,
@@ -190,7 +192,16 @@ def test_estimate_fields_and_stiffness_std(model):
     np.testing.assert_allclose(est.covariance, P @ est.screw_covariance @ P.T, rtol=1e-10)
     G = cartesian_stiffness_jacobian(model, est.screw)
     expected = np.sqrt(np.einsum('abk,kl,abl->ab', G, est.screw_covariance, G))
-    np.testing.assert_allclose(est.cartesian_stiffness_std, expected, rtol=1e-12)
+    # dK_c/dxi may be the one of an estimate within STIFFNESS_JACOBIAN_REUSE of this one
+    np.testing.assert_allclose(est.cartesian_stiffness_std, expected,
+                               rtol=5 * STIFFNESS_JACOBIAN_REUSE)
+    estimation._STIFFNESS_JACOBIANS.clear()  # computed afresh: exactly the definition
+    again = estimate_joint_state(model, measure(truth, SENSOR_SETS['12 tensions'], rng),
+                                 initial_screw=xi)
+    G = cartesian_stiffness_jacobian(model, again.screw)
+    np.testing.assert_allclose(
+        again.cartesian_stiffness_std,
+        np.sqrt(np.einsum('abk,kl,abl->ab', G, again.screw_covariance, G)), rtol=1e-12)
     spread = np.std(np.array(Kc_samples), axis=0)
     big = expected > 0.05 * expected.max()
     ratio = spread[big] / expected[big]
