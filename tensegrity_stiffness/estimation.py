@@ -529,10 +529,13 @@ def _stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray
         length = float(rest.sum()) / rest.size
         wx, wy, wz, vx, vy, vz = d.tolist()
         if (max(abs(wx), abs(wy), abs(wz), abs(vx) / length, abs(vy) / length, abs(vz) / length)
-                <= STIFFNESS_JACOBIAN_REUSE and np.array_equal(rest, cached_rest)):
+                <= STIFFNESS_JACOBIAN_REUSE
+                and (rest is cached_rest or np.array_equal(rest, cached_rest))):
             return G
     G = cartesian_stiffness_jacobian(model, xi, rest)
-    _STIFFNESS_JACOBIANS[model] = (xi.copy(), rest.copy(), G)
+    # the model's own rest lengths are kept by identity (never mutated), others copied
+    _STIFFNESS_JACOBIANS[model] = (xi.copy(),
+                                   rest if rest is model.rest_lengths else rest.copy(), G)
     return G
 
 
