@@ -13,6 +13,8 @@ stamps       ``builtin_interfaces/Time`` <-> nanoseconds / seconds.
 diagnostics  ``diagnostic_msgs/DiagnosticStatus`` and ``DiagnosticArray`` builders.
 markers      ``visualization_msgs/MarkerArray`` of nodes and tension-coloured strings for RViz.
 imu          ``sensor_msgs/Imu`` of the twin's IMU (angular velocity, specific force).
+estimation   estimator_node's inputs and outputs (PoseWithCovarianceStamped, Imu gravity, measured
+             arrays with NaN).
 outputs      rclpy's message classes for :mod:`tensegrity_stiffness.messages`.
 joint_outputs  the joint node's five per-input output messages and its markers.
 spine_outputs  the spine node's seven per-input output messages and its markers.

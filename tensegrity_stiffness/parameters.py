@@ -392,6 +392,13 @@ def node_tables() -> tuple[NodeTable, ...]:
                   'the stiffness in the form an impedance or admittance controller takes: '
                   'frame change, symmetric positive definite projection, clamps, low-pass, rate '
                   'limit; published or set as the controller\'s parameters'),
+        NodeTable('estimator_node', ESTIMATOR_NODE_PARAMETERS, 'config/default_joint.yaml',
+                  'pose, load and stiffness with their uncertainty from measured tensions, '
+                  'lengths, an IMU, motion capture or a force-torque sensor'),
+        NodeTable('spine_estimator_node', spine_estimator_node_parameters(),
+                  'config/default_spine.yaml',
+                  'the estimator of a spine (the table for the default N = 5): every screw, the '
+                  'tip load, tip pose and tip stiffness with their covariances'),
     )
 
 
@@ -768,3 +775,175 @@ def bridge_settings(values: Mapping[str, Any], generation: int = 0) -> BridgeSet
         deadband=checked['target.deadband'], timeout=checked['target.timeout'],
         input_frame=checked['input.frame'], output_frame=checked['output.frame'],
         generation=generation, values=checked)
+
+
+# ---------------------------------------------------------------------------------- estimator_node
+#: What ``estimator_node`` assumes about the external load (``estimation.external_wrench``).
+LOAD_MODES = ('unknown', 'zero', 'measured')
+#: Inputs of ``estimator_node`` by the name ``estimation.trigger`` gives them (topic ``~/<name>``).
+ESTIMATOR_INPUTS = ('measured_tensions', 'measured_lengths', 'measured_pose', 'imu',
+                    'measured_wrench')
+
+ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('estimation.external_wrench', 'string', 'unknown',
+                  "the load on link 2: 'unknown' (estimated, W = -F), 'zero' (unloaded, to "
+                  "sensors.force_std / moment_std) or 'measured' (~/measured_wrench)",
+                  choices=LOAD_MODES),
+    ParameterSpec('estimation.trigger', 'string', 'measured_tensions',
+                  'the input whose messages trigger an estimate (with the latest of the others '
+                  'no older than estimation.max_age)', choices=ESTIMATOR_INPUTS),
+    ParameterSpec('estimation.max_age', 'double', 0.05,
+                  'inputs older than this (s, by arrival) are left out of an estimate',
+                  range=(0.0, 3600.0)),
+    ParameterSpec('estimation.stiffness_std', 'bool', True,
+                  'publish ~/cartesian_stiffness_std (first-order std of K_c)'),
+    ParameterSpec('sensors.tension_std', 'double', 0.005, 'load cells: tension std, N',
+                  range=(1e-12, 1e6)),
+    ParameterSpec('sensors.length_std', 'double', 1e-4, 'string length sensors: std, m',
+                  range=(1e-12, 1e3)),
+    ParameterSpec('sensors.gravity_std', 'double', 0.01,
+                  'IMU: std of each component of the measured gravity direction (unit vector)',
+                  range=(1e-9, 1.0)),
+    ParameterSpec('sensors.gravity_base', 'double_array', [0.0, -1.0, 0.0],
+                  'direction of gravity in {1} (3 values; normalised)'),
+    ParameterSpec('sensors.imu_rest_tolerance', 'double', 1.0,
+                  'an ~/imu reading whose specific force differs from 9.81 m/s^2 by more than '
+                  'this (m/s^2) is not at rest and is rejected', range=(0.0, 1e3)),
+    ParameterSpec('sensors.pose_position_std', 'double', 1e-4,
+                  'motion capture position std, m, used when ~/measured_pose carries no '
+                  'covariance (all zeros)', range=(1e-12, 1e3)),
+    ParameterSpec('sensors.pose_angle_std', 'double', 0.0017453292519943296,
+                  'motion capture angle std, rad, used when ~/measured_pose carries no '
+                  'covariance', range=(1e-12, 10.0)),
+    ParameterSpec('sensors.force_std', 'double', 0.01,
+                  'force-torque sensor force std, N (also the tolerance of a zero load)',
+                  range=(1e-12, 1e6)),
+    ParameterSpec('sensors.moment_std', 'double', 0.0005,
+                  'force-torque sensor moment std, N m (also the tolerance of a zero load)',
+                  range=(1e-12, 1e6)),
+)
+
+#: Every parameter of ``estimator_node``, in declaration order.
+ESTIMATOR_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
+    JOINT_PARAMETERS + FRAME_PARAMETERS + ESTIMATION_PARAMETERS + COMMON_PARAMETERS)
+
+
+@dataclass(frozen=True)
+class EstimatorNodeSettings:
+    """Everything one estimate of ``estimator_node`` needs, swapped as a whole (never mutated):
+    built from a complete set of parameter values by :func:`estimator_node_settings`."""
+
+    model: JointModel
+    link1_frame: str
+    link2_frame: str
+    load_mode: str
+    trigger: str
+    max_age: float
+    stiffness_std: bool
+    tension_std: float
+    length_std: float
+    gravity_std: float
+    gravity_base: tuple[float, float, float]
+    imu_rest_tolerance: float
+    pose_position_std: float
+    pose_angle_std: float
+    force_std: float
+    moment_std: float
+    max_array_length: int
+    marker_period: float
+    generation: int = 0
+    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+
+def estimator_node_settings(values: Mapping[str, Any], generation: int = 0
+                            ) -> EstimatorNodeSettings:
+    """Validate a whole parameter set of ``estimator_node`` and build its settings; ValueError
+    names the bad field. Every parameter of the table must be in ``values``."""
+    checked = {spec.name: spec.check(values[spec.name]) for spec in ESTIMATOR_NODE_PARAMETERS}
+    for name in ('frames.link1', 'frames.link2'):
+        if not checked[name].strip():
+            raise ValueError(f'{name} must not be empty')
+    base = checked['sensors.gravity_base']
+    if len(base) != 3 or not all(math.isfinite(v) for v in base) or math.hypot(*base) < 1e-9:
+        raise ValueError(f'sensors.gravity_base must be 3 finite values, not all zero, got '
+                         f'{base}')
+    return EstimatorNodeSettings(
+        model=joint_from_values(checked), link1_frame=checked['frames.link1'],
+        link2_frame=checked['frames.link2'],
+        load_mode=checked['estimation.external_wrench'], trigger=checked['estimation.trigger'],
+        max_age=checked['estimation.max_age'],
+        stiffness_std=checked['estimation.stiffness_std'],
+        tension_std=checked['sensors.tension_std'], length_std=checked['sensors.length_std'],
+        gravity_std=checked['sensors.gravity_std'],
+        gravity_base=(float(base[0]), float(base[1]), float(base[2])),
+        imu_rest_tolerance=checked['sensors.imu_rest_tolerance'],
+        pose_position_std=checked['sensors.pose_position_std'],
+        pose_angle_std=checked['sensors.pose_angle_std'],
+        force_std=checked['sensors.force_std'], moment_std=checked['sensors.moment_std'],
+        max_array_length=checked['limits.max_array_length'],
+        marker_period=marker_period(checked['markers.max_rate']),
+        generation=generation, values=checked)
+
+
+# --------------------------------------------------------------------------- spine_estimator_node
+#: Inputs of ``spine_estimator_node`` (no IMU on a spine yet): per-string arrays of every joint,
+#: joint-major; ``measured_pose`` is the tool frame in the base; ``measured_wrench`` the tip load.
+SPINE_ESTIMATOR_INPUTS = ('measured_tensions', 'measured_lengths', 'measured_pose',
+                          'measured_wrench')
+
+
+def spine_estimator_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, ...]:
+    """Every parameter of ``spine_estimator_node``: the spine's (as ``spine_node``) and the
+    estimator's (``estimation.*``, ``sensors.*``; the IMU's are not used)."""
+    return spine_node_parameters(n_joints) + ESTIMATION_PARAMETERS
+
+
+@dataclass(frozen=True)
+class SpineEstimatorNodeSettings:
+    """Everything one estimate of ``spine_estimator_node`` needs, swapped as a whole: the spine
+    (``chain``, frames, topic-set ``rest_lengths`` as :class:`SpineNodeSettings`) and the
+    estimator's settings (``estimator``: the sensors' stds, load mode, trigger, max age)."""
+
+    chain: JointChain
+    base_frame: str
+    tool_frame: str
+    max_array_length: int
+    marker_period: float
+    estimator: EstimatorNodeSettings
+    rest_lengths: tuple[Any, ...] | None = None
+    generation: int = 0
+    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def n_joints(self) -> int:
+        return self.chain.n_joints
+
+    @property
+    def n_strings(self) -> list[int]:
+        """String count of every joint."""
+        return [model.n_strings for model in self.chain.joints]
+
+    def current_rest_lengths(self) -> list[Any]:
+        """Every joint's rest lengths now (topic-set or configured)."""
+        if self.rest_lengths is not None:
+            return list(self.rest_lengths)
+        return [model.rest_lengths for model in self.chain.joints]
+
+
+def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
+                                  ) -> SpineEstimatorNodeSettings:
+    """Validate a whole parameter set of ``spine_estimator_node``; ValueError names the bad
+    field (an ``estimation.trigger`` the spine has no input for among them)."""
+    spine = spine_node_settings(values, generation)
+    if values['estimation.trigger'] not in SPINE_ESTIMATOR_INPUTS:
+        raise ValueError(f'estimation.trigger must be one of {" | ".join(SPINE_ESTIMATOR_INPUTS)}'
+                         f' for a spine, got {values["estimation.trigger"]!r}')
+    joint_values = {name: values[name] for name in (spec.name for spec in JOINT_PARAMETERS)}
+    estimator = estimator_node_settings({
+        **defaults(ESTIMATOR_NODE_PARAMETERS), **joint_values,
+        **{spec.name: values[spec.name] for spec in ESTIMATION_PARAMETERS + COMMON_PARAMETERS}})
+    return SpineEstimatorNodeSettings(
+        chain=spine.chain, base_frame=spine.base_frame, tool_frame=spine.tool_frame,
+        max_array_length=spine.max_array_length, marker_period=spine.marker_period,
+        estimator=estimator, generation=generation, values=spine.values | {
+            spec.name: estimator.values[spec.name] for spec in ESTIMATION_PARAMETERS})

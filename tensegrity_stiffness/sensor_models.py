@@ -33,6 +33,7 @@ Every Jacobian is held to central differences in ``test/test_sensor_models.py``.
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -117,20 +118,41 @@ def string_predictions(model: JointModel, xi: ArrayLike,
     """Lengths and tensions of every string at screw ``xi`` with their Jacobians (one
     evaluation). ``dl_j/dxi = -[(q_j x u_j)^T, u_j^T] J`` (``u_j^T ds_j/dxi`` with
     ``ds_j/dxi = -dq_j/dxi``), ``dphi_j/dxi = phi_j'(l_j) dl_j/dxi`` (eq. 8)."""
-    xi = _screw(xi)
-    rest = model.validate_rest_lengths(rest_lengths, batched=False)
+    return string_predictions_unchecked(
+        model, _screw(xi), model.validate_rest_lengths(rest_lengths, batched=False))
+
+
+_UNIT_ROWS: weakref.WeakKeyDictionary[JointModel, FloatArray] = weakref.WeakKeyDictionary()
+
+
+def _unit_rows(model: JointModel) -> FloatArray:
+    """``[hat(p1_j)^T, I]`` (n, 3, 6) per string of ``model`` (cached per model): ``u_j^T``
+    times it is ``[(p1_j x u_j)^T, u_j^T]``."""
+    rows = _UNIT_ROWS.get(model)
+    if rows is None:
+        p1 = model._p1
+        rows = np.zeros((p1.shape[0], 3, 6))
+        rows[:, :, :3] = np.swapaxes(hat3(p1), 1, 2)
+        rows[:, :, 3:] = np.eye(3)
+        _UNIT_ROWS[model] = rows
+    return rows
+
+
+def string_predictions_unchecked(model: JointModel, xi: FloatArray, rest: FloatArray
+                                 ) -> StringPrediction:
+    """:func:`string_predictions` for a validated screw (6,) and rest lengths (n,) (the
+    estimator's per-iteration path)."""
     state = model.evaluate(xi, rest)
     kin = ScrewKinematics(xi)
-    s = state.string_vectors
     lengths = state.lengths
-    u = s / lengths[:, None]
-    q = model._p1 - s
-    row = np.empty((lengths.shape[0], 6))
-    row[:, :3] = np.cross(q, u)
-    row[:, 3:] = u
-    length_jacobian = -(row @ kin.J)
-    _, slope, _, _ = model._string_forces(lengths, rest)
-    slope = np.broadcast_to(slope, lengths.shape).astype(np.float64)
+    u = state.string_vectors / lengths[:, None]
+    # [q x u, u] = u^T [hat(p1)^T, I] (q x u = (p1 - s) x u = p1 x u): one batched product with
+    # the per-string constant blocks, then -(...) J.
+    length_jacobian = (u[:, None, :] @ _unit_rows(model))[:, 0, :] @ kin.J
+    np.negative(length_jacobian, out=length_jacobian)
+    slope = model._string_forces(lengths, rest)[1]
+    if np.ndim(slope) == 0 or slope.shape != lengths.shape:
+        slope = np.broadcast_to(slope, lengths.shape).astype(np.float64)
     return StringPrediction(state, lengths, length_jacobian, state.tensions,
                             slope[:, None] * length_jacobian, slope, kin)
 
@@ -203,8 +225,10 @@ def pose_jacobian(xi: ArrayLike, kinematics: ScrewKinematics | None = None) -> F
     the PoseWithCovariance convention, per change of screw coordinates (``D = dt/domega``,
     eqs. 15-17; ``G`` the SO(3) left Jacobian, eq. 4)."""
     kin = ScrewKinematics(_screw(xi)) if kinematics is None else kinematics
+    tx, ty, tz = kin.t.tolist()
     out = np.zeros((6, 6))
-    out[:3, :3] = kin.D
+    # D = Q - hat(t) G (ScrewKinematics.D, written out for the estimator's per-estimate path)
+    out[:3, :3] = kin.Q - np.array([[0.0, -tz, ty], [tz, 0.0, -tx], [-ty, tx, 0.0]]) @ kin.G
     out[:3, 3:] = kin.G
     out[3:, :3] = kin.G
     return out
@@ -247,10 +271,18 @@ def predicted_gravity(xi: ArrayLike, gravity_base: ArrayLike,
     (``R -> exp(hat(G domega)) R``, eq. 4)."""
     g1 = unit_vector(gravity_base, 'gravity_base')
     kin = ScrewKinematics(_screw(xi)) if kinematics is None else kinematics
-    Rt = kin.R.T
+    return gravity_prediction_unchecked(kin, g1)
+
+
+def gravity_prediction_unchecked(kinematics: ScrewKinematics, gravity_base: FloatArray
+                                 ) -> tuple[FloatArray, FloatArray]:
+    """:func:`predicted_gravity` for the kinematics of a screw and a unit ``gravity_base`` (3,)
+    already checked (the estimator's per-iteration path)."""
+    Rt = kinematics.R.T
+    gx, gy, gz = gravity_base.tolist()
     J = np.zeros((3, 6))
-    J[:, :3] = Rt @ hat3(g1) @ kin.G
-    return Rt @ g1, J
+    J[:, :3] = Rt @ np.array([[0.0, -gz, gy], [gz, 0.0, -gx], [-gy, gx, 0.0]]) @ kinematics.G
+    return Rt @ gravity_base, J
 
 
 # ---------------------------------------------------------------------------------- statics
@@ -266,3 +298,10 @@ def equilibrium_residual(model: JointModel, xi: ArrayLike, external_wrench: Arra
     J[:, :6] = state.stiffness
     J[:, 6:] = np.eye(6)
     return state.wrench + W, J
+
+
+def gravity_from_specific_force(specific_force: ArrayLike) -> FloatArray:
+    """The unit direction of gravity (3,) in the accelerometer's frame from its specific force
+    at rest (``a - g`` = ``-g``: it points up), ``-a / |a|``; ValueError when it is not three
+    finite numbers or zero."""
+    return -unit_vector(specific_force, 'specific_force')

@@ -253,3 +253,9 @@ def test_bad_input(model):
         sm.pose_residual(np.zeros(6), np.ones((3, 3)))
     with pytest.raises(ValueError, match='transform'):
         sm.pose_error(np.eye(4) * 2.0, np.eye(4))
+
+
+def test_gravity_from_specific_force():
+    np.testing.assert_allclose(sm.gravity_from_specific_force([0.0, 9.81, 0.0]), [0, -1.0, 0])
+    with pytest.raises(ValueError, match='specific_force'):
+        sm.gravity_from_specific_force([0.0, np.nan, 0.0])

@@ -1,0 +1,220 @@
+"""``estimator_node``: pose, load and stiffness of a tensegrity joint with their uncertainty,
+estimated from what the robot measures (load cells, string lengths, an IMU, motion capture, a
+force-torque sensor).
+
+Thin layer: decode with :mod:`msg_tools.estimation`, keep the latest reading of each input,
+estimate with :mod:`tensegrity_stiffness.estimation_processing` (the library's
+:func:`~tensegrity_stiffness.estimation.estimate_joint_state`, warm-started from the last
+estimate) when a message of the trigger input (``estimation.trigger``) arrives, using the latest
+of the others no older than ``estimation.max_age``; publish. Parameters in
+:mod:`tensegrity_stiffness.parameters` (section estimator_node), the method and conventions in
+``docs/estimation.md``.
+
+Built on :class:`.StreamingNode` (:mod:`.node_base`): the inputs are its streams (served in
+order on the fast lane), an estimate is its "configuration" (all outputs or none, under one
+lock, re-estimated when ``~/rest_lengths`` or a parameter changes), markers and /diagnostics as
+the stiffness node's. Bad or stale input, or a set that cannot determine the pose: a specific
+throttled warning, no publication, the state kept.
+"""
+
+from __future__ import annotations
+
+import time
+from operator import attrgetter
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PoseWithCovarianceStamped, WrenchStamped
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
+
+import msg_tools
+from msg_tools import estimation as estimation_msgs
+from tensegrity_stiffness.equilibrium import solve_equilibrium
+from tensegrity_stiffness.estimation_processing import (
+    EstimatorInput,
+    EstimatorOutputs,
+    Reading,
+    diagnostic_values,
+    estimator_outputs,
+    gravity_reading,
+    measured_array,
+)
+from tensegrity_stiffness.parameters import (
+    ESTIMATOR_NODE_PARAMETERS,
+    EstimatorNodeSettings,
+    ParameterSpec,
+    estimator_node_settings,
+)
+from tensegrity_stiffness.ros import runner
+from tensegrity_stiffness.ros.node_base import Stream, StreamingNode
+from tensegrity_stiffness.ros.reporting import guarded
+from tensegrity_stiffness.ros.stiffness_node import StiffnessNode
+
+NODE_NAME = 'estimator_node'
+
+
+class EstimatorNode(StreamingNode):
+    """Publishes the pose (with covariance), load, screw, K, K_c, its std and the tensions of
+    every estimate; markers and diagnostics."""
+
+    OUTPUT_TOPICS = (
+        (PoseWithCovarianceStamped, '~/pose_estimate'), (WrenchStamped, '~/wrench_estimate'),
+        (Float64MultiArray, '~/screw_estimate'), (Float64MultiArray, '~/stiffness'),
+        (Float64MultiArray, '~/cartesian_stiffness'), (Float64MultiArray, '~/string_tensions'),
+        (Float64MultiArray, '~/cartesian_stiffness_std'))
+    WORKER_NAME = 'equilibrium worker'
+    #: What the frame of ~/measured_pose and ~/measured_wrench is called in warnings.
+    INPUT_FRAME_NAME = "link 1's frame"
+    _build_settings = staticmethod(estimator_node_settings)
+    _output_frame = attrgetter('link1_frame')
+    _settings: EstimatorNodeSettings
+    # The joint's rest lengths are kept and set as the stiffness node's (settings.model).
+    _keep_topic_rest_lengths = StiffnessNode._keep_topic_rest_lengths
+    _with_rest_lengths = StiffnessNode._with_rest_lengths
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
+        self._readings: dict[str, Reading] = {}
+        super().__init__(node_name, **kwargs)
+        self._start(*self._warm_up(self._settings))
+
+    def _warm_up(self, settings: EstimatorNodeSettings) -> tuple[Any, tuple, str]:
+        """The worker's first job and the ready line's summary (see ``StreamingNode._start``)."""
+        model = settings.model
+        return (solve_equilibrium, (model, np.zeros(6)),
+                f'{model.n_strings} strings, load {settings.load_mode}, trigger '
+                f'~/{settings.trigger}, max age {settings.max_age:g} s')
+
+    def _options(self, settings: Any) -> EstimatorNodeSettings:
+        """The estimator's settings (sensors, load mode, trigger, max age)."""
+        return settings
+
+    def _string_count(self, settings: Any) -> int:
+        """Values of a measured-array input."""
+        return settings.model.n_strings
+
+    def _input_frames(self, settings: Any) -> tuple[str, str]:
+        """(frame of the pose and the wrench inputs, frame of the IMU)."""
+        return settings.link1_frame, settings.link2_frame
+
+    # ------------------------------------------------------------------ declarations
+    def _parameter_table(self) -> tuple[ParameterSpec, ...]:
+        return ESTIMATOR_NODE_PARAMETERS
+
+    def _streams(self) -> tuple[Stream, ...]:
+        return ((Float64MultiArray, '~/measured_tensions', self._on_tensions),
+                (Float64MultiArray, '~/measured_lengths', self._on_lengths),
+                (PoseWithCovarianceStamped, '~/measured_pose', self._on_pose),
+                (Imu, '~/imu', self._on_imu),
+                (WrenchStamped, '~/measured_wrench', self._on_wrench))
+
+    def _output_messages(self, settings: EstimatorNodeSettings
+                         ) -> estimation_msgs.EstimatorOutputMessages:
+        return estimation_msgs.EstimatorOutputMessages(tuple(settings.model.string_names))
+
+    def _outputs(self, settings: EstimatorNodeSettings, snapshot: EstimatorInput
+                 ) -> EstimatorOutputs:
+        return estimator_outputs(settings, snapshot)
+
+    def _markers(self, settings: EstimatorNodeSettings, state: Any, stamp: Any) -> MarkerArray:
+        return msg_tools.joint_markers(settings.model, state, settings.link1_frame, stamp)
+
+    # ------------------------------------------------------------------ inputs
+    def _store(self, name: str, value: Any, stamp: Any) -> None:
+        """Keep the reading; when ``name`` is the trigger, estimate from the latest readings
+        (warm-started from the last estimate) and publish."""
+        now = time.monotonic()
+        self._readings[name] = Reading(value, now)
+        if name != self._options(self._settings).trigger:
+            return
+        last = self._last.outputs
+        snapshot = EstimatorInput(dict(self._readings), now,
+                                  None if last is None else last.screw)
+        has_stamp = stamp is not None and (stamp.sec or stamp.nanosec)
+        self._compute_and_publish(snapshot, stamp if has_stamp else None, f'~/{name}')
+
+    def _measured(self, name: str, msg: Float64MultiArray) -> None:
+        settings = self._settings
+        try:
+            values = measured_array(
+                estimation_msgs.measured_values(msg, settings.max_array_length),
+                self._string_count(settings), f'~/{name}')
+        except ValueError as exc:
+            self.reporter.reject(f'~/{name}', str(exc))
+            return
+        self._store(name, values, None)
+
+    @guarded('~/measured_tensions')
+    def _on_tensions(self, msg: Float64MultiArray) -> None:
+        self._measured('measured_tensions', msg)
+
+    @guarded('~/measured_lengths')
+    def _on_lengths(self, msg: Float64MultiArray) -> None:
+        self._measured('measured_lengths', msg)
+
+    def _check_frame(self, frame_id: str, expected: str, what: str) -> None:
+        if frame_id and frame_id != expected:
+            raise ValueError(f"header.frame_id '{frame_id}' is not {what} '{expected}'")
+
+    @guarded('~/measured_pose')
+    def _on_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        settings = self._settings
+        try:
+            self._check_frame(msg.header.frame_id, self._input_frames(settings)[0],
+                              self.INPUT_FRAME_NAME)
+            value = estimation_msgs.pose_with_covariance_to_arrays(msg.pose)
+        except ValueError as exc:
+            self.reporter.reject('~/measured_pose', str(exc))
+            return
+        self._store('measured_pose', value, msg.header.stamp)
+
+    @guarded('~/imu')
+    def _on_imu(self, msg: Imu) -> None:
+        settings = self._settings
+        try:
+            self._check_frame(msg.header.frame_id, self._input_frames(settings)[1],
+                              "link 2's frame")
+            gravity = gravity_reading(estimation_msgs.imu_specific_force(msg),
+                                      settings.imu_rest_tolerance)
+        except ValueError as exc:
+            self.reporter.reject('~/imu', str(exc))
+            return
+        self._store('imu', gravity, msg.header.stamp)
+
+    @guarded('~/measured_wrench')
+    def _on_wrench(self, msg: WrenchStamped) -> None:
+        settings = self._settings
+        try:
+            self._check_frame(msg.header.frame_id, self._input_frames(settings)[0],
+                              self.INPUT_FRAME_NAME)
+            wrench = estimation_msgs.wrench_stamped_to_array(msg)
+        except ValueError as exc:
+            self.reporter.reject('~/measured_wrench', str(exc))
+            return
+        self._store('measured_wrench', wrench, msg.header.stamp)
+
+    # ------------------------------------------------------------------ diagnostics
+    def _diagnostic_statuses(self, settings: Any, outputs: Any,
+                             values: list[tuple[str, Any]]) -> list[Any]:
+        options = self._options(settings)
+        level, message = 'WARN', 'no estimate yet'
+        if outputs is not None:
+            values += diagnostic_values(outputs)
+            est = outputs.estimate
+            level = 'OK'
+            message = (f'estimating from {", ".join(outputs.used)}; chi2/dof '
+                       f'{est.chi2:.3g}/{est.dof}, rank {est.rank}')
+        values += [('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
+                   ('max age [s]', options.max_age)]
+        return [msg_tools.diagnostic_status(f'{self.get_name()}: estimator', level, message,
+                                            values, hardware_id=self._output_frame(settings))]
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run tensegrity_stiffness estimator_node``."""
+    runner.run(EstimatorNode, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,109 @@
+"""``spine_estimator_node``: every joint's screw, the tip load, the tip pose and the exact tip
+stiffness of a spine with their uncertainty, estimated from per-joint load cells or string
+lengths, a motion-capture tip pose or a force-torque reading of the tip load.
+
+:class:`.EstimatorNode` on a :class:`~tensegrity_stiffness.chain.JointChain`: the same inputs and
+triggering (``~/measured_tensions`` / ``~/measured_lengths`` hold every joint's strings,
+joint-major, NaN = not measured; ``~/measured_pose`` is the tool frame in the base;
+``~/measured_wrench`` the tip load in the base; no IMU), the library's
+:func:`~tensegrity_stiffness.estimation.estimate_chain_state` (the equilibria exact, the tip load
+shared by every joint), warm-started from the last estimate. The spine's parameters and
+``~/rest_lengths`` are ``spine_node``'s; the estimator's are ``estimator_node``'s.
+"""
+
+from __future__ import annotations
+
+from operator import attrgetter
+from typing import Any
+
+import numpy as np
+from geometry_msgs.msg import PoseWithCovarianceStamped, WrenchStamped
+from std_msgs.msg import Float64MultiArray
+from visualization_msgs.msg import MarkerArray
+
+import msg_tools
+from msg_tools import estimation as estimation_msgs
+from tensegrity_stiffness.chain import solve_chain_equilibrium
+from tensegrity_stiffness.estimation_processing import (
+    EstimatorInput,
+    SpineEstimatorOutputs,
+    spine_estimator_outputs,
+)
+from tensegrity_stiffness.parameters import (
+    EstimatorNodeSettings,
+    ParameterSpec,
+    SpineEstimatorNodeSettings,
+    spine_estimator_node_parameters,
+    spine_estimator_node_settings,
+)
+from tensegrity_stiffness.ros import runner
+from tensegrity_stiffness.ros.estimator_node import EstimatorNode
+from tensegrity_stiffness.ros.node_base import Stream
+from tensegrity_stiffness.ros.spine_node import SpineNode, _declared_joint_count
+
+NODE_NAME = 'spine_estimator_node'
+
+
+class SpineEstimatorNode(EstimatorNode):
+    """Publishes the screws, the tip pose (with covariance), the tip load and the tip stiffness
+    with its std per estimate; markers and diagnostics."""
+
+    OUTPUT_TOPICS = (
+        (Float64MultiArray, '~/screws_estimate'),
+        (PoseWithCovarianceStamped, '~/tip_pose_estimate'),
+        (WrenchStamped, '~/tip_wrench_estimate'), (Float64MultiArray, '~/tip_stiffness_base'),
+        (Float64MultiArray, '~/tip_stiffness_base_std'))
+    WORKER_NAME = 'chain equilibrium worker'
+    INPUT_FRAME_NAME = 'the base frame'
+    _build_settings = staticmethod(spine_estimator_node_settings)
+    _output_frame = attrgetter('base_frame')
+    _settings: SpineEstimatorNodeSettings
+    # The spine's rest lengths are kept and set as spine_node's (settings.rest_lengths).
+    _keep_topic_rest_lengths = SpineNode._keep_topic_rest_lengths
+    _with_rest_lengths = SpineNode._with_rest_lengths
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+
+    def _warm_up(self, settings: SpineEstimatorNodeSettings) -> tuple[Any, tuple, str]:
+        options = settings.estimator
+        return (solve_chain_equilibrium, (settings.chain, np.zeros(6)),
+                f'{settings.n_joints} joints, load {options.load_mode}, trigger '
+                f'~/{options.trigger}, max age {options.max_age:g} s')
+
+    def _options(self, settings: SpineEstimatorNodeSettings) -> EstimatorNodeSettings:
+        return settings.estimator
+
+    def _string_count(self, settings: SpineEstimatorNodeSettings) -> int:
+        return sum(settings.n_strings)
+
+    def _input_frames(self, settings: SpineEstimatorNodeSettings) -> tuple[str, str]:
+        return settings.base_frame, ''
+
+    # ------------------------------------------------------------------ declarations
+    def _parameter_table(self) -> tuple[ParameterSpec, ...]:
+        return spine_estimator_node_parameters(_declared_joint_count(self))
+
+    def _streams(self) -> tuple[Stream, ...]:
+        return tuple(stream for stream in super()._streams() if stream[1] != '~/imu')
+
+    def _output_messages(self, settings: SpineEstimatorNodeSettings
+                         ) -> estimation_msgs.SpineEstimatorOutputMessages:
+        return estimation_msgs.SpineEstimatorOutputMessages(settings.n_joints)
+
+    def _outputs(self, settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput
+                 ) -> SpineEstimatorOutputs:
+        return spine_estimator_outputs(settings, snapshot)
+
+    def _markers(self, settings: SpineEstimatorNodeSettings, state: Any, stamp: Any
+                 ) -> MarkerArray:
+        return msg_tools.spine_markers(settings.chain, state, settings.base_frame, stamp)
+
+
+def main(args: list[str] | None = None) -> None:
+    """Entry point of ``ros2 run tensegrity_stiffness spine_estimator_node``."""
+    runner.run(SpineEstimatorNode, args)
+
+
+if __name__ == '__main__':
+    main()
