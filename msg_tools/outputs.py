@@ -12,9 +12,15 @@ from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, Wre
 from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
 
-from tensegrity_stiffness.messages import MESSAGE_CLASS_NAMES, MessageTypes
+from tensegrity_stiffness.messages import (
+    MESSAGE_CLASS_NAMES,
+    MessageTypes,
+    fill_outputs,
+    payload_writer,
+    write_wrench_stamped,
+)
 
-__all__ = ['RCLPY_TYPES', 'payload']
+__all__ = ['RCLPY_TYPES', 'fill_outputs', 'payload', 'write_payload', 'write_wrench_stamped']
 
 
 def payload(arr: NDArray[np.float64]) -> array.array:
@@ -31,3 +37,6 @@ RCLPY_TYPES = MessageTypes(
         Time, Header, MultiArrayDimension, MultiArrayLayout, Float64MultiArray, Vector3, Wrench,
         WrenchStamped, Point, Quaternion, Pose, PoseStamped), strict=True)),
     payload=payload)
+
+#: Writes an array into a ``Float64MultiArray`` of rclpy (:func:`fill_outputs`' writer form).
+write_payload = payload_writer(RCLPY_TYPES)

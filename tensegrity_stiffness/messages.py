@@ -232,6 +232,12 @@ def output_writer(layout: OutputLayout, types: MessageTypes) -> Writer:
         return write_wrench_stamped
     if layout.msgtype == POSE_STAMPED:
         return write_pose_stamped
+    return payload_writer(types)
+
+
+def payload_writer(types: MessageTypes) -> Writer:
+    """The :data:`Writer` of a ``Float64MultiArray``'s data in ``types``' payload form (its
+    layout, labelled once, stays; stamp and frame are not used)."""
     payload = types.payload
 
     def write_payload(msg: Any, values: FloatArray, stamp: Any, frame_id: str) -> None:
