@@ -88,6 +88,8 @@ _C1_SERIES = _series(3, True)
 # e = (1 - t sin t / (2 (1 - cos t))) / t^2, the omega^2 coefficient of the inverse left Jacobian.
 _E_SERIES = np.array([691.0 / 1307674368000.0, 1.0 / 47900160.0, 1.0 / 1209600.0,
                       1.0 / 30240.0, 1.0 / 720.0, 1.0 / 12.0])
+_E_SERIES_FLOATS = tuple(_E_SERIES.tolist())
+_TINY = float(np.finfo(float).tiny)
 
 
 def rotation_coefficients(theta: ArrayLike) -> tuple[FloatArray, ...]:
@@ -356,30 +358,54 @@ def log_so3(R: ArrayLike, reference: ArrayLike | None = None) -> FloatArray:
     R = np.asarray(R, dtype=np.float64)
     if R.shape != (3, 3):
         raise ValueError(f'R must have shape (3, 3), got {R.shape}')
-    skew = vee3(R)  # sin(theta) u
-    sin_t = float(np.linalg.norm(skew))
-    cos_t = 0.5 * (float(np.trace(R)) - 1.0)
+    ref = None if reference is None else np.asarray(reference, dtype=np.float64).tolist()
+    return np.array(_log_so3_floats(R.tolist(), ref))
+
+
+def _log_so3_floats(R: list, reference: list | None) -> list[float]:
+    """:func:`log_so3` on plain floats (a 3x3 nested list; one rotation costs a few us, where
+    numpy's small-array calls cost some 50 us)."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
+    sx, sy, sz = 0.5 * (r21 - r12), 0.5 * (r02 - r20), 0.5 * (r10 - r01)  # sin(theta) u
+    sin_t = math.sqrt(sx * sx + sy * sy + sz * sz)
+    cos_t = 0.5 * (r00 + r11 + r22 - 1.0)
     theta = math.atan2(sin_t, cos_t)
     if theta < _LOG_SYMMETRIC_BRANCH:
         # theta / sin(theta) with its series near 0.
         t2 = theta * theta
         ratio = 1.0 + t2 / 6.0 + 7.0 * t2 * t2 / 360.0 if theta < 1e-4 else theta / sin_t
-        omega = ratio * skew
+        omega = [ratio * sx, ratio * sy, ratio * sz]
     else:
         # u u^T = (sym(R) - cos t I) / (1 - cos t); take the best-conditioned column.
-        uu = (0.5 * (R + R.T) - cos_t * np.eye(3)) / (1.0 - cos_t)
-        k = int(np.argmax(np.diag(uu)))
-        u = uu[:, k] / math.sqrt(max(uu[k, k], np.finfo(float).tiny))
-        u /= np.linalg.norm(u)
-        if float(u @ skew) < 0.0:
-            u = -u
-        omega = theta * u
+        d = 1.0 - cos_t
+        uu = [[(r00 - cos_t) / d, 0.5 * (r01 + r10) / d, 0.5 * (r02 + r20) / d],
+              [0.5 * (r01 + r10) / d, (r11 - cos_t) / d, 0.5 * (r12 + r21) / d],
+              [0.5 * (r02 + r20) / d, 0.5 * (r12 + r21) / d, (r22 - cos_t) / d]]
+        k = max(range(3), key=lambda i: uu[i][i])
+        scale = 1.0 / math.sqrt(max(uu[k][k], _TINY))
+        u = [uu[0][k] * scale, uu[1][k] * scale, uu[2][k] * scale]
+        norm = math.sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2])
+        sign = -1.0 if u[0] * sx + u[1] * sy + u[2] * sz < 0.0 else 1.0
+        omega = [sign * theta * c / norm for c in u]
     if reference is None or theta == 0.0:
         return omega
-    ref = np.asarray(reference, dtype=np.float64)
-    norm = np.linalg.norm(omega)
-    other = omega * ((norm - 2.0 * math.pi) / norm)
-    return other if np.linalg.norm(other - ref) < np.linalg.norm(omega - ref) else omega
+    norm = math.sqrt(omega[0] ** 2 + omega[1] ** 2 + omega[2] ** 2)
+    factor = (norm - 2.0 * math.pi) / norm
+    other = [c * factor for c in omega]
+    if math.dist(other, reference) < math.dist(omega, reference):
+        return other
+    return omega
+
+
+def _inverse_jacobian_coefficient(t: float) -> float:
+    """``e`` of :func:`left_jacobian_so3_inverse` at one angle ``t`` (its series below
+    ``_INVERSE_SERIES_THRESHOLD``)."""
+    if t < _INVERSE_SERIES_THRESHOLD:
+        e = 0.0
+        for coefficient in _E_SERIES_FLOATS:  # Horner in t^2, as np.polyval
+            e = e * t * t + coefficient
+        return e
+    return (1.0 - t * math.sin(t) / (2.0 * (1.0 - math.cos(t)))) / (t * t)
 
 
 def log_se3(T: ArrayLike, reference: ArrayLike | None = None) -> FloatArray:
@@ -387,22 +413,35 @@ def log_se3(T: ArrayLike, reference: ArrayLike | None = None) -> FloatArray:
 
     ``reference`` (a screw, shape (6,)) selects the rotation branch nearest to its omega, which
     matters at ``theta = pi`` where ``pi u`` and ``-pi u`` give the same rotation. ``T`` must be a
-    rigid transform (orthonormal R with det +1 to 1e-6).
+    rigid transform (orthonormal R with det +1 to 1e-6). ``v = G^-1 p`` with
+    ``G^-1 = I - W/2 + e W^2`` (:func:`left_jacobian_so3_inverse`), on plain floats.
     """
     T = np.asarray(T, dtype=np.float64)
     if T.shape != (4, 4):
         raise ValueError(f'T must have shape (4, 4), got {T.shape}')
-    if not np.all(np.isfinite(T)):
+    rows = T.tolist()
+    if not all(math.isfinite(x) for row in rows for x in row):
         raise ValueError('T must be finite')
-    R, p = T[:3, :3], T[:3, 3]
-    if np.max(np.abs(R.T @ R - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0.0:
+    R = [row[:3] for row in rows[:3]]
+    columns = list(zip(*R, strict=True))
+    gram_error = max(abs(sum(a * b for a, b in zip(columns[i], columns[j], strict=True))
+                         - (1.0 if i == j else 0.0)) for i in range(3) for j in range(3))
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = R
+    det = (r00 * (r11 * r22 - r12 * r21) - r01 * (r10 * r22 - r12 * r20)
+           + r02 * (r10 * r21 - r11 * r20))
+    if gram_error > 1e-6 or det < 0.0:
         raise ValueError('T[:3, :3] must be a rotation matrix (orthonormal, det +1)')
     ref_omega = None
     if reference is not None:
         ref = as_screws(reference, 'reference')
         if ref.shape != (6,):
             raise ValueError(f'reference must have shape (6,), got {ref.shape}')
-        ref_omega = ref[:3]
-    omega = log_so3(R, ref_omega)
-    v = left_jacobian_so3_inverse(omega) @ p
-    return np.concatenate([omega, v])
+        ref_omega = ref[:3].tolist()
+    wx, wy, wz = _log_so3_floats(R, ref_omega)
+    px, py, pz = rows[0][3], rows[1][3], rows[2][3]
+    e = _inverse_jacobian_coefficient(math.sqrt(wx * wx + wy * wy + wz * wz))
+    # w x p and w x (w x p): W p and W^2 p
+    cx, cy, cz = wy * pz - wz * py, wz * px - wx * pz, wx * py - wy * px
+    ccx, ccy, ccz = wy * cz - wz * cy, wz * cx - wx * cz, wx * cy - wy * cx
+    return np.array([wx, wy, wz, px - 0.5 * cx + e * ccx, py - 0.5 * cy + e * ccy,
+                     pz - 0.5 * cz + e * ccz])
