@@ -419,22 +419,12 @@ def chain_document(values: Mapping[str, Any]) -> dict[str, Any]:
     return document
 
 
-@dataclass(frozen=True)
-class SpineNodeSettings:
-    """Everything one computation of ``spine_node`` needs, swapped as a whole (never mutated):
-    built from a complete set of parameter values by :func:`spine_node_settings`.
-    ``rest_lengths``: per-joint rest lengths set on ``~/rest_lengths`` (None: the models')."""
+class _SpineModel:
+    """What the settings of the spine's nodes share: the joints and their rest lengths now (the
+    dataclasses below give ``chain`` and ``rest_lengths``)."""
 
     chain: JointChain
-    base_frame: str
-    tool_frame: str
-    max_array_length: int
-    equilibrium_time_budget: float
-    equilibrium_max_iterations: int
-    marker_period: float
-    rest_lengths: tuple[Any, ...] | None = None
-    generation: int = 0
-    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    rest_lengths: tuple[Any, ...] | None
 
     @property
     def n_joints(self) -> int:
@@ -450,6 +440,24 @@ class SpineNodeSettings:
         if self.rest_lengths is not None:
             return list(self.rest_lengths)
         return [model.rest_lengths for model in self.chain.joints]
+
+
+@dataclass(frozen=True)
+class SpineNodeSettings(_SpineModel):
+    """Everything one computation of ``spine_node`` needs, swapped as a whole (never mutated):
+    built from a complete set of parameter values by :func:`spine_node_settings`.
+    ``rest_lengths``: per-joint rest lengths set on ``~/rest_lengths`` (None: the models')."""
+
+    chain: JointChain
+    base_frame: str
+    tool_frame: str
+    max_array_length: int
+    equilibrium_time_budget: float
+    equilibrium_max_iterations: int
+    marker_period: float
+    rest_lengths: tuple[Any, ...] | None = None
+    generation: int = 0
+    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
 
 def spine_node_settings(values: Mapping[str, Any], generation: int = 0) -> SpineNodeSettings:
@@ -899,7 +907,7 @@ def spine_estimator_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, .
 
 
 @dataclass(frozen=True)
-class SpineEstimatorNodeSettings:
+class SpineEstimatorNodeSettings(_SpineModel):
     """Everything one estimate of ``spine_estimator_node`` needs, swapped as a whole: the spine
     (``chain``, frames, topic-set ``rest_lengths`` as :class:`SpineNodeSettings`) and the
     estimator's settings (``estimator``: the sensors' stds, load mode, trigger, max age)."""
@@ -913,21 +921,6 @@ class SpineEstimatorNodeSettings:
     rest_lengths: tuple[Any, ...] | None = None
     generation: int = 0
     values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
-
-    @property
-    def n_joints(self) -> int:
-        return self.chain.n_joints
-
-    @property
-    def n_strings(self) -> list[int]:
-        """String count of every joint."""
-        return [model.n_strings for model in self.chain.joints]
-
-    def current_rest_lengths(self) -> list[Any]:
-        """Every joint's rest lengths now (topic-set or configured)."""
-        if self.rest_lengths is not None:
-            return list(self.rest_lengths)
-        return [model.rest_lengths for model in self.chain.joints]
 
 
 def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
