@@ -457,14 +457,8 @@ class JointModel:
         rest_c = np.ascontiguousarray(rest)
         # All outputs in one buffer (kernel.h: blocks T, s, lengths, tensions, wrench, K, K_c,
         # then the flags as bytes).
-        o_s = 16 * N
-        o_l = o_s + 3 * n * N
-        o_phi = o_l + n * N
-        o_F = o_phi + n * N
-        o_K = o_F + 6 * N
-        o_Kc = o_K + 36 * N
-        o_flags = o_Kc + 36 * N
-        buf = np.empty(o_flags + (2 * N * n + 7) // 8)
+        o = kn.batch_layout(N)
+        buf = np.empty(o.size)
         status = kn.evaluate(kn.model, N, kernel.address(xi), kernel.address(rest_c),
                              rest_c.size,
                              kernel.MODE_WRENCH if wrench_only else kernel.MODE_FULL,
@@ -473,17 +467,17 @@ class JointModel:
             if status == kernel.ERROR_ZERO_LENGTH:
                 return None
             kernel.check(status, 'tsk_joint_evaluate')
-        K = buf[o_K:o_Kc].reshape(N, 6, 6)
-        Kc = buf[o_Kc:o_flags].reshape(N, 6, 6)
+        K = buf[o.stiffness:o.cartesian].reshape(N, 6, 6)
+        Kc = buf[o.cartesian:o.flags].reshape(N, 6, 6)
         if wrench_only:
             K.fill(np.nan)
             Kc.fill(np.nan)
-        flags = buf[o_flags:].view(np.bool_)[:2 * N * n].reshape(2, N, n)
-        T = buf[:o_s].reshape(N, 4, 4)
-        s = buf[o_s:o_l].reshape(N, n, 3)
-        lengths = buf[o_l:o_phi].reshape(N, n)
-        phi = buf[o_phi:o_F].reshape(N, n)
-        wrench = buf[o_F:o_K].reshape(N, 6)
+        flags = buf[o.flags:].view(np.bool_)[:2 * N * n].reshape(2, N, n)
+        T = buf[:o.strings].reshape(N, 4, 4)
+        s = buf[o.strings:o.lengths].reshape(N, n, 3)
+        lengths = buf[o.lengths:o.tensions].reshape(N, n)
+        phi = buf[o.tensions:o.wrench].reshape(N, n)
+        wrench = buf[o.wrench:o.stiffness].reshape(N, 6)
         return JointState(xi, T, s, lengths, phi, flags[0], flags[1], wrench, K, Kc)
 
     # ------------------------------------------------------------------ public shortcuts

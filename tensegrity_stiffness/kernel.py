@@ -24,6 +24,7 @@ import ctypes
 import functools
 import os
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -193,6 +194,19 @@ def library() -> _Library | None:
     return _load()[0]
 
 
+class BatchLayout(NamedTuple):
+    """Where each block of a batch's output buffer starts (doubles; ``T`` at 0) and its size."""
+
+    strings: int
+    lengths: int
+    tensions: int
+    wrench: int
+    stiffness: int
+    cartesian: int
+    flags: int
+    size: int
+
+
 class JointKernel:
     """The compiled evaluation of one joint model: its per-string constants, bound once.
 
@@ -220,7 +234,6 @@ class JointKernel:
         self.model = ctypes.addressof(self._struct)
         self.evaluate = library.evaluate
         self.evaluate_packed = library.evaluate_packed
-        self.batch_size = library.batch_size
         self.rest = 6
         self.transform = self.rest + n
         self.strings = self.transform + 16
@@ -231,6 +244,20 @@ class JointKernel:
         self.cartesian = self.stiffness + 36
         self.flags = self.cartesian + 36
         self.size = self.flags + (2 * n + 7) // 8
+
+    def batch_layout(self, N: int) -> BatchLayout:
+        """Offsets (in doubles) of the blocks of a batch's output buffer for ``N`` screws, in
+        the order of ``kernel.h``, and its size (``tsk_joint_batch_size(n, N)``)."""
+        n = self.n
+        strings = 16 * N
+        lengths = strings + 3 * n * N
+        tensions = lengths + n * N
+        wrench = tensions + n * N
+        stiffness = wrench + 6 * N
+        cartesian = stiffness + 36 * N
+        flags = cartesian + 36 * N
+        return BatchLayout(strings, lengths, tensions, wrench, stiffness, cartesian, flags,
+                           flags + (2 * N * n + 7) // 8)
 
     def __reduce__(self) -> tuple:
         """Pickled as its constants (a model sent to the solver worker process): the receiving
