@@ -147,8 +147,8 @@ else
     log "checkout, venv or layout changed: removing stale build/ install/"
     rm -rf build install
   fi
-  # --symlink-install leaves links to deleted sources (e.g. a removed config/*.yaml) behind in
-  # build/ and install/; setup.py's glob in build/ would then pick them up and fail.
+  # --symlink-install leaves links to deleted sources (a removed module, config or launch file)
+  # behind in install/: they would stay importable or installed.
   find build install -xtype l -delete 2>/dev/null || true
   log "colcon build --symlink-install (package tensegrity_stiffness)"
   mkdir -p build log
