@@ -75,9 +75,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import chdtri
 
+from tensegrity_stiffness.chain import pose_to_transform
 from tensegrity_stiffness.equilibrium import solve_equilibrium
 from tensegrity_stiffness.joint import JointModel, JointState
-from tensegrity_stiffness.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.screw import (
     as_screws,
     exp_se3,
@@ -199,10 +199,7 @@ def pose_transform(pose: ArrayLike, name: str = 'pose') -> FloatArray:
             raise ValueError(f'{name}: the rotation block is not a rotation matrix')
         return arr
     if arr.shape == (7,):
-        T = np.eye(4)
-        T[:3, :3] = quaternion_to_rotation(arr[3:])
-        T[:3, 3] = arr[:3]
-        return T
+        return pose_to_transform(arr, name)
     raise ValueError(f'{name} must be a (4, 4) transform or [x y z qx qy qz qw], got shape '
                      f'{arr.shape}')
 
