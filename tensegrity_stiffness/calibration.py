@@ -226,10 +226,6 @@ class _Data:
                           np.repeat(self.has_wrench[:, None], 6, axis=1),
                           np.isfinite(self.tensions), np.isfinite(self.lengths)])
 
-    def subset(self, rows: NDArray[np.int64]) -> _Data:
-        return _Data(self.rest[rows], self.poses[rows], self.has_pose[rows], self.wrench[rows],
-                     self.has_wrench[rows], self.tensions[rows], self.lengths[rows])
-
 
 def _per_string(name: str, value: ArrayLike | None, n: int, allow_nan: bool) -> FloatArray:
     if value is None:
@@ -379,6 +375,11 @@ class _Evaluation:
     jac_screw: FloatArray
     jac_parameters: FloatArray
     raw: FloatArray  # unwhitened residuals (N, R)
+
+    def subset(self, rows: NDArray[np.int64]) -> _Evaluation:
+        """The evaluation of the samples ``rows`` only."""
+        return _Evaluation(self.residuals[rows], self.jac_screw[rows],
+                           self.jac_parameters[rows], self.raw[rows])
 
 
 class _Problem:
@@ -931,14 +932,15 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     if progress:
         progress(3, stages)
 
-    sub = problem
-    if outliers.size:
-        sub = _Problem(model, data.subset(inliers), noise)
-    ev = sub.evaluate(z, xi_fit[inliers])
-    rms_after = _rms_by_kind(ev.raw, sub.mask, n)
+    # One evaluation at the estimate: the inliers' rows give the statistics, all rows the
+    # residuals after (every sample's rows depend on its own screw only).
+    ev_all = problem.evaluate(z, xi_fit)
+    ev = ev_all.subset(inliers)
+    mask_in = problem.mask[inliers]
+    rms_after = _rms_by_kind(ev.raw, mask_in, n)
     chi2_value = float(np.sum(ev.residuals ** 2))
-    dof = int(sub.mask.sum()) - 6 * inliers.size - ident.basis.shape[1]
-    info = sub.information(ev, columns)
+    dof = int(mask_in.sum()) - 6 * inliers.size - ident.basis.shape[1]
+    info = problem.information(ev, columns)
     cov_scaled = _subspace_covariance(info, ident.basis)
     unit = problem.unit[columns]
     covariance = cov_scaled * unit[:, None] * unit[None, :]
@@ -965,7 +967,6 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
                 success = False
                 message = f'{name} = {parameters[name]:.6g} is outside bounds [{low}, {high}]'
     calibrated = model_with_parameters(model, k, model.rest_lengths + d)
-    after_all = problem.evaluate(z, xi_fit, jacobians=False).raw
     if progress:
         progress(4, stages)
     return CalibrationResult(
@@ -977,7 +978,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         outliers=outliers.tolist(), iterations=iterations, screws=xi_fit, chi2=chi2_value,
         dof=dof, nominal=nominal, offsets=d,
         residuals_before=np.where(problem.mask, before.raw, np.nan),
-        residuals_after=np.where(problem.mask, after_all, np.nan),
+        residuals_after=np.where(problem.mask, ev_all.raw, np.nan),
         seconds=time.perf_counter() - started)
 
 
