@@ -297,25 +297,20 @@ def model_with_parameters(model: JointModel, stiffness: ArrayLike,
                       initial_screw=model.initial_screw, use_kernel=model.uses_kernel)
 
 
-def _force_law_slopes(model: JointModel, state: JointState, rest: FloatArray
-                      ) -> tuple[FloatArray, FloatArray]:
-    """``d phi / d l`` and ``d phi / d l0`` of every string for a batch of states (eq. 8 and
-    the model's force law; the maximum stretch ``lmax - l0`` is held, as :class:`JointModel`
-    does): the batched form of ``sensor_models.string_predictions(...).tension_slope`` and
+def _tension_rest_length_slopes(model: JointModel, state: JointState, rest: FloatArray
+                                ) -> FloatArray:
+    """``d phi / d l0`` of every string for a batch of states (eq. 8 and the model's force law;
+    the maximum stretch ``lmax - l0`` is held, as :class:`JointModel` does): the batched form of
     ``sensor_models.string_parameter_jacobians(...).tension_rest_length``."""
     k = model.k
-    lengths = state.lengths
     taut = ~(state.slack | state.saturated)
     if model.force_law == 'hooke':
-        dphi_dl = np.where(taut, k, 0.0)
-        dphi_dl0 = np.where(taut, -k, 0.0)
-    else:  # 'paper': k (l - l0) / l taut, k s_max / (l0 + s_max) saturated
-        dphi_dl = np.where(taut, k * rest / (lengths * lengths), 0.0)
-        lmax = rest + model.max_stretch
-        with np.errstate(invalid='ignore'):
-            saturated_slope = -k * model.max_stretch / (lmax * lmax)
-        dphi_dl0 = np.where(taut, -k / lengths, np.where(state.saturated, saturated_slope, 0.0))
-    return dphi_dl, dphi_dl0
+        return np.where(taut, -k, 0.0)
+    # 'paper': -k / l taut, -k s_max / lmax^2 (= -phi / lmax) saturated
+    lmax = rest + model.max_stretch
+    with np.errstate(invalid='ignore'):
+        saturated_slope = -k * model.max_stretch / (lmax * lmax)
+    return np.where(taut, -k / state.lengths, np.where(state.saturated, saturated_slope, 0.0))
 
 
 def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArray:
@@ -452,7 +447,8 @@ class _Problem:
         jx[:, 6:12] = state.stiffness
         w = _string_wrench_directions(model, state)  # (N, n, 6)
         dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
-        dphi_dl, dphi_dl0 = _force_law_slopes(model, state, rest)
+        dphi_dl = model._string_forces(state.lengths, rest)[1]  # as sensor_models does
+        dphi_dl0 = _tension_rest_length_slopes(model, state, rest)
         jx[:, 12:12 + n] = dphi_dl[..., None] * dl
         jx[:, 12 + n:] = dl
         jp = np.zeros((N, R, 2 * n))
