@@ -406,7 +406,10 @@ class _Problem:
             found = self._models[key] = model_with_parameters(self.model, k)
         return found
 
-    def evaluate(self, z: FloatArray, xi: FloatArray, jacobians: bool = True) -> _Evaluation:
+    def evaluate(self, z: FloatArray, xi: FloatArray, jacobians: bool = True,
+                 parameter_jacobians: bool = True) -> _Evaluation:
+        """Residuals at (z, xi); with ``jacobians`` their Jacobian w.r.t. the screws, and with
+        ``parameter_jacobians`` as well the one w.r.t. the parameters."""
         n, data = self.n, self.data
         k, d = self.parameters(z)
         if np.any(k <= 0.0):
@@ -448,9 +451,13 @@ class _Problem:
         w = _string_wrench_directions(model, state)  # (N, n, 6)
         dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
         dphi_dl = model._string_forces(state.lengths, rest)[1]  # as sensor_models does
-        dphi_dl0 = _tension_rest_length_slopes(model, state, rest)
         jx[:, 12:12 + n] = dphi_dl[..., None] * dl
         jx[:, 12 + n:] = dl
+        scale = self.mask / self.std  # (N, R)
+        jx *= scale[..., None]
+        if not parameter_jacobians:
+            return _Evaluation(residuals, jx, np.empty(0), raw)
+        dphi_dl0 = _tension_rest_length_slopes(model, state, rest)
         jp = np.zeros((N, R, 2 * n))
         dphi_dk = state.tensions / k
         jp[:, 6:12, :n] = np.swapaxes(w * dphi_dk[..., None], -1, -2)
@@ -458,8 +465,6 @@ class _Problem:
         idx = np.arange(n)
         jp[:, 12 + idx, idx] = dphi_dk
         jp[:, 12 + idx, n + idx] = dphi_dl0
-        scale = self.mask / self.std  # (N, R)
-        jx *= scale[..., None]
         jp *= scale[..., None] * self.unit
         return _Evaluation(residuals, jx, jp, raw)
 
@@ -469,7 +474,7 @@ class _Problem:
         """Every sample's screw by Gauss-Newton with the parameters fixed (batched; a step that
         raises a sample's cost is halved up to 4 times, else that sample keeps its screw)."""
         xi = xi.copy()
-        ev = self.evaluate(z, xi)
+        ev = self.evaluate(z, xi, parameter_jacobians=False)
         cost = np.sum(ev.residuals ** 2, axis=1)
         for _ in range(iterations):
             A = np.swapaxes(ev.jac_screw, -1, -2) @ ev.jac_screw
@@ -493,7 +498,7 @@ class _Problem:
             else:
                 alpha[worse] = 0.0
             xi = xi + alpha[:, None] * step
-            ev = self.evaluate(z, xi)
+            ev = self.evaluate(z, xi, parameter_jacobians=False)
             cost = np.sum(ev.residuals ** 2, axis=1)
         return xi
 
@@ -903,7 +908,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     if progress:
         progress(2, stages)
     # Outliers: samples whose whitened chi-square is improbable for their degrees of freedom.
-    ev = problem.evaluate(z, xi_fit)
+    ev = problem.evaluate(z, xi_fit, jacobians=False)
     sample_chi2 = np.sum(ev.residuals ** 2, axis=1)
     dof_i = problem.mask.sum(axis=1) - 6
     limit = np.where(dof_i > 0, chdtri(np.maximum(dof_i, 1), OUTLIER_PROBABILITY), np.inf)
