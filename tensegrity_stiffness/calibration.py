@@ -75,9 +75,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import chdtri
 
+from tensegrity_stiffness.chain import pose_to_transform
 from tensegrity_stiffness.equilibrium import solve_equilibrium
 from tensegrity_stiffness.joint import JointModel, JointState
-from tensegrity_stiffness.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.screw import (
     as_screws,
     exp_se3,
@@ -199,10 +199,7 @@ def pose_transform(pose: ArrayLike, name: str = 'pose') -> FloatArray:
             raise ValueError(f'{name}: the rotation block is not a rotation matrix')
         return arr
     if arr.shape == (7,):
-        T = np.eye(4)
-        T[:3, :3] = quaternion_to_rotation(arr[3:])
-        T[:3, 3] = arr[:3]
-        return T
+        return pose_to_transform(arr, name)
     raise ValueError(f'{name} must be a (4, 4) transform or [x y z qx qy qz qw], got shape '
                      f'{arr.shape}')
 
@@ -228,10 +225,6 @@ class _Data:
         return np.hstack([np.repeat(self.has_pose[:, None], 6, axis=1),
                           np.repeat(self.has_wrench[:, None], 6, axis=1),
                           np.isfinite(self.tensions), np.isfinite(self.lengths)])
-
-    def subset(self, rows: NDArray[np.int64]) -> _Data:
-        return _Data(self.rest[rows], self.poses[rows], self.has_pose[rows], self.wrench[rows],
-                     self.has_wrench[rows], self.tensions[rows], self.lengths[rows])
 
 
 def _per_string(name: str, value: ArrayLike | None, n: int, allow_nan: bool) -> FloatArray:
@@ -304,25 +297,20 @@ def model_with_parameters(model: JointModel, stiffness: ArrayLike,
                       initial_screw=model.initial_screw, use_kernel=model.uses_kernel)
 
 
-def _force_law_slopes(model: JointModel, state: JointState, rest: FloatArray
-                      ) -> tuple[FloatArray, FloatArray]:
-    """``d phi / d l`` and ``d phi / d l0`` of every string for a batch of states (eq. 8 and
-    the model's force law; the maximum stretch ``lmax - l0`` is held, as :class:`JointModel`
-    does): the batched form of ``sensor_models.string_predictions(...).tension_slope`` and
+def _tension_rest_length_slopes(model: JointModel, state: JointState, rest: FloatArray
+                                ) -> FloatArray:
+    """``d phi / d l0`` of every string for a batch of states (eq. 8 and the model's force law;
+    the maximum stretch ``lmax - l0`` is held, as :class:`JointModel` does): the batched form of
     ``sensor_models.string_parameter_jacobians(...).tension_rest_length``."""
     k = model.k
-    lengths = state.lengths
     taut = ~(state.slack | state.saturated)
     if model.force_law == 'hooke':
-        dphi_dl = np.where(taut, k, 0.0)
-        dphi_dl0 = np.where(taut, -k, 0.0)
-    else:  # 'paper': k (l - l0) / l taut, k s_max / (l0 + s_max) saturated
-        dphi_dl = np.where(taut, k * rest / (lengths * lengths), 0.0)
-        lmax = rest + model.max_stretch
-        with np.errstate(invalid='ignore'):
-            saturated_slope = -k * model.max_stretch / (lmax * lmax)
-        dphi_dl0 = np.where(taut, -k / lengths, np.where(state.saturated, saturated_slope, 0.0))
-    return dphi_dl, dphi_dl0
+        return np.where(taut, -k, 0.0)
+    # 'paper': -k / l taut, -k s_max / lmax^2 (= -phi / lmax) saturated
+    lmax = rest + model.max_stretch
+    with np.errstate(invalid='ignore'):
+        saturated_slope = -k * model.max_stretch / (lmax * lmax)
+    return np.where(taut, -k / state.lengths, np.where(state.saturated, saturated_slope, 0.0))
 
 
 def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArray:
@@ -383,6 +371,11 @@ class _Evaluation:
     jac_parameters: FloatArray
     raw: FloatArray  # unwhitened residuals (N, R)
 
+    def subset(self, rows: NDArray[np.int64]) -> _Evaluation:
+        """The evaluation of the samples ``rows`` only."""
+        return _Evaluation(self.residuals[rows], self.jac_screw[rows],
+                           self.jac_parameters[rows], self.raw[rows])
+
 
 class _Problem:
     """The calibration problem on fixed data: evaluation of residuals and Jacobians at
@@ -413,7 +406,10 @@ class _Problem:
             found = self._models[key] = model_with_parameters(self.model, k)
         return found
 
-    def evaluate(self, z: FloatArray, xi: FloatArray, jacobians: bool = True) -> _Evaluation:
+    def evaluate(self, z: FloatArray, xi: FloatArray, jacobians: bool = True,
+                 parameter_jacobians: bool = True) -> _Evaluation:
+        """Residuals at (z, xi); with ``jacobians`` their Jacobian w.r.t. the screws, and with
+        ``parameter_jacobians`` as well the one w.r.t. the parameters."""
         n, data = self.n, self.data
         k, d = self.parameters(z)
         if np.any(k <= 0.0):
@@ -454,9 +450,14 @@ class _Problem:
         jx[:, 6:12] = state.stiffness
         w = _string_wrench_directions(model, state)  # (N, n, 6)
         dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
-        dphi_dl, dphi_dl0 = _force_law_slopes(model, state, rest)
+        dphi_dl = model._string_forces(state.lengths, rest)[1]  # as sensor_models does
         jx[:, 12:12 + n] = dphi_dl[..., None] * dl
         jx[:, 12 + n:] = dl
+        scale = self.mask / self.std  # (N, R)
+        jx *= scale[..., None]
+        if not parameter_jacobians:
+            return _Evaluation(residuals, jx, np.empty(0), raw)
+        dphi_dl0 = _tension_rest_length_slopes(model, state, rest)
         jp = np.zeros((N, R, 2 * n))
         dphi_dk = state.tensions / k
         jp[:, 6:12, :n] = np.swapaxes(w * dphi_dk[..., None], -1, -2)
@@ -464,8 +465,6 @@ class _Problem:
         idx = np.arange(n)
         jp[:, 12 + idx, idx] = dphi_dk
         jp[:, 12 + idx, n + idx] = dphi_dl0
-        scale = self.mask / self.std  # (N, R)
-        jx *= scale[..., None]
         jp *= scale[..., None] * self.unit
         return _Evaluation(residuals, jx, jp, raw)
 
@@ -475,7 +474,7 @@ class _Problem:
         """Every sample's screw by Gauss-Newton with the parameters fixed (batched; a step that
         raises a sample's cost is halved up to 4 times, else that sample keeps its screw)."""
         xi = xi.copy()
-        ev = self.evaluate(z, xi)
+        ev = self.evaluate(z, xi, parameter_jacobians=False)
         cost = np.sum(ev.residuals ** 2, axis=1)
         for _ in range(iterations):
             A = np.swapaxes(ev.jac_screw, -1, -2) @ ev.jac_screw
@@ -499,7 +498,7 @@ class _Problem:
             else:
                 alpha[worse] = 0.0
             xi = xi + alpha[:, None] * step
-            ev = self.evaluate(z, xi)
+            ev = self.evaluate(z, xi, parameter_jacobians=False)
             cost = np.sum(ev.residuals ** 2, axis=1)
         return xi
 
@@ -909,7 +908,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     if progress:
         progress(2, stages)
     # Outliers: samples whose whitened chi-square is improbable for their degrees of freedom.
-    ev = problem.evaluate(z, xi_fit)
+    ev = problem.evaluate(z, xi_fit, jacobians=False)
     sample_chi2 = np.sum(ev.residuals ** 2, axis=1)
     dof_i = problem.mask.sum(axis=1) - 6
     limit = np.where(dof_i > 0, chdtri(np.maximum(dof_i, 1), OUTLIER_PROBABILITY), np.inf)
@@ -934,14 +933,15 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     if progress:
         progress(3, stages)
 
-    sub = problem
-    if outliers.size:
-        sub = _Problem(model, data.subset(inliers), noise)
-    ev = sub.evaluate(z, xi_fit[inliers])
-    rms_after = _rms_by_kind(ev.raw, sub.mask, n)
+    # One evaluation at the estimate: the inliers' rows give the statistics, all rows the
+    # residuals after (every sample's rows depend on its own screw only).
+    ev_all = problem.evaluate(z, xi_fit)
+    ev = ev_all.subset(inliers)
+    mask_in = problem.mask[inliers]
+    rms_after = _rms_by_kind(ev.raw, mask_in, n)
     chi2_value = float(np.sum(ev.residuals ** 2))
-    dof = int(sub.mask.sum()) - 6 * inliers.size - ident.basis.shape[1]
-    info = sub.information(ev, columns)
+    dof = int(mask_in.sum()) - 6 * inliers.size - ident.basis.shape[1]
+    info = problem.information(ev, columns)
     cov_scaled = _subspace_covariance(info, ident.basis)
     unit = problem.unit[columns]
     covariance = cov_scaled * unit[:, None] * unit[None, :]
@@ -968,7 +968,6 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
                 success = False
                 message = f'{name} = {parameters[name]:.6g} is outside bounds [{low}, {high}]'
     calibrated = model_with_parameters(model, k, model.rest_lengths + d)
-    after_all = problem.evaluate(z, xi_fit, jacobians=False).raw
     if progress:
         progress(4, stages)
     return CalibrationResult(
@@ -980,7 +979,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         outliers=outliers.tolist(), iterations=iterations, screws=xi_fit, chi2=chi2_value,
         dof=dof, nominal=nominal, offsets=d,
         residuals_before=np.where(problem.mask, before.raw, np.nan),
-        residuals_after=np.where(problem.mask, after_all, np.nan),
+        residuals_after=np.where(problem.mask, ev_all.raw, np.nan),
         seconds=time.perf_counter() - started)
 
 

@@ -2,7 +2,9 @@
 time series, and picking the quasi-static instants that become calibration samples.
 
 No rclpy and no ROS message package: rosbag2 files (mcap or sqlite3) are read with ``rosbags``
-(its own message types for ROS 2 Jazzy, read by attribute), as the bag command does.
+(its own message types for ROS 2 Jazzy, read by attribute) with the bag command's input checks
+and typestore (:mod:`tensegrity_stiffness.bag`) and the nodes' pose reader
+(:func:`tensegrity_stiffness.messages.pose_to_transform`).
 
 Bag topics (each optional except the rest lengths; a bag needs a pose, a wrench or tensions):
 
@@ -47,7 +49,7 @@ from tensegrity_stiffness.calibration import (
     pose_transform,
     rotation_log_batch,
 )
-from tensegrity_stiffness.quaternion import quaternion_to_rotation
+from tensegrity_stiffness.messages import multiarray_to_array, pose_to_transform
 
 FloatArray = NDArray[np.float64]
 
@@ -271,23 +273,14 @@ def _stamp_seconds(msg: Any, log_time: int) -> float:
     return log_time * 1e-9
 
 
-def _pose_of(msg: Any, msgtype: str) -> FloatArray:
-    pose = msg.pose.pose if msgtype.endswith('PoseWithCovarianceStamped') else msg.pose
-    p, o = pose.position, pose.orientation
-    T = np.eye(4)
-    T[:3, :3] = quaternion_to_rotation([o.x, o.y, o.z, o.w])
-    T[:3, 3] = [p.x, p.y, p.z]
-    if not np.isfinite(T).all():
-        raise ValueError('pose is not finite')
-    return T
-
-
-def _array_of(msg: Any, n: int, allow_nan: bool) -> FloatArray:
+def _measured_array_of(msg: Any, n: int) -> FloatArray:
+    """A measured per-string array (NaN: not measured; :func:`messages.multiarray_to_array`
+    rejects NaN, so this one reads the payload itself)."""
     values = np.asarray(msg.data, dtype=np.float64)[int(msg.layout.data_offset):]
     if values.shape != (n,):
         raise ValueError(f'expected {n} values, got {values.size}')
-    if np.isinf(values).any() or (not allow_nan and np.isnan(values).any()):
-        raise ValueError('values must be finite' + (' (NaN: not measured)' if allow_nan else ''))
+    if np.isinf(values).any():
+        raise ValueError('values must be finite (NaN: not measured)')
     return values
 
 
@@ -315,18 +308,12 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
     """
     from rosbags.rosbag2 import Reader
     from rosbags.rosbag2.errors import ReaderError
-    from rosbags.typesys import Stores, get_typestore
+
+    from tensegrity_stiffness.bag import _check_input as check_bag_input
+    from tensegrity_stiffness.bag import _typestore
 
     path = Path(path)
-    # The checks of the bag command's input (tensegrity_stiffness.bag is not imported: its
-    # message conversion needs the ROS message packages, which this reader does without).
-    if not path.exists():
-        raise RecordingError(f'{path}: no such rosbag2 folder')
-    if path.is_dir() and not (path / 'metadata.yaml').is_file():
-        raise RecordingError(f'{path}: not a rosbag2 (no metadata.yaml)')
-    if path.is_file() and path.suffix not in ('.mcap', '.db3'):
-        raise RecordingError(f'{path}: not a rosbag2 (a folder with metadata.yaml, or a .mcap '
-                             'or .db3 file)')
+    check_bag_input(path)
     wanted = dict(DEFAULT_TOPICS)
     wanted.update(topics or {})
     try:
@@ -334,7 +321,7 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
         reader.open()
     except (ReaderError, OSError, KeyError, ValueError) as exc:
         raise RecordingError(f'{path}: not a readable rosbag2: {exc}') from None
-    deserialize = get_typestore(Stores.ROS2_JAZZY).deserialize_cdr
+    deserialize = _typestore().deserialize_cdr
     try:
         present = {c.topic: c.msgtype for c in reader.connections}
         expected = {'pose': POSE_TYPES, 'rest_lengths': (ARRAY_TYPE,),
@@ -370,13 +357,16 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
                 msg = deserialize(raw, connection.msgtype)
                 t = _stamp_seconds(msg, log_time)
                 if signal == 'pose':
-                    value = _pose_of(msg, connection.msgtype)
+                    value = pose_to_transform(
+                        msg.pose.pose if connection.msgtype == POSE_TYPES[1] else msg.pose)
                 elif signal == 'wrench':
                     value = _wrench_of(msg)
-                else:
-                    value = _array_of(msg, n_strings, signal != 'rest_lengths')
-                    if signal == 'rest_lengths' and np.any(value <= 0.0):
+                elif signal == 'rest_lengths':
+                    value = multiarray_to_array(msg, n_strings)
+                    if np.any(value <= 0.0):
                         raise ValueError('rest lengths must be > 0')
+                else:
+                    value = _measured_array_of(msg, n_strings)
             except Exception:  # rosbags raises several types on corrupt CDR
                 skipped += 1
                 continue
