@@ -119,7 +119,7 @@ def main() -> None:
         evaluate_all()
         library_threads = time.perf_counter() - start
 
-        typestore = bag._typestore()
+        typestore = bag.jazzy_typestore()
         output_layouts = layouts.joint_output_layouts(settings.model.string_names)
         outputs_spec = bag.NODE_TOPICS['stiffness'].outputs
         templates = {name: bag._Template(typestore, output_layouts[name],

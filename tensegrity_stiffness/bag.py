@@ -279,7 +279,7 @@ class StiffnessProcessor:
         self.emit = emit
         self.chunk_size = chunk_size
         if deserialize is None:
-            store = _typestore()
+            store = jazzy_typestore()
 
             def deserialize(raw: bytes) -> Any:
                 return store.deserialize_cdr(raw, FLOAT64_MULTIARRAY)
@@ -518,7 +518,7 @@ class SpineProcessor:
                  types: MessageTypes | None = None) -> None:
         self.settings = settings
         self.emit = emit
-        self.types = rosbags_types(_typestore()) if types is None else types
+        self.types = rosbags_types(jazzy_typestore()) if types is None else types
         self.messages = SpineOutputMessages(settings.n_joints, self.types)
         self.rejected: Counter[str] = Counter()
         self.examples: dict[str, str] = {}
@@ -714,7 +714,8 @@ class _Template:
 
 
 # ------------------------------------------------------------------------------ files
-def _typestore() -> Any:
+def jazzy_typestore() -> Any:
+    """rosbags' type store of ROS 2 Jazzy's messages (decodes and encodes recordings)."""
     from rosbags.typesys import Stores, get_typestore
 
     return get_typestore(Stores.ROS2_JAZZY)
@@ -737,7 +738,8 @@ def _storage_of(path: Path) -> str:
         return 'unknown'
 
 
-def _check_input(path: Path) -> None:
+def check_input(path: Path) -> None:
+    """A rosbag2 folder or storage file to read; BagError naming what is wrong."""
     if not path.exists():
         raise BagError(f'{path}: no such rosbag2 folder')
     if path.is_dir() and not (path / 'metadata.yaml').is_file():
@@ -868,7 +870,7 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     spec = NODE_TOPICS[node]
     src, out = Path(input_path), Path(output_path)
     csv_file = Path(csv_path) if csv_path is not None else None
-    _check_input(src)
+    check_input(src)
     if storage is not None and storage not in STORAGES:
         raise BagError(f"unknown storage '{storage}' (mcap or sqlite3)")
     prefix = namespace_prefix(DEFAULT_NAMESPACES[node] if namespace is None else namespace)
@@ -899,7 +901,7 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
         _clear_output(out, overwrite, 'output')
         if csv_file is not None:
             _clear_output(csv_file, overwrite, 'csv file')
-        typestore = _typestore()
+        typestore = jazzy_typestore()
         summary.written = dict.fromkeys(f'{prefix}/{name}' for name in outputs)
         try:
             writer = Writer(out, version=9,

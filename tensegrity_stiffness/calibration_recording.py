@@ -309,8 +309,8 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
     from rosbags.rosbag2 import Reader
     from rosbags.rosbag2.errors import ReaderError
 
-    from tensegrity_stiffness.bag import _check_input as check_bag_input
-    from tensegrity_stiffness.bag import _typestore
+    from tensegrity_stiffness.bag import check_input as check_bag_input
+    from tensegrity_stiffness.bag import jazzy_typestore
 
     path = Path(path)
     check_bag_input(path)
@@ -321,7 +321,7 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
         reader.open()
     except (ReaderError, OSError, KeyError, ValueError) as exc:
         raise RecordingError(f'{path}: not a readable rosbag2: {exc}') from None
-    deserialize = _typestore().deserialize_cdr
+    deserialize = jazzy_typestore().deserialize_cdr
     try:
         present = {c.topic: c.msgtype for c in reader.connections}
         expected = {'pose': POSE_TYPES, 'rest_lengths': (ARRAY_TYPE,),
