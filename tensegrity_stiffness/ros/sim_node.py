@@ -174,6 +174,7 @@ class SimNode(Node):
             self._sim = JointSimulation(settings.model, initial_screw=None if screws is None
                                         else screws[0], **options)
         self._swing_wrenches: np.ndarray | None = None
+        self._held_wrench: np.ndarray | None = None  # the topic's wrench object the twin holds
 
     def _messages(self, settings: SimNodeSettings) -> None:
         n = settings.n_strings
@@ -290,9 +291,12 @@ class SimNode(Node):
             for _ in range(n):
                 sim.apply_wrench(self._wrench_at(sim.time))
                 sim.step()
+            self._held_wrench = None
         else:
-            if not np.array_equal(sim.external_wrench, self._topic_wrench):
-                sim.apply_wrench(self._topic_wrench)
+            # each message brings a new array: hand it on once, not compare it every step
+            if self._held_wrench is not self._topic_wrench:
+                self._held_wrench = self._topic_wrench
+                sim.apply_wrench(self._held_wrench)
             sim.step(n)
         self.steps += n
 
