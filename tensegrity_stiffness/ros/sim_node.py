@@ -105,11 +105,10 @@ class SimNode(Node):
             self._apply_parameters, lambda reason: self.reporter.warn('parameter change', reason))
         settings = sim_node_settings(self._binding.values())
         values = settings.values
-        self._settings = settings
+        self._use_settings(settings)
         self._period = 1.0 / values['sim.rate']
         self._real_time = values['sim.real_time']
         self._rng = np.random.default_rng(values['noise.seed'])
-        self._noise = SensorNoise(**settings.noise())
         self._build_twin(settings, None)
         # Inputs handed from the executor to the stepping thread (one reference each: an
         # assignment is atomic; the thread takes and clears it).
@@ -136,7 +135,6 @@ class SimNode(Node):
         self._pub_imu = create_output_publisher(self, Imu, '~/imu', out)
         self._pub_clock = None if self._real_time else create_output_publisher(
             self, Clock, '/clock', 10)
-        self._messages(settings)
         self._wanted_until = -math.inf
         self._wanted_cache: tuple[bool, ...] = ()
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics',
@@ -176,15 +174,17 @@ class SimNode(Node):
         self._swing_wrenches: np.ndarray | None = None
         self._held_wrench: np.ndarray | None = None  # the topic's wrench object the twin holds
 
-    def _messages(self, settings: SimNodeSettings) -> None:
+    def _use_settings(self, settings: SimNodeSettings) -> None:
+        """The settings in force, the noise model and the reused output messages they fix."""
+        self._settings = settings
+        self._noise = SensorNoise(**settings.noise())
         n = settings.n_strings
         width = 6 * (settings.chain.n_joints if settings.chain is not None else 1)
         self._msg_truth = msg_tools.vector_to_multiarray(np.zeros(width), msg_tools.SCREW_LABEL)
         self._msg_lengths = msg_tools.vector_to_multiarray(np.zeros(n), LENGTHS_LABEL)
         self._msg_tensions = msg_tools.vector_to_multiarray(np.zeros(n), TENSIONS_LABEL)
-        noise = settings.noise()
-        self._msg_imu = msg_tools.imu_message(settings.imu_frame, noise['gyro'],
-                                              noise['accelerometer'])
+        self._msg_imu = msg_tools.imu_message(settings.imu_frame, self._noise.gyro,
+                                              self._noise.accelerometer)
 
     def close(self) -> None:
         """Stop the stepping thread (called by the runner before the node is destroyed)."""
@@ -261,9 +261,7 @@ class SimNode(Node):
                 sim = self._sim
                 screws = sim.screws() if isinstance(sim, ChainSimulation) else sim.screw()[None]
                 self._build_twin(settings, screws)
-            self._settings = settings
-            self._noise = SensorNoise(**settings.noise())
-            self._messages(settings)
+            self._use_settings(settings)
         rest = self._pending_rest
         if rest is not None:
             self._pending_rest = None
