@@ -435,12 +435,17 @@ class _Simulation:
         self.data.qvel[:] = 0.0
         self.data.qacc[:] = 0.0
 
-    def _current_screws(self) -> FloatArray:
+    def _joint_transforms(self) -> FloatArray:
+        """(N, 4, 4) T_i: each {2}_i in {1}_i, ``P_i^-1 L_i`` (T_1 = L_1: {1}_1 is the base)."""
         L = self._link_transforms()
-        P = self._joint_frames(L)
+        if self._n > 1:
+            L[1:] = np.linalg.solve(self._joint_frames(L)[1:], L[1:])
+        return L
+
+    def _current_screws(self) -> FloatArray:
+        T = self._joint_transforms()
         for i in range(self._n):
-            T = np.linalg.solve(P[i], L[i]) if i else L[i]
-            self._screws[i] = log_se3(T, reference=self._screws[i])
+            self._screws[i] = log_se3(T[i], reference=self._screws[i])
         return self._screws.copy()
 
     def _set_screws(self, screws: FloatArray) -> None:
@@ -817,9 +822,7 @@ class ChainSimulation(_Twin):
     def joint_transforms(self) -> FloatArray:
         """(N, 4, 4) ``T_i``: each {2}_i in {1}_i (``exp(hat(xi_i))`` of :meth:`screws`, without
         the log map)."""
-        L = self._sim._link_transforms()
-        P = self._sim._joint_frames(L)
-        return np.linalg.solve(P, L)
+        return self._sim._joint_transforms()
 
     def tip_pose(self) -> FloatArray:
         """(4, 4) pose of the tool frame in the base."""
