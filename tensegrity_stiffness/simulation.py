@@ -435,12 +435,17 @@ class _Simulation:
         self.data.qvel[:] = 0.0
         self.data.qacc[:] = 0.0
 
-    def _current_screws(self) -> FloatArray:
+    def _joint_transforms(self) -> FloatArray:
+        """(N, 4, 4) T_i: each {2}_i in {1}_i, ``P_i^-1 L_i`` (T_1 = L_1: {1}_1 is the base)."""
         L = self._link_transforms()
-        P = self._joint_frames(L)
+        if self._n > 1:
+            L[1:] = np.linalg.solve(self._joint_frames(L)[1:], L[1:])
+        return L
+
+    def _current_screws(self) -> FloatArray:
+        T = self._joint_transforms()
         for i in range(self._n):
-            T = np.linalg.solve(P[i], L[i]) if i else L[i]
-            self._screws[i] = log_se3(T, reference=self._screws[i])
+            self._screws[i] = log_se3(T[i], reference=self._screws[i])
         return self._screws.copy()
 
     def _set_screws(self, screws: FloatArray) -> None:
@@ -610,7 +615,8 @@ class _Simulation:
 
 class _Twin:
     """What :class:`JointSimulation` and :class:`ChainSimulation` share: MuJoCo's own objects
-    (for anything they do not wrap), the clock, stepping and settling."""
+    (for anything they do not wrap), the clock, gravity, the rest lengths and the load they
+    take, stepping and settling."""
 
     _sim: _Simulation
 
@@ -633,6 +639,30 @@ class _Twin:
     def time(self) -> float:
         """Simulated time (s)."""
         return self._sim.time
+
+    @property
+    def gravity(self) -> FloatArray:
+        """(3,) m/s^2 in the fixed frame ({1} of a joint, the base of a spine), as simulated
+        (compensated on the links without a configured mass; the IMU senses it)."""
+        return self._sim._gravity.copy()
+
+    @property
+    def external_wrench(self) -> FloatArray:
+        """The applied wrench (6,) on the last link (link 2 of a joint, link N of a spine), in
+        the fixed frame about that link's origin."""
+        return self._sim._load.copy()
+
+    def set_rest_lengths(self, rest_lengths: ArrayLike | Sequence[ArrayLike],
+                         rate: float | None = None) -> None:
+        """New rest lengths (m, > 0): (n,) for a joint; (N, n) or one (n_i,) array per joint for
+        a spine. Each string keeps its maximum stretch. ``rate`` (m/s) limits the change per
+        second (default ``options.rest_length_rate``; None: at once)."""
+        self._sim._set_rest(self._sim._validated_rest(rest_lengths), rate)
+
+    def apply_wrench(self, wrench: ArrayLike) -> None:
+        """External wrench (6,) [f; m] on the last link (link 2 of a joint, link N of a spine),
+        in the fixed frame about that link's origin, held constant."""
+        self._sim._set_load(wrench)
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` time steps."""
@@ -666,28 +696,9 @@ class JointSimulation(_Twin):
             self.set_screw(initial_screw)
 
     @property
-    def gravity(self) -> FloatArray:
-        """(3,) m/s^2 in {1}, as simulated (compensated on link 2; the IMU senses it)."""
-        return self._sim._gravity.copy()
-
-    @property
     def rest_lengths(self) -> FloatArray:
         """Rest lengths in force now (n,) (on their way to the last set ones when rate-limited)."""
         return self._sim._rest.copy()
-
-    @property
-    def external_wrench(self) -> FloatArray:
-        """The applied wrench (6,) on link 2 in {1} about its origin."""
-        return self._sim._load.copy()
-
-    def set_rest_lengths(self, rest_lengths: ArrayLike, rate: float | None = None) -> None:
-        """New rest lengths (n,) m, > 0; each string keeps its maximum stretch. ``rate`` (m/s)
-        limits the change per second (default ``options.rest_length_rate``; None: at once)."""
-        self._sim._set_rest(self._sim._validated_rest(rest_lengths), rate)
-
-    def apply_wrench(self, wrench: ArrayLike) -> None:
-        """External wrench (6,) [f; m] on link 2 in {1} about its origin, held constant."""
-        self._sim._set_load(wrench)
 
     def set_screw(self, screw: ArrayLike) -> None:
         """Put link 2 at ``T = exp(hat(screw))``, at rest (zero velocity)."""
@@ -781,31 +792,11 @@ class ChainSimulation(_Twin):
         return self._sim._n
 
     @property
-    def gravity(self) -> FloatArray:
-        """(3,) m/s^2 in the base, as simulated."""
-        return self._sim._gravity.copy()
-
-    @property
     def rest_lengths(self) -> list[FloatArray]:
         """Rest lengths in force now, one (n_i,) array per joint."""
         s = self._sim
         return [s._rest[s._tendon_start[i]:s._tendon_start[i + 1]].copy()
                 for i in range(self.n_joints)]
-
-    @property
-    def external_wrench(self) -> FloatArray:
-        """The applied tip wrench (6,) on link N in the base about its origin."""
-        return self._sim._load.copy()
-
-    def set_rest_lengths(self, rest_lengths: ArrayLike | Sequence[ArrayLike],
-                         rate: float | None = None) -> None:
-        """New rest lengths, (N, n) or one (n_i,) array per joint; as
-        :meth:`JointSimulation.set_rest_lengths`."""
-        self._sim._set_rest(self._sim._validated_rest(rest_lengths), rate)
-
-    def apply_wrench(self, wrench: ArrayLike) -> None:
-        """Tip wrench (6,) on link N in the base frame about its origin, held constant."""
-        self._sim._set_load(wrench)
 
     def set_screws(self, screws: ArrayLike) -> None:
         """Put the chain at the screws (N, 6), at rest."""
@@ -831,9 +822,7 @@ class ChainSimulation(_Twin):
     def joint_transforms(self) -> FloatArray:
         """(N, 4, 4) ``T_i``: each {2}_i in {1}_i (``exp(hat(xi_i))`` of :meth:`screws`, without
         the log map)."""
-        L = self._sim._link_transforms()
-        P = self._sim._joint_frames(L)
-        return np.linalg.solve(P, L)
+        return self._sim._joint_transforms()
 
     def tip_pose(self) -> FloatArray:
         """(4, 4) pose of the tool frame in the base."""

@@ -87,6 +87,12 @@ def swing_plane(gravity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return e1, np.cross(axis, e1)
 
 
+def swing_wrenches(gravity: np.ndarray, origin: np.ndarray) -> np.ndarray:
+    """(2, 6): the wrenches ``[e; origin x e]`` of a unit force along each direction of
+    :func:`swing_plane` acting at ``origin`` (the swinging load is their combination)."""
+    return np.array([np.concatenate([e, np.cross(origin, e)]) for e in swing_plane(gravity)])
+
+
 class SimNode(Node):
     """Steps the twin and publishes its truth and its sensors (see the module docstring)."""
 
@@ -99,12 +105,11 @@ class SimNode(Node):
             self._apply_parameters, lambda reason: self.reporter.warn('parameter change', reason))
         settings = sim_node_settings(self._binding.values())
         values = settings.values
-        self._settings = settings
+        self._use_settings(settings)
         self._period = 1.0 / values['sim.rate']
         self._real_time = values['sim.real_time']
         self._rng = np.random.default_rng(values['noise.seed'])
-        self._noise = SensorNoise(**settings.noise())
-        self._sim = self._simulation(settings, None)
+        self._build_twin(settings, None)
         # Inputs handed from the executor to the stepping thread (one reference each: an
         # assignment is atomic; the thread takes and clears it).
         self._pending_rest: Any = None
@@ -130,7 +135,6 @@ class SimNode(Node):
         self._pub_imu = create_output_publisher(self, Imu, '~/imu', out)
         self._pub_clock = None if self._real_time else create_output_publisher(
             self, Clock, '/clock', 10)
-        self._messages(settings)
         self._wanted_until = -math.inf
         self._wanted_cache: tuple[bool, ...] = ()
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics',
@@ -153,27 +157,34 @@ class SimNode(Node):
             f'every {values["sim.publish_every"]} steps, max_length {values["sim.max_length"]}')
 
     # ------------------------------------------------------------------ construction
-    def _simulation(self, settings: SimNodeSettings, screws: np.ndarray | None
-                    ) -> JointSimulation | ChainSimulation:
+    def _build_twin(self, settings: SimNodeSettings, screws: np.ndarray | None) -> None:
+        """The twin at ``screws`` (None: its unloaded configuration); the swinging load's
+        wrench directions follow its gravity at the next swing step."""
         values = settings.values
         options = {'timestep': 1.0 / values['sim.rate'], 'max_length': values['sim.max_length'],
                    'tendon_damping': values['sim.tendon_damping'],
                    'joint_damping': values['sim.joint_damping'],
                    'link_mass': values['sim.link_mass']}
         if settings.chain is not None:
-            return ChainSimulation(settings.chain, initial_screws=screws, **options)
-        return JointSimulation(settings.model, initial_screw=None if screws is None
-                               else screws[0], **options)
+            self._sim: JointSimulation | ChainSimulation = ChainSimulation(
+                settings.chain, initial_screws=screws, **options)
+        else:
+            self._sim = JointSimulation(settings.model, initial_screw=None if screws is None
+                                        else screws[0], **options)
+        self._swing_wrenches: np.ndarray | None = None
+        self._held_wrench: np.ndarray | None = None  # the topic's wrench object the twin holds
 
-    def _messages(self, settings: SimNodeSettings) -> None:
+    def _use_settings(self, settings: SimNodeSettings) -> None:
+        """The settings in force, the noise model and the reused output messages they fix."""
+        self._settings = settings
+        self._noise = SensorNoise(**settings.noise())
         n = settings.n_strings
         width = 6 * (settings.chain.n_joints if settings.chain is not None else 1)
         self._msg_truth = msg_tools.vector_to_multiarray(np.zeros(width), msg_tools.SCREW_LABEL)
         self._msg_lengths = msg_tools.vector_to_multiarray(np.zeros(n), LENGTHS_LABEL)
         self._msg_tensions = msg_tools.vector_to_multiarray(np.zeros(n), TENSIONS_LABEL)
-        noise = settings.noise()
-        self._msg_imu = msg_tools.imu_message(settings.imu_frame, noise['gyro'],
-                                              noise['accelerometer'])
+        self._msg_imu = msg_tools.imu_message(settings.imu_frame, self._noise.gyro,
+                                              self._noise.accelerometer)
 
     def close(self) -> None:
         """Stop the stepping thread (called by the runner before the node is destroyed)."""
@@ -249,10 +260,8 @@ class SimNode(Node):
             if rebuild:
                 sim = self._sim
                 screws = sim.screws() if isinstance(sim, ChainSimulation) else sim.screw()[None]
-                self._sim = self._simulation(settings, screws)
-            self._settings = settings
-            self._noise = SensorNoise(**settings.noise())
-            self._messages(settings)
+                self._build_twin(settings, screws)
+            self._use_settings(settings)
         rest = self._pending_rest
         if rest is not None:
             self._pending_rest = None
@@ -266,10 +275,11 @@ class SimNode(Node):
         W = self._topic_wrench
         if amplitude <= 0.0:
             return W
-        e1, e2 = swing_plane(self._sim.gravity)
+        basis = self._swing_wrenches
+        if basis is None:  # once per twin: its gravity and the load point are fixed
+            basis = self._swing_wrenches = swing_wrenches(self._sim.gravity, self._swing_origin)
         phase = 2.0 * math.pi * sim_time / values['load.swing_period']
-        force = amplitude * (math.cos(phase) * e1 + math.sin(phase) * e2)
-        return W + np.concatenate([force, np.cross(self._swing_origin, force)])
+        return W + amplitude * (math.cos(phase) * basis[0] + math.sin(phase) * basis[1])
 
     def _advance(self, n: int) -> None:
         """``n`` steps under the current inputs (the swinging load updated every step)."""
@@ -279,9 +289,12 @@ class SimNode(Node):
             for _ in range(n):
                 sim.apply_wrench(self._wrench_at(sim.time))
                 sim.step()
+            self._held_wrench = None
         else:
-            if not np.array_equal(sim.external_wrench, self._topic_wrench):
-                sim.apply_wrench(self._topic_wrench)
+            # each message brings a new array: hand it on once, not compare it every step
+            if self._held_wrench is not self._topic_wrench:
+                self._held_wrench = self._topic_wrench
+                sim.apply_wrench(self._held_wrench)
             sim.step(n)
         self.steps += n
 

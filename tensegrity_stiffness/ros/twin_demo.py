@@ -82,21 +82,18 @@ class Monitor:
         sim, spine_node = f'{NAMESPACE}/sim_node', f'{NAMESPACE}/spine_node'
         joint_node = f'{NAMESPACE}/stiffness_node'
         if spine:
-            subscribe(node, PoseArray, f'{sim}/poses', self._on_poses, qos)
-            subscribe(node, PoseStamped, f'{spine_node}/tip_pose',
-                                     self._on_tip_pose, qos)
-            subscribe(node, Float64MultiArray, f'{spine_node}/tip_stiffness_base',
-                                     self._on_stiffness, qos)
-            subscribe(node, Float64MultiArray, f'{sim}/measured_tensions',
-                                     self._on_tensions, qos)
+            streams = [(PoseArray, f'{sim}/poses', self._on_poses),
+                       (PoseStamped, f'{spine_node}/tip_pose', self._on_tip_pose),
+                       (Float64MultiArray, f'{spine_node}/tip_stiffness_base', self._on_stiffness),
+                       (Float64MultiArray, f'{sim}/measured_tensions', self._on_tensions)]
         else:
-            subscribe(node, PoseStamped, f'{sim}/pose', self._on_pose, qos)
-            subscribe(node, WrenchStamped, f'{joint_node}/wrench',
-                                     self._on_output, qos)
-            subscribe(node, Float64MultiArray, f'{joint_node}/cartesian_stiffness',
-                                     self._on_stiffness, qos)
-            subscribe(node, Float64MultiArray, f'{joint_node}/string_tensions',
-                                     self._on_tensions, qos)
+            streams = [(PoseStamped, f'{sim}/pose', self._on_pose),
+                       (WrenchStamped, f'{joint_node}/wrench', self._on_output),
+                       (Float64MultiArray, f'{joint_node}/cartesian_stiffness',
+                        self._on_stiffness),
+                       (Float64MultiArray, f'{joint_node}/string_tensions', self._on_tensions)]
+        for msg_type, topic, callback in streams:
+            subscribe(node, msg_type, topic, callback, qos)
 
     def _on_pose(self, msg: PoseStamped) -> None:
         with self._lock:
