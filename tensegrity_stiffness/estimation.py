@@ -106,8 +106,10 @@ def _std(name: str, value: Any, size: int) -> FloatArray:
     return arr
 
 
-def _covariance(name: str, value: Any, size: int) -> FloatArray:
-    """A symmetric positive definite (size, size) covariance; ValueError naming ``name``."""
+def _covariance(name: str, value: Any, size: int) -> tuple[FloatArray, FloatArray]:
+    """A symmetric positive definite (size, size) covariance and its whitener ``L^-1`` with
+    ``covariance = L L^T`` (whitened residual ``L^-1 r``; one Cholesky factorisation checks
+    and whitens); ValueError naming ``name``."""
     if value is None:
         raise ValueError(f'{name} is required with its measurement')
     arr = finite_array(name, value)
@@ -115,16 +117,12 @@ def _covariance(name: str, value: Any, size: int) -> FloatArray:
         raise ValueError(f'{name} must have shape ({size}, {size}), got {arr.shape}')
     if not np.allclose(arr, arr.T, rtol=1e-9, atol=0.0):
         raise ValueError(f'{name} must be symmetric')
+    covariance = 0.5 * (arr + arr.T)
     try:
-        np.linalg.cholesky(arr)
+        factor = np.linalg.cholesky(covariance)
     except np.linalg.LinAlgError:
         raise ValueError(f'{name} must be positive definite') from None
-    return 0.5 * (arr + arr.T)
-
-
-def _whitener(covariance: FloatArray) -> FloatArray:
-    """``L^-1`` with ``covariance = L L^T`` (whitened residual ``L^-1 r``)."""
-    return np.linalg.inv(np.linalg.cholesky(covariance))
+    return covariance, np.linalg.inv(factor)
 
 
 def _per_string(name: str, value: Any, n: int) -> FloatArray:
@@ -193,7 +191,7 @@ class PreparedMeasurements:
         self.pose = None
         if m.pose is not None:
             self.pose = sm.as_transform(m.pose, 'pose')
-            self.pose_whitener = _whitener(_covariance('pose_covariance', m.pose_covariance, 6))
+            _, self.pose_whitener = _covariance('pose_covariance', m.pose_covariance, 6)
         self.gravity = None
         if m.gravity is not None:
             self.gravity = sm.unit_vector(m.gravity, 'gravity')
@@ -208,8 +206,8 @@ class PreparedMeasurements:
             if W.shape != (6,):
                 raise ValueError(f'external_wrench must have shape (6,), got {W.shape}')
             self.wrench = W
-            self.wrench_covariance = _covariance('wrench_covariance', m.wrench_covariance, 6)
-            self.wrench_whitener = _whitener(self.wrench_covariance)
+            self.wrench_covariance, self.wrench_whitener = _covariance(
+                'wrench_covariance', m.wrench_covariance, 6)
         nt, nl = self.tension_index.size, self.length_index.size
         self.rows = nt + nl + (6 if self.pose is not None else 0) + (
             3 if self.gravity is not None else 0) + (6 if self.wrench is not None else 0)
@@ -947,13 +945,13 @@ def estimate_chain_state(chain: JointChain,
     pose_T = pose_whitener = None
     if tip_pose is not None:
         pose_T = sm.as_transform(tip_pose, 'tip_pose')
-        pose_whitener = _whitener(_covariance('tip_pose_covariance', tip_pose_covariance, 6))
+        _, pose_whitener = _covariance('tip_pose_covariance', tip_pose_covariance, 6)
     W_m = W_whitener = None
     if tip_wrench is not None:
         W_m = finite_array('tip_wrench', tip_wrench)
         if W_m.shape != (6,):
             raise ValueError(f'tip_wrench must have shape (6,), got {W_m.shape}')
-        W_whitener = _whitener(_covariance('tip_wrench_covariance', tip_wrench_covariance, 6))
+        _, W_whitener = _covariance('tip_wrench_covariance', tip_wrench_covariance, 6)
     x0 = (chain.unloaded_screws(rest) if initial_screws is None
           else chain._screws(initial_screws).copy())
     if initial_tip_wrench is None:
