@@ -106,15 +106,26 @@ def _std(name: str, value: Any, size: int) -> FloatArray:
     return arr
 
 
+#: Checked covariances and their whiteners by content: a tracker's covariances come from its
+#: settings (or a sensor's fixed covariance) and repeat every estimate. A few are kept.
+_COVARIANCES: dict[bytes, tuple[FloatArray, FloatArray]] = {}
+_COVARIANCES_KEPT = 16
+
+
 def _covariance(name: str, value: Any, size: int) -> tuple[FloatArray, FloatArray]:
     """A symmetric positive definite (size, size) covariance and its whitener ``L^-1`` with
     ``covariance = L L^T`` (whitened residual ``L^-1 r``; one Cholesky factorisation checks
-    and whitens); ValueError naming ``name``."""
+    and whitens; both read-only, reused for a covariance seen before); ValueError naming
+    ``name``."""
     if value is None:
         raise ValueError(f'{name} is required with its measurement')
     arr = finite_array(name, value)
     if arr.shape != (size, size):
         raise ValueError(f'{name} must have shape ({size}, {size}), got {arr.shape}')
+    key = arr.tobytes()
+    known = _COVARIANCES.get(key)
+    if known is not None:
+        return known
     if not np.allclose(arr, arr.T, rtol=1e-9, atol=0.0):
         raise ValueError(f'{name} must be symmetric')
     covariance = 0.5 * (arr + arr.T)
@@ -122,7 +133,12 @@ def _covariance(name: str, value: Any, size: int) -> tuple[FloatArray, FloatArra
         factor = np.linalg.cholesky(covariance)
     except np.linalg.LinAlgError:
         raise ValueError(f'{name} must be positive definite') from None
-    return covariance, np.linalg.inv(factor)
+    whitener = np.linalg.inv(factor)
+    covariance.flags.writeable = whitener.flags.writeable = False
+    if len(_COVARIANCES) >= _COVARIANCES_KEPT:
+        _COVARIANCES.pop(next(iter(_COVARIANCES), None), None)
+    _COVARIANCES[key] = (covariance, whitener)
+    return covariance, whitener
 
 
 def _per_string(name: str, value: Any, n: int) -> FloatArray:
