@@ -186,12 +186,17 @@ class Measurements:
         return PreparedMeasurements(self, n_strings)
 
 
+#: :meth:`PreparedMeasurements.describe`'s texts by sensor pattern (a tracker's pattern rarely
+#: changes, its measurements are prepared anew for every estimate). A few are kept.
+_DESCRIPTIONS: dict[tuple, str] = {}
+_DESCRIPTIONS_KEPT = 64
+
+
 class PreparedMeasurements:
     """:class:`Measurements` validated for one joint, with their whitening (reusable)."""
 
     def __init__(self, m: Measurements, n: int) -> None:
         self.n_strings = n
-        self._description: tuple[Sequence[str], bool, str] | None = None
         tensions = _per_string('tensions', m.tensions, n)
         self.tension_index = np.flatnonzero(~np.isnan(tensions))
         self.tensions = tensions[self.tension_index]
@@ -237,13 +242,17 @@ class PreparedMeasurements:
         return bool(self.tension_index.size or self.length_index.size)
 
     def describe(self, string_names: Sequence[str], load: bool = True) -> str:
-        """The inputs in words, e.g. ``'3 tensions (a, b, c), unknown load'`` (cached; without
-        the load when not ``load``)."""
-        cached = self._description
-        if cached is not None and cached[0] is string_names and cached[1] == load:
-            return cached[2]
-        text = self._describe(string_names, load)
-        self._description = (string_names, load, text)
+        """The inputs in words, e.g. ``'3 tensions (a, b, c), unknown load'`` (without the load
+        when not ``load``); one text per sensor pattern and names, kept across estimates."""
+        key = (self.tension_index.tobytes(), self.length_index.tobytes(),
+               self.pose is not None, self.gravity is not None, self.wrench is not None, load,
+               tuple(string_names))
+        text = _DESCRIPTIONS.get(key)
+        if text is None:
+            text = self._describe(string_names, load)
+            if len(_DESCRIPTIONS) >= _DESCRIPTIONS_KEPT:
+                _DESCRIPTIONS.pop(next(iter(_DESCRIPTIONS), None), None)
+            _DESCRIPTIONS[key] = text
         return text
 
     def _describe(self, string_names: Sequence[str], load: bool) -> str:
