@@ -351,8 +351,9 @@ class _JointProblem:
                 if J is not None:
                     J[row:row + k] = dh[index] * weight[:, None]
             row += k
-        if p.pose is not None:
-            res, jac = sm.pose_residual(xi, p.pose)
+        if p.pose is not None:  # checked in PreparedMeasurements: not again per evaluation
+            res, jac = sm.pose_residual_unchecked(
+                xi, kin if kin is not None else ScrewKinematics(xi), p.pose, J is not None)
             r[row:row + 6] = p.pose_whitener @ res
             if J is not None:
                 J[row:row + 6] = p.pose_whitener @ jac

@@ -253,10 +253,21 @@ def pose_residual(xi: ArrayLike, measured: ArrayLike) -> tuple[FloatArray, Float
     the SO(3) left Jacobian (``exp(hat(d)) exp(hat(E)) = exp(hat(E + Jl^-1(E) d))``).
     """
     xi = _screw(xi)
-    T_m = as_transform(measured, 'measured pose')
-    kin = ScrewKinematics(xi)
-    E = log_so3(kin.R @ T_m[:3, :3].T)
-    r = np.concatenate([kin.t - T_m[:3, 3], E])
+    r, J = pose_residual_unchecked(xi, ScrewKinematics(xi),
+                                   as_transform(measured, 'measured pose'))
+    return r, J
+
+
+def pose_residual_unchecked(xi: FloatArray, kinematics: ScrewKinematics, measured: FloatArray,
+                            jacobian: bool = True) -> tuple[FloatArray, FloatArray | None]:
+    """:func:`pose_residual` for a validated screw (6,) with its kinematics and a measured
+    (4, 4) transform already checked (the estimator's per-iteration path); without
+    ``jacobian`` the residual alone (Jacobian None)."""
+    kin = kinematics
+    E = log_so3(kin.R @ measured[:3, :3].T)
+    r = np.concatenate([kin.t - measured[:3, 3], E])
+    if not jacobian:
+        return r, None
     J = pose_jacobian(xi, kin)
     J[3:] = left_jacobian_so3_inverse(E) @ J[3:]
     return r, J
