@@ -54,9 +54,7 @@ from tensegrity_stiffness.screw import (
     as_screws,
     check_in_chart,
     hat3,
-    left_jacobian_so3_inverse,
     log_se3,
-    log_so3,
 )
 from tensegrity_stiffness.validation import finite_array
 
@@ -352,8 +350,9 @@ class _JointProblem:
                     J[row:row + k] = dh[index] * weight[:, None]
             row += k
         if p.pose is not None:  # checked in PreparedMeasurements: not again per evaluation
+            pose_kin = kin if kin is not None else ScrewKinematics(xi)
             res, jac = sm.pose_residual_unchecked(
-                xi, kin if kin is not None else ScrewKinematics(xi), p.pose, J is not None)
+                pose_kin.T, p.pose, None if J is None else sm.pose_jacobian(xi, pose_kin))
             r[row:row + 6] = p.pose_whitener @ res
             if J is not None:
                 J[row:row + 6] = p.pose_whitener @ jac
@@ -776,11 +775,9 @@ class _ChainProblem:
             rows_J.append(block)
         if self.tip_pose is not None:
             T = state.tip_transform
-            E = log_so3(T[:3, :3] @ self.tip_pose[:3, :3].T)
-            r = np.concatenate([T[:3, 3] - self.tip_pose[:3, 3], E])
             jac = np.zeros((6, size))
             jac[:, :6 * n] = _tip_pose_jacobian(self.chain, xi, T)
-            jac[3:] = left_jacobian_so3_inverse(E) @ jac[3:]
+            r, jac = sm.pose_residual_unchecked(T, self.tip_pose, jac)
             rows_r.append(self.tip_pose_whitener @ r)
             rows_J.append(self.tip_pose_whitener @ jac)
         if self.tip_wrench is not None:
