@@ -54,9 +54,7 @@ from tensegrity_stiffness.screw import (
     as_screws,
     check_in_chart,
     hat3,
-    left_jacobian_so3_inverse,
     log_se3,
-    log_so3,
 )
 from tensegrity_stiffness.validation import finite_array
 
@@ -106,25 +104,39 @@ def _std(name: str, value: Any, size: int) -> FloatArray:
     return arr
 
 
-def _covariance(name: str, value: Any, size: int) -> FloatArray:
-    """A symmetric positive definite (size, size) covariance; ValueError naming ``name``."""
+#: Checked covariances and their whiteners by content: a tracker's covariances come from its
+#: settings (or a sensor's fixed covariance) and repeat every estimate. A few are kept.
+_COVARIANCES: dict[bytes, tuple[FloatArray, FloatArray]] = {}
+_COVARIANCES_KEPT = 16
+
+
+def _covariance(name: str, value: Any, size: int) -> tuple[FloatArray, FloatArray]:
+    """A symmetric positive definite (size, size) covariance and its whitener ``L^-1`` with
+    ``covariance = L L^T`` (whitened residual ``L^-1 r``; one Cholesky factorisation checks
+    and whitens; both read-only, reused for a covariance seen before); ValueError naming
+    ``name``."""
     if value is None:
         raise ValueError(f'{name} is required with its measurement')
     arr = finite_array(name, value)
     if arr.shape != (size, size):
         raise ValueError(f'{name} must have shape ({size}, {size}), got {arr.shape}')
+    key = arr.tobytes()
+    known = _COVARIANCES.get(key)
+    if known is not None:
+        return known
     if not np.allclose(arr, arr.T, rtol=1e-9, atol=0.0):
         raise ValueError(f'{name} must be symmetric')
+    covariance = 0.5 * (arr + arr.T)
     try:
-        np.linalg.cholesky(arr)
+        factor = np.linalg.cholesky(covariance)
     except np.linalg.LinAlgError:
         raise ValueError(f'{name} must be positive definite') from None
-    return 0.5 * (arr + arr.T)
-
-
-def _whitener(covariance: FloatArray) -> FloatArray:
-    """``L^-1`` with ``covariance = L L^T`` (whitened residual ``L^-1 r``)."""
-    return np.linalg.inv(np.linalg.cholesky(covariance))
+    whitener = np.linalg.inv(factor)
+    covariance.flags.writeable = whitener.flags.writeable = False
+    if len(_COVARIANCES) >= _COVARIANCES_KEPT:
+        _COVARIANCES.pop(next(iter(_COVARIANCES), None), None)
+    _COVARIANCES[key] = (covariance, whitener)
+    return covariance, whitener
 
 
 def _per_string(name: str, value: Any, n: int) -> FloatArray:
@@ -172,12 +184,17 @@ class Measurements:
         return PreparedMeasurements(self, n_strings)
 
 
+#: :meth:`PreparedMeasurements.describe`'s texts by sensor pattern (a tracker's pattern rarely
+#: changes, its measurements are prepared anew for every estimate). A few are kept.
+_DESCRIPTIONS: dict[tuple, str] = {}
+_DESCRIPTIONS_KEPT = 64
+
+
 class PreparedMeasurements:
     """:class:`Measurements` validated for one joint, with their whitening (reusable)."""
 
     def __init__(self, m: Measurements, n: int) -> None:
         self.n_strings = n
-        self._description: tuple[Sequence[str], bool, str] | None = None
         tensions = _per_string('tensions', m.tensions, n)
         self.tension_index = np.flatnonzero(~np.isnan(tensions))
         self.tensions = tensions[self.tension_index]
@@ -193,7 +210,7 @@ class PreparedMeasurements:
         self.pose = None
         if m.pose is not None:
             self.pose = sm.as_transform(m.pose, 'pose')
-            self.pose_whitener = _whitener(_covariance('pose_covariance', m.pose_covariance, 6))
+            _, self.pose_whitener = _covariance('pose_covariance', m.pose_covariance, 6)
         self.gravity = None
         if m.gravity is not None:
             self.gravity = sm.unit_vector(m.gravity, 'gravity')
@@ -208,8 +225,8 @@ class PreparedMeasurements:
             if W.shape != (6,):
                 raise ValueError(f'external_wrench must have shape (6,), got {W.shape}')
             self.wrench = W
-            self.wrench_covariance = _covariance('wrench_covariance', m.wrench_covariance, 6)
-            self.wrench_whitener = _whitener(self.wrench_covariance)
+            self.wrench_covariance, self.wrench_whitener = _covariance(
+                'wrench_covariance', m.wrench_covariance, 6)
         nt, nl = self.tension_index.size, self.length_index.size
         self.rows = nt + nl + (6 if self.pose is not None else 0) + (
             3 if self.gravity is not None else 0) + (6 if self.wrench is not None else 0)
@@ -223,13 +240,17 @@ class PreparedMeasurements:
         return bool(self.tension_index.size or self.length_index.size)
 
     def describe(self, string_names: Sequence[str], load: bool = True) -> str:
-        """The inputs in words, e.g. ``'3 tensions (a, b, c), unknown load'`` (cached; without
-        the load when not ``load``)."""
-        cached = self._description
-        if cached is not None and cached[0] is string_names and cached[1] == load:
-            return cached[2]
-        text = self._describe(string_names, load)
-        self._description = (string_names, load, text)
+        """The inputs in words, e.g. ``'3 tensions (a, b, c), unknown load'`` (without the load
+        when not ``load``); one text per sensor pattern and names, kept across estimates."""
+        key = (self.tension_index.tobytes(), self.length_index.tobytes(),
+               self.pose is not None, self.gravity is not None, self.wrench is not None, load,
+               tuple(string_names))
+        text = _DESCRIPTIONS.get(key)
+        if text is None:
+            text = self._describe(string_names, load)
+            if len(_DESCRIPTIONS) >= _DESCRIPTIONS_KEPT:
+                _DESCRIPTIONS.pop(next(iter(_DESCRIPTIONS), None), None)
+            _DESCRIPTIONS[key] = text
         return text
 
     def _describe(self, string_names: Sequence[str], load: bool) -> str:
@@ -328,8 +349,10 @@ class _JointProblem:
                 if J is not None:
                     J[row:row + k] = dh[index] * weight[:, None]
             row += k
-        if p.pose is not None:
-            res, jac = sm.pose_residual(xi, p.pose)
+        if p.pose is not None:  # checked in PreparedMeasurements: not again per evaluation
+            pose_kin = kin if kin is not None else ScrewKinematics(xi)
+            res, jac = sm.pose_residual_unchecked(
+                pose_kin.T, p.pose, None if J is None else sm.pose_jacobian(xi, pose_kin))
             r[row:row + 6] = p.pose_whitener @ res
             if J is not None:
                 J[row:row + 6] = p.pose_whitener @ jac
@@ -752,11 +775,9 @@ class _ChainProblem:
             rows_J.append(block)
         if self.tip_pose is not None:
             T = state.tip_transform
-            E = log_so3(T[:3, :3] @ self.tip_pose[:3, :3].T)
-            r = np.concatenate([T[:3, 3] - self.tip_pose[:3, 3], E])
             jac = np.zeros((6, size))
             jac[:, :6 * n] = _tip_pose_jacobian(self.chain, xi, T)
-            jac[3:] = left_jacobian_so3_inverse(E) @ jac[3:]
+            r, jac = sm.pose_residual_unchecked(T, self.tip_pose, jac)
             rows_r.append(self.tip_pose_whitener @ r)
             rows_J.append(self.tip_pose_whitener @ jac)
         if self.tip_wrench is not None:
@@ -947,13 +968,13 @@ def estimate_chain_state(chain: JointChain,
     pose_T = pose_whitener = None
     if tip_pose is not None:
         pose_T = sm.as_transform(tip_pose, 'tip_pose')
-        pose_whitener = _whitener(_covariance('tip_pose_covariance', tip_pose_covariance, 6))
+        _, pose_whitener = _covariance('tip_pose_covariance', tip_pose_covariance, 6)
     W_m = W_whitener = None
     if tip_wrench is not None:
         W_m = finite_array('tip_wrench', tip_wrench)
         if W_m.shape != (6,):
             raise ValueError(f'tip_wrench must have shape (6,), got {W_m.shape}')
-        W_whitener = _whitener(_covariance('tip_wrench_covariance', tip_wrench_covariance, 6))
+        _, W_whitener = _covariance('tip_wrench_covariance', tip_wrench_covariance, 6)
     x0 = (chain.unloaded_screws(rest) if initial_screws is None
           else chain._screws(initial_screws).copy())
     if initial_tip_wrench is None:

@@ -102,6 +102,39 @@ def fresh_readings(snapshot: EstimatorInput, max_age: float
     return {name: r for name, r in snapshot.readings.items() if ages[name] <= max_age}, ages
 
 
+def _usable_readings(snapshot: EstimatorInput, max_age: float
+                     ) -> tuple[dict[str, Reading], dict[str, float]]:
+    """:func:`fresh_readings`; ValueError when none is fresh."""
+    readings, ages = fresh_readings(snapshot, max_age)
+    if not readings:
+        raise ValueError('no input within estimation.max_age')
+    return readings, ages
+
+
+def _require_success(est: JointEstimate | ChainEstimate, snapshot: EstimatorInput,
+                     readings: Mapping[str, Reading], max_age: float) -> None:
+    """ValueError with the estimate's message (and the inputs left out as stale) when it
+    failed."""
+    if est.success:
+        return
+    stale = sorted(set(snapshot.readings) - set(readings))
+    left_out = f' (left out as older than {max_age:g} s: {", ".join(stale)})' if stale else ''
+    raise ValueError(f'no estimate: {est.message}{left_out}')
+
+
+def pose_reading(settings: EstimatorNodeSettings, readings: Mapping[str, Reading]
+                 ) -> tuple[FloatArray | None, FloatArray | None]:
+    """(transform, covariance) of the fresh ``measured_pose`` (None, None when absent); a
+    message without a covariance gets the settings' pose stds."""
+    if 'measured_pose' not in readings:
+        return None, None
+    transform, covariance = readings['measured_pose'].value
+    if covariance is None:
+        covariance = np.diag([settings.pose_position_std ** 2] * 3
+                             + [settings.pose_angle_std ** 2] * 3)
+    return transform, covariance
+
+
 def measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading]
                  ) -> Measurements:
     """The :class:`Measurements` of the fresh ``readings`` under ``settings`` (the sensors'
@@ -112,11 +145,8 @@ def measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading
         kw.update(tensions=readings['measured_tensions'].value, tension_std=settings.tension_std)
     if 'measured_lengths' in readings:
         kw.update(lengths=readings['measured_lengths'].value, length_std=settings.length_std)
-    if 'measured_pose' in readings:
-        transform, covariance = readings['measured_pose'].value
-        if covariance is None:
-            covariance = np.diag([settings.pose_position_std ** 2] * 3
-                                 + [settings.pose_angle_std ** 2] * 3)
+    transform, covariance = pose_reading(settings, readings)
+    if transform is not None:
         kw.update(pose=transform, pose_covariance=covariance)
     if 'imu' in readings:
         kw.update(gravity=readings['imu'].value, gravity_std=settings.gravity_std,
@@ -178,17 +208,11 @@ def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput
     """The estimate of the fresh readings of ``snapshot``; ValueError (nothing is published)
     when the inputs are bad, the set cannot determine the pose (the message names what is
     missing), the estimate does not converge or an output is not finite."""
-    readings, ages = fresh_readings(snapshot, settings.max_age)
-    if not readings:
-        raise ValueError('no input within estimation.max_age')
-    stale = sorted(set(snapshot.readings) - set(readings))
+    readings, ages = _usable_readings(snapshot, settings.max_age)
     est = estimate_joint_state(settings.model, measurements(settings, readings),
                                initial_screw=snapshot.initial_screw,
                                stiffness_std=settings.stiffness_std)
-    if not est.success:
-        left_out = f' (left out as older than {settings.max_age:g} s: {", ".join(stale)})' \
-            if stale else ''
-        raise ValueError(f'no estimate: {est.message}{left_out}')
+    _require_success(est, snapshot, readings, settings.max_age)
     outputs = EstimatorOutputs(est, tuple(name for name in ESTIMATOR_INPUTS if name in readings),
                                ages)
     arrays = output_arrays(outputs)
@@ -252,10 +276,7 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
     joint, joint-major; ``measured_pose`` the tool frame in the base; ``measured_wrench`` the
     tip load); ValueError (nothing is published) as :func:`estimator_outputs`."""
     options = settings.estimator
-    readings, ages = fresh_readings(snapshot, options.max_age)
-    if not readings:
-        raise ValueError('no input within estimation.max_age')
-    stale = sorted(set(snapshot.readings) - set(readings))
+    readings, ages = _usable_readings(snapshot, options.max_age)
     counts = settings.n_strings
     bounds = np.cumsum([0, *counts])
     joints: list[Measurements | None] = []
@@ -269,12 +290,7 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
                 if not np.all(np.isnan(values)):
                     kw.update({key: values, f'{key[:-1]}_std': std})
         joints.append(Measurements(**kw) if kw else None)
-    tip_pose = tip_cov = None
-    if 'measured_pose' in readings:
-        tip_pose, tip_cov = readings['measured_pose'].value
-        if tip_cov is None:
-            tip_cov = np.diag([options.pose_position_std ** 2] * 3
-                              + [options.pose_angle_std ** 2] * 3)
+    tip_pose, tip_cov = pose_reading(options, readings)
     load, load_covariance = load_measurement(options, readings)
     initial_screws = initial_wrench = None
     if snapshot.initial_screw is not None:
@@ -283,10 +299,7 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
         settings.chain, joints, tip_pose, tip_cov, load, load_covariance,
         rest_lengths=settings.current_rest_lengths(), initial_screws=initial_screws,
         initial_tip_wrench=initial_wrench, stiffness_std=options.stiffness_std)
-    if not est.success:
-        left_out = f' (left out as older than {options.max_age:g} s: {", ".join(stale)})' \
-            if stale else ''
-        raise ValueError(f'no estimate: {est.message}{left_out}')
+    _require_success(est, snapshot, readings, options.max_age)
     outputs = SpineEstimatorOutputs(
         est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages)
     arrays = spine_output_arrays(outputs)

@@ -253,13 +253,23 @@ def pose_residual(xi: ArrayLike, measured: ArrayLike) -> tuple[FloatArray, Float
     the SO(3) left Jacobian (``exp(hat(d)) exp(hat(E)) = exp(hat(E + Jl^-1(E) d))``).
     """
     xi = _screw(xi)
-    T_m = as_transform(measured, 'measured pose')
     kin = ScrewKinematics(xi)
-    E = log_so3(kin.R @ T_m[:3, :3].T)
-    r = np.concatenate([kin.t - T_m[:3, 3], E])
-    J = pose_jacobian(xi, kin)
-    J[3:] = left_jacobian_so3_inverse(E) @ J[3:]
+    r, J = pose_residual_unchecked(kin.T, as_transform(measured, 'measured pose'),
+                                   pose_jacobian(xi, kin))
     return r, J
+
+
+def pose_residual_unchecked(transform: FloatArray, measured: FloatArray,
+                            jacobian: FloatArray | None = None
+                            ) -> tuple[FloatArray, FloatArray | None]:
+    """:func:`pose_residual` between (4, 4) transforms already checked (the estimators'
+    per-iteration path) and, given ``jacobian`` = ``d[dp; dtheta]/dx`` (6, k) of ``transform``
+    (modified in place), ``dr/dx``; without it the residual alone (Jacobian None)."""
+    E = log_so3(transform[:3, :3] @ measured[:3, :3].T)
+    r = np.concatenate([transform[:3, 3] - measured[:3, 3], E])
+    if jacobian is not None:
+        jacobian[3:] = left_jacobian_so3_inverse(E) @ jacobian[3:]
+    return r, jacobian
 
 
 # ---------------------------------------------------------------------------------- gravity

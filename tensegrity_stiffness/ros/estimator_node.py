@@ -20,6 +20,7 @@ throttled warning, no publication, the state kept.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from operator import attrgetter
 from typing import Any
 
@@ -153,46 +154,38 @@ class EstimatorNode(StreamingNode):
     def _on_lengths(self, msg: Float64MultiArray) -> None:
         self._measured('measured_lengths', msg)
 
-    def _check_frame(self, frame_id: str, expected: str, what: str) -> None:
-        if frame_id and frame_id != expected:
-            raise ValueError(f"header.frame_id '{frame_id}' is not {what} '{expected}'")
+    def _store_framed(self, name: str, msg: Any, expected: str, what: str,
+                      decode: Callable[[Any], Any]) -> None:
+        """Keep ``decode(msg)`` as input ``name`` with the header's stamp when the header's
+        frame is ``expected`` (or empty, ``what`` names it) and it decodes; otherwise a
+        throttled warning naming the problem."""
+        frame_id = msg.header.frame_id
+        try:
+            if frame_id and frame_id != expected:
+                raise ValueError(f"header.frame_id '{frame_id}' is not {what} '{expected}'")
+            value = decode(msg)
+        except ValueError as exc:
+            self.reporter.reject(f'~/{name}', str(exc))
+            return
+        self._store(name, value, msg.header.stamp)
 
     @guarded('~/measured_pose')
     def _on_pose(self, msg: PoseWithCovarianceStamped) -> None:
-        settings = self._settings
-        try:
-            self._check_frame(msg.header.frame_id, self._input_frames(settings)[0],
-                              self.INPUT_FRAME_NAME)
-            value = estimation_msgs.pose_with_covariance_to_arrays(msg.pose)
-        except ValueError as exc:
-            self.reporter.reject('~/measured_pose', str(exc))
-            return
-        self._store('measured_pose', value, msg.header.stamp)
+        self._store_framed('measured_pose', msg, self._input_frames(self._settings)[0],
+                           self.INPUT_FRAME_NAME,
+                           lambda m: estimation_msgs.pose_with_covariance_to_arrays(m.pose))
 
     @guarded('~/imu')
     def _on_imu(self, msg: Imu) -> None:
         settings = self._settings
-        try:
-            self._check_frame(msg.header.frame_id, self._input_frames(settings)[1],
-                              "link 2's frame")
-            gravity = gravity_reading(estimation_msgs.imu_specific_force(msg),
-                                      settings.imu_rest_tolerance)
-        except ValueError as exc:
-            self.reporter.reject('~/imu', str(exc))
-            return
-        self._store('imu', gravity, msg.header.stamp)
+        self._store_framed('imu', msg, self._input_frames(settings)[1], "link 2's frame",
+                           lambda m: gravity_reading(estimation_msgs.imu_specific_force(m),
+                                                     settings.imu_rest_tolerance))
 
     @guarded('~/measured_wrench')
     def _on_wrench(self, msg: WrenchStamped) -> None:
-        settings = self._settings
-        try:
-            self._check_frame(msg.header.frame_id, self._input_frames(settings)[0],
-                              self.INPUT_FRAME_NAME)
-            wrench = estimation_msgs.wrench_stamped_to_array(msg)
-        except ValueError as exc:
-            self.reporter.reject('~/measured_wrench', str(exc))
-            return
-        self._store('measured_wrench', wrench, msg.header.stamp)
+        self._store_framed('measured_wrench', msg, self._input_frames(self._settings)[0],
+                           self.INPUT_FRAME_NAME, estimation_msgs.wrench_stamped_to_array)
 
     # ------------------------------------------------------------------ diagnostics
     def _diagnostic_statuses(self, settings: Any, outputs: Any,
