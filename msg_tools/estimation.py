@@ -36,6 +36,7 @@ from tensegrity_stiffness.layouts import (
     TIP_STIFFNESS_LABELS,
     tensions_label,
 )
+from tensegrity_stiffness.messages import multiarray_payload
 
 FloatArray = NDArray[np.float64]
 
@@ -54,13 +55,7 @@ def measured_values(msg: Float64MultiArray, max_length: int) -> FloatArray:
     """The payload of a measured-array message (``layout.data_offset`` honoured) as float64, NaN
     kept (not measured); ValueError when it has more than ``max_length`` elements (checked
     before any conversion) or a bad data offset. The caller checks the length and inf."""
-    n_total = len(msg.data)
-    if n_total > max_length:
-        raise ValueError(f'too many elements: {n_total} > max_length {max_length}')
-    offset = int(msg.layout.data_offset)
-    if offset > n_total:
-        raise ValueError(f'data_offset {offset} exceeds the {n_total} data elements')
-    return np.array(msg.data, dtype=np.float64)[offset:]
+    return multiarray_payload(msg, max_length)
 
 
 def pose_with_covariance_to_arrays(msg: PoseWithCovariance

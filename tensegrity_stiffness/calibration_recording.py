@@ -49,7 +49,12 @@ from tensegrity_stiffness.calibration import (
     pose_transform,
     rotation_log_batch,
 )
-from tensegrity_stiffness.messages import multiarray_to_array, pose_to_transform
+from tensegrity_stiffness.messages import (
+    DEFAULT_MAX_LENGTH,
+    multiarray_payload,
+    multiarray_to_array,
+    pose_to_transform,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -274,9 +279,9 @@ def _stamp_seconds(msg: Any, log_time: int) -> float:
 
 
 def _measured_array_of(msg: Any, n: int) -> FloatArray:
-    """A measured per-string array (NaN: not measured; :func:`messages.multiarray_to_array`
-    rejects NaN, so this one reads the payload itself)."""
-    values = np.asarray(msg.data, dtype=np.float64)[int(msg.layout.data_offset):]
+    """A measured per-string array (NaN: not measured, so the payload as
+    :func:`messages.multiarray_payload` reads it, not the NaN-free ``multiarray_to_array``)."""
+    values = multiarray_payload(msg, max(n, DEFAULT_MAX_LENGTH))
     if values.shape != (n,):
         raise ValueError(f'expected {n} values, got {values.size}')
     if np.isinf(values).any():

@@ -61,16 +61,23 @@ def multiarray_to_array(msg: Any, expected_length: int | None = None,
     ValueError
         ``'too many elements'``, ``'data_offset'``, ``'expected N values'`` or ``'NaN or inf'``.
     """
+    values = multiarray_payload(msg, max_length)
+    if expected_length is not None and values.size != expected_length:
+        raise ValueError(f'expected {expected_length} values, got {values.size}')
+    return finite_array_of_shape('array', values, None)
+
+
+def multiarray_payload(msg: Any, max_length: int = DEFAULT_MAX_LENGTH) -> FloatArray:
+    """The payload of a ``Float64MultiArray`` from ``layout.data_offset`` on, as float64, NaN and
+    inf kept (measured arrays use NaN for "not measured"); ValueError when it has more than
+    ``max_length`` elements (checked before any conversion) or a bad data offset."""
     n_total = len(msg.data)
     if n_total > max_length:
         raise ValueError(f'too many elements: {n_total} > max_length {max_length}')
     offset = int(msg.layout.data_offset)
     if offset > n_total:
         raise ValueError(f'data_offset {offset} exceeds the {n_total} data elements')
-    n = n_total - offset
-    if expected_length is not None and n != expected_length:
-        raise ValueError(f'expected {expected_length} values, got {n}')
-    return finite_array_of_shape('array', np.array(msg.data, dtype=np.float64)[offset:], None)
+    return np.array(msg.data, dtype=np.float64)[offset:]
 
 
 def pose_to_transform(pose: Any,
