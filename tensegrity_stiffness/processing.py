@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness.interpretation import interpretation_vector
 from tensegrity_stiffness.joint import JointModel, JointState
 from tensegrity_stiffness.screw import check_in_chart, log_se3
-from tensegrity_stiffness.validation import require_all_finite
+from tensegrity_stiffness.validation import require_all_finite, require_frame
 
 FloatArray = NDArray[np.float64]
 
@@ -33,8 +33,7 @@ def pose_input(frame_id: str, transform: ArrayLike, link1_frame: str,
     """The screw of a pose of link 2 in link 1 (``~/pose``): the log map on the rotation branch
     nearest ``reference`` (the last screw). ValueError when ``frame_id`` is set and is not
     ``link1_frame``."""
-    if frame_id and frame_id != link1_frame:
-        raise ValueError(f"header.frame_id '{frame_id}' is not link 1's frame '{link1_frame}'")
+    require_frame(frame_id, link1_frame, "link 1's frame")
     return log_se3(transform, reference=reference)
 
 

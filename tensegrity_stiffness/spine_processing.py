@@ -19,7 +19,7 @@ from tensegrity_stiffness.chain import ChainState, JointChain
 from tensegrity_stiffness.equilibrium import stability_margin
 from tensegrity_stiffness.health import JointHealth
 from tensegrity_stiffness.screw import CHART_LIMIT, check_in_chart, log_se3
-from tensegrity_stiffness.validation import require_all_finite
+from tensegrity_stiffness.validation import require_all_finite, require_frame
 
 FloatArray = NDArray[np.float64]
 
@@ -45,8 +45,7 @@ def poses_input(frame_id: str, poses: Sequence[Any], base_frame: str, reference:
     made a (4, 4) transform by ``to_transform``, after the count is checked): the log map of
     each on the rotation branch nearest the joint's ``reference`` screw (the last screws).
     ValueError when ``frame_id`` is set and is not the base frame, or the pose count is not N."""
-    if frame_id and frame_id != base_frame:
-        raise ValueError(f"header.frame_id '{frame_id}' is not the base frame '{base_frame}'")
+    require_frame(frame_id, base_frame, 'the base frame')
     n = reference.shape[0]
     if len(poses) != n:
         raise ValueError(f'expected N = {n} poses (one per joint), got {len(poses)}')

@@ -57,3 +57,10 @@ def require_all_finite(names: Sequence[str], arrays: Sequence[NDArray[np.float64
     for name, array in zip(names, arrays, strict=True):
         if not np.isfinite(array).all():
             raise ValueError(f'{name} contains NaN or inf')
+
+
+def require_frame(frame_id: str, expected: str, what: str) -> None:
+    """An input's ``header.frame_id`` must be ``expected`` (``what`` names that frame, e.g.
+    "the base frame"); empty means "in the expected frame". ValueError otherwise."""
+    if frame_id and frame_id != expected:
+        raise ValueError(f"header.frame_id '{frame_id}' is not {what} '{expected}'")

@@ -52,6 +52,7 @@ from tensegrity_stiffness.ros import runner
 from tensegrity_stiffness.ros.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.reporting import guarded
 from tensegrity_stiffness.ros.stiffness_node import StiffnessNode
+from tensegrity_stiffness.validation import require_frame
 
 NODE_NAME = 'estimator_node'
 
@@ -159,10 +160,8 @@ class EstimatorNode(StreamingNode):
         """Keep ``decode(msg)`` as input ``name`` with the header's stamp when the header's
         frame is ``expected`` (or empty, ``what`` names it) and it decodes; otherwise a
         throttled warning naming the problem."""
-        frame_id = msg.header.frame_id
         try:
-            if frame_id and frame_id != expected:
-                raise ValueError(f"header.frame_id '{frame_id}' is not {what} '{expected}'")
+            require_frame(msg.header.frame_id, expected, what)
             value = decode(msg)
         except ValueError as exc:
             self.reporter.reject(f'~/{name}', str(exc))

@@ -49,6 +49,7 @@ from tensegrity_stiffness.ros.topics import (
 )
 from tensegrity_stiffness.simulation import ChainSimulation, JointSimulation, SensorNoise
 from tensegrity_stiffness.spine_processing import rest_lengths_input
+from tensegrity_stiffness.validation import require_frame
 
 NODE_NAME = 'sim_node'
 #: Seconds between the questions which outputs have a subscriber (outputs nobody reads are
@@ -228,10 +229,7 @@ class SimNode(Node):
         settings = self._settings
         values = settings.values
         try:
-            frame = msg.header.frame_id
-            if frame and frame != settings.base_frame:
-                raise ValueError(f"header.frame_id '{frame}' is not the base frame "
-                                 f"'{settings.base_frame}'")
+            require_frame(msg.header.frame_id, settings.base_frame, 'the base frame')
             W = msg_tools.msg_to_wrench(msg.wrench)
             force, moment = float(np.linalg.norm(W[:3])), float(np.linalg.norm(W[3:]))
             if force > values['limits.max_force']:
