@@ -85,7 +85,8 @@ from tensegrity_stiffness.screw import (
     left_jacobian_se3,
     left_jacobian_so3_inverse,
     log_se3,
-    vee3,
+    log_se3_sequence,
+    log_so3_batch,
 )
 from tensegrity_stiffness.validation import finite_array, finite_scalar
 
@@ -319,48 +320,6 @@ def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArra
     return np.concatenate([u, np.cross(model._p1, u)], axis=-1)
 
 
-def rotation_log_batch(R: FloatArray) -> FloatArray:
-    """Rotation vectors (N, 3) of rotations (N, 3, 3), principal branch (``|phi| <= pi``): the
-    batched :func:`~tensegrity_stiffness.screw.log_so3` (the same two branches: ``theta /
-    sin(theta)`` times the skew part below pi/2, the axis from the symmetric part above)."""
-    v = vee3(R)  # sin(theta) u
-    sin_t = np.linalg.norm(v, axis=-1)
-    cos_t = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
-    theta = np.arctan2(sin_t, cos_t)
-    small = theta < 1e-4
-    with np.errstate(invalid='ignore', divide='ignore'):
-        ratio = np.where(small, 1.0 + theta * theta / 6.0, theta / np.where(small, 1.0, sin_t))
-    out = ratio[:, None] * v
-    large = np.flatnonzero(theta >= 0.5 * math.pi)
-    if large.size:
-        Rl, cl = R[large], cos_t[large]
-        uu = (0.5 * (Rl + np.swapaxes(Rl, -1, -2)) - cl[:, None, None] * np.eye(3)) / \
-            (1.0 - cl)[:, None, None]
-        rows = np.arange(large.size)
-        k = np.argmax(np.diagonal(uu, axis1=-2, axis2=-1), axis=1)
-        u = uu[rows, :, k] / np.sqrt(np.maximum(uu[rows, k, k], np.finfo(float).tiny))[:, None]
-        u /= np.linalg.norm(u, axis=1)[:, None]
-        u *= np.where(np.einsum('ij,ij->i', u, v[large]) < 0.0, -1.0, 1.0)[:, None]
-        out[large] = theta[large, None] * u
-    return out
-
-
-def screws_of_poses(poses: FloatArray, reference: ArrayLike) -> FloatArray:
-    """Screws (N, 6) of poses (N, 4, 4), each on the rotation branch nearest the previous one
-    (the first nearest ``reference``): :func:`~tensegrity_stiffness.screw.log_se3` in a batch."""
-    omega = rotation_log_batch(poses[:, :3, :3])
-    previous = np.asarray(reference, dtype=np.float64)[:3]
-    for i, w in enumerate(omega):
-        norm = math.sqrt(float(w @ w))
-        if norm > 0.0:
-            other = w * ((norm - 2.0 * math.pi) / norm)
-            if np.linalg.norm(other - previous) < np.linalg.norm(w - previous):
-                omega[i] = other
-        previous = omega[i]
-    v = (left_jacobian_so3_inverse(omega) @ poses[:, :3, 3, None])[:, :, 0]
-    return np.concatenate([omega, v], axis=1)
-
-
 @dataclass
 class _Evaluation:
     """Whitened residuals (N, R) and their Jacobians w.r.t. the screws (N, R, 6) and the scaled
@@ -429,7 +388,7 @@ class _Problem:
         phi = np.zeros((N, 3))
         if has_pose.any():
             raw[has_pose, :3] = p[has_pose] - data.poses[has_pose, :3, 3]
-            phi[has_pose] = rotation_log_batch(
+            phi[has_pose] = log_so3_batch(
                 T[has_pose, :3, :3] @ np.swapaxes(Rm[has_pose], -1, -2))
             raw[:, 3:6] = phi
         raw[:, 6:12] = state.wrench + data.wrench
@@ -727,7 +686,7 @@ def initial_screws(model: JointModel, data: _Data) -> FloatArray:
     previous sample's screw), else the nominal model's equilibrium under the measured load
     (zero when unknown) from the previous screw."""
     if data.has_pose.all():
-        return screws_of_poses(data.poses, model.initial_screw)
+        return log_se3_sequence(data.poses, model.initial_screw)
     xi = np.empty((data.n_samples, 6))
     previous = model.initial_screw
     for i in range(data.n_samples):

@@ -47,7 +47,6 @@ from numpy.typing import NDArray
 from tensegrity_stiffness.calibration import (
     CalibrationSample,
     pose_transform,
-    rotation_log_batch,
 )
 from tensegrity_stiffness.messages import (
     DEFAULT_MAX_LENGTH,
@@ -55,6 +54,7 @@ from tensegrity_stiffness.messages import (
     multiarray_to_array,
     pose_to_transform,
 )
+from tensegrity_stiffness.screw import log_so3_batch
 
 FloatArray = NDArray[np.float64]
 
@@ -152,7 +152,7 @@ def quasi_static_indices(recording: Recording, window: float = DEFAULT_WINDOW,
             P = recording.poses[inside]
             B = recording.poses[i]
             drift = np.max(np.linalg.norm(P[:, :3, 3] - B[:3, 3], axis=1))
-            turn = np.max(np.linalg.norm(rotation_log_batch(P[:, :3, :3] @ B[:3, :3].T),
+            turn = np.max(np.linalg.norm(log_so3_batch(P[:, :3, :3] @ B[:3, :3].T),
                                          axis=1))
             quiet[i] = drift <= max_speed * window and turn <= max_angular_speed * window
     # The last instant of each run of quiet instants with the same rest lengths.

@@ -397,6 +397,50 @@ def _log_so3_floats(R: list, reference: list | None) -> list[float]:
     return omega
 
 
+def log_so3_batch(R: ArrayLike) -> FloatArray:
+    """Rotation vectors (N, 3) of rotations (N, 3, 3), principal branch (``|phi| <= pi``): the
+    batched :func:`log_so3` (the same two branches: ``theta /
+    sin(theta)`` times the skew part below pi/2, the axis from the symmetric part above)."""
+    R = np.asarray(R, dtype=np.float64)
+    v = vee3(R)  # sin(theta) u
+    sin_t = np.linalg.norm(v, axis=-1)
+    cos_t = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
+    theta = np.arctan2(sin_t, cos_t)
+    small = theta < 1e-4
+    with np.errstate(invalid='ignore', divide='ignore'):
+        ratio = np.where(small, 1.0 + theta * theta / 6.0, theta / np.where(small, 1.0, sin_t))
+    out = ratio[:, None] * v
+    large = np.flatnonzero(theta >= 0.5 * math.pi)
+    if large.size:
+        Rl, cl = R[large], cos_t[large]
+        uu = (0.5 * (Rl + np.swapaxes(Rl, -1, -2)) - cl[:, None, None] * np.eye(3)) / \
+            (1.0 - cl)[:, None, None]
+        rows = np.arange(large.size)
+        k = np.argmax(np.diagonal(uu, axis1=-2, axis2=-1), axis=1)
+        u = uu[rows, :, k] / np.sqrt(np.maximum(uu[rows, k, k], np.finfo(float).tiny))[:, None]
+        u /= np.linalg.norm(u, axis=1)[:, None]
+        u *= np.where(np.einsum('ij,ij->i', u, v[large]) < 0.0, -1.0, 1.0)[:, None]
+        out[large] = theta[large, None] * u
+    return out
+
+
+def log_se3_sequence(poses: ArrayLike, reference: ArrayLike) -> FloatArray:
+    """Screws (N, 6) of poses (N, 4, 4), each on the rotation branch nearest the previous one
+    (the first nearest ``reference``), as a tracker takes them: :func:`log_se3` in a batch."""
+    poses = np.asarray(poses, dtype=np.float64)
+    omega = log_so3_batch(poses[:, :3, :3])
+    previous = np.asarray(reference, dtype=np.float64)[:3]
+    for i, w in enumerate(omega):
+        norm = math.sqrt(float(w @ w))
+        if norm > 0.0:
+            other = w * ((norm - 2.0 * math.pi) / norm)
+            if np.linalg.norm(other - previous) < np.linalg.norm(w - previous):
+                omega[i] = other
+        previous = omega[i]
+    v = (left_jacobian_so3_inverse(omega) @ poses[:, :3, 3, None])[:, :, 0]
+    return np.concatenate([omega, v], axis=1)
+
+
 def _inverse_jacobian_coefficient(t: float) -> float:
     """``e`` of :func:`left_jacobian_so3_inverse` at one angle ``t`` (its series below
     ``_INVERSE_SERIES_THRESHOLD``)."""

@@ -135,7 +135,7 @@ def test_identifiability_separates_dead_parameters_combinations_and_weak_directi
 def test_batched_logs_equal_log_se3_on_every_branch():
     """Rotations near 0, near pi (the default joint's equilibria) and between; each screw on
     the branch nearest the previous one, as log_se3 with that reference."""
-    from tensegrity_stiffness.screw import log_se3
+    from tensegrity_stiffness.screw import log_se3, log_se3_sequence
 
     rng = np.random.default_rng(9)
     axes = rng.normal(size=(300, 3))
@@ -144,7 +144,7 @@ def test_batched_logs_equal_log_se3_on_every_branch():
                              np.pi - rng.uniform(0, 1e-6, 50), rng.uniform(np.pi, 2 * np.pi, 50)])
     screws = np.hstack([axes * angles[:, None], rng.normal(0, 0.02, (300, 3))])
     poses = exp_se3(screws)
-    got = cal.screws_of_poses(poses, screws[0])
+    got = log_se3_sequence(poses, screws[0])
     previous = screws[0]
     for T, x in zip(poses, got, strict=True):
         want = log_se3(T, reference=previous)
