@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 from tensegrity_stiffness import config
@@ -419,12 +419,22 @@ def chain_document(values: Mapping[str, Any]) -> dict[str, Any]:
     return document
 
 
-class _SpineModel:
-    """What the settings of the spine's nodes share: the joints and their rest lengths now (the
-    dataclasses below give ``chain`` and ``rest_lengths``)."""
+@dataclass(frozen=True)
+class SpineNodeSettings:
+    """Everything one computation of ``spine_node`` needs, swapped as a whole (never mutated):
+    built from a complete set of parameter values by :func:`spine_node_settings`.
+    ``rest_lengths``: per-joint rest lengths set on ``~/rest_lengths`` (None: the models')."""
 
     chain: JointChain
-    rest_lengths: tuple[Any, ...] | None
+    base_frame: str
+    tool_frame: str
+    max_array_length: int
+    equilibrium_time_budget: float
+    equilibrium_max_iterations: int
+    marker_period: float
+    rest_lengths: tuple[Any, ...] | None = None
+    generation: int = 0
+    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
     @property
     def n_joints(self) -> int:
@@ -440,24 +450,6 @@ class _SpineModel:
         if self.rest_lengths is not None:
             return list(self.rest_lengths)
         return [model.rest_lengths for model in self.chain.joints]
-
-
-@dataclass(frozen=True)
-class SpineNodeSettings(_SpineModel):
-    """Everything one computation of ``spine_node`` needs, swapped as a whole (never mutated):
-    built from a complete set of parameter values by :func:`spine_node_settings`.
-    ``rest_lengths``: per-joint rest lengths set on ``~/rest_lengths`` (None: the models')."""
-
-    chain: JointChain
-    base_frame: str
-    tool_frame: str
-    max_array_length: int
-    equilibrium_time_budget: float
-    equilibrium_max_iterations: int
-    marker_period: float
-    rest_lengths: tuple[Any, ...] | None = None
-    generation: int = 0
-    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
 
 def spine_node_settings(values: Mapping[str, Any], generation: int = 0) -> SpineNodeSettings:
@@ -907,20 +899,12 @@ def spine_estimator_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, .
 
 
 @dataclass(frozen=True)
-class SpineEstimatorNodeSettings(_SpineModel):
-    """Everything one estimate of ``spine_estimator_node`` needs, swapped as a whole: the spine
-    (``chain``, frames, topic-set ``rest_lengths`` as :class:`SpineNodeSettings`) and the
-    estimator's settings (``estimator``: the sensors' stds, load mode, trigger, max age)."""
+class SpineEstimatorNodeSettings(SpineNodeSettings):
+    """Everything one estimate of ``spine_estimator_node`` needs, swapped as a whole: the spine's
+    settings (``chain``, frames, topic-set ``rest_lengths``: :class:`SpineNodeSettings`) and
+    the estimator's (``estimator``: the sensors' stds, load mode, trigger, max age)."""
 
-    chain: JointChain
-    base_frame: str
-    tool_frame: str
-    max_array_length: int
-    marker_period: float
-    estimator: EstimatorNodeSettings
-    rest_lengths: tuple[Any, ...] | None = None
-    generation: int = 0
-    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    estimator: EstimatorNodeSettings = field(kw_only=True)
 
 
 def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
@@ -935,8 +919,7 @@ def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
     estimator = estimator_node_settings({
         **defaults(ESTIMATOR_NODE_PARAMETERS), **joint_values,
         **{spec.name: values[spec.name] for spec in ESTIMATION_PARAMETERS + COMMON_PARAMETERS}})
-    return SpineEstimatorNodeSettings(
-        chain=spine.chain, base_frame=spine.base_frame, tool_frame=spine.tool_frame,
-        max_array_length=spine.max_array_length, marker_period=spine.marker_period,
-        estimator=estimator, generation=generation, values=spine.values | {
-            spec.name: estimator.values[spec.name] for spec in ESTIMATION_PARAMETERS})
+    inherited = {f.name: getattr(spine, f.name) for f in fields(SpineNodeSettings)}
+    inherited['values'] = spine.values | {
+        spec.name: estimator.values[spec.name] for spec in ESTIMATION_PARAMETERS}
+    return SpineEstimatorNodeSettings(**inherited, estimator=estimator)
