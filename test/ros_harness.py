@@ -367,8 +367,13 @@ class RosClient:
         self.node.destroy_client(client)
 
     def wait_for_publishers(self, topic: str, count: int = 1, timeout: float = 20.0) -> None:
+        """Wait until ``topic`` has ``count`` publishers and this client's own subscriptions on
+        it are matched to them: the graph can list a publisher whose writer has not matched a
+        new reader yet, and a message it sends then is lost to that reader."""
         deadline = time.monotonic() + timeout
-        while self.node.count_publishers(topic) < count:
+        readers = [s for s in self.node.subscriptions if s.topic_name == topic]
+        while (self.node.count_publishers(topic) < count
+               or any(s.get_publisher_count() < count for s in readers)):
             if time.monotonic() > deadline:
                 raise TimeoutError(f'no publisher on {topic}')
             time.sleep(0.02)
