@@ -288,6 +288,26 @@ class Inbox:
             self.times.clear()
 
 
+class StampedInbox(Inbox):
+    """An :class:`Inbox` that also keeps each message's source timestamp (the publisher's write
+    time, s, from rclpy's message info): gaps between publications, unlike arrival times, do
+    not bunch up when this process's executor falls behind."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.source_times: list[float] = []
+
+    def __call__(self, msg: Any, info: dict[str, Any]) -> None:  # type: ignore[override]
+        with self._cond:
+            self.source_times.append(info['source_timestamp'] * 1e-9)
+            super().__call__(msg)
+
+    def clear(self) -> None:
+        with self._cond:
+            super().clear()
+            self.source_times.clear()
+
+
 class RosClient:
     """A private rclpy context, node and background executor."""
 
@@ -311,6 +331,13 @@ class RosClient:
     def subscribe(self, msg_type: Any, topic: str, qos: QoSProfile = RELIABLE) -> Inbox:
         inbox = Inbox()
         self.subscribe_callback(msg_type, topic, inbox, qos)
+        return inbox
+
+    def subscribe_stamped(self, msg_type: Any, topic: str,
+                          qos: QoSProfile = RELIABLE) -> StampedInbox:
+        """A plain subscription (one message per callback) whose inbox keeps source stamps."""
+        inbox = StampedInbox()
+        self.node.create_subscription(msg_type, topic, inbox, qos)
         return inbox
 
     def subscribe_callback(self, msg_type: Any, topic: str, callback: Callable[[Any], None],

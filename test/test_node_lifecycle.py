@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
+import textwrap
 import threading
 import time
 
@@ -68,6 +71,43 @@ def test_signal_stops_the_node_cleanly(sig: signal.Signals, to_group: bool) -> N
     assert elapsed < STOP_BOUND_S, f'stopped after {elapsed:.2f} s'
     assert not left, f'children left behind: {left}'
     assert 'Traceback' not in log, log
+
+
+#: A node built by the runner that receives SIGINT as its construction ends, before the runner
+#: holds it: no one can close it, and its running thread (the fast lane, the twin's stepping) is
+#: still in rclpy's C++ code when the interpreter exits (the twin's stepping thread has the same
+#: guard).
+INTERRUPTED_CONSTRUCTION = textwrap.dedent('''
+    import importlib, os, signal, sys
+    from tensegrity_stiffness.ros import runner
+    module, name = sys.argv[1].rsplit('.', 1)
+    node_class = getattr(importlib.import_module(module), name)
+
+    def interrupted():
+        node = node_class()
+        os.kill(os.getpid(), signal.SIGINT)
+        for _ in range(10_000):  # Python raises KeyboardInterrupt here
+            pass
+        return node
+
+    runner.run(interrupted, sys.argv)
+    print('run returned', flush=True)
+''')
+
+
+def test_sigint_during_construction_exits_cleanly() -> None:
+    """Exit 0, no abort: the node's fast lane is stopped at exit although the node was never
+    closed (before: "terminate called without an active exception", exit -6, every time)."""
+    ns = unique_namespace('interrupted')
+    node_class = 'tensegrity_stiffness.ros.stiffness_node.StiffnessNode'
+    result = subprocess.run(
+        [sys.executable, '-c', INTERRUPTED_CONSTRUCTION, node_class, '--ros-args',
+         '--params-file', str(CONFIG), '-r', f'__ns:={ns}'],
+        capture_output=True, text=True, timeout=60, env=os.environ.copy())
+    output = result.stdout + result.stderr
+    assert 'terminate called' not in output, output[-3000:]
+    assert result.returncode == 0, output[-3000:]
+    assert 'run returned' in output
 
 
 def _request(wrench: list[float] | None = None) -> SolveEquilibrium.Request:

@@ -6,6 +6,10 @@ each callback: 0.35-0.6 ms per message on the 2-core CI machine, more than the n
 for a screw. The fast lane waits on a wait set that holds only its subscriptions and a guard
 condition (built once, refilled per wait: tens of microseconds) and calls the handlers directly,
 taking every message queued behind the first (:func:`.draining_subscription.take_queued`).
+A running lane is also stopped at the interpreter's exit (``atexit``): a daemon thread that
+returns from rclpy's C++ wait while Python finalizes is ended inside a ``noexcept`` frame, and
+the process aborts ("terminate called without an active exception"). That happened when SIGINT
+interrupted a node's construction after its lane had started: no one held the node to close it.
 Services, parameters, timers and the other topics stay with the node's executor on the main
 thread; the handlers and those callbacks share the node's state under the node's own locks.
 
@@ -18,6 +22,7 @@ condition, and without one its spin delivered neither timers nor messages (docs/
 
 from __future__ import annotations
 
+import atexit
 import threading
 from collections.abc import Callable
 from contextlib import ExitStack
@@ -73,9 +78,11 @@ class FastLane:
     def start(self) -> None:
         self._thread = threading.Thread(target=self._run, name='fast_lane', daemon=True)
         self._thread.start()
+        atexit.register(self.stop)
 
     def stop(self, timeout: float = 2.0) -> None:
-        """End the thread (before the node is destroyed)."""
+        """End the thread (before the node is destroyed; at the latest at exit, again if it
+        outlived ``timeout`` here)."""
         self._stop.set()
         try:
             self._wake.trigger()
@@ -83,6 +90,8 @@ class FastLane:
             pass
         if self._thread is not None:
             self._thread.join(timeout)
+            if not self._thread.is_alive():
+                atexit.unregister(self.stop)
 
     def _run(self) -> None:
         context = self._node.context

@@ -10,6 +10,7 @@ workers and exits with status 0.
 from __future__ import annotations
 
 import gc
+import signal
 import sys
 from collections.abc import Callable
 from typing import Any
@@ -28,7 +29,8 @@ SWITCH_INTERVAL_S = 2e-4
 def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
         executor_factory: Callable[[], Any] | None = None) -> None:
     """Create the node with ``node_factory`` (after ``rclpy.init(args=args)``) and spin it until
-    shutdown; then ``node.close()`` (if it has one), destroy it and shut rclpy down."""
+    shutdown; then ``node.close()`` (if it has one), destroy it and shut rclpy down. SIGINT is
+    ignored from the clean-up on: ``run`` is the last thing its process does."""
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     profile = bound_input_memory()
     rclpy.init(args=args)
@@ -49,6 +51,11 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        # Nothing cuts the clean-up short: the KeyboardInterrupt of the SIGINT that shut the
+        # context down can surface after the spin ended by ExternalShutdownException, and a
+        # second Ctrl-C may follow; either, raised in close(), left the fast lane's thread
+        # running into the interpreter's exit (an abort, exit -6).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
         if node is not None:
             close = getattr(node, 'close', None)
             if close is not None:

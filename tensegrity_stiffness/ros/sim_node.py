@@ -16,6 +16,7 @@ before its next step. Only the stepping thread touches the simulation.
 
 from __future__ import annotations
 
+import atexit
 import math
 import threading
 import time
@@ -151,6 +152,7 @@ class SimNode(Node):
         self._thread = threading.Thread(target=self._run, name='sim_node stepping',
                                         daemon=True)
         self._thread.start()
+        atexit.register(self.close)  # as the fast lane's: no publishing thread at finalization
         kind = f'spine of {n_joints} joints' if spine else 'joint'
         self.get_logger().info(
             f'ready: MuJoCo twin of the {kind}, {values["sim.rate"]:g} Hz '
@@ -188,7 +190,9 @@ class SimNode(Node):
                                               self._noise.accelerometer)
 
     def close(self) -> None:
-        """Stop the stepping thread (called by the runner before the node is destroyed)."""
+        """Stop the stepping thread (called by the runner before the node is destroyed, at the
+        latest at exit)."""
+        atexit.unregister(self.close)
         self._stop.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
