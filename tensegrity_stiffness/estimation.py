@@ -320,13 +320,14 @@ class _JointProblem:
     def evaluate(self, xi: FloatArray, jacobian: bool = True
                  ) -> tuple[FloatArray, FloatArray | None, JointState, ScrewKinematics | None]:
         """Whitened residual (rows,), Jacobian (rows, 6), joint state and kinematics at xi;
-        without ``jacobian`` the residual and the state alone (Jacobian and kinematics None)."""
+        without ``jacobian`` the residual and the state alone (Jacobian None; the kinematics
+        too, unless the compiled kernel computed them with the state at no extra cost)."""
         p = self.prep
         r = np.empty(p.rows)
         J = np.empty((p.rows, 6)) if jacobian else None
         kin = None
         row = 0
-        if p.needs_strings and jacobian:
+        if (p.needs_strings and jacobian) or self.model.uses_kernel:
             pred = sm.string_predictions_unchecked(self.model, xi, self.rest)
             state, kin = pred.state, pred.kinematics
             strings = ((pred.tensions, pred.tension_jacobian),
@@ -467,8 +468,8 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
     linearised at the last point where the Jacobian was evaluated (within ``tolerance`` of the
     optimum in units of its own std). The damping scales the normal matrix's diagonal
     (Marquardt); it is zero while steps reduce the cost. Returns (x, (r, J, state,
-    kinematics) with J and kinematics of the linearisation point, iterations, converged,
-    message).
+    kinematics) with J of the linearisation point and r, state and the kinematics of x (None
+    when ``evaluate`` gave none there), iterations, converged, message).
     """
     x = x0.copy()
     try:
@@ -494,14 +495,14 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
                     return x, (r, J, state, kin), it, False, 'singular normal matrix'
             trial = x + _clip(step, length_scale)
             try:
-                trial_r, _, trial_state, _ = evaluate(trial, False)
+                trial_r, _, trial_state, trial_kin = evaluate(trial, False)
             except ValueError:  # a string of zero length, outside the chart: step too long
                 trial_r = None
             if trial_r is not None:
                 trial_cost = float(trial_r @ trial_r)
                 if trial_cost <= cost:
                     stalled = cost - trial_cost <= STALL_TOLERANCE * max(cost, 1.0)
-                    x, r, state, cost = trial, trial_r, trial_state, trial_cost
+                    x, r, state, kin, cost = trial, trial_r, trial_state, trial_kin, trial_cost
                     if stalled:  # creeping along a kink (a string at its slack boundary)
                         return x, (r, J, state, kin), it, True, ''
                     damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
@@ -635,6 +636,8 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     except _InitialPointError as exc:
         raise ValueError(f'initial_screw: {exc}') from None
     r, J, state, kin = ev
+    if kin is None:  # the kinematics at the estimate x (J: at the linearisation)
+        kin = ScrewKinematics(x)
     C, s = _information(J, problem.length_scale)
     rank = int(np.sum(s > rank_tolerance * s[0])) if s[0] > 0 else 0
     cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
@@ -644,7 +647,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     if not converged:
         return _failed_joint(f'{prep.describe(names)}: {why}', prep, names, True, rank, cond,
                              iterations, s)
-    P = sm.pose_jacobian(x, ScrewKinematics(x))  # at the estimate (kin: at the linearisation)
+    P = sm.pose_jacobian(x, kin)  # at the estimate
     pose_cov = P @ C @ P.T
     K = state.stiffness
     Kc_std = (_entry_std(_stiffness_jacobian_near(model, x, rest), C) if stiffness_std
