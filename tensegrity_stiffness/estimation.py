@@ -151,6 +151,28 @@ def _per_string(name: str, value: Any, n: int) -> FloatArray:
     return arr
 
 
+_NOT_MEASURED = (np.empty(0, dtype=np.intp), np.empty(0), np.empty(0))
+for _empty in _NOT_MEASURED:
+    _empty.flags.writeable = False
+
+
+def _string_readings(name: str, value: Any, std_name: str, std: Any, n: int
+                     ) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
+    """(indices of the measured strings, their values, their weights 1/std) of a per-string
+    reading (NaN = not measured; None: no string measured, std not needed)."""
+    if value is None:
+        return _NOT_MEASURED
+    values = _per_string(name, value, n)
+    index = np.flatnonzero(~np.isnan(values))
+    if not index.size:
+        return _NOT_MEASURED
+    if isinstance(std, float) and math.isfinite(std) and std > 0.0:  # the common scalar
+        weight = np.full(index.size, 1.0 / std)
+    else:
+        weight = 1.0 / _std(std_name, std, n)[index]
+    return index, values[index], weight
+
+
 @dataclass
 class Measurements:
     """One instant's sensor readings (see the module docstring).
@@ -195,18 +217,12 @@ class PreparedMeasurements:
 
     def __init__(self, m: Measurements, n: int) -> None:
         self.n_strings = n
-        tensions = _per_string('tensions', m.tensions, n)
-        self.tension_index = np.flatnonzero(~np.isnan(tensions))
-        self.tensions = tensions[self.tension_index]
-        self.tension_weight = (1.0 / _std('tension_std', m.tension_std, n)[self.tension_index]
-                               if self.tension_index.size else np.empty(0))
-        lengths = _per_string('lengths', m.lengths, n)
-        self.length_index = np.flatnonzero(~np.isnan(lengths))
-        self.lengths = lengths[self.length_index]
-        if np.any(self.lengths <= 0.0):
+        self.tension_index, self.tensions, self.tension_weight = _string_readings(
+            'tensions', m.tensions, 'tension_std', m.tension_std, n)
+        self.length_index, self.lengths, self.length_weight = _string_readings(
+            'lengths', m.lengths, 'length_std', m.length_std, n)
+        if self.lengths.size and self.lengths.min() <= 0.0:
             raise ValueError('lengths must be > 0 where measured')
-        self.length_weight = (1.0 / _std('length_std', m.length_std, n)[self.length_index]
-                              if self.length_index.size else np.empty(0))
         self.pose = None
         if m.pose is not None:
             self.pose = sm.as_transform(m.pose, 'pose')

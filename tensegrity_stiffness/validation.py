@@ -49,9 +49,12 @@ def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...] | 
 
 def require_all_finite(names: Sequence[str], arrays: Sequence[NDArray[np.float64]]) -> None:
     """ValueError ``'<name> contains NaN or inf'`` for the first of ``arrays`` that is not finite
-    (an input gets all of its outputs or none). One sum per array on the common, finite path."""
+    (an input gets all of its outputs or none). One sum over all of them on the common, finite
+    path (a sum that overflows is looked at array by array)."""
+    if not arrays:
+        return
     with np.errstate(all='ignore'):
-        total = sum(float(a.sum()) for a in arrays)
+        total = float(np.concatenate([np.ravel(a) for a in arrays]).sum())
     if math.isfinite(total):
         return
     for name, array in zip(names, arrays, strict=True):
