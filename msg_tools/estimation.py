@@ -17,7 +17,7 @@ from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped, Wre
 from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray
 
-from msg_tools.arrays import matrix_to_multiarray, payload, vector_to_multiarray
+from msg_tools.arrays import matrix_to_multiarray, vector_to_multiarray
 from msg_tools.geometry import msg_to_wrench, pose_to_transform
 from msg_tools.imu import imu_to_arrays
 from msg_tools.outputs import fill_outputs, write_payload, write_wrench_stamped
@@ -82,7 +82,9 @@ def write_pose_with_covariance(msg: PoseWithCovarianceStamped, transform: FloatA
     pose.position.x, pose.position.y, pose.position.z = transform[:3, 3].tolist()
     o = pose.orientation
     o.x, o.y, o.z, o.w = rotation_to_quaternion_unchecked(transform[:3, :3]).tolist()
-    msg.pose.covariance = payload(covariance)
+    # A float64[36] field takes a numpy array of 36 as it is (any other sequence is checked
+    # value by value): a copy, as the message keeps it.
+    msg.pose.covariance = np.array(covariance, dtype=np.float64).reshape(36)
 
 
 def wrench_stamped_to_array(msg: WrenchStamped) -> FloatArray:

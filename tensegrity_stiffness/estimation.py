@@ -655,8 +655,10 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     if kin is None:  # the kinematics at the estimate x (J: at the linearisation)
         kin = ScrewKinematics(x)
     C, s = _information(J, problem.length_scale)
-    rank = int(np.sum(s > rank_tolerance * s[0])) if s[0] > 0 else 0
-    cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+    values = s.tolist()  # descending
+    largest, smallest = values[0], values[-1]
+    rank = sum(1 for v in values if v > rank_tolerance * largest) if largest > 0 else 0
+    cond = largest / smallest if smallest > 0 else math.inf
     if rank < 6:
         rank, cond, s, message = _observability(problem, J, state, kin, rank_tolerance)
         return _failed_joint(message, prep, names, False, rank, cond, iterations, s)

@@ -54,7 +54,7 @@ def require_all_finite(names: Sequence[str], arrays: Sequence[NDArray[np.float64
     if not arrays:
         return
     with np.errstate(all='ignore'):
-        total = float(np.concatenate([np.ravel(a) for a in arrays]).sum())
+        total = float(np.concatenate([a.reshape(-1) for a in arrays]).sum())
     if math.isfinite(total):
         return
     for name, array in zip(names, arrays, strict=True):
