@@ -75,11 +75,11 @@ def as_transform(value: ArrayLike, name: str = 'pose') -> FloatArray:
 def unit_vector(value: ArrayLike, name: str) -> FloatArray:
     """``value`` (3,) scaled to unit length; ValueError naming ``name`` when it is not three
     finite numbers or (nearly) zero."""
-    g = finite_array_of_shape(name, value, (3,))
-    norm = float(np.linalg.norm(g))
+    x, y, z = finite_array_of_shape(name, value, (3,)).tolist()
+    norm = math.sqrt(x * x + y * y + z * z)
     if norm < MIN_GRAVITY_NORM:
         raise ValueError(f'{name} must not be zero')
-    return g / norm
+    return np.array([x / norm, y / norm, z / norm])
 
 
 # ---------------------------------------------------------------------------------- strings

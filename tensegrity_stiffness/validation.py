@@ -42,7 +42,7 @@ def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...] | 
     arr = _as_float_array(name, value)
     if shape is not None and arr.shape != shape:
         raise ValueError(f'{name} must have shape {shape}, got {arr.shape}')
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise ValueError(f'{name} contains NaN or inf')
     return arr
 
