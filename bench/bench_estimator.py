@@ -182,8 +182,9 @@ def node(model: JointModel, rate: float, seconds: float, loop: str, params: list
         inputs = (f'12 tensions every {tensions_every} + IMU, trigger ~/imu' if by_imu
                   else '12 tensions alone, trigger ~/measured_tensions')
         label = f'  estimator_node {rate:.0f} Hz, {inputs} {" ".join(params)}, client {loop}'
-        print(latency_summary(label, latencies)
-              + f'  drops {n - len(latencies)} of {n}', flush=True)
+        drops = n - len(latencies)
+        caveat = '' if by_imu or not drops else ' (paired in order with drops: upper bounds)'
+        print(latency_summary(label, latencies) + f'  drops {drops} of {n}{caveat}', flush=True)
     finally:
         ros.close()
         code = proc.stop()
