@@ -146,7 +146,7 @@ def _per_string(name: str, value: Any, n: int) -> FloatArray:
     if arr.size != n:
         raise ValueError(f'{name} must have {n} entries (one per string, NaN = not measured), '
                          f'got {arr.size}')
-    if np.any(np.isinf(arr)):
+    if np.isinf(arr).any():
         raise ValueError(f'{name} must be finite or NaN (not measured), got inf')
     return arr
 
