@@ -3,6 +3,7 @@
 
     python bench/bench_estimator.py [--repeats 3000] [--rate 1000] [--seconds 10]
                                     [--client-loops lane executor] [--no-node]
+                                    [--triggers imu measured_tensions]
 
 1. The library: one warm-started ``estimate_joint_state`` per reading, as a tracker at 1 kHz
    calls it (a fixed true configuration of the default joint, new sensor noise each call, warm
@@ -14,7 +15,12 @@
    this process publishes ``~/imu`` at ``--rate`` for ``--seconds`` and ``~/measured_tensions``
    before every ``--tensions-every``-th of them; each ``~/pose_estimate`` carries its IMU
    message's stamp, so it is paired with its input exactly. Median / p99 / max latency and
-   drops. Target: at 1 kHz for 10 s, median <= 1 ms, 0 drops.
+   drops. Beside it the sensor set of the library's target row as its own trigger
+   (``estimation.trigger`` = ``measured_tensions``, 12 load cells alone, unknown load): this
+   process publishes ``~/measured_tensions`` at ``--rate``; a ``Float64MultiArray`` has no stamp,
+   so the k-th ``~/pose_estimate`` is paired with the k-th reading sent (exact without drops;
+   with drops it overstates the latency, as a later reading answers an earlier one's slot).
+   Target: at 1 kHz for 10 s, median <= 1 ms, 0 drops.
 """
 
 from __future__ import annotations
@@ -96,7 +102,7 @@ def library(model: JointModel, repeats: int) -> None:
 
 
 def node(model: JointModel, rate: float, seconds: float, loop: str, params: list[str],
-         tensions_every: int = 1) -> None:
+         tensions_every: int = 1, trigger: str = 'imu') -> None:
     from builtin_interfaces.msg import Time
     from geometry_msgs.msg import PoseWithCovarianceStamped
     from ros_harness import (
@@ -116,15 +122,18 @@ def node(model: JointModel, rate: float, seconds: float, loop: str, params: list
     truth = truth_from_model(model, xi)
     ns = unique_namespace('bench_estimator')
     proc = NodeProcess(ns, CONFIG, executable='estimator_node',
-                       extra_args=['-p', 'estimation.trigger:=imu',
+                       extra_args=['-p', f'estimation.trigger:={trigger}',
                                    *[a for p in params for a in ('-p', p)]])
     ros = RosClient('bench_estimator')
     base = f'{ns}/estimator_node'
     arrivals: dict[int, float] = {}
+    by_imu = trigger == 'imu'
 
     def on_pose(msg: PoseWithCovarianceStamped) -> None:
-        arrivals[msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec] = \
-            time.perf_counter()
+        # the IMU's stamp (trigger ~/imu) or the arrival order (trigger ~/measured_tensions)
+        key = (msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec if by_imu
+               else len(arrivals) + 1)
+        arrivals[key] = time.perf_counter()
 
     try:
         tensions_pub = ros.publisher(Float64MultiArray, f'{base}/measured_tensions')
@@ -147,9 +156,12 @@ def node(model: JointModel, rate: float, seconds: float, loop: str, params: list
         tensions_pub.publish(tensions[0])
         time.sleep(STARTUP_SETTLE_S)
         # the load cells' reading before every tensions_every-th IMU reading (the others use the
-        # latest one, no older than estimation.max_age)
+        # latest one, no older than estimation.max_age); or the load cells alone
         pairs = []
         for k in range(n):
+            if not by_imu:
+                pairs.append(tensions[k])
+                continue
             if k % tensions_every == 0:
                 pairs.append(tensions[k])
             pairs.append(imus[k])
@@ -163,12 +175,16 @@ def node(model: JointModel, rate: float, seconds: float, loop: str, params: list
             per_cycle = len(pairs) / n
             sent = publish_paced(Both(), pairs, per_cycle * rate, 0.0,
                                  lambda: int(per_cycle * len(arrivals)))
-        imu_sent = [t for t, msg in zip(sent, pairs, strict=True) if isinstance(msg, Imu)]
-        latencies = [arrivals[k + 1] - imu_sent[k] for k in range(n) if k + 1 in arrivals]
-        label = (f'  estimator_node {rate:.0f} Hz, tensions every {tensions_every} '
-                 f'{" ".join(params)}, client {loop}')
-        print(latency_summary(label, latencies)
-              + f'  drops {n - len(latencies)} of {n}', flush=True)
+        trigger_type = Imu if by_imu else Float64MultiArray
+        trigger_sent = [t for t, msg in zip(sent, pairs, strict=True)
+                        if isinstance(msg, trigger_type)]
+        latencies = [arrivals[k + 1] - trigger_sent[k] for k in range(n) if k + 1 in arrivals]
+        inputs = (f'12 tensions every {tensions_every} + IMU, trigger ~/imu' if by_imu
+                  else '12 tensions alone, trigger ~/measured_tensions')
+        label = f'  estimator_node {rate:.0f} Hz, {inputs} {" ".join(params)}, client {loop}'
+        drops = n - len(latencies)
+        caveat = '' if by_imu or not drops else ' (paired in order with drops: upper bounds)'
+        print(latency_summary(label, latencies) + f'  drops {drops} of {n}{caveat}', flush=True)
     finally:
         ros.close()
         code = proc.stop()
@@ -188,6 +204,10 @@ def main() -> None:
     parser.add_argument('--no-library', action='store_true', help='the node part only')
     parser.add_argument('--tensions-every', type=int, default=1,
                         help='send the load cells every this many IMU readings (trigger: ~/imu)')
+    parser.add_argument('--triggers', nargs='+', choices=['imu', 'measured_tensions'],
+                        default=['imu', 'measured_tensions'],
+                        help='node rows: 12 tensions + IMU (trigger ~/imu) and / or the 12 '
+                             'tensions alone (trigger ~/measured_tensions)')
     parser.add_argument('--param', action='append', default=[],
                         help='node parameter override NAME:=VALUE (repeatable)')
     args = parser.parse_args()
@@ -199,9 +219,12 @@ def main() -> None:
     if not args.no_library:
         library(model, args.repeats)
     if not args.no_node:
-        print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}; ~/imu -> ~/pose_estimate latency')
+        print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}; trigger -> ~/pose_estimate '
+              'latency')
         for loop in args.client_loops:
-            node(model, args.rate, args.seconds, loop, args.param, args.tensions_every)
+            for trigger in args.triggers:
+                node(model, args.rate, args.seconds, loop, args.param, args.tensions_every,
+                     trigger)
 
 
 if __name__ == '__main__':

@@ -17,8 +17,8 @@ from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped, Wre
 from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray
 
-from msg_tools.arrays import matrix_to_multiarray, payload, vector_to_multiarray
-from msg_tools.geometry import msg_to_wrench, pose_to_transform, rotation_to_quaternion
+from msg_tools.arrays import matrix_to_multiarray, vector_to_multiarray
+from msg_tools.geometry import msg_to_wrench, pose_to_transform
 from msg_tools.imu import imu_to_arrays
 from msg_tools.outputs import fill_outputs, write_payload, write_wrench_stamped
 from tensegrity_stiffness.estimation_processing import (
@@ -37,6 +37,7 @@ from tensegrity_stiffness.layouts import (
     tensions_label,
 )
 from tensegrity_stiffness.messages import multiarray_payload
+from tensegrity_stiffness.quaternion import rotation_to_quaternion_unchecked
 
 FloatArray = NDArray[np.float64]
 
@@ -72,14 +73,18 @@ def pose_with_covariance_to_arrays(msg: PoseWithCovariance
 
 def write_pose_with_covariance(msg: PoseWithCovarianceStamped, transform: FloatArray,
                                covariance: FloatArray, stamp: Time, frame_id: str) -> None:
-    """Header, pose of a (4, 4) transform and the (6, 6) covariance (row-major)."""
+    """Header, pose of a (4, 4) transform and the (6, 6) covariance (row-major). The transform
+    is an estimate's (a rotation by construction, checked finite): its rotation is not
+    checked again."""
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
     pose = msg.pose.pose
     pose.position.x, pose.position.y, pose.position.z = transform[:3, 3].tolist()
     o = pose.orientation
-    o.x, o.y, o.z, o.w = rotation_to_quaternion(transform[:3, :3]).tolist()
-    msg.pose.covariance = payload(covariance)
+    o.x, o.y, o.z, o.w = rotation_to_quaternion_unchecked(transform[:3, :3]).tolist()
+    # A float64[36] field takes a numpy array of 36 as it is (any other sequence is checked
+    # value by value): a copy, as the message keeps it.
+    msg.pose.covariance = np.array(covariance, dtype=np.float64).reshape(36)
 
 
 def wrench_stamped_to_array(msg: WrenchStamped) -> FloatArray:

@@ -387,4 +387,91 @@ int64_t tsk_joint_evaluate(const tsk_joint_model* model, int64_t n_screws, const
   }
 }
 
+int64_t tsk_joint_measure_size(int64_t n_strings) {
+  if (n_strings < 1 || n_strings > kMaxCount) {
+    return TSK_ERROR_COUNT;
+  }
+  return 36 + 36 + 13 * n_strings;
+}
+
+int64_t tsk_joint_measure_packed(const tsk_joint_model* model, int64_t mode, double* buf,
+                                 int64_t buf_len, double* meas, int64_t meas_len) {
+  try {
+    // Every check before anything is written (the evaluation checks the rest).
+    const int64_t checked = check_model(model);
+    if (checked != TSK_OK) {
+      return checked;
+    }
+    const int64_t n = model->n_strings;
+    if (meas == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (meas_len < tsk_joint_measure_size(n)) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    const int64_t status = tsk_joint_evaluate_packed(model, mode, buf, buf_len);
+    if (status != TSK_OK) {
+      return status;
+    }
+    // The same kinematics as the evaluation (recomputed: about 100 flops).
+    double T[16], G[3][3], Q[3][3];
+    kinematics(*model, buf, T, G, Q);
+    double* J = meas;
+    double* P = J + 36;
+    double* dl = P + 36;
+    double* dphi = dl + 6 * n;
+    double* slope = dphi + 6 * n;
+    // J = [[G, 0], [Q, G]]; P = [[D, G], [G, 0]] with D = Q - hat(t) G (sensor_models.
+    // pose_jacobian: ScrewKinematics.D written out).
+    const double tx = T[3], ty = T[7], tz = T[11];
+    for (int i = 0; i < 3; ++i) {
+      for (int c = 0; c < 3; ++c) {
+        J[6 * i + c] = G[i][c];
+        J[6 * i + 3 + c] = 0.0;
+        J[6 * (i + 3) + c] = Q[i][c];
+        J[6 * (i + 3) + 3 + c] = G[i][c];
+        P[6 * i + 3 + c] = G[i][c];
+        P[6 * (i + 3) + c] = G[i][c];
+        P[6 * (i + 3) + 3 + c] = 0.0;
+      }
+    }
+    for (int c = 0; c < 3; ++c) {
+      P[c] = Q[0][c] - (-tz * G[1][c] + ty * G[2][c]);
+      P[6 + c] = Q[1][c] - (tz * G[0][c] - tx * G[2][c]);
+      P[12 + c] = Q[2][c] - (-ty * G[0][c] + tx * G[1][c]);
+    }
+    // dl_j/dxi = -[(p1_j x u_j)^T, u_j^T] J (q x u = p1 x u), dphi_j/dxi = phi_j'(l_j) dl_j/dxi.
+    const double* rest = buf + 6;
+    const double* s = buf + 6 + n + 16;
+    const double* lengths = s + 3 * n;
+    for (int64_t j = 0; j < n; ++j) {
+      const double l = lengths[j];
+      const double u[3] = {s[3 * j] / l, s[3 * j + 1] / l, s[3 * j + 2] / l};
+      const double* a1 = model->p1 + 3 * j;
+      const double w[3] = {a1[1] * u[2] - a1[2] * u[1], a1[2] * u[0] - a1[0] * u[2],
+                           a1[0] * u[1] - a1[1] * u[0]};
+      const double r0 = rest[j];
+      const double lmax = r0 + model->max_stretch[j];
+      const bool taut = !(l <= r0 || l >= lmax);
+      const double clipped = std::fmin(std::fmax(l, r0), lmax);
+      const double kj = model->k[j];
+      const double d = !taut ? 0.0 : (model->law == TSK_LAW_HOOKE ? kj
+                                                                  : kj * r0 / (clipped * clipped));
+      slope[j] = d;
+      for (int c = 0; c < 3; ++c) {
+        const double rot = -(w[0] * G[0][c] + w[1] * G[1][c] + w[2] * G[2][c] +
+                             u[0] * Q[0][c] + u[1] * Q[1][c] + u[2] * Q[2][c]);
+        const double trans = -(u[0] * G[0][c] + u[1] * G[1][c] + u[2] * G[2][c]);
+        dl[6 * j + c] = rot;
+        dl[6 * j + 3 + c] = trans;
+        dphi[6 * j + c] = d * rot;
+        dphi[6 * j + 3 + c] = d * trans;
+      }
+    }
+    return TSK_OK;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
+}
+
 }  // extern "C"

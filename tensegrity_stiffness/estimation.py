@@ -146,9 +146,31 @@ def _per_string(name: str, value: Any, n: int) -> FloatArray:
     if arr.size != n:
         raise ValueError(f'{name} must have {n} entries (one per string, NaN = not measured), '
                          f'got {arr.size}')
-    if np.any(np.isinf(arr)):
+    if np.isinf(arr).any():
         raise ValueError(f'{name} must be finite or NaN (not measured), got inf')
     return arr
+
+
+_NOT_MEASURED = (np.empty(0, dtype=np.intp), np.empty(0), np.empty(0))
+for _empty in _NOT_MEASURED:
+    _empty.flags.writeable = False
+
+
+def _string_readings(name: str, value: Any, std_name: str, std: Any, n: int
+                     ) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
+    """(indices of the measured strings, their values, their weights 1/std) of a per-string
+    reading (NaN = not measured; None: no string measured, std not needed)."""
+    if value is None:
+        return _NOT_MEASURED
+    values = _per_string(name, value, n)
+    index = np.flatnonzero(~np.isnan(values))
+    if not index.size:
+        return _NOT_MEASURED
+    if isinstance(std, float) and math.isfinite(std) and std > 0.0:  # the common scalar
+        weight = np.full(index.size, 1.0 / std)
+    else:
+        weight = 1.0 / _std(std_name, std, n)[index]
+    return index, values[index], weight
 
 
 @dataclass
@@ -195,18 +217,12 @@ class PreparedMeasurements:
 
     def __init__(self, m: Measurements, n: int) -> None:
         self.n_strings = n
-        tensions = _per_string('tensions', m.tensions, n)
-        self.tension_index = np.flatnonzero(~np.isnan(tensions))
-        self.tensions = tensions[self.tension_index]
-        self.tension_weight = (1.0 / _std('tension_std', m.tension_std, n)[self.tension_index]
-                               if self.tension_index.size else np.empty(0))
-        lengths = _per_string('lengths', m.lengths, n)
-        self.length_index = np.flatnonzero(~np.isnan(lengths))
-        self.lengths = lengths[self.length_index]
-        if np.any(self.lengths <= 0.0):
+        self.tension_index, self.tensions, self.tension_weight = _string_readings(
+            'tensions', m.tensions, 'tension_std', m.tension_std, n)
+        self.length_index, self.lengths, self.length_weight = _string_readings(
+            'lengths', m.lengths, 'length_std', m.length_std, n)
+        if self.lengths.size and self.lengths.min() <= 0.0:
             raise ValueError('lengths must be > 0 where measured')
-        self.length_weight = (1.0 / _std('length_std', m.length_std, n)[self.length_index]
-                              if self.length_index.size else np.empty(0))
         self.pose = None
         if m.pose is not None:
             self.pose = sm.as_transform(m.pose, 'pose')
@@ -320,13 +336,14 @@ class _JointProblem:
     def evaluate(self, xi: FloatArray, jacobian: bool = True
                  ) -> tuple[FloatArray, FloatArray | None, JointState, ScrewKinematics | None]:
         """Whitened residual (rows,), Jacobian (rows, 6), joint state and kinematics at xi;
-        without ``jacobian`` the residual and the state alone (Jacobian and kinematics None)."""
+        without ``jacobian`` the residual and the state alone (Jacobian None; the kinematics
+        too, unless the compiled kernel computed them with the state at no extra cost)."""
         p = self.prep
         r = np.empty(p.rows)
         J = np.empty((p.rows, 6)) if jacobian else None
         kin = None
         row = 0
-        if p.needs_strings and jacobian:
+        if (p.needs_strings and jacobian) or self.model.uses_kernel:
             pred = sm.string_predictions_unchecked(self.model, xi, self.rest)
             state, kin = pred.state, pred.kinematics
             strings = ((pred.tensions, pred.tension_jacobian),
@@ -467,8 +484,8 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
     linearised at the last point where the Jacobian was evaluated (within ``tolerance`` of the
     optimum in units of its own std). The damping scales the normal matrix's diagonal
     (Marquardt); it is zero while steps reduce the cost. Returns (x, (r, J, state,
-    kinematics) with J and kinematics of the linearisation point, iterations, converged,
-    message).
+    kinematics) with J of the linearisation point and r, state and the kinematics of x (None
+    when ``evaluate`` gave none there), iterations, converged, message).
     """
     x = x0.copy()
     try:
@@ -494,14 +511,14 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
                     return x, (r, J, state, kin), it, False, 'singular normal matrix'
             trial = x + _clip(step, length_scale)
             try:
-                trial_r, _, trial_state, _ = evaluate(trial, False)
+                trial_r, _, trial_state, trial_kin = evaluate(trial, False)
             except ValueError:  # a string of zero length, outside the chart: step too long
                 trial_r = None
             if trial_r is not None:
                 trial_cost = float(trial_r @ trial_r)
                 if trial_cost <= cost:
                     stalled = cost - trial_cost <= STALL_TOLERANCE * max(cost, 1.0)
-                    x, r, state, cost = trial, trial_r, trial_state, trial_cost
+                    x, r, state, kin, cost = trial, trial_r, trial_state, trial_kin, trial_cost
                     if stalled:  # creeping along a kink (a string at its slack boundary)
                         return x, (r, J, state, kin), it, True, ''
                     damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
@@ -635,16 +652,20 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     except _InitialPointError as exc:
         raise ValueError(f'initial_screw: {exc}') from None
     r, J, state, kin = ev
+    if kin is None:  # the kinematics at the estimate x (J: at the linearisation)
+        kin = ScrewKinematics(x)
     C, s = _information(J, problem.length_scale)
-    rank = int(np.sum(s > rank_tolerance * s[0])) if s[0] > 0 else 0
-    cond = float(s[0] / s[-1]) if s[-1] > 0 else math.inf
+    values = s.tolist()  # descending
+    largest, smallest = values[0], values[-1]
+    rank = sum(1 for v in values if v > rank_tolerance * largest) if largest > 0 else 0
+    cond = largest / smallest if smallest > 0 else math.inf
     if rank < 6:
         rank, cond, s, message = _observability(problem, J, state, kin, rank_tolerance)
         return _failed_joint(message, prep, names, False, rank, cond, iterations, s)
     if not converged:
         return _failed_joint(f'{prep.describe(names)}: {why}', prep, names, True, rank, cond,
                              iterations, s)
-    P = sm.pose_jacobian(x, ScrewKinematics(x))  # at the estimate (kin: at the linearisation)
+    P = sm.pose_jacobian(x, kin)  # at the estimate
     pose_cov = P @ C @ P.T
     K = state.stiffness
     Kc_std = (_entry_std(_stiffness_jacobian_near(model, x, rest), C) if stiffness_std

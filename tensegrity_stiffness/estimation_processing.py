@@ -174,12 +174,13 @@ def load_measurement(settings: EstimatorNodeSettings, readings: Mapping[str, Rea
 @dataclass(frozen=True)
 class EstimatorOutputs:
     """One estimate and what the node publishes of it: ``estimate`` (:class:`JointEstimate`),
-    ``state`` (the joint at the estimate, for the markers), the inputs used and every input's
-    age (s)."""
+    ``state`` (the joint at the estimate, for the markers), the inputs used, every input's
+    age (s) and whether the std of K_c was computed (else it is NaN and not published)."""
 
     estimate: JointEstimate
     used: tuple[str, ...]
     ages: Mapping[str, float] = field(default_factory=dict)
+    stiffness_std: bool = True
 
     @property
     def state(self) -> JointState:
@@ -203,20 +204,23 @@ def output_arrays(outputs: EstimatorOutputs) -> tuple[FloatArray, ...]:
             state.cartesian_stiffness, state.tensions, est.cartesian_stiffness_std)
 
 
-def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput
-                      ) -> EstimatorOutputs:
-    """The estimate of the fresh readings of ``snapshot``; ValueError (nothing is published)
-    when the inputs are bad, the set cannot determine the pose (the message names what is
-    missing), the estimate does not converge or an output is not finite."""
+def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
+                      stiffness_std: bool | None = None) -> EstimatorOutputs:
+    """The estimate of the fresh readings of ``snapshot``, with the std of K_c when
+    ``stiffness_std`` (None: ``settings.stiffness_std``; else NaN); ValueError (nothing is
+    published) when the inputs are bad, the set cannot determine the pose (the message names
+    what is missing), the estimate does not converge or an output is not finite."""
+    if stiffness_std is None:
+        stiffness_std = settings.stiffness_std
     readings, ages = _usable_readings(snapshot, settings.max_age)
     est = estimate_joint_state(settings.model, measurements(settings, readings),
                                initial_screw=snapshot.initial_screw,
-                               stiffness_std=settings.stiffness_std)
+                               stiffness_std=stiffness_std)
     _require_success(est, snapshot, readings, settings.max_age)
     outputs = EstimatorOutputs(est, tuple(name for name in ESTIMATOR_INPUTS if name in readings),
-                               ages)
+                               ages, stiffness_std)
     arrays = output_arrays(outputs)
-    if settings.stiffness_std:
+    if stiffness_std:
         require_all_finite(OUTPUT_NAMES, arrays)
     else:
         require_all_finite(OUTPUT_NAMES[:-1], arrays[:-1])
@@ -242,11 +246,13 @@ def diagnostic_values(outputs: EstimatorOutputs | SpineEstimatorOutputs
 @dataclass(frozen=True)
 class SpineEstimatorOutputs:
     """One spine estimate (:class:`~tensegrity_stiffness.estimation.ChainEstimate`), the inputs
-    used and every input's age (s)."""
+    used, every input's age (s) and whether the std of the tip stiffness was computed (else it
+    is NaN and not published)."""
 
     estimate: ChainEstimate
     used: tuple[str, ...]
     ages: Mapping[str, float] = field(default_factory=dict)
+    stiffness_std: bool = True
 
     @property
     def state(self) -> ChainState:
@@ -270,12 +276,15 @@ def spine_output_arrays(outputs: SpineEstimatorOutputs) -> tuple[FloatArray, ...
             est.tip_stiffness, est.tip_stiffness_std)
 
 
-def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput
-                            ) -> SpineEstimatorOutputs:
+def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
+                            stiffness_std: bool | None = None) -> SpineEstimatorOutputs:
     """The spine estimate of the fresh readings of ``snapshot`` (per-string arrays of every
     joint, joint-major; ``measured_pose`` the tool frame in the base; ``measured_wrench`` the
-    tip load); ValueError (nothing is published) as :func:`estimator_outputs`."""
+    tip load), with the std of the tip stiffness when ``stiffness_std`` (None: the settings');
+    ValueError (nothing is published) as :func:`estimator_outputs`."""
     options = settings.estimator
+    if stiffness_std is None:
+        stiffness_std = options.stiffness_std
     readings, ages = _usable_readings(snapshot, options.max_age)
     counts = settings.n_strings
     bounds = np.cumsum([0, *counts])
@@ -298,11 +307,12 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
     est = estimate_chain_state(
         settings.chain, joints, tip_pose, tip_cov, load, load_covariance,
         rest_lengths=settings.current_rest_lengths(), initial_screws=initial_screws,
-        initial_tip_wrench=initial_wrench, stiffness_std=options.stiffness_std)
+        initial_tip_wrench=initial_wrench, stiffness_std=stiffness_std)
     _require_success(est, snapshot, readings, options.max_age)
     outputs = SpineEstimatorOutputs(
-        est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages)
+        est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages,
+        stiffness_std)
     arrays = spine_output_arrays(outputs)
-    count = len(arrays) if options.stiffness_std else len(arrays) - 1
+    count = len(arrays) if stiffness_std else len(arrays) - 1
     require_all_finite(SPINE_OUTPUT_NAMES[:count], arrays[:count])
     return outputs

@@ -81,6 +81,17 @@ class JointState:
 _EYE3 = np.eye(3)
 
 
+
+def _kernel_state(kn: kernel.JointKernel, xi: FloatArray, buf: FloatArray) -> JointState:
+    """The :class:`JointState` of a packed buffer the kernel evaluated (views into it)."""
+    n = kn.n
+    flags = buf[kn.flags:kn.size].view(np.bool_)
+    return JointState(xi, buf[kn.transform:kn.strings].reshape(4, 4),
+                      buf[kn.strings:kn.lengths].reshape(n, 3), buf[kn.lengths:kn.tensions],
+                      buf[kn.tensions:kn.wrench], flags[:n], flags[n:2 * n],
+                      buf[kn.wrench:kn.stiffness], buf[kn.stiffness:kn.cartesian].reshape(6, 6),
+                      buf[kn.cartesian:kn.flags].reshape(6, 6))
+
 class JointModel:
     """A six-DOF tensegrity joint: node sets, strings and their elastic law.
 
@@ -375,16 +386,37 @@ class JointModel:
             if status == kernel.ERROR_ZERO_LENGTH:
                 return None
             kernel.check(status, 'tsk_joint_evaluate_packed')
-        K = buf[kn.stiffness:kn.cartesian].reshape(6, 6)
         if not full:
-            return K
-        n = kn.n
-        flags = buf[kn.flags:].view(np.bool_)
-        return JointState(xi, buf[kn.transform:kn.strings].reshape(4, 4),
-                          buf[kn.strings:kn.lengths].reshape(n, 3), buf[kn.lengths:kn.tensions],
-                          buf[kn.tensions:kn.wrench], flags[:n], flags[n:2 * n],
-                          buf[kn.wrench:kn.stiffness], K,
-                          buf[kn.cartesian:kn.flags].reshape(6, 6))
+            return buf[kn.stiffness:kn.cartesian].reshape(6, 6)
+        return _kernel_state(kn, xi, buf)
+
+    def _measure_single_kernel(self, xi: FloatArray, rest: FloatArray
+                               ) -> tuple[JointState, FloatArray] | None:
+        """The :class:`JointState` of one screw (6,) with validated rest lengths (n,) and the
+        string measurements' Jacobians (the kernel's measurement buffer, ``JointKernel.
+        measure_*`` offsets) in one call of ``tsk_joint_measure_packed``: the compiled twin of
+        :func:`~tensegrity_stiffness.sensor_models.string_predictions_unchecked`. ``None``
+        without the kernel or when a string has zero length (the numpy path then raises the
+        error that names it)."""
+        kn = self._kernel
+        if kn is None:
+            return None
+        values = xi.tolist()
+        if not math.isfinite(sum(values)):
+            as_screws(xi)  # names the non-finite entry (as _evaluate_single)
+        math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+        # One buffer: the packed evaluation, then the measurement block (both written by C).
+        buf = np.empty(kn.size + kn.measure_size)
+        buf[:kn.rest] = xi
+        buf[kn.rest:kn.transform] = rest
+        start = kernel.address(buf)
+        status = kn.measure_packed(kn.model, kernel.MODE_FULL, start, kn.size,
+                                   start + 8 * kn.size, kn.measure_size)
+        if status != kernel.OK:
+            if status == kernel.ERROR_ZERO_LENGTH:
+                return None
+            kernel.check(status, 'tsk_joint_measure_packed')
+        return _kernel_state(kn, xi, buf), buf[kn.size:]
 
     def _check_lengths(self, lengths: FloatArray) -> None:
         if lengths.min(initial=math.inf) < MIN_STRING_LENGTH:

@@ -41,7 +41,7 @@ OFF_VALUES = ('off', '0', 'no', 'false', 'numpy')
 # The mirror of include/tensegrity_stiffness/kernel.h (test/test_kernel_abi.py holds it to the
 # library: version, struct layout, buffer sizes, status codes).
 #: ABI version this module speaks (``TSK_ABI_VERSION``, ``tsk_abi_version()``).
-ABI_VERSION = 2
+ABI_VERSION = 3
 #: Status codes (``TSK_OK``, ``TSK_ERROR_*``): 0 success, negative errors.
 OK = 0
 ERRORS = {-1: 'NULL_POINTER', -2: 'COUNT', -3: 'BUFFER_SIZE', -4: 'ARGUMENT', -5: 'ZERO_LENGTH',
@@ -158,6 +158,12 @@ class _Library:
         self.evaluate_packed = lib.tsk_joint_evaluate_packed
         self.evaluate_packed.restype = _I
         self.evaluate_packed.argtypes = [_P, _I, _P, _I]
+        lib.tsk_joint_measure_size.restype = _I
+        lib.tsk_joint_measure_size.argtypes = [_I]
+        self.measure_size = lib.tsk_joint_measure_size
+        self.measure_packed = lib.tsk_joint_measure_packed
+        self.measure_packed.restype = _I
+        self.measure_packed.argtypes = [_P, _I, _P, _I, _P, _I]
         self.chain_frames = lib.tsk_chain_frames
         self.chain_frames.restype = _I
         self.chain_frames.argtypes = [_I, _P, _P, _P, _P, _I]
@@ -216,6 +222,11 @@ class JointKernel:
     ``s`` (3n), lengths (n), tensions (n), wrench (6), ``K`` (36), ``K_c`` (36), then the slack
     and saturated flags as 2n bytes; the offsets are attributes (``size`` is
     ``tsk_joint_packed_size(n)``). Inputs copied into it need no lifetime care.
+
+    ``tsk_joint_measure_packed`` evaluates the same buffer and writes the string measurements'
+    Jacobians to a second one (``measure_size`` doubles, offsets ``measure_*`` from its start):
+    the SE(3) left Jacobian ``J`` (36), the pose Jacobian ``P`` (36), ``dl/dxi`` (6n),
+    ``dphi/dxi`` (6n) and ``dphi/dl`` (n).
     """
 
     def __init__(self, library: _Library, p1: NDArray, p2: NDArray, k: NDArray,
@@ -234,6 +245,7 @@ class JointKernel:
         self.model = ctypes.addressof(self._struct)
         self.evaluate = library.evaluate
         self.evaluate_packed = library.evaluate_packed
+        self.measure_packed = library.measure_packed
         self.rest = 6
         self.transform = self.rest + n
         self.strings = self.transform + 16
@@ -244,6 +256,11 @@ class JointKernel:
         self.cartesian = self.stiffness + 36
         self.flags = self.cartesian + 36
         self.size = self.flags + (2 * n + 7) // 8
+        self.measure_pose = 36
+        self.measure_lengths = 72
+        self.measure_tensions = 72 + 6 * n
+        self.measure_slope = 72 + 12 * n
+        self.measure_size = 72 + 13 * n
 
     def batch_layout(self, N: int) -> BatchLayout:
         """Offsets (in doubles) of the blocks of a batch's output buffer for ``N`` screws, in

@@ -9,6 +9,8 @@ when orthonormal within :data:`ROTATION_TOLERANCE` with det > 0. Quaternions are
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -86,26 +88,31 @@ def rotation_to_quaternion(rotation: ArrayLike,
             f'tolerance={tolerance:g}')
     if np.linalg.det(R) < 0.0:
         raise ValueError('rotation has det < 0 (a reflection, not a rotation)')
-    trace = R[0, 0] + R[1, 1] + R[2, 2]
-    pivots = (trace, R[0, 0], R[1, 1], R[2, 2])
-    k = int(np.argmax(pivots))
+    return rotation_to_quaternion_unchecked(R)
+
+
+def rotation_to_quaternion_unchecked(rotation: FloatArray) -> FloatArray:
+    """:func:`rotation_to_quaternion` (Shepperd's method, ``w >= 0``) of a finite (3, 3)
+    rotation known to be one (e.g. ``exp`` of a screw, an estimate's pose): no checks, in
+    floats (a publisher's per-message path)."""
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = rotation.tolist()
+    trace = r00 + r11 + r22
+    pivots = (trace, r00, r11, r22)
+    k = max(range(4), key=pivots.__getitem__)  # the first largest, as np.argmax
     if k == 0:
-        s = 2.0 * np.sqrt(1.0 + trace)  # s = 4w
-        q = np.array([(R[2, 1] - R[1, 2]) / s, (R[0, 2] - R[2, 0]) / s,
-                      (R[1, 0] - R[0, 1]) / s, 0.25 * s])
+        s = 2.0 * math.sqrt(1.0 + trace)  # s = 4w
+        q = ((r21 - r12) / s, (r02 - r20) / s, (r10 - r01) / s, 0.25 * s)
     elif k == 1:
-        s = 2.0 * np.sqrt(1.0 + 2.0 * R[0, 0] - trace)  # s = 4x
-        q = np.array([0.25 * s, (R[0, 1] + R[1, 0]) / s,
-                      (R[0, 2] + R[2, 0]) / s, (R[2, 1] - R[1, 2]) / s])
+        s = 2.0 * math.sqrt(1.0 + 2.0 * r00 - trace)  # s = 4x
+        q = (0.25 * s, (r01 + r10) / s, (r02 + r20) / s, (r21 - r12) / s)
     elif k == 2:
-        s = 2.0 * np.sqrt(1.0 + 2.0 * R[1, 1] - trace)  # s = 4y
-        q = np.array([(R[0, 1] + R[1, 0]) / s, 0.25 * s,
-                      (R[1, 2] + R[2, 1]) / s, (R[0, 2] - R[2, 0]) / s])
+        s = 2.0 * math.sqrt(1.0 + 2.0 * r11 - trace)  # s = 4y
+        q = ((r01 + r10) / s, 0.25 * s, (r12 + r21) / s, (r02 - r20) / s)
     else:
-        s = 2.0 * np.sqrt(1.0 + 2.0 * R[2, 2] - trace)  # s = 4z
-        q = np.array([(R[0, 2] + R[2, 0]) / s, (R[1, 2] + R[2, 1]) / s,
-                      0.25 * s, (R[1, 0] - R[0, 1]) / s])
-    q /= np.linalg.norm(q)
-    if q[3] < 0.0:
-        q = -q
-    return q
+        s = 2.0 * math.sqrt(1.0 + 2.0 * r22 - trace)  # s = 4z
+        q = ((r02 + r20) / s, (r12 + r21) / s, 0.25 * s, (r10 - r01) / s)
+    x, y, z, w = q
+    norm = math.sqrt(x * x + y * y + z * z + w * w)
+    if w < 0.0:
+        norm = -norm
+    return np.array([x / norm, y / norm, z / norm, w / norm])

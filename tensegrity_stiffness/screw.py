@@ -308,6 +308,18 @@ class ScrewKinematics:
         self.G = self.J[..., :3, :3]
         self.Q = self.J[..., 3:, :3]
 
+    @classmethod
+    def from_matrices(cls, theta: float, T: FloatArray, J: FloatArray) -> ScrewKinematics:
+        """The kinematics of one screw whose ``T`` (4, 4) and ``J`` (6, 6) were computed
+        elsewhere (the compiled kernel's twin of these formulas), with its angle ``theta``."""
+        kin = cls.__new__(cls)
+        kin.theta, kin.T, kin.J = theta, T, J
+        kin.R = T[:3, :3]
+        kin.t = T[:3, 3]
+        kin.G = J[:3, :3]
+        kin.Q = J[3:, :3]
+        return kin
+
     @property
     def D(self) -> FloatArray:
         """``d t / d omega`` (eqs. 15-17), (B, 3, 3): column i is d(G v)/d omega_i."""

@@ -33,6 +33,7 @@ Every Jacobian is held to central differences in ``test/test_sensor_models.py``.
 
 from __future__ import annotations
 
+import math
 import weakref
 from dataclasses import dataclass
 
@@ -74,11 +75,11 @@ def as_transform(value: ArrayLike, name: str = 'pose') -> FloatArray:
 def unit_vector(value: ArrayLike, name: str) -> FloatArray:
     """``value`` (3,) scaled to unit length; ValueError naming ``name`` when it is not three
     finite numbers or (nearly) zero."""
-    g = finite_array_of_shape(name, value, (3,))
-    norm = float(np.linalg.norm(g))
+    x, y, z = finite_array_of_shape(name, value, (3,)).tolist()
+    norm = math.sqrt(x * x + y * y + z * z)
     if norm < MIN_GRAVITY_NORM:
         raise ValueError(f'{name} must not be zero')
-    return g / norm
+    return np.array([x / norm, y / norm, z / norm])
 
 
 # ---------------------------------------------------------------------------------- strings
@@ -138,10 +139,23 @@ def _unit_rows(model: JointModel) -> FloatArray:
     return rows
 
 
+class KernelKinematics(ScrewKinematics):
+    """:class:`ScrewKinematics` of one screw computed by the compiled kernel, with the pose
+    Jacobian it computed there (:func:`pose_jacobian` returns a copy of it)."""
+
+    __slots__ = ('pose_jacobian',)
+
+
 def string_predictions_unchecked(model: JointModel, xi: FloatArray, rest: FloatArray
                                  ) -> StringPrediction:
     """:func:`string_predictions` for a validated screw (6,) and rest lengths (n,) (the
-    estimator's per-iteration path)."""
+    estimator's per-iteration path). With the compiled kernel everything comes from one call
+    (``tsk_joint_measure_packed``, the twin of the numpy lines below, held to them in
+    ``test/test_sensor_models.py``), kinematics and pose Jacobian included
+    (:class:`KernelKinematics`)."""
+    measured = model._measure_single_kernel(xi, rest)
+    if measured is not None:
+        return _kernel_prediction(model, xi, *measured)
     state = model.evaluate(xi, rest)
     kin = ScrewKinematics(xi)
     lengths = state.lengths
@@ -155,6 +169,22 @@ def string_predictions_unchecked(model: JointModel, xi: FloatArray, rest: FloatA
         slope = np.broadcast_to(slope, lengths.shape).astype(np.float64)
     return StringPrediction(state, lengths, length_jacobian, state.tensions,
                             slope[:, None] * length_jacobian, slope, kin)
+
+
+def _kernel_prediction(model: JointModel, xi: FloatArray, state: JointState,
+                       measured: FloatArray) -> StringPrediction:
+    """The :class:`StringPrediction` of the kernel's measurement buffer (views into it)."""
+    kn = model._kernel
+    n = kn.n
+    wx, wy, wz = xi[:3].tolist()
+    kin = KernelKinematics.from_matrices(math.sqrt(wx * wx + wy * wy + wz * wz),
+                                         state.transform, measured[:36].reshape(6, 6))
+    kin.pose_jacobian = measured[kn.measure_pose:kn.measure_lengths].reshape(6, 6)
+    return StringPrediction(state, state.lengths,
+                            measured[kn.measure_lengths:kn.measure_tensions].reshape(n, 6),
+                            state.tensions,
+                            measured[kn.measure_tensions:kn.measure_slope].reshape(n, 6),
+                            measured[kn.measure_slope:kn.measure_size], kin)
 
 
 def predicted_lengths(model: JointModel, xi: ArrayLike, rest_lengths: ArrayLike | None = None
@@ -225,6 +255,8 @@ def pose_jacobian(xi: ArrayLike, kinematics: ScrewKinematics | None = None) -> F
     the PoseWithCovariance convention, per change of screw coordinates (``D = dt/domega``,
     eqs. 15-17; ``G`` the SO(3) left Jacobian, eq. 4)."""
     kin = ScrewKinematics(_screw(xi)) if kinematics is None else kinematics
+    if type(kin) is KernelKinematics:  # the kernel's twin of the lines below
+        return kin.pose_jacobian.copy()
     tx, ty, tz = kin.t.tolist()
     out = np.zeros((6, 6))
     # D = Q - hat(t) G (ScrewKinematics.D, written out for the estimator's per-estimate path)

@@ -42,16 +42,19 @@ def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...] | 
     arr = _as_float_array(name, value)
     if shape is not None and arr.shape != shape:
         raise ValueError(f'{name} must have shape {shape}, got {arr.shape}')
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise ValueError(f'{name} contains NaN or inf')
     return arr
 
 
 def require_all_finite(names: Sequence[str], arrays: Sequence[NDArray[np.float64]]) -> None:
     """ValueError ``'<name> contains NaN or inf'`` for the first of ``arrays`` that is not finite
-    (an input gets all of its outputs or none). One sum per array on the common, finite path."""
+    (an input gets all of its outputs or none). One sum over all of them on the common, finite
+    path (a sum that overflows is looked at array by array)."""
+    if not arrays:
+        return
     with np.errstate(all='ignore'):
-        total = sum(float(a.sum()) for a in arrays)
+        total = float(np.concatenate([a.reshape(-1) for a in arrays]).sum())
     if math.isfinite(total):
         return
     for name, array in zip(names, arrays, strict=True):

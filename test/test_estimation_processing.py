@@ -149,6 +149,23 @@ def test_output_messages(settings):
     np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.state.stiffness)
 
 
+def test_the_std_of_the_cartesian_stiffness_only_when_asked(settings):
+    """The node asks for the std of K_c only while ~/cartesian_stiffness_std has a subscriber:
+    without it the outputs say so, the std is NaN (never published) and the rest is the same
+    estimate; None takes the settings'."""
+    now = time.monotonic()
+    truth, readings = readings_at(settings.model, np.random.default_rng(4), now)
+    snapshot = EstimatorInput(readings, now, truth.screw)
+    with_std = estimator_outputs(settings, snapshot)
+    assert settings.stiffness_std and with_std.stiffness_std
+    assert np.all(np.isfinite(with_std.estimate.cartesian_stiffness_std))
+    without = estimator_outputs(settings, snapshot, stiffness_std=False)
+    assert not without.stiffness_std
+    assert np.all(np.isnan(without.estimate.cartesian_stiffness_std))
+    np.testing.assert_array_equal(without.screw, with_std.screw)
+    np.testing.assert_array_equal(without.estimate.covariance, with_std.estimate.covariance)
+
+
 def test_spine_settings_and_outputs():
     """spine_estimator_node's settings (no IMU trigger) and one estimate of a 3-joint spine's
     tensions, split per joint from the joint-major array."""

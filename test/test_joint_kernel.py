@@ -173,3 +173,61 @@ def test_a_pickled_model_keeps_the_kernel_in_another_process():
     np.testing.assert_array_equal(K, ref.stiffness)
     np.testing.assert_array_equal(F, ref.wrench)
     np.testing.assert_array_equal(K_only, ref.stiffness)
+
+
+@pytest.mark.parametrize('force_law', ['hooke', 'paper'])
+def test_string_measurements_equal_the_numpy_path(force_law):
+    """``tsk_joint_measure_packed`` (the kernel's twin of ``sensor_models.
+    string_predictions_unchecked`` and ``pose_jacobian``) against the numpy lines: lengths,
+    tensions, dl/dxi, dphi/dxi, dphi/dl, the kinematics and the pose Jacobian, to 1e-13 of
+    each quantity's largest entry, over every string region and angle branch."""
+    from tensegrity_stiffness import sensor_models as sm
+    from tensegrity_stiffness.screw import ScrewKinematics
+
+    rng = np.random.default_rng(36 if force_law == 'hooke' else 37)
+    models = [random_model(rng, force_law) for _ in range(6)]
+    if force_law == 'hooke':
+        models.append(JointModel.from_yaml(CONFIG))
+    slopes = np.zeros(2, dtype=int)
+    for model in models:
+        fast, slow = pair(model)
+        for x in angle_screws(rng, 10):
+            try:
+                ref = sm.string_predictions_unchecked(slow, x, slow.rest_lengths)
+            except ValueError:  # a zero-length string: both paths raise it (test above)
+                continue
+            new = sm.string_predictions_unchecked(fast, x, fast.rest_lengths)
+            assert type(new.kinematics) is sm.KernelKinematics
+            assert type(ref.kinematics) is ScrewKinematics
+            assert_same(fast, new.state, ref.state)
+            for name in ('lengths', 'tensions', 'length_jacobian', 'tension_jacobian',
+                         'tension_slope'):
+                a, b = getattr(new, name), getattr(ref, name)
+                assert a.shape == b.shape, name
+                np.testing.assert_allclose(a, b, rtol=0.0, atol=1e-13 * np.abs(b).max(),
+                                           err_msg=name)
+            for name in ('T', 'J', 'R', 't', 'G', 'Q', 'theta'):
+                np.testing.assert_allclose(getattr(new.kinematics, name),
+                                           getattr(ref.kinematics, name), rtol=0.0,
+                                           atol=1e-13, err_msg=name)
+            P = sm.pose_jacobian(x, new.kinematics)
+            np.testing.assert_allclose(P, sm.pose_jacobian(x, ref.kinematics), rtol=0.0,
+                                       atol=1e-13 * (1.0 + np.abs(P).max()))
+            P[:] = np.nan  # a copy: the kernel's buffer is not handed out to be modified
+            assert np.all(np.isfinite(sm.pose_jacobian(x, new.kinematics)))
+            slopes += [np.sum(new.tension_slope == 0.0), np.sum(new.tension_slope > 0.0)]
+    assert np.all(slopes > 20), slopes  # slack or saturated, and taut strings
+
+
+def test_string_measurements_of_a_zero_length_string_raise_as_the_numpy_path():
+    from tensegrity_stiffness import sensor_models as sm
+
+    model = JointModel(np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]), np.array([[0, 0], [1, 1]]),
+                       100.0, [0.05, 0.05], link2_nodes=np.array([[0.0, 0.0, 0.0],
+                                                                  [0.1, 0.0, 0.01]]))
+    fast, slow = pair(model)
+    with pytest.raises(ValueError) as ref:
+        sm.string_predictions_unchecked(slow, np.zeros(6), slow.rest_lengths)
+    with pytest.raises(ValueError) as new:
+        sm.string_predictions_unchecked(fast, np.zeros(6), fast.rest_lengths)
+    assert str(new.value) == str(ref.value) and 'zero length' in str(new.value)

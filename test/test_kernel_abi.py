@@ -77,7 +77,12 @@ def test_buffer_sizes_mirror_the_library():
             # joint.py's batch buffer: 16 + 5n + 78 doubles per screw, then 2nN flag bytes
             # (its offsets: _evaluate_batch_kernel).
             assert (16 + 5 * n + 78) * N + (2 * N * n + 7) // 8 == library.batch_size(n, N)
+        # the measurement buffer: J 36, P 36, dl/dxi 6n, dphi/dxi 6n, dphi/dl n
+        assert kn.measure_size == 72 + 13 * n == library.measure_size(n)
+        assert (kn.measure_pose, kn.measure_lengths, kn.measure_tensions, kn.measure_slope) == (
+            36, 72, 72 + 6 * n, 72 + 12 * n)
     assert library.packed_size(0) == library.batch_size(3, 0) == -2  # TSK_ERROR_COUNT
+    assert library.measure_size(0) == -2
 
 
 def test_model_constants_come_from_their_python_home():
@@ -110,6 +115,20 @@ def test_the_library_refuses_bad_counts_and_short_buffers():
     assert (short == 7.0).all()  # nothing written
     assert kn.evaluate_packed(kn.model, 5, kernel.address(buf), kn.size) == -4
     assert kn.evaluate_packed(None, 0, kernel.address(buf), kn.size) == -1
+    meas = np.full(kn.measure_size, 7.0)
+    assert kn.measure_packed(kn.model, 0, kernel.address(buf), kn.size, kernel.address(meas),
+                             kn.measure_size) == kernel.OK
+    np.testing.assert_array_equal(meas[:36].reshape(6, 6),
+                                  screw.ScrewKinematics(model.initial_screw).J)
+    meas[:] = short[:] = 7.0
+    assert kn.measure_packed(kn.model, 0, kernel.address(short), short.size,
+                             kernel.address(meas), kn.measure_size) == -3
+    assert kn.measure_packed(kn.model, 0, kernel.address(buf), kn.size, kernel.address(short),
+                             kn.measure_size - 1) == -3
+    assert kn.measure_packed(kn.model, 0, kernel.address(buf), kn.size, None, 0) == -1
+    assert kn.measure_packed(kn.model, 5, kernel.address(buf), kn.size, kernel.address(meas),
+                             kn.measure_size) == -4
+    assert (short == 7.0).all() and (meas == 7.0).all()  # nothing written
     out = np.zeros(kernel.library().batch_size(kn.n, 2))
     xi = np.zeros((2, 6))
     assert kn.evaluate(kn.model, 0, kernel.address(xi), kernel.address(rest), kn.n, 0,

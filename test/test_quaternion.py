@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -10,7 +12,9 @@ from tensegrity_stiffness.quaternion import (
     QUATERNION_UNIT_TOLERANCE,
     quaternion_to_rotation,
     rotation_to_quaternion,
+    rotation_to_quaternion_unchecked,
 )
+from tensegrity_stiffness.screw import exp_so3
 
 
 def test_round_trip_against_scipy_including_half_turns():
@@ -55,3 +59,19 @@ def test_bad_quaternions_raise_naming_the_problem(value, match):
 def test_bad_rotations_raise_naming_the_problem(R, match):
     with pytest.raises(ValueError, match=match):
         rotation_to_quaternion(R)
+
+
+def test_unchecked_conversion_equals_the_checked_one():
+    """The publishers' float path gives the checked conversion's quaternion (every pivot of
+    Shepperd's method, rotations by pi included)."""
+    rng = np.random.default_rng(5)
+    pivots = set()
+    for i in range(400):
+        w = rng.normal(size=3)
+        w *= (math.pi if i % 4 == 0 else rng.uniform(0.0, math.pi)) / np.linalg.norm(w)
+        R = exp_so3(w)
+        pivots.add(int(np.argmax([np.trace(R), *np.diag(R)])))
+        q = rotation_to_quaternion_unchecked(R)
+        np.testing.assert_allclose(q, rotation_to_quaternion(R), rtol=0.0, atol=1e-15)
+        assert q[3] >= 0.0
+    assert pivots == {0, 1, 2, 3}

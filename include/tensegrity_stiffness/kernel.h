@@ -24,8 +24,9 @@ extern "C" {
 #endif
 
 /* Version of this ABI: bumped with every change below (1: the series tables set through a
- * global tsk_set_series, positive return values as screw indices). */
-#define TSK_ABI_VERSION 2
+ * global tsk_set_series, positive return values as screw indices; 2: without
+ * tsk_joint_measure_packed). */
+#define TSK_ABI_VERSION 3
 
 /* Status codes. */
 #define TSK_OK 0
@@ -89,6 +90,17 @@ int64_t tsk_joint_packed_size(int64_t n_strings);
  * the rest lengths on entry and the outputs after. */
 int64_t tsk_joint_evaluate_packed(const tsk_joint_model* model, int64_t mode, double* buf,
                                   int64_t buf_len);
+
+/* Doubles of the measurement buffer of one screw for n strings: the SE(3) left Jacobian
+ * J = [[G, 0], [Q, G]] (36), the pose Jacobian P = d[dp; dtheta]/dxi = [[D, G], [G, 0]] (36,
+ * D = Q - hat(t) G), then dl/dxi (n x 6), dphi/dxi (n x 6) and dphi/dl (n) of the strings. */
+int64_t tsk_joint_measure_size(int64_t n_strings);
+
+/* tsk_joint_evaluate_packed (same buf, mode and errors), and the string measurements'
+ * Jacobians in meas (meas_len >= tsk_joint_measure_size(n)): the compiled twin of
+ * sensor_models.string_predictions_unchecked (and pose_jacobian). */
+int64_t tsk_joint_measure_packed(const tsk_joint_model* model, int64_t mode, double* buf,
+                                 int64_t buf_len, double* meas, int64_t meas_len);
 
 /* Doubles of the output buffer of a batch: blocks of all screws one after the other, T 16N,
  * s 3nN, lengths nN, tensions nN, wrench 6N, K 36N, K_c 36N, then slack nN and saturated nN as

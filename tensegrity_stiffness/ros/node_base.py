@@ -237,7 +237,7 @@ class StreamingNode(Node):
                 outputs = self._outputs(settings, xi)
                 if stamp is None:
                     stamp = self._clock.now().to_msg()
-                wanted = tuple(p.get_subscription_count() > 0 for p in self._output_publishers)
+                wanted = self._wanted_outputs(outputs)
                 messages.fill(outputs, stamp, self._output_frame(settings), wanted)
                 markers = None
                 if settings.marker_period == 0.0:  # one per input; else _publish_markers
@@ -252,6 +252,11 @@ class StreamingNode(Node):
             if markers is not None:
                 self._pub_markers.publish(markers)
             self._last.record(xi, stamp, outputs, start)
+
+    def _wanted_outputs(self, outputs: Any) -> tuple[bool, ...]:
+        """Which of ``OUTPUT_TOPICS`` to fill and publish for ``outputs``: those with a
+        subscriber."""
+        return tuple(p.get_subscription_count() > 0 for p in self._output_publishers)
 
     @guarded('~/markers')
     def _watch_markers(self) -> None:

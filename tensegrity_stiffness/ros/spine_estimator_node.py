@@ -93,7 +93,10 @@ class SpineEstimatorNode(EstimatorNode):
 
     def _outputs(self, settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput
                  ) -> SpineEstimatorOutputs:
-        return spine_estimator_outputs(settings, snapshot)
+        # The std of the tip stiffness only while ~/tip_stiffness_base_std has a subscriber
+        # (as the joint's, EstimatorNode._outputs; _wanted_outputs is inherited).
+        return spine_estimator_outputs(settings, snapshot, settings.estimator.stiffness_std and (
+            self._output_publishers[-1].get_subscription_count() > 0))
 
     def _markers(self, settings: SpineEstimatorNodeSettings, state: Any, stamp: Any
                  ) -> MarkerArray:

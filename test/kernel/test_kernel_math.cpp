@@ -299,6 +299,69 @@ TEST(JointKernel, BatchEqualsSingleCalls) {
   }
 }
 
+// tsk_joint_measure_packed: the same evaluation as tsk_joint_evaluate_packed, dl/dxi equal to
+// central differences of the kernel's own lengths, dphi/dxi = dphi/dl dl/dxi, J = [[G, 0],
+// [Q, G]] with G = I at xi = 0.
+TEST(JointKernel, MeasurementJacobiansAreDerivativesOfTheKernelsLengths) {
+  Joint joint({0.05, 0.0, 0.1, -0.03, 0.04, 0.1}, {0.04, 0.01, 0.0, -0.02, 0.05, -0.01},
+              {100.0, 80.0}, {0.1, kInf}, TSK_LAW_PAPER);
+  const std::vector<double> xi = {0.3, -0.2, 0.1, 0.01, 0.0, 0.02};
+  const std::vector<double> rest = {0.05, 0.06};
+  Packed plain(2), measured(2);
+  ASSERT_EQ(evaluate(joint, plain, xi, rest), TSK_OK);
+  for (int i = 0; i < 6; ++i) {
+    measured.xi()[i] = xi[i];
+  }
+  measured.rest()[0] = rest[0];
+  measured.rest()[1] = rest[1];
+  std::vector<double> meas(tsk_joint_measure_size(2), 0.0);
+  ASSERT_EQ(meas.size(), 36u + 36u + 13u * 2u);
+  ASSERT_EQ(tsk_joint_measure_packed(&joint.model, TSK_MODE_FULL, measured.buf.data(),
+                                     static_cast<int64_t>(measured.buf.size()), meas.data(),
+                                     static_cast<int64_t>(meas.size())), TSK_OK);
+  for (size_t i = 0; i < plain.buf.size(); ++i) {
+    EXPECT_EQ(measured.buf[i], plain.buf[i]) << "packed entry " << i;
+  }
+  const double* dl = meas.data() + 72;
+  const double* dphi = dl + 12;
+  const double* slope = dphi + 12;
+  const double h = 1e-6;
+  for (int c = 0; c < 6; ++c) {
+    std::vector<double> up = xi, down = xi;
+    up[c] += h;
+    down[c] -= h;
+    Packed a(2), b(2);
+    ASSERT_EQ(evaluate(joint, a, up, rest), TSK_OK);
+    ASSERT_EQ(evaluate(joint, b, down, rest), TSK_OK);
+    for (int j = 0; j < 2; ++j) {
+      EXPECT_NEAR(dl[6 * j + c], (a.lengths()[j] - b.lengths()[j]) / (2.0 * h), 1e-8)
+          << "dl/dxi string " << j << " column " << c;
+      EXPECT_EQ(dphi[6 * j + c], slope[j] * dl[6 * j + c]);
+    }
+  }
+  // paper law, taut: dphi/dl = k l0 / l^2
+  for (int j = 0; j < 2; ++j) {
+    const double l = plain.lengths()[j];
+    EXPECT_NEAR(slope[j], joint.k[j] * rest[j] / (l * l), 1e-12 * joint.k[j]);
+  }
+  Packed zero(2);
+  zero.rest()[0] = rest[0];
+  zero.rest()[1] = rest[1];
+  ASSERT_EQ(tsk_joint_measure_packed(&joint.model, TSK_MODE_FULL, zero.buf.data(),
+                                     static_cast<int64_t>(zero.buf.size()), meas.data(),
+                                     static_cast<int64_t>(meas.size())), TSK_OK);
+  for (int r = 0; r < 6; ++r) {
+    for (int c = 0; c < 6; ++c) {
+      EXPECT_EQ(meas[6 * r + c], r == c ? 1.0 : 0.0)
+          << "J at xi = 0, entry " << r << ", " << c;
+    }
+  }
+  EXPECT_EQ(tsk_joint_measure_packed(&joint.model, TSK_MODE_FULL, zero.buf.data(),
+                                     static_cast<int64_t>(zero.buf.size()), meas.data(), 10),
+            TSK_ERROR_BUFFER_SIZE);
+  EXPECT_EQ(tsk_joint_measure_size(0), TSK_ERROR_COUNT);
+}
+
 TEST(JointKernel, RefusesBadCountsBuffersModesAndPointers) {
   Joint joint({0.0, 0.0, 0.1}, {0.0, 0.0, 0.0}, {100.0}, {kInf}, TSK_LAW_HOOKE);
   Packed out(1);
