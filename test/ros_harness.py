@@ -413,6 +413,40 @@ class RosClient:
         rclpy.try_shutdown(context=self.context)
 
 
+# ---------------------------------------------------------------------------- the twin
+#: Settled: the last SETTLED_COUNT screws agree to SETTLED_SPREAD (rad, m).
+SETTLED_SPREAD = 1e-11
+SETTLED_COUNT = 20
+#: How close a settled twin must be to the equilibrium a test expects (the twin matches the
+#: library's equilibria to ~1e-12, test_sim_node).
+SETTLED_AT_TARGET = 1e-8
+
+
+def wait_settled(inbox: Inbox, timeout: float = 30.0, after: int = 0,
+                 target: Any = None) -> Any:
+    """The twin's screw(s) once the last SETTLED_COUNT messages (after index ``after``) agree,
+    and, given a ``target`` (the equilibrium the input just sent leads to), lie within
+    SETTLED_AT_TARGET of it: a loaded machine may deliver that input after the twin has
+    been still for a while at the equilibrium before it."""
+    import numpy as np
+
+    deadline = time.monotonic() + timeout
+    distance = None
+    while time.monotonic() < deadline:
+        messages = inbox.messages[after:]
+        if len(messages) >= SETTLED_COUNT:
+            last = np.array([m.data for m in messages[-SETTLED_COUNT:]])
+            if np.ptp(last, axis=0).max() <= SETTLED_SPREAD:
+                if target is None:
+                    return last[-1]
+                distance = float(np.abs(last[-1] - np.ravel(target)).max())
+                if distance <= SETTLED_AT_TARGET:
+                    return last[-1]
+        time.sleep(0.1)
+    raise TimeoutError('the twin did not settle' + (
+        '' if distance is None else f' at the expected equilibrium ({distance:.3g} from it)'))
+
+
 # ---------------------------------------------------------------------------- fuzzing
 class StreamMatcher:
     """Subscription callback that matches the messages of one output topic, in arrival order,
@@ -472,7 +506,13 @@ class StreamMatcher:
                     return
             self.wrong += 1
             if len(self.wrong_examples) < 5:
-                self.wrong_examples.append(np.array2string(value, precision=6, threshold=40))
+                example = np.array2string(value, precision=6, threshold=40)
+                if self._expected and self._expected[0][1].shape == value.shape:
+                    seq, oldest = self._expected[0]
+                    scale = max(float(np.abs(oldest).max()), self._atol)
+                    example += (f' (max difference to the oldest expected, of input {seq}: '
+                                f'{float(np.abs(value - oldest).max()) / scale:.3g} relative)')
+                self.wrong_examples.append(example)
             self._cond.notify_all()
 
     def outstanding(self) -> int:

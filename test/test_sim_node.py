@@ -31,6 +31,7 @@ from ros_harness import (  # noqa: E402
     NodeProcess,
     RosClient,
     unique_namespace,
+    wait_settled,
 )
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
@@ -47,9 +48,6 @@ JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
 SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 W_JOINT = np.array([0.04, -0.05, 0.02, 0.0, 5e-4, 0.0])
 W_SPINE = np.array([0.03, 0.0, -0.02, 0.0, 0.0, 0.0])
-#: Settled: the last SETTLED_COUNT screws agree to this (rad, m).
-SETTLED_SPREAD = 1e-11
-SETTLED_COUNT = 20
 
 
 def wrench_stamped(W, frame_id: str = '') -> WrenchStamped:
@@ -59,19 +57,6 @@ def wrench_stamped(W, frame_id: str = '') -> WrenchStamped:
     msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in W[:3])
     msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in W[3:])
     return msg
-
-
-def wait_settled(inbox, timeout: float = 30.0, after: int = 0) -> np.ndarray:
-    """The screw(s) once the last SETTLED_COUNT messages (after index ``after``) agree."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        messages = inbox.messages[after:]
-        if len(messages) >= SETTLED_COUNT:
-            last = np.array([m.data for m in messages[-SETTLED_COUNT:]])
-            if np.ptp(last, axis=0).max() <= SETTLED_SPREAD:
-                return last[-1]
-        time.sleep(0.1)
-    raise TimeoutError('the twin did not settle')
 
 
 def log_has(proc: NodeProcess, pattern: str, timeout: float = 5.0) -> bool:
@@ -122,8 +107,8 @@ def test_settled_twin_gives_the_librarys_stiffness(joint_loop) -> None:
     loop = joint_loop
     before = len(loop['screw'])
     loop['wrench_pub'].publish(wrench_stamped(W_JOINT, 'tensegrity_link1'))
-    xi = wait_settled(loop['screw'], after=before + 5)
     res = solve_equilibrium(model, W_JOINT)
+    xi = wait_settled(loop['screw'], after=before + 5, target=res.screw)
     assert np.abs(xi - res.screw).max() < 1e-8
     # The newest K_c is of a settled pose (the stiffness node answers every input in order).
     time.sleep(0.3)
@@ -146,8 +131,8 @@ def test_rest_lengths_move_the_twin_as_the_library_predicts(joint_loop) -> None:
     rest = model.rest_lengths * np.linspace(0.98, 1.02, model.n_strings)
     before = len(loop['screw'])
     loop['rest_pub'].publish(Float64MultiArray(data=rest.tolist()))
-    xi = wait_settled(loop['screw'], after=before + 5)
     res = solve_equilibrium(model, W_JOINT, rest_lengths=rest)
+    xi = wait_settled(loop['screw'], after=before + 5, target=res.screw)
     assert np.abs(xi - res.screw).max() < 1e-8
 
 
@@ -211,10 +196,10 @@ def test_a_model_change_rebuilds_the_twin(joint_loop) -> None:
     before = len(loop['screw'])
     result = loop['ros'].set_parameter(loop['params'], 'joint.stiffness', k)
     assert result.successful, result.reason
-    xi = wait_settled(loop['screw'], after=before + 5)
     changed = JointModel(model.link1_nodes, model.connections, k, model.rest_lengths,
                          max_lengths=model.max_lengths, initial_screw=model.initial_screw)
     res = solve_equilibrium(changed, W_JOINT)
+    xi = wait_settled(loop['screw'], after=before + 5, target=res.screw)
     assert np.abs(xi - res.screw).max() < 1e-8
     assert log_has(loop['sim'], r'parameters applied: \[.joint.stiffness.\]')
 
@@ -242,8 +227,9 @@ def test_spine_twin_drives_spine_node() -> None:
         tip.wait_for(1, timeout=30.0)
         before = len(screws)
         wrench_pub.publish(wrench_stamped(W_SPINE, 'spine_base'))
-        x = wait_settled(screws, timeout=60.0, after=before + 5).reshape(5, 6)
         res = solve_chain_equilibrium(chain, W_SPINE)
+        x = wait_settled(screws, timeout=60.0, after=before + 5,
+                         target=res.screws).reshape(5, 6)
         assert np.abs(x - res.screws).max() < 1e-8
         time.sleep(0.5)
         K = np.asarray(tip.messages[-1].data).reshape(6, 6)
