@@ -796,7 +796,8 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'inputs older than this (s, by arrival) are left out of an estimate',
                   range=(0.0, 3600.0)),
     ParameterSpec('estimation.stiffness_std', 'bool', True,
-                  'publish ~/cartesian_stiffness_std (first-order std of K_c)'),
+                  'publish the first-order std of the stiffness (~/cartesian_stiffness_std; the '
+                  "spine's ~/tip_stiffness_base_std), computed only while it has a subscriber"),
     ParameterSpec('sensors.tension_std', 'double', 0.005, 'load cells: tension std, N',
                   range=(1e-12, 1e6)),
     ParameterSpec('sensors.length_std', 'double', 1e-4, 'string length sensors: std, m',
