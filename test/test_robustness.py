@@ -510,7 +510,9 @@ def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_p
         fuzzer.send(inputs.valid_screw_case())
     thread.join(30.0)
     figures = fuzzer.finish(quiet=0.3)
-    assert figures['wrong publications'] == 0 and figures['missing answers'] == 0
+    assert figures['wrong publications'] == 0 and figures['missing answers'] == 0, {
+        k: figures[k] for k in ('valid messages', 'stiffness received', 'wrench received',
+                                'missing answers', 'sync timeouts', 'node alive')}
     during = [lat for sent, lat in fuzzer.latencies if window[0] <= sent <= window[1]]
     before = [lat for sent, lat in fuzzer.latencies if sent < window[0]]
     durations = [end - start for start, end in solves]
