@@ -81,7 +81,6 @@ class JointState:
 _EYE3 = np.eye(3)
 
 
-
 def _kernel_state(kn: kernel.JointKernel, xi: FloatArray, buf: FloatArray) -> JointState:
     """The :class:`JointState` of a packed buffer the kernel evaluated (views into it)."""
     n = kn.n
@@ -91,6 +90,37 @@ def _kernel_state(kn: kernel.JointKernel, xi: FloatArray, buf: FloatArray) -> Jo
                       buf[kn.tensions:kn.wrench], flags[:n], flags[n:2 * n],
                       buf[kn.wrench:kn.stiffness], buf[kn.stiffness:kn.cartesian].reshape(6, 6),
                       buf[kn.cartesian:kn.flags].reshape(6, 6))
+
+
+def _packed_input(kn: kernel.JointKernel, xi: FloatArray, rest: FloatArray,
+                  extra: int = 0) -> FloatArray:
+    """The packed buffer of one screw and its rest lengths (``extra`` more values after it for
+    C to write): the inputs are copied into it, nothing else is for C to read."""
+    buf = np.empty(kn.size + extra)
+    buf[:kn.rest] = xi
+    buf[kn.rest:kn.transform] = rest
+    return buf
+
+
+def _kernel_succeeded(status: int, function: str) -> bool:
+    """False when a string has zero length (the numpy path then raises the error that names
+    it); any other failure raises (:func:`kernel.check`)."""
+    if status == kernel.OK:
+        return True
+    if status == kernel.ERROR_ZERO_LENGTH:
+        return False
+    kernel.check(status, function)
+    return True
+
+
+def _check_single_screw(xi: FloatArray) -> None:
+    """ValueError naming a non-finite entry of one screw (6,) (a finite sum may overflow: then
+    no error); OverflowError for a finite screw whose angle overflows (as the array path)."""
+    values = xi.tolist()
+    if not math.isfinite(sum(values)):
+        as_screws(xi)
+    math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+
 
 class JointModel:
     """A six-DOF tensegrity joint: node sets, strings and their elastic law.
@@ -358,11 +388,7 @@ class JointModel:
                          ) -> JointState | FloatArray:
         """One screw (6,) with validated rest lengths (n,): the :class:`JointState`, or ``K``
         alone when not ``full``; in the compiled kernel when it is loaded."""
-        values = xi.tolist()
-        if not math.isfinite(sum(values)):
-            as_screws(xi)  # names the non-finite entry (a finite sum may overflow: then no error)
-        # Raises OverflowError for a finite screw whose angle overflows (as the array path).
-        math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+        _check_single_screw(xi)
         if self._kernel is not None:
             result = self._evaluate_single_kernel(xi, rest, full)
             if result is not None:
@@ -376,16 +402,11 @@ class JointModel:
         ``None`` when a string has zero length (the numpy path then raises the error that
         names it)."""
         kn = self._kernel
-        # Inputs are copied into the one buffer (nothing else for C to read).
-        buf = np.empty(kn.size)
-        buf[:kn.rest] = xi
-        buf[kn.rest:kn.transform] = rest
+        buf = _packed_input(kn, xi, rest)
         status = kn.evaluate_packed(kn.model, kernel.MODE_FULL if full else kernel.MODE_STIFFNESS,
                                     kernel.address(buf), kn.size)
-        if status != kernel.OK:
-            if status == kernel.ERROR_ZERO_LENGTH:
-                return None
-            kernel.check(status, 'tsk_joint_evaluate_packed')
+        if not _kernel_succeeded(status, 'tsk_joint_evaluate_packed'):
+            return None
         if not full:
             return buf[kn.stiffness:kn.cartesian].reshape(6, 6)
         return _kernel_state(kn, xi, buf)
@@ -401,21 +422,14 @@ class JointModel:
         kn = self._kernel
         if kn is None:
             return None
-        values = xi.tolist()
-        if not math.isfinite(sum(values)):
-            as_screws(xi)  # names the non-finite entry (as _evaluate_single)
-        math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+        _check_single_screw(xi)
         # One buffer: the packed evaluation, then the measurement block (both written by C).
-        buf = np.empty(kn.size + kn.measure_size)
-        buf[:kn.rest] = xi
-        buf[kn.rest:kn.transform] = rest
+        buf = _packed_input(kn, xi, rest, kn.measure_size)
         start = kernel.address(buf)
         status = kn.measure_packed(kn.model, kernel.MODE_FULL, start, kn.size,
                                    start + 8 * kn.size, kn.measure_size)
-        if status != kernel.OK:
-            if status == kernel.ERROR_ZERO_LENGTH:
-                return None
-            kernel.check(status, 'tsk_joint_measure_packed')
+        if not _kernel_succeeded(status, 'tsk_joint_measure_packed'):
+            return None
         return _kernel_state(kn, xi, buf), buf[kn.size:]
 
     def _check_lengths(self, lengths: FloatArray) -> None:
@@ -495,10 +509,8 @@ class JointModel:
                              rest_c.size,
                              kernel.MODE_WRENCH if wrench_only else kernel.MODE_FULL,
                              kernel.address(buf), buf.size)
-        if status != kernel.OK:
-            if status == kernel.ERROR_ZERO_LENGTH:
-                return None
-            kernel.check(status, 'tsk_joint_evaluate')
+        if not _kernel_succeeded(status, 'tsk_joint_evaluate'):
+            return None
         K = buf[o.stiffness:o.cartesian].reshape(N, 6, 6)
         Kc = buf[o.cartesian:o.flags].reshape(N, 6, 6)
         if wrench_only:
