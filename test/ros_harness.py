@@ -14,6 +14,7 @@ from __future__ import annotations
 import gc
 import itertools
 import os
+import re
 import signal
 import subprocess
 import threading
@@ -235,6 +236,28 @@ class NodeProcess:
             self.process.kill()
             self.process.wait(10)
         self._log.close()
+
+
+def log_has(proc: NodeProcess, pattern: str, timeout: float = 5.0) -> bool:
+    """Whether the node's log matches ``pattern`` (re.search) within ``timeout`` s."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if re.search(pattern, proc.log()):
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def wrench_stamped(W: Any, frame_id: str = '') -> Any:
+    """A ``WrenchStamped`` of ``W`` ([f; m]) with its fields set directly (a NaN too: the node,
+    not the test, must refuse it)."""
+    from geometry_msgs.msg import WrenchStamped
+
+    msg = WrenchStamped()
+    msg.header.frame_id = frame_id
+    msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in W[:3])
+    msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in W[3:])
+    return msg
 
 
 class Inbox:

@@ -28,13 +28,16 @@ from ros_harness import (  # noqa: E402
     REPO,
     NodeProcess,
     RosClient,
+    log_has,
     unique_namespace,
     wait_settled,
+    wrench_stamped,
 )
 from scipy.stats import chi2  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 from std_msgs.msg import Float64MultiArray, Header  # noqa: E402
 
+import msg_tools  # noqa: E402
 from msg_tools import estimation as estimation_msgs  # noqa: E402
 from tensegrity_stiffness import sensor_models as sm  # noqa: E402
 from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
@@ -53,27 +56,10 @@ ACCELEROMETER_NOISE = 0.0981
 THREE_SIGMA_6D = chi2.ppf(0.9973, 6)
 
 
-def wrench_stamped(W, frame_id: str = '') -> WrenchStamped:
-    msg = WrenchStamped()
-    msg.header.frame_id = frame_id
-    msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in W[:3])
-    msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in W[3:])
-    return msg
-
-
 def non_unit_pose() -> PoseWithCovarianceStamped:
     msg = PoseWithCovarianceStamped()
     msg.pose.pose.orientation.w = 2.0
     return msg
-
-
-def log_has(proc: NodeProcess, pattern: str, timeout: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if re.search(pattern, proc.log()):
-            return True
-        time.sleep(0.1)
-    return False
 
 
 def assert_refused(loop, publisher, message, pattern: str) -> None:
@@ -122,10 +108,6 @@ def loop():
     assert 'internal error' not in estimator.log(), estimator.log()
 
 
-def stamp_seconds(stamp) -> float:
-    return stamp.sec + 1e-9 * stamp.nanosec
-
-
 def settle(loop, W) -> np.ndarray:
     """Apply W to the twin and wait until it has settled where the library says; its screw."""
     model = JointModel.from_yaml(JOINT_CONFIG)
@@ -150,7 +132,8 @@ def test_pose_estimates_within_three_sigma_of_the_twins_truth(loop) -> None:
         # pose i and K_c i of one estimate (a list may be one ahead of the other: cut)
         stamped = list(zip(loop['pose'].messages[start:], loop['kc'].messages[start_kc:],
                            strict=False))
-        settled = [(p, k) for p, k in stamped if stamp_seconds(p.header.stamp) >= settled_at]
+        settled = [(p, k) for p, k in stamped
+                   if msg_tools.stamp_to_seconds(p.header.stamp) >= settled_at]
         if len(settled) >= ESTIMATES or time.monotonic() > deadline:
             break
         time.sleep(0.2)

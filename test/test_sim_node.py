@@ -30,8 +30,10 @@ from ros_harness import (  # noqa: E402
     REPO,
     NodeProcess,
     RosClient,
+    log_has,
     unique_namespace,
     wait_settled,
+    wrench_stamped,
 )
 from rosgraph_msgs.msg import Clock  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
@@ -48,24 +50,6 @@ JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
 SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 W_JOINT = np.array([0.04, -0.05, 0.02, 0.0, 5e-4, 0.0])
 W_SPINE = np.array([0.03, 0.0, -0.02, 0.0, 0.0, 0.0])
-
-
-def wrench_stamped(W, frame_id: str = '') -> WrenchStamped:
-    """Fields set directly (a NaN too: the node, not the test, must refuse it)."""
-    msg = WrenchStamped()
-    msg.header.frame_id = frame_id
-    msg.wrench.force.x, msg.wrench.force.y, msg.wrench.force.z = (float(v) for v in W[:3])
-    msg.wrench.torque.x, msg.wrench.torque.y, msg.wrench.torque.z = (float(v) for v in W[3:])
-    return msg
-
-
-def log_has(proc: NodeProcess, pattern: str, timeout: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if re.search(pattern, proc.log()):
-            return True
-        time.sleep(0.1)
-    return False
 
 
 @pytest.fixture(scope='module')
