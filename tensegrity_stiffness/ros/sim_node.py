@@ -191,11 +191,11 @@ class SimNode(Node):
 
     def close(self) -> None:
         """Stop the stepping thread (called by the runner before the node is destroyed, at the
-        latest at exit)."""
-        atexit.unregister(self.close)
+        latest at exit, again if it outlived the join here, as the fast lane's)."""
         self._stop.set()
-        if self._thread.is_alive():
-            self._thread.join(timeout=5.0)
+        self._thread.join(timeout=5.0)
+        if not self._thread.is_alive():
+            atexit.unregister(self.close)
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, values: Any, names: set[str]) -> None:
