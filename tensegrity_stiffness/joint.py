@@ -102,15 +102,14 @@ def _packed_input(kn: kernel.JointKernel, xi: FloatArray, rest: FloatArray,
     return buf
 
 
-def _kernel_succeeded(status: int, function: str) -> bool:
-    """False when a string has zero length (the numpy path then raises the error that names
-    it); any other failure raises (:func:`kernel.check`)."""
-    if status == kernel.OK:
-        return True
+def _zero_length(status: int, function: str) -> bool:
+    """For a kernel ``status`` other than ``kernel.OK``: True when a string has zero length
+    (the numpy path then raises the error that names it); any other failure raises
+    (:func:`kernel.check`)."""
     if status == kernel.ERROR_ZERO_LENGTH:
-        return False
+        return True
     kernel.check(status, function)
-    return True
+    return False
 
 
 def _check_single_screw(xi: FloatArray) -> None:
@@ -405,7 +404,7 @@ class JointModel:
         buf = _packed_input(kn, xi, rest)
         status = kn.evaluate_packed(kn.model, kernel.MODE_FULL if full else kernel.MODE_STIFFNESS,
                                     kernel.address(buf), kn.size)
-        if not _kernel_succeeded(status, 'tsk_joint_evaluate_packed'):
+        if status != kernel.OK and _zero_length(status, 'tsk_joint_evaluate_packed'):
             return None
         if not full:
             return buf[kn.stiffness:kn.cartesian].reshape(6, 6)
@@ -428,7 +427,7 @@ class JointModel:
         start = kernel.address(buf)
         status = kn.measure_packed(kn.model, kernel.MODE_FULL, start, kn.size,
                                    start + 8 * kn.size, kn.measure_size)
-        if not _kernel_succeeded(status, 'tsk_joint_measure_packed'):
+        if status != kernel.OK and _zero_length(status, 'tsk_joint_measure_packed'):
             return None
         return _kernel_state(kn, xi, buf), buf[kn.size:]
 
@@ -509,7 +508,7 @@ class JointModel:
                              rest_c.size,
                              kernel.MODE_WRENCH if wrench_only else kernel.MODE_FULL,
                              kernel.address(buf), buf.size)
-        if not _kernel_succeeded(status, 'tsk_joint_evaluate'):
+        if status != kernel.OK and _zero_length(status, 'tsk_joint_evaluate'):
             return None
         K = buf[o.stiffness:o.cartesian].reshape(N, 6, 6)
         Kc = buf[o.cartesian:o.flags].reshape(N, 6, 6)
