@@ -11,7 +11,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from tensegrity_stiffness import sensor_models as sm
-from tensegrity_stiffness.estimation import Measurements
+from tensegrity_stiffness.estimation import Measurements, estimate_joint_state
 from tensegrity_stiffness.screw import exp_so3
 
 #: Typical sensor noise (issue 23): load cells (N), string lengths (m), gravity direction (unit
@@ -120,6 +120,14 @@ def measure(truth: Truth, sensor_set, rng, n_strings: int = 12) -> Measurements:
         kw.update(external_wrench=truth.external_wrench + rng.multivariate_normal(
             np.zeros(6), WRENCH_COVARIANCE), wrench_covariance=WRENCH_COVARIANCE)
     return Measurements(**kw)
+
+
+def tracked_estimate(model, truth: Truth, sensor_set, rng):
+    """One estimate of ``truth`` from a noisy reading of ``sensor_set``, warm-started in the
+    truth's neighbourhood as a tracker's previous estimate would be (no std of K_c)."""
+    return estimate_joint_state(model, measure(truth, sensor_set, rng),
+                                initial_screw=truth.screw + rng.normal(scale=WARM_START_SPREAD),
+                                stiffness_std=False)
 
 
 def pose_error(estimate, truth: Truth) -> np.ndarray:

@@ -15,12 +15,12 @@ from estimation_trials import (
     SINGULAR_FOUR,
     TENSION_STD,
     TRUTH_SPREAD,
-    WARM_START_SPREAD,
     WRENCH_COVARIANCE,
     measure,
     nees,
     nees_band,
     pose_error,
+    tracked_estimate,
     truth_from_model,
 )
 
@@ -66,9 +66,7 @@ def run_trials(model, name, sensor_set, trials=TRIALS, seed=23):
         for _ in range(trials):
             xi = model.initial_screw + rng.normal(scale=TRUTH_SPREAD)
             truth = truth_from_model(model, xi)
-            est = estimate_joint_state(model, measure(truth, sensor_set, rng),
-                                       initial_screw=xi + rng.normal(scale=WARM_START_SPREAD),
-                                       stiffness_std=False)
+            est = tracked_estimate(model, truth, sensor_set, rng)
             if not est.success:
                 failures.append(est.message)
                 continue
@@ -240,7 +238,7 @@ def test_prepared_measurements_are_reusable(model):
     np.testing.assert_array_equal(a.screw, b.screw)
     np.testing.assert_array_equal(a.covariance, b.covariance)
     with pytest.raises(ValueError, match='prepared for 11 strings'):
-        estimate_joint_state(model, m.prepared(11) if False else _prepared_11(m))
+        estimate_joint_state(model, _prepared_11(m))
 
 
 def _prepared_11(m):

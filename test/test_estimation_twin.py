@@ -9,11 +9,10 @@ import numpy as np
 import pytest
 from estimation_trials import (
     SENSOR_SETS,
-    WARM_START_SPREAD,
-    measure,
     nees,
     nees_band,
     pose_error,
+    tracked_estimate,
     truth_from_twin,
 )
 
@@ -59,10 +58,7 @@ def run(model, truths, name, sensor_set, trials=TRIALS):
         errors, values, failures = [], [], []
         for trial in range(trials):
             truth = truths[trial % len(truths)]
-            est = estimate_joint_state(
-                model, measure(truth, sensor_set, rng),
-                initial_screw=truth.screw + rng.normal(scale=WARM_START_SPREAD),
-                stiffness_std=False)
+            est = tracked_estimate(model, truth, sensor_set, rng)
             if not est.success:
                 failures.append(est.message)
                 continue
