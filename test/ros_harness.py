@@ -437,6 +437,23 @@ class RosClient:
 
 
 # ---------------------------------------------------------------------------- the twin
+def repeat_until(send: Callable[[], Any], check: Callable[[], Any], timeout: float = 30.0,
+                 period: float = 0.2) -> Any:
+    """``send()`` then ``check()`` every ``period`` until ``check`` returns something other than
+    None, which is returned. For a first message: a node's publisher may not have matched this
+    client's subscription yet when the input is sent (both sides discover each other on their
+    own), and a node fills an output only while it sees a subscriber."""
+    deadline = time.monotonic() + timeout
+    while True:
+        send()
+        time.sleep(period)
+        result = check()
+        if result is not None:
+            return result
+        if time.monotonic() > deadline:
+            raise AssertionError(f'nothing came within {timeout:g} s')
+
+
 #: Settled: the last SETTLED_COUNT screws agree to SETTLED_SPREAD (rad, m).
 SETTLED_SPREAD = 1e-11
 SETTLED_COUNT = 20

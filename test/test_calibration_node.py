@@ -19,7 +19,7 @@ from calibration_recordings import (  # noqa: E402
     true_parameters,
 )
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
-from ros_harness import NodeProcess, RosClient, unique_namespace  # noqa: E402
+from ros_harness import NodeProcess, RosClient, repeat_until, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from tensegrity_stiffness import calibration as cal  # noqa: E402
@@ -47,11 +47,13 @@ def test_calibrated_config_runs_in_stiffness_node(tmp_path: Path):
         ros.wait_for_subscribers(screw)
         ros.wait_for_publishers(f'{base}/wrench')
         xi = calibrated.initial_screw + np.array([0.05, -0.02, 0.03, 1e-3, 0.0, -5e-4])
-        screw.publish(Float64MultiArray(data=xi.tolist()))
         state = calibrated.evaluate(xi)
-        got = np.asarray(tensions.wait_for(1, timeout=20.0)[0].data)
+        # until both outputs answered (the node fills a topic only once it sees the subscriber)
+        repeat_until(lambda: screw.publish(Float64MultiArray(data=xi.tolist())),
+                     lambda: True if len(tensions) and len(wrench) else None)
+        got = np.asarray(tensions.messages[0].data)
         np.testing.assert_allclose(got, state.tensions, rtol=0, atol=1e-12)
-        w = wrench.wait_for(1, timeout=5.0)[0].wrench
+        w = wrench.messages[0].wrench
         np.testing.assert_allclose([w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y,
                                     w.torque.z], state.wrench, rtol=0, atol=1e-12)
         # ... and they are not the nominal model's.
