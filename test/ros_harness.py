@@ -438,11 +438,12 @@ class RosClient:
 
 # ---------------------------------------------------------------------------- the twin
 def repeat_until(send: Callable[[], Any], check: Callable[[], Any], timeout: float = 30.0,
-                 period: float = 0.2) -> Any:
+                 period: float = 0.2, explain: Callable[[], str] | None = None) -> Any:
     """``send()`` then ``check()`` every ``period`` until ``check`` returns something other than
     None, which is returned. For a first message: a node's publisher may not have matched this
     client's subscription yet when the input is sent (both sides discover each other on their
-    own), and a node fills an output only while it sees a subscriber."""
+    own), and a node fills an output only while it sees a subscriber. ``explain()`` is added to
+    the error on timeout (e.g. a node's log)."""
     deadline = time.monotonic() + timeout
     while True:
         send()
@@ -451,7 +452,8 @@ def repeat_until(send: Callable[[], Any], check: Callable[[], Any], timeout: flo
         if result is not None:
             return result
         if time.monotonic() > deadline:
-            raise AssertionError(f'nothing came within {timeout:g} s')
+            raise AssertionError(f'nothing came within {timeout:g} s'
+                                 + (f': {explain()}' if explain is not None else ''))
 
 
 #: Settled: the last SETTLED_COUNT screws agree to SETTLED_SPREAD (rad, m).

@@ -479,7 +479,9 @@ def test_a_controller_that_answers_late_counts_as_lost_and_is_retried(world, loa
         'target.timeout': 0.3}))
     world.bridge_status(bridge_ns)
     status = repeat_until(lambda: world.send_screw(loaded_screw), lambda: world.bridge_status_now(
-        bridge_ns, lambda s: kv(s)['calls lost'] not in ('0', '1')))
+        bridge_ns, lambda s: kv(s)['calls lost'] not in ('0', '1')), explain=lambda: (
+            f'last status {kv(world.bridge_status(bridge_ns))}; the bridge log ends: '
+            f'{bridge.log()[-1500:]}'))
     assert kv(status)['target reachable'] == 'false'
     assert 'gave no answer within target.timeout = 0.3 s' in bridge.log()
     assert bridge.alive()
