@@ -29,8 +29,9 @@ SWITCH_INTERVAL_S = 2e-4
 def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
         executor_factory: Callable[[], Any] | None = None) -> None:
     """Create the node with ``node_factory`` (after ``rclpy.init(args=args)``) and spin it until
-    shutdown; then ``node.close()`` (if it has one), destroy it and shut rclpy down. SIGINT is
-    ignored from the clean-up on: ``run`` is the last thing its process does."""
+    shutdown (also one that lands inside rclpy's own calls); then ``node.close()`` (if it has
+    one), destroy it and shut rclpy down. SIGINT is ignored from the clean-up on: ``run`` is the
+    last thing its process does."""
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     profile = bound_input_memory()
     rclpy.init(args=args)
@@ -50,6 +51,12 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RuntimeError:
+        # rclpy's signal handler shuts the context down on a thread of its own: a call past its
+        # check of the context (the executor's creation, a spin's wait set) raises RCLError, a
+        # RuntimeError, instead (ros2/rclpy#398, ros2/ros2cli#854). Anything else is a fault.
+        if rclpy.ok():
+            raise
     finally:
         # Nothing cuts the clean-up short: the KeyboardInterrupt of the SIGINT that shut the
         # context down can surface after the spin ended by ExternalShutdownException, and a
