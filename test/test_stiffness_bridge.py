@@ -169,13 +169,16 @@ class World:
 
     def close(self) -> None:
         self.ros.close()
-        codes = {}
+        codes, logs = {}, {}
         for thing in reversed(self.started):
             code = thing.stop()
             if isinstance(thing, NodeProcess):  # the bridges
                 codes[thing.namespace] = code
+                logs[thing.namespace] = thing.log()
         codes['joint'], codes['spine'] = self.joint.stop(), self.spine.stop()
-        assert set(codes.values()) == {0}, codes
+        logs['joint'], logs['spine'] = self.joint.log(), self.spine.log()
+        failed = {name: logs[name][-2000:] for name, code in codes.items() if code != 0}
+        assert not failed, (codes, failed)
 
 
 def kv(status) -> dict[str, str]:
