@@ -689,7 +689,8 @@ BRIDGE_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'parameters are set only when a value moved by more than this (relative)',
                   range=(0.0, 1.0)),
     ParameterSpec('target.timeout', 'double', 1.0,
-                  'seconds a set_parameters call may take before it counts as lost',
+                  'seconds a set_parameters call may take before it counts as lost (and is '
+                  'sent again)',
                   range=(0.01, 60.0)),
     _COMMON_BY_NAME['qos.depth'],
     _COMMON_BY_NAME['qos.input_reliability'],

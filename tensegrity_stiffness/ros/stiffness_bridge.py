@@ -183,6 +183,7 @@ class StiffnessBridge(Node):
                 self._in_flight = None
                 self._lost += 1
                 self._reachable = False
+                self._pending = True  # sent again (the controller may not have applied it)
                 self._client.remove_pending_request(future)
                 self.reporter.warn('set_parameters call',
                                    f'{settings.target_node}/set_parameters gave no answer within '
@@ -245,6 +246,7 @@ class StiffnessBridge(Node):
             self._in_flight = None
             if future.cancelled() or future.exception() is not None:
                 self._lost += 1
+                self._pending = True  # sent again on a later tick
                 return
             self._reachable = True
             results = future.result().results
