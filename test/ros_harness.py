@@ -456,6 +456,27 @@ def repeat_until(send: Callable[[], Any], check: Callable[[], Any], timeout: flo
                                  + (f': {explain()}' if explain is not None else ''))
 
 
+def answer_every_output(send: Callable[[], Any], counts: Callable[[], dict[str, int]],
+                        timeout: float = 30.0, quiet: float = 0.3) -> None:
+    """Before a harness's tests: ``send()`` every 0.2 s until every output of ``counts()`` has
+    answered once, then until no answer came for ``quiet`` s (so that none arrives during a
+    test). A fresh node fills a topic only while it sees a subscriber there, and its view of the
+    graph can lag this client's: its first inputs can go unanswered on a topic."""
+    deadline = time.monotonic() + timeout
+    while min(counts().values()) == 0:
+        assert time.monotonic() < deadline, f'outputs never all answered: {counts()}'
+        send()
+        time.sleep(0.2)
+    seen = counts()
+    while True:
+        time.sleep(quiet)
+        now = counts()
+        if now == seen:
+            return
+        assert time.monotonic() < deadline, f'outputs keep coming: {now}'
+        seen = now
+
+
 #: Settled: the last SETTLED_COUNT screws agree to SETTLED_SPREAD (rad, m).
 SETTLED_SPREAD = 1e-11
 SETTLED_COUNT = 20

@@ -27,6 +27,7 @@ from ros_harness import (  # noqa: E402
     NodeProcess,
     RosClient,
     StreamMatcher,
+    answer_every_output,
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -98,15 +99,9 @@ class Harness:
             self.ros.wait_for_subscribers(pub)
         for name in OUTPUT_TOPICS:
             self.ros.wait_for_publishers(f'{base}/{name}')
-        # The node fills and publishes a topic only while it sees a subscriber there, and its
-        # view of the graph can lag this client's: the first screws of a fresh node went
-        # unanswered on a topic (a loaded full-suite run). Every output answers once first.
+        # the first screws of a fresh node went unanswered on a topic (a loaded full-suite run)
         unloaded = JointChain.from_yaml(CONFIG).unloaded_screws()
-        deadline = time.monotonic() + 30.0
-        while min(self.counts().values()) == 0:
-            assert time.monotonic() < deadline, f'outputs never all answered: {self.counts()}'
-            self.send_screws(unloaded)
-            time.sleep(0.2)
+        answer_every_output(lambda: self.send_screws(unloaded), self.counts)
 
     def counts(self) -> dict[str, int]:
         return {name: len(inbox) for name, inbox in self.inbox.items()}
