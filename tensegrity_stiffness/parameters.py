@@ -908,6 +908,11 @@ class SpineEstimatorNodeSettings(SpineNodeSettings):
 
     estimator: EstimatorNodeSettings = field(kw_only=True)
 
+    @property
+    def stiffness_std(self) -> bool:
+        """``estimation.stiffness_std`` (as :attr:`EstimatorNodeSettings.stiffness_std`)."""
+        return self.estimator.stiffness_std
+
 
 def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
                                   ) -> SpineEstimatorNodeSettings:

@@ -1,10 +1,12 @@
 """estimator_node in-process (as test_node_inprocess.py does for stiffness_node): the std of K_c
-is computed only while ``~/cartesian_stiffness_std`` has a subscriber, and an estimate without
-it never publishes that topic, even when a subscriber has come meanwhile."""
+is computed only while ``~/cartesian_stiffness_std`` has a subscriber and
+``estimation.stiffness_std`` is on; the node asks once per input, before it computes, and
+publishes what that answer says, so a std is published only when it was computed."""
 
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,7 +21,6 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 from tensegrity_stiffness.estimation_processing import (  # noqa: E402
     EstimatorInput,
     Reading,
-    estimator_outputs,
 )
 from tensegrity_stiffness.ros.estimator_node import EstimatorNode  # noqa: E402
 
@@ -52,24 +53,24 @@ def test_std_of_the_cartesian_stiffness_only_for_a_subscriber():
         std_publisher = node._output_publishers[-1]
         assert std_publisher.topic_name.endswith('/cartesian_stiffness_std')
 
-        unheard = node._outputs(settings, snapshot)
+        unheard = node._outputs(settings, snapshot, node._wanted_outputs(settings))
         assert not unheard.stiffness_std
         assert np.all(np.isnan(unheard.estimate.cartesian_stiffness_std))
 
         subscription = listener.create_subscription(
             Float64MultiArray, std_publisher.topic_name, lambda _: None, 10)
         wait_for_count(std_publisher, 1)
-        heard = node._outputs(settings, snapshot)
+        wanted = node._wanted_outputs(settings)
+        heard = node._outputs(settings, snapshot, wanted)
         assert heard.stiffness_std
         assert np.all(np.isfinite(heard.estimate.cartesian_stiffness_std))
-        assert node._wanted_outputs(heard)[-1]
-        # computed without the std (no subscriber then), published after one came: not the std
-        assert not node._wanted_outputs(unheard)[-1]
-        assert not node._wanted_outputs(estimator_outputs(settings, snapshot, False))[-1]
+        assert wanted[-1]
+        # with estimation.stiffness_std off: neither computed nor published, subscriber or not
+        assert not node._wanted_outputs(replace(settings, stiffness_std=False))[-1]
 
         listener.destroy_subscription(subscription)
         wait_for_count(std_publisher, 0)
-        assert not node._outputs(settings, snapshot).stiffness_std
+        assert not node._outputs(settings, snapshot, node._wanted_outputs(settings)).stiffness_std
     finally:
         listener.destroy_node()
         node.close()

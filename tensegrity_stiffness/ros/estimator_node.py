@@ -115,18 +115,16 @@ class EstimatorNode(StreamingNode):
                          ) -> estimation_msgs.EstimatorOutputMessages:
         return estimation_msgs.EstimatorOutputMessages(tuple(settings.model.string_names))
 
-    def _outputs(self, settings: EstimatorNodeSettings, snapshot: EstimatorInput
-                 ) -> EstimatorOutputs:
-        # The std of K_c (estimation.stiffness_std) only while ~/cartesian_stiffness_std has a
-        # subscriber: its outputs are volatile, nobody else would see it.
-        return estimator_outputs(settings, snapshot, settings.stiffness_std and (
-            self._output_publishers[-1].get_subscription_count() > 0))
+    def _wanted_outputs(self, settings: EstimatorNodeSettings) -> tuple[bool, ...]:
+        """As every node's (a subscriber), and the std of the stiffness (the last output) only
+        with ``estimation.stiffness_std``."""
+        wanted = super()._wanted_outputs(settings)
+        return wanted if settings.stiffness_std else (*wanted[:-1], False)
 
-    def _wanted_outputs(self, outputs: EstimatorOutputs) -> tuple[bool, ...]:
-        """As every node's, but ``~/cartesian_stiffness_std`` only when the estimate computed
-        it (a subscriber that came after :meth:`_outputs` gets the next estimate's)."""
-        wanted = super()._wanted_outputs(outputs)
-        return wanted if outputs.stiffness_std else (*wanted[:-1], False)
+    def _outputs(self, settings: EstimatorNodeSettings, snapshot: EstimatorInput,
+                 wanted: tuple[bool, ...]) -> EstimatorOutputs:
+        # the std of K_c (most of an estimate's time) only when it is wanted
+        return estimator_outputs(settings, snapshot, wanted[-1])
 
     def _markers(self, settings: EstimatorNodeSettings, state: Any, stamp: Any) -> MarkerArray:
         return msg_tools.joint_markers(settings.model, state, settings.link1_frame, stamp)

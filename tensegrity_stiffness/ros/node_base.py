@@ -156,8 +156,9 @@ class StreamingNode(Node):
         """The preallocated output messages for ``settings`` (``fill``, ``messages()``)."""
         raise NotImplementedError
 
-    def _outputs(self, settings: Any, xi: np.ndarray) -> Any:
-        """Every output of the screws ``xi`` (ValueError: nothing is published)."""
+    def _outputs(self, settings: Any, xi: np.ndarray, wanted: tuple[bool, ...]) -> Any:
+        """Every output of the screws ``xi`` (ValueError: nothing is published); those not
+        ``wanted`` (:meth:`_wanted_outputs`) need not be computed."""
         raise NotImplementedError
 
     def _markers(self, settings: Any, state: Any, stamp: Any) -> MarkerArray:
@@ -234,10 +235,10 @@ class StreamingNode(Node):
             start = time.perf_counter()
             messages = self._messages
             try:
-                outputs = self._outputs(settings, xi)
+                wanted = self._wanted_outputs(settings)
+                outputs = self._outputs(settings, xi, wanted)
                 if stamp is None:
                     stamp = self._clock.now().to_msg()
-                wanted = self._wanted_outputs(outputs)
                 messages.fill(outputs, stamp, self._output_frame(settings), wanted)
                 markers = None
                 if settings.marker_period == 0.0:  # one per input; else _publish_markers
@@ -253,9 +254,9 @@ class StreamingNode(Node):
                 self._pub_markers.publish(markers)
             self._last.record(xi, stamp, outputs, start)
 
-    def _wanted_outputs(self, outputs: Any) -> tuple[bool, ...]:
-        """Which of ``OUTPUT_TOPICS`` to fill and publish for ``outputs``: those with a
-        subscriber."""
+    def _wanted_outputs(self, settings: Any) -> tuple[bool, ...]:
+        """Which of ``OUTPUT_TOPICS`` to compute, fill and publish under ``settings``: those
+        with a subscriber (asked once per input)."""
         return tuple(p.get_subscription_count() > 0 for p in self._output_publishers)
 
     @guarded('~/markers')

@@ -91,12 +91,10 @@ class SpineEstimatorNode(EstimatorNode):
                          ) -> estimation_msgs.SpineEstimatorOutputMessages:
         return estimation_msgs.SpineEstimatorOutputMessages(settings.n_joints)
 
-    def _outputs(self, settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput
-                 ) -> SpineEstimatorOutputs:
-        # The std of the tip stiffness only while ~/tip_stiffness_base_std has a subscriber
-        # (as the joint's, EstimatorNode._outputs; _wanted_outputs is inherited).
-        return spine_estimator_outputs(settings, snapshot, settings.estimator.stiffness_std and (
-            self._output_publishers[-1].get_subscription_count() > 0))
+    def _outputs(self, settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
+                 wanted: tuple[bool, ...]) -> SpineEstimatorOutputs:
+        # the std of the tip stiffness only when it is wanted (EstimatorNode._wanted_outputs)
+        return spine_estimator_outputs(settings, snapshot, wanted[-1])
 
     def _markers(self, settings: SpineEstimatorNodeSettings, state: Any, stamp: Any
                  ) -> MarkerArray:

@@ -98,7 +98,8 @@ class SpineNode(StreamingNode):
     def _output_messages(self, settings: SpineNodeSettings) -> msg_tools.SpineOutputMessages:
         return msg_tools.SpineOutputMessages(settings.n_joints)
 
-    def _outputs(self, settings: SpineNodeSettings, xi: np.ndarray) -> SpineOutputs:
+    def _outputs(self, settings: SpineNodeSettings, xi: np.ndarray, wanted: tuple[bool, ...]
+                 ) -> SpineOutputs:
         return spine_outputs(settings.chain, xi, settings.rest_lengths)
 
     def _markers(self, settings: SpineNodeSettings, state: ChainState, stamp: Any

@@ -93,7 +93,8 @@ class StiffnessNode(StreamingNode):
     def _output_messages(self, settings: JointNodeSettings) -> msg_tools.JointOutputMessages:
         return msg_tools.JointOutputMessages(tuple(settings.model.string_names))
 
-    def _outputs(self, settings: JointNodeSettings, xi: np.ndarray) -> JointOutputs:
+    def _outputs(self, settings: JointNodeSettings, xi: np.ndarray, wanted: tuple[bool, ...]
+                 ) -> JointOutputs:
         return joint_outputs(settings.model, xi)
 
     def _markers(self, settings: JointNodeSettings, state: JointState, stamp: Any
