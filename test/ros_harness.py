@@ -436,7 +436,7 @@ class RosClient:
         rclpy.try_shutdown(context=self.context)
 
 
-# ---------------------------------------------------------------------------- the twin
+# ---------------------------------------------------------------------------- first answers
 def repeat_until(send: Callable[[], Any], check: Callable[[], Any], timeout: float = 30.0,
                  period: float = 0.2, explain: Callable[[], str] | None = None) -> Any:
     """``send()`` then ``check()`` every ``period`` until ``check`` returns something other than
@@ -463,10 +463,8 @@ def answer_every_output(send: Callable[[], Any], counts: Callable[[], dict[str, 
     test). A fresh node fills a topic only while it sees a subscriber there, and its view of the
     graph can lag this client's: its first inputs can go unanswered on a topic."""
     deadline = time.monotonic() + timeout
-    while min(counts().values()) == 0:
-        assert time.monotonic() < deadline, f'outputs never all answered: {counts()}'
-        send()
-        time.sleep(0.2)
+    repeat_until(send, lambda: True if min(counts().values()) else None, timeout,
+                 explain=lambda: f'outputs never all answered: {counts()}')
     seen = counts()
     while True:
         time.sleep(quiet)
@@ -477,6 +475,7 @@ def answer_every_output(send: Callable[[], Any], counts: Callable[[], dict[str, 
         seen = now
 
 
+# ---------------------------------------------------------------------------- the twin
 #: Settled: the last SETTLED_COUNT screws agree to SETTLED_SPREAD (rad, m).
 SETTLED_SPREAD = 1e-11
 SETTLED_COUNT = 20

@@ -32,9 +32,9 @@ from ros_harness import (  # noqa: E402
     NodeFuzzer,
     NodeProcess,
     RosClient,
+    answer_every_output,
     percentile,
     reliable_qos,
-    repeat_until,
     unique_namespace,
 )
 from std_msgs.msg import Float64MultiArray  # noqa: E402
@@ -446,9 +446,8 @@ def test_rejected_parameter_changes_keep_the_old_set(node, model):
     ros.wait_for_subscribers(pub)
     ros.wait_for_publishers(f'{base}/stiffness')
     xi = model.initial_screw + np.r_[0.03, -0.01, 0.02, 0.001, 0.0, -0.001]
-    repeat_until(lambda: pub.publish(Float64MultiArray(data=xi.tolist())),
-                 lambda: True if len(stiffness) else None)
-    time.sleep(0.3)
+    answer_every_output(lambda: pub.publish(Float64MultiArray(data=xi.tolist())),
+                        lambda: {'stiffness': len(stiffness)})
     answered = len(stiffness)  # 1, or more if the first answer was only late
     names = ['joint.stiffness', 'joint.rest_lengths', 'joint.force_law', 'planar.K1']
     before = ros.call(get, GetParameters.Request(names=names)).values
