@@ -8,14 +8,16 @@ packaged configs under ``<prefix>/share/tensegrity_stiffness/config``.
 
 from glob import glob
 
-from setuptools import setup
+from setuptools import find_packages, setup
 
 PACKAGE_NAME = 'tensegrity_stiffness'
 
 setup(
     name=PACKAGE_NAME,
     version='0.1.0',
-    packages=[PACKAGE_NAME],
+    # the library's subpackages; the ROS layer (tensegrity_stiffness.ros) is colcon's
+    packages=find_packages(include=[PACKAGE_NAME, PACKAGE_NAME + '.*'],
+                           exclude=[PACKAGE_NAME + '.ros', PACKAGE_NAME + '.ros.*']),
     data_files=[('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml'))],
     python_requires='>=3.10',
     install_requires=['numpy', 'scipy', 'PyYAML', 'rosbags'],

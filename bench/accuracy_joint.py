@@ -28,9 +28,9 @@ sys.path.insert(0, str(ROOT))
 from test_equilibrium import moderate_wrench  # noqa: E402  (the tests' generators and oracle)
 from test_screw import random_screws, reference_dexp  # noqa: E402
 
-from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
-from tensegrity_stiffness.screw import dexp_se3, exp_se3  # noqa: E402
+from tensegrity_stiffness.geometry.screw import dexp_se3, exp_se3  # noqa: E402
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
 STEP = 1e-6
 

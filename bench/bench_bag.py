@@ -4,7 +4,8 @@
 
 Writes a rosbag2 (default mcap) of N screws (default 100,000, 1 kHz log times, near the default
 joint's unloaded equilibrium) to a temporary folder, then measures side by side in one run:
-* end to end: :func:`tensegrity_stiffness.bag.process_bag` (read, decode and validate as the
+* end to end: :func:`tensegrity_stiffness.recordings.bag.process_bag` (read, decode and validate
+as the
   node does, batched evaluation, write five outputs per input), in inputs per second, best of
   R runs; with ``--baseline CHECKOUT`` (a checkout of another commit, e.g. a ``git worktree``)
   that checkout's ``tensegrity_stiffness/bag.py`` too, on this checkout's library, its runs
@@ -38,7 +39,8 @@ sys.path.insert(0, str(ROOT))
 
 from test_bag import TYPESTORE, In, multiarray, screw_stream, write_bag  # noqa: E402
 
-from tensegrity_stiffness import bag, layouts, messages, processing  # noqa: E402
+from tensegrity_stiffness.nodes import layouts, messages, processing  # noqa: E402
+from tensegrity_stiffness.recordings import bag  # noqa: E402
 
 
 def load_bag_module(checkout: Path) -> object:

@@ -37,7 +37,8 @@ if 'ROS_DOMAIN_ID' not in os.environ:
 
 import numpy as np  # noqa: E402
 import yaml  # noqa: E402
-from ros_harness import (  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support.ros_harness import (  # noqa: E402
     CLIENT_LOOPS,
     Inbox,
     NodeProcess,
@@ -50,11 +51,10 @@ from ros_harness import (  # noqa: E402
     receiving,
     unique_namespace,
 )
-from std_msgs.msg import Float64MultiArray  # noqa: E402
 
-from tensegrity_stiffness.controller_stiffness import Conditioner, to_layout  # noqa: E402
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
-from tensegrity_stiffness.parameters import BRIDGE_PRESETS  # noqa: E402
+from tensegrity_stiffness.mechanics.controller_stiffness import Conditioner, to_layout  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.nodes.parameters import BRIDGE_PRESETS  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_joint.yaml'
 POSE = [0.02, 0.0, 0.01, 0.0, 0.0, math.sin(math.pi / 12), math.cos(math.pi / 12)]

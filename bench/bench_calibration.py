@@ -1,4 +1,4 @@
-"""Timing and accuracy of the calibration (``tensegrity_stiffness.calibration``).
+"""Timing and accuracy of the calibration (``tensegrity_stiffness.estimation.calibration``).
 
 Run by hand: ``python3 bench/bench_calibration.py [--samples 1000] [--repeats 3]``. A joint with
 true parameters drawn away from the nominal (each ``k_j`` within +-20 %, each offset within
@@ -25,14 +25,14 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'test'))
 
-from calibration_recordings import (  # noqa: E402
+from support.calibration_recordings import (  # noqa: E402
     configurations,
     measure,
     nominal_model,
     true_parameters,
 )
 
-from tensegrity_stiffness import calibration as cal  # noqa: E402
+from tensegrity_stiffness.estimation import calibration as cal  # noqa: E402
 
 TARGET_S = 5.0
 SEED = 3

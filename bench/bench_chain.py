@@ -20,8 +20,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tensegrity_stiffness.chain import JointChain, solve_chain_equilibrium
-from tensegrity_stiffness.joint import JointModel
+from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium
+from tensegrity_stiffness.mechanics.joint import JointModel
 
 REPO = Path(__file__).resolve().parents[1]
 SPINE = REPO / 'config' / 'default_spine.yaml'

@@ -1,4 +1,4 @@
-"""Timing of the stiffness design (``tensegrity_stiffness.design``).
+"""Timing of the stiffness design (``tensegrity_stiffness.mechanics.design``).
 
 Run by hand: ``python3 bench/bench_design.py [--requests N]``. Library part: median and p90 time
 of ``design_rest_lengths`` over random feasible requests near the default joint's unloaded
@@ -22,12 +22,12 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.design import (
+from tensegrity_stiffness.mechanics.design import (
     design_rest_lengths,
     rest_length_sensitivity,
     stiffness_range,
 )
-from tensegrity_stiffness.joint import JointModel
+from tensegrity_stiffness.mechanics.joint import JointModel
 
 DESIGN_TARGET_MS = 5.0
 LIMITS = (0.1, 1.5)
@@ -106,10 +106,10 @@ def service_part(args: argparse.Namespace) -> None:
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(100, 200)))
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
-    from ros_harness import NodeProcess, RosClient, unique_namespace
+    from support.ros_harness import NodeProcess, RosClient, unique_namespace
     from tensegrity_stiffness.srv import DesignRestLengths
 
-    import msg_tools
+    from tensegrity_stiffness.ros import conversions
 
     model = joint('hooke')
     cases = requests(model, args.requests, seed=2)
@@ -121,7 +121,7 @@ def service_part(args: argparse.Namespace) -> None:
 
         def call(case: tuple[np.ndarray, ...], target: bool) -> None:
             request = DesignRestLengths.Request(
-                target_screw=case[0].tolist(), external_wrench=msg_tools.wrench_to_msg(case[1]),
+                target_screw=case[0].tolist(), external_wrench=conversions.wrench_to_msg(case[1]),
                 tension_min=LIMITS[0], tension_max=LIMITS[1],
                 target_cartesian_stiffness=case[2].ravel().tolist() if target else [])
             if not ros.call(client, request, timeout=30.0).success:

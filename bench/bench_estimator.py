@@ -41,7 +41,7 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(100, 200)))
 
 import numpy as np  # noqa: E402
-from estimation_trials import (  # noqa: E402
+from support.estimation_trials import (  # noqa: E402
     SENSOR_SETS,
     TENSION_STD,
     TRUTH_SPREAD,
@@ -49,8 +49,8 @@ from estimation_trials import (  # noqa: E402
     truth_from_model,
 )
 
-from tensegrity_stiffness.estimation import estimate_joint_state  # noqa: E402
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.estimation.estimators import estimate_joint_state  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_joint.yaml'
 #: Seconds between the node being reachable and the start of the stream.
@@ -105,7 +105,9 @@ def node(model: JointModel, rate: float, seconds: float, loop: str, params: list
          tensions_every: int = 1, trigger: str = 'imu') -> None:
     from builtin_interfaces.msg import Time
     from geometry_msgs.msg import PoseWithCovarianceStamped
-    from ros_harness import (
+    from sensor_msgs.msg import Imu
+    from std_msgs.msg import Float64MultiArray
+    from support.ros_harness import (
         NodeProcess,
         RosClient,
         collector_paused,
@@ -114,8 +116,6 @@ def node(model: JointModel, rate: float, seconds: float, loop: str, params: list
         receiving,
         unique_namespace,
     )
-    from sensor_msgs.msg import Imu
-    from std_msgs.msg import Float64MultiArray
 
     rng = np.random.default_rng(1)
     xi = model.initial_screw + rng.normal(scale=TRUTH_SPREAD)

@@ -41,14 +41,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tensegrity_stiffness import kernel  # noqa: E402
-from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
-from tensegrity_stiffness.interpretation import (  # noqa: E402
+from tensegrity_stiffness.geometry.screw import dexp_se3, exp_se3  # noqa: E402
+from tensegrity_stiffness.mechanics import kernel  # noqa: E402
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402
+from tensegrity_stiffness.mechanics.interpretation import (  # noqa: E402
     interpret_stiffness,
     interpretation_vector,
 )
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
-from tensegrity_stiffness.screw import dexp_se3, exp_se3  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
 
 def per_call_us(fn, repeat: int = 7, number: int = 2000) -> float:
@@ -91,7 +91,8 @@ def build_previous_kernel(root: Path, out_dir: Path) -> Path:
 
 
 def import_previous(root: Path, library: Path) -> tuple[ModuleType, ModuleType]:
-    """``tensegrity_stiffness.joint`` and ``.kernel`` of the checkout ``root``, imported beside
+    """``tensegrity_stiffness.mechanics.joint`` and ``.kernel`` of the checkout ``root``, imported
+    beside
     this package (its modules swapped out of ``sys.modules`` meanwhile), bound to ``library``."""
     prefix = 'tensegrity_stiffness'
     ours = {k: v for k, v in sys.modules.items() if k == prefix or k.startswith(prefix + '.')}

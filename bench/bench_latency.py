@@ -39,7 +39,8 @@ os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this 
 
 import numpy as np  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
-from ros_harness import (  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support.ros_harness import (  # noqa: E402
     Inbox,
     NodeProcess,
     RosClient,
@@ -52,15 +53,14 @@ from ros_harness import (  # noqa: E402
     receiving,
     unique_namespace,
 )
-from std_msgs.msg import Float64MultiArray  # noqa: E402
 from tensegrity_stiffness.srv import (  # noqa: E402
     PlanarForwardKinematics,
     PlanarInverseKinematics,
     SolveEquilibrium,
 )
 
-import msg_tools  # noqa: E402
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.ros import conversions  # noqa: E402
 
 #: Seconds between the node being reachable and the start of the stream.
 STARTUP_SETTLE_S = 3.0
@@ -126,7 +126,7 @@ def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Ge
         W = np.r_[rng.normal(scale=0.1, size=3), rng.normal(scale=0.002, size=3)]
         requests = {
             'solve_equilibrium': SolveEquilibrium.Request(
-                external_wrench=msg_tools.wrench_to_msg(W)),
+                external_wrench=conversions.wrench_to_msg(W)),
             'planar_forward_kinematics': PlanarForwardKinematics.Request(
                 actuator_length=rng.uniform(0.2, 1.8), actuator_angle=rng.uniform(0.2, 2.9)),
             'planar_inverse_kinematics': PlanarInverseKinematics.Request(

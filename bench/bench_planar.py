@@ -18,8 +18,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from tensegrity_stiffness.planar import PlanarMechanism
-from tensegrity_stiffness.planar_workspace import (
+from tensegrity_stiffness.mechanics.planar import PlanarMechanism
+from tensegrity_stiffness.mechanics.planar_workspace import (
     actuator_stiffness_map,
     cartesian_stiffness_map,
 )

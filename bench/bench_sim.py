@@ -36,9 +36,9 @@ os.environ.setdefault('ROS_DOMAIN_ID', '231')
 
 import numpy as np  # noqa: E402
 
-from tensegrity_stiffness.chain import JointChain  # noqa: E402
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
-from tensegrity_stiffness.simulation import ChainSimulation, JointSimulation  # noqa: E402
+from tensegrity_stiffness.mechanics.chain import JointChain  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.simulation.twin import ChainSimulation, JointSimulation  # noqa: E402
 
 JOINT_CONFIG = ROOT / 'config' / 'default_joint.yaml'
 SPINE_CONFIG = ROOT / 'config' / 'default_spine.yaml'
@@ -79,7 +79,7 @@ def node_in_process(name: str, params_file: Path, spine: bool, seconds: float) -
     rclpy.init()
     overrides = [Parameter('sim.real_time', value=False)]
     # Parameters of the config file, as --params-file would give them.
-    from tensegrity_stiffness import parameters
+    from tensegrity_stiffness.nodes import parameters
     values = parameters.values_from_config(params_file,
                                            parameters.sim_node_parameters(spine, 5))
     values['sim.spine'] = spine
@@ -119,7 +119,7 @@ def node_in_process(name: str, params_file: Path, spine: bool, seconds: float) -
 def node_real_time(seconds: float, rate: float) -> None:
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
-    from ros_harness import DEEP, NodeProcess, RosClient, unique_namespace
+    from support.ros_harness import DEEP, NodeProcess, RosClient, unique_namespace
 
     ns = unique_namespace('bench_sim')
     proc = NodeProcess(ns, JOINT_CONFIG, executable='sim_node',

@@ -34,7 +34,8 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('ROS_DOMAIN_ID', '231')  # Fast DDS takes domain ids up to 232
 
 import numpy as np  # noqa: E402
-from ros_harness import (  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support.ros_harness import (  # noqa: E402
     NodeProcess,
     RosClient,
     add_client_arguments,
@@ -46,12 +47,11 @@ from ros_harness import (  # noqa: E402
     receiving,
     unique_namespace,
 )
-from std_msgs.msg import Float64MultiArray  # noqa: E402
 from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
 
-import msg_tools  # noqa: E402
-from tensegrity_stiffness import parameters  # noqa: E402
-from tensegrity_stiffness.spine_processing import spine_outputs  # noqa: E402
+from tensegrity_stiffness.nodes import parameters  # noqa: E402
+from tensegrity_stiffness.nodes.spine_processing import spine_outputs  # noqa: E402
+from tensegrity_stiffness.ros import conversions  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_spine.yaml'
 #: Seconds between the node being reachable and the start of the stream (the worker's warm-up).
@@ -128,7 +128,7 @@ def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Ge
     times, failures = [], 0
     for _ in range(calls):
         W = np.r_[rng.normal(scale=0.03, size=3), rng.normal(scale=0.0006, size=3)]
-        request = SolveChainEquilibrium.Request(tip_wrench=msg_tools.wrench_to_msg(W))
+        request = SolveChainEquilibrium.Request(tip_wrench=conversions.wrench_to_msg(W))
         start = time.perf_counter()
         response = ros.call(client, request, timeout=30.0)
         times.append(time.perf_counter() - start)

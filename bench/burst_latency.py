@@ -32,7 +32,8 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
-from ros_harness import (  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support.ros_harness import (  # noqa: E402
     DEEP,
     NodeProcess,
     RosClient,
@@ -40,11 +41,10 @@ from ros_harness import (  # noqa: E402
     sleep_until,
     unique_namespace,
 )
-from std_msgs.msg import Float64MultiArray  # noqa: E402
 from tensegrity_stiffness.srv import SolveEquilibrium  # noqa: E402
 
-import msg_tools  # noqa: E402
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.ros import conversions  # noqa: E402
 
 HARD_WRENCH = np.r_[50.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> dict[str, object]:
         ros.wait_for_subscribers(pub)
         ros.wait_for_publishers(f'{base}/stiffness')
         time.sleep(3.0)  # the node's start-up (its solver process warms up) is not measured
-        request = SolveEquilibrium.Request(external_wrench=msg_tools.wrench_to_msg(HARD_WRENCH),
+        request = SolveEquilibrium.Request(external_wrench=conversions.wrench_to_msg(HARD_WRENCH),
                                            initial_screw=model.initial_screw.tolist())
         round_trips: list[float] = []
         answers: list[str] = []

@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / 'test'))
 
-from calibration_recordings import (  # noqa: E402
+from support.calibration_recordings import (  # noqa: E402
     FORCE_SPREAD,
     MOMENT_SPREAD,
     configurations,
@@ -30,7 +30,7 @@ from calibration_recordings import (  # noqa: E402
     true_parameters,
 )
 
-from tensegrity_stiffness import calibration as cal  # noqa: E402
+from tensegrity_stiffness.estimation import calibration as cal  # noqa: E402
 
 SEED = 7
 FOUR = (0, 3, 5, 10)

@@ -31,11 +31,11 @@ sys.path.insert(0, str(ROOT))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
-import fuzz_inputs as fi  # noqa: E402
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from ros_harness import NodeFuzzer, NodeProcess, RosClient, unique_namespace  # noqa: E402
+from support import fuzz_inputs as fi  # noqa: E402
+from support.ros_harness import NodeFuzzer, NodeProcess, RosClient, unique_namespace  # noqa: E402
 
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
 MB = 2**20
 

@@ -33,10 +33,17 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
-from ros_harness import DEEP, NodeProcess, RosClient, percentile, sleep_until, unique_namespace  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support.ros_harness import (  # noqa: E402
+    DEEP,
+    NodeProcess,
+    RosClient,
+    percentile,
+    sleep_until,
+    unique_namespace,
+)
 
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
 MB = 2**20
 #: Bound on the growth of the node's resident memory over the soak (issue: under 5 MB).

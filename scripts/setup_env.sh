@@ -7,7 +7,7 @@
 #                  kernel, the Python packages, executables, launch and config files), exactly as a
 #                  workspace builds it (`colcon build` finds the package.xml at the root), with
 #                  BUILD_TESTING=ON: the kernel's gtest build/tensegrity_stiffness/test_kernel_math
-#                  (test/test_kernel_gtest.py runs it).
+#                  (test/kernel/test_kernel_gtest.py runs it).
 # Each step is skipped when its stamp matches (stamps are sha256 hashes of the inputs):
 #   .venv/.tensegrity_venv_stamp       requirement pins + constraints.txt + python version + path
 #   install/.tensegrity_build_stamp    venv stamp + the build files (package.xml, CMakeLists.txt,
@@ -129,7 +129,7 @@ build_hash="$( {
   find cmake srv src include -type f 2>/dev/null | LC_ALL=C sort \
     | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
   # Installed as symlinks: names count.
-  find tensegrity_stiffness msg_tools config launch -type f ! -path '*__pycache__*' 2>/dev/null \
+  find tensegrity_stiffness config launch -type f ! -path '*__pycache__*' 2>/dev/null \
     | LC_ALL=C sort
 } | sha)"
 

@@ -2,12 +2,13 @@
 estimated from what the robot measures (load cells, string lengths, an IMU, motion capture, a
 force-torque sensor).
 
-Thin layer: decode with :mod:`msg_tools.estimation`, keep the latest reading of each input,
-estimate with :mod:`tensegrity_stiffness.estimation_processing` (the library's
+Thin layer: decode with :mod:`conversions.estimation`, keep the latest reading of each input,
+estimate with :mod:`tensegrity_stiffness.nodes.estimation_processing` (the library's
 :func:`~tensegrity_stiffness.estimation.estimate_joint_state`, warm-started from the last
 estimate) when a message of the trigger input (``estimation.trigger``) arrives, using the latest
 of the others no older than ``estimation.max_age``; publish. Parameters in
-:mod:`tensegrity_stiffness.parameters` (section estimator_node), the method and conventions in
+:mod:`tensegrity_stiffness.nodes.parameters` (section estimator_node), the method and conventions
+in
 ``docs/estimation.md``.
 
 Built on :class:`.StreamingNode` (:mod:`.node_base`): the inputs are its streams (served in
@@ -30,10 +31,9 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
-import msg_tools
-from msg_tools import estimation as estimation_msgs
-from tensegrity_stiffness.equilibrium import solve_equilibrium
-from tensegrity_stiffness.estimation_processing import (
+from tensegrity_stiffness.geometry.validation import require_frame
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
+from tensegrity_stiffness.nodes.estimation_processing import (
     EstimatorInput,
     EstimatorOutputs,
     Reading,
@@ -42,17 +42,18 @@ from tensegrity_stiffness.estimation_processing import (
     gravity_reading,
     measured_array,
 )
-from tensegrity_stiffness.parameters import (
+from tensegrity_stiffness.nodes.parameters import (
     ESTIMATOR_NODE_PARAMETERS,
     EstimatorNodeSettings,
     ParameterSpec,
     estimator_node_settings,
 )
-from tensegrity_stiffness.ros import runner
-from tensegrity_stiffness.ros.node_base import Stream, StreamingNode
-from tensegrity_stiffness.ros.reporting import guarded
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
+from tensegrity_stiffness.ros.runtime import runner
+from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
+from tensegrity_stiffness.ros.runtime.reporting import guarded
 from tensegrity_stiffness.ros.stiffness_node import StiffnessNode
-from tensegrity_stiffness.validation import require_frame
 
 NODE_NAME = 'estimator_node'
 
@@ -127,7 +128,7 @@ class EstimatorNode(StreamingNode):
         return estimator_outputs(settings, snapshot, wanted[-1])
 
     def _markers(self, settings: EstimatorNodeSettings, state: Any, stamp: Any) -> MarkerArray:
-        return msg_tools.joint_markers(settings.model, state, settings.link1_frame, stamp)
+        return conversions.joint_markers(settings.model, state, settings.link1_frame, stamp)
 
     # ------------------------------------------------------------------ inputs
     def _store(self, name: str, value: Any, stamp: Any) -> None:
@@ -206,7 +207,7 @@ class EstimatorNode(StreamingNode):
                        f'{est.chi2:.3g}/{est.dof}, rank {est.rank}')
         values += [('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
                    ('max age [s]', options.max_age)]
-        return [msg_tools.diagnostic_status(f'{self.get_name()}: estimator', level, message,
+        return [conversions.diagnostic_status(f'{self.get_name()}: estimator', level, message,
                                             values, hardware_id=self._output_frame(settings))]
 
 

@@ -1,11 +1,12 @@
 """``sim_node``: the MuJoCo digital twin of a joint or a spine over ROS 2.
 
-Thin layer around :mod:`tensegrity_stiffness.simulation`: it steps the twin on a thread of its
+Thin layer around :mod:`tensegrity_stiffness.simulation.twin`: it steps the twin on a thread of its
 own (paced by the wall clock, or as fast as possible publishing ``/clock``), validates and hands
 on the inputs, and publishes the truth in exactly the input formats of ``stiffness_node``
 (``~/screw``, ``~/pose``) or ``spine_node`` (``~/screws``, ``~/poses``) and the simulated sensors
 with their noise (``~/measured_lengths``, ``~/measured_tensions``, ``~/imu``). Parameters:
-:func:`tensegrity_stiffness.parameters.sim_node_parameters` (``sim.*``, ``load.*``, ``noise.*``,
+:func:`tensegrity_stiffness.nodes.parameters.sim_node_parameters` (``sim.*``, ``load.*``,
+``noise.*``,
 ``limits.*`` and the model's own, from the same config files as the other nodes).
 
 Inputs are taken by the executor (``~/rest_lengths``, latched as the stiffness node's;
@@ -30,8 +31,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
-import msg_tools
-from tensegrity_stiffness.parameters import (
+from tensegrity_stiffness.geometry.validation import require_frame
+from tensegrity_stiffness.nodes.parameters import (
     CHAIN_PARAMETERS,
     SIM_PARAMETERS,
     SimNodeSettings,
@@ -39,18 +40,18 @@ from tensegrity_stiffness.parameters import (
     sim_node_parameters,
     sim_node_settings,
 )
-from tensegrity_stiffness.ros import runner
-from tensegrity_stiffness.ros.parameters import ParameterBinding
-from tensegrity_stiffness.ros.reporting import Reporter, guarded
-from tensegrity_stiffness.ros.topics import (
+from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.runtime import runner
+from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
+from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
+from tensegrity_stiffness.ros.runtime.topics import (
     LATCHED_QOS,
     create_output_publisher,
     input_qos,
     output_qos,
 )
-from tensegrity_stiffness.simulation import ChainSimulation, JointSimulation, SensorNoise
-from tensegrity_stiffness.spine_processing import rest_lengths_input
-from tensegrity_stiffness.validation import require_frame
+from tensegrity_stiffness.simulation.twin import ChainSimulation, JointSimulation, SensorNoise
 
 NODE_NAME = 'sim_node'
 #: Seconds between the questions which outputs have a subscriber (outputs nobody reads are
@@ -183,10 +184,11 @@ class SimNode(Node):
         self._noise = SensorNoise(**settings.noise())
         n = settings.n_strings
         width = 6 * (settings.chain.n_joints if settings.chain is not None else 1)
-        self._msg_truth = msg_tools.vector_to_multiarray(np.zeros(width), msg_tools.SCREW_LABEL)
-        self._msg_lengths = msg_tools.vector_to_multiarray(np.zeros(n), LENGTHS_LABEL)
-        self._msg_tensions = msg_tools.vector_to_multiarray(np.zeros(n), TENSIONS_LABEL)
-        self._msg_imu = msg_tools.imu_message(settings.imu_frame, self._noise.gyro,
+        self._msg_truth = conversions.vector_to_multiarray(np.zeros(width),
+                                                           conversions.SCREW_LABEL)
+        self._msg_lengths = conversions.vector_to_multiarray(np.zeros(n), LENGTHS_LABEL)
+        self._msg_tensions = conversions.vector_to_multiarray(np.zeros(n), TENSIONS_LABEL)
+        self._msg_imu = conversions.imu_message(settings.imu_frame, self._noise.gyro,
                                               self._noise.accelerometer)
 
     def close(self) -> None:
@@ -216,7 +218,7 @@ class SimNode(Node):
     def _on_rest_lengths(self, msg: Float64MultiArray) -> None:
         settings = self._settings
         try:
-            values = msg_tools.multiarray_to_array(
+            values = conversions.multiarray_to_array(
                 msg, expected_length=settings.n_strings,
                 max_length=settings.values['limits.max_array_length'])
             if settings.chain is not None:
@@ -234,7 +236,7 @@ class SimNode(Node):
         values = settings.values
         try:
             require_frame(msg.header.frame_id, settings.base_frame, 'the base frame')
-            W = msg_tools.msg_to_wrench(msg.wrench)
+            W = conversions.msg_to_wrench(msg.wrench)
             force, moment = float(np.linalg.norm(W[:3])), float(np.linalg.norm(W[3:]))
             if force > values['limits.max_force']:
                 raise ValueError(f'|force| = {force:.6g} N exceeds limits.max_force = '
@@ -327,7 +329,7 @@ class SimNode(Node):
     def _stamp(self) -> Any:
         if self._real_time:
             return self.get_clock().now().to_msg()
-        return msg_tools.stamp_from_seconds(self._sim.time)
+        return conversions.stamp_from_seconds(self._sim.time)
 
     def _wanted(self) -> tuple[bool, ...]:
         """Which outputs have a subscriber, asked at most every :data:`SUBSCRIBERS_PERIOD_S`
@@ -349,32 +351,32 @@ class SimNode(Node):
         truth, pose, lengths_wanted, tensions_wanted, imu_wanted = self._wanted()
         if truth:
             screws = sim.screws() if spine else sim.screw()
-            msg_tools.set_multiarray_data(self._msg_truth, screws.ravel())
+            conversions.set_multiarray_data(self._msg_truth, screws.ravel())
             self._pub_truth.publish(self._msg_truth)
         if pose:
             if spine:
                 msg = PoseArray()
                 msg.header.stamp = stamp
                 msg.header.frame_id = settings.base_frame
-                msg.poses = [msg_tools.transform_to_pose(T) for T in sim.joint_transforms()]
+                msg.poses = [conversions.transform_to_pose(T) for T in sim.joint_transforms()]
             else:
                 msg = PoseStamped()
                 msg.header.stamp = stamp
                 msg.header.frame_id = settings.base_frame
-                msg.pose = msg_tools.transform_to_pose(sim.pose())
+                msg.pose = conversions.transform_to_pose(sim.pose())
             self._pub_pose.publish(msg)
         noise, rng = self._noise, self._rng
         if lengths_wanted:
             lengths = noise.add(np.ravel(sim.string_lengths()), 'lengths', rng)
-            msg_tools.set_multiarray_data(self._msg_lengths, lengths)
+            conversions.set_multiarray_data(self._msg_lengths, lengths)
             self._pub_lengths.publish(self._msg_lengths)
         if tensions_wanted:
             tensions = noise.add(np.ravel(sim.tensions()), 'tensions', rng)
-            msg_tools.set_multiarray_data(self._msg_tensions, tensions)
+            conversions.set_multiarray_data(self._msg_tensions, tensions)
             self._pub_tensions.publish(self._msg_tensions)
         if imu_wanted:
             imu = sim.imu()
-            msg_tools.write_imu(self._msg_imu, noise.add(imu.angular_velocity, 'gyro', rng),
+            conversions.write_imu(self._msg_imu, noise.add(imu.angular_velocity, 'gyro', rng),
                                 noise.add(imu.specific_force, 'accelerometer', rng), stamp)
             self._pub_imu.publish(self._msg_imu)
         self.publications += 1
@@ -394,8 +396,8 @@ class SimNode(Node):
                   ('publications', self.publications), ('simulated time', sim_time),
                   ('real-time factor', factor), ('rejected inputs', rejected or 0)]
         message = (f'{steps} steps, {self.missed_steps} missed, real-time factor {factor:.3g}')
-        self._pub_diagnostics.publish(msg_tools.diagnostic_array(
-            [msg_tools.diagnostic_status(f'{self.get_name()}: twin', level, message, values,
+        self._pub_diagnostics.publish(conversions.diagnostic_array(
+            [conversions.diagnostic_status(f'{self.get_name()}: twin', level, message, values,
                                          hardware_id=self._settings.base_frame)],
             self.get_clock().now().to_msg()))
 

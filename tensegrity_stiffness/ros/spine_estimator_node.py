@@ -2,7 +2,8 @@
 stiffness of a spine with their uncertainty, estimated from per-joint load cells or string
 lengths, a motion-capture tip pose or a force-torque reading of the tip load.
 
-:class:`.EstimatorNode` on a :class:`~tensegrity_stiffness.chain.JointChain`: the same inputs and
+:class:`.EstimatorNode` on a :class:`~tensegrity_stiffness.mechanics.chain.JointChain`: the same
+inputs and
 triggering (``~/measured_tensions`` / ``~/measured_lengths`` hold every joint's strings,
 joint-major, NaN = not measured; ``~/measured_pose`` is the tool frame in the base;
 ``~/measured_wrench`` the tip load in the base; no IMU), the library's
@@ -21,24 +22,24 @@ from geometry_msgs.msg import PoseWithCovarianceStamped, WrenchStamped
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
-import msg_tools
-from msg_tools import estimation as estimation_msgs
-from tensegrity_stiffness.chain import solve_chain_equilibrium
-from tensegrity_stiffness.estimation_processing import (
+from tensegrity_stiffness.mechanics.chain import solve_chain_equilibrium
+from tensegrity_stiffness.nodes.estimation_processing import (
     EstimatorInput,
     SpineEstimatorOutputs,
     spine_estimator_outputs,
 )
-from tensegrity_stiffness.parameters import (
+from tensegrity_stiffness.nodes.parameters import (
     EstimatorNodeSettings,
     ParameterSpec,
     SpineEstimatorNodeSettings,
     spine_estimator_node_parameters,
     spine_estimator_node_settings,
 )
-from tensegrity_stiffness.ros import runner
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.estimator_node import EstimatorNode
-from tensegrity_stiffness.ros.node_base import Stream
+from tensegrity_stiffness.ros.runtime import runner
+from tensegrity_stiffness.ros.runtime.node_base import Stream
 from tensegrity_stiffness.ros.spine_node import SpineNode, _declared_joint_count
 
 NODE_NAME = 'spine_estimator_node'
@@ -98,7 +99,7 @@ class SpineEstimatorNode(EstimatorNode):
 
     def _markers(self, settings: SpineEstimatorNodeSettings, state: Any, stamp: Any
                  ) -> MarkerArray:
-        return msg_tools.spine_markers(settings.chain, state, settings.base_frame, stamp)
+        return conversions.spine_markers(settings.chain, state, settings.base_frame, stamp)
 
 
 def main(args: list[str] | None = None) -> None:

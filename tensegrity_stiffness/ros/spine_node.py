@@ -1,9 +1,12 @@
 """``spine_node``: real-time per-joint and tip stiffness of a tensegrity spine over ROS 2.
 
-A spine is a :class:`~tensegrity_stiffness.chain.JointChain` (conventions, frames and loads in
-:mod:`tensegrity_stiffness.chain`; parameters in :mod:`tensegrity_stiffness.parameters`; topics,
+A spine is a :class:`~tensegrity_stiffness.mechanics.chain.JointChain` (conventions, frames and
+loads in
+:mod:`tensegrity_stiffness.mechanics.chain`; parameters in
+:mod:`tensegrity_stiffness.nodes.parameters`; topics,
 services and QoS in docs/nodes.md). Thin layer: validate
-(:mod:`tensegrity_stiffness.spine_processing`), convert (:mod:`msg_tools`), call the library,
+(:mod:`tensegrity_stiffness.nodes.spine_processing`), convert
+(:mod:`tensegrity_stiffness.ros.conversions`), call the library,
 publish all of an input's outputs or none.
 
 Built on :class:`.StreamingNode` as ``stiffness_node`` is (:mod:`.node_base`: concurrency, the
@@ -25,9 +28,8 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
-import msg_tools
-from tensegrity_stiffness.chain import ChainState, solve_chain_equilibrium
-from tensegrity_stiffness.parameters import (
+from tensegrity_stiffness.mechanics.chain import ChainState, solve_chain_equilibrium
+from tensegrity_stiffness.nodes.parameters import (
     CHAIN_PARAMETERS,
     ParameterSpec,
     SpineNodeSettings,
@@ -35,11 +37,7 @@ from tensegrity_stiffness.parameters import (
     spine_node_parameters,
     spine_node_settings,
 )
-from tensegrity_stiffness.ros import runner, spine_services
-from tensegrity_stiffness.ros.node_base import Stream, StreamingNode
-from tensegrity_stiffness.ros.reporting import guarded, guarded_service
-from tensegrity_stiffness.ros.worker_calls import SOLVER_GRACE_S
-from tensegrity_stiffness.spine_processing import (
+from tensegrity_stiffness.nodes.spine_processing import (
     SpineOutputs,
     joint_health_in_chain,
     poses_input,
@@ -47,10 +45,16 @@ from tensegrity_stiffness.spine_processing import (
     screws_input,
     spine_outputs,
 )
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.runtime import runner
+from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
+from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
+from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
+from tensegrity_stiffness.ros.services import spine_services
 from tensegrity_stiffness.srv import SolveChainEquilibrium
 
 NODE_NAME = 'spine_node'
-#: Output topics in the order of :meth:`msg_tools.SpineOutputMessages.messages`.
+#: Output topics in the order of :meth:`conversions.SpineOutputMessages.messages`.
 OUTPUT_TOPICS = (
     (Float64MultiArray, '~/joint_wrenches'), (Float64MultiArray, '~/joint_stiffness'),
     (Float64MultiArray, '~/joint_cartesian_stiffness'), (PoseStamped, '~/tip_pose'),
@@ -95,8 +99,8 @@ class SpineNode(StreamingNode):
         return ((Float64MultiArray, '~/screws', self._on_screws),
                 (PoseArray, '~/poses', self._on_poses))
 
-    def _output_messages(self, settings: SpineNodeSettings) -> msg_tools.SpineOutputMessages:
-        return msg_tools.SpineOutputMessages(settings.n_joints)
+    def _output_messages(self, settings: SpineNodeSettings) -> conversions.SpineOutputMessages:
+        return conversions.SpineOutputMessages(settings.n_joints)
 
     def _outputs(self, settings: SpineNodeSettings, xi: np.ndarray, wanted: tuple[bool, ...]
                  ) -> SpineOutputs:
@@ -104,7 +108,7 @@ class SpineNode(StreamingNode):
 
     def _markers(self, settings: SpineNodeSettings, state: ChainState, stamp: Any
                  ) -> MarkerArray:
-        return msg_tools.spine_markers(settings.chain, state, settings.base_frame, stamp)
+        return conversions.spine_markers(settings.chain, state, settings.base_frame, stamp)
 
     def _keep_topic_rest_lengths(self, old: SpineNodeSettings, settings: SpineNodeSettings,
                                  names: set[str]) -> SpineNodeSettings:
@@ -116,7 +120,7 @@ class SpineNode(StreamingNode):
 
     def _with_rest_lengths(self, settings: SpineNodeSettings, msg: Float64MultiArray
                            ) -> SpineNodeSettings:
-        rest = rest_lengths_input(msg_tools.multiarray_to_array(
+        rest = rest_lengths_input(conversions.multiarray_to_array(
             msg, max_length=settings.max_array_length), settings.chain)
         return replace(settings, rest_lengths=rest)
 
@@ -125,7 +129,7 @@ class SpineNode(StreamingNode):
     def _on_screws(self, msg: Float64MultiArray) -> None:
         settings = self._settings
         try:
-            xi = screws_input(msg_tools.multiarray_to_array(
+            xi = screws_input(conversions.multiarray_to_array(
                 msg, max_length=settings.max_array_length), settings.n_joints)
         except ValueError as exc:
             self.reporter.reject('~/screws', str(exc))
@@ -140,7 +144,7 @@ class SpineNode(StreamingNode):
             reference = last if last is not None else np.array(
                 [model.initial_screw for model in settings.chain.joints])
             xi = poses_input(msg.header.frame_id, msg.poses, settings.base_frame, reference,
-                             msg_tools.pose_to_transform)
+                             conversions.pose_to_transform)
         except ValueError as exc:
             self.reporter.reject('~/poses', str(exc))
             return
@@ -177,13 +181,13 @@ class SpineNode(StreamingNode):
                 health = joint_health_in_chain(outputs.state, i, model.string_names)
                 if health.problems:
                     problems.append(f'joint {i + 1}: ' + ', '.join(health.problems))
-                statuses.append(msg_tools.diagnostic_status(
+                statuses.append(conversions.diagnostic_status(
                     f'{name}: joint {i + 1}', 'WARN' if health.problems else 'OK',
                     ', '.join(health.problems) or 'all strings taut, stable', health.values(),
                     hardware_id=settings.base_frame))
         message = ('no input yet' if outputs is None else
                    '; '.join(problems) or 'every joint: all strings taut, stable')
-        statuses.insert(0, msg_tools.diagnostic_status(
+        statuses.insert(0, conversions.diagnostic_status(
             f'{name}: chain', 'WARN' if problems else 'OK', message,
             [('joints', settings.n_joints), *values], hardware_id=settings.base_frame))
         return statuses

@@ -4,7 +4,8 @@ admittance_controller, Franka stacks); docs/controllers.md.
 
 Thin layer: reads ``~/input_stiffness`` (a 6x6 ``Float64MultiArray`` as ``stiffness_node``'s
 ``~/cartesian_stiffness`` or ``spine_node``'s ``~/tip_stiffness``; remap it), conditions it with
-the library (:mod:`tensegrity_stiffness.controller_stiffness`: the controller's frame, the
+the library (:mod:`tensegrity_stiffness.mechanics.controller_stiffness`: the controller's frame,
+the
 nearest positive definite matrix, scale, clamps, low-pass) and delivers it, rate-limited: on
 ``~/output_stiffness`` in a layout (topic targets) or through the ``set_parameters`` service of
 the controller node (parameter targets: asynchronous calls, only when a value moved beyond the
@@ -31,22 +32,26 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 
-import msg_tools
-from msg_tools.arrays import payload
-from tensegrity_stiffness.controller_stiffness import (
+from tensegrity_stiffness.mechanics.controller_stiffness import (
     Conditioned,
     LowPass,
     diagonal,
     moved_beyond,
     to_layout,
 )
-from tensegrity_stiffness.parameters import BRIDGE_PARAMETERS, BridgeSettings, bridge_settings
-from tensegrity_stiffness.ros import runner
-from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
-from tensegrity_stiffness.ros.fast_lane import FastLane
-from tensegrity_stiffness.ros.parameters import ParameterBinding
-from tensegrity_stiffness.ros.reporting import Reporter, guarded
-from tensegrity_stiffness.ros.topics import create_output_publisher, input_qos, output_qos
+from tensegrity_stiffness.nodes.parameters import (
+    BRIDGE_PARAMETERS,
+    BridgeSettings,
+    bridge_settings,
+)
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.conversions.arrays import payload
+from tensegrity_stiffness.ros.runtime import runner
+from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
+from tensegrity_stiffness.ros.runtime.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.runtime.fast_lane import FastLane
+from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
+from tensegrity_stiffness.ros.runtime.topics import create_output_publisher, input_qos, output_qos
 
 NODE_NAME = 'stiffness_bridge'
 INPUT_TOPIC = '~/input_stiffness'
@@ -147,7 +152,7 @@ class StiffnessBridge(Node):
     def _on_input(self, msg: Float64MultiArray) -> None:
         settings = self._settings
         try:
-            K = msg_tools.multiarray_to_matrix(msg, expected_shape=(6, 6),
+            K = conversions.multiarray_to_matrix(msg, expected_shape=(6, 6),
                                                max_length=MAX_INPUT_LENGTH)
             conditioned = settings.conditioner.apply(K)
         except ValueError as exc:
@@ -322,10 +327,10 @@ class StiffnessBridge(Node):
                     problems.append(f'{self._refused} updates refused')
             message = '; '.join(problems) or ('no input yet' if last is None else
                                               'positive definite input, delivered')
-        status = msg_tools.diagnostic_status(
+        status = conversions.diagnostic_status(
             f'{self.get_fully_qualified_name()}: controller stiffness', level, message, values,
             hardware_id=settings.input_frame)
-        self._pub_diagnostics.publish(msg_tools.diagnostic_array(
+        self._pub_diagnostics.publish(conversions.diagnostic_array(
             [status], self._clock.now().to_msg()))
 
 

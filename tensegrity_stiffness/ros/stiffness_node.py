@@ -1,9 +1,10 @@
 """``stiffness_node``: real-time wrench and stiffness of a tensegrity joint over ROS 2.
 
-Thin layer: validate, convert with :mod:`msg_tools`, call the library
-(:mod:`tensegrity_stiffness.processing`), publish. Topics, services, parameters and QoS are
+Thin layer: validate, convert with :mod:`tensegrity_stiffness.ros.conversions`, call the library
+(:mod:`tensegrity_stiffness.nodes.processing`), publish. Topics, services, parameters and QoS are
 documented in docs/nodes.md; the conventions (frames, orderings, signs) in
-:mod:`tensegrity_stiffness.joint`; the parameters in :mod:`tensegrity_stiffness.parameters`.
+:mod:`tensegrity_stiffness.mechanics.joint`; the parameters in
+:mod:`tensegrity_stiffness.nodes.parameters`.
 
 Built on :class:`.StreamingNode` (:mod:`.node_base`: concurrency, the settings swap, the
 publication under one lock); ``~/screw`` and ``~/pose`` are its streamed inputs, the equilibrium
@@ -23,22 +24,28 @@ from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
-import msg_tools
-from tensegrity_stiffness.design import design_rest_lengths
-from tensegrity_stiffness.equilibrium import solve_equilibrium
-from tensegrity_stiffness.health import joint_health
-from tensegrity_stiffness.joint import JointState
-from tensegrity_stiffness.parameters import (
+from tensegrity_stiffness.mechanics.design import design_rest_lengths
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
+from tensegrity_stiffness.mechanics.joint import JointState
+from tensegrity_stiffness.nodes.health import joint_health
+from tensegrity_stiffness.nodes.parameters import (
     STIFFNESS_NODE_PARAMETERS,
     JointNodeSettings,
     ParameterSpec,
     joint_node_settings,
 )
-from tensegrity_stiffness.processing import JointOutputs, joint_outputs, pose_input, screw_input
-from tensegrity_stiffness.ros import joint_services, runner
-from tensegrity_stiffness.ros.node_base import Stream, StreamingNode
-from tensegrity_stiffness.ros.reporting import guarded, guarded_service
-from tensegrity_stiffness.ros.worker_calls import SOLVER_GRACE_S
+from tensegrity_stiffness.nodes.processing import (
+    JointOutputs,
+    joint_outputs,
+    pose_input,
+    screw_input,
+)
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.runtime import runner
+from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
+from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
+from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
+from tensegrity_stiffness.ros.services import joint_services
 from tensegrity_stiffness.srv import (
     DesignRestLengths,
     PlanarForwardKinematics,
@@ -90,8 +97,8 @@ class StiffnessNode(StreamingNode):
         return ((Float64MultiArray, '~/screw', self._on_screw),
                 (PoseStamped, '~/pose', self._on_pose))
 
-    def _output_messages(self, settings: JointNodeSettings) -> msg_tools.JointOutputMessages:
-        return msg_tools.JointOutputMessages(tuple(settings.model.string_names))
+    def _output_messages(self, settings: JointNodeSettings) -> conversions.JointOutputMessages:
+        return conversions.JointOutputMessages(tuple(settings.model.string_names))
 
     def _outputs(self, settings: JointNodeSettings, xi: np.ndarray, wanted: tuple[bool, ...]
                  ) -> JointOutputs:
@@ -99,7 +106,7 @@ class StiffnessNode(StreamingNode):
 
     def _markers(self, settings: JointNodeSettings, state: JointState, stamp: Any
                  ) -> MarkerArray:
-        return msg_tools.joint_markers(settings.model, state, settings.link1_frame, stamp)
+        return conversions.joint_markers(settings.model, state, settings.link1_frame, stamp)
 
     def _keep_topic_rest_lengths(self, old: JointNodeSettings, settings: JointNodeSettings,
                                  names: set[str]) -> JointNodeSettings:
@@ -110,7 +117,7 @@ class StiffnessNode(StreamingNode):
 
     def _with_rest_lengths(self, settings: JointNodeSettings, msg: Float64MultiArray
                            ) -> JointNodeSettings:
-        rest = msg_tools.multiarray_to_array(msg, expected_length=settings.model.n_strings,
+        rest = conversions.multiarray_to_array(msg, expected_length=settings.model.n_strings,
                                              max_length=settings.max_array_length)
         return replace(settings, model=settings.model.with_rest_lengths(rest))
 
@@ -119,7 +126,7 @@ class StiffnessNode(StreamingNode):
     def _on_screw(self, msg: Float64MultiArray) -> None:
         settings = self._settings
         try:
-            xi = screw_input(msg_tools.multiarray_to_array(
+            xi = screw_input(conversions.multiarray_to_array(
                 msg, expected_length=6, max_length=settings.max_array_length))
         except ValueError as exc:
             self.reporter.reject('~/screw', str(exc))
@@ -131,7 +138,7 @@ class StiffnessNode(StreamingNode):
         settings = self._settings
         try:
             last = self._last.screws
-            xi = pose_input(msg.header.frame_id, msg_tools.pose_to_transform(msg.pose),
+            xi = pose_input(msg.header.frame_id, conversions.pose_to_transform(msg.pose),
                             settings.link1_frame,
                             last if last is not None else settings.model.initial_screw)
         except ValueError as exc:
@@ -200,7 +207,7 @@ class StiffnessNode(StreamingNode):
             values += health.values()
             level = 'WARN' if health.problems else 'OK'
             message = ', '.join(health.problems) or 'all strings taut, stable'
-        return [msg_tools.diagnostic_status(f'{self.get_name()}: joint', level, message,
+        return [conversions.diagnostic_status(f'{self.get_name()}: joint', level, message,
                                             values, hardware_id=settings.link1_frame)]
 
 

@@ -32,10 +32,10 @@ from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from std_msgs.msg import Float64MultiArray
 
-import msg_tools
 from tensegrity_stiffness import config
-from tensegrity_stiffness.ros.draining_subscription import create_draining_subscription
-from tensegrity_stiffness.ros.topics import output_qos
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.runtime.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.runtime.topics import output_qos
 
 PACKAGE = 'tensegrity_stiffness'
 NAMESPACE = '/twin'
@@ -98,7 +98,7 @@ class Monitor:
     def _on_pose(self, msg: PoseStamped) -> None:
         with self._lock:
             self._inputs += 1
-            self._pose = msg_tools.pose_to_transform(msg.pose)
+            self._pose = conversions.pose_to_transform(msg.pose)
 
     def _on_poses(self, msg: PoseArray) -> None:
         with self._lock:
@@ -107,7 +107,7 @@ class Monitor:
     def _on_tip_pose(self, msg: PoseStamped) -> None:
         self._on_output(msg)
         with self._lock:
-            self._pose = msg_tools.pose_to_transform(msg.pose)
+            self._pose = conversions.pose_to_transform(msg.pose)
 
     def _on_output(self, msg: Any) -> None:
         now = self.node.get_clock().now().nanoseconds
@@ -200,10 +200,10 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f'--config {params}: no such file')
     if args.spine:
         chain_doc = config.parameters(config.load_yaml(params))
-        from tensegrity_stiffness.chain import JointChain
+        from tensegrity_stiffness.mechanics.chain import JointChain
         n_strings = sum(m.n_strings for m in JointChain.from_dict(chain_doc).joints)
     else:
-        from tensegrity_stiffness.joint import JointModel
+        from tensegrity_stiffness.mechanics.joint import JointModel
         n_strings = JointModel.from_yaml(params).n_strings
 
     stiffness = 'spine_node' if args.spine else 'stiffness_node'

@@ -1,0 +1,7 @@
+"""``python -m tensegrity_stiffness.cli``: the command line."""
+
+import sys
+
+from tensegrity_stiffness.cli.commands import main
+
+sys.exit(main())

@@ -1,0 +1,1088 @@
+"""Calibration of a joint model from a recording: each string's stiffness ``k_j`` and rest-length
+offset ``d_j`` (true rest length = commanded + ``d_j``), with identifiability and uncertainty.
+
+Data model (one :class:`CalibrationSample` per quasi-static instant i)
+----------------------------------------------------------------------
+The unknowns are the parameters ``theta`` (the chosen subset of ``k``, ``d``) and every sample's
+screw ``xi_i`` (the measured pose is a noisy measurement, not the truth: holding the screw at the
+measured pose biases the stiffness low and the bias does not shrink with more samples). Each
+measurement gives whitened residuals (measurement noise std ``sigma`` from
+:class:`CalibrationNoise`):
+
+* pose (motion capture): ``[p(xi) - p_m; log(R(xi) R_m^T)] / sigma`` -- the
+  ``PoseWithCovariance`` convention (``p -> p + dp``, ``R -> exp(hat(dtheta)) R``, in {1}, ordered
+  ``[x y z rx ry rz]``); a measured ``screw`` is the pose ``exp(hat(screw))``;
+* equilibrium with a measured external wrench ``W_m`` (force-torque sensor on link 2, in {1}
+  about its origin; zeros for "unloaded"): ``(F(xi; theta) + W_m) / sigma`` (Monke & Vikas eq. 9
+  for ``F``); no residual when the load is unknown;
+* load cells: ``(phi_j(xi; theta) - t_j) / sigma`` for every measured string (eq. 8, the
+  model's force law);
+* string lengths: ``(l_j(xi) - l_m) / sigma`` (eq. 7).
+
+Jacobians (analytic). :mod:`tensegrity_stiffness.estimation.sensor_models` defines every
+measurement model
+and its Jacobians for one screw (shared with the estimator); the calibration evaluates the same
+models for all samples at once (:class:`_Problem`, one batched :meth:`JointModel.evaluate` per
+iteration), held to ``sensor_models`` sample by sample and to central differences in
+``test/estimation/test_calibration_jacobians.py``. With ``u_j = s_j / l_j``, ``m_j = p1_j x u_j``,
+``w_j = [u_j; m_j]`` and ``J`` the SE(3) left Jacobian (twist ``[omega; v] = J dxi``):
+``d l_j / d xi = -[m_j^T, u_j^T] J``, ``d phi_j / d xi = phi_j' d l_j / d xi``,
+``d F / d xi = K`` (eq. 10), pose ``[[-hat(p), I], [Jl^-1(phi), 0]] J``; parameters
+(``sensor_models.string_parameter_jacobians``): ``d phi_j / d k_j = phi_j / k_j``,
+``d phi_j / d d_j = d phi_j / d l0_j``, ``d F / d k_j = (phi_j / k_j) w_j``,
+``d F / d d_j = (d phi_j / d l0_j) w_j``.
+
+Method
+------
+1. Initial screws: the measured pose (log map on the branch nearest the previous sample's),
+   else the nominal model's equilibrium under the measured (or zero) load; then every screw is
+   refined with the parameters at nominal (batched Gauss-Newton per sample).
+2. Identifiability at nominal: the screws are eliminated (Schur complement per sample), which
+   leaves the parameters' information ``S = sum_i C_i - B_i^T A_i^+ B_i`` (``A = Jx^T Jx``,
+   ``B = Jx^T Jp``, ``C = Jp^T Jp`` of the whitened Jacobian); its eigenvalues are the squared
+   singular values of the weighted Jacobian with the screws projected out. In the scaled
+   coordinates ``z_k = (k - k_nom) / (STIFFNESS_UNIT k_nom)``, ``z_d = d / OFFSET_UNIT``, a
+   direction is unidentifiable when its singular value is below ``RANK_TOLERANCE`` times the
+   largest or its standard deviation exceeds 1 (the data determine it worse than
+   :data:`STIFFNESS_UNIT` of the nominal stiffness or :data:`OFFSET_UNIT` of offset). The fit
+   moves only in the identifiable subspace: unidentifiable directions stay at nominal. Without
+   a force measurement (no load cell, known loads zero within their noise:
+   :func:`measures_force`) the common scale of the stiffnesses is held as well.
+3. Fit (:func:`_solve`): Levenberg-Marquardt over the subspace coordinates and every screw,
+   the screws eliminated per sample (one q x q system per iteration, q <= 24: the sparse
+   structure "parameters + one screw per sample" solved exactly), with the robust ``loss`` (the
+   losses of ``scipy.optimize.least_squares``, acting beyond :data:`ROBUST_SCALE` sigma) by
+   iteratively re-weighted least squares; samples whose whitened chi-square exceeds the
+   ``1 - OUTLIER_PROBABILITY`` quantile are outliers; a final plain least-squares fit on the
+   inliers, warm-started, gives the estimate. ``scipy.optimize.least_squares`` with the same
+   sparse Jacobian (LSMR) reaches the same estimate (``bench/bench_calibration.py`` prints both:
+   0.001 std apart, 2.3x the time at 1,000 samples); the elimination solves each step exactly
+   and gives the information of step 2 and the covariance from the same blocks.
+4. Covariance ``V (V^T S V)^-1 V^T`` (``V`` the identifiable subspace, ``S`` at the estimate):
+   the Gauss-Newton covariance, equal to the Cramer-Rao bound of the same data model at the
+   truth (:func:`cramer_rao_std`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import chdtri
+
+from tensegrity_stiffness.geometry.screw import (
+    as_screws,
+    exp_se3,
+    hat3,
+    left_jacobian_se3,
+    left_jacobian_so3_inverse,
+    log_se3,
+    log_se3_sequence,
+    log_so3_batch,
+)
+from tensegrity_stiffness.geometry.validation import finite_array, finite_scalar
+from tensegrity_stiffness.mechanics.chain import pose_to_transform
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
+from tensegrity_stiffness.mechanics.joint import JointModel, JointState
+
+FloatArray = NDArray[np.float64]
+
+#: Parameter kinds that :func:`calibrate_joint` can fit (``fit=``), in the order of the vector.
+FIT_KINDS = ('stiffness', 'rest_length_offsets')
+#: Name of parameter j of each kind (``parameters`` keys).
+PARAMETER_NAMES = {'stiffness': 'stiffness[{j}]', 'rest_length_offsets': 'rest_length_offset[{j}]'}
+#: Units of each kind (tables).
+PARAMETER_UNITS = {'stiffness': 'N/m', 'rest_length_offsets': 'm'}
+#: Scaled coordinates: one unit is this fraction of the nominal stiffness ...
+STIFFNESS_UNIT = 0.5
+#: ... and this offset (m). A direction whose std exceeds one unit is unidentifiable.
+OFFSET_UNIT = 5e-3
+#: Singular values below this fraction of the largest count as zero (numerical rank).
+RANK_TOLERANCE = 1e-6
+#: Residual kinds (rows of a sample: pose 6, wrench 6, tensions n, lengths n) and their units.
+RESIDUAL_KINDS = ('position', 'rotation', 'force', 'moment', 'tension', 'length')
+RESIDUAL_UNITS = {'position': 'm', 'rotation': 'rad', 'force': 'N', 'moment': 'N m',
+                  'tension': 'N', 'length': 'm'}
+#: The robust loss acts beyond this many standard deviations (``f_scale`` of least_squares).
+ROBUST_SCALE = 3.0
+#: A sample is an outlier when its chi-square has this upper-tail probability or less.
+OUTLIER_PROBABILITY = 1e-4
+#: Known loads measure a force when their chi-square has this upper-tail probability or less.
+SCALE_TEST_PROBABILITY = 1e-3
+#: Robust losses of scipy.optimize.least_squares.
+LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
+#: Gauss-Newton iterations of the per-sample screw refinement.
+SCREW_ITERATIONS = 8
+#: The fit has converged when an iteration lowers the cost by less than this fraction.
+FIT_TOLERANCE = 1e-8
+#: ... and the robust stage (followed by the final plain least-squares stage).
+ROBUST_TOLERANCE = 1e-6
+#: Levenberg-Marquardt iterations of one fit stage.
+MAX_ITERATIONS = 100
+
+
+@dataclass(frozen=True)
+class CalibrationNoise:
+    """Standard deviation of each measurement kind (the defaults: a motion-capture system, a
+    six-axis force-torque sensor, inline load cells, string encoders)."""
+
+    position: float = 1e-4          # m (0.1 mm)
+    rotation: float = math.radians(0.1)  # rad (0.1 deg)
+    force: float = 0.01             # N
+    moment: float = 5e-4            # N m
+    tension: float = 0.005          # N
+    length: float = 1e-4            # m
+
+    def __post_init__(self) -> None:
+        for kind in RESIDUAL_KINDS:
+            value = finite_scalar(f'noise.{kind}', getattr(self, kind))
+            if value <= 0.0:
+                raise ValueError(f'noise.{kind} must be > 0, got {value}')
+
+    @classmethod
+    def of(cls, noise: CalibrationNoise | Mapping[str, float] | None) -> CalibrationNoise:
+        """``noise`` as a :class:`CalibrationNoise` (a mapping overrides the defaults it
+        names; ``pose`` sets position (m) and ``wrench`` force (N) for short)."""
+        if noise is None:
+            return cls()
+        if isinstance(noise, CalibrationNoise):
+            return noise
+        values = dict(noise)
+        if 'pose' in values:
+            values.setdefault('position', values.pop('pose'))
+        if 'wrench' in values:
+            values.setdefault('force', values.pop('wrench'))
+        unknown = sorted(set(values) - set(RESIDUAL_KINDS))
+        if unknown:
+            raise ValueError(f'noise: unknown kinds {unknown} '
+                             f'(known: {", ".join(RESIDUAL_KINDS)})')
+        return cls(**{k: float(v) for k, v in values.items()})
+
+    def row_std(self, n: int) -> FloatArray:
+        """Std of every residual row of a sample: pose (6), wrench (6), tensions (n),
+        lengths (n)."""
+        return np.concatenate([np.full(3, self.position), np.full(3, self.rotation),
+                               np.full(3, self.force), np.full(3, self.moment),
+                               np.full(n, self.tension), np.full(n, self.length)])
+
+
+@dataclass(frozen=True)
+class CalibrationSample:
+    """One quasi-static instant of a recording.
+
+    ``rest_lengths`` (n,) m: the commanded values (encoders); ``pose``: link 2 in {1} measured by
+    motion capture, (4, 4) or ``[x y z qx qy qz qw]``; ``screw`` (6,): the same as a screw (give
+    one of the two); ``tensions`` (n,) N from load cells, NaN where none; ``lengths`` (n,) m
+    measured string lengths, NaN where none; ``external_wrench`` (6,) a force-torque reading on
+    link 2 in the library's convention ([N; N m], in {1} about its origin): None when unknown,
+    zeros when unloaded.
+    """
+
+    rest_lengths: ArrayLike
+    pose: ArrayLike | None = None
+    screw: ArrayLike | None = None
+    tensions: ArrayLike | None = None
+    lengths: ArrayLike | None = None
+    external_wrench: ArrayLike | None = None
+
+
+def pose_transform(pose: ArrayLike, name: str = 'pose') -> FloatArray:
+    """(4, 4) transform of a pose given as (4, 4) or ``[x y z qx qy qz qw]``."""
+    arr = finite_array(name, pose)
+    if arr.shape == (4, 4):
+        R = arr[:3, :3]
+        if np.max(np.abs(R.T @ R - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0.0:
+            raise ValueError(f'{name}: the rotation block is not a rotation matrix')
+        return arr
+    if arr.shape == (7,):
+        return pose_to_transform(arr, name)
+    raise ValueError(f'{name} must be a (4, 4) transform or [x y z qx qy qz qw], got shape '
+                     f'{arr.shape}')
+
+
+@dataclass
+class _Data:
+    """The samples as arrays (N samples, n strings); absent measurements NaN / masked."""
+
+    rest: FloatArray            # (N, n) commanded
+    poses: FloatArray           # (N, 4, 4), NaN where no pose
+    has_pose: NDArray[np.bool_]
+    wrench: FloatArray          # (N, 6), 0 where unknown
+    has_wrench: NDArray[np.bool_]
+    tensions: FloatArray        # (N, n) NaN where none
+    lengths: FloatArray         # (N, n) NaN where none
+
+    @property
+    def n_samples(self) -> int:
+        return self.rest.shape[0]
+
+    def mask(self) -> NDArray[np.bool_]:
+        """(N, 12 + 2n) rows that carry a measurement."""
+        return np.hstack([np.repeat(self.has_pose[:, None], 6, axis=1),
+                          np.repeat(self.has_wrench[:, None], 6, axis=1),
+                          np.isfinite(self.tensions), np.isfinite(self.lengths)])
+
+
+def _per_string(name: str, value: ArrayLike | None, n: int, allow_nan: bool) -> FloatArray:
+    if value is None:
+        return np.full(n, np.nan)
+    try:
+        arr = np.asarray(value, dtype=np.float64).ravel()
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f'{name} must be numeric: {exc}') from None
+    if arr.shape != (n,):
+        raise ValueError(f'{name} must have {n} values (one per string), got {arr.size}')
+    bad = np.isinf(arr) | (np.isnan(arr) if not allow_nan else False)
+    if np.any(bad):
+        raise ValueError(f'{name} must be finite{" (NaN: not measured)" if allow_nan else ""}, '
+                         f'got {arr[bad][0]} at string {int(np.flatnonzero(bad)[0])}')
+    return arr
+
+
+def _samples_data(model: JointModel, samples: Sequence[CalibrationSample]) -> _Data:
+    """Validate the samples (ValueError naming ``samples[i].field``) into arrays."""
+    n = model.n_strings
+    N = len(samples)
+    rest = np.empty((N, n))
+    poses = np.full((N, 4, 4), np.nan)
+    has_pose = np.zeros(N, bool)
+    wrench = np.zeros((N, 6))
+    has_wrench = np.zeros(N, bool)
+    tensions = np.full((N, n), np.nan)
+    lengths = np.full((N, n), np.nan)
+    for i, s in enumerate(samples):
+        where = f'samples[{i}]'
+        if not isinstance(s, CalibrationSample):
+            raise ValueError(f'{where} is not a CalibrationSample')
+        rest[i] = _per_string(f'{where}.rest_lengths', s.rest_lengths, n, False)
+        if np.any(rest[i] <= 0.0):
+            raise ValueError(f'{where}.rest_lengths must be > 0')
+        if s.pose is not None and s.screw is not None:
+            raise ValueError(f'{where}: give pose or screw, not both')
+        if s.pose is not None:
+            poses[i] = pose_transform(s.pose, f'{where}.pose')
+            has_pose[i] = True
+        elif s.screw is not None:
+            xi = as_screws(s.screw, f'{where}.screw')
+            if xi.shape != (6,):
+                raise ValueError(f'{where}.screw must have shape (6,), got {xi.shape}')
+            poses[i] = exp_se3(xi)
+            has_pose[i] = True
+        tensions[i] = _per_string(f'{where}.tensions', s.tensions, n, True)
+        lengths[i] = _per_string(f'{where}.lengths', s.lengths, n, True)
+        if s.external_wrench is not None:
+            w = finite_array(f'{where}.external_wrench', s.external_wrench)
+            if w.shape != (6,):
+                raise ValueError(f'{where}.external_wrench must have shape (6,), got {w.shape}')
+            wrench[i] = w
+            has_wrench[i] = True
+    return _Data(rest, poses, has_pose, wrench, has_wrench, tensions, lengths)
+
+
+# ------------------------------------------------------------------------------ the model
+def model_with_parameters(model: JointModel, stiffness: ArrayLike,
+                          rest_lengths: ArrayLike | None = None) -> JointModel:
+    """A copy of ``model`` with stiffness ``k`` (n,) and rest lengths (n,) (default its own);
+    each string keeps its maximum stretch."""
+    rest = model.rest_lengths if rest_lengths is None else model.validate_rest_lengths(
+        rest_lengths, batched=False)
+    return JointModel(model.link1_nodes, model.connections, stiffness, rest,
+                      link2_nodes=model.link2_nodes, max_lengths=rest + model.max_stretch,
+                      force_law=model.force_law, node_names=model.node_names,
+                      link2_node_names=model.link2_node_names, string_names=model.string_names,
+                      initial_screw=model.initial_screw, use_kernel=model.uses_kernel)
+
+
+def _tension_rest_length_slopes(model: JointModel, state: JointState, rest: FloatArray
+                                ) -> FloatArray:
+    """``d phi / d l0`` of every string for a batch of states (eq. 8 and the model's force law;
+    the maximum stretch ``lmax - l0`` is held, as :class:`JointModel` does): the batched form of
+    ``sensor_models.string_parameter_jacobians(...).tension_rest_length``."""
+    k = model.k
+    taut = ~(state.slack | state.saturated)
+    if model.force_law == 'hooke':
+        return np.where(taut, -k, 0.0)
+    # 'paper': -k / l taut, -k s_max / lmax^2 (= -phi / lmax) saturated
+    lmax = rest + model.max_stretch
+    with np.errstate(invalid='ignore'):
+        saturated_slope = -k * model.max_stretch / (lmax * lmax)
+    return np.where(taut, -k / state.lengths, np.where(state.saturated, saturated_slope, 0.0))
+
+
+def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArray:
+    """``w_j = [u_j; p1_j x u_j]`` (..., n, 6): the wrench of a unit tension in string j."""
+    u = state.string_vectors / state.lengths[..., None]
+    return np.concatenate([u, np.cross(model._p1, u)], axis=-1)
+
+
+@dataclass
+class _Evaluation:
+    """Whitened residuals (N, R) and their Jacobians w.r.t. the screws (N, R, 6) and the scaled
+    parameters (N, R, 2n) at one point (rows: pose 6, wrench 6, tensions n, lengths n)."""
+
+    residuals: FloatArray
+    jac_screw: FloatArray
+    jac_parameters: FloatArray
+    raw: FloatArray  # unwhitened residuals (N, R)
+
+    def subset(self, rows: NDArray[np.int64]) -> _Evaluation:
+        """The evaluation of the samples ``rows`` only."""
+        return _Evaluation(self.residuals[rows], self.jac_screw[rows],
+                           self.jac_parameters[rows], self.raw[rows])
+
+
+class _Problem:
+    """The calibration problem on fixed data: evaluation of residuals and Jacobians at
+    (stiffness k, offsets d, screws xi)."""
+
+    def __init__(self, model: JointModel, data: _Data, noise: CalibrationNoise) -> None:
+        self.model = model
+        self.data = data
+        self.n = model.n_strings
+        self.std = noise.row_std(self.n)
+        self.mask = data.mask()
+        self.k_nominal = model.k.copy()
+        # Scaled coordinates: k = k_nom (1 + STIFFNESS_UNIT z_k), d = OFFSET_UNIT z_d.
+        self.unit = np.concatenate([STIFFNESS_UNIT * self.k_nominal, np.full(self.n, OFFSET_UNIT)])
+        self._models: dict[bytes, JointModel] = {}
+
+    def parameters(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(k, d) of scaled coordinates z (2n,)."""
+        p = z * self.unit
+        return self.k_nominal + p[:self.n], p[self.n:]
+
+    def _model(self, k: FloatArray) -> JointModel:
+        key = k.tobytes()
+        found = self._models.get(key)
+        if found is None:
+            if len(self._models) > 8:
+                self._models.clear()
+            found = self._models[key] = model_with_parameters(self.model, k)
+        return found
+
+    def evaluate(self, z: FloatArray, xi: FloatArray, jacobians: bool = True,
+                 parameter_jacobians: bool = True) -> _Evaluation:
+        """Residuals at (z, xi); with ``jacobians`` their Jacobian w.r.t. the screws, and with
+        ``parameter_jacobians`` as well the one w.r.t. the parameters."""
+        n, data = self.n, self.data
+        k, d = self.parameters(z)
+        if np.any(k <= 0.0):
+            raise ValueError('a stiffness reached zero')
+        model = self._model(k)
+        rest = data.rest + d
+        if np.any(rest <= 0.0):
+            raise ValueError('a rest length reached zero')
+        state = model.evaluate(xi, rest)
+        N = xi.shape[0]
+        R = 12 + 2 * n
+        raw = np.zeros((N, R))
+        T = state.transform
+        p = T[:, :3, 3]
+        Rm = data.poses[:, :3, :3]
+        has_pose = data.has_pose
+        phi = np.zeros((N, 3))
+        if has_pose.any():
+            raw[has_pose, :3] = p[has_pose] - data.poses[has_pose, :3, 3]
+            phi[has_pose] = log_so3_batch(
+                T[has_pose, :3, :3] @ np.swapaxes(Rm[has_pose], -1, -2))
+            raw[:, 3:6] = phi
+        raw[:, 6:12] = state.wrench + data.wrench
+        raw[:, 12:12 + n] = state.tensions - data.tensions
+        raw[:, 12 + n:] = state.lengths - data.lengths
+        raw = np.where(self.mask, raw, 0.0)
+        residuals = raw / self.std
+        if not jacobians:
+            return _Evaluation(residuals, np.empty(0), np.empty(0), raw)
+        J = left_jacobian_se3(xi)  # (N, 6, 6): twist [omega; v] = J dxi
+        jx = np.zeros((N, R, 6))
+        # Pose: d p = omega x p + v, d log(R R_m^T) = Jl^-1(phi) omega.
+        jt = np.zeros((N, 6, 6))
+        jt[:, :3, :3] = -hat3(p)
+        jt[:, :3, 3:] = np.eye(3)
+        jt[:, 3:, :3] = left_jacobian_so3_inverse(phi)
+        jx[:, :6] = jt @ J
+        jx[:, 6:12] = state.stiffness
+        w = _string_wrench_directions(model, state)  # (N, n, 6)
+        dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
+        dphi_dl = model._string_forces(state.lengths, rest)[1]  # as sensor_models does
+        jx[:, 12:12 + n] = dphi_dl[..., None] * dl
+        jx[:, 12 + n:] = dl
+        scale = self.mask / self.std  # (N, R)
+        jx *= scale[..., None]
+        if not parameter_jacobians:
+            return _Evaluation(residuals, jx, np.empty(0), raw)
+        dphi_dl0 = _tension_rest_length_slopes(model, state, rest)
+        jp = np.zeros((N, R, 2 * n))
+        dphi_dk = state.tensions / k
+        jp[:, 6:12, :n] = np.swapaxes(w * dphi_dk[..., None], -1, -2)
+        jp[:, 6:12, n:] = np.swapaxes(w * dphi_dl0[..., None], -1, -2)
+        idx = np.arange(n)
+        jp[:, 12 + idx, idx] = dphi_dk
+        jp[:, 12 + idx, n + idx] = dphi_dl0
+        jp *= scale[..., None] * self.unit
+        return _Evaluation(residuals, jx, jp, raw)
+
+    # -------------------------------------------------------------- screws with fixed theta
+    def refine_screws(self, z: FloatArray, xi: FloatArray,
+                      iterations: int = SCREW_ITERATIONS) -> FloatArray:
+        """Every sample's screw by Gauss-Newton with the parameters fixed (batched; a step that
+        raises a sample's cost is halved up to 4 times, else that sample keeps its screw)."""
+        xi = xi.copy()
+        ev = self.evaluate(z, xi, parameter_jacobians=False)
+        cost = np.sum(ev.residuals ** 2, axis=1)
+        for _ in range(iterations):
+            A = np.swapaxes(ev.jac_screw, -1, -2) @ ev.jac_screw
+            g = np.einsum('nri,nr->ni', ev.jac_screw, ev.residuals)
+            step = -_solve_psd(A, g)
+            if np.max(np.abs(step)) < 1e-13:
+                break
+            alpha = np.ones(len(xi))
+            for _ in range(5):
+                trial = xi + alpha[:, None] * step
+                try:
+                    tev = self.evaluate(z, trial, jacobians=False)
+                except ValueError:
+                    alpha *= 0.5
+                    continue
+                tcost = np.sum(tev.residuals ** 2, axis=1)
+                worse = tcost > cost * (1 + 1e-12) + 1e-300
+                if not worse.any():
+                    break
+                alpha[worse] *= 0.5
+            else:
+                alpha[worse] = 0.0
+            xi = xi + alpha[:, None] * step
+            ev = self.evaluate(z, xi, parameter_jacobians=False)
+            cost = np.sum(ev.residuals ** 2, axis=1)
+        return xi
+
+    # -------------------------------------------------------------- information
+    def information(self, ev: _Evaluation, columns: NDArray[np.int64],
+                    weights: FloatArray | None = None) -> FloatArray:
+        """Parameters' information with the screws eliminated (Schur complement per sample),
+        scaled coordinates, over ``columns`` of the parameter vector."""
+        jx = ev.jac_screw
+        jp = ev.jac_parameters[:, :, columns]
+        if weights is not None:
+            jx = jx * weights[..., None]
+            jp = jp * weights[..., None]
+        A = np.swapaxes(jx, -1, -2) @ jx
+        B = np.swapaxes(jx, -1, -2) @ jp
+        C = np.einsum('nri,nrj->ij', jp, jp)
+        return C - np.einsum('nia,nij->aj', B, _solve_psd(A, B))
+
+
+def _solve_psd(A: FloatArray, b: FloatArray) -> FloatArray:
+    """``A^+ b`` for a batch of symmetric positive semi-definite (N, 6, 6) ``A`` (directions
+    with no information get none), ``b`` (N, 6) or (N, 6, m)."""
+    lam, V = np.linalg.eigh(A)
+    cut = RANK_TOLERANCE ** 2 * np.maximum(lam[:, -1:], 1e-300)
+    inv = np.where(lam > cut, 1.0 / np.where(lam > cut, lam, 1.0), 0.0)
+    vec = b.ndim == 2
+    bb = b[..., None] if vec else b
+    out = V @ (inv[..., None] * (np.swapaxes(V, -1, -2) @ bb))
+    return out[..., 0] if vec else out
+
+
+# ------------------------------------------------------------------------------ results
+@dataclass
+class CalibrationResult:
+    """Outcome of :func:`calibrate_joint`.
+
+    ``parameters`` maps a name (``stiffness[j]`` in N/m, ``rest_length_offset[j]`` in m, in the
+    fitted kinds) to its value; unidentifiable ones hold their nominal value (0 for an offset).
+    ``std`` the standard deviation of each (NaN where not identifiable), ``covariance`` over
+    ``names`` (units as the values), ``identifiable`` per name, ``unidentifiable`` the directions
+    the data cannot determine in words, ``singular_values`` of the weighted Jacobian (screws
+    eliminated, scaled coordinates), ``residual_rms_before`` / ``residual_rms_after`` per
+    measurement kind (its unit, :data:`RESIDUAL_UNITS`; before: nominal parameters with each
+    screw fitted), ``outliers`` the sample indices left out, ``screws`` (N, 6) the fitted screws,
+    ``chi2`` and ``dof`` of the final fit (``chi2 / dof`` near 1 when the noise model is right).
+    """
+
+    success: bool
+    message: str
+    model: JointModel
+    names: list[str]
+    parameters: dict[str, float]
+    std: dict[str, float]
+    covariance: FloatArray
+    identifiable: dict[str, bool]
+    unidentifiable: list[str]
+    singular_values: FloatArray
+    residual_rms_before: dict[str, float]
+    residual_rms_after: dict[str, float]
+    outliers: list[int]
+    iterations: int
+    screws: FloatArray
+    chi2: float
+    dof: int
+    nominal: dict[str, float] = field(default_factory=dict)
+    offsets: FloatArray = field(default_factory=lambda: np.zeros(0))
+    residuals_before: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    residuals_after: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
+    seconds: float = 0.0
+
+    def residuals(self, kind: str, after: bool = True) -> FloatArray:
+        """Residuals (N, m) of one measurement kind (:data:`RESIDUAL_KINDS`, its unit) of every
+        sample, NaN where not measured; outliers included (``after``: at the estimate, else at
+        nominal)."""
+        table = self.residuals_after if after else self.residuals_before
+        return table[:, residual_block(kind, self.model.n_strings)]
+
+    def table(self) -> list[dict[str, Any]]:
+        """Rows ``name, string, nominal, fitted, std, identifiable`` (units of the name)."""
+        rows = []
+        for name in self.names:
+            j = int(re.search(r'\[(\d+)\]', name).group(1))
+            rows.append({'name': name, 'string': self.model.string_names[j],
+                         'nominal': self.nominal[name], 'fitted': self.parameters[name],
+                         'std': self.std[name], 'identifiable': self.identifiable[name]})
+        return rows
+
+
+def residual_block(kind: str, n: int) -> slice:
+    """Columns of one measurement kind in a sample's residual rows (pose 6, wrench 6,
+    tensions n, lengths n)."""
+    blocks = {'position': slice(0, 3), 'rotation': slice(3, 6), 'force': slice(6, 9),
+              'moment': slice(9, 12), 'tension': slice(12, 12 + n), 'length': slice(12 + n, None)}
+    if kind not in blocks:
+        raise ValueError(f'unknown residual kind {kind!r} (known: {", ".join(RESIDUAL_KINDS)})')
+    return blocks[kind]
+
+
+def _rms_by_kind(raw: FloatArray, mask: NDArray[np.bool_], n: int) -> dict[str, float]:
+    out = {}
+    for kind in RESIDUAL_KINDS:
+        sl = residual_block(kind, n)
+        m = mask[:, sl]
+        if m.any():
+            out[kind] = float(np.sqrt(np.mean(raw[:, sl][m] ** 2)))
+    return out
+
+
+def _parameter_names(kinds: Sequence[str], n: int) -> list[str]:
+    return [PARAMETER_NAMES[kind].format(j=j) for kind in kinds for j in range(n)]
+
+
+def _fit_columns(kinds: Sequence[str], n: int) -> NDArray[np.int64]:
+    return np.concatenate([np.arange(n) + FIT_KINDS.index(kind) * n for kind in kinds])
+
+
+def _check_fit(fit: Sequence[str] | str) -> tuple[str, ...]:
+    kinds = (fit,) if isinstance(fit, str) else tuple(fit)
+    aliases = {'rest_length_offset': 'rest_length_offsets', 'offsets': 'rest_length_offsets'}
+    kinds = tuple(aliases.get(k, k) for k in kinds)
+    unknown = [k for k in kinds if k not in FIT_KINDS]
+    if unknown or not kinds:
+        raise ValueError(f'fit must name some of {FIT_KINDS}, got {list(fit)}')
+    return tuple(k for k in FIT_KINDS if k in kinds)
+
+
+@dataclass
+class Identifiability:
+    """The identifiable subspace of the scaled parameters: ``basis`` (P, q) orthonormal,
+    ``null`` (P, P - q) its complement, the singular values, and words for each null
+    direction."""
+
+    basis: FloatArray
+    null: FloatArray
+    singular_values: FloatArray
+    descriptions: list[str]
+    zero_columns: NDArray[np.int64]
+
+
+def identifiability(information: FloatArray, names: Sequence[str],
+                    describe: Callable[[FloatArray], str] | None = None,
+                    held: FloatArray | None = None) -> Identifiability:
+    """Split the scaled parameter space into what the information ``S`` (P, P) determines and
+    what it does not: parameters no measurement depends on (zero diagonal) first, each on its
+    own, then the eigen-directions of the rest whose singular value ``sqrt(lambda)`` is below
+    :data:`RANK_TOLERANCE` of the largest or below 1 (std above one scaled unit). ``held``
+    (P, h) orthonormal: directions known to be unidentifiable (their information is removed)."""
+    P = information.shape[0]
+    if held is not None and held.shape[1]:
+        project = np.eye(P) - held @ held.T
+        information = project @ information @ project
+    diag = np.diag(information)
+    top = float(diag.max()) if P else 0.0
+    zero = np.flatnonzero(diag <= (RANK_TOLERANCE ** 2) * max(top, 1e-300))
+    rest = np.setdiff1d(np.arange(P), zero)
+    null_vectors = [np.eye(P)[:, j] for j in zero]
+    basis = []
+    singular = []
+    if rest.size:
+        lam, V = np.linalg.eigh(information[np.ix_(rest, rest)])
+        s = np.sqrt(np.maximum(lam, 0.0))
+        cut = max(RANK_TOLERANCE * float(s.max()), 1.0)
+        for value, vec in zip(s, V.T, strict=True):
+            full = np.zeros(P)
+            full[rest] = vec
+            (basis if value > cut else null_vectors).append(full)
+            singular.append(value)
+    describe = describe or (lambda v: _combination_words(v, names))
+    return Identifiability(
+        np.array(basis).T.reshape(P, len(basis)),
+        np.array(null_vectors).T.reshape(P, len(null_vectors)),
+        np.sort(np.array(singular))[::-1], [describe(v) for v in null_vectors], zero)
+
+
+def _combination_words(v: FloatArray, names: Sequence[str], limit: int = 6) -> str:
+    order = np.argsort(-np.abs(v))
+    big = [j for j in order[:limit] if abs(v[j]) >= 0.1 * abs(v[order[0]])]
+    terms = ' '.join(f'{v[j]:+.2f} {names[j]}' for j in big)
+    more = ' ...' if np.count_nonzero(np.abs(v) >= 0.1 * abs(v[order[0]])) > len(big) else ''
+    return f'the combination {terms}{more} (scaled units)'
+
+
+def _describe(v: FloatArray, names: Sequence[str], model: JointModel, data: _Data,
+              kinds: Sequence[str], noise: CalibrationNoise) -> str:
+    """Words for one unidentifiable direction ``v`` of the scaled parameters."""
+    n = model.n_strings
+    force = measures_force(data, noise)
+    nz = np.flatnonzero(np.abs(v) > 1e-9)
+    if nz.size == 1:
+        name = names[nz[0]]
+        j = int(re.search(r'\[(\d+)\]', name).group(1))
+        what = (f"{name} (string {model.string_names[j]}): no measurement depends on it")
+        if name.startswith('stiffness') or not force:
+            if not np.isfinite(data.tensions[:, j]).any() and not data.has_wrench.any():
+                what += ' (its tension is not measured and no sample has a known load)'
+        return what
+    if 'stiffness' in kinds:
+        ks = v[:n] if kinds[0] == 'stiffness' else np.zeros(n)
+        if np.linalg.norm(ks) > 0.99 * np.linalg.norm(v) and \
+                abs(ks.sum()) > 0.99 * math.sqrt(n) * np.linalg.norm(ks):
+            reason = ('no sample measures a force' if not force
+                      else 'the forces measured do not fix it')
+            return (f'the common scale of all stiffnesses: {reason} (a tension or a known '
+                    'load); the ratios between them are fitted, the scale is held at nominal')
+    return _combination_words(v, names)
+
+
+# ------------------------------------------------------------------------------ the fit
+def measures_force(data: _Data, noise: CalibrationNoise,
+                   probability: float = SCALE_TEST_PROBABILITY) -> bool:
+    """Whether the samples measure a force: a load cell, or known loads that differ from zero
+    beyond their noise (their whitened chi-square exceeds its ``1 - probability`` quantile).
+    Without one, the common scale of the stiffnesses is unidentifiable: ``F(c k) = c F(k)`` and
+    ``F = -W = 0`` at every sample, whatever ``c``."""
+    if np.isfinite(data.tensions).any():
+        return True
+    loads = data.wrench[data.has_wrench]
+    if loads.size == 0:
+        return False
+    std = np.concatenate([np.full(3, noise.force), np.full(3, noise.moment)])
+    return float(np.sum((loads / std) ** 2)) > chdtri(loads.size, probability)
+
+
+def initial_screws(model: JointModel, data: _Data) -> FloatArray:
+    """A starting screw per sample: the measured pose's (on the rotation branch nearest the
+    previous sample's screw), else the nominal model's equilibrium under the measured load
+    (zero when unknown) from the previous screw."""
+    if data.has_pose.all():
+        return log_se3_sequence(data.poses, model.initial_screw)
+    xi = np.empty((data.n_samples, 6))
+    previous = model.initial_screw
+    for i in range(data.n_samples):
+        if data.has_pose[i]:
+            xi[i] = log_se3(data.poses[i], reference=previous)
+        else:
+            eq = solve_equilibrium(model, -data.wrench[i] if data.has_wrench[i] else np.zeros(6),
+                                   data.rest[i], initial_screw=previous)
+            xi[i] = eq.screw
+        previous = xi[i]
+    return xi
+
+
+def _min_rows(data: _Data) -> int:
+    return int(data.mask().sum())
+
+
+def _robust_weights(residuals: FloatArray, loss: str) -> tuple[FloatArray, FloatArray]:
+    """Loss values ``rho`` and IRLS weights ``rho'`` of whitened residuals for scipy's losses
+    (``rho(z)`` of ``z = (r / f)^2`` scaled by ``f^2``, ``f`` = :data:`ROBUST_SCALE`)."""
+    f2 = ROBUST_SCALE ** 2
+    z = residuals * residuals / f2
+    if loss == 'linear':
+        return z * f2, np.ones_like(z)
+    if loss == 'soft_l1':
+        t = np.sqrt(1.0 + z)
+        return 2.0 * (t - 1.0) * f2, 1.0 / t
+    if loss == 'huber':
+        big = z > 1.0
+        root = np.sqrt(np.where(big, z, 1.0))
+        return np.where(big, 2.0 * root - 1.0, z) * f2, np.where(big, 1.0 / root, 1.0)
+    if loss == 'cauchy':
+        return np.log1p(z) * f2, 1.0 / (1.0 + z)
+    return np.arctan(z) * f2, 1.0 / (1.0 + z * z)  # arctan
+
+
+def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray, loss: str,
+           rows: NDArray[np.bool_], max_iterations: int = MAX_ITERATIONS,
+           tolerance: float = FIT_TOLERANCE) -> tuple[FloatArray, FloatArray, int, bool]:
+    """Levenberg-Marquardt over ``z = z0 + basis y`` and every sample's screw, with the screws
+    eliminated per sample (Schur complement: one q x q system per iteration) and the robust
+    ``loss`` by iteratively re-weighted least squares (a descent method for these concave
+    losses); only the residual rows ``rows`` (N, R) count. Returns (z, screws, iterations,
+    converged)."""
+    q = basis.shape[1]
+    z, xi = z0.copy(), xi0.copy()
+    mask = rows.astype(np.float64)
+
+    def cost_of(ev: _Evaluation) -> tuple[float, FloatArray]:
+        rho, weight = _robust_weights(ev.residuals * mask, loss)
+        return float(np.sum(rho * mask)), weight * mask
+
+    ev = problem.evaluate(z, xi)
+    cost, weight = cost_of(ev)
+    lam = 1e-3
+    converged = False
+    iterations = 0
+    for iterations in range(1, max_iterations + 1):  # noqa: B007 (returned)
+        sw = np.sqrt(weight)
+        jx = ev.jac_screw * sw[..., None]
+        jp = (ev.jac_parameters @ basis) * sw[..., None]
+        r = ev.residuals * sw
+        A = np.swapaxes(jx, -1, -2) @ jx
+        B = np.swapaxes(jx, -1, -2) @ jp
+        gx = np.einsum('nri,nr->ni', jx, r)
+        gp = np.einsum('nri,nr->i', jp, r)
+        C = np.einsum('nri,nrj->ij', jp, jp)
+        dA = np.diagonal(A, axis1=-2, axis2=-1)
+        dC = np.diag(C).copy()
+        accepted = False
+        for _ in range(12):
+            Ad = A + lam * (dA[..., None] * np.eye(6) + 1e-12 * np.eye(6))
+            Ainv_B = np.linalg.solve(Ad, B) if q else np.zeros((len(xi), 6, 0))
+            Ainv_g = np.linalg.solve(Ad, gx[..., None])[..., 0]
+            S = C + lam * np.diag(dC + 1e-12) - np.einsum('nia,nib->ab', B, Ainv_B)
+            rhs = gp - np.einsum('nia,ni->a', B, Ainv_g)
+            dy = -np.linalg.solve(S, rhs) if q else np.zeros(0)
+            dxi = -(Ainv_g + Ainv_B @ dy)
+            z_trial, xi_trial = z + basis @ dy, xi + dxi
+            try:
+                ev_trial = problem.evaluate(z_trial, xi_trial)
+            except ValueError:
+                lam *= 10.0
+                continue
+            cost_trial, weight_trial = cost_of(ev_trial)
+            if cost_trial <= cost:
+                accepted = True
+                break
+            lam *= 10.0
+        if not accepted:
+            converged = True  # no descent direction left at working precision
+            break
+        decrease = cost - cost_trial
+        z, xi, ev, weight = z_trial, xi_trial, ev_trial, weight_trial
+        cost = cost_trial
+        lam = max(lam / 10.0, 1e-12)
+        if decrease <= tolerance * max(cost, 1.0):
+            converged = True
+            break
+    return z, xi, iterations, converged
+
+
+def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
+                    fit: Sequence[str] | str = ('stiffness', 'rest_length_offsets'),
+                    noise: CalibrationNoise | Mapping[str, float] | None = None,
+                    loss: str = 'soft_l1',
+                    bounds: Mapping[str, tuple[float, float]] | None = None,
+                    progress: Callable[[int, int], None] | None = None) -> CalibrationResult:
+    """Fit each string's stiffness and rest-length offset of ``model`` (the nominal) to
+    ``samples``; see the module docstring for the data model and the method.
+
+    ``fit``: kinds of :data:`FIT_KINDS`; ``noise``: :class:`CalibrationNoise` or a mapping of
+    its fields (defaults: pose 0.1 mm and 0.1 deg, wrench 0.01 N and 0.0005 N m, tension
+    0.005 N, length 0.1 mm); ``loss``: one of :data:`LOSSES` (robust losses act beyond
+    :data:`ROBUST_SCALE` sigma); ``bounds``: ``{kind: (low, high)}`` plausibility limits on the
+    fitted values (stiffness in N/m, offsets in m): a value outside makes ``success`` False and
+    names it. ``progress(done, total)`` is called between the stages. Bad input raises
+    ValueError naming the field; too few samples or measurements raise ValueError saying what
+    is missing.
+    """
+    started = time.perf_counter()
+    kinds = _check_fit(fit)
+    noise = CalibrationNoise.of(noise)
+    if loss not in LOSSES:
+        raise ValueError(f'loss must be one of {LOSSES}, got {loss!r}')
+    bounds = dict(bounds or {})
+    for key, pair in bounds.items():
+        if _check_fit(key)[0] not in kinds or len(pair) != 2 or not pair[0] < pair[1]:
+            raise ValueError(f'bounds[{key!r}] must be (low, high) with low < high for a '
+                             'fitted kind')
+    data = _samples_data(model, samples)
+    n = model.n_strings
+    N = data.n_samples
+    if N == 0:
+        raise ValueError('no samples')
+    if not data.has_pose.any() and not data.has_wrench.any() and \
+            not np.isfinite(data.lengths).any():
+        raise ValueError('the samples carry no pose, no known load and no string lengths: '
+                         'nothing fixes the configuration')
+    names = _parameter_names(kinds, n)
+    columns = _fit_columns(kinds, n)
+    P = columns.size
+    total_rows = _min_rows(data)
+    if total_rows < 6 * N + P:
+        raise ValueError(f'too few measurements: {total_rows} values for {6 * N} screw '
+                         f'coordinates ({N} samples) and {P} parameters; record more samples '
+                         'or add a sensor (pose, wrench, tensions)')
+    stages = 4
+    if progress:
+        progress(0, stages)
+    problem = _Problem(model, data, noise)
+    z_nominal = np.zeros(2 * n)
+    xi = problem.refine_screws(z_nominal, initial_screws(model, data))
+    before = problem.evaluate(z_nominal, xi)
+    rms_before = _rms_by_kind(before.raw, problem.mask, n)
+    info = problem.information(before, columns)
+    held = np.zeros((P, 0))
+    if 'stiffness' in kinds and not measures_force(data, noise):
+        held = np.zeros((P, 1))
+        held[:n, 0] = 1.0 / math.sqrt(n)  # stiffness columns come first
+    ident = identifiability(info, names, lambda v: _describe(v, names, model, data, kinds, noise),
+                            held)
+    basis_full = np.zeros((2 * n, ident.basis.shape[1]))
+    basis_full[columns] = ident.basis
+    if progress:
+        progress(1, stages)
+
+    rows = problem.mask.copy()
+    iterations = 0
+    converged = True
+    z, xi_fit = z_nominal, xi
+    if basis_full.shape[1]:
+        # A robust stage only finds the outliers (the final stage polishes): a looser tolerance.
+        z, xi_fit, used, converged = _solve(
+            problem, z_nominal, basis_full, xi, loss, rows,
+            tolerance=FIT_TOLERANCE if loss == 'linear' else ROBUST_TOLERANCE)
+        iterations += used
+    if progress:
+        progress(2, stages)
+    # Outliers: samples whose whitened chi-square is improbable for their degrees of freedom.
+    ev = problem.evaluate(z, xi_fit, jacobians=False)
+    sample_chi2 = np.sum(ev.residuals ** 2, axis=1)
+    dof_i = problem.mask.sum(axis=1) - 6
+    limit = np.where(dof_i > 0, chdtri(np.maximum(dof_i, 1), OUTLIER_PROBABILITY), np.inf)
+    outliers = np.flatnonzero(sample_chi2 > limit) if loss != 'linear' else np.zeros(0, int)
+    inliers = np.setdiff1d(np.arange(N), outliers)
+    if inliers.size * 6 + P > int(problem.mask[inliers].sum()):
+        raise ValueError(f'too many outliers ({outliers.size} of {N} samples) left too few '
+                         'measurements')
+    message = 'converged'
+    if basis_full.shape[1] and loss != 'linear':
+        # The final estimate: plain least squares on the inliers, from the robust solution.
+        rows_in = rows.copy()
+        rows_in[outliers] = False
+        z, xi_fit, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear', rows_in)
+        iterations += used
+    success = True
+    if not basis_full.shape[1]:
+        success, message = False, ('no parameter is identifiable from these samples: all held '
+                                   'at nominal')
+    elif not converged:
+        success, message = False, f'no convergence in {MAX_ITERATIONS} iterations'
+    if progress:
+        progress(3, stages)
+
+    # One evaluation at the estimate: the inliers' rows give the statistics, all rows the
+    # residuals after (every sample's rows depend on its own screw only).
+    ev_all = problem.evaluate(z, xi_fit)
+    ev = ev_all.subset(inliers)
+    mask_in = problem.mask[inliers]
+    rms_after = _rms_by_kind(ev.raw, mask_in, n)
+    chi2_value = float(np.sum(ev.residuals ** 2))
+    dof = int(mask_in.sum()) - 6 * inliers.size - ident.basis.shape[1]
+    info = problem.information(ev, columns)
+    cov_scaled = _subspace_covariance(info, ident.basis)
+    unit = problem.unit[columns]
+    covariance = cov_scaled * unit[:, None] * unit[None, :]
+    k, d = problem.parameters(z)
+    values_all = np.concatenate([k, d])
+    nominal_all = np.concatenate([model.k, np.zeros(n)])
+    ident_flags = _identifiable_flags(ident, P)
+    std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
+    parameters = {name: float(values_all[c]) for name, c in zip(names, columns, strict=True)}
+    nominal = {name: float(nominal_all[c]) for name, c in zip(names, columns, strict=True)}
+    std_map = {name: (float(s) if flag else math.nan)
+               for name, s, flag in zip(names, std, ident_flags, strict=True)}
+    if 'stiffness' in kinds and not ident.basis.shape[1] == P:
+        # Stiffness ratios of a scale-free fit keep their (constrained) std.
+        for name, s, flag in zip(names, std, ident_flags, strict=True):
+            if not flag and name.startswith('stiffness') and _only_scale_unidentifiable(
+                    ident, names, name):
+                std_map[name] = float(s)
+    for key, (low, high) in bounds.items():
+        kind = _check_fit(key)[0]
+        for name in names:
+            if name.startswith(PARAMETER_NAMES[kind].split('[')[0] + '[') and \
+                    not low <= parameters[name] <= high:
+                success = False
+                message = f'{name} = {parameters[name]:.6g} is outside bounds [{low}, {high}]'
+    calibrated = model_with_parameters(model, k, model.rest_lengths + d)
+    if progress:
+        progress(4, stages)
+    return CalibrationResult(
+        success=success, message=message, model=calibrated, names=names,
+        parameters=parameters, std=std_map, covariance=covariance,
+        identifiable=dict(zip(names, map(bool, ident_flags), strict=True)),
+        unidentifiable=ident.descriptions, singular_values=ident.singular_values,
+        residual_rms_before=rms_before, residual_rms_after=rms_after,
+        outliers=outliers.tolist(), iterations=iterations, screws=xi_fit, chi2=chi2_value,
+        dof=dof, nominal=nominal, offsets=d,
+        residuals_before=np.where(problem.mask, before.raw, np.nan),
+        residuals_after=np.where(problem.mask, ev_all.raw, np.nan),
+        seconds=time.perf_counter() - started)
+
+
+def _only_scale_unidentifiable(ident: Identifiability, names: Sequence[str], name: str) -> bool:
+    return any(text.startswith('the common scale') for text in ident.descriptions) and \
+        name not in [names[j] for j in ident.zero_columns]
+
+
+def _identifiable_flags(ident: Identifiability, P: int) -> NDArray[np.bool_]:
+    """A parameter is identifiable when no unidentifiable direction involves it."""
+    if ident.null.shape[1] == 0:
+        return np.ones(P, bool)
+    return np.max(np.abs(ident.null), axis=1) < 1e-6
+
+
+def _subspace_covariance(information: FloatArray, basis: FloatArray) -> FloatArray:
+    """``V (V^T S V)^-1 V^T``: the covariance with the unidentifiable directions held."""
+    if basis.shape[1] == 0:
+        return np.zeros_like(information)
+    reduced = basis.T @ information @ basis
+    return basis @ np.linalg.solve(reduced, basis.T)
+
+
+def cramer_rao_std(model: JointModel, true_stiffness: ArrayLike, true_offsets: ArrayLike,
+                   true_screws: ArrayLike, samples: Sequence[CalibrationSample],
+                   fit: Sequence[str] | str = ('stiffness', 'rest_length_offsets'),
+                   noise: CalibrationNoise | Mapping[str, float] | None = None,
+                   basis: FloatArray | None = None) -> FloatArray:
+    """Cramer-Rao bound (std, units of each parameter, order of ``result.names``) of the
+    parameters for the data model of :func:`calibrate_joint`, at the true parameters and
+    screws: the inverse of the information with the screws eliminated (in the subspace
+    ``basis`` (P, q) of the scaled coordinates when some directions are held)."""
+    kinds = _check_fit(fit)
+    data = _samples_data(model, samples)
+    problem = _Problem(model, data, CalibrationNoise.of(noise))
+    n = model.n_strings
+    k = np.asarray(true_stiffness, dtype=np.float64)
+    z = np.concatenate([(k - problem.k_nominal) / (STIFFNESS_UNIT * problem.k_nominal),
+                        np.asarray(true_offsets, dtype=np.float64) / OFFSET_UNIT])
+    ev = problem.evaluate(z, as_screws(true_screws))
+    columns = _fit_columns(kinds, n)
+    info = problem.information(ev, columns)
+    V = np.eye(columns.size) if basis is None else basis
+    cov = _subspace_covariance(info, V)
+    unit = problem.unit[columns]
+    return np.sqrt(np.maximum(np.diag(cov), 0.0)) * unit
+
+
+# ------------------------------------------------------------------------------ spines
+@dataclass(frozen=True)
+class ChainCalibrationSample:
+    """One quasi-static instant of a spine (N joints, n strings each).
+
+    ``rest_lengths`` (N, n) commanded per joint; ``link_poses`` (N, 4, 4) or (N, 7): the
+    measured pose of every link {2}_i in the base; ``tip_wrench`` (6,) the load on link N in the
+    base about its origin (None when unknown, zeros when unloaded); ``tensions`` (N, n) N, NaN
+    where none.
+    """
+
+    rest_lengths: ArrayLike
+    link_poses: ArrayLike
+    tip_wrench: ArrayLike | None = None
+    tensions: ArrayLike | None = None
+
+
+def _chain_joint_samples(chain: Any, samples: Sequence[ChainCalibrationSample], noise:
+                         CalibrationNoise) -> tuple[list[list[CalibrationSample]],
+                                                    list[CalibrationNoise]]:
+    """Per joint: samples in the joint's own frames (relative pose, load moved into {1}_i) and
+    the relative pose's noise."""
+    from tensegrity_stiffness.mechanics.chain import _adjoint
+
+    N = chain.n_joints
+    per_joint: list[list[CalibrationSample]] = [[] for _ in range(N)]
+    spans = np.zeros(N)
+    arms = np.zeros(N)
+    g = chain.gravity
+    weights = chain._has_weights(g)
+    for s_index, s in enumerate(samples):
+        where = f'samples[{s_index}]'
+        raw = finite_array(f'{where}.link_poses', s.link_poses)
+        if raw.shape not in ((N, 4, 4), (N, 7)):
+            raise ValueError(f'{where}.link_poses must have shape ({N}, 4, 4) or ({N}, 7), got '
+                             f'{raw.shape}')
+        L = np.array([pose_transform(p, f'{where}.link_poses[{i}]') for i, p in enumerate(raw)])
+        P = np.empty_like(L)
+        P[0] = np.eye(4)
+        for i in range(1, N):
+            P[i] = L[i - 1] @ chain.link_offsets[i - 1]
+        rest = finite_array(f'{where}.rest_lengths', s.rest_lengths)
+        if rest.ndim != 2 or rest.shape[0] != N:
+            raise ValueError(f'{where}.rest_lengths must have one row per joint ({N}), got '
+                             f'shape {rest.shape}')
+        tensions = None if s.tensions is None else np.asarray(s.tensions, dtype=np.float64)
+        loads = None
+        if s.tip_wrench is not None:
+            W = finite_array(f'{where}.tip_wrench', s.tip_wrench)
+            if W.shape != (6,):
+                raise ValueError(f'{where}.tip_wrench must have shape (6,), got {W.shape}')
+            B = np.broadcast_to(W, (N, 6))
+            if weights:
+                w, _ = chain._weights(L, g)
+                B = W + np.cumsum(w[::-1], axis=0)[::-1]
+            loads = (np.swapaxes(_adjoint(P), 1, 2) @ B[:, :, None])[:, :, 0]
+        for i in range(N):
+            T = np.linalg.solve(P[i], L[i])
+            spans[i] = max(spans[i], float(np.linalg.norm(L[i][:3, 3] - P[i][:3, 3])))
+            arms[i] = max(arms[i], float(np.linalg.norm(P[i][:3, 3])))
+            per_joint[i].append(CalibrationSample(
+                rest[i], pose=T, tensions=None if tensions is None else tensions[i],
+                external_wrench=None if loads is None else loads[i]))
+    noises = [noise]
+    for i in range(1, N):
+        # Two measured poses: sqrt(2) their noise, plus link i-1's rotation noise acting on
+        # the distance between the frames; the load's force noise acting on the arm from the
+        # base origin to {1}_i (isotropic, first order).
+        position = math.sqrt(2.0 * noise.position ** 2
+                             + (2.0 / 3.0) * (spans[i] * noise.rotation) ** 2)
+        moment = math.sqrt(noise.moment ** 2 + (2.0 / 3.0) * (arms[i] * noise.force) ** 2)
+        noises.append(CalibrationNoise(position=position, rotation=math.sqrt(2.0) * noise.rotation,
+                                       force=noise.force, moment=moment,
+                                       tension=noise.tension, length=noise.length))
+    return per_joint, noises
+
+
+def calibrate_chain(chain: Any, samples: Sequence[ChainCalibrationSample],
+                    fit: Sequence[str] | str = ('stiffness', 'rest_length_offsets'),
+                    noise: CalibrationNoise | Mapping[str, float] | None = None,
+                    loss: str = 'soft_l1') -> list[CalibrationResult]:
+    """Calibrate every joint of a spine
+    (:class:`~tensegrity_stiffness.mechanics.chain.JointChain`) from
+    recordings with every link's pose: joint i is fitted by :func:`calibrate_joint` to the
+    pose of {2}_i in {1}_i (``P_i^-1 L_i``, ``P_i = L_{i-1} O_{i-1}``) and to the load it
+    carries moved into {1}_i, ``Ad_{P_i}^T (W + sum_{k >= i} w_k)`` (the chain's link weights
+    ``w_k`` at the measured poses; :mod:`tensegrity_stiffness.mechanics.chain`). A relative pose
+    carries
+    the noise of two measured poses: its std is taken as ``sqrt(2)`` times the rotation noise
+    and ``sqrt(2 sp^2 + 2/3 (d sr)^2)`` in position (``d`` the largest distance between the two
+    frames), and the moved load's moment noise as ``sqrt(sm^2 + 2/3 (a sf)^2)`` (``a`` the
+    largest distance of {1}_i from the base origin); the correlation between neighbouring joints
+    (they share a link's pose) is left out. One :class:`CalibrationResult` per joint."""
+    noise = CalibrationNoise.of(noise)
+    per_joint, noises = _chain_joint_samples(chain, samples, noise)
+    return [calibrate_joint(model, joint_samples, fit=fit, noise=joint_noise, loss=loss)
+            for model, joint_samples, joint_noise in zip(chain.joints, per_joint, noises,
+                                                         strict=True)]

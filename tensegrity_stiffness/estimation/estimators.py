@@ -1,0 +1,1096 @@
+"""Pose, load and stiffness of a tensegrity joint (or a spine) estimated from what robots
+measure, with their uncertainty (no rclpy).
+
+Measurements (:class:`Measurements`, models and Jacobians in :mod:`~tensegrity_stiffness.
+sensor_models`): string tensions (load cells), string lengths (stretch sensors), a pose (motion
+capture), the direction of gravity in link 2 (an accelerometer at rest) and the external wrench
+(known, e.g. zero, or measured by a force-torque sensor; ``None`` = unknown). Rest lengths
+(motor encoders) are known inputs of the model.
+
+Method: weighted nonlinear least squares over the screw ``xi`` (Gauss-Newton with Levenberg-
+Marquardt damping, analytic Jacobians), warm-started. Each measurement ``z`` with covariance
+``S`` contributes the whitened residual ``L^-1 (h(xi) - z)`` (``S = L L^T``). A known or measured
+load ``W_m`` enters as the quasi-static residual ``F(xi) + W_m`` with the load's covariance (at
+the truth ``F + W = 0``, Section VI). An unknown load is a free unknown of the equilibrium
+``F(xi) + W = 0``, which then carries no information on ``xi``: it is eliminated exactly and
+recovered as ``W = -F(xi)`` with covariance ``K C K^T`` (``K = dF/dxi``, eq. 10).
+
+Uncertainty: the screw covariance is the inverse of the weighted normal matrix ``C = (J^T J)^-1``
+at the estimate (the Cramer-Rao bound of the linearised problem); the pose covariance follows the
+ROS ``PoseWithCovariance`` convention (``[dp; dtheta]`` in {1}, ``p -> p + dp``,
+``R -> exp(hat(dtheta)) R``): ``P C P^T`` with ``P`` = :func:`~tensegrity_stiffness.
+sensor_models.pose_jacobian`. ``K_c``'s std is the first-order propagation of ``C`` through
+central differences of ``K_c(xi)``.
+
+Observability: the rank and condition number of the whitened Jacobian with the translation
+columns scaled by the mean rest length (so that radians and metres weigh alike). A set that
+cannot determine the pose (fewer than 6 independent measured degrees of freedom, e.g. 3 tensions
+and an unknown load, or gravity alone) gets ``success=False, observable=False`` and a message
+naming what is missing; it never gets a number.
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.linalg import lapack
+
+from tensegrity_stiffness.estimation import sensor_models as sm
+from tensegrity_stiffness.geometry.screw import (
+    ScrewKinematics,
+    as_screws,
+    check_in_chart,
+    hat3,
+    log_se3,
+)
+from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.mechanics.chain import ChainState, JointChain
+from tensegrity_stiffness.mechanics.equilibrium import (
+    MAX_ROTATION_STEP,
+    MAX_TRANSLATION_STEP,
+    solve_equilibrium,
+)
+from tensegrity_stiffness.mechanics.joint import JointModel, JointState
+
+__all__ = [
+    'CHAIN_EQUILIBRIUM_TOLERANCE',
+    'DAMPING_GROWTH',
+    'DECREMENT_TOLERANCE',
+    'INITIAL_DAMPING',
+    'MAX_DAMPING',
+    'MAX_ITERATIONS',
+    'MAX_RESTORATION_STEPS',
+    'POSE_AXES',
+    'RANK_TOLERANCE',
+    'STALL_TOLERANCE',
+    'STIFFNESS_JACOBIAN_REUSE',
+    'STIFFNESS_STEP',
+    'ChainEstimate',
+    'JointEstimate',
+    'Measurements',
+    'PreparedMeasurements',
+    'cartesian_stiffness_jacobian',
+    'estimate_chain_state',
+    'estimate_joint_state',
+]
+
+FloatArray = NDArray[np.float64]
+
+#: Converged when the Gauss-Newton decrement ``g^T A^-1 g`` (the squared length of the step in
+#: units of its own std) is below this: the step left is under 0.03 standard deviations, which
+#: moves the NEES by about 1e-3 (a tracker's warm start converges in one step).
+DECREMENT_TOLERANCE = 1e-3
+#: Gauss-Newton / Levenberg-Marquardt iterations before giving up.
+MAX_ITERATIONS = 30
+#: Singular values of the scaled whitened Jacobian below this fraction of the largest count as
+#: zero (an unobservable direction).
+RANK_TOLERANCE = 1e-9
+#: Damping factor of the first rejected step and the factor it grows by.
+INITIAL_DAMPING = 1e-4
+DAMPING_GROWTH = 10.0
+#: An accepted step that lowers the cost by less than this fraction of it ends the iteration:
+#: the iterate creeps along a kink of the cost (a string at its slack or saturation boundary).
+STALL_TOLERANCE = 1e-9
+#: Beyond this damping (a step a 1e-10 fraction of the gradient step) the iterate is a minimum.
+MAX_DAMPING = 1e10
+#: Central-difference step (rad, m) of dK_c/dxi for the std of K_c.
+STIFFNESS_STEP = 1e-6
+#: The chain's equilibria count as met when every residual is below this (N, N m).
+CHAIN_EQUILIBRIUM_TOLERANCE = 1e-9
+#: Newton corrections onto the chain's equilibria after each step.
+MAX_RESTORATION_STEPS = 8
+#: Names of the pose coordinates in the PoseWithCovariance order.
+POSE_AXES = ('x', 'y', 'z', 'rx', 'ry', 'rz')
+
+
+# ---------------------------------------------------------------------------------- inputs
+def _std(name: str, value: Any, size: int) -> FloatArray:
+    """A std given as a scalar or one per entry: (size,) array, finite and > 0."""
+    if value is None:
+        raise ValueError(f'{name} is required with its measurement')
+    if isinstance(value, float) and math.isfinite(value) and value > 0.0:
+        return np.full(size, value)
+    arr = finite_array(name, value).ravel()
+    if arr.size == 1:
+        arr = np.full(size, arr[0])
+    if arr.size != size:
+        raise ValueError(f'{name} must be a scalar or have {size} entries, got {arr.size}')
+    if np.any(arr <= 0.0):
+        raise ValueError(f'{name} must be > 0, got minimum {arr.min()}')
+    return arr
+
+
+#: Checked covariances and their whiteners by content: a tracker's covariances come from its
+#: settings (or a sensor's fixed covariance) and repeat every estimate. A few are kept.
+_COVARIANCES: dict[bytes, tuple[FloatArray, FloatArray]] = {}
+_COVARIANCES_KEPT = 16
+
+
+def _covariance(name: str, value: Any, size: int) -> tuple[FloatArray, FloatArray]:
+    """A symmetric positive definite (size, size) covariance and its whitener ``L^-1`` with
+    ``covariance = L L^T`` (whitened residual ``L^-1 r``; one Cholesky factorisation checks
+    and whitens; both read-only, reused for a covariance seen before); ValueError naming
+    ``name``."""
+    if value is None:
+        raise ValueError(f'{name} is required with its measurement')
+    arr = finite_array(name, value)
+    if arr.shape != (size, size):
+        raise ValueError(f'{name} must have shape ({size}, {size}), got {arr.shape}')
+    key = arr.tobytes()
+    known = _COVARIANCES.get(key)
+    if known is not None:
+        return known
+    if not np.allclose(arr, arr.T, rtol=1e-9, atol=0.0):
+        raise ValueError(f'{name} must be symmetric')
+    covariance = 0.5 * (arr + arr.T)
+    try:
+        factor = np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError:
+        raise ValueError(f'{name} must be positive definite') from None
+    whitener = np.linalg.inv(factor)
+    covariance.flags.writeable = whitener.flags.writeable = False
+    if len(_COVARIANCES) >= _COVARIANCES_KEPT:
+        _COVARIANCES.pop(next(iter(_COVARIANCES), None), None)
+    _COVARIANCES[key] = (covariance, whitener)
+    return covariance, whitener
+
+
+def _per_string(name: str, value: Any, n: int) -> FloatArray:
+    arr = np.asarray(value, dtype=np.float64).ravel() if value is not None else None
+    if arr is None:
+        return np.full(n, np.nan)
+    if arr.size != n:
+        raise ValueError(f'{name} must have {n} entries (one per string, NaN = not measured), '
+                         f'got {arr.size}')
+    if np.isinf(arr).any():
+        raise ValueError(f'{name} must be finite or NaN (not measured), got inf')
+    return arr
+
+
+_NOT_MEASURED = (np.empty(0, dtype=np.intp), np.empty(0), np.empty(0))
+for _empty in _NOT_MEASURED:
+    _empty.flags.writeable = False
+
+
+def _string_readings(name: str, value: Any, std_name: str, std: Any, n: int
+                     ) -> tuple[NDArray[np.intp], FloatArray, FloatArray]:
+    """(indices of the measured strings, their values, their weights 1/std) of a per-string
+    reading (NaN = not measured; None: no string measured, std not needed)."""
+    if value is None:
+        return _NOT_MEASURED
+    values = _per_string(name, value, n)
+    index = np.flatnonzero(~np.isnan(values))
+    if not index.size:
+        return _NOT_MEASURED
+    if isinstance(std, float) and math.isfinite(std) and std > 0.0:  # the common scalar
+        weight = np.full(index.size, 1.0 / std)
+    else:
+        weight = 1.0 / _std(std_name, std, n)[index]
+    return index, values[index], weight
+
+
+@dataclass
+class Measurements:
+    """One instant's sensor readings (see the module docstring).
+
+    ``tensions`` (n,) N and ``lengths`` (n,) m in the config's string order, NaN where a string
+    is not measured; ``tension_std`` / ``length_std`` a scalar or one per string. ``pose`` the
+    measured pose of {2} in {1} ((4, 4) or ``[x y z qx qy qz qw]``) with ``pose_covariance``
+    (6, 6) in the PoseWithCovariance convention. ``gravity`` (3,) the direction of gravity
+    measured in link 2's frame by an accelerometer at rest (normalised here), ``gravity_std`` a
+    scalar or (3,) std of its unit-vector components, ``gravity_base`` (3,) its known direction
+    in {1}. ``external_wrench`` (6,) [N; N m] on link 2 in {1} about its origin with
+    ``wrench_covariance`` (6, 6): a known (zeros with a small covariance for "unloaded") or
+    measured (force-torque) load; ``None`` for an unknown load.
+    """
+
+    tensions: ArrayLike | None = None
+    tension_std: ArrayLike | float | None = None
+    lengths: ArrayLike | None = None
+    length_std: ArrayLike | float | None = None
+    pose: ArrayLike | None = None
+    pose_covariance: ArrayLike | None = None
+    gravity: ArrayLike | None = None
+    gravity_std: ArrayLike | float | None = None
+    gravity_base: ArrayLike | None = None
+    external_wrench: ArrayLike | None = None
+    wrench_covariance: ArrayLike | None = None
+
+    def prepared(self, n_strings: int) -> PreparedMeasurements:
+        """Validated and whitened for a joint with ``n_strings`` strings; bad input raises
+        ValueError naming the field."""
+        return PreparedMeasurements(self, n_strings)
+
+
+#: :meth:`PreparedMeasurements.describe`'s texts by sensor pattern (a tracker's pattern rarely
+#: changes, its measurements are prepared anew for every estimate). A few are kept.
+_DESCRIPTIONS: dict[tuple, str] = {}
+_DESCRIPTIONS_KEPT = 64
+
+
+class PreparedMeasurements:
+    """:class:`Measurements` validated for one joint, with their whitening (reusable)."""
+
+    def __init__(self, m: Measurements, n: int) -> None:
+        self.n_strings = n
+        self.tension_index, self.tensions, self.tension_weight = _string_readings(
+            'tensions', m.tensions, 'tension_std', m.tension_std, n)
+        self.length_index, self.lengths, self.length_weight = _string_readings(
+            'lengths', m.lengths, 'length_std', m.length_std, n)
+        if self.lengths.size and self.lengths.min() <= 0.0:
+            raise ValueError('lengths must be > 0 where measured')
+        self.pose = None
+        if m.pose is not None:
+            self.pose = sm.as_transform(m.pose, 'pose')
+            _, self.pose_whitener = _covariance('pose_covariance', m.pose_covariance, 6)
+        self.gravity = None
+        if m.gravity is not None:
+            self.gravity = sm.unit_vector(m.gravity, 'gravity')
+            if m.gravity_base is None:
+                raise ValueError('gravity_base (the direction of gravity in {1}) is required '
+                                 'with gravity')
+            self.gravity_base = sm.unit_vector(m.gravity_base, 'gravity_base')
+            self.gravity_weight = 1.0 / _std('gravity_std', m.gravity_std, 3)
+        self.wrench = None
+        if m.external_wrench is not None:
+            W = finite_array('external_wrench', m.external_wrench)
+            if W.shape != (6,):
+                raise ValueError(f'external_wrench must have shape (6,), got {W.shape}')
+            self.wrench = W
+            self.wrench_covariance, self.wrench_whitener = _covariance(
+                'wrench_covariance', m.wrench_covariance, 6)
+        nt, nl = self.tension_index.size, self.length_index.size
+        self.rows = nt + nl + (6 if self.pose is not None else 0) + (
+            3 if self.gravity is not None else 0) + (6 if self.wrench is not None else 0)
+        #: Independent measured degrees of freedom (a gravity direction counts 2).
+        self.dof = nt + nl + (6 if self.pose is not None else 0) + (
+            sm.GRAVITY_DOF if self.gravity is not None else 0) + (
+            6 if self.wrench is not None else 0)
+
+    @property
+    def needs_strings(self) -> bool:
+        return bool(self.tension_index.size or self.length_index.size)
+
+    def describe(self, string_names: Sequence[str], load: bool = True) -> str:
+        """The inputs in words, e.g. ``'3 tensions (a, b, c), unknown load'`` (without the load
+        when not ``load``); one text per sensor pattern and names, kept across estimates."""
+        key = (self.tension_index.tobytes(), self.length_index.tobytes(),
+               self.pose is not None, self.gravity is not None, self.wrench is not None, load,
+               tuple(string_names))
+        text = _DESCRIPTIONS.get(key)
+        if text is None:
+            text = self._describe(string_names, load)
+            if len(_DESCRIPTIONS) >= _DESCRIPTIONS_KEPT:
+                _DESCRIPTIONS.pop(next(iter(_DESCRIPTIONS), None), None)
+            _DESCRIPTIONS[key] = text
+        return text
+
+    def _describe(self, string_names: Sequence[str], load: bool) -> str:
+        parts = []
+        for label, index in (('tension', self.tension_index), ('length', self.length_index)):
+            if index.size:
+                names = ', '.join(string_names[i] for i in index)
+                parts.append(f'{index.size} {label}{"s" if index.size > 1 else ""} ({names})')
+        if self.pose is not None:
+            parts.append('a pose')
+        if self.gravity is not None:
+            parts.append('gravity')
+        if load:
+            parts.append('a known load' if self.wrench is not None else 'unknown load')
+        return ', '.join(parts)
+
+
+# ---------------------------------------------------------------------------------- joint
+@dataclass
+class JointEstimate:
+    """Outcome of :func:`estimate_joint_state`.
+
+    ``screw`` (6,), ``transform`` (4, 4) and ``covariance`` (6, 6) of the pose in the
+    PoseWithCovariance convention; ``screw_covariance`` (6, 6) of the screw coordinates;
+    ``external_wrench`` (6,) the load implied at the estimate (``-F(xi)``) with
+    ``wrench_covariance`` (6, 6); ``state`` the :class:`JointState` at the estimate (wrench, K,
+    K_c, tensions, slack ...); ``cartesian_stiffness_std`` (6, 6) the first-order std of K_c;
+    ``chi2`` the weighted squared residual and ``dof`` its degrees of freedom (measured degrees
+    of freedom minus 6); ``observable``, ``rank`` (of 6) and ``condition_number`` of the scaled
+    whitened Jacobian; ``iterations``. When ``success`` is False the numbers are NaN (never a
+    guess) and ``message`` says why.
+    """
+
+    success: bool
+    message: str
+    screw: FloatArray
+    transform: FloatArray
+    covariance: FloatArray
+    screw_covariance: FloatArray
+    external_wrench: FloatArray
+    wrench_covariance: FloatArray
+    state: JointState | None
+    cartesian_stiffness_std: FloatArray
+    chi2: float
+    dof: int
+    observable: bool
+    rank: int
+    condition_number: float
+    iterations: int
+    inputs: str = ''
+    singular_values: FloatArray = field(default_factory=lambda: np.empty(0), repr=False)
+
+
+def _nan(*shape: int) -> FloatArray:
+    return np.full(shape, np.nan)
+
+
+class _JointProblem:
+    """The whitened residual and Jacobian of one joint's measurements at a screw."""
+
+    def __init__(self, model: JointModel, prep: PreparedMeasurements, rest: FloatArray) -> None:
+        self.model = model
+        self.prep = prep
+        self.rest = rest
+        self.length_scale = float(rest.sum()) / rest.size
+
+    def evaluate(self, xi: FloatArray, jacobian: bool = True
+                 ) -> tuple[FloatArray, FloatArray | None, JointState, ScrewKinematics | None]:
+        """Whitened residual (rows,), Jacobian (rows, 6), joint state and kinematics at xi;
+        without ``jacobian`` the residual and the state alone (Jacobian None; the kinematics
+        too, unless the compiled kernel computed them with the state at no extra cost)."""
+        p = self.prep
+        r = np.empty(p.rows)
+        J = np.empty((p.rows, 6)) if jacobian else None
+        kin = None
+        row = 0
+        if (p.needs_strings and jacobian) or self.model.uses_kernel:
+            pred = sm.string_predictions_unchecked(self.model, xi, self.rest)
+            state, kin = pred.state, pred.kinematics
+            strings = ((pred.tensions, pred.tension_jacobian),
+                       (pred.lengths, pred.length_jacobian))
+        else:
+            state = self.model.evaluate(xi, self.rest)
+            strings = ((state.tensions, None), (state.lengths, None))
+            if jacobian:
+                kin = ScrewKinematics(xi)
+        for (index, values, weight), (h, dh) in zip(
+                ((p.tension_index, p.tensions, p.tension_weight),
+                 (p.length_index, p.lengths, p.length_weight)), strings, strict=True):
+            k = index.size
+            if k == p.n_strings:  # every string measured: no gather
+                np.multiply(h - values, weight, out=r[row:row + k])
+                if J is not None:
+                    np.multiply(dh, weight[:, None], out=J[row:row + k])
+            elif k:
+                r[row:row + k] = (h[index] - values) * weight
+                if J is not None:
+                    J[row:row + k] = dh[index] * weight[:, None]
+            row += k
+        if p.pose is not None:  # checked in PreparedMeasurements: not again per evaluation
+            pose_kin = kin if kin is not None else ScrewKinematics(xi)
+            res, jac = sm.pose_residual_unchecked(
+                pose_kin.T, p.pose, None if J is None else sm.pose_jacobian(xi, pose_kin))
+            r[row:row + 6] = p.pose_whitener @ res
+            if J is not None:
+                J[row:row + 6] = p.pose_whitener @ jac
+            row += 6
+        if p.gravity is not None:
+            if J is not None:
+                g2, jac = sm.gravity_prediction_unchecked(kin, p.gravity_base)
+                J[row:row + 3] = jac * p.gravity_weight[:, None]
+            else:  # g_2 = R^T g_1 with R of the evaluated state
+                g2 = state.transform[:3, :3].T @ p.gravity_base
+            r[row:row + 3] = (g2 - p.gravity) * p.gravity_weight
+            row += 3
+        if p.wrench is not None:
+            # e = F(xi) + W_m, de/dxi = K (sensor_models.equilibrium_residual, from this state)
+            r[row:row + 6] = p.wrench_whitener @ (state.wrench + p.wrench)
+            if J is not None:
+                J[row:row + 6] = p.wrench_whitener @ state.stiffness
+        return r, J, state, kin
+
+
+def _scaled_svd(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatArray]:
+    """Singular values (6,) and right singular vectors (rows, in screw coordinates) of the
+    whitened Jacobian with the translation columns scaled by ``length_scale`` (zero rows added
+    when there are fewer than 6, so that every direction gets a singular value)."""
+    scale = np.array([1.0] * 3 + [length_scale] * 3)
+    Js = J * scale
+    if Js.shape[0] < 6:
+        Js = np.vstack([Js, np.zeros((6 - Js.shape[0], 6))])
+    _, s, Vt = np.linalg.svd(Js, full_matrices=False)
+    return s, Vt * scale
+
+
+def _describe_direction(pose_change: FloatArray, length_scale: float) -> str:
+    """A pose change [dp; dtheta] in words: the translation or rotation that dominates."""
+    dp, dth = pose_change[:3], pose_change[3:]
+    if np.linalg.norm(dth) * length_scale >= np.linalg.norm(dp):
+        axis = dth / np.linalg.norm(dth)
+        kind = 'rotation about'
+    else:
+        axis = dp / np.linalg.norm(dp)
+        kind = 'translation along'
+    return f'{kind} ({axis[0]:.2f}, {axis[1]:.2f}, {axis[2]:.2f})'
+
+
+def _missing_message(prep: PreparedMeasurements, names: Sequence[str], rank: int,
+                     null_directions: list[str], slack: Sequence[str]) -> str:
+    """Why a joint's measurement set cannot determine the pose, and what would."""
+    inputs = prep.describe(names)
+    if prep.dof < 6:
+        head = (f'{inputs}: {prep.dof} measured degree{"s" if prep.dof != 1 else ""} of '
+                f'freedom cannot determine the 6 of the pose')
+    else:
+        head = f'{inputs}: they determine only {rank} of the 6 pose coordinates'
+    if null_directions:
+        head += '; undetermined: ' + '; '.join(null_directions)
+    if slack:
+        head += f'; slack strings carry no tension information ({", ".join(slack)})'
+    need = 6 - rank
+    load = '' if prep.wrench is not None else ', or the load (external_wrench: zero or measured)'
+    return (f'{head}. Add at least {need} independent measurement{"s" if need > 1 else ""}: '
+            f'more string tensions or lengths, a pose, gravity (fixes 2 rotations){load}')
+
+
+def _observability(problem: _JointProblem, J: FloatArray, state: JointState,
+                   kin: ScrewKinematics, rank_tolerance: float
+                   ) -> tuple[int, float, FloatArray, str]:
+    """(rank, condition number, singular values, message when rank < 6)."""
+    prep = problem.prep
+    s, Vt = _scaled_svd(J, problem.length_scale)
+    largest = s[0]
+    rank = int(np.sum(s > rank_tolerance * largest)) if largest > 0 else 0
+    cond = float(largest / s[-1]) if s[-1] > 0 else math.inf
+    if rank == 6:
+        return rank, cond, s, ''
+    P = sm.pose_jacobian(state.screw, kin)
+    null = Vt[rank:]
+    words = [_describe_direction(P @ v, problem.length_scale) for v in null]
+    slack = [problem.model.string_names[i] for i in prep.tension_index if state.slack[i]]
+    return rank, cond, s, _missing_message(prep, problem.model.string_names, rank, words,
+                                                slack)
+
+
+def _clip(step: FloatArray, length_scale: float) -> FloatArray:
+    """The step scaled into the equilibrium solver's trust radius (rotation, translation)."""
+    wx, wy, wz, vx, vy, vz = step.tolist()
+    worst = max(math.sqrt(wx * wx + wy * wy + wz * wz) / MAX_ROTATION_STEP,
+                math.sqrt(vx * vx + vy * vy + vz * vz) / (MAX_TRANSLATION_STEP * length_scale),
+                1.0)
+    return step if worst == 1.0 else step / worst
+
+
+def _normal_solve(A: FloatArray, g: FloatArray) -> FloatArray | None:
+    """The Gauss-Newton step ``-A^-1 g`` for a symmetric positive definite normal matrix ``A``
+    (LAPACK's Cholesky solver ``dposv``); None when ``A`` is not positive definite."""
+    _, x, info = lapack.dposv(A, g)
+    return -x if info == 0 else None
+
+
+class _InitialPointError(ValueError):
+    """The starting point of :func:`_gauss_newton` cannot be evaluated."""
+
+
+def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterations: int,
+                  tolerance: float) -> tuple[FloatArray, Any, int, bool, str]:
+    """Levenberg-Marquardt on the whitened residual of ``evaluate(x, jacobian) -> (r, J,
+    state, kinematics)``.
+
+    Trial points are evaluated without their Jacobian (the cost decides); at an accepted point
+    the decrement is first taken with the Jacobian it was stepped from (a chord step), and only
+    when that is not below ``tolerance`` is the Jacobian evaluated there. So a warm start near
+    the optimum costs one evaluation with the Jacobian and one without, and the covariance is
+    linearised at the last point where the Jacobian was evaluated (within ``tolerance`` of the
+    optimum in units of its own std). The damping scales the normal matrix's diagonal
+    (Marquardt); it is zero while steps reduce the cost. Returns (x, (r, J, state,
+    kinematics) with J of the linearisation point and r, state and the kinematics of x (None
+    when ``evaluate`` gave none there), iterations, converged, message).
+    """
+    x = x0.copy()
+    try:
+        r, J, state, kin = evaluate(x)
+    except ValueError as exc:  # the trial steps below catch theirs: this one is the caller's
+        raise _InitialPointError(str(exc)) from None
+    cost = float(r @ r)
+    damping = 0.0
+    for it in range(1, max_iterations + 1):
+        A = J.T @ J
+        g = J.T @ r
+        full_step = _normal_solve(A, g)
+        if full_step is None:
+            return x, (r, J, state, kin), it - 1, False, 'singular normal matrix'
+        if float(-g @ full_step) < tolerance:
+            return x, (r, J, state, kin), it - 1, True, ''
+        while True:
+            if damping == 0.0:
+                step = full_step
+            else:
+                step = _normal_solve(A + damping * np.diag(np.diag(A)), g)
+                if step is None:
+                    return x, (r, J, state, kin), it, False, 'singular normal matrix'
+            trial = x + _clip(step, length_scale)
+            try:
+                trial_r, _, trial_state, trial_kin = evaluate(trial, False)
+            except ValueError:  # a string of zero length, outside the chart: step too long
+                trial_r = None
+            if trial_r is not None:
+                trial_cost = float(trial_r @ trial_r)
+                if trial_cost <= cost:
+                    stalled = cost - trial_cost <= STALL_TOLERANCE * max(cost, 1.0)
+                    x, r, state, kin, cost = trial, trial_r, trial_state, trial_kin, trial_cost
+                    if stalled:  # creeping along a kink (a string at its slack boundary)
+                        return x, (r, J, state, kin), it, True, ''
+                    damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
+                    break
+            damping = INITIAL_DAMPING if damping == 0.0 else damping * DAMPING_GROWTH
+            if damping > MAX_DAMPING:
+                # Not even a short gradient step lowers the cost: a minimum, where the cost has
+                # a kink (a string at its slack or saturation boundary) or is flat to rounding.
+                return x, (r, J, state, kin), it, True, ''
+        chord_g = J.T @ r
+        chord = _normal_solve(A, chord_g)
+        if chord is not None and float(-chord_g @ chord) < tolerance:
+            return x, (r, J, state, kin), it, True, ''
+        r, J, state, kin = evaluate(x)
+    return x, (r, J, state, kin), max_iterations, False, (
+        f'not converged in {max_iterations} iterations')
+
+
+def cartesian_stiffness_jacobian(model: JointModel, xi: ArrayLike,
+                                 rest_lengths: ArrayLike | None = None,
+                                 step: float = STIFFNESS_STEP) -> FloatArray:
+    """``dK_c/dxi`` (6, 6, 6) by central differences (one batched evaluation of 12 screws)."""
+    xi = as_screws(xi)
+    steps = _STIFFNESS_STEPS if step == STIFFNESS_STEP else np.vstack(
+        [np.eye(6), -np.eye(6)]) * step
+    Kc = model.evaluate(xi + steps, rest_lengths).cartesian_stiffness
+    return np.moveaxis((Kc[:6] - Kc[6:]) / (2.0 * step), 0, -1)
+
+
+#: dK_c/dxi is reused for the std of K_c while the screw stays within this distance (rad, and
+#: metres over the mean rest length) of where it was computed: it changes on the scale of the
+#: joint (radians, its size), so the std's relative error stays below about this much (1%: a
+#: tracker's consecutive estimates differ by their noise, a few mrad, and reuse it).
+STIFFNESS_JACOBIAN_REUSE = 1e-2
+_STIFFNESS_JACOBIANS: weakref.WeakKeyDictionary[JointModel, tuple[FloatArray, FloatArray,
+                                                                   FloatArray]] = \
+    weakref.WeakKeyDictionary()
+
+
+def _stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray) -> FloatArray:
+    """:func:`cartesian_stiffness_jacobian` at ``xi``, or the one computed last for this model
+    and rest lengths when ``xi`` is within :data:`STIFFNESS_JACOBIAN_REUSE` of its screw (a
+    tracker's consecutive estimates: 12 evaluations saved per estimate)."""
+    cached = _STIFFNESS_JACOBIANS.get(model)
+    if cached is not None:
+        at, cached_rest, G = cached
+        d = xi - at
+        length = float(rest.sum()) / rest.size
+        wx, wy, wz, vx, vy, vz = d.tolist()
+        if (max(abs(wx), abs(wy), abs(wz), abs(vx) / length, abs(vy) / length, abs(vz) / length)
+                <= STIFFNESS_JACOBIAN_REUSE
+                and (rest is cached_rest or np.array_equal(rest, cached_rest))):
+            return G
+    G = cartesian_stiffness_jacobian(model, xi, rest)
+    # the model's own rest lengths are kept by identity (never mutated), others copied
+    _STIFFNESS_JACOBIANS[model] = (xi.copy(),
+                                   rest if rest is model.rest_lengths else rest.copy(), G)
+    return G
+
+
+#: The 12 central-difference steps of :func:`cartesian_stiffness_jacobian` (+ then -).
+_STIFFNESS_STEPS = np.vstack([np.eye(6), -np.eye(6)]) * STIFFNESS_STEP
+
+
+def _entry_std(jacobian: FloatArray, covariance: FloatArray) -> FloatArray:
+    """sqrt(diag(g C g^T)) per entry of a matrix with Jacobian (a, b, k)."""
+    a, b, k = jacobian.shape
+    G = jacobian.reshape(a * b, k)
+    variance = np.add.reduce((G @ covariance) * G, axis=1)
+    return np.sqrt(np.maximum(variance, 0.0, out=variance)).reshape(a, b)
+
+
+def _failed_joint(message: str, prep: PreparedMeasurements | None, names: Sequence[str],
+                  observable: bool, rank: int, cond: float, iterations: int = 0,
+                  s: FloatArray | None = None) -> JointEstimate:
+    return JointEstimate(False, message, _nan(6), _nan(4, 4), _nan(6, 6), _nan(6, 6), _nan(6),
+                         _nan(6, 6), None, _nan(6, 6), math.nan,
+                         0 if prep is None else prep.dof - 6, observable, rank, cond,
+                         iterations, '' if prep is None else prep.describe(names),
+                         np.empty(0) if s is None else s)
+
+
+def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
+                   initial_screw: ArrayLike | None) -> FloatArray:
+    if initial_screw is not None:
+        x0 = np.array(initial_screw, dtype=np.float64)
+        if x0.shape != (6,) or not math.isfinite(x0.sum()):
+            x0 = as_screws(x0, 'initial_screw')  # names the problem
+            raise ValueError(f'initial_screw must have shape (6,), got {x0.shape}')
+        check_in_chart(x0, 'initial_screw')
+        return x0
+    if prep.pose is not None:
+        return log_se3(prep.pose, model.initial_screw)
+    if prep.wrench is not None:
+        res = solve_equilibrium(model, prep.wrench, rest)
+        if res.success:
+            return res.screw
+    return model.initial_screw.copy()
+
+
+def estimate_joint_state(model: JointModel, measurements: Measurements | PreparedMeasurements,
+                         rest_lengths: ArrayLike | None = None,
+                         initial_screw: ArrayLike | None = None, *,
+                         tolerance: float = DECREMENT_TOLERANCE,
+                         max_iterations: int = MAX_ITERATIONS,
+                         rank_tolerance: float = RANK_TOLERANCE,
+                         stiffness_std: bool = True) -> JointEstimate:
+    """Estimate the screw, the pose, the load and the stiffness from ``measurements``.
+
+    ``rest_lengths`` (n,) the encoders' values (default: the model's); ``initial_screw`` the warm
+    start (a tracker's previous estimate; default: the measured pose, else the equilibrium under
+    a known load, else ``model.initial_screw``). ``stiffness_std=False`` skips the std of K_c
+    (NaN). Bad input raises ValueError naming the field; an unobservable set returns
+    ``success=False, observable=False`` with a message naming what is missing.
+    """
+    prep = (measurements if isinstance(measurements, PreparedMeasurements)
+            else Measurements.prepared(measurements, model.n_strings))
+    if prep.n_strings != model.n_strings:
+        raise ValueError(f'measurements were prepared for {prep.n_strings} strings, the model '
+                         f'has {model.n_strings}')
+    rest = model.validate_rest_lengths(rest_lengths, batched=False)
+    names = model.string_names
+    if prep.dof < 6:
+        return _failed_joint(_missing_message(prep, names, prep.dof, [], []), prep, names,
+                             False, min(prep.dof, 6), math.inf)
+    x0 = _initial_screw(model, prep, rest, initial_screw)
+    problem = _JointProblem(model, prep, rest)
+    try:
+        x, ev, iterations, converged, why = _gauss_newton(
+            problem.evaluate, x0, problem.length_scale, max_iterations, tolerance)
+    except _InitialPointError as exc:
+        raise ValueError(f'initial_screw: {exc}') from None
+    r, J, state, kin = ev
+    if kin is None:  # the kinematics at the estimate x (J: at the linearisation)
+        kin = ScrewKinematics(x)
+    C, s = _information(J, problem.length_scale)
+    values = s.tolist()  # descending
+    largest, smallest = values[0], values[-1]
+    rank = sum(1 for v in values if v > rank_tolerance * largest) if largest > 0 else 0
+    cond = largest / smallest if smallest > 0 else math.inf
+    if rank < 6:
+        rank, cond, s, message = _observability(problem, J, state, kin, rank_tolerance)
+        return _failed_joint(message, prep, names, False, rank, cond, iterations, s)
+    if not converged:
+        return _failed_joint(f'{prep.describe(names)}: {why}', prep, names, True, rank, cond,
+                             iterations, s)
+    P = sm.pose_jacobian(x, kin)  # at the estimate
+    pose_cov = P @ C @ P.T
+    K = state.stiffness
+    Kc_std = (_entry_std(_stiffness_jacobian_near(model, x, rest), C) if stiffness_std
+              else _nan(6, 6))
+    return JointEstimate(True, 'ok', x, state.transform.copy(), 0.5 * (pose_cov + pose_cov.T), C,
+                         -state.wrench, K @ C @ K.T, state, Kc_std, float(r @ r), prep.dof - 6,
+                         True, rank, cond, iterations, prep.describe(names), s)
+
+
+def _information(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatArray]:
+    """Covariance ``(J^T J)^-1`` (6, 6) (NaN when singular) and the singular values (6,) of
+    the whitened Jacobian with its translation columns scaled by ``length_scale`` (one
+    symmetric eigendecomposition of the scaled normal matrix)."""
+    outer = _column_scales(length_scale)
+    w, V, info = lapack.dsyevd(J.T @ J * outer)  # ascending eigenvalues (LAPACK)
+    if info != 0:
+        raise np.linalg.LinAlgError('eigendecomposition of the normal matrix failed')
+    w, V = w[::-1], V[:, ::-1]
+    s = np.sqrt(np.maximum(w, 0.0))
+    if w[-1] <= 0.0:
+        return _nan(6, 6), s
+    return (V / w) @ V.T * outer, s  # symmetric: V diag(1/w) V^T, scaled on both sides
+
+
+_COLUMN_SCALES: dict[float, FloatArray] = {}
+
+
+def _column_scales(length_scale: float) -> FloatArray:
+    """``outer(c, c)`` (6, 6) of the column scale ``c = [1 1 1 L L L]`` (cached per L)."""
+    outer = _COLUMN_SCALES.get(length_scale)
+    if outer is None:
+        scale = np.array([1.0, 1.0, 1.0, length_scale, length_scale, length_scale])
+        outer = _COLUMN_SCALES[length_scale] = scale[:, None] * scale
+        if len(_COLUMN_SCALES) > 64:  # rest lengths change: keep the cache small
+            _COLUMN_SCALES.pop(next(iter(_COLUMN_SCALES)))
+    return outer
+
+
+# ---------------------------------------------------------------------------------- spine
+@dataclass
+class ChainEstimate:
+    """Outcome of :func:`estimate_chain_state` (N joints).
+
+    ``screws`` (N, 6) with ``screw_covariance`` (6N, 6N) (joint-major); ``joint_covariances``
+    (N, 6, 6) each joint's pose covariance in its own {1}_i (PoseWithCovariance convention);
+    ``tip_wrench`` (6,) in the base about its origin with ``tip_wrench_covariance``;
+    ``tip_transform`` (4, 4) with ``tip_pose_covariance`` (6, 6) in the base;
+    ``tip_stiffness`` (6, 6) the exact tip stiffness under the estimated load (base frame, rows
+    [f; m], columns [dv; dw]) with ``tip_stiffness_std`` (first order, central differences);
+    ``chi2``, ``dof``, ``observable``, ``rank`` (of 6N + 6), ``condition_number``,
+    ``iterations``; ``state`` the :class:`ChainState` at the estimate.
+    """
+
+    success: bool
+    message: str
+    screws: FloatArray
+    screw_covariance: FloatArray
+    joint_covariances: FloatArray
+    tip_wrench: FloatArray
+    tip_wrench_covariance: FloatArray
+    tip_transform: FloatArray
+    tip_pose_covariance: FloatArray
+    tip_stiffness: FloatArray
+    tip_stiffness_std: FloatArray
+    chi2: float
+    dof: int
+    observable: bool
+    rank: int
+    condition_number: float
+    iterations: int
+    state: ChainState | None = field(default=None, repr=False)
+
+
+class _ChainProblem:
+    """Unknowns ``z = [xi_1 .. xi_N, W]``. Measurement residuals (whitened): each joint's
+    tensions, lengths and pose, the tip pose, the tip load when it is known; constraints: each
+    joint's equilibrium ``c_i = F_i + Ad_{P_i}^T B_i = 0`` (exact, Jacobian from
+    :meth:`JointChain.residual_jacobian`'s blocks and ``dc_i/dW = Ad_{P_i}^T``)."""
+
+    def __init__(self, chain: JointChain, preps: list[PreparedMeasurements | None],
+                 rest: list[FloatArray | None], gravity: FloatArray,
+                 tip_pose: FloatArray | None, tip_pose_whitener: FloatArray | None,
+                 tip_wrench: FloatArray | None, tip_wrench_whitener: FloatArray | None) -> None:
+        self.chain = chain
+        self.n = chain.n_joints
+        self.rest = rest
+        self.gravity = gravity
+        self.tip_pose = tip_pose
+        self.tip_pose_whitener = tip_pose_whitener
+        self.tip_wrench = tip_wrench
+        self.tip_wrench_whitener = tip_wrench_whitener
+        self.problems = [
+            None if p is None or p.rows == 0
+            else _JointProblem(model, p, model.validate_rest_lengths(r, False))
+            for model, p, r in zip(chain.joints, preps, rest, strict=True)]
+        self.length_scale = float(np.mean([np.mean(m.rest_lengths) for m in chain.joints]))
+        size = 6 * self.n + 6
+        #: Column scale of z for rank and clipping: radians, metres / length_scale, the load.
+        self.scale = np.array(([1.0] * 3 + [self.length_scale] * 3) * self.n + [1.0] * 6)
+        self.size = size
+
+    def constraints(self, z: FloatArray) -> tuple[FloatArray, FloatArray, ChainState]:
+        """(c (6N,), dc/dz (6N, size), chain state) at z."""
+        n = self.n
+        xi = z[:6 * n].reshape(n, 6)
+        chain = self.chain
+        state = chain.evaluate(xi, self.rest)
+        c, D, AdT, _ = chain._system(state, z[6 * n:], self.gravity)
+        Jc = np.empty((6 * n, self.size))
+        Jc[:, :6 * n] = chain._screw_jacobian(D, xi)
+        Jc[:, 6 * n:] = AdT.reshape(6 * n, 6)
+        return c.reshape(-1), Jc, state
+
+    def measurements(self, z: FloatArray, state: ChainState) -> tuple[FloatArray, FloatArray]:
+        """(r, dr/dz) whitened at z (``state`` the chain's at z)."""
+        n, size = self.n, self.size
+        xi = z[:6 * n].reshape(n, 6)
+        W = z[6 * n:]
+        rows_r: list[FloatArray] = []
+        rows_J: list[FloatArray] = []
+        for i, problem in enumerate(self.problems):
+            if problem is None:
+                continue
+            r, J, _, _ = problem.evaluate(xi[i])
+            block = np.zeros((r.size, size))
+            block[:, 6 * i:6 * i + 6] = J
+            rows_r.append(r)
+            rows_J.append(block)
+        if self.tip_pose is not None:
+            T = state.tip_transform
+            jac = np.zeros((6, size))
+            jac[:, :6 * n] = _tip_pose_jacobian(self.chain, xi, T)
+            r, jac = sm.pose_residual_unchecked(T, self.tip_pose, jac)
+            rows_r.append(self.tip_pose_whitener @ r)
+            rows_J.append(self.tip_pose_whitener @ jac)
+        if self.tip_wrench is not None:
+            jac = np.zeros((6, size))
+            jac[:, 6 * n:] = self.tip_wrench_whitener
+            rows_r.append(self.tip_wrench_whitener @ (W - self.tip_wrench))
+            rows_J.append(jac)
+        r = np.concatenate(rows_r) if rows_r else np.empty(0)
+        J = np.vstack(rows_J) if rows_J else np.empty((0, size))
+        return r, J
+
+    def restore(self, z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, ChainState
+                                               ] | None:
+        """Newton's minimum-norm corrections onto the equilibria from z: (z, c, dc/dz, state)
+        once every residual is below :data:`CHAIN_EQUILIBRIUM_TOLERANCE`; None when that fails
+        (or a string collapses)."""
+        z = z.copy()
+        for _ in range(MAX_RESTORATION_STEPS):
+            try:
+                c, Jc, state = self.constraints(z)
+            except ValueError:
+                return None
+            if not np.all(np.isfinite(c)):
+                return None
+            if np.max(np.abs(c)) < CHAIN_EQUILIBRIUM_TOLERANCE:
+                return z, c, Jc, state
+            try:
+                Q1, _, R = _tangent(Jc)
+                step = Q1 @ np.linalg.solve(R.T, -c)
+            except np.linalg.LinAlgError:
+                return None
+            for i in range(self.n):
+                step[6 * i:6 * i + 6] = _clip(step[6 * i:6 * i + 6], self.length_scale)
+            z = z + step
+        return None
+
+
+def _tip_pose_jacobian(chain: JointChain, xi: FloatArray, tip: FloatArray) -> FloatArray:
+    """``d[dp; dtheta]/dxi`` (6, 6N) of the tip pose (PoseWithCovariance convention in the base)
+    from the tip's spatial twist ``[dv; dw]`` (:meth:`JointChain.jacobian`):
+    ``dp = dv + dw x p``, ``dtheta = dw``."""
+    twist = chain.jacobian(xi)
+    out = np.empty_like(twist)
+    out[:3] = twist[:3] - hat3(tip[:3, 3]) @ twist[3:]
+    out[3:] = twist[3:]
+    return out
+
+
+def _tangent(Jc: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Orthonormal bases of the range (Q1) and null space (Q2) of ``Jc^T`` and ``R`` with
+    ``Jc^T = Q1 R`` (complete QR)."""
+    m = Jc.shape[0]
+    Q, R = np.linalg.qr(Jc.T, mode='complete')
+    return Q[:, :m], Q[:, m:], R[:m]
+
+
+def _constrained_gauss_newton(problem: _ChainProblem, z0: FloatArray, max_iterations: int,
+                              tolerance: float) -> tuple[FloatArray, Any, int, bool, str]:
+    """Levenberg-Marquardt on the measurements over the equilibria (a manifold of dimension 6):
+    each step lies in the tangent (the null space of dc/dz) and is followed by Newton's
+    restoration onto the equilibria (:meth:`_ChainProblem.restore`); a step is kept when the
+    restored point lowers the cost. Converged when the decrement is below ``tolerance``.
+    Returns (z, (r, J, c, dc/dz, state), iterations, converged, message)."""
+    restored = problem.restore(z0)
+    if restored is None:
+        return z0, None, 0, False, ('no equilibrium of the chain near the initial screws and '
+                                    'tip load')
+    z, c, Jc, state = restored
+    r, J = problem.measurements(z, state)
+    cost = float(r @ r)
+    damping = 0.0
+    for it in range(1, max_iterations + 1):
+        _, Q2, _ = _tangent(Jc)
+        M = J @ Q2
+        A = M.T @ M
+        g = M.T @ r
+        try:
+            full = -np.linalg.solve(A, g)
+        except np.linalg.LinAlgError:
+            return z, (r, J, c, Jc, state), it - 1, False, 'singular normal matrix'
+        if float(-g @ full) < tolerance:
+            return z, (r, J, c, Jc, state), it - 1, True, ''
+        while True:
+            y = full if damping == 0.0 else -np.linalg.solve(A + damping * np.diag(np.diag(A)), g)
+            step = Q2 @ y
+            for i in range(problem.n):
+                step[6 * i:6 * i + 6] = _clip(step[6 * i:6 * i + 6], problem.length_scale)
+            trial = problem.restore(z + step)
+            if trial is not None:
+                trial_r, trial_J = problem.measurements(trial[0], trial[3])
+                trial_cost = float(trial_r @ trial_r)
+                if trial_cost <= cost:
+                    stalled = cost - trial_cost <= STALL_TOLERANCE * max(cost, 1.0)
+                    z, c, Jc, state = trial
+                    r, J, cost = trial_r, trial_J, trial_cost
+                    if stalled:  # see _gauss_newton
+                        return z, (r, J, c, Jc, state), it, True, ''
+                    damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
+                    break
+            damping = INITIAL_DAMPING if damping == 0.0 else damping * DAMPING_GROWTH
+            if damping > MAX_DAMPING:  # a minimum (see _gauss_newton)
+                return z, (r, J, c, Jc, state), it, True, ''
+    return z, (r, J, c, Jc, state), max_iterations, False, (
+        f'not converged in {max_iterations} iterations')
+
+
+def _chain_information(problem: _ChainProblem, J: FloatArray, Jc: FloatArray,
+                       rank_tolerance: float) -> tuple[FloatArray, int, float, FloatArray]:
+    """Covariance of z (size, size) on the equilibria, ``Q2 (M^T M)^-1 Q2^T`` with
+    ``M = J Q2``, the rank (of 6: the equilibria leave 6 directions, those of the load), the
+    condition number and the scaled null directions (rows, in z) when rank < 6."""
+    scale = problem.scale
+    _, Q2, _ = _tangent(Jc * scale)  # the tangent in scaled coordinates
+    M = (J * scale) @ Q2
+    k = Q2.shape[1]
+    Ms = M if M.shape[0] >= k else np.vstack([M, np.zeros((k - M.shape[0], k))])
+    _, s, Vt = np.linalg.svd(Ms)
+    rank = int(np.sum(s > rank_tolerance * s[0])) if s.size and s[0] > 0 else 0
+    cond = float(s[0] / s[-1]) if s.size and s[-1] > 0 else math.inf
+    if rank < k:
+        return _nan(problem.size, problem.size), rank, cond, (Q2 @ Vt[rank:].T).T * scale
+    C = Q2 @ np.linalg.inv(M.T @ M) @ Q2.T
+    C = C * np.outer(scale, scale)
+    return 0.5 * (C + C.T), rank, cond, np.empty((0, problem.size))
+
+
+def _chain_missing_message(null: FloatArray, n: int, inputs: str, rank: int) -> str:
+    weight = np.zeros(n + 1)
+    for v in null:
+        weight += np.sqrt(np.sum(v.reshape(n + 1, 6) ** 2, axis=1))
+    involved = [f'joint {i + 1}' for i in range(n) if weight[i] > 0.1 * weight.max()]
+    if weight[n] > 0.1 * weight.max():
+        involved.append('the tip load')
+    return (f'{inputs}: with the equilibria they determine only {rank} of the 6 remaining '
+            f'unknowns (the tip load, or the configuration it implies); undetermined: '
+            f'{", ".join(involved)}. Add string tensions or lengths on those joints, a joint or '
+            f'tip pose, or the tip load (tip_wrench)')
+
+
+def estimate_chain_state(chain: JointChain,
+                         joint_measurements: Sequence[Measurements | None],
+                         tip_pose: ArrayLike | None = None,
+                         tip_pose_covariance: ArrayLike | None = None,
+                         tip_wrench: ArrayLike | None = None,
+                         tip_wrench_covariance: ArrayLike | None = None,
+                         gravity: ArrayLike | None = None, *,
+                         rest_lengths: Any = None,
+                         initial_screws: ArrayLike | None = None,
+                         initial_tip_wrench: ArrayLike | None = None,
+                         tolerance: float = DECREMENT_TOLERANCE,
+                         max_iterations: int = MAX_ITERATIONS,
+                         rank_tolerance: float = RANK_TOLERANCE,
+                         stiffness_std: bool = True) -> ChainEstimate:
+    """Every joint's screw, the tip load, the tip pose and the exact tip stiffness of a spine,
+    each with its covariance.
+
+    ``joint_measurements``: one :class:`Measurements` (or None) per joint with its strings'
+    tensions / lengths and optionally the joint's own pose (of {2}_i in {1}_i). The load is the
+    spine's: ``tip_wrench`` (6,) in the base about its origin with ``tip_wrench_covariance``, or
+    None for an unknown tip load, shared by every joint's equilibrium (which is what makes a few
+    load cells per vertebra enough). The equilibria ``F_i + Ad_{P_i}^T B_i = 0`` are exact
+    constraints (null-space Gauss-Newton), so 6 unknowns remain whatever N: the tip load (or
+    the configuration it implies). ``tip_pose`` (the tool frame in the base, (4, 4) or 7
+    values) with ``tip_pose_covariance`` (6, 6, PoseWithCovariance convention). ``gravity``
+    (3,) for the link weights (default ``chain.gravity``). ``initial_screws`` (N, 6) and
+    ``initial_tip_wrench`` warm-start (default: the unloaded screws and the known load or
+    zero).
+    """
+    n = chain.n_joints
+    if len(joint_measurements) != n:
+        raise ValueError(f'joint_measurements must hold one entry per joint ({n}), '
+                         f'got {len(joint_measurements)}')
+    preps: list[PreparedMeasurements | None] = []
+    for i, (model, m) in enumerate(zip(chain.joints, joint_measurements, strict=True)):
+        if m is None:
+            preps.append(None)
+            continue
+        if m.external_wrench is not None or m.gravity is not None:
+            raise ValueError(f'joint_measurements[{i}]: a spine takes its load as tip_wrench '
+                             'and gravity as gravity (per-joint external_wrench / gravity are '
+                             'not supported)')
+        try:
+            preps.append(m.prepared(model.n_strings))
+        except ValueError as exc:
+            raise ValueError(f'joint_measurements[{i}].{exc}') from None
+    g = chain._gravity(gravity)
+    rest = chain._rest(rest_lengths)
+    pose_T = pose_whitener = None
+    if tip_pose is not None:
+        pose_T = sm.as_transform(tip_pose, 'tip_pose')
+        _, pose_whitener = _covariance('tip_pose_covariance', tip_pose_covariance, 6)
+    W_m = W_whitener = None
+    if tip_wrench is not None:
+        W_m = finite_array('tip_wrench', tip_wrench)
+        if W_m.shape != (6,):
+            raise ValueError(f'tip_wrench must have shape (6,), got {W_m.shape}')
+        _, W_whitener = _covariance('tip_wrench_covariance', tip_wrench_covariance, 6)
+    x0 = (chain.unloaded_screws(rest) if initial_screws is None
+          else chain._screws(initial_screws).copy())
+    if initial_tip_wrench is None:
+        W0 = W_m.copy() if W_m is not None else np.zeros(6)
+    else:
+        W0 = finite_array('initial_tip_wrench', initial_tip_wrench)
+        if W0.shape != (6,):
+            raise ValueError(f'initial_tip_wrench must have shape (6,), got {W0.shape}')
+    problem = _ChainProblem(chain, preps, rest, g, pose_T, pose_whitener, W_m, W_whitener)
+    names = [f'joint {i + 1}: {p.describe(model.string_names, load=False)}'
+             for i, (model, p) in enumerate(zip(chain.joints, preps, strict=True))
+             if p is not None and p.rows]
+    if pose_T is not None:
+        names.append('a tip pose')
+    names.append('a known tip load' if W_m is not None else 'unknown tip load')
+    inputs = '; '.join(names)
+    measured = sum(p.dof for p in preps if p is not None) + (6 if pose_T is not None else 0) + (
+        6 if W_m is not None else 0)
+    size = 6 * n + 6
+
+    def failed(msg: str, observable: bool, rank: int, cond: float, iterations: int = 0
+               ) -> ChainEstimate:
+        return ChainEstimate(False, msg, _nan(n, 6), _nan(6 * n, 6 * n), _nan(n, 6, 6),
+                             _nan(6), _nan(6, 6), _nan(4, 4), _nan(6, 6), _nan(6, 6),
+                             _nan(6, 6), math.nan, measured - 6, observable, rank, cond,
+                             iterations)
+
+    if measured < 6:
+        return failed(f'{inputs}: {measured} measured degrees of freedom cannot determine the 6 '
+                      'unknowns left by the equilibria (the tip load). Add string tensions or '
+                      'lengths, a pose, or the tip load (tip_wrench)', False, measured, math.inf)
+    z0 = np.concatenate([x0.reshape(-1), W0])
+    z, ev, iterations, converged, why = _constrained_gauss_newton(problem, z0, max_iterations,
+                                                                  tolerance)
+    if ev is None:
+        return failed(f'{inputs}: {why}', True, 0, math.inf, iterations)
+    r, J, _, Jc, state = ev
+    C, rank, cond, null = _chain_information(problem, J, Jc, rank_tolerance)
+    if rank < 6:
+        return failed(_chain_missing_message(null, n, inputs, rank), False, rank, cond,
+                      iterations)
+    if not converged:
+        return failed(f'{inputs}: {why}', True, rank, cond, iterations)
+    xi = z[:6 * n].reshape(n, 6)
+    W = z[6 * n:]
+    joint_cov = np.empty((n, 6, 6))
+    for i in range(n):
+        P = sm.pose_jacobian(xi[i])
+        joint_cov[i] = P @ C[6 * i:6 * i + 6, 6 * i:6 * i + 6] @ P.T
+    T_tip = state.tip_transform
+    M = np.zeros((6, size))
+    M[:, :6 * n] = _tip_pose_jacobian(chain, xi, T_tip)
+    tip_cov = M @ C @ M.T
+    K_tip = chain.tip_stiffness_from_state(state, W, g)
+    K_tip_std = _tip_stiffness_std(chain, z, C, g, rest) if stiffness_std else _nan(6, 6)
+    return ChainEstimate(True, 'ok', xi.copy(), C[:6 * n, :6 * n], joint_cov, W.copy(),
+                         C[6 * n:, 6 * n:], T_tip.copy(), 0.5 * (tip_cov + tip_cov.T), K_tip,
+                         K_tip_std, float(r @ r), measured - 6, True, rank, cond, iterations,
+                         state)
+
+
+def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,
+                       rest: Any) -> FloatArray:
+    """First-order std (6, 6) of the exact tip stiffness: central differences of
+    :meth:`JointChain.tip_stiffness` over ``z = [xi; W]`` propagated with ``C``."""
+    n = chain.n_joints
+    grads = np.empty((6, 6, z.size))
+    for k in range(z.size):
+        values = []
+        for sign in (1.0, -1.0):
+            zk = z.copy()
+            zk[k] += sign * STIFFNESS_STEP
+            values.append(chain.tip_stiffness(zk[:6 * n].reshape(n, 6), zk[6 * n:], g,
+                                              rest_lengths=rest))
+        grads[:, :, k] = (values[0] - values[1]) / (2.0 * STIFFNESS_STEP)
+    return _entry_std(grads, C)

@@ -1,0 +1,294 @@
+"""The compiled kernel: loader and calling convention (pure Python, ctypes only).
+
+``tensegrity_stiffness_kernel`` (a C++ package of this repository, built by colcon with the rest)
+installs ``lib/libtensegrity_stiffness_kernel.so``: the per-string loop of
+:class:`~tensegrity_stiffness.mechanics.joint.JointModel` (eqs. 6-11: kinematics, string forces,
+wrench,
+K and K_c) for one screw or a batch, and the frames, implied tip wrench and tip stiffness of a
+:class:`~tensegrity_stiffness.mechanics.chain.JointChain`, in compiled code. Both use it when it
+is found
+and keep their numpy implementations as the fallback and as the reference the tests compare it
+with.
+
+Where the library comes from, first match wins:
+
+* ``TENSEGRITY_STIFFNESS_KERNEL`` (:data:`KERNEL_ENV`): a path to the library, or ``off`` to
+  use numpy only;
+* ``lib/`` of every prefix on ``AMENT_PREFIX_PATH`` (what ``source install/setup.bash`` or
+  ``scripts/env.sh`` sets).
+
+:func:`status` says which path is in use, and why (the bench and ``/diagnostics`` print it).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import functools
+import os
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tensegrity_stiffness.geometry import screw
+
+#: Environment variable naming the library (a path) or ``off`` for the numpy path.
+KERNEL_ENV = 'TENSEGRITY_STIFFNESS_KERNEL'
+#: File name of the library under ``<prefix>/lib``.
+LIBRARY_NAME = 'libtensegrity_stiffness_kernel.so'
+#: Values of :data:`KERNEL_ENV` that select the numpy path.
+OFF_VALUES = ('off', '0', 'no', 'false', 'numpy')
+
+# The mirror of include/tensegrity_stiffness/kernel.h (test/kernel/test_kernel_abi.py holds it
+# to the library: version, struct layout, buffer sizes, status codes).
+#: ABI version this module speaks (``TSK_ABI_VERSION``, ``tsk_abi_version()``).
+ABI_VERSION = 3
+#: Status codes (``TSK_OK``, ``TSK_ERROR_*``): 0 success, negative errors.
+OK = 0
+ERRORS = {-1: 'NULL_POINTER', -2: 'COUNT', -3: 'BUFFER_SIZE', -4: 'ARGUMENT', -5: 'ZERO_LENGTH',
+          -6: 'SINGULAR_SYSTEM', -7: 'SINGULAR_COMPLIANCE', -8: 'INTERNAL'}
+ERROR_ZERO_LENGTH, ERROR_SINGULAR_SYSTEM, ERROR_SINGULAR_COMPLIANCE = -5, -6, -7
+#: Modes of the joint evaluation (``TSK_MODE_*``): everything; K without K_c; the wrench alone.
+MODE_FULL, MODE_STIFFNESS, MODE_WRENCH = 0, 1, 2
+#: Outputs of ``tsk_chain_tip`` besides the tip wrench (``TSK_TIP_*``, a bit mask).
+TIP_BASE, TIP_TOOL = 1, 2
+#: Doubles of ``tsk_chain_tip``'s output buffer: tip wrench 6, K_tip base 36, tool 36.
+TIP_SIZE = 78
+
+_P = ctypes.c_void_p
+_I = ctypes.c_int64
+_D = ctypes.c_double
+
+#: The Taylor tables of the rotation coefficients a, b, c, b1, c1 (``TSK_SERIES_ROWS`` x
+#: terms), taken from :mod:`~tensegrity_stiffness.geometry.screw` (their one home); every model
+# points
+#: to this array, which lives as long as the module.
+SERIES = np.ascontiguousarray(np.stack([
+    screw._A_SERIES, screw._B_SERIES, screw._C_SERIES, screw._B1_SERIES, screw._C1_SERIES]))
+SERIES.flags.writeable = False
+
+
+class KernelError(RuntimeError):
+    """A kernel call refused its arguments (a bug of the caller: the numpy path is the
+    reference; never raised for a model's own conditions, which have their own errors)."""
+
+
+class _ModelStruct(ctypes.Structure):
+    """``tsk_joint_model`` of ``kernel.h``: pointers into arrays the owner keeps alive."""
+
+    _fields_ = [('n_strings', _I), ('p1', _P), ('p2', _P), ('k', _P), ('max_stretch', _P),
+                ('law', _I), ('series_terms', _I), ('series', _P), ('series_threshold', _D),
+                ('min_string_length', _D)]
+
+
+def model_layout() -> list[int]:
+    """This module's mirror of ``tsk_joint_model_layout``: its size and field offsets."""
+    return [ctypes.sizeof(_ModelStruct)] + [getattr(_ModelStruct, name).offset
+                                            for name, _ in _ModelStruct._fields_]
+
+
+def check(status: int, call: str) -> None:
+    """:class:`KernelError` naming ``call`` and the status unless it is ``OK``."""
+    if status != OK:
+        raise KernelError(f'{call} returned {status} '
+                          f'(TSK_ERROR_{ERRORS.get(status, "UNKNOWN")})')
+
+
+def address(arr: NDArray) -> int:
+    """Data address of a C-contiguous array for a pointer argument of the kernel (a writable
+    one through ctypes' buffer view: a third of the time of ``__array_interface__``).
+
+    The address is valid only while ``arr`` lives: bind every array to a name that outlives
+    the call (never ``address(np.ascontiguousarray(x))``: a copy is freed before C reads it).
+    """
+    if arr.flags.writeable and arr.nbytes:
+        return _addressof(_char_view(arr))
+    if not arr.flags.c_contiguous:
+        raise ValueError('kernel.address needs a C-contiguous array')
+    return arr.__array_interface__['data'][0]
+
+
+_addressof = ctypes.addressof
+_char_view = ctypes.c_char.from_buffer
+
+
+def library_path() -> tuple[Path | None, str]:
+    """The library to load and where it was found, or ``None`` and the reason."""
+    setting = os.environ.get(KERNEL_ENV, '').strip()
+    if setting.lower() in OFF_VALUES:
+        return None, f'{KERNEL_ENV}={setting}'
+    if setting:
+        path = Path(setting)
+        return (path, f'{KERNEL_ENV}') if path.is_file() else (
+            None, f'{KERNEL_ENV}={setting} is not a file')
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            path = Path(prefix) / 'lib' / LIBRARY_NAME
+            if path.is_file():
+                return path, 'AMENT_PREFIX_PATH'
+    return None, (f'{LIBRARY_NAME} not found on AMENT_PREFIX_PATH (build the workspace: '
+                  'bash scripts/setup_env.sh, then source scripts/env.sh)')
+
+
+class _Library:
+    """The loaded library with its entry points typed (``kernel.h``)."""
+
+    def __init__(self, path: Path) -> None:
+        lib = ctypes.CDLL(str(path))
+        lib.tsk_abi_version.restype = _I
+        lib.tsk_abi_version.argtypes = []
+        version = lib.tsk_abi_version()
+        if version != ABI_VERSION:
+            raise OSError(f'{path} speaks ABI {version}, this package {ABI_VERSION}')
+        lib.tsk_joint_model_layout.restype = _I
+        lib.tsk_joint_model_layout.argtypes = [_P, _I]
+        layout = np.zeros(32, dtype=np.int64)
+        count = lib.tsk_joint_model_layout(address(layout), layout.size)
+        self.model_layout = layout[:max(count, 0)].tolist()
+        if self.model_layout != model_layout():
+            raise OSError(f'{path}: tsk_joint_model layout {self.model_layout} differs from '
+                          f'the ctypes mirror {model_layout()}')
+        for name in ('tsk_joint_packed_size', 'tsk_joint_batch_size'):
+            getattr(lib, name).restype = _I
+        lib.tsk_joint_packed_size.argtypes = [_I]
+        lib.tsk_joint_batch_size.argtypes = [_I, _I]
+        self.packed_size = lib.tsk_joint_packed_size
+        self.batch_size = lib.tsk_joint_batch_size
+        self.evaluate = lib.tsk_joint_evaluate
+        self.evaluate.restype = _I
+        self.evaluate.argtypes = [_P, _I, _P, _P, _I, _I, _P, _I]
+        self.evaluate_packed = lib.tsk_joint_evaluate_packed
+        self.evaluate_packed.restype = _I
+        self.evaluate_packed.argtypes = [_P, _I, _P, _I]
+        lib.tsk_joint_measure_size.restype = _I
+        lib.tsk_joint_measure_size.argtypes = [_I]
+        self.measure_size = lib.tsk_joint_measure_size
+        self.measure_packed = lib.tsk_joint_measure_packed
+        self.measure_packed.restype = _I
+        self.measure_packed.argtypes = [_P, _I, _P, _I, _P, _I]
+        self.chain_frames = lib.tsk_chain_frames
+        self.chain_frames.restype = _I
+        self.chain_frames.argtypes = [_I, _P, _P, _P, _P, _I]
+        self.chain_tip = lib.tsk_chain_tip
+        self.chain_tip.restype = _I
+        self.chain_tip.argtypes = [_I] + [_P] * 8 + [_I, _P, _I]
+        self.path = path
+        self._lib = lib
+
+
+@functools.lru_cache(maxsize=1)
+def _load() -> tuple[_Library | None, str]:
+    path, where = library_path()
+    if path is None:
+        return None, f'numpy ({where})'
+    try:
+        return _Library(path), f'compiled kernel {path} (from {where})'
+    except OSError as exc:
+        return None, f'numpy (could not load {path}: {exc})'
+
+
+def status() -> str:
+    """Which implementation :class:`JointKernel` users get, and why."""
+    return _load()[1]
+
+
+def available() -> bool:
+    """True when the compiled kernel is loaded."""
+    return _load()[0] is not None
+
+
+def library() -> _Library | None:
+    """The loaded library, or ``None`` (numpy path)."""
+    return _load()[0]
+
+
+class BatchLayout(NamedTuple):
+    """Where each block of a batch's output buffer starts (doubles; ``T`` at 0) and its size."""
+
+    strings: int
+    lengths: int
+    tensions: int
+    wrench: int
+    stiffness: int
+    cartesian: int
+    flags: int
+    size: int
+
+
+class JointKernel:
+    """The compiled evaluation of one joint model: its per-string constants, bound once.
+
+    ``p1``, ``p2`` (n, 3) string ends in {1} and {2}, ``k`` (n,) N/m, ``max_stretch`` (n,) m
+    (inf: no limit), ``law`` 0 (Hooke) or 1 (paper), ``min_string_length`` (m). The packed
+    buffer of one screw holds the inputs ``xi`` (6) and the rest lengths (n), then ``T`` (16),
+    ``s`` (3n), lengths (n), tensions (n), wrench (6), ``K`` (36), ``K_c`` (36), then the slack
+    and saturated flags as 2n bytes; the offsets are attributes (``size`` is
+    ``tsk_joint_packed_size(n)``). Inputs copied into it need no lifetime care.
+
+    ``tsk_joint_measure_packed`` evaluates the same buffer and writes the string measurements'
+    Jacobians to a second one (``measure_size`` doubles, offsets ``measure_*`` from its start):
+    the SE(3) left Jacobian ``J`` (36), the pose Jacobian ``P`` (36), ``dl/dxi`` (6n),
+    ``dphi/dxi`` (6n) and ``dphi/dl`` (n).
+    """
+
+    def __init__(self, library: _Library, p1: NDArray, p2: NDArray, k: NDArray,
+                 max_stretch: NDArray, law: int, min_string_length: float) -> None:
+        n = p1.shape[0]
+        self.n = n
+        self.law = law
+        self.min_string_length = min_string_length
+        # The struct points into these arrays (and SERIES): they live as long as this object.
+        self._arrays = [np.ascontiguousarray(a, dtype=np.float64)
+                        for a in (p1, p2, k, max_stretch)]
+        self._series = SERIES
+        self._struct = _ModelStruct(n, *(address(a) for a in self._arrays), law,
+                                    SERIES.shape[1], address(SERIES), screw.SERIES_THRESHOLD,
+                                    min_string_length)
+        self.model = ctypes.addressof(self._struct)
+        self.evaluate = library.evaluate
+        self.evaluate_packed = library.evaluate_packed
+        self.measure_packed = library.measure_packed
+        self.rest = 6
+        self.transform = self.rest + n
+        self.strings = self.transform + 16
+        self.lengths = self.strings + 3 * n
+        self.tensions = self.lengths + n
+        self.wrench = self.tensions + n
+        self.stiffness = self.wrench + 6
+        self.cartesian = self.stiffness + 36
+        self.flags = self.cartesian + 36
+        self.size = self.flags + (2 * n + 7) // 8
+        self.measure_pose = 36
+        self.measure_lengths = 72
+        self.measure_tensions = 72 + 6 * n
+        self.measure_slope = 72 + 12 * n
+        self.measure_size = 72 + 13 * n
+
+    def batch_layout(self, N: int) -> BatchLayout:
+        """Offsets (in doubles) of the blocks of a batch's output buffer for ``N`` screws, in
+        the order of ``kernel.h``, and its size (``tsk_joint_batch_size(n, N)``)."""
+        n = self.n
+        strings = 16 * N
+        lengths = strings + 3 * n * N
+        tensions = lengths + n * N
+        wrench = tensions + n * N
+        stiffness = wrench + 6 * N
+        cartesian = stiffness + 36 * N
+        flags = cartesian + 36 * N
+        return BatchLayout(strings, lengths, tensions, wrench, stiffness, cartesian, flags,
+                           flags + (2 * N * n + 7) // 8)
+
+    def __reduce__(self) -> tuple:
+        """Pickled as its constants (a model sent to the solver worker process): the receiving
+        process binds them to its own library, or gets ``None`` (numpy) without one."""
+        return joint_kernel, (*self._arrays, self.law, self.min_string_length)
+
+
+def joint_kernel(p1: NDArray, p2: NDArray, k: NDArray, max_stretch: NDArray, law: int,
+                 min_string_length: float) -> JointKernel | None:
+    """A :class:`JointKernel` for these constants, or ``None`` when the library is not loaded."""
+    library = _load()[0]
+    if library is None:
+        return None
+    return JointKernel(library, p1, p2, k, max_stretch, law, min_string_length)

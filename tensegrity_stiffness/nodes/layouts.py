@@ -1,0 +1,138 @@
+"""Labels and shapes of the arrays that tensegrity_stiffness publishes: one home for the node,
+the bag command, the command line and :mod:`tensegrity_stiffness.ros.conversions`.
+
+No ROS import: the labels are plain strings, used to build ``std_msgs/Float64MultiArray``
+layouts with rclpy messages (:mod:`tensegrity_stiffness.ros.conversions`) or with any other
+message implementation
+(rosbags types in the bag command). Layout convention (row-major, ``std_msgs/MultiArrayLayout``):
+a matrix of shape (rows, cols) has ``dim[0] = (row_label, rows, rows*cols)`` and
+``dim[1] = (col_label, cols, cols)``; a vector ``dim[0] = (label, n, n)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+from tensegrity_stiffness.geometry.components import (
+    BLOCK_NAMES,
+    SCREW_NAMES,
+    TWIST_NAMES,
+    WRENCH_NAMES,
+)
+
+WRENCH_LABEL = 'wrench [' + ' '.join(WRENCH_NAMES) + ']'
+SCREW_LABEL = 'screw [' + ' '.join(SCREW_NAMES) + ']'
+TWIST_LABEL = 'spatial twist in {1} [' + ' '.join(TWIST_NAMES) + '] (linear first, as ROS)'
+
+#: Row label of K and K_c; column labels of K (screw) and of K_c (spatial twist).
+STIFFNESS_ROW_LABEL = 'rows: ' + WRENCH_LABEL
+STIFFNESS_COL_LABEL = 'cols: ' + SCREW_LABEL
+CARTESIAN_STIFFNESS_COL_LABEL = 'cols: ' + TWIST_LABEL
+
+#: Label of ``~/string_tensions``: this prefix, then the string names in config order.
+TENSIONS_LABEL_PREFIX = 'tensions [N], strings in config order: '
+
+#: Label of ``~/stiffness_interpretation`` (16 values, :func:`interpretation_vector`).
+INTERPRETATION_LABEL = (
+    'stiffness interpretation of K: block Frobenius norms [' + ' '.join(BLOCK_NAMES) + '] (4), '
+    'column norms [' + ' '.join(SCREW_NAMES) + '] (6), '
+    'row norms [' + ' '.join(WRENCH_NAMES) + '] (6)')
+INTERPRETATION_SIZE = len(BLOCK_NAMES) + len(SCREW_NAMES) + len(WRENCH_NAMES)
+
+
+def tensions_label(string_names: Sequence[str]) -> str:
+    """Label of the tensions vector for these string names (config order)."""
+    return TENSIONS_LABEL_PREFIX + ' '.join(string_names)
+
+
+def matrix_dims(rows: int, cols: int, row_label: str, col_label: str
+                ) -> list[tuple[str, int, int]]:
+    """``(label, size, stride)`` of the two dimensions of a dense row-major matrix."""
+    return [(row_label, rows, rows * cols), (col_label, cols, cols)]
+
+
+def vector_dims(n: int, label: str) -> list[tuple[str, int, int]]:
+    """``(label, size, stride)`` of the one dimension of a vector."""
+    return [(label, n, n)]
+
+
+# ------------------------------------------------------------------------------------ spines
+#: First dimension of the spine's per-joint arrays (joint-major: joint 1 first).
+JOINTS_LABEL = 'joints'
+#: Tip stiffness K_tip = dW/d(delta) of a spine: rows the tip wrench, cols a small twist of the
+#: tool frame (linear first, as ROS), both in the tool frame (``~/tip_stiffness``) or in the
+#: base frame, wrench about its origin (``~/tip_stiffness_base``).
+TIP_STIFFNESS_LABELS = {
+    frame: ('rows: tip wrench in the ' + frame + ' frame [' + ' '.join(WRENCH_NAMES) + ']',
+            'cols: tip twist in the ' + frame + ' frame [' + ' '.join(TWIST_NAMES)
+            + '] (linear first, as ROS)')
+    for frame in ('tool', 'base')}
+
+
+def stacked_matrix_dims(n: int, rows: int, cols: int, stack_label: str, row_label: str,
+                        col_label: str) -> list[tuple[str, int, int]]:
+    """``(label, size, stride)`` of ``n`` dense row-major (rows, cols) matrices, one after
+    the other (shape (n, rows, cols))."""
+    return [(stack_label, n, n * rows * cols), *matrix_dims(rows, cols, row_label, col_label)]
+
+
+# ------------------------------------------------------------------------------ output messages
+#: ROS 2 type names of the nodes' output messages (``package/msg/Name``, as rosbag2 records them).
+FLOAT64_MULTIARRAY = 'std_msgs/msg/Float64MultiArray'
+WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
+POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+
+
+@dataclass(frozen=True)
+class OutputLayout:
+    """One output message of a node: its type and, for a ``Float64MultiArray``, its layout
+    ``dims`` ((label, size, stride) each; the payload holds ``dims[0][2]`` values). A stamped
+    message (``WrenchStamped``, ``PoseStamped``) carries the frame id the node is configured
+    with (``link1_frame`` of ``stiffness_node``, ``base_frame`` of ``spine_node``), given when
+    it is filled."""
+
+    msgtype: str
+    dims: tuple[tuple[str, int, int], ...] = ()
+
+    @property
+    def size(self) -> int:
+        """Values in the payload (6 for a wrench, 16 for a pose's (4, 4) transform)."""
+        if self.msgtype == FLOAT64_MULTIARRAY:
+            return self.dims[0][2]
+        return 6 if self.msgtype == WRENCH_STAMPED else 16
+
+
+def _array(dims: Sequence[tuple[str, int, int]]) -> OutputLayout:
+    return OutputLayout(FLOAT64_MULTIARRAY, tuple(dims))
+
+
+def joint_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
+    """``stiffness_node``'s per-input outputs by topic (relative to the node), in the order of
+    :func:`processing.output_arrays`: wrench, K, K_c, tensions, interpretation."""
+    n = len(string_names)
+    return {
+        'wrench': OutputLayout(WRENCH_STAMPED),
+        'stiffness': _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
+        'cartesian_stiffness': _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL,
+                                                  CARTESIAN_STIFFNESS_COL_LABEL)),
+        'string_tensions': _array(vector_dims(n, tensions_label(string_names))),
+        'stiffness_interpretation': _array(vector_dims(INTERPRETATION_SIZE,
+                                                       INTERPRETATION_LABEL)),
+    }
+
+
+def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
+    """``spine_node``'s per-input outputs by topic, in the order of
+    :func:`spine_processing.output_arrays` (and its ``OUTPUT_NAMES``)."""
+    return {
+        'joint_wrenches': _array(matrix_dims(n_joints, 6, JOINTS_LABEL, WRENCH_LABEL)),
+        'joint_stiffness': _array(stacked_matrix_dims(
+            n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
+        'joint_cartesian_stiffness': _array(stacked_matrix_dims(
+            n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, CARTESIAN_STIFFNESS_COL_LABEL)),
+        'tip_pose': OutputLayout(POSE_STAMPED),
+        'tip_wrench': OutputLayout(WRENCH_STAMPED),
+        'tip_stiffness': _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['tool'])),
+        'tip_stiffness_base': _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['base'])),
+    }

@@ -1,0 +1,327 @@
+"""The nodes' messages, read and written by attribute, for any ROS 2 message implementation.
+
+rclpy's generated classes (:mod:`tensegrity_stiffness.ros.conversions`, the nodes) and rosbags'
+types (the bag command,
+which runs without a ROS install) have the same fields. This module reads the inputs and builds
+and refills the outputs through those fields only, so it imports neither: a
+:class:`MessageTypes` names the implementation (its classes by ROS type name, and how it holds a
+float64 payload).
+
+Inputs: :func:`multiarray_to_array` (the validated payload of a ``Float64MultiArray``) and
+:func:`pose_to_transform` (a ``Pose``). Outputs: :class:`OutputMessages`, preallocated messages
+of :class:`~tensegrity_stiffness.nodes.layouts.OutputLayout` s refilled per input, and the two
+nodes'
+per-input outputs :class:`JointOutputMessages` and :class:`SpineOutputMessages` (one finite
+check of every output, then each message gets its array without a second check).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tensegrity_stiffness.geometry.quaternion import (
+    QUATERNION_UNIT_TOLERANCE,
+    ROTATION_TOLERANCE,
+    quaternion_to_rotation,
+    rotation_to_quaternion,
+)
+from tensegrity_stiffness.geometry.validation import finite_array_of_shape
+from tensegrity_stiffness.nodes import processing, spine_processing
+from tensegrity_stiffness.nodes.layouts import (
+    FLOAT64_MULTIARRAY,
+    POSE_STAMPED,
+    WRENCH_STAMPED,
+    OutputLayout,
+    joint_output_layouts,
+    spine_output_layouts,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: Largest element count accepted from an incoming message unless the caller says otherwise.
+DEFAULT_MAX_LENGTH = 4096
+NANOSECONDS_PER_SECOND = 1_000_000_000
+_MAX_SECONDS = 2**31 - 1  # builtin_interfaces/Time.sec is int32
+
+
+# ------------------------------------------------------------------------------ inputs
+def multiarray_to_array(msg: Any, expected_length: int | None = None,
+                        max_length: int = DEFAULT_MAX_LENGTH) -> FloatArray:
+    """Validated flat copy of the payload of a ``Float64MultiArray``, shape (n,).
+
+    ``layout.data_offset`` is honoured (elements before it are skipped). Checks, in order:
+    the payload length against ``max_length`` (before any conversion, so an oversized message
+    costs nothing), the data offset, the length against ``expected_length``, then NaN / inf.
+
+    Raises
+    ------
+    ValueError
+        ``'too many elements'``, ``'data_offset'``, ``'expected N values'`` or ``'NaN or inf'``.
+    """
+    values = multiarray_payload(msg, max_length)
+    if expected_length is not None and values.size != expected_length:
+        raise ValueError(f'expected {expected_length} values, got {values.size}')
+    return finite_array_of_shape('array', values, None)
+
+
+def multiarray_payload(msg: Any, max_length: int = DEFAULT_MAX_LENGTH) -> FloatArray:
+    """The payload of a ``Float64MultiArray`` from ``layout.data_offset`` on, as float64, NaN and
+    inf kept (measured arrays use NaN for "not measured"); ValueError when it has more than
+    ``max_length`` elements (checked before any conversion) or a bad data offset."""
+    n_total = len(msg.data)
+    if n_total > max_length:
+        raise ValueError(f'too many elements: {n_total} > max_length {max_length}')
+    offset = int(msg.layout.data_offset)
+    if offset > n_total:
+        raise ValueError(f'data_offset {offset} exceeds the {n_total} data elements')
+    return np.array(msg.data, dtype=np.float64)[offset:]
+
+
+def pose_to_transform(pose: Any,
+                      unit_tolerance: float = QUATERNION_UNIT_TOLERANCE) -> FloatArray:
+    """(4, 4) homogeneous transform of a ``geometry_msgs/Pose`` (position in m).
+
+    The orientation is validated as in :func:`quaternion_to_rotation` (finite, non-zero, unit
+    norm within ``unit_tolerance``; renormalised within it).
+
+    Raises
+    ------
+    ValueError
+        Non-finite position, or an invalid orientation quaternion.
+    """
+    p = finite_array_of_shape('pose position',
+                              [pose.position.x, pose.position.y, pose.position.z], None)
+    o = pose.orientation
+    T = np.eye(4)
+    T[:3, :3] = quaternion_to_rotation([o.x, o.y, o.z, o.w], unit_tolerance=unit_tolerance)
+    T[:3, 3] = p
+    return T
+
+
+# ------------------------------------------------------------------------------ output fields
+def pose_values(transform: ArrayLike, tolerance: float = ROTATION_TOLERANCE
+                ) -> tuple[list[float], list[float]]:
+    """Position ``[x y z]`` and quaternion ``[x y z w]`` (``w >= 0``) of a (4, 4) homogeneous
+    transform, as a ``geometry_msgs/Pose`` holds them.
+
+    Raises
+    ------
+    ValueError
+        If T is not finite (4, 4), its last row is not [0 0 0 1] within ``tolerance``, or its
+        rotation block is not a rotation (see :func:`rotation_to_quaternion`).
+    """
+    T = finite_array_of_shape('transform', transform, (4, 4))
+    if float(np.max(np.abs(T[3] - np.array([0.0, 0.0, 0.0, 1.0])))) > tolerance:
+        raise ValueError(f'transform last row must be [0 0 0 1], got {T[3].tolist()}')
+    q = rotation_to_quaternion(T[:3, :3], tolerance=tolerance)
+    return T[:3, 3].tolist(), np.asarray(q, dtype=np.float64).tolist()
+
+
+def write_pose(msg: Any, transform: ArrayLike) -> Any:
+    """Write the pose of a (4, 4) transform into an existing ``Pose`` (:func:`pose_values`'
+    checks; nothing is written if they fail)."""
+    (px, py, pz), (qx, qy, qz, qw) = pose_values(transform)
+    p, o = msg.position, msg.orientation
+    p.x, p.y, p.z = px, py, pz
+    o.x, o.y, o.z, o.w = qx, qy, qz, qw
+    return msg
+
+
+def write_wrench(msg: Any, wrench: FloatArray) -> Any:
+    """Write a (6,) array ``[fx fy fz mx my mz]`` already checked finite into an existing
+    ``Wrench``."""
+    f, t = msg.force, msg.torque
+    f.x, f.y, f.z, t.x, t.y, t.z = wrench.tolist()
+    return msg
+
+
+def stamp_parts(nanoseconds: int) -> tuple[int, int]:
+    """``(sec, nanosec)`` of a ``builtin_interfaces/Time`` for a non-negative integer count of
+    nanoseconds.
+
+    Raises
+    ------
+    ValueError
+        If negative or beyond the int32 seconds range of ``Time.sec``.
+    """
+    ns = int(nanoseconds)
+    if ns < 0:
+        raise ValueError(f'stamp must be non-negative, got {ns} ns')
+    sec, nanosec = divmod(ns, NANOSECONDS_PER_SECOND)
+    if sec > _MAX_SECONDS:
+        raise ValueError(f'stamp {sec} s exceeds the int32 range of Time.sec')
+    return sec, nanosec
+
+
+# ------------------------------------------------------------------------------ implementations
+@dataclass(frozen=True)
+class MessageTypes:
+    """A message implementation: ``classes[name]`` builds the message ``name``
+    (``'std_msgs/msg/Header'`` ...) from keyword fields; ``payload(values)`` is what its
+    ``float64[]`` fields hold for a float64 array (row-major, flattened)."""
+
+    classes: Mapping[str, Callable[..., Any]]
+    payload: Callable[[FloatArray], Any]
+
+    def time(self, nanoseconds: int) -> Any:
+        """A ``builtin_interfaces/Time`` (:func:`stamp_parts`' checks)."""
+        sec, nanosec = stamp_parts(nanoseconds)
+        return self.classes['builtin_interfaces/msg/Time'](sec=sec, nanosec=nanosec)
+
+
+#: The ROS type names :func:`new_message` builds with (every field given, as rosbags needs).
+MESSAGE_CLASS_NAMES = (
+    'builtin_interfaces/msg/Time', 'std_msgs/msg/Header', 'std_msgs/msg/MultiArrayDimension',
+    'std_msgs/msg/MultiArrayLayout', FLOAT64_MULTIARRAY, 'geometry_msgs/msg/Vector3',
+    'geometry_msgs/msg/Wrench', WRENCH_STAMPED, 'geometry_msgs/msg/Point',
+    'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Pose', POSE_STAMPED)
+
+
+def multiarray(dims: Sequence[tuple[str, int, int]], values: FloatArray,
+               types: MessageTypes) -> Any:
+    """A ``Float64MultiArray`` with the layout ``dims`` ((label, size, stride) each, e.g.
+    :func:`~tensegrity_stiffness.nodes.layouts.matrix_dims`) and the payload ``values`` (checked
+    by the caller)."""
+    c = types.classes
+    dim = c['std_msgs/msg/MultiArrayDimension']
+    return c[FLOAT64_MULTIARRAY](
+        layout=c['std_msgs/msg/MultiArrayLayout'](
+            dim=[dim(label=label, size=size, stride=stride) for label, size, stride in dims],
+            data_offset=0),
+        data=types.payload(values))
+
+
+def new_message(layout: OutputLayout, types: MessageTypes) -> Any:
+    """A message of ``layout`` with every field set: a ``Float64MultiArray`` with the layout's
+    dimensions and a zero payload, or a stamped wrench / pose of zeros (identity orientation)
+    with a zero stamp and an empty frame id."""
+    c = types.classes
+    if layout.msgtype == FLOAT64_MULTIARRAY:
+        return multiarray(layout.dims, np.zeros(layout.size), types)
+    header = c['std_msgs/msg/Header'](stamp=types.time(0), frame_id='')
+    if layout.msgtype == WRENCH_STAMPED:
+        vector3 = c['geometry_msgs/msg/Vector3']
+        return c[WRENCH_STAMPED](header=header, wrench=c['geometry_msgs/msg/Wrench'](
+            force=vector3(x=0.0, y=0.0, z=0.0), torque=vector3(x=0.0, y=0.0, z=0.0)))
+    if layout.msgtype == POSE_STAMPED:
+        return c[POSE_STAMPED](header=header, pose=c['geometry_msgs/msg/Pose'](
+            position=c['geometry_msgs/msg/Point'](x=0.0, y=0.0, z=0.0),
+            orientation=c['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0)))
+    raise ValueError(f'no output message of type {layout.msgtype}')
+
+
+#: Writes one checked array into its message: ``writer(msg, values, stamp, frame_id)``.
+Writer = Callable[[Any, FloatArray, Any, str], None]
+
+
+def write_wrench_stamped(msg: Any, values: FloatArray, stamp: Any, frame_id: str) -> None:
+    """A WrenchStamped's header and ``[fx fy fz mx my mz]``."""
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    write_wrench(msg.wrench, values)
+
+
+def write_pose_stamped(msg: Any, values: FloatArray, stamp: Any, frame_id: str) -> None:
+    """A PoseStamped's pose of a (4, 4) transform and its header (ValueError, and nothing
+    written, if the rotation block is not a rotation)."""
+    write_pose(msg.pose, values)
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+
+
+def output_writer(layout: OutputLayout, types: MessageTypes) -> Writer:
+    """The :data:`Writer` of a message of ``layout``: a ``Float64MultiArray``'s data (its
+    layout, labelled once, stays), or a stamped message's header and fields."""
+    if layout.msgtype == WRENCH_STAMPED:
+        return write_wrench_stamped
+    if layout.msgtype == POSE_STAMPED:
+        return write_pose_stamped
+    return payload_writer(types)
+
+
+def payload_writer(types: MessageTypes) -> Writer:
+    """The :data:`Writer` of a ``Float64MultiArray``'s data in ``types``' payload form (its
+    layout, labelled once, stays; stamp and frame are not used)."""
+    payload = types.payload
+
+    def write_payload(msg: Any, values: FloatArray, stamp: Any, frame_id: str) -> None:
+        msg.data = payload(values)
+
+    return write_payload
+
+
+def fill_outputs(messages: Sequence[Any], arrays: Sequence[FloatArray],
+                 writers: Sequence[Writer], stamp: Any, frame_id: str,
+                 wanted: Sequence[bool] | None = None) -> None:
+    """Write ``arrays[k]`` into ``messages[k]`` with ``writers[k]`` for every ``k`` flagged in
+    ``wanted`` (default all)."""
+    for k, (msg, values, write) in enumerate(zip(messages, arrays, writers, strict=True)):
+        if wanted is None or wanted[k]:
+            write(msg, values, stamp, frame_id)
+
+
+# ------------------------------------------------------------------------------ node outputs
+class OutputMessages:
+    """One preallocated message per output of ``layouts`` (topic -> layout, in publishing
+    order), refilled per input by :meth:`fill_arrays`."""
+
+    def __init__(self, layouts: Mapping[str, OutputLayout], types: MessageTypes) -> None:
+        self.layouts = dict(layouts)
+        self.types = types
+        self._messages = tuple(new_message(layout, types) for layout in self.layouts.values())
+        self.writers = tuple(output_writer(layout, types) for layout in self.layouts.values())
+
+    def messages(self) -> tuple[Any, ...]:
+        """The messages in the order of :attr:`layouts`."""
+        return self._messages
+
+    def fill_arrays(self, arrays: Sequence[FloatArray], stamp: Any, frame_id: str,
+                    wanted: Sequence[bool] | None = None) -> None:
+        """Write ``arrays`` (checked finite, in :meth:`messages` order) into the messages
+        flagged in ``wanted`` (default all); the stamped ones get ``stamp`` and ``frame_id``."""
+        fill_outputs(self._messages, arrays, self.writers, stamp, frame_id, wanted)
+
+
+class JointOutputMessages(OutputMessages):
+    """``stiffness_node``'s five per-input output messages
+    (:func:`~tensegrity_stiffness.nodes.layouts.joint_output_layouts`), refilled by
+    :meth:`fill`."""
+
+    def __init__(self, string_names: Sequence[str], types: MessageTypes) -> None:
+        self.string_names = tuple(string_names)
+        super().__init__(joint_output_layouts(self.string_names), types)
+        (self.wrench, self.stiffness, self.cartesian_stiffness, self.tensions,
+         self.interpretation) = self._messages
+
+    def fill(self, outputs: processing.JointOutputs, stamp: Any, frame_id: str,
+             wanted: Sequence[bool] | None = None) -> None:
+        """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
+        order; default all); ValueError if any output is not finite (then none is set)."""
+        processing.require_finite(outputs)
+        self.fill_arrays(processing.output_arrays(outputs), stamp, frame_id, wanted)
+
+
+class SpineOutputMessages(OutputMessages):
+    """``spine_node``'s seven per-input output messages of a spine of ``n_joints``
+    (:func:`~tensegrity_stiffness.nodes.layouts.spine_output_layouts`), refilled by
+    :meth:`fill`."""
+
+    def __init__(self, n_joints: int, types: MessageTypes) -> None:
+        self.n_joints = n_joints
+        super().__init__(spine_output_layouts(n_joints), types)
+        (self.joint_wrenches, self.joint_stiffness, self.joint_cartesian_stiffness,
+         self.tip_pose, self.tip_wrench, self.tip_stiffness,
+         self.tip_stiffness_base) = self._messages
+
+    def fill(self, outputs: spine_processing.SpineOutputs, stamp: Any, base_frame: str,
+             wanted: Sequence[bool] | None = None) -> None:
+        """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
+        order; default all); ValueError if any output is not finite (then none is set), or if
+        the tip transform's rotation block is not a rotation."""
+        spine_processing.require_finite(outputs)
+        self.fill_arrays(spine_processing.output_arrays(outputs), stamp, base_frame, wanted)

@@ -1,0 +1,116 @@
+"""What the joint node does with each input, without ROS: the checks of a screw or a pose, and
+the outputs of one configuration. ``stiffness_node`` and the bag command both call these, so they
+reject the same inputs with the same words and publish the same numbers.
+
+Decoding a message into numbers (length, NaN and size checks, quaternions) is
+:mod:`tensegrity_stiffness.ros.conversions`' part; this module takes the numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tensegrity_stiffness.geometry.screw import check_in_chart, log_se3
+from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
+from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
+from tensegrity_stiffness.mechanics.joint import JointModel, JointState
+
+FloatArray = NDArray[np.float64]
+
+
+def screw_input(values: FloatArray) -> FloatArray:
+    """The screw of a ``~/screw`` message's six finite values; ValueError outside the chart
+    ``|omega| < 2 pi``."""
+    check_in_chart(values, 'screw')
+    return values
+
+
+def pose_input(frame_id: str, transform: ArrayLike, link1_frame: str,
+               reference: ArrayLike) -> FloatArray:
+    """The screw of a pose of link 2 in link 1 (``~/pose``): the log map on the rotation branch
+    nearest ``reference`` (the last screw). ValueError when ``frame_id`` is set and is not
+    ``link1_frame``."""
+    require_frame(frame_id, link1_frame, "link 1's frame")
+    return log_se3(transform, reference=reference)
+
+
+@dataclass(frozen=True)
+class JointOutputs:
+    """Everything the joint node publishes for one configuration: the joint ``state`` (wrench,
+    K, K_c, tensions, ...) and the 16-value ``interpretation`` of K (eqs. 19-20)."""
+
+    screw: FloatArray
+    state: JointState
+    interpretation: FloatArray
+
+
+def joint_outputs(model: JointModel, screw: FloatArray) -> JointOutputs:
+    """The outputs at ``screw`` (6,). Overflow far out shows as non-finite values, which the
+    publishers' checks reject; no floating-point warning is raised."""
+    with np.errstate(all='ignore'):
+        state = model.evaluate(screw)
+        interpretation = interpretation_vector(state.stiffness)
+    return JointOutputs(screw, state, interpretation)
+
+
+#: The published arrays of :class:`JointOutputs`, in topic order (wrench, stiffness,
+#: cartesian_stiffness, string_tensions, stiffness_interpretation).
+OUTPUT_NAMES = ('wrench', 'stiffness', 'cartesian_stiffness', 'tensions', 'interpretation')
+
+
+def output_arrays(outputs: JointOutputs) -> tuple[FloatArray, ...]:
+    """The published arrays of ``outputs`` in :data:`OUTPUT_NAMES` order."""
+    state = outputs.state
+    return (state.wrench, state.stiffness, state.cartesian_stiffness, state.tensions,
+            outputs.interpretation)
+
+
+def require_finite(outputs: JointOutputs) -> None:
+    """ValueError naming the first published array of ``outputs`` that is not finite (an input
+    gets all of its outputs or none). One sum per array on the common, finite path."""
+    require_all_finite(OUTPUT_NAMES, output_arrays(outputs))
+
+
+def screw_inputs(values: FloatArray) -> tuple[NDArray[np.bool_], dict[int, str]]:
+    """:func:`screw_input` over the rows of ``values`` (N, 6) of finite screws: which rows are
+    accepted, and for each rejected row its ValueError's text (the node's words)."""
+    values = np.asarray(values, dtype=np.float64).reshape(-1, 6)
+    try:
+        check_in_chart(values, 'screw')
+    except ValueError:
+        pass
+    else:
+        return np.ones(len(values), dtype=bool), {}
+    accepted = np.ones(len(values), dtype=bool)
+    problems: dict[int, str] = {}
+    for i, row in enumerate(values):
+        try:
+            screw_input(row)
+        except ValueError as exc:
+            accepted[i] = False
+            problems[i] = str(exc)
+    return accepted, problems
+
+
+def joint_outputs_batch(model: JointModel, screws: FloatArray) -> JointOutputs:
+    """:func:`joint_outputs` of many screws (N, 6) in one batched evaluation: every field with a
+    leading axis N (``state`` from :meth:`JointModel.evaluate`, ``interpretation`` (N, 16)).
+    Rows agree with :func:`joint_outputs` of each screw to rounding."""
+    screws = np.asarray(screws, dtype=np.float64).reshape(-1, 6)
+    with np.errstate(all='ignore'):
+        state = model.evaluate(screws)
+        interpretation = interpretation_vector(state.stiffness)
+    return JointOutputs(screws, state, interpretation)
+
+
+def finite_rows(outputs: JointOutputs) -> NDArray[np.bool_]:
+    """(N,) mask of the rows of a :func:`joint_outputs_batch` whose published arrays (wrench,
+    K, K_c, tensions, interpretation) are all finite: the rows :func:`require_finite` accepts."""
+    n = len(outputs.screw)
+    mask = np.ones(n, dtype=bool)
+    for array in output_arrays(outputs):
+        mask &= np.isfinite(array.reshape(n, -1)).all(axis=1)
+    return mask

@@ -1,0 +1,71 @@
+"""Run a node in its own process, from start-up to a clean stop.
+
+``run`` is the body of every executable of the package: it bounds the memory oversized messages
+can pin (:mod:`.middleware`), creates the node, moves what lives as long as the process out of the
+garbage collector's reach, spins, and on SIGINT or SIGTERM (rclpy's signal handlers shut the
+context down; Ctrl-C and supervisors that signal the whole process group alike) closes the node's
+workers and exits with status 0.
+"""
+
+from __future__ import annotations
+
+import gc
+import signal
+import sys
+from collections.abc import Callable
+from typing import Any
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+from tensegrity_stiffness.ros.runtime.middleware import bound_input_memory
+
+#: Python's thread switch interval while a node runs (s): a thread that holds the GIL (a
+#: service, the worker's reader) yields it to the executor thread at least this often (the
+#: default, 5 ms, would dominate the p99 latency).
+SWITCH_INTERVAL_S = 2e-4
+
+
+def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
+        executor_factory: Callable[[], Any] | None = None) -> None:
+    """Create the node with ``node_factory`` (after ``rclpy.init(args=args)``) and spin it until
+    shutdown (also one that lands inside rclpy's own calls); then ``node.close()`` (if it has
+    one), destroy it and shut rclpy down. SIGINT is ignored from the clean-up on: ``run`` is the
+    last thing its process does."""
+    sys.setswitchinterval(SWITCH_INTERVAL_S)
+    profile = bound_input_memory()
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = node_factory()
+        finally:  # Fast DDS read the profile when the node's participant was created
+            if profile is not None:
+                profile.unlink(missing_ok=True)
+        # Everything allocated so far (modules, node, settings) lives as long as the process:
+        # out of the collector's reach, full collections stay short.
+        gc.collect()
+        gc.freeze()
+        executor = (executor_factory or SingleThreadedExecutor)()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RuntimeError:
+        # rclpy's signal handler shuts the context down on a thread of its own: a call past its
+        # check of the context (the executor's creation, a spin's wait set) raises RCLError, a
+        # RuntimeError, instead (ros2/rclpy#398, ros2/ros2cli#854). Anything else is a fault.
+        if rclpy.ok():
+            raise
+    finally:
+        # Nothing cuts the clean-up short: the KeyboardInterrupt of the SIGINT that shut the
+        # context down can surface after the spin ended by ExternalShutdownException, and a
+        # second Ctrl-C may follow; either, raised in close(), left the fast lane's thread
+        # running into the interpreter's exit (an abort, exit -6).
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        if node is not None:
+            close = getattr(node, 'close', None)
+            if close is not None:
+                close()
+            node.destroy_node()
+        rclpy.try_shutdown()

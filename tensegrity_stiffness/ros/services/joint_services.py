@@ -1,0 +1,184 @@
+"""The joint node's services as pure functions: request validation and response filling, with
+no rclpy (requests and responses are the generated message objects, or anything with the same
+fields), so they are tested without a node.
+
+``~/solve_equilibrium`` and ``~/design_rest_lengths`` are validated here and computed in the
+worker process; the planar services are answered here whole.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from tensegrity_stiffness.geometry.screw import CHART_LIMIT
+from tensegrity_stiffness.mechanics.design import (
+    DesignResult,
+    design_request_from_service,
+    design_response_fields,
+)
+from tensegrity_stiffness.mechanics.equilibrium import EquilibriumResult
+from tensegrity_stiffness.mechanics.planar import PlanarMechanism
+from tensegrity_stiffness.nodes.parameters import JointNodeSettings
+from tensegrity_stiffness.ros import conversions
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class EquilibriumJob:
+    """The arguments of one :func:`solve_equilibrium` call, validated."""
+
+    external_wrench: FloatArray
+    rest_lengths: FloatArray | None
+    initial_screw: FloatArray
+    time_budget: float
+    max_iterations: int
+
+    def kwargs(self) -> dict[str, Any]:
+        return {'rest_lengths': self.rest_lengths, 'initial_screw': self.initial_screw,
+                'time_budget': self.time_budget, 'max_iterations': self.max_iterations}
+
+
+def equilibrium_job(request: Any, settings: JointNodeSettings,
+                    last_solution: FloatArray | None) -> EquilibriumJob:
+    """Validate a ``SolveEquilibrium`` request; ValueError naming the field. An empty
+    ``initial_screw`` starts from the last solution, else from ``joint.initial_screw``."""
+    for name in ('rest_lengths', 'initial_screw'):
+        n = len(getattr(request, name))
+        if n > settings.max_array_length:  # rejected before anything is converted
+            raise ValueError(f'{name}: too many elements: {n} > max_length '
+                             f'{settings.max_array_length}')
+    W = conversions.msg_to_wrench(request.external_wrench)
+    model = settings.model
+    rest = None
+    if len(request.rest_lengths):
+        rest = model.validate_rest_lengths(np.asarray(request.rest_lengths, dtype=np.float64),
+                                           batched=False)
+    if len(request.initial_screw):
+        x0 = np.asarray(request.initial_screw, dtype=np.float64)
+        if x0.shape != (6,):
+            raise ValueError(f'initial_screw must have 6 values, got {x0.size}')
+    else:
+        x0 = last_solution if last_solution is not None else model.initial_screw
+    x0 = np.asarray(x0, dtype=np.float64)
+    if not np.isfinite(x0).all() or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
+        raise ValueError('initial_screw must have finite values and |omega| < 2 pi')
+    return EquilibriumJob(W, rest, x0, settings.equilibrium_time_budget,
+                          settings.equilibrium_max_iterations)
+
+
+def fill_equilibrium(response: Any, result: EquilibriumResult) -> bool:
+    """Fill a ``SolveEquilibrium`` response from a solver result; True when it is a usable
+    equilibrium (the node then keeps its screw as the next default start)."""
+    response.success = bool(result.success)
+    response.message = result.message
+    response.iterations = int(result.iterations)
+    response.residual = float(result.residual) if math.isfinite(result.residual) else -1.0
+    if not result.success or result.state is None:
+        return False
+    state = result.state
+    if not (math.isfinite(result.energy) and all(np.isfinite(a).all() for a in (
+            result.screw, state.transform, state.wrench, state.stiffness,
+            state.cartesian_stiffness, state.tensions))):
+        # e.g. a start so far out that the string lengths overflow: F evaluates to 0 there
+        response.success = False
+        response.message = 'no usable equilibrium: the state at the solution is not finite'
+        return False
+    response.screw = result.screw.tolist()
+    response.pose = conversions.transform_to_pose(state.transform)
+    response.string_wrench = conversions.wrench_to_msg(state.wrench)
+    response.stiffness = state.stiffness.ravel().tolist()
+    response.cartesian_stiffness = state.cartesian_stiffness.ravel().tolist()
+    response.tensions = state.tensions.tolist()
+    response.energy = float(result.energy)
+    response.stable = bool(result.stable)
+    return True
+
+
+def design_kwargs(request: Any, settings: JointNodeSettings, reference: FloatArray
+                  ) -> dict[str, Any]:
+    """Keyword arguments of :func:`design.design_rest_lengths` (after the model) from a
+    ``DesignRestLengths`` request; ValueError naming the field. A target pose is converted on the
+    branch nearest ``reference`` (the node's last screw)."""
+    for name in ('target_screw', 'target_cartesian_stiffness'):
+        n = len(getattr(request, name))
+        if n > settings.max_array_length:
+            raise ValueError(f'{name}: too many elements: {n} > max_length '
+                             f'{settings.max_array_length}')
+    pose = request.target_pose
+    return design_request_from_service(
+        request.target_screw, [pose.position.x, pose.position.y, pose.position.z],
+        [pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w],
+        conversions.msg_to_wrench(request.external_wrench), request.tension_min,
+        request.tension_max, request.target_cartesian_stiffness, reference)
+
+
+def fill_design(response: Any, result: DesignResult) -> Any:
+    """Fill a ``DesignRestLengths`` response from a design result."""
+    for name, value in design_response_fields(result).items():
+        setattr(response, name, value)
+    return response
+
+
+def fail(response: Any, message: str) -> Any:
+    """``success: false`` with ``message``."""
+    response.success = False
+    response.message = message
+    return response
+
+
+def planar_forward(planar: PlanarMechanism, request: Any, response: Any) -> Any:
+    """Answer a ``PlanarForwardKinematics`` request."""
+    try:
+        fk = planar.forward(request.actuator_length, request.actuator_angle)
+    except ValueError as exc:
+        return fail(response, f'invalid request: {exc}')
+    if not fk.actuator_in_range:
+        return fail(response, (
+            f'actuator (L3 = {request.actuator_length:.6g} m, theta1 = '
+            f'{request.actuator_angle:.6g} rad) is outside the actuator workspace '
+            f'L3 in [{planar.L3_min:.6g}, {planar.L3_max:.6g}], theta1 in '
+            f'[{planar.theta1_min:.6g}, {planar.theta1_max:.6g}]'))
+    values = (fk.x, fk.y, fk.theta2, fk.stiffness, fk.energy, fk.jacobian_determinant)
+    if not all(math.isfinite(v) for v in values) or not np.isfinite(fk.jacobian).all():
+        return fail(response, 'no isolated equilibrium here (neutral point): every theta2 is '
+                              'an equilibrium')
+    response.success = True
+    response.x, response.y = float(fk.x), float(fk.y)
+    response.platform_angle = float(fk.theta2)
+    response.stiffness = float(fk.stiffness)
+    response.energy = float(fk.energy)
+    response.stable = bool(fk.stable)
+    response.in_range = bool(fk.theta2_in_range)
+    response.jacobian = np.asarray(fk.jacobian, dtype=np.float64).ravel().tolist()
+    response.jacobian_determinant = float(fk.jacobian_determinant)
+    response.singularities = list(fk.singularities)
+    notes = []
+    if not fk.theta2_in_range:
+        notes.append('theta2 outside its allowed range')
+    if fk.singularities:
+        notes.append('singular: ' + ', '.join(fk.singularities))
+    response.message = 'ok' + (' (' + '; '.join(notes) + ')' if notes else '')
+    return response
+
+
+def planar_inverse(planar: PlanarMechanism, request: Any, response: Any) -> Any:
+    """Answer a ``PlanarInverseKinematics`` request."""
+    try:
+        solutions = planar.inverse(request.x, request.y)
+    except ValueError as exc:
+        return fail(response, f'invalid request: {exc}')
+    response.actuator_length = [float(s.L3) for s in solutions]
+    response.actuator_angle = [float(s.theta1) for s in solutions]
+    response.platform_angle = [float(s.theta2) for s in solutions]
+    response.stiffness = [float(s.stiffness) for s in solutions]
+    response.stable = [bool(s.stable) for s in solutions]
+    response.success = len(solutions) > 0
+    response.message = (f'{len(solutions)} solution(s)' if solutions
+                        else f'unreachable: {solutions.reason}')
+    return response

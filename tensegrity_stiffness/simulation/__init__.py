@@ -1,0 +1,9 @@
+"""Simulation: the MuJoCo digital twin of a joint or a spine (:mod:`.twin`, re-exported here:
+``tensegrity_stiffness.simulation`` is the documented path).
+
+May import: :mod:`tensegrity_stiffness.mechanics`, :mod:`tensegrity_stiffness.geometry`,
+:mod:`tensegrity_stiffness.config`, numpy, mujoco (imported when a twin is built).
+"""
+
+from tensegrity_stiffness.simulation.twin import *  # noqa: F403
+from tensegrity_stiffness.simulation.twin import __all__  # noqa: F401

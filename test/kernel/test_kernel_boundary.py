@@ -1,0 +1,183 @@
+"""Every array whose address goes to the compiled kernel lives until the call returns.
+
+A copy made inside a call's argument list (``address(np.ascontiguousarray(x))``) is freed before
+C reads it: C then reads freed memory, which the next allocation of that size gets. Two proofs:
+
+* poisoned calls: the library's entry points are wrapped so that, after Python evaluated the
+  arguments and before C runs, every freed buffer below 1024 bytes is handed out again (numpy's
+  small-buffer cache gives the just-freed block to the next allocation of its size) and
+  overwritten with NaN; the results must still equal the numpy path's. Strided rest lengths
+  (one screw, a batch) and a strided tip wrench (a spine) are the inputs that are copied;
+* AddressSanitizer (slow): the kernel compiled with ``-fsanitize=address`` evaluates a joint of
+  200 strings (rest lengths of 1600 bytes, which numpy returns to malloc) with strided rest
+  lengths, one screw and a batch with per-screw rest lengths; ASan must report nothing.
+
+Both fail on the code before this test (commit 5525cc4) and pass now.
+"""
+
+import ctypes
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from support.joint_compare import assert_same, random_model
+
+import tensegrity_stiffness
+from tensegrity_stiffness.mechanics import kernel
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.joint import JointModel
+
+pytestmark = pytest.mark.skipif(not kernel.available(), reason=kernel.status())
+
+#: Largest freed block (bytes) the poisoned calls hand out again and overwrite: numpy keeps
+#: freed data buffers below 1024 bytes in a cache (per size, last freed first out); larger ones
+#: go back to malloc, where the AddressSanitizer test sees them.
+POISON_BYTES = 1016
+#: The entry points of the library that take addresses.
+ENTRY_POINTS = ('evaluate', 'evaluate_packed', 'chain_frames', 'chain_tip')
+
+
+def _poisoned(call):
+    """``call`` preceded by reallocating and NaN-filling every freed block up to POISON_BYTES
+    (kept until the call returns, so that C sees them overwritten)."""
+    def poisoned(*args):
+        held = [np.full(k, np.nan) for k in range(1, POISON_BYTES // 8 + 1)]
+        try:
+            return call(*args)
+        finally:
+            del held
+    return poisoned
+
+
+@pytest.fixture
+def poisoned_library(monkeypatch):
+    library = kernel.library()
+    for name in ENTRY_POINTS:
+        monkeypatch.setattr(library, name, _poisoned(getattr(library, name)))
+    return library
+
+
+def numpy_twin(model: JointModel) -> JointModel:
+    return JointModel(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+                      link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+                      force_law=model.force_law, use_kernel=False)
+
+
+@pytest.mark.parametrize('doubles', [6, 12, 120])
+def test_poisoning_overwrites_freed_memory_before_the_call(doubles):
+    """The poison works (a tip wrench, 12 and 120 rest lengths): a buffer freed before the
+    call holds NaN when the wrapped function reads it."""
+    seen = []
+
+    def read(address: int, count: int) -> None:
+        seen.extend((ctypes.c_double * count).from_address(address))
+
+    freed = np.arange(1.0, doubles + 1.0)
+    address = kernel.address(freed)
+    del freed
+    _poisoned(read)(address, doubles)
+    assert np.isnan(seen).all()
+
+
+def test_strided_rest_lengths_outlive_the_call(poisoned_library):
+    rng = np.random.default_rng(41)
+    for force_law in ('hooke', 'paper'):
+        model = random_model(rng, force_law, n=12)
+        assert model.uses_kernel
+        plain = numpy_twin(model)
+        xi = np.r_[rng.normal(scale=0.3, size=3), rng.normal(scale=0.01, size=3)]
+        rests = np.repeat(model.rest_lengths[:, None], 2, axis=1) * [1.0, 1.1]
+        strided = rests[:, 1]  # a (n,) view with stride 16: copied for C
+        assert not strided.flags.c_contiguous
+        assert_same(model, model.evaluate(xi, strided), plain.evaluate(xi, strided))
+        np.testing.assert_array_equal(model.stiffness(xi, strided),
+                                      model.evaluate(xi, strided).stiffness)
+        # A batch with strided per-screw rest lengths and strided screws.
+        X = np.repeat(xi[None] + rng.normal(scale=0.01, size=(5, 6)), 2, axis=0)[::2]
+        R = np.asfortranarray(np.repeat(rests[:, 1][None], 5, axis=0))  # copied for C
+        assert_same(model, model.evaluate(X, R), plain.evaluate(X, R))
+
+
+def test_a_strided_tip_wrench_outlives_the_call(poisoned_library):
+    rng = np.random.default_rng(42)
+    joints = [random_model(rng, 'hooke', n=12) for _ in range(3)]
+    offsets = np.repeat(np.eye(4)[None], 2, axis=0)
+    offsets[:, 2, 3] = 0.05
+    fast = JointChain(joints, offsets)
+    slow = JointChain(joints, offsets, use_kernel=False)
+    screws = rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(3, 6))
+    wrenches = np.zeros((6, 2))
+    wrenches[:, 1] = [0.3, -0.2, 0.5, 0.01, 0.02, -0.01]
+    W = wrenches[:, 1]  # strided: copied for C
+    assert not W.flags.c_contiguous
+    for frame in ('base', 'tool'):
+        K_fast = fast.tip_stiffness(screws, tip_wrench=W, frame=frame)
+        K_slow = slow.tip_stiffness(screws, tip_wrench=W, frame=frame)
+        assert np.isfinite(K_fast).all()
+        np.testing.assert_allclose(K_fast, K_slow, rtol=0.0, atol=1e-9 * np.abs(K_slow).max())
+
+
+def _kernel_sources() -> list[Path]:
+    """The kernel's C++ sources of the checkout under test (this package's repository)."""
+    root = Path(tensegrity_stiffness.__file__).resolve().parents[1]
+    for folder in (root / 'tensegrity_stiffness_kernel' / 'src', root / 'src'):
+        sources = sorted(folder.glob('*_kernel.cpp'))
+        if sources:
+            return sources
+    pytest.fail(f'no kernel sources (*_kernel.cpp) under {root}')
+
+
+def _libasan() -> str:
+    done = subprocess.run(['g++', '-print-file-name=libasan.so'], capture_output=True,
+                          text=True, check=False)
+    path = done.stdout.strip()
+    if done.returncode != 0 or not os.path.isabs(path):
+        pytest.skip('g++ has no libasan')
+    return path
+
+
+ASAN_SCRIPT = textwrap.dedent('''
+    import numpy as np
+    from tensegrity_stiffness.mechanics.joint import JointModel
+    rng = np.random.default_rng(43)
+    n = 200  # rest lengths of 1600 bytes: numpy frees such buffers to malloc (no cache)
+    p1 = rng.normal(scale=0.05, size=(n, 3))
+    p2 = rng.normal(scale=0.04, size=(n, 3)) + [0.0, 0.0, 0.1]
+    conn = np.column_stack([np.arange(n), np.arange(n)])
+    model = JointModel(p1, conn, 100.0, np.full(n, 0.05), link2_nodes=p2)
+    assert model.uses_kernel
+    rests = np.full((n, 2), 0.05)
+    x = np.r_[0.01, -0.02, 0.03, 0.0, 0.0, 0.001]
+    single = model.evaluate(x, rests[:, 1])
+    X = np.repeat(x[None], 4, axis=0)
+    R = np.asfortranarray(np.full((4, n), 0.05))
+    batch = model.evaluate(X, R)
+    assert np.isfinite(single.stiffness).all() and np.isfinite(batch.stiffness).all()
+    print('ok')
+''')
+
+
+@pytest.mark.slow
+def test_addresssanitizer_finds_no_use_after_free(tmp_path):
+    if shutil.which('g++') is None:
+        pytest.skip('no g++')
+    libasan = _libasan()
+    sources = _kernel_sources()
+    root = sources[0].parents[1]
+    library = tmp_path / kernel.LIBRARY_NAME
+    includes = [f'-I{root / "include"}'] if (root / 'include').is_dir() else []
+    subprocess.run(['g++', '-std=c++17', '-O1', '-g', '-fsanitize=address',
+                    '-fno-omit-frame-pointer', '-ffp-contract=off', '-shared', '-fPIC',
+                    *includes, *map(str, sources), '-o', str(library)], check=True, timeout=300)
+    env = dict(os.environ, LD_PRELOAD=libasan, ASAN_OPTIONS='detect_leaks=0',
+               TENSEGRITY_STIFFNESS_KERNEL=str(library))
+    done = subprocess.run([sys.executable, '-c', ASAN_SCRIPT], env=env, capture_output=True,
+                          text=True, timeout=120, check=False)
+    report = done.stderr[-3000:]
+    assert 'AddressSanitizer' not in done.stderr, report
+    assert done.returncode == 0 and done.stdout.strip() == 'ok', report

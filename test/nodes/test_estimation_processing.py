@@ -1,0 +1,202 @@
+"""estimator_node's parts without a node: its parameter section, the choice of fresh readings,
+the measurements they make, the outputs of one estimate, and the message conversions (messages
+built directly, no rclpy.init)."""
+
+import time
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped
+from sensor_msgs.msg import Imu
+from std_msgs.msg import Float64MultiArray
+from support.estimation_trials import GRAVITY_BASE, TENSION_STD, truth_from_model
+
+from tensegrity_stiffness.nodes import parameters
+from tensegrity_stiffness.nodes.estimation_processing import (
+    EstimatorInput,
+    Reading,
+    diagnostic_values,
+    estimator_outputs,
+    gravity_reading,
+    measured_array,
+    measurements,
+)
+from tensegrity_stiffness.nodes.parameters import (
+    ESTIMATOR_NODE_PARAMETERS,
+    estimator_node_settings,
+)
+from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
+from tensegrity_stiffness.ros.conversions.geometry import transform_to_pose
+
+
+@pytest.fixture(scope='module')
+def settings():
+    return estimator_node_settings(parameters.defaults(ESTIMATOR_NODE_PARAMETERS))
+
+
+def readings_at(model, rng, now, imu_age=0.01):
+    truth = truth_from_model(model, model.initial_screw)
+    tensions = truth.tensions + rng.normal(scale=TENSION_STD, size=model.n_strings)
+    return truth, {'measured_tensions': Reading(tensions, now),
+                   'imu': Reading(truth.gravity, now - imu_age)}
+
+
+def test_settings_defaults_and_bad_fields(settings):
+    assert settings.load_mode == 'unknown' and settings.trigger == 'measured_tensions'
+    np.testing.assert_allclose(settings.gravity_base, GRAVITY_BASE)
+    values = parameters.defaults(ESTIMATOR_NODE_PARAMETERS)
+    for name, value, match in (('estimation.external_wrench', 'maybe', 'external_wrench'),
+                               ('estimation.trigger', 'screw', 'estimation.trigger'),
+                               ('estimation.max_age', -1.0, 'max_age'),
+                               ('sensors.tension_std', 0.0, 'tension_std'),
+                               ('sensors.gravity_base', [0.0, 0.0], 'gravity_base'),
+                               ('sensors.gravity_base', [0.0, 0.0, 0.0], 'gravity_base'),
+                               ('frames.link1', '', 'frames.link1')):
+        with pytest.raises(ValueError, match=match):
+            estimator_node_settings({**values, name: value})
+
+
+def test_estimate_of_fresh_readings(settings):
+    rng = np.random.default_rng(0)
+    now = time.monotonic()
+    truth, readings = readings_at(settings.model, rng, now)
+    out = estimator_outputs(settings, EstimatorInput(readings, now, truth.screw))
+    assert out.used == ('measured_tensions', 'imu')
+    assert out.estimate.success and out.estimate.dof == 8
+    np.testing.assert_allclose(out.screw, truth.screw, atol=0.05)
+    keys = dict(diagnostic_values(out))
+    assert keys['inputs used'] == 'measured_tensions, imu' and keys['rank'] == 6
+    assert keys['age of imu [ms]'] == pytest.approx(10.0)
+
+
+def test_stale_readings_are_left_out_and_named(settings):
+    rng = np.random.default_rng(1)
+    now = time.monotonic()
+    truth, readings = readings_at(settings.model, rng, now, imu_age=1.0)
+    out = estimator_outputs(settings, EstimatorInput(readings, now, truth.screw))
+    assert out.used == ('measured_tensions',)  # 12 tensions alone still determine the pose
+    few = readings['measured_tensions'].value.copy()
+    few[4:] = np.nan
+    readings['measured_tensions'] = Reading(few, now)
+    with pytest.raises(ValueError, match=r'no estimate: 4 tensions.*older than 0.05 s: imu'):
+        estimator_outputs(settings, EstimatorInput(readings, now, truth.screw))
+
+
+def test_load_modes(settings):
+    now = time.monotonic()
+    _, readings = readings_at(settings.model, np.random.default_rng(2), now)
+    zero = estimator_node_settings({**settings.values, 'estimation.external_wrench': 'zero'})
+    m = measurements(zero, readings)
+    np.testing.assert_array_equal(m.external_wrench, np.zeros(6))
+    measured = estimator_node_settings({**settings.values,
+                                        'estimation.external_wrench': 'measured'})
+    with pytest.raises(ValueError, match="'measured' but no ~/measured_wrench"):
+        measurements(measured, readings)
+    readings['measured_wrench'] = Reading(np.ones(6), now)
+    np.testing.assert_array_equal(measurements(measured, readings).external_wrench, np.ones(6))
+
+
+def test_readings_are_checked():
+    with pytest.raises(ValueError, match='expected 12'):
+        measured_array(np.ones(5), 12, '~/measured_tensions')
+    with pytest.raises(ValueError, match='NaN'):
+        measured_array(np.full(12, np.nan), 12, '~/measured_tensions')
+    with pytest.raises(ValueError, match='inf'):
+        measured_array(np.array([np.inf] + [1.0] * 11), 12, '~/measured_tensions')
+    np.testing.assert_allclose(gravity_reading([0.0, 9.8, 0.0], 0.5), [0.0, -1.0, 0.0])
+    with pytest.raises(ValueError, match='not at rest'):
+        gravity_reading([0.0, 12.0, 0.0], 0.5)
+
+
+def test_message_conversions():
+    T = np.eye(4)
+    T[:3, 3] = [0.01, 0.02, 0.03]
+    cov = np.diag(np.arange(1.0, 7.0))
+    msg = PoseWithCovarianceStamped()
+    estimation_msgs.write_pose_with_covariance(msg, T, cov, msg.header.stamp, 'f')
+    T2, cov2 = estimation_msgs.pose_with_covariance_to_arrays(msg.pose)
+    np.testing.assert_allclose(T2, T)
+    np.testing.assert_array_equal(cov2, cov)
+    assert msg.header.frame_id == 'f'
+    empty = PoseWithCovariance(pose=transform_to_pose(T))
+    assert estimation_msgs.pose_with_covariance_to_arrays(empty)[1] is None
+    bad = PoseWithCovariance(pose=transform_to_pose(T))
+    bad.covariance[0] = float('nan')
+    with pytest.raises(ValueError, match='covariance'):
+        estimation_msgs.pose_with_covariance_to_arrays(bad)
+    values = estimation_msgs.measured_values(Float64MultiArray(data=[1.0, float('nan')]), 10)
+    assert values[0] == 1.0 and np.isnan(values[1])
+    with pytest.raises(ValueError, match='too many'):
+        estimation_msgs.measured_values(Float64MultiArray(data=[1.0] * 11), 10)
+    imu = Imu()
+    imu.linear_acceleration.y = 9.81
+    np.testing.assert_array_equal(estimation_msgs.imu_specific_force(imu), [0.0, 9.81, 0.0])
+
+
+def test_output_messages(settings):
+    now = time.monotonic()
+    truth, readings = readings_at(settings.model, np.random.default_rng(3), now)
+    out = estimator_outputs(settings, EstimatorInput(readings, now, truth.screw))
+    messages = estimation_msgs.EstimatorOutputMessages(tuple(settings.model.string_names))
+    stamp = PoseWithCovarianceStamped().header.stamp
+    messages.fill(out, stamp, 'link1')
+    pose, wrench, screw, K, Kc, tensions, Kc_std = messages.messages()
+    T, cov = estimation_msgs.pose_with_covariance_to_arrays(pose.pose)
+    np.testing.assert_allclose(T, out.estimate.transform, atol=1e-12)
+    np.testing.assert_allclose(cov, out.estimate.covariance)
+    np.testing.assert_allclose(screw.data, out.screw)
+    np.testing.assert_allclose(np.reshape(Kc_std.data, (6, 6)),
+                               out.estimate.cartesian_stiffness_std)
+    assert Kc_std.layout.dim[1].label == Kc.layout.dim[1].label
+    assert wrench.header.frame_id == 'link1' and len(tensions.data) == 12
+    np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.state.stiffness)
+
+
+def test_the_std_of_the_cartesian_stiffness_only_when_asked(settings):
+    """The node asks for the std of K_c only while ~/cartesian_stiffness_std has a subscriber:
+    without it the outputs say so, the std is NaN (never published) and the rest is the same
+    estimate; None takes the settings'."""
+    now = time.monotonic()
+    truth, readings = readings_at(settings.model, np.random.default_rng(4), now)
+    snapshot = EstimatorInput(readings, now, truth.screw)
+    with_std = estimator_outputs(settings, snapshot)
+    assert settings.stiffness_std and with_std.stiffness_std
+    assert np.all(np.isfinite(with_std.estimate.cartesian_stiffness_std))
+    without = estimator_outputs(settings, snapshot, stiffness_std=False)
+    assert not without.stiffness_std
+    assert np.all(np.isnan(without.estimate.cartesian_stiffness_std))
+    np.testing.assert_array_equal(without.screw, with_std.screw)
+    np.testing.assert_array_equal(without.estimate.covariance, with_std.estimate.covariance)
+
+
+def test_spine_settings_and_outputs():
+    """spine_estimator_node's settings (no IMU trigger) and one estimate of a 3-joint spine's
+    tensions, split per joint from the joint-major array."""
+    from tensegrity_stiffness.nodes.estimation_processing import spine_estimator_outputs
+    from tensegrity_stiffness.nodes.parameters import (
+        spine_estimator_node_parameters,
+        spine_estimator_node_settings,
+    )
+
+    values = parameters.defaults(spine_estimator_node_parameters(3))
+    values['chain.n_joints'] = 3
+    settings = spine_estimator_node_settings(values)
+    assert settings.n_joints == 3 and settings.estimator.load_mode == 'unknown'
+    with pytest.raises(ValueError, match=r'estimation\.trigger'):
+        spine_estimator_node_settings({**values, 'estimation.trigger': 'imu'})
+    screws = settings.chain.unloaded_screws()
+    state = settings.chain.evaluate(screws)
+    now = time.monotonic()
+    tensions = np.concatenate(list(state.tensions))
+    tensions[12:24] = np.nan  # joint 2 without load cells
+    out = spine_estimator_outputs(settings, EstimatorInput(
+        {'measured_tensions': Reading(tensions, now)}, now, (screws, np.zeros(6))))
+    assert out.estimate.success and out.used == ('measured_tensions',)
+    np.testing.assert_allclose(out.estimate.tip_wrench, 0.0, atol=1e-7)
+    messages = estimation_msgs.SpineEstimatorOutputMessages(3)
+    messages.fill(out, PoseWithCovarianceStamped().header.stamp, 'spine_base')
+    screws_msg, pose, wrench, K, K_std = messages.messages()
+    np.testing.assert_allclose(np.reshape(screws_msg.data, (3, 6)), out.estimate.screws)
+    np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.estimate.tip_stiffness)
+    assert pose.header.frame_id == wrench.header.frame_id == 'spine_base'
+    assert len(K_std.data) == 36

@@ -1,0 +1,94 @@
+"""tensegrity_stiffness.nodes.messages: the nodes' output messages built from the layouts of
+tensegrity_stiffness.nodes.layouts with rclpy's classes (tensegrity_stiffness.ros.conversions, the
+nodes) and with rosbags' types
+(the bag command) serialize to the same bytes; the readers and the pose writer check as before."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.nodes import layouts, messages, processing, spine_processing
+
+rosbags_typesys = pytest.importorskip('rosbags.typesys')
+serialization = pytest.importorskip('rclpy.serialization')
+conversions = pytest.importorskip('tensegrity_stiffness.ros.conversions')
+
+TYPESTORE = rosbags_typesys.get_typestore(rosbags_typesys.Stores.ROS2_JAZZY)
+STAMP_NS = 1_700_000_123_456_789_012
+
+
+def rosbags_types() -> messages.MessageTypes:
+    from tensegrity_stiffness.recordings import bag
+
+    return bag.rosbags_types(TYPESTORE)
+
+
+def same_bytes(rclpy_msg: Any, rosbags_msg: Any, msgtype: str) -> bool:
+    """rclpy's serialization, read and written again by rosbags (Fast CDR leaves padding bytes
+    unset, rosbags zeroes them), equals rosbags' serialization."""
+    theirs = TYPESTORE.deserialize_cdr(bytes(serialization.serialize_message(rclpy_msg)),
+                                       msgtype)
+    return bytes(TYPESTORE.serialize_cdr(theirs, msgtype)) == bytes(
+        TYPESTORE.serialize_cdr(rosbags_msg, msgtype))
+
+
+def test_joint_messages_of_rclpy_and_rosbags_are_the_same() -> None:
+    model = JointModel.from_yaml(config.packaged_config_path())
+    outputs = processing.joint_outputs(model, model.initial_screw + 0.02)
+    node = conversions.JointOutputMessages(tuple(model.string_names))
+    offline = messages.JointOutputMessages(model.string_names, rosbags_types())
+    node.fill(outputs, conversions.stamp_from_nanoseconds(STAMP_NS), 'link_a')
+    offline.fill(outputs, offline.types.time(STAMP_NS), 'link_a')
+    found = layouts.joint_output_layouts(model.string_names)
+    assert list(found) == ['wrench', 'stiffness', 'cartesian_stiffness', 'string_tensions',
+                           'stiffness_interpretation']
+    for (name, layout), mine, theirs, values in zip(
+            found.items(), offline.messages(), node.messages(),
+            processing.output_arrays(outputs), strict=True):
+        assert values.size == layout.size, name
+        assert same_bytes(theirs, mine, layout.msgtype), name
+    assert node.wrench.header.frame_id == 'link_a'
+    assert [d.label for d in node.tensions.layout.dim] == [
+        layouts.tensions_label(model.string_names)]
+
+
+def test_spine_messages_of_rclpy_and_rosbags_are_the_same() -> None:
+    chain = JointChain.from_yaml(config.packaged_config_path(DEFAULT_SPINE_CONFIG))
+    xi = np.array([m.initial_screw for m in chain.joints]) + 0.01
+    outputs = spine_processing.spine_outputs(chain, xi)
+    node = conversions.SpineOutputMessages(chain.n_joints)
+    offline = messages.SpineOutputMessages(chain.n_joints, rosbags_types())
+    node.fill(outputs, conversions.stamp_from_nanoseconds(STAMP_NS), 'base')
+    offline.fill(outputs, offline.types.time(STAMP_NS), 'base')
+    found = layouts.spine_output_layouts(chain.n_joints)
+    assert tuple(found) == spine_processing.OUTPUT_NAMES
+    for (name, layout), mine, theirs, values in zip(
+            found.items(), offline.messages(), node.messages(),
+            spine_processing.output_arrays(outputs), strict=True):
+        assert values.size == layout.size, name
+        assert same_bytes(theirs, mine, layout.msgtype), name
+    T = outputs.state.tip_transform
+    np.testing.assert_allclose(messages.pose_to_transform(node.tip_pose.pose), T, atol=1e-12)
+
+
+def test_pose_writer_refuses_a_non_rotation_and_writes_nothing() -> None:
+    msg = messages.new_message(layouts.OutputLayout(layouts.POSE_STAMPED), rosbags_types())
+    T = np.eye(4)
+    T[:3, :3] *= 1.1
+    with pytest.raises(ValueError, match='rotation'):
+        messages.write_pose_stamped(msg, T, rosbags_types().time(5), 'base')
+    assert (msg.pose.orientation.w, msg.header.stamp.nanosec, msg.header.frame_id) == (1.0, 0, '')
+
+
+@pytest.mark.parametrize('ns, problem', [(-1, 'non-negative'), (2**31 * 10**9, 'int32')])
+def test_stamps_out_of_range_are_refused(ns: int, problem: str) -> None:
+    with pytest.raises(ValueError, match=problem):
+        messages.stamp_parts(ns)
+    with pytest.raises(ValueError, match=problem):
+        conversions.stamp_from_nanoseconds(ns)

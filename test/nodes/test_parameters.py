@@ -1,0 +1,128 @@
+"""The one parameter table (tensegrity_stiffness.nodes.parameters): the packaged config agrees with
+it, every entry is checked by type, range and choice, and a whole set is validated at once."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+from support import REPO
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.nodes import parameters
+from tensegrity_stiffness.nodes.parameters import (
+    STIFFNESS_NODE_PARAMETERS,
+    ParameterSpec,
+    joint_node_settings,
+    values_from_config,
+)
+
+REPO = REPO
+CONFIG = REPO / 'config' / 'default_joint.yaml'
+TABLE = parameters.by_name(STIFFNESS_NODE_PARAMETERS)
+
+
+def test_default_joint_config_and_the_table_agree():
+    """Every parameter of config/default_joint.yaml is in the table with the table's default
+    (an optional array left out of the file is the table's empty default), and vice versa."""
+    in_file = parameters.flatten(config.parameters(config.load_yaml(CONFIG)))
+    assert set(in_file) <= set(TABLE), set(in_file) - set(TABLE)
+    defaults = parameters.defaults(STIFFNESS_NODE_PARAMETERS)
+    for name, spec in TABLE.items():
+        if name not in in_file:
+            assert defaults[name] == [], f'{name} is not in {CONFIG.name}'
+            continue
+        value = spec.check(in_file[name])
+        if isinstance(value, float):
+            assert value == pytest.approx(defaults[name], rel=1e-15, abs=0.0), name
+        else:
+            assert value == defaults[name], name
+
+
+def test_the_table_builds_the_default_joint():
+    settings = joint_node_settings(parameters.defaults(STIFFNESS_NODE_PARAMETERS))
+    model = JointModel.from_yaml(CONFIG)
+    np.testing.assert_array_equal(settings.model.link1_nodes, model.link1_nodes)
+    np.testing.assert_array_equal(settings.model.rest_lengths, model.rest_lengths)
+    np.testing.assert_array_equal(settings.model.max_lengths, model.max_lengths)
+    np.testing.assert_array_equal(settings.model.initial_screw, model.initial_screw)
+    assert settings.model.string_names == model.string_names
+    assert np.abs(model.wrench(model.initial_screw)).max() < 1e-12  # its unloaded equilibrium
+    assert settings.link1_frame == 'tensegrity_link1'
+    assert settings.marker_period == pytest.approx(1.0 / 30.0)
+    assert settings.planar.L3_max == 2.0 * settings.planar.L
+
+
+def test_every_entry_is_well_formed():
+    names = [spec.name for spec in STIFFNESS_NODE_PARAMETERS]
+    assert len(names) == len(set(names))
+    for spec in STIFFNESS_NODE_PARAMETERS:
+        assert spec.description, spec.name
+        spec.check(spec.default)  # the default passes its own checks
+        if spec.range is not None:
+            assert spec.type in ('int', 'double')
+            assert spec.range[0] <= spec.range[1]
+        if spec.choices:
+            assert spec.type == 'string' and spec.default in spec.choices
+
+
+@pytest.mark.parametrize(('spec', 'value', 'match'), [
+    (ParameterSpec('a.i', 'int', 1, 'x', range=(1, 10)), 11, r'a.i = 11 is outside \[1, 10\]'),
+    (ParameterSpec('a.i', 'int', 1, 'x'), 1.5, 'a.i must be an integer'),
+    (ParameterSpec('a.i', 'int', 1, 'x'), True, 'a.i must be an integer'),
+    (ParameterSpec('a.d', 'double', 1.0, 'x'), math.nan, 'a.d must be finite'),
+    (ParameterSpec('a.d', 'double', 1.0, 'x'), 'one', 'a.d must be a number'),
+    (ParameterSpec('a.s', 'string', 'p', 'x', choices=('p', 'q')), 'r', 'a.s must be one of'),
+    (ParameterSpec('a.s', 'string', 'p', 'x'), 3, 'a.s must be a string'),
+    (ParameterSpec('a.b', 'bool', True, 'x'), 1, 'a.b must be true or false'),
+    (ParameterSpec('a.v', 'double_array', None, 'x'), ['a'], 'a.v must be a list of numbers'),
+    (ParameterSpec('a.v', 'double_array', None, 'x'), 'abc', 'a.v must be a list'),
+    (ParameterSpec('a.w', 'string_array', None, 'x'), [1], 'a.w must be a list of strings'),
+])
+def test_check_names_the_parameter_and_the_problem(spec, value, match):
+    with pytest.raises(ValueError, match=match):
+        spec.check(value)
+
+
+def test_unknown_type_is_refused():
+    with pytest.raises(ValueError, match='unknown type'):
+        ParameterSpec('a', 'float', 1.0, 'x')
+
+
+@pytest.mark.parametrize(('changes', 'match'), [
+    ({'qos.depth': 0}, r'qos.depth = 0 is outside'),
+    ({'markers.max_rate': -1.0}, r'markers.max_rate = -1 is outside'),
+    ({'joint.force_law': 'linear'}, 'joint.force_law must be one of hooke | paper'),
+    ({'frames.link1': '  '}, 'frames.link1 must not be empty'),
+    ({'joint.rest_lengths': [0.03] * 11}, 'rest_lengths'),
+    ({'planar.L3_min': 3.0}, '^planar.'),
+    ({'joint.string_link1_nodes': ['A'] * 11 + ['Z']}, 'Z'),
+])
+def test_whole_set_validation_names_the_field(changes, match):
+    values = parameters.defaults(STIFFNESS_NODE_PARAMETERS)
+    values.update(changes)
+    with pytest.raises(ValueError, match=match):
+        joint_node_settings(values)
+
+
+def test_values_from_config_overrides_defaults_and_ignores_undeclared(tmp_path):
+    path = tmp_path / 'p.yaml'
+    path.write_text(yaml.safe_dump({'/**': {'ros__parameters': {
+        'use_sim_time': False, 'qos': {'depth': 7}, 'planar': {'K1': 250.0}}}}))
+    values = values_from_config(path, STIFFNESS_NODE_PARAMETERS)
+    assert values['qos.depth'] == 7 and values['planar.K1'] == 250.0
+    assert values['planar.K2'] == TABLE['planar.K2'].default
+    assert 'use_sim_time' not in values
+    path.write_text(yaml.safe_dump({'qos': {'depth': 'deep'}}))  # a plain config
+    with pytest.raises(ValueError, match=r'qos\.depth must be an integer'):
+        values_from_config(path, STIFFNESS_NODE_PARAMETERS)
+
+
+def test_the_cli_planar_defaults_are_the_table():
+    from tensegrity_stiffness.cli import commands as cli
+
+    assert cli.PLANAR_KEYS == tuple(name[len('planar.'):] for name in TABLE
+                                    if name.startswith('planar.'))

@@ -1,0 +1,141 @@
+"""The documentation holds together: README.md is a short front page, every relative link of
+README.md and docs/*.md names a file (and heading) of the repository, and no file of the
+project points to a path outside the repository."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+from support import REPO
+
+REPO = REPO
+PAGES = [REPO / 'README.md', *sorted((REPO / 'docs').glob('*.md'))]
+#: Front page length the docs promise (the rest lives in docs/).
+MAX_README_LINES = 250
+#: Folders that are not the project's files (environment, build products, VCS).
+SKIPPED_DIRS = {'.git', '.venv', 'build', 'install', 'log', '__pycache__', '.pytest_cache',
+                '.ruff_cache', 'figures'}
+TEXT_SUFFIXES = {'.py', '.md', '.sh', '.txt', '.yaml', '.yml', '.xml', '.cfg', '.toml', '.cpp',
+                 '.hpp', '.h', '.srv', '.msg', '.in', ''}
+#: Paths of the machine this project was written on, outside the repository, and the files
+#: there that docs/errata.md and docs/install.md replace (built from pieces so that this file
+#: does not match itself).
+OUTSIDE = [re.compile(p) for p in ('/' + 'work/', r'\.\./' + 'shared', 'shared/' + 'papers',
+                                   'shared/' + 'ros2-from-pypi', 'shared/' + 'STYLE',
+                                   r'\bERRATA' + r'\.md', r'\bNOTES' + r'\.md')]
+LINK = re.compile(r'!?\[[^\]]*\]\(([^)\s]+)\)')
+FENCE = re.compile(r'^```.*?^```', re.S | re.M)
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a heading."""
+    text = heading.strip().lower()
+    text = re.sub(r'[^\w\- ]', '', text)
+    return text.replace(' ', '-')
+
+
+def _anchors(page: Path) -> set[str]:
+    seen: dict[str, int] = {}
+    out = set()
+    for line in FENCE.sub('', page.read_text(encoding='utf-8')).splitlines():
+        match = re.match(r'^#{1,6} (.+)$', line)
+        if not match:
+            continue
+        slug = _slug(match[1])
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        out.add(slug if n == 0 else f'{slug}-{n}')
+    return out
+
+
+def test_readme_is_a_front_page():
+    lines = (REPO / 'README.md').read_text(encoding='utf-8').splitlines()
+    assert len(lines) <= MAX_README_LINES, len(lines)
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: p.name)
+def test_relative_links_resolve(page: Path):
+    text = FENCE.sub('', page.read_text(encoding='utf-8'))
+    for target in LINK.findall(text):
+        if re.match(r'^[a-z]+:', target):  # https:, mailto:
+            continue
+        path_part, _, anchor = target.partition('#')
+        file = (page.parent / path_part).resolve() if path_part else page
+        assert REPO in file.parents or file == REPO, f'{page.name}: {target} leaves the repository'
+        assert file.exists(), f'{page.name}: {target} does not exist'
+        if anchor and file.suffix == '.md':
+            assert anchor in _anchors(file), f'{page.name}: no heading #{anchor} in {file.name}'
+
+
+def _project_files() -> list[Path]:
+    files = []
+    for path in REPO.rglob('*'):
+        if any(part in SKIPPED_DIRS for part in path.relative_to(REPO).parts):
+            continue
+        if path.is_file() and path.suffix in TEXT_SUFFIXES and path.stat().st_size < 2_000_000:
+            files.append(path)
+    return files
+
+
+def test_no_file_points_outside_the_repository():
+    found = []
+    for path in _project_files():
+        try:
+            text = path.read_text(encoding='utf-8')
+        except UnicodeDecodeError:
+            continue
+        for number, line in enumerate(text.splitlines(), 1):
+            if any(p.search(line) for p in OUTSIDE):
+                found.append(f'{path.relative_to(REPO)}:{number}: {line.strip()[:100]}')
+    assert not found, 'paths outside the repository:\n' + '\n'.join(found)
+
+
+def test_errata_page_names_tests_that_exist():
+    """Every test docs/errata.md cites as showing an erratum exists."""
+    text = (REPO / 'docs' / 'errata.md').read_text(encoding='utf-8')
+    cited = re.findall(r'`(test_\w+\.py)::(test_\w+)`', text)
+    assert len(cited) >= 15
+    module = None
+    for row in text.splitlines():
+        for name in re.findall(r'`(?:(test_\w+\.py)::)?(test_\w+)`', row):
+            module = name[0] or module
+            source = next((REPO / 'test').rglob(module)).read_text(encoding='utf-8')
+            assert f'def {name[1]}(' in source, f'{module}::{name[1]}'
+
+
+def _cells(row: str) -> int:
+    return len(re.split(r'(?<!\\)\|', row.strip().strip('|')))
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: p.name)
+def test_table_rows_have_the_header_s_cells(page: Path):
+    """A pipe inside a table cell (even in code, e.g. |omega|) must be escaped as \\|, else it
+    splits the cell."""
+    header = None
+    text = FENCE.sub(lambda m: '\n' * m[0].count('\n'), page.read_text(encoding='utf-8'))
+    for number, line in enumerate(text.splitlines(), 1):
+        if not line.startswith('|'):
+            header = None
+            continue
+        if header is None:
+            header = _cells(line)
+            continue
+        assert _cells(line) == header, f'{page.name}:{number}: {line[:80]}'
+
+
+LIBRARY_EXAMPLES = [(page, i, code) for page in PAGES
+                    for i, code in enumerate(re.findall(r'```python\n(.*?)```',
+                                                        page.read_text(encoding='utf-8'), re.S))
+                    if 'rclpy' not in code]
+
+
+@pytest.mark.parametrize('page, index, code', LIBRARY_EXAMPLES,
+                         ids=[f'{p.name}-{i}' for p, i, _ in LIBRARY_EXAMPLES])
+def test_library_examples_run(page: Path, index: int, code: str, monkeypatch, capsys):
+    """Every Python example of the docs that needs no ROS graph runs as printed (from the
+    repository root, as the examples' relative config paths assume)."""
+    monkeypatch.chdir(REPO)
+    exec(compile(code, f'{page.name} example {index}', 'exec'), {})
+    capsys.readouterr()

@@ -1,0 +1,92 @@
+"""The repository builds in a colcon workspace as a ROS user builds it.
+
+``git clone <checkout> ws/src/tensegrity_stiffness`` next to another package that depends on it,
+``cd ws && colcon build`` (no options) in this environment, ``source install/setup.bash``, then
+``test/support/workspace_check.py`` starts the installed ``stiffness_node`` from ``ws/install``
+(through the ament index, as ``ros2 run`` does) and gets a correct K and an equilibrium back.
+Nothing of the
+checkout's own build (its install/) is on any path of the workspace's environment.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+from support import REPO
+
+pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+
+REPO = REPO
+PATH_VARIABLES = ('AMENT_PREFIX_PATH', 'CMAKE_PREFIX_PATH', 'COLCON_PREFIX_PATH', 'PYTHONPATH',
+                  'LD_LIBRARY_PATH', 'PATH')
+
+CONSUMER_PACKAGE_XML = """<?xml version="1.0"?>
+<package format="3">
+  <name>tensegrity_consumer</name>
+  <version>0.0.1</version>
+  <description>Beside tensegrity_stiffness in the workspace, depends on it.</description>
+  <maintainer email="nobody@example.invalid">nobody</maintainer>
+  <license>Apache-2.0</license>
+  <buildtool_depend>ament_cmake</buildtool_depend>
+  <depend>tensegrity_stiffness</depend>
+  <export><build_type>ament_cmake</build_type></export>
+</package>
+"""
+CONSUMER_CMAKE = """cmake_minimum_required(VERSION 3.8)
+project(tensegrity_consumer NONE)
+find_package(ament_cmake REQUIRED)
+find_package(tensegrity_stiffness REQUIRED)
+ament_package()
+"""
+
+
+def _without_checkout_build(env: dict[str, str]) -> dict[str, str]:
+    """The environment less every path entry inside the checkout's install/ or build/."""
+    own = (str(REPO / 'install'), str(REPO / 'build'))
+    clean = dict(env)
+    for name in PATH_VARIABLES:
+        if name in clean:
+            kept = [p for p in clean[name].split(os.pathsep) if p and not p.startswith(own)]
+            clean[name] = os.pathsep.join(kept)
+    return clean
+
+
+def test_clone_build_and_run_in_a_workspace(tmp_path: Path) -> None:
+    if shutil.which('git') is None or shutil.which('colcon') is None:
+        pytest.fail('git and colcon are needed (scripts/setup_env.sh installs colcon)')
+    ws = tmp_path / 'ws'
+    src = ws / 'src'
+    src.mkdir(parents=True)
+    subprocess.run(['git', 'clone', '--quiet', str(REPO), str(src / 'tensegrity_stiffness')],
+                   check=True)
+    consumer = src / 'tensegrity_consumer'
+    consumer.mkdir()
+    (consumer / 'package.xml').write_text(CONSUMER_PACKAGE_XML)
+    (consumer / 'CMakeLists.txt').write_text(CONSUMER_CMAKE)
+
+    env = _without_checkout_build(os.environ.copy())
+    script = f"""
+set -e
+cd {ws}
+colcon list --names-only
+colcon build --event-handlers console_cohesion- status-
+set +u
+source install/setup.bash
+set -u
+python {src / 'tensegrity_stiffness' / 'test' / 'support' / 'workspace_check.py'} {ws / 'install'}
+"""
+    env['PYTHONPATH'] = os.pathsep.join(
+        filter(None, [str(src / 'tensegrity_stiffness' / 'test'), env.get('PYTHONPATH', '')]))
+    result = subprocess.run(['bash', '-c', script], env=env, cwd=ws, capture_output=True,
+                            text=True, timeout=900)
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output[-6000:]
+    listed = result.stdout.split()
+    assert 'tensegrity_stiffness' in listed and 'tensegrity_consumer' in listed, output[-3000:]
+    assert 'WORKSPACE OK' in result.stdout, output[-6000:]

@@ -1,0 +1,729 @@
+"""``tensegrity-stiffness bag``: input bags written with rosbags (mcap and sqlite3), the command
+run in-process and as a subprocess, the output read back with rosbags and every answer checked
+against the library at the rest lengths in force."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.cli import commands as cli
+from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
+from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
+from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.nodes import layouts
+
+rosbags = pytest.importorskip('rosbags')
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer  # noqa: E402
+from rosbags.typesys import Stores, get_typestore  # noqa: E402
+from support import REPO  # noqa: E402
+
+REPO = REPO
+NS = '/stiffness_node'
+TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+FMA = 'std_msgs/msg/Float64MultiArray'
+POSE = 'geometry_msgs/msg/PoseStamped'
+FRAME = 'tensegrity_link1'
+T0 = 1_700_000_000_000_000_000  # log time of the first message (ns)
+#: Batched and single-screw evaluations differ by rounding (summation order): absolute
+#: tolerances for wrench and tensions (N, N m; |F| ~ 1) and for K, K_c (entries up to ~500).
+ATOL = 1e-13
+ATOL_K = 1e-10
+
+
+def default_model() -> JointModel:
+    return JointModel.from_yaml(config.packaged_config_path())
+
+
+# ------------------------------------------------------------------------------ input bags
+@dataclass
+class In:
+    """One input message: topic ('screw', 'pose', 'rest_lengths' or a full name), log time,
+    and the message (a rosbags message) or raw bytes."""
+
+    topic: str
+    t: int
+    msg: Any
+    msgtype: str = FMA
+
+
+def multiarray(values: Iterable[float], data_offset: int = 0) -> Any:
+    types = TYPESTORE.types
+    return types[FMA](layout=types['std_msgs/msg/MultiArrayLayout'](dim=[],
+                                                                    data_offset=data_offset),
+                      data=np.asarray(list(values), dtype=np.float64))
+
+
+def pose_msg(T: np.ndarray, stamp_ns: int = 0, frame: str = FRAME,
+             quaternion: Sequence[float] | None = None) -> Any:
+    types = TYPESTORE.types
+    q = rotation_to_quaternion(T[:3, :3]) if quaternion is None else quaternion
+    return types[POSE](
+        header=types['std_msgs/msg/Header'](
+            stamp=types['builtin_interfaces/msg/Time'](sec=stamp_ns // 1_000_000_000,
+                                                       nanosec=stamp_ns % 1_000_000_000),
+            frame_id=frame),
+        pose=types['geometry_msgs/msg/Pose'](
+            position=types['geometry_msgs/msg/Point'](x=float(T[0, 3]), y=float(T[1, 3]),
+                                                      z=float(T[2, 3])),
+            orientation=types['geometry_msgs/msg/Quaternion'](
+                x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3]))))
+
+
+def write_bag(path: Path, messages: Sequence[In], storage: str = 'mcap',
+              namespace: str = NS) -> Path:
+    """A rosbag2 with ``messages`` (one connection per topic and type)."""
+    with Writer(path, version=9, storage_plugin=StoragePlugin[storage.upper()]) as writer:
+        connections: dict[tuple[str, str], Any] = {}
+        for m in messages:
+            topic = m.topic if m.topic.startswith('/') else f'{namespace}/{m.topic}'
+            key = (topic, m.msgtype)
+            if key not in connections:
+                connections[key] = writer.add_connection(topic, m.msgtype, typestore=TYPESTORE)
+            raw = m.msg if isinstance(m.msg, bytes) else bytes(
+                TYPESTORE.serialize_cdr(m.msg, m.msgtype))
+            writer.write(connections[key], m.t, raw)
+    return path
+
+
+def read_bag(path: Path) -> list[tuple[str, int, Any]]:
+    """(topic, log time, deserialized message) of every message, in log-time order."""
+    with Reader(path) as reader:
+        return [(c.topic, t, TYPESTORE.deserialize_cdr(raw, c.msgtype))
+                for c, t, raw in reader.messages()]
+
+
+def screw_stream(n: int, seed: int = 0, scale: float = 0.05) -> np.ndarray:
+    """n screws near the default joint's unloaded equilibrium (seeded)."""
+    rng = np.random.default_rng(seed)
+    xi0 = default_model().initial_screw
+    return xi0 + scale * rng.standard_normal((n, 6)) * np.array([1, 1, 1, 0.02, 0.02, 0.02])
+
+
+# ------------------------------------------------------------------------------ the scenario
+def scenario() -> tuple[list[In], list[dict[str, Any]], dict[str, int]]:
+    """Inputs with screws, poses, rest-length changes and one bad message of each kind; the
+    expected answers (source, log time, stamp, screw, rest lengths in force) computed from the
+    library the way the node answers; the expected rejection counts."""
+    model = default_model()
+    n = model.n_strings
+    rest0 = model.rest_lengths.copy()
+    rest1 = rest0 * 1.05
+    screws = screw_stream(12, seed=3)
+    msgs: list[In] = []
+    expected: list[dict[str, Any]] = []
+    t = T0
+    rest = rest0
+
+    def tick() -> int:
+        nonlocal t
+        t += 1_000_000  # 1 ms
+        return t
+
+    last: tuple[np.ndarray, int] | None = None
+
+    def answer(source: str, xi: np.ndarray, log_time: int, stamp: int) -> None:
+        nonlocal last
+        expected.append({'source': source, 't': log_time, 'stamp': stamp, 'xi': xi.copy(),
+                         'rest': rest.copy()})
+        last = (xi.copy(), stamp)
+
+    for xi in screws[:4]:
+        msgs.append(In('screw', tick(), multiarray(xi)))
+        answer('screw', xi, t, t)
+    # a pose with a stamp, on the branch nearest the last screw
+    T = exp_se3(screws[4])
+    msgs.append(In('pose', tick(), pose_msg(T, stamp_ns=T0 - 5), POSE))
+    answer('pose', log_se3(T, reference=last[0]), t, T0 - 5)
+    # a pose without a stamp and without a frame id: stamped with its log time
+    T = exp_se3(screws[5])
+    msgs.append(In('pose', tick(), pose_msg(T, frame=''), POSE))
+    answer('pose', log_se3(T, reference=last[0]), t, t)
+    # bad messages of each kind
+    bad = [
+        In('screw', tick(), multiarray([0.1] * 5)),                        # wrong length
+        In('screw', tick(), multiarray([0.1, math.nan, 0, 0, 0, 0])),      # NaN
+        In('screw', tick(), multiarray([7.0, 0, 0, 0, 0, 0])),             # outside the chart
+        In('screw', tick(), multiarray([0.0] * 2000)),                     # oversized
+        In('pose', tick(), pose_msg(np.eye(4), quaternion=[0, 0, 0, 2.0]), POSE),  # quaternion
+        In('pose', tick(), pose_msg(np.eye(4), frame='world'), POSE),      # wrong frame id
+        In('rest_lengths', tick(), multiarray([-0.01] * n)),               # rest lengths <= 0
+        In('rest_lengths', tick(), multiarray([0.03] * (n - 1))),          # wrong length
+        In('screw', tick(), b'\x00\x01\x00\x00\x07'),                     # undecodable
+    ]
+    msgs += bad
+    # a screw between the bad ones, then new rest lengths: re-publish of the last answer
+    msgs.append(In('screw', tick(), multiarray(screws[6])))
+    answer('screw', screws[6], t, t)
+    rest = rest1
+    msgs.append(In('rest_lengths', tick(), multiarray(rest1)))
+    answer('re-publish', last[0], t, last[1])
+    for xi in screws[7:10]:
+        msgs.append(In('screw', tick(), multiarray(xi)))
+        answer('screw', xi, t, t)
+    # a pose after the change: reference the last screw
+    T = exp_se3(screws[10])
+    msgs.append(In('pose', tick(), pose_msg(T, stamp_ns=T0 + 123_456_789), POSE))
+    answer('pose', log_se3(T, reference=last[0]), t, T0 + 123_456_789)
+    # back to the first rest lengths, then a screw logged at the same time as another
+    rest = rest0
+    msgs.append(In('rest_lengths', tick(), multiarray(rest0)))
+    answer('re-publish', last[0], t, last[1])
+    msgs.append(In('screw', tick(), multiarray(screws[11])))
+    answer('screw', screws[11], t, t)
+    rejected = {'screw: wrong length': 1, 'screw: NaN or inf': 1, 'screw: outside the chart': 1,
+                'screw: oversized array': 1, 'screw: undecodable': 1,
+                'pose: bad quaternion': 1, 'pose: wrong frame_id': 1,
+                'rest_lengths: bad rest lengths': 1, 'rest_lengths: wrong length': 1}
+    return msgs, expected, rejected
+
+
+def check_output(out: Path, expected: list[dict[str, Any]], frame: str = FRAME,
+                 namespace: str = NS) -> None:
+    """Every output message of ``out`` against the library, in order."""
+    model = default_model()
+    got = read_bag(out)
+    names = [f'{namespace}/{name}' for name in OUTPUTS]
+    assert len(got) == 5 * len(expected)
+    for k, exp in enumerate(expected):
+        group = got[5 * k: 5 * k + 5]
+        assert [topic for topic, _, _ in group] == names
+        assert all(t == exp['t'] for _, t, _ in group)
+        m = model.with_rest_lengths(exp['rest'])
+        state = m.evaluate(exp['xi'])
+        wrench, K, Kc, tensions, interp = (msg for _, _, msg in group)
+        assert wrench.header.frame_id == frame
+        assert wrench.header.stamp.sec * 1_000_000_000 + wrench.header.stamp.nanosec == \
+            exp['stamp']
+        w = wrench.wrench
+        got_w = [w.force.x, w.force.y, w.force.z, w.torque.x, w.torque.y, w.torque.z]
+        np.testing.assert_allclose(got_w, state.wrench, rtol=1e-12, atol=ATOL)
+        check_layout(K, layouts.matrix_dims(6, 6, layouts.STIFFNESS_ROW_LABEL,
+                                            layouts.STIFFNESS_COL_LABEL))
+        check_layout(Kc, layouts.matrix_dims(6, 6, layouts.STIFFNESS_ROW_LABEL,
+                                             layouts.CARTESIAN_STIFFNESS_COL_LABEL))
+        check_layout(tensions, layouts.vector_dims(m.n_strings,
+                                                   layouts.tensions_label(m.string_names)))
+        check_layout(interp, layouts.vector_dims(layouts.INTERPRETATION_SIZE,
+                                                 layouts.INTERPRETATION_LABEL))
+        np.testing.assert_allclose(K.data, state.stiffness.ravel(), rtol=1e-12,
+                                   atol=ATOL_K)
+        np.testing.assert_allclose(Kc.data, state.cartesian_stiffness.ravel(), rtol=1e-12,
+                                   atol=ATOL_K)
+        np.testing.assert_allclose(tensions.data, state.tensions, rtol=1e-12, atol=ATOL)
+        np.testing.assert_allclose(interp.data, interpretation_vector(state.stiffness),
+                                   rtol=1e-12, atol=ATOL_K)
+
+
+OUTPUTS = ('wrench', 'stiffness', 'cartesian_stiffness', 'string_tensions',
+           'stiffness_interpretation')
+
+
+def check_layout(msg: Any, dims: list[tuple[str, int, int]]) -> None:
+    assert [(d.label, d.size, d.stride) for d in msg.layout.dim] == dims
+    assert msg.layout.data_offset == 0
+
+
+def run_cli(*args: str) -> tuple[int, str, str]:
+    """``cli.main`` in-process with its stdout and stderr."""
+    import contextlib
+    import io
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = cli.main([str(a) for a in args])
+    return code, out.getvalue(), err.getvalue()
+
+
+# ------------------------------------------------------------------------------ tests
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_bag_answers_every_valid_input_like_the_node(tmp_path: Path, storage: str) -> None:
+    msgs, expected, rejected = scenario()
+    src = write_bag(tmp_path / 'in', msgs, storage)
+    out = tmp_path / 'out'
+    code, stdout, stderr = run_cli('bag', src, '--out', out, '--json')
+    assert code == 0, stderr
+    report = json.loads(stdout)
+    assert report['storage'] == storage
+    with Reader(out) as reader:  # same storage as the input by default
+        assert {c.msgtype for c in reader.connections} == {
+            'geometry_msgs/msg/WrenchStamped', FMA}
+    assert report['answers'] == len(expected)
+    assert report['answered'] == {'screw': 9, 'pose': 3, 're-publish': 2}
+    assert report['inputs'] == {'screw': 14, 'pose': 5, 'rest_lengths': 4}
+    assert report['rejected'] == rejected
+    assert report['written'] == {f'{NS}/{name}': len(expected) for name in OUTPUTS}
+    check_output(out, expected)
+
+
+def test_bag_storage_option_csv_and_text_summary(tmp_path: Path) -> None:
+    msgs, expected, rejected = scenario()
+    src = write_bag(tmp_path / 'in', msgs, 'mcap')
+    out, table = tmp_path / 'out', tmp_path / 'answers.csv'
+    code, stdout, stderr = run_cli('bag', src, '--out', out, '--storage', 'sqlite3',
+                                   '--csv', table)
+    assert code == 0, stderr
+    assert (out / 'out.db3').is_file() or list(out.glob('*.db3'))
+    check_output(out, expected)
+    for kind, n in rejected.items():  # the summary names each kind
+        assert f'  {kind}: {n}' in stdout
+    assert f'answered {len(expected)} inputs' in stdout
+    import csv as csv_module
+
+    with table.open() as f:
+        rows = list(csv_module.reader(f))
+    header, rows = rows[0], rows[1:]
+    model = default_model()
+    assert header[:9] == ['log_time_ns', 'source', 'stamp_ns', 'wx', 'wy', 'wz', 'vx', 'vy',
+                          'vz']
+    assert len(header) == 3 + 6 + 6 + 36 + 36 + model.n_strings
+    assert header[-1] == f'tension_{model.string_names[-1]}'
+    assert len(rows) == len(expected)
+    for row, exp in zip(rows, expected, strict=True):
+        assert int(row[0]) == exp['t'] and row[1] == exp['source'] and int(row[2]) == \
+            exp['stamp']
+        values = np.array(row[3:], dtype=float)
+        state = model.with_rest_lengths(exp['rest']).evaluate(exp['xi'])
+        np.testing.assert_allclose(values[:6], exp['xi'], rtol=1e-15, atol=1e-15)
+        np.testing.assert_allclose(values[6:12], state.wrench, rtol=1e-12, atol=ATOL)
+        np.testing.assert_allclose(values[12:48], state.stiffness.ravel(), rtol=1e-12,
+                                   atol=ATOL_K)
+        np.testing.assert_allclose(values[48:84], state.cartesian_stiffness.ravel(),
+                                   rtol=1e-12, atol=ATOL_K)
+        np.testing.assert_allclose(values[84:], state.tensions, rtol=1e-12, atol=ATOL)
+
+
+def test_bag_batches_split_at_rejections_and_rest_length_changes(tmp_path: Path) -> None:
+    """Small chunks, a long stream: screws outside the chart and poses between them (whose
+    branch depends on the last answered screw) land at chunk boundaries and inside chunks."""
+    model = default_model()
+    rng = np.random.default_rng(11)
+    screws = screw_stream(300, seed=5)
+    msgs, expected = [], []
+    rest = model.rest_lengths
+    last = model.initial_screw
+    t = T0
+    for i, xi in enumerate(screws):
+        t += 1000
+        kind = rng.integers(0, 10)
+        if kind == 0:  # outside the chart: rejected, the next pose's branch is unchanged
+            msgs.append(In('screw', t, multiarray([0, 0, 6.5, 0, 0, 0])))
+        elif kind <= 3:  # a pose at theta near pi: the branch matters
+            T = exp_se3(xi)
+            msgs.append(In('pose', t, pose_msg(T), POSE))
+            last = log_se3(T, reference=last)
+            expected.append({'source': 'pose', 't': t, 'stamp': t, 'xi': last, 'rest': rest})
+        elif kind == 4 and i % 3 == 0:
+            rest = model.rest_lengths * (1 + 0.1 * rng.random())
+            msgs.append(In('rest_lengths', t, multiarray(rest)))
+            expected.append({'source': 're-publish', 't': t, 'stamp': expected[-1]['stamp'],
+                             'xi': last, 'rest': rest})
+        else:
+            msgs.append(In('screw', t, multiarray(xi)))
+            last = xi
+            expected.append({'source': 'screw', 't': t, 'stamp': t, 'xi': xi, 'rest': rest})
+    src = write_bag(tmp_path / 'in', msgs)
+    from tensegrity_stiffness.recordings import bag
+
+    summary = bag.process_bag(src, tmp_path / 'out', chunk_size=7)
+    assert summary.answers == len(expected)
+    check_output(tmp_path / 'out', expected)
+
+
+def test_bag_namespace_config_and_topics(tmp_path: Path) -> None:
+    """Another namespace, a parameter file with another frame id and array limit (the rest
+    from the packaged config), and a subset of the outputs."""
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    frames:\n      link1: base\n'
+                      '    limits:\n      max_array_length: 6\n')
+    model = default_model()
+    xi = screw_stream(2, seed=1)
+    msgs = [In('screw', T0, multiarray(xi[0])),
+            In('rest_lengths', T0 + 1, multiarray(model.rest_lengths)),  # 12 > 6: rejected
+            In('pose', T0 + 2, pose_msg(exp_seq := exp_se3(xi[1]), frame='base'), POSE),
+            In('/other/screw', T0 + 3, multiarray(xi[1]))]
+    src = write_bag(tmp_path / 'in', msgs, namespace='/robot/j1/stiffness_node')
+    code, stdout, stderr = run_cli('bag', src, '--out', tmp_path / 'out', '--config', params,
+                                   '--namespace', 'robot/j1/stiffness_node/', '--topics',
+                                   'wrench', '/robot/j1/stiffness_node/string_tensions',
+                                   '--json')
+    assert code == 0, stderr
+    report = json.loads(stdout)
+    assert report['rejected'] == {'rest_lengths: oversized array': 1}
+    got = read_bag(tmp_path / 'out')
+    assert [topic for topic, _, _ in got] == [
+        '/robot/j1/stiffness_node/wrench', '/robot/j1/stiffness_node/string_tensions'] * 2
+    assert got[0][2].header.frame_id == 'base'
+    state = model.evaluate(log_se3(exp_seq, reference=xi[0]))
+    np.testing.assert_allclose(got[3][2].data, state.tensions, rtol=1e-12)
+
+
+def test_bag_errors_exit_2_with_one_line(tmp_path: Path) -> None:
+    msgs, _, _ = scenario()
+    src = write_bag(tmp_path / 'in', msgs)
+    other = write_bag(tmp_path / 'other', [In('/camera/points', T0, multiarray([1.0]))])
+    (tmp_path / 'plain').mkdir()
+    (tmp_path / 'exists').mkdir()
+    (tmp_path / 'exists' / 'keep.txt').write_text('not a bag')
+    write_bag(tmp_path / 'old_out', [In('screw', T0, multiarray([0.0] * 6))])
+    bad_only = write_bag(tmp_path / 'bad_only', [In('screw', T0, multiarray([1.0] * 3))])
+    cases = [
+        (['bag', tmp_path / 'missing', '--out', tmp_path / 'o1'], 'no such rosbag2'),
+        (['bag', tmp_path / 'plain', '--out', tmp_path / 'o2'], 'not a rosbag2'),
+        (['bag', tmp_path / 'exists' / 'keep.txt', '--out', tmp_path / 'o3'], 'not a rosbag2'),
+        (['bag', other, '--out', tmp_path / 'o4'], '/camera/points'),
+        (['bag', src, '--out', tmp_path / 'old_out'], 'exists (use --overwrite'),
+        (['bag', src, '--out', tmp_path / 'exists', '--overwrite'], 'not a rosbag2; not'),
+        (['bag', src, '--out', tmp_path / 'o5', '--storage', 'rosbag1'], 'unknown storage'),
+        (['bag', src, '--out', tmp_path / 'o6', '--topics', 'markers'], 'unknown output'),
+        (['bag', bad_only, '--out', tmp_path / 'o7'], 'no input could be answered'),
+    ]
+    for argv, text in cases:
+        code, stdout, stderr = run_cli(*argv)
+        assert code == 2, (argv, stderr)
+        assert stderr.count('\n') == 1 and text in stderr, (argv, stderr)
+        assert stdout == ''
+    assert 'none of the topics' in run_cli('bag', other, '--out', tmp_path / 'o4')[2]
+    assert not (tmp_path / 'o7').exists()
+    assert (tmp_path / 'exists' / 'keep.txt').is_file()
+    # --overwrite replaces an earlier output bag
+    code, _, stderr = run_cli('bag', src, '--out', tmp_path / 'old_out', '--overwrite')
+    assert code == 0, stderr
+    assert len(read_bag(tmp_path / 'old_out')) == 5 * 14
+
+
+def test_bag_command_as_a_subprocess(tmp_path: Path) -> None:
+    msgs, expected, rejected = scenario()
+    src = write_bag(tmp_path / 'in', msgs, 'sqlite3')
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+        [str(REPO), os.environ.get('PYTHONPATH', '')]))
+    result = subprocess.run([sys.executable, '-m', 'tensegrity_stiffness.cli', 'bag', str(src),
+                             '--out', str(tmp_path / 'out'), '--json'],
+                            capture_output=True, text=True, env=env, timeout=120, check=False)
+    assert result.returncode == 0, result.stderr
+    assert result.stderr == ''  # no progress bar when stderr is not a terminal
+    assert json.loads(result.stdout)['rejected'] == rejected
+    check_output(tmp_path / 'out', expected)
+    result = subprocess.run([sys.executable, '-m', 'tensegrity_stiffness.cli', 'bag',
+                             str(tmp_path / 'nothing'), '--out', str(tmp_path / 'o')],
+                            capture_output=True, text=True, env=env, timeout=120, check=False)
+    assert result.returncode == 2
+    assert result.stderr.count('\n') == 1 and 'no such rosbag2' in result.stderr
+
+
+def test_rate_progress_shows_rate_and_eta() -> None:
+    import io
+
+    class Tty(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    stream = Tty()
+    progress = cli.TerminalRateProgress('bag', unit=' inputs/s', stream=stream)
+    progress(50, 100)
+    progress(100, 100)
+    text = stream.getvalue()
+    assert 'bag:  50% (50/100)' in text and 'inputs/s ETA' in text
+    assert text.endswith('\n') and ' in ' in text.splitlines()[-1].split('\r')[-1]
+
+
+# ------------------------------------------------------------------------------ the running node
+@pytest.mark.ros
+def test_bag_output_equals_the_running_nodes_recorded_output(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The scenario's inputs sent to the installed node one by one; its outputs recorded by an
+    rclpy subscriber writing with rosbags; that recording and the bag command's output of the
+    same inputs compared message by message. Stamps: equal where the node copies them (poses,
+    re-publishes of poses); the node's time of computation elsewhere, the log time in the bag."""
+    pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+    from geometry_msgs.msg import PoseStamped, WrenchStamped
+    from rclpy.serialization import deserialize_message, serialize_message
+    from std_msgs.msg import Float64MultiArray
+    from support.ros_harness import LATCHED, NodeProcess, RosClient, unique_namespace
+
+    ns = unique_namespace('bag')
+    base = f'{ns}/stiffness_node'
+    msgs, expected, _ = scenario()
+    src = write_bag(tmp_path / 'in', msgs, namespace=base)
+    rcl_types = {'screw': Float64MultiArray, 'pose': PoseStamped,
+                 'rest_lengths': Float64MultiArray}
+    out_types = {'wrench': WrenchStamped, **dict.fromkeys(OUTPUTS[1:], Float64MultiArray)}
+    recorded = tmp_path / 'node_out'
+    # The installed node with its own sources: this checkout's are left off its PYTHONPATH.
+    paths = [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep)
+             if p and Path(p).resolve() not in (REPO, REPO / 'test')]
+    with monkeypatch.context() as env:
+        env.setenv('PYTHONPATH', os.pathsep.join(paths))
+        proc = NodeProcess(ns, REPO / 'config' / 'default_joint.yaml')
+    ros = RosClient('bag_test')
+    try:
+        log_time = [0]
+        with Writer(recorded, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+            conns = {name: writer.add_connection(f'{base}/{name}', TYPESTORE_NAMES[name],
+                                                 typestore=TYPESTORE) for name in OUTPUTS}
+            inboxes = {}
+            for name in OUTPUTS:
+                def record(msg: Any, name: str = name) -> None:
+                    writer.write(conns[name], log_time[0], serialize_message(msg))
+                inboxes[name] = ros.subscribe(out_types[name], f'{base}/{name}')
+                ros.subscribe_callback(out_types[name], f'{base}/{name}', record)
+            pubs = {'screw': ros.publisher(Float64MultiArray, f'{base}/screw'),
+                    'pose': ros.publisher(PoseStamped, f'{base}/pose'),
+                    'rest_lengths': ros.publisher(Float64MultiArray, f'{base}/rest_lengths',
+                                                  LATCHED)}
+            for pub in pubs.values():
+                ros.wait_for_subscribers(pub)
+            ros.wait_for_executor(base)
+            for name in OUTPUTS:
+                ros.wait_for_publishers(f'{base}/{name}')
+            answered_times = {e['t'] for e in expected}
+            count = 0
+            for m in msgs:
+                if isinstance(m.msg, bytes):  # undecodable: cannot be sent over ROS
+                    continue
+                log_time[0] = m.t
+                raw = bytes(TYPESTORE.serialize_cdr(m.msg, m.msgtype))
+                pubs[m.topic].publish(deserialize_message(raw, rcl_types[m.topic]))
+                if m.t in answered_times:
+                    count += 1
+                    for name in OUTPUTS:
+                        inboxes[name].wait_for(count, timeout=10.0)
+                elif m.topic == 'rest_lengths':
+                    # The node orders inputs per topic only (screws and poses on its fast lane,
+                    # rest lengths on the executor): an unanswered state change lands first.
+                    time.sleep(0.2)
+            time.sleep(0.5)  # nothing more may come
+            assert {name: len(inboxes[name]) for name in OUTPUTS} == dict.fromkeys(
+                OUTPUTS, len(expected))
+    finally:
+        ros.close()
+        proc.stop()
+
+    code, _, stderr = run_cli('bag', src, '--out', tmp_path / 'bag_out', '--namespace', base)
+    assert code == 0, stderr
+    node_out, bag_out = read_bag(recorded), read_bag(tmp_path / 'bag_out')
+    assert len(node_out) == len(bag_out) == 5 * len(expected)
+    for k, ((topic_n, t_n, n), (topic_b, t_b, b)) in enumerate(
+            zip(node_out, bag_out, strict=True)):
+        exp = expected[k // 5]
+        assert topic_n == topic_b and t_n == t_b == exp['t'], k
+        if topic_b.endswith('/wrench'):
+            assert n.header.frame_id == b.header.frame_id == FRAME
+            copied = exp['stamp'] != exp['t'] and (exp['source'] == 'pose' or any(
+                e['source'] == 'pose' and e['stamp'] == exp['stamp'] for e in expected))
+            if copied:
+                assert (n.header.stamp.sec, n.header.stamp.nanosec) == (
+                    b.header.stamp.sec, b.header.stamp.nanosec)
+            vn = [n.wrench.force.x, n.wrench.force.y, n.wrench.force.z,
+                  n.wrench.torque.x, n.wrench.torque.y, n.wrench.torque.z]
+            vb = [b.wrench.force.x, b.wrench.force.y, b.wrench.force.z,
+                  b.wrench.torque.x, b.wrench.torque.y, b.wrench.torque.z]
+            np.testing.assert_allclose(vb, vn, rtol=1e-12, atol=ATOL)
+        else:
+            assert [(d.label, d.size, d.stride) for d in n.layout.dim] == \
+                [(d.label, d.size, d.stride) for d in b.layout.dim]
+            assert n.layout.data_offset == b.layout.data_offset
+            np.testing.assert_allclose(b.data, n.data, rtol=1e-12, atol=ATOL_K)
+
+
+TYPESTORE_NAMES = {'wrench': 'geometry_msgs/msg/WrenchStamped',
+                   **dict.fromkeys(OUTPUTS[1:], FMA)}
+
+
+# ------------------------------------------------------------------------------ batched parts
+def _rewrite_message_by_message(src: Path, dst: Path, storage: str) -> None:
+    """The messages of the bag ``src`` written again one ``Writer.write`` at a time."""
+    with Reader(src) as reader, Writer(dst, version=9,
+                                       storage_plugin=StoragePlugin[storage.upper()]) as writer:
+        conns = {c.id: writer.add_connection(c.topic, c.msgtype, typestore=TYPESTORE)
+                 for c in reader.connections}
+        for c, t, raw in reader.messages():
+            writer.write(conns[c.id], t, raw)
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_blocks_are_written_as_rosbags_writes_them_message_by_message(
+        tmp_path: Path, storage: str) -> None:
+    """Chunks of 333 answers (``write_blocks``) across mcap chunk boundaries (about 1.1 kB per
+    input, 1 MiB chunks), two inputs per log time: the bag is byte for byte the one rosbags'
+    Writer writes when the messages read back are written again one at a time, in the order
+    read (sqlite3: the same messages and metadata read back)."""
+    from tensegrity_stiffness.recordings import bag
+
+    screws = screw_stream(2500, seed=9)
+    src = write_bag(tmp_path / 'in', [In('screw', T0 + 1000 * (i // 2), multiarray(xi))
+                                      for i, xi in enumerate(screws)], storage)
+    out, again = tmp_path / 'out', tmp_path / 'again' / 'out'  # same name: same metadata
+    bag.process_bag(src, out, chunk_size=333)
+    _rewrite_message_by_message(out, again, storage)
+    if storage == 'mcap':
+        assert (out / 'out.mcap').read_bytes() == (again / 'out.mcap').read_bytes()
+    else:
+        def raw_messages(path: Path) -> list[tuple[str, int, bytes]]:
+            with Reader(path) as reader:
+                return [(c.topic, t, bytes(raw)) for c, t, raw in reader.messages()]
+
+        assert raw_messages(out) == raw_messages(again)
+    assert (out / 'metadata.yaml').read_text() == (again / 'metadata.yaml').read_text()
+
+
+def test_plain_screws_decoded_in_blocks_equal_the_nodes_decoding(tmp_path: Path) -> None:
+    """Screws of the plain layout (decoded with frombuffer) and of other layouts (a labelled
+    dimension, a data offset; deserialized), NaN and out-of-chart ones among them: the same
+    answers and the node's rejection texts."""
+    from tensegrity_stiffness.recordings import bag
+
+    types = TYPESTORE.types
+    screws = screw_stream(40, seed=4)
+    msgs, expected = [], []
+    for i, xi in enumerate(screws):
+        t = T0 + 1000 * i
+        if i % 7 == 3:
+            msgs.append(In('screw', t, multiarray([math.inf, *xi[1:]])))
+        elif i % 7 == 5:
+            msgs.append(In('screw', t, multiarray([0, 0, 6.4, 0, 0, 0])))
+        elif i % 5 == 1:
+            labelled = multiarray(xi)
+            labelled.layout.dim = [types['std_msgs/msg/MultiArrayDimension'](
+                label='screw', size=6, stride=6)]
+            msgs.append(In('screw', t, labelled))
+            expected.append({'source': 'screw', 't': t, 'stamp': t, 'xi': xi,
+                             'rest': default_model().rest_lengths})
+        elif i % 5 == 2:
+            msgs.append(In('screw', t, multiarray([9.0, *xi], data_offset=1)))
+            expected.append({'source': 'screw', 't': t, 'stamp': t, 'xi': xi,
+                             'rest': default_model().rest_lengths})
+        else:
+            msgs.append(In('screw', t, multiarray(xi)))
+            expected.append({'source': 'screw', 't': t, 'stamp': t, 'xi': xi,
+                             'rest': default_model().rest_lengths})
+    plain = bytes(TYPESTORE.serialize_cdr(multiarray(screws[0]), FMA))
+    assert len(plain) == bag.PLAIN_SCREW_SIZE
+    np.testing.assert_array_equal(bag.plain_screw_values([plain])[0], screws[0])
+    src = write_bag(tmp_path / 'in', msgs)
+    summary = bag.process_bag(src, tmp_path / 'out', chunk_size=8)
+    check_output(tmp_path / 'out', expected)
+    assert summary.rejected == {'screw: NaN or inf': 6, 'screw: outside the chart': 5}
+    assert summary.rejection_examples['screw: NaN or inf'] == 'array contains NaN or inf'
+    assert summary.rejection_examples['screw: outside the chart'] == (
+        'screw: |omega| = 6.4 rad is outside the chart (must be < 2 pi)')
+
+
+def test_interpretation_vector_of_a_batch_matches_interpret_stiffness() -> None:
+    from tensegrity_stiffness.mechanics.interpretation import interpret_stiffness
+
+    rng = np.random.default_rng(21)
+    K = rng.normal(size=(3, 50, 6, 6)) * 10.0 ** rng.uniform(-6, 6, size=(3, 50, 6, 6))
+    got = interpretation_vector(K)
+    assert got.shape == (3, 50, 16)
+    for index in np.ndindex(3, 50):
+        it = interpret_stiffness(K[index])
+        ref = np.concatenate([it.block_norms, it.column_norms, it.row_norms])
+        np.testing.assert_allclose(got[index], ref, rtol=1e-13, atol=0.0)
+        np.testing.assert_allclose(got[index], interpretation_vector(K[index]), rtol=1e-14)
+    assert interpretation_vector(np.zeros((0, 6, 6))).shape == (0, 16)
+    for shape in [(36,), (6, 5), (4, 6, 5)]:
+        with pytest.raises(ValueError, match='stiffness must have shape'):
+            interpretation_vector(np.zeros(shape))
+
+
+def test_batched_processing_agrees_with_the_node_functions() -> None:
+    from tensegrity_stiffness.nodes import processing
+
+    model = default_model()
+    screws = screw_stream(64, seed=8)
+    screws[5] = [0, 0, 7.0, 0, 0, 0]
+    screws[9] = [0, 0, 2 * math.pi, 0, 0, 0]
+    accepted, problems = processing.screw_inputs(screws)
+    assert np.flatnonzero(~accepted).tolist() == [5, 9] and sorted(problems) == [5, 9]
+    for i, problem in problems.items():
+        with pytest.raises(ValueError) as exc:
+            processing.screw_input(screws[i])
+        assert str(exc.value) == problem
+    good = screws[accepted]
+    batch = processing.joint_outputs_batch(model, good)
+    assert processing.finite_rows(batch).all()
+    for i, xi in enumerate(good):
+        one = processing.joint_outputs(model, xi)
+        np.testing.assert_allclose(batch.state.wrench[i], one.state.wrench, atol=ATOL)
+        np.testing.assert_allclose(batch.state.stiffness[i], one.state.stiffness, atol=ATOL_K)
+        np.testing.assert_allclose(batch.interpretation[i], one.interpretation, atol=ATOL_K)
+    unlimited = model_without_max_lengths()  # far out, the tensions overflow
+    far = processing.joint_outputs_batch(unlimited, np.array([good[0], [0, 0, 0, 1e300, 0, 0]]))
+    assert processing.finite_rows(far).tolist() == [True, False]
+
+
+def model_without_max_lengths() -> JointModel:
+    from tensegrity_stiffness.nodes import parameters
+
+    values = parameters.defaults(parameters.STIFFNESS_NODE_PARAMETERS)
+    values['joint.max_lengths'] = []
+    return parameters.joint_node_settings(values).model
+
+
+def test_non_finite_result_splits_the_chunk_with_the_nodes_message(tmp_path: Path) -> None:
+    """A screw whose outputs overflow (no max lengths): rejected with the text of the node's
+    publisher check, the inputs around it answered, a pose after it on the branch of the last
+    answer."""
+    from tensegrity_stiffness.recordings import bag
+
+    params = tmp_path / 'params.yaml'
+    params.write_text('joint:\n  max_lengths: []\n')
+    model = model_without_max_lengths()
+    screws = screw_stream(6, seed=12)
+    msgs = [In('screw', T0 + i, multiarray(xi)) for i, xi in enumerate(screws[:3])]
+    msgs.append(In('screw', T0 + 3, multiarray([0, 0, 0, 1e300, 0, 0])))
+    T = exp_se3(screws[3])
+    msgs.append(In('pose', T0 + 4, pose_msg(T), POSE))
+    msgs += [In('screw', T0 + 5 + i, multiarray(xi)) for i, xi in enumerate(screws[4:])]
+    src = write_bag(tmp_path / 'in', msgs)
+    summary = bag.process_bag(src, tmp_path / 'out', config_path=params)
+    assert summary.rejected == {'screw: non-finite result': 1}
+    assert summary.rejection_examples['screw: non-finite result'] == \
+        'wrench contains NaN or inf'
+    got = read_bag(tmp_path / 'out')
+    answered = [e for e in got if e[0].endswith('/wrench')]
+    assert [t for _, t, _ in answered] == [T0, T0 + 1, T0 + 2, T0 + 4, T0 + 5, T0 + 6]
+    xi_pose = log_se3(T, reference=screws[2])
+    tensions = [e[2].data for e in got if e[0].endswith('/string_tensions')]
+    np.testing.assert_allclose(tensions[3], model.evaluate(xi_pose).tensions, rtol=1e-12,
+                               atol=ATOL)
+
+
+def test_settings_come_from_the_parameter_table_and_ignore_undeclared_names(
+        tmp_path: Path) -> None:
+    from tensegrity_stiffness.nodes import parameters
+    from tensegrity_stiffness.recordings import bag
+
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    use_sim_time: false\n'
+                      '    qos_overrides:\n      /parameter_events:\n        publisher:\n'
+                      '          depth: 1000\n'
+                      '    frames:\n      link1: base\n    joint:\n      stiffness: [80.0]\n')
+    settings = bag.node_settings(params)
+    assert settings.link1_frame == 'base'
+    np.testing.assert_array_equal(settings.model.k, np.full(12, 80.0))
+    values = parameters.values_from_config(params, parameters.STIFFNESS_NODE_PARAMETERS)
+    assert 'use_sim_time' not in values and values['frames.link1'] == 'base'
+    default = bag.node_settings(None)
+    assert default.max_array_length == 1024 and default.link1_frame == FRAME
+    np.testing.assert_array_equal(default.model.rest_lengths, default_model().rest_lengths)
+    params.write_text('frames:\n  link1: 3\n')
+    with pytest.raises(bag.BagError, match=r'config .*frames\.link1 must be a string'):
+        bag.node_settings(params)
+    params.write_text('limits:\n  max_array_length: 2\n')
+    with pytest.raises(bag.BagError, match=r'limits\.max_array_length'):
+        bag.node_settings(params)

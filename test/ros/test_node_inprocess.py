@@ -1,0 +1,81 @@
+"""stiffness_node's parameters in-process (as rclpy's own tests do): the node is built with
+``parameter_overrides`` in this process and its declarations, descriptors and whole-set
+validation are checked through the node's API, with no separate process or middleware traffic."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+pytestmark = pytest.mark.ros
+
+from rclpy.context import Context  # noqa: E402
+from rclpy.parameter import Parameter  # noqa: E402
+
+from tensegrity_stiffness.nodes.parameters import STIFFNESS_NODE_PARAMETERS  # noqa: E402
+from tensegrity_stiffness.ros.stiffness_node import StiffnessNode  # noqa: E402
+
+
+@pytest.fixture(scope='module')
+def node():
+    context = Context()
+    rclpy.init(context=context)
+    node = StiffnessNode(context=context, parameter_overrides=[
+        Parameter('qos.depth', value=7), Parameter('markers.max_rate', value=10.0),
+        Parameter('realtime.fast_lane', value=False)])
+    yield node
+    node.close()
+    node.destroy_node()
+    rclpy.shutdown(context=context)
+
+
+def test_overrides_win_over_the_table(node):
+    assert node.get_parameter('qos.depth').value == 7
+    assert node._settings.marker_period == pytest.approx(0.1)
+    assert node.get_parameter('planar.K1').value == 100.0  # the table's default
+
+
+def test_every_descriptor_comes_from_the_table(node):
+    for spec in STIFFNESS_NODE_PARAMETERS:
+        d = node.describe_parameter(spec.name)
+        assert d.description == spec.description, spec.name
+        assert d.read_only == spec.read_only, spec.name
+        assert d.additional_constraints == spec.constraints, spec.name
+        if spec.range is not None and spec.type == 'double':
+            r = d.floating_point_range[0]
+            assert (r.from_value, r.to_value) == spec.range, spec.name
+        elif spec.range is not None and spec.type == 'int':
+            r = d.integer_range[0]
+            assert (r.from_value, r.to_value) == spec.range, spec.name
+
+
+def test_a_read_only_parameter_is_refused_for_that_reason(node):
+    result = node.set_parameters([Parameter('qos.depth', value=3)])[0]
+    assert not result.successful and 'read-only' in result.reason, result.reason
+    assert node.get_parameter('qos.depth').value == 7
+
+
+def test_a_change_is_validated_as_a_whole_and_the_old_set_stays(node):
+    generation = node._settings.generation
+    model = node._settings.model
+    result = node.set_parameters([Parameter('joint.stiffness', value=[-1.0] * 12)])[0]
+    assert not result.successful and 'joint.stiffness must be > 0' in result.reason
+    # two parameters that only make sense together: 11 strings, atomically
+    names = list(model.string_names[:11])
+    result = node.set_parameters_atomically([
+        Parameter('joint.string_names', value=names),
+        Parameter('joint.rest_lengths', value=list(model.rest_lengths[:11]))])
+    assert not result.successful  # the node-name lists still have 12 entries
+    assert node._settings.generation == generation and node._settings.model is model
+    result = node.set_parameters([Parameter('planar.K2', value=12.5)])[0]
+    assert result.successful, result.reason
+    assert node._settings.planar.K2 == 12.5 and node._settings.generation == generation + 1
+    # the topic rest lengths survive a change of another parameter
+    np.testing.assert_array_equal(node._settings.model.rest_lengths, model.rest_lengths)
+
+
+def test_a_range_from_the_table_is_enforced(node):
+    result = node.set_parameters([Parameter('markers.max_rate', value=-1.0)])[0]
+    assert not result.successful
+    assert node._settings.marker_period == pytest.approx(0.1)

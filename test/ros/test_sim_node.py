@@ -1,0 +1,298 @@
+"""sim_node -> stiffness_node (and -> spine_node) over the real middleware, across processes.
+
+The installed executables run as separate processes from the packaged configs; the stiffness
+node's ``~/pose`` is remapped to the twin's. Under a constant external wrench, once the twin has
+settled, the published ``K_c`` equals the library's at the twin's true screw and the screw equals
+``solve_equilibrium``'s; rest lengths sent to the twin move the equilibrium as the library
+predicts; bad input is refused with a warning and the twin keeps its state and keeps running;
+``scripts/run_twin.sh --duration`` prints its summary lines and stops both nodes.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+pytestmark = pytest.mark.ros
+
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped  # noqa: E402
+from rcl_interfaces.srv import SetParameters  # noqa: E402
+from rosgraph_msgs.msg import Clock  # noqa: E402
+from sensor_msgs.msg import Imu  # noqa: E402
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support.ros_harness import (  # noqa: E402
+    LATCHED,
+    REPO,
+    NodeProcess,
+    RosClient,
+    log_has,
+    unique_namespace,
+    wait_settled,
+    wrench_stamped,
+)
+
+from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium  # noqa: E402
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.nodes import parameters  # noqa: E402
+from tensegrity_stiffness.ros import conversions  # noqa: E402
+from tensegrity_stiffness.ros.runtime.reporting import WARN_THROTTLE_S  # noqa: E402
+
+JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
+SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
+W_JOINT = np.array([0.04, -0.05, 0.02, 0.0, 5e-4, 0.0])
+W_SPINE = np.array([0.03, 0.0, -0.02, 0.0, 0.0, 0.0])
+
+
+@pytest.fixture(scope='module')
+def joint_loop():
+    ns = unique_namespace('twin')
+    stiffness = NodeProcess(ns, JOINT_CONFIG, extra_args=[
+        '-r', f'{ns}/stiffness_node/pose:={ns}/sim_node/pose'])
+    sim = NodeProcess(ns, JOINT_CONFIG, executable='sim_node',
+                      extra_args=['-p', 'sim.publish_every:=10'])
+    ros = RosClient('twin_test')
+    base = f'{ns}/sim_node'
+    loop = {
+        'ns': ns, 'sim': sim, 'stiffness': stiffness, 'ros': ros,
+        'screw': ros.subscribe(Float64MultiArray, f'{base}/screw'),
+        'lengths': ros.subscribe(Float64MultiArray, f'{base}/measured_lengths'),
+        'tensions': ros.subscribe(Float64MultiArray, f'{base}/measured_tensions'),
+        'imu': ros.subscribe(Imu, f'{base}/imu'),
+        'kc': ros.subscribe(Float64MultiArray, f'{ns}/stiffness_node/cartesian_stiffness'),
+        'diagnostics': ros.subscribe(DiagnosticArray, '/diagnostics'),
+        'wrench_pub': ros.publisher(WrenchStamped, f'{base}/external_wrench'),
+        'rest_pub': ros.publisher(Float64MultiArray, f'{base}/rest_lengths', LATCHED),
+    }
+    loop['params'] = ros.client(SetParameters, f'{base}/set_parameters')
+    for pub in ('wrench_pub', 'rest_pub'):
+        ros.wait_for_subscribers(loop[pub])
+    loop['kc'].wait_for(1, timeout=30.0)
+    yield loop
+    ros.close()
+    codes = sim.stop(), stiffness.stop()
+    assert codes == (0, 0), sim.log() + stiffness.log()
+    assert 'internal error' not in sim.log(), sim.log()
+
+
+def test_settled_twin_gives_the_librarys_stiffness(joint_loop) -> None:
+    """Under a constant wrench, once settled: the twin's screw is solve_equilibrium's, the
+    stiffness node's K_c (computed from the twin's pose) is the library's at the twin's screw,
+    and the simulated sensors agree with the library at that screw."""
+    model = JointModel.from_yaml(JOINT_CONFIG)
+    loop = joint_loop
+    before = len(loop['screw'])
+    loop['wrench_pub'].publish(wrench_stamped(W_JOINT, 'tensegrity_link1'))
+    res = solve_equilibrium(model, W_JOINT)
+    xi = wait_settled(loop['screw'], after=before + 5, target=res.screw)
+    assert np.abs(xi - res.screw).max() < 1e-8
+    # The newest K_c is of a settled pose (the stiffness node answers every input in order).
+    time.sleep(0.3)
+    K = np.asarray(loop['kc'].messages[-1].data).reshape(6, 6)
+    K_lib = model.cartesian_stiffness(xi)
+    assert np.abs(K - K_lib).max() <= 1e-9 * np.abs(K_lib).max()
+    state = model.evaluate(xi)
+    np.testing.assert_allclose(loop['lengths'].messages[-1].data, state.lengths, atol=1e-12)
+    np.testing.assert_allclose(loop['tensions'].messages[-1].data, state.tensions, atol=1e-9)
+    imu = loop['imu'].messages[-1]
+    w, a = conversions.imu_to_arrays(imu)
+    assert imu.header.frame_id == 'tensegrity_link2'
+    assert np.abs(w).max() < 1e-8 and abs(np.linalg.norm(a) - 9.81) < 1e-6
+    assert imu.orientation_covariance[0] == -1.0
+
+
+def test_rest_lengths_move_the_twin_as_the_library_predicts(joint_loop) -> None:
+    model = JointModel.from_yaml(JOINT_CONFIG)
+    loop = joint_loop
+    rest = model.rest_lengths * np.linspace(0.98, 1.02, model.n_strings)
+    before = len(loop['screw'])
+    loop['rest_pub'].publish(Float64MultiArray(data=rest.tolist()))
+    res = solve_equilibrium(model, W_JOINT, rest_lengths=rest)
+    xi = wait_settled(loop['screw'], after=before + 5, target=res.screw)
+    assert np.abs(xi - res.screw).max() < 1e-8
+
+
+@pytest.mark.parametrize(('topic', 'message', 'problem'), [
+    ('rest_pub', Float64MultiArray(data=[0.03] * 5), 'expected 12'),
+    ('rest_pub', Float64MultiArray(data=[0.03] * 11 + [float('nan')]), 'finite|NaN|nan'),
+    ('rest_pub', Float64MultiArray(data=[0.03] * 11 + [-0.01]), 'rest_lengths must be > 0'),
+    ('wrench_pub', wrench_stamped([float('nan'), 0, 0, 0, 0, 0]), 'finite|NaN|nan'),
+    ('wrench_pub', wrench_stamped([1e6, 0, 0, 0, 0, 0]), 'limits.max_force'),
+    ('wrench_pub', wrench_stamped([0, 0, 0, 0, 50.0, 0]), 'limits.max_moment'),
+    ('wrench_pub', wrench_stamped([0.1, 0, 0, 0, 0, 0], 'elsewhere'), 'not the base frame'),
+])
+def test_bad_input_is_refused_and_the_twin_keeps_its_state(joint_loop, topic, message,
+                                                           problem) -> None:
+    loop = joint_loop
+    before = len(loop['screw'])
+    loop['screw'].wait_for(before + 1, timeout=10.0)
+    xi_before = np.array(loop['screw'].messages[-1].data)
+    time.sleep(WARN_THROTTLE_S)  # the warnings of one kind are throttled: each one is seen
+    loop[topic].publish(message)
+    kind = '~/rest_lengths' if topic == 'rest_pub' else '~/external_wrench'
+    assert log_has(loop['sim'], rf'{re.escape(kind)} rejected: .*({problem})'), loop['sim'].log()
+    count = len(loop['screw'])
+    loop['screw'].wait_for(count + 20, timeout=10.0)  # still publishing
+    xi_after = np.array(loop['screw'].messages[-1].data)
+    assert np.abs(xi_after - xi_before).max() < 1e-10  # state kept (settled, same inputs)
+    assert loop['sim'].alive()
+    if topic == 'rest_pub':  # the latched bad value replaced the good one: send it again
+        model = JointModel.from_yaml(JOINT_CONFIG)
+        rest = model.rest_lengths * np.linspace(0.98, 1.02, model.n_strings)
+        loop['rest_pub'].publish(Float64MultiArray(data=rest.tolist()))
+
+
+def test_parameters_are_validated_and_diagnostics_count_missed_steps(joint_loop) -> None:
+    loop = joint_loop
+    ros = loop['ros']
+    result = ros.set_parameter(loop['params'], 'sim.publish_every', 0)
+    assert not result.successful and 'sim.publish_every' in result.reason
+    result = ros.set_parameter(loop['params'], 'noise.lengths', -1.0)
+    assert not result.successful
+    result = ros.set_parameter(loop['params'], 'noise.lengths', 1e-4)
+    assert result.successful
+    count = len(loop['lengths'])
+    lengths = loop['lengths'].wait_for(count + 30, timeout=10.0)[-30:]
+    spread = np.std(np.array([m.data for m in lengths]), axis=0)
+    assert 3e-5 < spread.mean() < 3e-4  # the noise is on
+    assert ros.set_parameter(loop['params'], 'noise.lengths', 0.0).successful
+    loop['diagnostics'].clear()  # a fresh one (the node has run for seconds by now)
+    status = loop['diagnostics'].wait_until(
+        lambda m: any(s.name.endswith('sim_node: twin') for s in m.status), timeout=5.0)
+    values = {kv.key: kv.value for s in status.status for kv in s.values}
+    assert int(values['steps']) > 1000 and 'missed steps' in values
+
+
+def test_a_model_change_rebuilds_the_twin(joint_loop) -> None:
+    """joint.stiffness changed at run time: the twin is rebuilt at its configuration with the
+    new model (and its configured rest lengths) and settles where the library says."""
+    loop = joint_loop
+    model = JointModel.from_yaml(JOINT_CONFIG)
+    k = (model.k * np.linspace(0.9, 1.1, model.n_strings)).tolist()
+    before = len(loop['screw'])
+    result = loop['ros'].set_parameter(loop['params'], 'joint.stiffness', k)
+    assert result.successful, result.reason
+    changed = JointModel(model.link1_nodes, model.connections, k, model.rest_lengths,
+                         max_lengths=model.max_lengths, initial_screw=model.initial_screw)
+    res = solve_equilibrium(changed, W_JOINT)
+    xi = wait_settled(loop['screw'], after=before + 5, target=res.screw)
+    assert np.abs(xi - res.screw).max() < 1e-8
+    assert log_has(loop['sim'], r'parameters applied: \[.joint.stiffness.\]')
+
+
+def test_spine_twin_drives_spine_node() -> None:
+    """sim.spine: the twin of the default spine, as fast as possible (/clock), settles under a
+    tip wrench where solve_chain_equilibrium says, and spine_node's tip stiffness of the twin's
+    poses equals the library's at that load."""
+    chain = JointChain.from_yaml(SPINE_CONFIG)
+    ns = unique_namespace('twin_spine')
+    spine = NodeProcess(ns, SPINE_CONFIG, executable='spine_node', extra_args=[
+        '-r', f'{ns}/spine_node/poses:={ns}/sim_node/poses'])
+    sim = NodeProcess(ns, SPINE_CONFIG, executable='sim_node', extra_args=[
+        '-p', 'sim.spine:=true', '-p', 'sim.real_time:=false', '-p', 'sim.publish_every:=50'])
+    ros = RosClient('twin_spine_test')
+    try:
+        base = f'{ns}/sim_node'
+        screws = ros.subscribe(Float64MultiArray, f'{base}/screws')
+        poses = ros.subscribe(PoseArray, f'{base}/poses')
+        clock = ros.subscribe(Clock, '/clock')
+        tip = ros.subscribe(Float64MultiArray, f'{ns}/spine_node/tip_stiffness_base')
+        tip_pose = ros.subscribe(PoseStamped, f'{ns}/spine_node/tip_pose')
+        wrench_pub = ros.publisher(WrenchStamped, f'{base}/external_wrench')
+        ros.wait_for_subscribers(wrench_pub)
+        tip.wait_for(1, timeout=30.0)
+        before = len(screws)
+        wrench_pub.publish(wrench_stamped(W_SPINE, 'spine_base'))
+        res = solve_chain_equilibrium(chain, W_SPINE)
+        x = wait_settled(screws, timeout=60.0, after=before + 5,
+                         target=res.screws).reshape(5, 6)
+        assert np.abs(x - res.screws).max() < 1e-8
+        time.sleep(0.5)
+        K = np.asarray(tip.messages[-1].data).reshape(6, 6)
+        K_lib = chain.tip_stiffness(x, tip_wrench=W_SPINE)
+        assert np.abs(K - K_lib).max() <= 1e-6 * np.abs(K_lib).max()
+        assert poses.messages[-1].header.frame_id == 'spine_base'
+        assert len(poses.messages[-1].poses) == 5
+        stamp = clock.messages[-1].clock
+        assert stamp.sec + stamp.nanosec * 1e-9 > 1.0  # simulated time
+        assert tip_pose.messages  # spine_node answered the twin's poses
+    finally:
+        ros.close()
+        codes = sim.stop(), spine.stop()
+    assert codes == (0, 0), sim.log() + spine.log()
+
+
+def test_sim_node_settings_name_the_bad_field() -> None:
+    values = parameters.defaults(parameters.sim_node_parameters(False))
+    assert parameters.sim_node_settings(values).imu_frame == 'tensegrity_link2'
+    for name, value, match in (('sim.rate', 0.0, 'sim.rate'),
+                               ('sim.max_length', 'clip', 'sim.max_length'),
+                               ('noise.gyro', -1.0, 'noise.gyro'),
+                               ('frames.link1', ' ', 'frames.link1'),
+                               ('joint.rest_lengths', [0.03] * 5, 'rest_lengths')):
+        with pytest.raises(ValueError, match=match):
+            parameters.sim_node_settings({**values, name: value})
+
+
+@pytest.mark.slow
+def test_run_twin_prints_summary_lines_and_stops_cleanly() -> None:
+    env = {**os.environ, 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    out = subprocess.run(['bash', str(REPO / 'scripts' / 'run_twin.sh'), '--duration', '9'],
+                         capture_output=True, text=True, timeout=120, env=env)
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = [line for line in out.stdout.splitlines() if line.startswith('t ')]
+    assert len(lines) >= 8, out.stdout
+    live = [line for line in lines if 'K_c eig' in line and 'latency median' in line]
+    assert live, out.stdout
+    assert re.search(r'input +\d+ Hz', live[-1]) and 'slack 0/12' in live[-1]
+    assert 'stiffness_node exit 0, sim_node exit 0' in out.stdout
+
+
+@pytest.mark.parametrize(('launch_file', 'partner', 'config'), [
+    ('twin.launch.py', 'stiffness_node', 'default_joint.yaml'),
+    ('twin_spine.launch.py', 'spine_node', 'default_spine.yaml')])
+def test_twin_launch_files_name_the_installed_executables(launch_file, partner, config) -> None:
+    """``launch`` is not on PyPI: the file is compiled and read, not run (as
+    test_package_layout does for the node launch files)."""
+    import ast
+
+    from ament_index_python.packages import get_package_prefix
+
+    prefix = Path(get_package_prefix('tensegrity_stiffness'))
+    installed = prefix / 'share' / 'tensegrity_stiffness' / 'launch' / launch_file
+    tree = ast.parse(installed.read_text())
+    compile(tree, str(installed), 'exec')
+    constants = {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
+                 if isinstance(node, ast.Assign) and isinstance(node.value, (ast.Constant,
+                                                                            ast.Tuple))}
+    assert constants['EXECUTABLE'] == 'sim_node' and constants['PARTNER'] == partner
+    for exe in ('sim_node', partner):
+        assert (prefix / 'lib' / 'tensegrity_stiffness' / exe).is_file()
+    assert constants['CONFIG'] == config
+    assert (prefix / 'share' / 'tensegrity_stiffness' / 'config' / config).is_file()
+    topic = 'poses' if partner == 'spine_node' else 'pose'
+    assert constants['REMAPPING'] == (f'~/{topic}', f'sim_node/{topic}')
+
+
+def test_imu_message_round_trip() -> None:
+    msg = conversions.imu_message('link', gyro_std=0.01, accelerometer_std=0.2)
+    conversions.write_imu(msg, [0.1, -0.2, 0.3], [0.0, 9.81, 0.5],
+                        conversions.stamp_from_seconds(1.5))
+    w, a = conversions.imu_to_arrays(msg)
+    np.testing.assert_array_equal(w, [0.1, -0.2, 0.3])
+    np.testing.assert_array_equal(a, [0.0, 9.81, 0.5])
+    assert msg.header.frame_id == 'link' and msg.header.stamp.sec == 1
+    assert msg.orientation_covariance[0] == -1.0
+    assert msg.angular_velocity_covariance[0] == pytest.approx(1e-4)
+    assert msg.linear_acceleration_covariance[8] == pytest.approx(0.04)
+    with pytest.raises(ValueError, match='specific_force'):
+        conversions.write_imu(msg, [0.0, 0.0, 0.0], [0.0, float('nan'), 0.0],
+                            conversions.stamp_from_seconds(0.0))
