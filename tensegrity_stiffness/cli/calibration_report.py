@@ -151,9 +151,9 @@ def plot_residuals(result: CalibrationResult, path: str | Path,
                    size: tuple[int, int] = PLOT_SIZE) -> Path:
     """PNG: for each measured kind, the norm of each sample's residual (display units) before
     (nominal) and after (calibrated) against the sample index; outliers marked."""
-    out = plots._output(path)
+    out = plots.output_path(path)
     kinds = [k for k in RESIDUAL_KINDS if k in result.residual_rms_before]
-    fig = plots._figure(*size)
+    fig = plots.new_figure(*size)
     axes = fig.subplots(len(kinds), 1, sharex=True, squeeze=False)[:, 0]
     index = np.arange(len(result.screws))
     for ax, kind in zip(axes, kinds, strict=True):
@@ -174,7 +174,7 @@ def plot_residuals(result: CalibrationResult, path: str | Path,
     axes[0].legend(loc='upper right', fontsize='small')
     axes[0].set_title('Residual per sample: nominal vs calibrated parameters')
     axes[-1].set_xlabel('sample')
-    return plots._save(fig, out)
+    return plots.save_figure(fig, out)
 
 
 def report_dict(result: CalibrationResult, recording: Recording, indices: Sequence[int],

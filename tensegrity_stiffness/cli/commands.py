@@ -811,7 +811,7 @@ def _chain_configuration(args: argparse.Namespace
         raise ValueError(f'config {path}: {exc}') from None
     W = np.asarray(args.tip_wrench, dtype=np.float64)
     if args.gravity is not None:
-        chain.gravity = chain._gravity(np.asarray(args.gravity, dtype=np.float64))
+        chain.gravity = chain.resolved_gravity(np.asarray(args.gravity, dtype=np.float64))
     if args.screws is not None:
         values = np.asarray(args.screws, dtype=np.float64)
         if values.size != 6 * chain.n_joints:

@@ -157,7 +157,7 @@ def _check_count(name: str, value: int, minimum: int = 2) -> int:
     return int(value)
 
 
-def _figure(width: int, height: int) -> Any:
+def new_figure(width: int, height: int) -> Any:
     """A Figure of exactly ``width`` x ``height`` px at :data:`DPI` with an Agg canvas."""
     width, height = check_size(width, height)
     Figure, FigureCanvasAgg = _matplotlib()
@@ -166,7 +166,7 @@ def _figure(width: int, height: int) -> Any:
     return fig
 
 
-def _output(path: str | Path) -> Path:
+def output_path(path: str | Path) -> Path:
     """The output path; ValueError when its folder does not exist."""
     path = Path(path)
     if not path.parent.is_dir():
@@ -176,7 +176,7 @@ def _output(path: str | Path) -> Path:
     return path
 
 
-def _save(fig: Any, path: Path) -> Path:
+def save_figure(fig: Any, path: Path) -> Path:
     fig.savefig(path, format='png', dpi=DPI)
     return path
 
@@ -210,9 +210,9 @@ def plot_joint(model: JointModel, screw: ArrayLike, path: str | Path, *,
     ``T p2`` (circles), each link drawn as the polyline through its nodes in config order, the
     strings coloured by tension (N, colour bar), slack strings dashed grey, saturated strings
     thick; the frames {1} and {2} as small RGB triads; the joint's y axis vertical."""
-    path = _output(path)
+    path = output_path(path)
     state = model.evaluate(screw, rest_lengths)
-    fig = _figure(width, height)
+    fig = new_figure(width, height)
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
     from matplotlib.lines import Line2D
@@ -263,7 +263,7 @@ def plot_joint(model: JointModel, screw: ArrayLike, path: str | Path, *,
     ax.set_title(title or ('joint at screw xi = [' + ' '.join(f'{v:.4g}' for v in xi) + ']\n'
                            f'|F| = {np.linalg.norm(state.wrench[:3]):.3g} N, '
                            f'|M| = {np.linalg.norm(state.wrench[3:]):.3g} N m'), fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _colormap(name: str) -> Any:
@@ -278,8 +278,8 @@ def plot_extension_sweep(sweep: ExtensionSweep, path: str | Path, *,
     """Monke & Vikas Figs. 4-5: Frobenius norms of the blocks of K (eq. 19, left) and norms of
     its columns (eq. 20, right) against the extension (mm) of :func:`extension_sweep`; log scale
     (the blocks have different units). Dotted lines mark where strings go slack or saturate."""
-    path = _output(path)
-    fig = _figure(width, height)
+    path = output_path(path)
+    fig = new_figure(width, height)
     s = sweep.displacement * MM
     left, right = fig.subplots(1, 2, sharex=True)
     for k, label in enumerate(BLOCK_LABELS):
@@ -307,7 +307,7 @@ def plot_extension_sweep(sweep: ExtensionSweep, path: str | Path, *,
                      fontsize=8)
     left.legend(fontsize=8, loc='center right')
     right.legend(fontsize=8, loc='center right', ncol=2)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # ---------------------------------------------------------------------------- planar mechanism
@@ -339,9 +339,9 @@ def plot_actuator_workspace(mech: PlanarMechanism, path: str | Path, *,
     """Ji, Li & Lin Fig. 2: the actuator workspace (theta1, L3) with the singular curves i-v
     and the actuator limit vi (:func:`~tensegrity_stiffness.mechanics.planar_workspace.
     actuator_workspace_curves`), shaded inside the ranges."""
-    path = _output(path)
+    path = output_path(path)
     samples = _check_count('samples', samples)
-    fig = _figure(width, height)
+    fig = new_figure(width, height)
     ax = fig.add_subplot()
     outline = actuator_workspace_boundary(mech, samples)
     ax.fill(outline[:, 0], outline[:, 1], color='tab:blue', alpha=0.08,
@@ -357,7 +357,7 @@ def plot_actuator_workspace(mech: PlanarMechanism, path: str | Path, *,
     ax.legend(fontsize=8, loc='center right', framealpha=0.9)
     ax.set_title(f'Fig. 2: actuator workspace and singular curves '
                  f'(L = {mech.L:g} m, K1 = {mech.K1:g} N/m, K2 = {mech.K2:g} N/m)', fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _cartesian_box(mech: PlanarMechanism, samples: int) -> tuple[float, float, float, float]:
@@ -388,10 +388,10 @@ def plot_cartesian_workspace(mech: PlanarMechanism, path: str | Path, *,
     equilibrium inside the actuator ranges, on a ``resolution`` x ``resolution`` grid) and the
     images of the curves i-vi (:func:`~tensegrity_stiffness.mechanics.planar_workspace.
     cartesian_workspace_curves`; curve i is a single point on the stable branch)."""
-    path = _output(path)
+    path = output_path(path)
     samples = _check_count('samples', samples)
     resolution = _check_count('resolution', resolution)
-    fig = _figure(width, height)
+    fig = new_figure(width, height)
     ax = fig.add_subplot()
     x0, x1, y0, y1 = _cartesian_box(mech, samples)
     X, Y = np.meshgrid(np.linspace(x0, x1, resolution), np.linspace(y0, y1, resolution))
@@ -413,7 +413,7 @@ def plot_cartesian_workspace(mech: PlanarMechanism, path: str | Path, *,
     ax.legend(fontsize=8, loc='lower right', framealpha=0.9)
     ax.set_title(f'Fig. 3: Cartesian workspace and singular curves '
                  f'(K1 = {mech.K1:g}, K2 = {mech.K2:g} N/m)', fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _rows(compute: Any, n_rows: int, progress: ProgressCallback | None) -> FloatArray:
@@ -451,12 +451,12 @@ def plot_theta2_curves(mech: PlanarMechanism, path: str | Path, *,
     with the actuators locked at (L3, theta1) (the captions' "theta2 = pi/10" is theta1, see
     docs/errata.md). Vertical lines: theta2_m (stable equilibrium) and theta2_0 (K = 0) in
     range."""
-    path = _output(path)
+    path = output_path(path)
     samples = _check_count('samples', samples)
     if not (math.isfinite(theta2_min) and math.isfinite(theta2_max) and theta2_max > theta2_min):
         raise ValueError(f'theta2 range must be finite with max > min, got '
                          f'[{theta2_min}, {theta2_max}]')
-    fig = _figure(width, height)
+    fig = new_figure(width, height)
     t2 = np.linspace(theta2_min, theta2_max, samples)
     c = theta2_curves(mech, L3, theta1, t2)
     axes = fig.subplots(3, 1, sharex=True)
@@ -488,7 +488,7 @@ def plot_theta2_curves(mech: PlanarMechanism, path: str | Path, *,
     axes[-1].set_xlabel(r'$\theta_2$ (rad)')
     fig.suptitle(f'Actuators locked: L = {mech.L:g} m, L3 = {L3:g} m, theta1 = {theta1:.4g} '
                  f'rad, K1 = {mech.K1:g} N/m, K2 = {mech.K2:g} N/m', fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _map_axes(fig: Any, X: FloatArray, Y: FloatArray, K: FloatArray, label: str,
@@ -516,9 +516,9 @@ def plot_actuator_stiffness(mech: PlanarMechanism, path: str | Path, *,
     """Ji, Li & Lin Fig. 7: stiffness K (N m/rad) at the stable equilibrium over the actuator
     workspace (theta1, L3), eq. 47 on the stable branch
     (:func:`~tensegrity_stiffness.mechanics.planar_workspace.actuator_stiffness_map`)."""
-    path = _output(path)
+    path = output_path(path)
     resolution = _check_count('resolution', resolution)
-    fig = _figure(width, height)
+    fig = new_figure(width, height)
     T1, L3 = np.meshgrid(np.linspace(mech.theta1_min, mech.theta1_max, resolution),
                          np.linspace(mech.L3_min, mech.L3_max, resolution))
     K = _rows(lambda sl: actuator_stiffness_map(mech, L3[sl], T1[sl]), resolution, progress)
@@ -527,7 +527,7 @@ def plot_actuator_stiffness(mech: PlanarMechanism, path: str | Path, *,
     ax.set_ylabel(r'$L_3$ (m)')
     ax.set_title(f'Fig. 7: stiffness in the actuator workspace '
                  f'(L = {mech.L:g} m, K1 = {mech.K1:g}, K2 = {mech.K2:g} N/m)', fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_cartesian_stiffness(mech: PlanarMechanism, path: str | Path, *,
@@ -540,10 +540,10 @@ def plot_cartesian_stiffness(mech: PlanarMechanism, path: str | Path, *,
     inverse kinematics
     (:func:`~tensegrity_stiffness.mechanics.planar_workspace.cartesian_stiffness_map`);
     where two stable in-range equilibria put D3 at a point, the stiffer one is shown."""
-    path = _output(path)
+    path = output_path(path)
     resolution = _check_count('resolution', resolution)
     samples = _check_count('samples', samples)
-    fig = _figure(width, height)
+    fig = new_figure(width, height)
     x0, x1, y0, y1 = _cartesian_box(mech, samples)
     X, Y = np.meshgrid(np.linspace(x0, x1, resolution), np.linspace(y0, y1, resolution))
 
@@ -560,7 +560,7 @@ def plot_cartesian_stiffness(mech: PlanarMechanism, path: str | Path, *,
     ax.set_ylabel('y (m)')
     ax.set_title(f'Fig. 8: stiffness in the Cartesian workspace '
                  f'(K1 = {mech.K1:g}, K2 = {mech.K2:g} N/m)', fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # ---------------------------------------------------------------------------- stiffness design
@@ -608,12 +608,12 @@ def plot_stiffness_range(model: JointModel, screw: ArrayLike, path: str | Path, 
     """Reachable range (shaded) of each diagonal entry of K_c over every admissible tension set,
     and the entry of the mid-limit design (line), for a sweep of one screw coordinate in
     ``[-extent, extent]`` about ``screw``; blank where no tensions hold the load."""
-    path = _output(path)
+    path = output_path(path)
     samples = _check_count('samples', samples)
     offsets = np.linspace(-extent, extent, samples)
     lo, hi, mid = stiffness_range_curves(model, screw, coordinate, offsets, external_wrench,
                                          tension_min, tension_max, progress)
-    fig = _figure(width, height)
+    fig = new_figure(width, height)
     axes = fig.subplots(2, 3, sharex=True)
     unit = SCREW_COORDINATE_UNITS[SCREW_COORDINATES.index(coordinate)]
     for i, ax in enumerate(axes.ravel()):
@@ -628,7 +628,7 @@ def plot_stiffness_range(model: JointModel, screw: ArrayLike, path: str | Path, 
     axes[0, 0].legend(fontsize=8)
     fig.suptitle(f'diagonal of $K_c$ reachable with tensions in [{tension_min:g}, '
                  f'{tension_max:g}] N', fontsize=11)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # ---------------------------------------------------------------------------- spine
@@ -641,9 +641,9 @@ def plot_spine(chain: JointChain, screws: ArrayLike, path: str | Path, *,
     i and link 1 of joint i+1, one colour per link, joined by a polyline per node set), every
     joint's strings coloured by tension (one colour bar), slack strings dashed grey, saturated
     thick; the base and tool frames as RGB triads; the tip wrench's force as an arrow."""
-    path = _output(path)
+    path = output_path(path)
     state = chain.evaluate(screws, rest_lengths)
-    fig = _figure(width, height)
+    fig = new_figure(width, height)
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
     from matplotlib.lines import Line2D
@@ -701,4 +701,4 @@ def plot_spine(chain: JointChain, screws: ArrayLike, path: str | Path, *,
     p = state.tip_transform[:3, 3] * MM
     ax.set_title(title or (f'spine of {chain.n_joints} joints, tip at '
                            f'({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f}) mm'), fontsize=10)
-    return _save(fig, path)
+    return save_figure(fig, path)

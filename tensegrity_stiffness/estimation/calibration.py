@@ -86,10 +86,14 @@ from tensegrity_stiffness.geometry.screw import (
     log_se3_sequence,
     log_so3_batch,
 )
+from tensegrity_stiffness.geometry.transforms import adjoint, rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array, finite_scalar
-from tensegrity_stiffness.mechanics.chain import pose_to_transform
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
+
+#: Largest max-abs deviation of R^T R from I accepted in a recorded (4, 4) pose (poses read
+#: from recordings carry the rounding of their source).
+RECORDED_ROTATION_TOLERANCE = 1e-6
 
 FloatArray = NDArray[np.float64]
 
@@ -192,20 +196,6 @@ class CalibrationSample:
     external_wrench: ArrayLike | None = None
 
 
-def pose_transform(pose: ArrayLike, name: str = 'pose') -> FloatArray:
-    """(4, 4) transform of a pose given as (4, 4) or ``[x y z qx qy qz qw]``."""
-    arr = finite_array(name, pose)
-    if arr.shape == (4, 4):
-        R = arr[:3, :3]
-        if np.max(np.abs(R.T @ R - np.eye(3))) > 1e-6 or np.linalg.det(R) < 0.0:
-            raise ValueError(f'{name}: the rotation block is not a rotation matrix')
-        return arr
-    if arr.shape == (7,):
-        return pose_to_transform(arr, name)
-    raise ValueError(f'{name} must be a (4, 4) transform or [x y z qx qy qz qw], got shape '
-                     f'{arr.shape}')
-
-
 @dataclass
 class _Data:
     """The samples as arrays (N samples, n strings); absent measurements NaN / masked."""
@@ -266,7 +256,7 @@ def _samples_data(model: JointModel, samples: Sequence[CalibrationSample]) -> _D
         if s.pose is not None and s.screw is not None:
             raise ValueError(f'{where}: give pose or screw, not both')
         if s.pose is not None:
-            poses[i] = pose_transform(s.pose, f'{where}.pose')
+            poses[i] = rigid_transform(s.pose, f'{where}.pose', RECORDED_ROTATION_TOLERANCE)
             has_pose[i] = True
         elif s.screw is not None:
             xi = as_screws(s.screw, f'{where}.screw')
@@ -318,7 +308,7 @@ def _tension_rest_length_slopes(model: JointModel, state: JointState, rest: Floa
 def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArray:
     """``w_j = [u_j; p1_j x u_j]`` (..., n, 6): the wrench of a unit tension in string j."""
     u = state.string_vectors / state.lengths[..., None]
-    return np.concatenate([u, np.cross(model._p1, u)], axis=-1)
+    return np.concatenate([u, np.cross(model.link1_string_nodes, u)], axis=-1)
 
 
 @dataclass
@@ -410,7 +400,7 @@ class _Problem:
         jx[:, 6:12] = state.stiffness
         w = _string_wrench_directions(model, state)  # (N, n, 6)
         dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
-        dphi_dl = model._string_forces(state.lengths, rest)[1]  # as sensor_models does
+        dphi_dl = model.string_forces(state.lengths, rest)[1]  # as sensor_models does
         jx[:, 12:12 + n] = dphi_dl[..., None] * dl
         jx[:, 12 + n:] = dl
         scale = self.mask / self.std  # (N, R)
@@ -1010,21 +1000,21 @@ def _chain_joint_samples(chain: Any, samples: Sequence[ChainCalibrationSample], 
                                                     list[CalibrationNoise]]:
     """Per joint: samples in the joint's own frames (relative pose, load moved into {1}_i) and
     the relative pose's noise."""
-    from tensegrity_stiffness.mechanics.chain import _adjoint
 
     N = chain.n_joints
     per_joint: list[list[CalibrationSample]] = [[] for _ in range(N)]
     spans = np.zeros(N)
     arms = np.zeros(N)
     g = chain.gravity
-    weights = chain._has_weights(g)
+    weights = chain.has_weights(g)
     for s_index, s in enumerate(samples):
         where = f'samples[{s_index}]'
         raw = finite_array(f'{where}.link_poses', s.link_poses)
         if raw.shape not in ((N, 4, 4), (N, 7)):
             raise ValueError(f'{where}.link_poses must have shape ({N}, 4, 4) or ({N}, 7), got '
                              f'{raw.shape}')
-        L = np.array([pose_transform(p, f'{where}.link_poses[{i}]') for i, p in enumerate(raw)])
+        L = np.array([rigid_transform(p, f'{where}.link_poses[{i}]', RECORDED_ROTATION_TOLERANCE)
+                      for i, p in enumerate(raw)])
         P = np.empty_like(L)
         P[0] = np.eye(4)
         for i in range(1, N):
@@ -1041,9 +1031,9 @@ def _chain_joint_samples(chain: Any, samples: Sequence[ChainCalibrationSample], 
                 raise ValueError(f'{where}.tip_wrench must have shape (6,), got {W.shape}')
             B = np.broadcast_to(W, (N, 6))
             if weights:
-                w, _ = chain._weights(L, g)
+                w, _ = chain.link_weights(L, g)
                 B = W + np.cumsum(w[::-1], axis=0)[::-1]
-            loads = (np.swapaxes(_adjoint(P), 1, 2) @ B[:, :, None])[:, :, 0]
+            loads = (np.swapaxes(adjoint(P), 1, 2) @ B[:, :, None])[:, :, 0]
         for i in range(N):
             T = np.linalg.solve(P[i], L[i])
             spans[i] = max(spans[i], float(np.linalg.norm(L[i][:3, 3] - P[i][:3, 3])))

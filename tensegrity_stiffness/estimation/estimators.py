@@ -49,6 +49,7 @@ from tensegrity_stiffness.geometry.screw import (
     hat3,
     log_se3,
 )
+from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.chain import ChainState, JointChain
 from tensegrity_stiffness.mechanics.equilibrium import (
@@ -247,7 +248,7 @@ class PreparedMeasurements:
             raise ValueError('lengths must be > 0 where measured')
         self.pose = None
         if m.pose is not None:
-            self.pose = sm.as_transform(m.pose, 'pose')
+            self.pose = rigid_transform(m.pose, 'pose')
             _, self.pose_whitener = _covariance('pose_covariance', m.pose_covariance, 6)
         self.gravity = None
         if m.gravity is not None:
@@ -795,9 +796,9 @@ class _ChainProblem:
         xi = z[:6 * n].reshape(n, 6)
         chain = self.chain
         state = chain.evaluate(xi, self.rest)
-        c, D, AdT, _ = chain._system(state, z[6 * n:], self.gravity)
+        c, D, AdT, _ = chain.equilibrium_system(state, z[6 * n:], self.gravity)
         Jc = np.empty((6 * n, self.size))
-        Jc[:, :6 * n] = chain._screw_jacobian(D, xi)
+        Jc[:, :6 * n] = chain.residual_screw_jacobian(D, xi)
         Jc[:, 6 * n:] = AdT.reshape(6 * n, 6)
         return c.reshape(-1), Jc, state
 
@@ -1006,11 +1007,11 @@ def estimate_chain_state(chain: JointChain,
             preps.append(m.prepared(model.n_strings))
         except ValueError as exc:
             raise ValueError(f'joint_measurements[{i}].{exc}') from None
-    g = chain._gravity(gravity)
-    rest = chain._rest(rest_lengths)
+    g = chain.resolved_gravity(gravity)
+    rest = chain.rest_lengths_per_joint(rest_lengths)
     pose_T = pose_whitener = None
     if tip_pose is not None:
-        pose_T = sm.as_transform(tip_pose, 'tip_pose')
+        pose_T = rigid_transform(tip_pose, 'tip_pose')
         _, pose_whitener = _covariance('tip_pose_covariance', tip_pose_covariance, 6)
     W_m = W_whitener = None
     if tip_wrench is not None:
@@ -1019,7 +1020,7 @@ def estimate_chain_state(chain: JointChain,
             raise ValueError(f'tip_wrench must have shape (6,), got {W_m.shape}')
         _, W_whitener = _covariance('tip_wrench_covariance', tip_wrench_covariance, 6)
     x0 = (chain.unloaded_screws(rest) if initial_screws is None
-          else chain._screws(initial_screws).copy())
+          else chain.validated_screws(initial_screws).copy())
     if initial_tip_wrench is None:
         W0 = W_m.copy() if W_m is not None else np.zeros(6)
     else:

@@ -50,8 +50,8 @@ from tensegrity_stiffness.geometry.screw import (
     left_jacobian_so3_inverse,
     log_so3,
 )
+from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape
-from tensegrity_stiffness.mechanics.chain import _rigid
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
 
 FloatArray = NDArray[np.float64]
@@ -67,12 +67,6 @@ def _screw(xi: ArrayLike) -> FloatArray:
     if arr.shape != (6,):
         raise ValueError(f'screw must have shape (6,), got {arr.shape}')
     return arr
-
-
-def as_transform(value: ArrayLike, name: str = 'pose') -> FloatArray:
-    """A rigid transform (4, 4) from a (4, 4) matrix or ``[x y z qx qy qz qw]`` (ROS order);
-    ValueError naming ``name`` otherwise."""
-    return _rigid(name, value)
 
 
 def unit_vector(value: ArrayLike, name: str) -> FloatArray:
@@ -134,7 +128,7 @@ def _unit_rows(model: JointModel) -> FloatArray:
     times it is ``[(p1_j x u_j)^T, u_j^T]``."""
     rows = _UNIT_ROWS.get(model)
     if rows is None:
-        p1 = model._p1
+        p1 = model.link1_string_nodes
         rows = np.zeros((p1.shape[0], 3, 6))
         rows[:, :, :3] = np.swapaxes(hat3(p1), 1, 2)
         rows[:, :, 3:] = np.eye(3)
@@ -156,7 +150,7 @@ def string_predictions_unchecked(model: JointModel, xi: FloatArray, rest: FloatA
     (``tsk_joint_measure_packed``, the twin of the numpy lines below, held to them in
     ``test/estimation/test_sensor_models.py``), kinematics and pose Jacobian included
     (:class:`KernelKinematics`)."""
-    measured = model._measure_single_kernel(xi, rest)
+    measured = model.measure_in_kernel(xi, rest)
     if measured is not None:
         return _kernel_prediction(model, xi, *measured)
     state = model.evaluate(xi, rest)
@@ -167,7 +161,7 @@ def string_predictions_unchecked(model: JointModel, xi: FloatArray, rest: FloatA
     # the per-string constant blocks, then -(...) J.
     length_jacobian = (u[:, None, :] @ _unit_rows(model))[:, 0, :] @ kin.J
     np.negative(length_jacobian, out=length_jacobian)
-    slope = model._string_forces(lengths, rest)[1]
+    slope = model.string_forces(lengths, rest)[1]
     if np.ndim(slope) == 0 or slope.shape != lengths.shape:
         slope = np.broadcast_to(slope, lengths.shape).astype(np.float64)
     return StringPrediction(state, lengths, length_jacobian, state.tensions,
@@ -177,7 +171,7 @@ def string_predictions_unchecked(model: JointModel, xi: FloatArray, rest: FloatA
 def _kernel_prediction(model: JointModel, xi: FloatArray, state: JointState,
                        measured: FloatArray) -> StringPrediction:
     """The :class:`StringPrediction` of the kernel's measurement buffer (views into it)."""
-    kn = model._kernel
+    kn = model.compiled_kernel
     n = kn.n
     wx, wy, wz = xi[:3].tolist()
     kin = KernelKinematics.from_matrices(math.sqrt(wx * wx + wy * wy + wz * wz),
@@ -239,7 +233,7 @@ def string_parameter_jacobians(model: JointModel, xi: ArrayLike,
         d_rest = np.where(taut, -model.k / lengths,
                           np.where(state.saturated, -phi / lmax, 0.0))
     u = state.string_vectors / lengths[:, None]
-    unit_wrench = np.concatenate([u, np.cross(model._p1, u)], axis=1).T  # (6, n)
+    unit_wrench = np.concatenate([u, np.cross(model.link1_string_nodes, u)], axis=1).T  # (6, n)
     return StringParameterJacobians(d_k, d_rest, unit_wrench * d_k, unit_wrench * d_rest)
 
 
@@ -248,8 +242,8 @@ def pose_error(transform: ArrayLike, reference: ArrayLike) -> FloatArray:
     """``[p - p_ref; log(R R_ref^T)]`` (6,): the ``[dp; dtheta]`` of the PoseWithCovariance
     convention that takes ``reference`` to ``transform`` (``p = p_ref + dp``,
     ``R = exp(hat(dtheta)) R_ref``). Both (4, 4) or ``[x y z qx qy qz qw]``."""
-    T = as_transform(transform, 'transform')
-    T_ref = as_transform(reference, 'reference')
+    T = rigid_transform(transform, 'transform')
+    T_ref = rigid_transform(reference, 'reference')
     return np.concatenate([T[:3, 3] - T_ref[:3, 3], log_so3(T[:3, :3] @ T_ref[:3, :3].T)])
 
 
@@ -289,7 +283,7 @@ def pose_residual(xi: ArrayLike, measured: ArrayLike) -> tuple[FloatArray, Float
     """
     xi = _screw(xi)
     kin = ScrewKinematics(xi)
-    r, J = pose_residual_unchecked(kin.T, as_transform(measured, 'measured pose'),
+    r, J = pose_residual_unchecked(kin.T, rigid_transform(measured, 'measured pose'),
                                    pose_jacobian(xi, kin))
     return r, J
 

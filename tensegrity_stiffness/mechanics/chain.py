@@ -72,7 +72,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.geometry.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.geometry.screw import (
     ScrewKinematics,
     check_in_chart,
@@ -80,6 +79,7 @@ from tensegrity_stiffness.geometry.screw import (
     hat3,
     log_se3,
 )
+from tensegrity_stiffness.geometry.transforms import adjoint, rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.equilibrium import (
@@ -98,24 +98,8 @@ FloatArray = NDArray[np.float64]
 
 #: Packaged spine configuration (5 default vertebrae, stacked).
 DEFAULT_SPINE_CONFIG = 'default_spine.yaml'
-#: Largest accepted max-abs deviation of R^T R from I in link offsets and the tool pose.
-RIGID_TOLERANCE = 1e-9
 #: Swap of the 3-blocks: [omega; v] <-> [v; omega].
 _SWAP = np.array([3, 4, 5, 0, 1, 2])
-
-
-def _adjoint(P: FloatArray) -> FloatArray:
-    """``Ad_P = [[R, hat(p) R], [0, R]]`` (twists [v; w]) for (..., 4, 4) poses: (..., 6, 6)."""
-    R = P[..., :3, :3]
-    out = np.zeros(P.shape[:-2] + (6, 6))
-    out[..., :3, :3] = R
-    out[..., 3:, 3:] = R
-    out[..., :3, 3:] = hat3(P[..., :3, 3]) @ R
-    return out
-
-
-#: Public name of :func:`_adjoint`: ``Ad_P`` of (..., 4, 4) poses, for twists [v; w].
-adjoint = _adjoint
 
 
 def _load_transport(B: FloatArray) -> FloatArray:
@@ -126,36 +110,6 @@ def _load_transport(B: FloatArray) -> FloatArray:
     out[..., 3:, :3] = hf
     out[..., 3:, 3:] = hat3(B[..., 3:])
     return out
-
-
-def pose_to_transform(pose: ArrayLike, name: str = 'pose') -> FloatArray:
-    """(4, 4) transform of ``[x y z qx qy qz qw]`` (metres, unit quaternion, ROS order)."""
-    p = finite_array(name, pose).ravel()
-    if p.size != 7:
-        raise ValueError(f'{name} must have 7 values [x y z qx qy qz qw], got {p.size}')
-    T = np.eye(4)
-    try:
-        T[:3, :3] = quaternion_to_rotation(p[3:])
-    except ValueError as exc:
-        raise ValueError(f'{name}: {exc}') from None
-    T[:3, 3] = p[:3]
-    return T
-
-
-def _rigid(name: str, value: ArrayLike) -> FloatArray:
-    """A rigid transform (4, 4) from a (4, 4) matrix or a 7-value pose."""
-    arr = finite_array(name, value)
-    if arr.shape == (7,):
-        return pose_to_transform(arr, name)
-    if arr.shape != (4, 4):
-        raise ValueError(f'{name} must be a (4, 4) transform or [x y z qx qy qz qw], '
-                         f'got shape {arr.shape}')
-    R = arr[:3, :3]
-    if (np.max(np.abs(R.T @ R - np.eye(3))) > RIGID_TOLERANCE or np.linalg.det(R) < 0.0
-            or np.any(arr[3] != (0.0, 0.0, 0.0, 1.0))):
-        raise ValueError(f'{name} must be a rigid transform (orthonormal R, det +1, last row '
-                         '[0 0 0 1])')
-    return arr.copy()
 
 
 @dataclass(slots=True)
@@ -223,10 +177,11 @@ class JointChain:
             if raw.ndim not in (2, 3) or raw.shape[0] != n - 1:
                 raise ValueError(f'link_offsets must hold N - 1 = {n - 1} poses ((N-1, 4, 4) or '
                                  f'(N-1, 7)), got shape {raw.shape}')
-            offsets = np.array([_rigid(f'link_offsets[{i}]', o) for i, o in enumerate(raw)]
+            offsets = np.array([rigid_transform(o, f'link_offsets[{i}]')
+                                for i, o in enumerate(raw)]
                                ).reshape(n - 1, 4, 4)
         self.link_offsets = offsets
-        self.tool = np.eye(4) if tool is None else _rigid('tool', tool)
+        self.tool = np.eye(4) if tool is None else rigid_transform(tool, 'tool')
         if link_masses is None:
             masses = np.zeros(n)
         else:
@@ -340,7 +295,8 @@ class JointChain:
         return cls.from_dict(config.load_yaml(path))
 
     # ------------------------------------------------------------------ validation
-    def _gravity(self, gravity: ArrayLike | None) -> FloatArray:
+    def resolved_gravity(self, gravity: ArrayLike | None) -> FloatArray:
+        """``gravity`` (3,) validated, or the chain's default for None."""
         if gravity is None:
             return self.gravity
         g = finite_array('gravity', gravity)
@@ -348,7 +304,8 @@ class JointChain:
             raise ValueError(f'gravity must have shape (3,), got {g.shape}')
         return g
 
-    def _screws(self, screws: ArrayLike) -> FloatArray:
+    def validated_screws(self, screws: ArrayLike) -> FloatArray:
+        """``screws`` as (N, 6), one per joint (6N flat accepted), finite and in the chart."""
         xi = finite_array('screws', screws)
         n = self.n_joints
         if xi.shape == (6 * n,):
@@ -367,7 +324,7 @@ class JointChain:
             raise ValueError(f'{name} must have shape (6,), got {W.shape}')
         return W
 
-    def _rest(self, rest_lengths: Any) -> list[FloatArray | None]:
+    def rest_lengths_per_joint(self, rest_lengths: Any) -> list[FloatArray | None]:
         """Per-joint rest lengths: None, an (N, n) array, or a sequence of N arrays/None."""
         n = self.n_joints
         if rest_lengths is None:
@@ -386,12 +343,13 @@ class JointChain:
 
     @gravity.setter
     def gravity(self, value: ArrayLike) -> None:
-        g = self._gravity(value).copy()
+        g = self.resolved_gravity(value).copy()
         g.flags.writeable = False
         self._default_gravity = g
         self._weighted = self._massive and bool(np.any(g != 0.0))
 
-    def _has_weights(self, g: FloatArray) -> bool:
+    def has_weights(self, g: FloatArray) -> bool:
+        """True when the links' weights under the (resolved) gravity ``g`` load the chain."""
         if g is self._default_gravity:
             return self._weighted
         return self._massive and bool(np.any(g != 0.0))
@@ -425,26 +383,26 @@ class JointChain:
 
     def link_transforms(self, screws: ArrayLike) -> FloatArray:
         """Pose of each {2}_i in the base: (N, 4, 4)."""
-        return self._frames(exp_se3(self._screws(screws)))[1]
+        return self._frames(exp_se3(self.validated_screws(screws)))[1]
 
     def tip_transform(self, screws: ArrayLike) -> FloatArray:
         """Pose of the tool frame in the base, ``T_1 O_1 ... T_N O_tool``: (4, 4)."""
-        return self._frames(exp_se3(self._screws(screws)))[2]
+        return self._frames(exp_se3(self.validated_screws(screws)))[2]
 
     def jacobian(self, screws: ArrayLike) -> FloatArray:
         """Tip spatial twist ``[dv; dw]`` (base) per joint screw change: (6, 6N), joint-major
         columns ``[wx wy wz vx vy vz]`` of each joint."""
-        xi = self._screws(screws)
+        xi = self.validated_screws(screws)
         kin = ScrewKinematics(xi)
         P = self._frames(kin.T)[0]
-        return np.concatenate(list(_adjoint(P) @ kin.J[:, _SWAP]), axis=1)
+        return np.concatenate(list(adjoint(P) @ kin.J[:, _SWAP]), axis=1)
 
     # ------------------------------------------------------------------ evaluation
     def evaluate(self, screws: ArrayLike, rest_lengths: Any = None) -> ChainState:
         """Every joint's wrench, K, K_c, tensions and flags (one batched evaluation per distinct
         model) and the chain's frames at ``screws`` (N, 6)."""
-        xi = self._screws(screws)
-        rest = self._rest(rest_lengths)
+        xi = self.validated_screws(screws)
+        rest = self.rest_lengths_per_joint(rest_lengths)
         n = self.n_joints
         wrenches = np.empty((n, 6))
         K = np.empty((n, 6, 6))
@@ -480,7 +438,7 @@ class JointChain:
         P, L, tip = self._frames(T)
         return ChainState(xi, T, P, L, tip, wrenches, K, Kc, *stacked)
 
-    def _weights(self, L: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def link_weights(self, L: FloatArray, g: FloatArray) -> tuple[FloatArray, FloatArray]:
         """Base wrenches w_k (N, 6) of the link weights and their transport N_k (N, 6, 6)."""
         G = self.link_masses[:, None] * g  # (N, 3)
         x = (L[:, :3, :3] @ self.link_coms[:, :, None])[:, :, 0] + L[:, :3, 3]
@@ -491,18 +449,19 @@ class JointChain:
         Nk[:, 3:, 3:] = hG @ hat3(x)
         return w, Nk
 
-    def _system(self, state: ChainState, W: FloatArray, g: FloatArray, tangent: bool = True
-                ) -> tuple[FloatArray, FloatArray | None, FloatArray, FloatArray]:
+    def equilibrium_system(self, state: ChainState, W: FloatArray, g: FloatArray,
+                           tangent: bool = True
+                           ) -> tuple[FloatArray, FloatArray | None, FloatArray, FloatArray]:
         """Residuals r (N, 6); ``dr/d(delta)`` (6N, 6N) with respect to the joints' twists
         ``delta_j`` (spatial in {1}_j, [dv; dw]; None unless ``tangent``), i.e. minus the chain's
         tangent stiffness, blocks ``-[i = j] K_c,i + Ad_{P_i}^T E_ij Ad_{P_j}``;
         ``Ad_{P_i}^T`` (N, 6, 6) = dr_i/dW; ``Ad_{P_i}`` (N, 6, 6)."""
         n = self.n_joints
-        Ad = _adjoint(state.joint_frames)
+        Ad = adjoint(state.joint_frames)
         AdT = np.swapaxes(Ad, 1, 2)
-        weights = self._has_weights(g)
+        weights = self.has_weights(g)
         if weights:
-            w, Nk = self._weights(state.link_transforms, g)
+            w, Nk = self.link_weights(state.link_transforms, g)
             B = W + np.cumsum(w[::-1], axis=0)[::-1]
             r = state.wrenches + (AdT @ B[:, :, None])[:, :, 0]
         else:
@@ -528,7 +487,7 @@ class JointChain:
         diag[self._index, :, self._index, :] -= state.cartesian_stiffness
         return r, D, AdT, Ad
 
-    def _screw_jacobian(self, D: FloatArray, screws: FloatArray) -> FloatArray:
+    def residual_screw_jacobian(self, D: FloatArray, screws: FloatArray) -> FloatArray:
         """``dr/dxi = dr/d(delta) diag(Pi J_j)`` (6N, 6N) from the twist form ``D``."""
         n = self.n_joints
         PJ = ScrewKinematics(screws).J[:, _SWAP]
@@ -544,13 +503,13 @@ class JointChain:
         if lib is not None:
             return self._tip_in_kernel(lib, state, W, g, base, tool)
         if W is None:
-            AdT_N = _adjoint(state.joint_frames[-1]).T
+            AdT_N = adjoint(state.joint_frames[-1]).T
             W = -np.linalg.solve(AdT_N, state.wrenches[-1])
-            if self._has_weights(g):
-                W -= self._weights(state.link_transforms, g)[0][-1]
+            if self.has_weights(g):
+                W -= self.link_weights(state.link_transforms, g)[0][-1]
         if not (base or tool):
             return W, None, None
-        _, D, AdT, Ad = self._system(state, W, g)
+        _, D, AdT, Ad = self.equilibrium_system(state, W, g)
         n = self.n_joints
         # Twist coordinates: dr = D delta + Ad^T dW = 0, tip twist = sum_j Ad_j delta_j.
         X = np.linalg.solve(D, AdT.reshape(6 * n, 6))
@@ -558,7 +517,7 @@ class JointChain:
         K = np.linalg.inv(C)
         K_tool = None
         if tool:
-            Ad_tip = _adjoint(state.tip_transform)
+            Ad_tip = adjoint(state.tip_transform)
             K_tool = Ad_tip.T @ K @ Ad_tip
         return W, K if base else None, K_tool
 
@@ -573,7 +532,7 @@ class JointChain:
             state.joint_frames, state.link_transforms, state.tip_transform, state.wrenches,
             state.cartesian_stiffness)]
         weights = coms = None
-        if self._has_weights(g):
+        if self.has_weights(g):
             weights = self.link_masses[:, None] * g
             coms = np.ascontiguousarray(self.link_coms, dtype=np.float64).reshape(self.n_joints, 3)
         W_c = None if W is None else np.ascontiguousarray(W, dtype=np.float64)
@@ -596,7 +555,7 @@ class JointChain:
         """At an evaluated ``state``: the implied tip wrench ``W`` (base) and the exact tip
         stiffness under ``W`` and the link weights, in the base and in the tool frame (what
         ``spine_node`` publishes per input). Singular configurations raise ``LinAlgError``."""
-        return self._tip(state, None, self._gravity(gravity), True, True)
+        return self._tip(state, None, self.resolved_gravity(gravity), True, True)
 
     def tip_stiffness_from_state(self, state: ChainState, tip_wrench: ArrayLike | None = None,
                                  gravity: ArrayLike | None = None, frame: str = 'base'
@@ -604,8 +563,9 @@ class JointChain:
         """:meth:`tip_stiffness` at an evaluated ``state`` (no second evaluation)."""
         if frame not in ('base', 'tool'):
             raise ValueError(f"frame must be 'base' or 'tool', got {frame!r}")
-        _, base, tool = self._tip(state, self._wrench(tip_wrench), self._gravity(gravity),
-                                  frame == 'base', frame == 'tool')
+        _, base, tool = self._tip(state, self._wrench(tip_wrench),
+                                  self.resolved_gravity(gravity), frame == 'base',
+                                  frame == 'tool')
         return base if frame == 'base' else tool
 
     def tip_stiffness(self, screws: ArrayLike, tip_wrench: ArrayLike | None = None,
@@ -624,15 +584,17 @@ class JointChain:
                   gravity: ArrayLike | None = None, rest_lengths: Any = None) -> FloatArray:
         """Equilibrium residuals ``r_i = F_i + Ad_{P_i}^T B_i`` (N, 6)."""
         state = self.evaluate(screws, rest_lengths)
-        return self._system(state, self._wrench(tip_wrench), self._gravity(gravity), False)[0]
+        return self.equilibrium_system(state, self._wrench(tip_wrench),
+                                       self.resolved_gravity(gravity), False)[0]
 
     def residual_jacobian(self, screws: ArrayLike, tip_wrench: ArrayLike | None = None,
                           gravity: ArrayLike | None = None, rest_lengths: Any = None
                           ) -> FloatArray:
         """``dr/dxi`` (6N, 6N), joint-major rows and columns."""
         state = self.evaluate(screws, rest_lengths)
-        D = self._system(state, self._wrench(tip_wrench), self._gravity(gravity))[1]
-        return self._screw_jacobian(D, state.screws)
+        D = self.equilibrium_system(state, self._wrench(tip_wrench),
+                                       self.resolved_gravity(gravity))[1]
+        return self.residual_screw_jacobian(D, state.screws)
 
     def tangent_stiffness(self, screws: ArrayLike, tip_wrench: ArrayLike | None = None,
                           gravity: ArrayLike | None = None, rest_lengths: Any = None
@@ -640,7 +602,8 @@ class JointChain:
         """The chain's tangent stiffness (6N, 6N): minus the residuals' derivative with respect
         to the joints' spatial twists in {1}_i ([dv; dw]); K_c for one joint."""
         state = self.evaluate(screws, rest_lengths)
-        return -self._system(state, self._wrench(tip_wrench), self._gravity(gravity))[1]
+        return -self.equilibrium_system(state, self._wrench(tip_wrench),
+                                       self.resolved_gravity(gravity))[1]
 
     def implied_tip_wrench(self, screws: ArrayLike, gravity: ArrayLike | None = None,
                            rest_lengths: Any = None) -> FloatArray:
@@ -651,12 +614,12 @@ class JointChain:
     def implied_tip_wrench_from_state(self, state: ChainState, gravity: ArrayLike | None = None
                                       ) -> FloatArray:
         """:meth:`implied_tip_wrench` at an evaluated ``state`` (no second evaluation)."""
-        return self._tip(state, None, self._gravity(gravity), False, False)[0]
+        return self._tip(state, None, self.resolved_gravity(gravity), False, False)[0]
 
     def unloaded_screws(self, rest_lengths: Any = None) -> FloatArray:
         """Each joint's unloaded equilibrium (single-joint solver from its ``initial_screw``;
         cached per model for the configured rest lengths): (N, 6)."""
-        rest = self._rest(rest_lengths)
+        rest = self.rest_lengths_per_joint(rest_lengths)
         out = np.empty((self.n_joints, 6))
         for i, (model, r) in enumerate(zip(self.joints, rest, strict=True)):
             if r is None and model in self._unloaded:
@@ -733,7 +696,7 @@ class _Problem:
             state = self.chain.evaluate(x, self.rest)
         except ValueError:  # a string of zero length, or out of the chart
             return None
-        r, D, _, _ = self.chain._system(state, scale * self.W, scale * self.g, tangent)
+        r, D, _, _ = self.chain.equilibrium_system(state, scale * self.W, scale * self.g, tangent)
         if not np.all(np.isfinite(r)):
             return None
         return state, r, D
@@ -752,8 +715,8 @@ class _Problem:
             if norm <= tolerance or time.perf_counter() > self.deadline:
                 return x, norm, it - 1
             if D is None:
-                D = self.chain._system(state, scale * self.W, scale * self.g)[1]
-            A = self.chain._screw_jacobian(D, x)
+                D = self.chain.equilibrium_system(state, scale * self.W, scale * self.g)[1]
+            A = self.chain.residual_screw_jacobian(D, x)
             try:
                 step = np.linalg.solve(A, -r.ravel())
             except np.linalg.LinAlgError:
@@ -786,7 +749,7 @@ class _Problem:
         iterations = 0
         P = np.eye(4)
         for i, model in enumerate(chain.joints):
-            load = _adjoint(P).T @ self.W
+            load = adjoint(P).T @ self.W
             budget = self.deadline - time.perf_counter()
             if budget <= 0.0:
                 return None
@@ -826,9 +789,9 @@ def solve_chain_equilibrium(
     returns ``success=False`` with the reason.
     """
     W = chain._wrench(tip_wrench)
-    g = chain._gravity(gravity)
-    rest = chain._rest(rest_lengths)
-    x0 = chain.unloaded_screws(rest) if initial_screws is None else chain._screws(
+    g = chain.resolved_gravity(gravity)
+    rest = chain.rest_lengths_per_joint(rest_lengths)
+    x0 = chain.unloaded_screws(rest) if initial_screws is None else chain.validated_screws(
         initial_screws).copy()
     if not (math.isfinite(tolerance) and tolerance > 0.0):
         raise ValueError(f'tolerance must be finite and > 0, got {tolerance}')
@@ -841,7 +804,7 @@ def solve_chain_equilibrium(
         return ChainEquilibriumResult(False, 'initial screws are not admissible (a string of '
                                       'zero length)', x0, math.inf, 0, None, None, False)
     x, norm, iterations = problem.newton(x0, 1.0, max_iterations, tolerance)
-    if norm > tolerance and not chain._has_weights(g) and time.perf_counter() < deadline:
+    if norm > tolerance and not chain.has_weights(g) and time.perf_counter() < deadline:
         got = problem.joint_by_joint(x0, tolerance, max_iterations)
         if got is not None:
             iterations += got[2]
@@ -876,7 +839,7 @@ def solve_chain_equilibrium(
     stable = is_stable(-D)
     try:
         K = chain.tip_stiffness_from_state(state, W, g)
-        Ad = _adjoint(state.tip_transform)
+        Ad = adjoint(state.tip_transform)
         K_tool = Ad.T @ K @ Ad
     except np.linalg.LinAlgError:
         K = K_tool = None

@@ -28,8 +28,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.geometry.transforms import adjoint, rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array
-from tensegrity_stiffness.mechanics.chain import _rigid, adjoint
 
 FloatArray = NDArray[np.float64]
 
@@ -114,7 +114,7 @@ def transform_cartesian_stiffness(K_c: ArrayLike, T: ArrayLike) -> FloatArray:
     frame (its pose does not move with the displacement).
     """
     K = stiffness_matrix(K_c, 'K_c')
-    Ad = adjoint(_rigid('pose', T))
+    Ad = adjoint(rigid_transform(T, 'pose'))
     return Ad.T @ K @ Ad
 
 
@@ -263,7 +263,7 @@ class Conditioner:
 
     def __post_init__(self) -> None:
         if self.pose is not None:
-            object.__setattr__(self, 'pose', _rigid('pose', self.pose))
+            object.__setattr__(self, 'pose', rigid_transform(self.pose, 'pose'))
         if not (math.isfinite(self.scale) and self.scale > 0.0):
             raise ValueError(f'scale must be finite and > 0, got {self.scale}')
         if not (math.isfinite(self.min_eigenvalue) and self.min_eigenvalue >= 0.0):

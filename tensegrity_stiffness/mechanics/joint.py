@@ -229,6 +229,18 @@ class JointModel:
             MIN_STRING_LENGTH) if use_kernel else None
 
     @property
+    def compiled_kernel(self) -> kernel.JointKernel | None:
+        """The compiled kernel's handle of this model (its buffer offsets and calls), None on
+        the numpy path."""
+        return self._kernel
+
+    @property
+    def link1_string_nodes(self) -> FloatArray:
+        """(n, 3) the link-1 node of each string in {1} (config order): the moment arm of its
+        force (eq. 9)."""
+        return self._p1
+
+    @property
     def uses_kernel(self) -> bool:
         """True when evaluations run in the compiled kernel."""
         return self._kernel is not None
@@ -363,7 +375,7 @@ class JointModel:
         return arr
 
     # ------------------------------------------------------------------ core evaluation
-    def _string_forces(self, lengths: FloatArray, rest: FloatArray
+    def string_forces(self, lengths: FloatArray, rest: FloatArray
                        ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
         """Tension phi (N), d phi / d l (N/m), slack and saturated masks (eq. 8, corrected)."""
         lmax = rest + self.max_stretch
@@ -420,7 +432,7 @@ class JointModel:
             return buf[kn.stiffness:kn.cartesian].reshape(6, 6)
         return _kernel_state(kn, xi, buf)
 
-    def _measure_single_kernel(self, xi: FloatArray, rest: FloatArray
+    def measure_in_kernel(self, xi: FloatArray, rest: FloatArray
                                ) -> tuple[JointState, FloatArray] | None:
         """The :class:`JointState` of one screw (6,) with validated rest lengths (n,) and the
         string measurements' Jacobians (the kernel's measurement buffer, ``JointKernel.
@@ -477,7 +489,7 @@ class JointModel:
         lengths = np.sqrt(l2)
         self._check_lengths(lengths)
         # eq. 8: tensions phi_j, their derivatives phi'_j and the regions.
-        phi, dphi, slack, saturated = self._string_forces(lengths, rest)
+        phi, dphi, slack, saturated = self.string_forces(lengths, rest)
         # eq. 9: f_j = phi_j s_j / l_j, F = sum_j [f_j; p1_j x f_j] = sum_j Z_j f_j.
         beta = phi / lengths
         f = beta[..., None] * s
@@ -582,7 +594,7 @@ class JointModel:
             stored = 0.5 * self.k * (lc - rest) ** 2
         else:
             stored = self.k * (lc - rest - rest * np.log(lc / rest))
-        phi, _, slack, saturated = self._string_forces(lengths, rest)
+        phi, _, slack, saturated = self.string_forces(lengths, rest)
         extra = np.where(saturated, phi * (lengths - lmax), 0.0)
         total = np.sum(np.where(slack, 0.0, stored + extra), axis=-1)
         return float(total) if np.ndim(total) == 0 else total

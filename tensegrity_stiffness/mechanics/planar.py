@@ -99,7 +99,7 @@ def _wrap_scalar(theta: float, lo: float, hi: float, tol: float) -> tuple[float,
     return t, lo - tol <= t <= hi + tol
 
 
-def _wrap_array(theta: FloatArray, lo: float, hi: float,
+def wrap_angles(theta: FloatArray, lo: float, hi: float,
                 tol: float) -> tuple[FloatArray, BoolArray]:
     """Vectorised :func:`_wrap_scalar` (NaN stays NaN and is out of range)."""
     t = lo + np.mod(theta - lo, TWO_PI)
@@ -577,8 +577,8 @@ class PlanarMechanism:
         neutral = R <= NEUTRAL_TOL * L * (self.K1 + self.K2) * (L + L3)
         Rs = np.where(neutral, np.nan, R)
         c2, s2 = -A / Rs, -B / Rs
-        theta2, t2_ok = _wrap_array(np.arctan2(s2, c2), self.theta2_min, self.theta2_max, rtol)
-        _, t1_ok = _wrap_array(t1, self.theta1_min, self.theta1_max, rtol)
+        theta2, t2_ok = wrap_angles(np.arctan2(s2, c2), self.theta2_min, self.theta2_max, rtol)
+        _, t1_ok = wrap_angles(t1, self.theta1_min, self.theta1_max, rtol)
         act_ok = t1_ok & (L3 >= self.L3_min - rtol) & (L3 <= self.L3_max + rtol)
         a, b = self.m_real, 0.5 * SQRT3 * self.K1
         A_L3, B_L3 = L * (a * c1 + b * s1), L * (a * s1 - b * c1)
@@ -698,8 +698,8 @@ class PlanarMechanism:
         u, v = x[..., None] - L * c2, y[..., None] - L * s2
         L3 = np.hypot(u, v)
         rtol = self.range_tol
-        theta1, t1_ok = _wrap_array(np.arctan2(v, u), self.theta1_min, self.theta1_max, rtol)
-        theta2, t2_ok = _wrap_array(np.arctan2(s2, c2), self.theta2_min, self.theta2_max, rtol)
+        theta1, t1_ok = wrap_angles(np.arctan2(v, u), self.theta1_min, self.theta1_max, rtol)
+        theta2, t2_ok = wrap_angles(np.arctan2(s2, c2), self.theta2_min, self.theta2_max, rtol)
         valid = (t1_ok & (L3 >= self.L3_min - rtol) & (L3 <= self.L3_max + rtol) & (s > 0.0))
         valid[..., 1] &= root > 0.0  # a double root is one solution
         return PlanarInverseGrid(x=x, y=y, L3=L3, theta1=theta1, theta2=theta2,
@@ -710,7 +710,7 @@ class PlanarMechanism:
     def in_actuator_workspace(self, L3: ArrayLike, theta1: ArrayLike) -> BoolArray:
         """Whether ``(L3, theta1)`` lies in the actuator ranges (eq. 31, Section 2), broadcast."""
         L3, t1 = finite_array('L3', L3), finite_array('theta1', theta1)
-        _, ok = _wrap_array(t1, self.theta1_min, self.theta1_max, self.range_tol)
+        _, ok = wrap_angles(t1, self.theta1_min, self.theta1_max, self.range_tol)
         return ok & (L3 >= self.L3_min - self.range_tol) & (L3 <= self.L3_max + self.range_tol)
 
     def in_cartesian_workspace(self, x: ArrayLike, y: ArrayLike, *,

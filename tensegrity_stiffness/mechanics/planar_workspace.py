@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.geometry.validation import finite_array
-from tensegrity_stiffness.mechanics.planar import SQRT3, _wrap_array
+from tensegrity_stiffness.mechanics.planar import SQRT3, wrap_angles
 
 if TYPE_CHECKING:
     from tensegrity_stiffness.mechanics.planar import PlanarMechanism
@@ -97,7 +97,7 @@ def _fold_actuator(mech: PlanarMechanism, n: int) -> FloatArray:
     phi = np.linspace(0.0, 2.0 * math.pi, n)
     u, v = cx + r * np.cos(phi), cy + r * np.sin(phi)
     L3 = np.hypot(u, v)
-    t1, ok = _wrap_array(np.arctan2(v, u), mech.theta1_min, mech.theta1_max, mech.range_tol)
+    t1, ok = wrap_angles(np.arctan2(v, u), mech.theta1_min, mech.theta1_max, mech.range_tol)
     keep = ok & _in_L3_range(mech, L3)
     out = _segments((t1, L3), keep)
     if len(out):

@@ -8,7 +8,8 @@ and refills the outputs through those fields only, so it imports neither: a
 float64 payload).
 
 Inputs: :func:`multiarray_to_array` (the validated payload of a ``Float64MultiArray``) and
-:func:`pose_to_transform` (a ``Pose``). Outputs: :class:`OutputMessages`, preallocated messages
+:func:`pose_message_to_transform` (a ``Pose``). Outputs: :class:`OutputMessages`, preallocated
+messages
 of :class:`~tensegrity_stiffness.nodes.layouts.OutputLayout` s refilled per input, and the two
 nodes'
 per-input outputs :class:`JointOutputMessages` and :class:`SpineOutputMessages` (one finite
@@ -82,7 +83,7 @@ def multiarray_payload(msg: Any, max_length: int = DEFAULT_MAX_LENGTH) -> FloatA
     return np.array(msg.data, dtype=np.float64)[offset:]
 
 
-def pose_to_transform(pose: Any,
+def pose_message_to_transform(pose: Any,
                       unit_tolerance: float = QUATERNION_UNIT_TOLERANCE) -> FloatArray:
     """(4, 4) homogeneous transform of a ``geometry_msgs/Pose`` (position in m).
 

@@ -62,7 +62,7 @@ from tensegrity_stiffness.nodes.messages import (
     multiarray_to_array,
     new_message,
     output_writer,
-    pose_to_transform,
+    pose_message_to_transform,
 )
 from tensegrity_stiffness.nodes.parameters import JointNodeSettings, SpineNodeSettings
 from tensegrity_stiffness.nodes.processing import (
@@ -393,7 +393,7 @@ class StiffnessProcessor:
         """A deserialized ``~/pose`` message (the node's ``_on_pose``)."""
         self._decode()
         try:
-            T = pose_to_transform(msg.pose)
+            T = pose_message_to_transform(msg.pose)
             xi = pose_input(msg.header.frame_id, T, self.settings.link1_frame,
                             self._reference())
         except ValueError as exc:
@@ -556,7 +556,7 @@ class SpineProcessor:
                 [model.initial_screw for model in settings.chain.joints])
             xi = spine_processing.poses_input(msg.header.frame_id, msg.poses,
                                               settings.base_frame, reference,
-                                              pose_to_transform)
+                                              pose_message_to_transform)
         except ValueError as exc:
             self.reject('poses', str(exc))
             return

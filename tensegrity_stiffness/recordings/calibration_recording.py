@@ -5,7 +5,7 @@ time series, and picking the quasi-static instants that become calibration sampl
 No rclpy and no ROS message package: rosbag2 files (mcap or sqlite3) are read with ``rosbags``
 (its own message types for ROS 2 Jazzy, read by attribute) with the bag command's input checks
 and typestore (:mod:`tensegrity_stiffness.recordings.bag`) and the nodes' pose reader
-(:func:`tensegrity_stiffness.nodes.messages.pose_to_transform`).
+(:func:`tensegrity_stiffness.nodes.messages.pose_message_to_transform`).
 
 Bag topics (each optional except the rest lengths; a bag needs a pose, a wrench or tensions):
 
@@ -45,13 +45,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tensegrity_stiffness.estimation.calibration import CalibrationSample, pose_transform
+from tensegrity_stiffness.estimation.calibration import (
+    RECORDED_ROTATION_TOLERANCE,
+    CalibrationSample,
+)
 from tensegrity_stiffness.geometry.screw import log_so3_batch
+from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.nodes.messages import (
     DEFAULT_MAX_LENGTH,
     multiarray_payload,
     multiarray_to_array,
-    pose_to_transform,
+    pose_message_to_transform,
 )
 
 FloatArray = NDArray[np.float64]
@@ -214,7 +218,8 @@ def read_csv(path: str | Path, n_strings: int) -> Recording:
             values = np.array([get(c) for c in CSV_POSE])
             if np.isfinite(values).all():
                 try:
-                    rec.poses[r] = pose_transform(values, f'{where}, pose')
+                    rec.poses[r] = rigid_transform(values, f'{where}, pose',
+                                                   RECORDED_ROTATION_TOLERANCE)
                 except ValueError as exc:
                     raise RecordingError(str(exc)) from None
         if has_wrench:
@@ -360,7 +365,7 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
                 msg = deserialize(raw, connection.msgtype)
                 t = _stamp_seconds(msg, log_time)
                 if signal == 'pose':
-                    value = pose_to_transform(
+                    value = pose_message_to_transform(
                         msg.pose.pose if connection.msgtype == POSE_TYPES[1] else msg.pose)
                 elif signal == 'wrench':
                     value = _wrench_of(msg)

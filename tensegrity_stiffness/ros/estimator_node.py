@@ -53,12 +53,12 @@ from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded
-from tensegrity_stiffness.ros.stiffness_node import StiffnessNode
+from tensegrity_stiffness.ros.runtime.rest_length_topics import JointRestLengthTopic
 
 NODE_NAME = 'estimator_node'
 
 
-class EstimatorNode(StreamingNode):
+class EstimatorNode(JointRestLengthTopic, StreamingNode):
     """Publishes the pose (with covariance), load, screw, K, K_c, its std and the tensions of
     every estimate; markers and diagnostics."""
 
@@ -74,8 +74,6 @@ class EstimatorNode(StreamingNode):
     _output_frame = attrgetter('link1_frame')
     _settings: EstimatorNodeSettings
     # The joint's rest lengths are kept and set as the stiffness node's (settings.model).
-    _keep_topic_rest_lengths = StiffnessNode._keep_topic_rest_lengths
-    _with_rest_lengths = StiffnessNode._with_rest_lengths
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         self._readings: dict[str, Reading] = {}

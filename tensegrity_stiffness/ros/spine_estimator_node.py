@@ -40,12 +40,13 @@ from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.estimator_node import EstimatorNode
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream
-from tensegrity_stiffness.ros.spine_node import SpineNode, _declared_joint_count
+from tensegrity_stiffness.ros.runtime.rest_length_topics import SpineRestLengthTopic
+from tensegrity_stiffness.ros.spine_node import declared_joint_count
 
 NODE_NAME = 'spine_estimator_node'
 
 
-class SpineEstimatorNode(EstimatorNode):
+class SpineEstimatorNode(SpineRestLengthTopic, EstimatorNode):
     """Publishes the screws, the tip pose (with covariance), the tip load and the tip stiffness
     with its std per estimate; markers and diagnostics."""
 
@@ -60,8 +61,6 @@ class SpineEstimatorNode(EstimatorNode):
     _output_frame = attrgetter('base_frame')
     _settings: SpineEstimatorNodeSettings
     # The spine's rest lengths are kept and set as spine_node's (settings.rest_lengths).
-    _keep_topic_rest_lengths = SpineNode._keep_topic_rest_lengths
-    _with_rest_lengths = SpineNode._with_rest_lengths
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
@@ -83,7 +82,7 @@ class SpineEstimatorNode(EstimatorNode):
 
     # ------------------------------------------------------------------ declarations
     def _parameter_table(self) -> tuple[ParameterSpec, ...]:
-        return spine_estimator_node_parameters(_declared_joint_count(self))
+        return spine_estimator_node_parameters(declared_joint_count(self))
 
     def _streams(self) -> tuple[Stream, ...]:
         return tuple(stream for stream in super()._streams() if stream[1] != '~/imu')

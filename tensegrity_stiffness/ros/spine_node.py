@@ -17,7 +17,6 @@ inputs, the equilibrium service awaits the worker process; all configuration is 
 
 from __future__ import annotations
 
-from dataclasses import replace
 from operator import attrgetter
 from typing import Any
 
@@ -41,7 +40,6 @@ from tensegrity_stiffness.nodes.spine_processing import (
     SpineOutputs,
     joint_health_in_chain,
     poses_input,
-    rest_lengths_input,
     screws_input,
     spine_outputs,
 )
@@ -49,6 +47,7 @@ from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
+from tensegrity_stiffness.ros.runtime.rest_length_topics import SpineRestLengthTopic
 from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
 from tensegrity_stiffness.ros.services import spine_services
 from tensegrity_stiffness.srv import SolveChainEquilibrium
@@ -62,7 +61,7 @@ OUTPUT_TOPICS = (
     (Float64MultiArray, '~/tip_stiffness_base'))
 
 
-def _declared_joint_count(node: Node) -> int:
+def declared_joint_count(node: Node) -> int:
     """``chain.n_joints`` as the parameter file or overrides set it: the parameter table depends
     on it (the ``joint_<i>`` overrides), so it is read before the table is declared."""
     spec = by_name(CHAIN_PARAMETERS)['chain.n_joints']
@@ -71,7 +70,7 @@ def _declared_joint_count(node: Node) -> int:
     return spec.check(value)
 
 
-class SpineNode(StreamingNode):
+class SpineNode(SpineRestLengthTopic, StreamingNode):
     """Publishes per-joint wrenches, K, K_c and the tip pose, implied wrench and stiffness per
     input; solves the chain's equilibrium as a service."""
 
@@ -93,7 +92,7 @@ class SpineNode(StreamingNode):
 
     # ------------------------------------------------------------------ declarations
     def _parameter_table(self) -> tuple[ParameterSpec, ...]:
-        return spine_node_parameters(_declared_joint_count(self))
+        return spine_node_parameters(declared_joint_count(self))
 
     def _streams(self) -> tuple[Stream, ...]:
         return ((Float64MultiArray, '~/screws', self._on_screws),
@@ -109,20 +108,6 @@ class SpineNode(StreamingNode):
     def _markers(self, settings: SpineNodeSettings, state: ChainState, stamp: Any
                  ) -> MarkerArray:
         return conversions.spine_markers(settings.chain, state, settings.base_frame, stamp)
-
-    def _keep_topic_rest_lengths(self, old: SpineNodeSettings, settings: SpineNodeSettings,
-                                 names: set[str]) -> SpineNodeSettings:
-        if old.rest_lengths is not None and not any(
-                n.endswith('.rest_lengths') for n in names) and [
-                r.shape[0] for r in old.rest_lengths] == settings.n_strings:
-            return replace(settings, rest_lengths=old.rest_lengths)
-        return settings
-
-    def _with_rest_lengths(self, settings: SpineNodeSettings, msg: Float64MultiArray
-                           ) -> SpineNodeSettings:
-        rest = rest_lengths_input(conversions.multiarray_to_array(
-            msg, max_length=settings.max_array_length), settings.chain)
-        return replace(settings, rest_lengths=rest)
 
     # ------------------------------------------------------------------ inputs
     @guarded('~/screws')
@@ -144,7 +129,7 @@ class SpineNode(StreamingNode):
             reference = last if last is not None else np.array(
                 [model.initial_screw for model in settings.chain.joints])
             xi = poses_input(msg.header.frame_id, msg.poses, settings.base_frame, reference,
-                             conversions.pose_to_transform)
+                             conversions.pose_message_to_transform)
         except ValueError as exc:
             self.reporter.reject('~/poses', str(exc))
             return

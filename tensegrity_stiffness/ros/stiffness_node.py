@@ -14,7 +14,6 @@ the configuration a computation needs is one immutable :class:`JointNodeSettings
 
 from __future__ import annotations
 
-from dataclasses import replace
 from operator import attrgetter
 from typing import Any
 
@@ -44,6 +43,7 @@ from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
+from tensegrity_stiffness.ros.runtime.rest_length_topics import JointRestLengthTopic
 from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
 from tensegrity_stiffness.ros.services import joint_services
 from tensegrity_stiffness.srv import (
@@ -58,7 +58,7 @@ NODE_NAME = 'stiffness_node'
 DESIGN_DEADLINE_S = 5.0
 
 
-class StiffnessNode(StreamingNode):
+class StiffnessNode(JointRestLengthTopic, StreamingNode):
     """Publishes wrench, K, K_c, tensions, interpretation, markers and diagnostics per input."""
 
     OUTPUT_TOPICS = (
@@ -108,19 +108,6 @@ class StiffnessNode(StreamingNode):
                  ) -> MarkerArray:
         return conversions.joint_markers(settings.model, state, settings.link1_frame, stamp)
 
-    def _keep_topic_rest_lengths(self, old: JointNodeSettings, settings: JointNodeSettings,
-                                 names: set[str]) -> JointNodeSettings:
-        rest = old.model.rest_lengths
-        if 'joint.rest_lengths' not in names and rest.shape == (settings.model.n_strings,):
-            return replace(settings, model=settings.model.with_rest_lengths(rest))
-        return settings
-
-    def _with_rest_lengths(self, settings: JointNodeSettings, msg: Float64MultiArray
-                           ) -> JointNodeSettings:
-        rest = conversions.multiarray_to_array(msg, expected_length=settings.model.n_strings,
-                                             max_length=settings.max_array_length)
-        return replace(settings, model=settings.model.with_rest_lengths(rest))
-
     # ------------------------------------------------------------------ inputs
     @guarded('~/screw')
     def _on_screw(self, msg: Float64MultiArray) -> None:
@@ -138,7 +125,7 @@ class StiffnessNode(StreamingNode):
         settings = self._settings
         try:
             last = self._last.screws
-            xi = pose_input(msg.header.frame_id, conversions.pose_to_transform(msg.pose),
+            xi = pose_input(msg.header.frame_id, conversions.pose_message_to_transform(msg.pose),
                             settings.link1_frame,
                             last if last is not None else settings.model.initial_screw)
         except ValueError as exc:

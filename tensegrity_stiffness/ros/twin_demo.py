@@ -98,7 +98,7 @@ class Monitor:
     def _on_pose(self, msg: PoseStamped) -> None:
         with self._lock:
             self._inputs += 1
-            self._pose = conversions.pose_to_transform(msg.pose)
+            self._pose = conversions.pose_message_to_transform(msg.pose)
 
     def _on_poses(self, msg: PoseArray) -> None:
         with self._lock:
@@ -107,7 +107,7 @@ class Monitor:
     def _on_tip_pose(self, msg: PoseStamped) -> None:
         self._on_output(msg)
         with self._lock:
-            self._pose = conversions.pose_to_transform(msg.pose)
+            self._pose = conversions.pose_message_to_transform(msg.pose)
 
     def _on_output(self, msg: Any) -> None:
         now = self.node.get_clock().now().nanoseconds

@@ -88,7 +88,7 @@ def test_buffer_sizes_mirror_the_library():
 
 def test_model_constants_come_from_their_python_home():
     model = JointModel.from_yaml(CONFIG)
-    struct = model._kernel._struct
+    struct = model.compiled_kernel._struct
     assert struct.series == kernel.address(kernel.SERIES)
     assert struct.series_terms == kernel.SERIES.shape[1] == screw._SERIES_TERMS
     tables = (screw._A_SERIES, screw._B_SERIES, screw._C_SERIES, screw._B1_SERIES,
@@ -103,7 +103,7 @@ def test_model_constants_come_from_their_python_home():
 
 def test_the_library_refuses_bad_counts_and_short_buffers():
     model = JointModel.from_yaml(CONFIG)
-    kn = model._kernel
+    kn = model.compiled_kernel
     rest = model.rest_lengths
     buf = np.zeros(kn.size)
     buf[:kn.rest] = model.initial_screw

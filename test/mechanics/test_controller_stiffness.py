@@ -13,7 +13,8 @@ from scipy.optimize import minimize
 from support import REPO
 
 from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
-from tensegrity_stiffness.mechanics.chain import adjoint, pose_to_transform
+from tensegrity_stiffness.geometry.transforms import adjoint
+from tensegrity_stiffness.geometry.transforms import pose_vector_to_transform as pose_to_transform
 from tensegrity_stiffness.mechanics.controller_stiffness import (
     LAYOUTS,
     Conditioner,

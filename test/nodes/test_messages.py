@@ -74,7 +74,8 @@ def test_spine_messages_of_rclpy_and_rosbags_are_the_same() -> None:
         assert values.size == layout.size, name
         assert same_bytes(theirs, mine, layout.msgtype), name
     T = outputs.state.tip_transform
-    np.testing.assert_allclose(messages.pose_to_transform(node.tip_pose.pose), T, atol=1e-12)
+    np.testing.assert_allclose(messages.pose_message_to_transform(node.tip_pose.pose), T,
+                               atol=1e-12)
 
 
 def test_pose_writer_refuses_a_non_rotation_and_writes_nothing() -> None:

@@ -190,7 +190,7 @@ def dims_of(msg: Any) -> list[tuple[str, int, int]]:
 
 
 #: The layouts of the node's messages (rclpy, tensegrity_stiffness.ros.conversions) and,
-# independently, from the labels.
+#: independently, from the labels.
 NODE_MESSAGES = conversions.SpineOutputMessages(N)
 EXPECTED_DIMS = {
     'joint_wrenches': [(layouts.JOINTS_LABEL, N, 6 * N), (layouts.WRENCH_LABEL, 6, 6)],

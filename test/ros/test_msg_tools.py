@@ -28,7 +28,7 @@ from tensegrity_stiffness.ros.conversions import (
     msg_to_wrench,
     multiarray_to_array,
     multiarray_to_matrix,
-    pose_to_transform,
+    pose_message_to_transform,
     quaternion_to_rotation,
     rotation_to_quaternion,
     stamp_from_nanoseconds,
@@ -291,14 +291,14 @@ class TestPose:
             T[:3, :3] = random_rotation(rng)
             T[:3, 3] = rng.standard_normal(3)
             pose = transform_to_pose(T)
-            np.testing.assert_allclose(pose_to_transform(pose), T, atol=ROTATION_ATOL)
+            np.testing.assert_allclose(pose_message_to_transform(pose), T, atol=ROTATION_ATOL)
 
     def test_default_pose_is_identity(self) -> None:
-        np.testing.assert_array_equal(pose_to_transform(Pose()), np.eye(4))
+        np.testing.assert_array_equal(pose_message_to_transform(Pose()), np.eye(4))
 
     def test_mild_renormalisation(self) -> None:
         s = 0.7071  # hand-typed sqrt(1/2): norm 0.99999... within the tolerance
-        T = pose_to_transform(make_pose((1.0, 2.0, 3.0), (0.0, 0.0, s, s)))
+        T = pose_message_to_transform(make_pose((1.0, 2.0, 3.0), (0.0, 0.0, s, s)))
         np.testing.assert_allclose(T[:3, :3], axis_angle([0, 0, 1], np.pi / 2), atol=1e-12)
         np.testing.assert_allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-12)
         np.testing.assert_array_equal(T[:3, 3], [1.0, 2.0, 3.0])
@@ -306,11 +306,11 @@ class TestPose:
     def test_tolerance_keyword(self) -> None:
         q = (0.0, 0.0, 0.0, 1.0 + 10 * QUATERNION_UNIT_TOLERANCE)
         with pytest.raises(ValueError, match='not a unit quaternion'):
-            pose_to_transform(make_pose((0, 0, 0), q))
-        T = pose_to_transform(make_pose((0, 0, 0), q), unit_tolerance=0.1)
+            pose_message_to_transform(make_pose((0, 0, 0), q))
+        T = pose_message_to_transform(make_pose((0, 0, 0), q), unit_tolerance=0.1)
         np.testing.assert_allclose(T, np.eye(4), atol=ROTATION_ATOL)
         with pytest.raises(ValueError, match='not a unit quaternion'):
-            pose_to_transform(make_pose((0, 0, 0), (0.0, 0.0, 0.0, 1.0 + 1e-6)),
+            pose_message_to_transform(make_pose((0, 0, 0), (0.0, 0.0, 0.0, 1.0 + 1e-6)),
                               unit_tolerance=1e-8)
 
     @pytest.mark.parametrize(('q', 'match'), [
@@ -321,11 +321,11 @@ class TestPose:
     ])
     def test_orientation_errors(self, q: tuple[float, ...], match: str) -> None:
         with pytest.raises(ValueError, match=match):
-            pose_to_transform(make_pose((0.0, 0.0, 0.0), q))
+            pose_message_to_transform(make_pose((0.0, 0.0, 0.0), q))
 
     def test_position_error(self) -> None:
         with pytest.raises(ValueError, match='pose position contains NaN or inf'):
-            pose_to_transform(make_pose((np.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
+            pose_message_to_transform(make_pose((np.nan, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0)))
 
     def test_transform_errors(self) -> None:
         with pytest.raises(ValueError, match=r'transform must have shape \(4, 4\)'):

@@ -224,7 +224,7 @@ def test_solve_equilibrium_service(harness, model):
     np.testing.assert_allclose(np.reshape(res.cartesian_stiffness, (6, 6)),
                                model.cartesian_stiffness(res.screw), rtol=1e-9, atol=1e-9)
     np.testing.assert_allclose(res.tensions, model.tensions(res.screw), atol=1e-12)
-    np.testing.assert_allclose(conversions.pose_to_transform(res.pose), exp_se3(res.screw),
+    np.testing.assert_allclose(conversions.pose_message_to_transform(res.pose), exp_se3(res.screw),
                                atol=1e-9)
     assert res.stable and res.residual <= 1e-9 and res.iterations >= 1
     assert res.energy == pytest.approx(model.energy(res.screw))

@@ -164,7 +164,7 @@ def data(msg) -> np.ndarray:
 
 
 def pose_matrix(pose) -> np.ndarray:
-    return conversions.pose_to_transform(pose)
+    return conversions.pose_message_to_transform(pose)
 
 
 def check_outputs(out: dict, chain: JointChain, screws, rest=None) -> None:
@@ -561,7 +561,7 @@ class SpineFuzz:
                 ref = self.last if self.last is not None else np.array(
                     [m.initial_screw for m in self.chain.joints])
                 xi = poses_input(msg.header.frame_id, msg.poses, 'spine_base', ref,
-                                 conversions.pose_to_transform)
+                                 conversions.pose_message_to_transform)
             else:
                 self.rest = list(rest_lengths_input(conversions.multiarray_to_array(
                     msg, max_length=self.max_length), self.chain))

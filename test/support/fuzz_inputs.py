@@ -593,7 +593,7 @@ class TopicOracle:
         if frame and frame != self.link1_frame:
             return None
         try:
-            T = conversions.pose_to_transform(msg.pose)
+            T = conversions.pose_message_to_transform(msg.pose)
             reference = self.last_screw if self.last_screw is not None else \
                 self.model.initial_screw
             with np.errstate(all='ignore'):
@@ -759,7 +759,8 @@ def check_equilibrium(model: JointModel, case: Case, response: Any) -> str | Non
     if not np.allclose(conversions.msg_to_wrench(response.string_wrench), state.wrench,
                        rtol=1e-9, atol=1e-9):
         return 'string_wrench differs from the library'
-    if not np.allclose(conversions.pose_to_transform(response.pose), exp_se3(screw), atol=1e-9):
+    if not np.allclose(conversions.pose_message_to_transform(response.pose), exp_se3(screw),
+                       atol=1e-9):
         return 'pose is not exp(screw)'
     if bool(response.stable) != is_stable(state.cartesian_stiffness):
         return 'stable flag differs from the library'

@@ -50,7 +50,7 @@ __all__ = [
 ]
 
 #: Labels of the orderings (wrench rows, screw / twist columns):
-# tensegrity_stiffness.nodes.layouts.
+#: tensegrity_stiffness.nodes.layouts.
 WRENCH_ROW_LABEL = STIFFNESS_ROW_LABEL
 SCREW_COL_LABEL = STIFFNESS_COL_LABEL
 CARTESIAN_TWIST_COL_LABEL = CARTESIAN_STIFFNESS_COL_LABEL

@@ -35,7 +35,7 @@ from tensegrity_stiffness.nodes.layouts import (
 )
 from tensegrity_stiffness.nodes.messages import multiarray_payload
 from tensegrity_stiffness.ros.conversions.arrays import matrix_to_multiarray, vector_to_multiarray
-from tensegrity_stiffness.ros.conversions.geometry import msg_to_wrench, pose_to_transform
+from tensegrity_stiffness.ros.conversions.geometry import msg_to_wrench, pose_message_to_transform
 from tensegrity_stiffness.ros.conversions.imu import imu_to_arrays
 from tensegrity_stiffness.ros.conversions.outputs import (
     fill_outputs,
@@ -68,7 +68,7 @@ def pose_with_covariance_to_arrays(msg: PoseWithCovariance
     """((4, 4) transform, (6, 6) covariance) of a ``PoseWithCovariance``; the covariance is None
     when it is all zeros (not given). ValueError on a bad quaternion or a non-finite value; the
     estimator checks that a given covariance is symmetric positive definite."""
-    T = pose_to_transform(msg.pose)
+    T = pose_message_to_transform(msg.pose)
     cov = np.array(msg.covariance, dtype=np.float64).reshape(6, 6)
     if not np.all(np.isfinite(cov)):
         raise ValueError('pose covariance contains NaN or inf')

@@ -5,7 +5,8 @@ Conventions: quaternions are ROS-ordered ``[x, y, z, w]`` (scalar last) and retu
 ``w >= 0``; wrenches are ``[fx fy fz mx my mz]`` (force first, N and N*m); homogeneous transforms
 are (4, 4) with rotation ``T[:3, :3]`` and translation ``T[:3, 3]`` (m), mapping coordinates in
 the child frame to the parent frame (a ``Pose`` of frame {2} in {1} is the transform 1_T_2).
-:func:`pose_to_transform` (and the field writers) read any message implementation and live in
+:func:`pose_message_to_transform` (and the field writers) read any message implementation and live
+in
 :mod:`tensegrity_stiffness.nodes.messages`; re-exported here.
 """
 
@@ -23,14 +24,18 @@ from tensegrity_stiffness.geometry.quaternion import (
     rotation_to_quaternion,
 )
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape
-from tensegrity_stiffness.nodes.messages import pose_to_transform, pose_values, write_wrench
+from tensegrity_stiffness.nodes.messages import (
+    pose_message_to_transform,
+    pose_values,
+    write_wrench,
+)
 
 __all__ = [
     'QUATERNION_UNIT_TOLERANCE',
     'QUATERNION_ZERO_NORM',
     'ROTATION_TOLERANCE',
     'msg_to_wrench',
-    'pose_to_transform',
+    'pose_message_to_transform',
     'quaternion_to_rotation',
     'rotation_to_quaternion',
     'transform_to_pose',

@@ -1,0 +1,186 @@
+"""The import rule of docs/architecture.md, read from the code: no module imports from a layer
+above its own, only ``tensegrity_stiffness.ros`` imports rclpy or a ROS message package, and no
+module uses another module's private names."""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from support import REPO
+
+
+@dataclass(frozen=True)
+class Layer:
+    """A layer of docs/architecture.md: its modules (packages or modules by dotted name) and its
+    rank; a module may import only from layers of a lower rank (and from its own layer).
+    ``alias``: the documented import paths at the top level, which only re-export."""
+
+    name: str
+    rank: int
+    packages: tuple[str, ...]
+    alias: bool = False
+
+
+T = 'tensegrity_stiffness.'
+LAYERS = (
+    Layer('config', 0, (T + 'config',)),
+    Layer('geometry', 0, (T + 'geometry',)),
+    Layer('mechanics', 1, (T + 'mechanics',)),
+    Layer('estimation', 2, (T + 'estimation',)),
+    Layer('simulation', 2, (T + 'simulation',)),
+    Layer('control', 2, (T + 'control',)),
+    Layer('nodes', 3, (T + 'nodes',)),
+    Layer('recordings', 4, (T + 'recordings',)),
+    Layer('cli', 5, (T + 'cli',)),
+    Layer('ros', 6, (T + 'ros', T + 'srv')),
+    Layer('documented paths', 7, ('tensegrity_stiffness',), alias=True),
+)
+#: Imported only under tensegrity_stiffness.ros.
+ROS_ONLY_IMPORTS = ('rclpy', 'std_msgs', 'geometry_msgs', 'sensor_msgs', 'diagnostic_msgs',
+                    'visualization_msgs', 'builtin_interfaces', 'rcl_interfaces', 'tf2_msgs',
+                    'std_srvs', 'rosidl_runtime_py', 'launch', 'launch_ros',
+                    'ament_index_python', T + 'srv', T + 'ros')
+
+
+def layer_of(module: str) -> Layer | None:
+    """The layer of a dotted module name (the longest matching package), None outside."""
+    best = None
+    for layer in LAYERS:
+        for package in layer.packages:
+            if module == package or module.startswith(package + '.'):
+                if best is None or len(package) > len(best[0]):
+                    best = (package, layer)
+    return best[1] if best else None
+
+PACKAGE = REPO / 'tensegrity_stiffness'
+MODULES = sorted(p for p in PACKAGE.rglob('*.py') if '__pycache__' not in p.parts)
+
+
+def dotted(path: Path) -> str:
+    parts = path.relative_to(REPO).with_suffix('').parts
+    return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
+
+
+def imported_modules(tree: ast.AST, module: str, is_package: bool) -> list[tuple[int, str]]:
+    """(line, absolute module) of every import statement, function-local ones too."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [(node.lineno, a.name) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = module.split('.')
+                base = base[:len(base) - node.level + (1 if is_package else 0)]
+                target = '.'.join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ''
+            if target != 'tensegrity_stiffness':
+                found.append((node.lineno, target))
+            # `from package import module` imports the module
+            found += [(node.lineno, f'{target}.{a.name}') for a in node.names]
+    return found
+
+
+def test_every_library_module_has_a_layer() -> None:
+    for path in MODULES:
+        assert layer_of(dotted(path)) is not None, f'{dotted(path)} has no layer in LAYERS'
+
+
+def test_no_module_imports_from_a_layer_above_or_a_sibling() -> None:
+    """Within one rank, the concerns are siblings that do not import each other."""
+    wrong = []
+    for path in MODULES:
+        module = dotted(path)
+        mine = layer_of(module)
+        tree = ast.parse(path.read_text(encoding='utf-8'))
+        for line, target in imported_modules(tree, module, path.name == '__init__.py'):
+            theirs = layer_of(target)
+            if theirs is None or mine is None or theirs.name == mine.name:
+                continue
+            if mine.alias:
+                continue
+            if theirs.rank >= mine.rank:
+                wrong.append(f'{path.relative_to(REPO)}:{line} ({mine.name}) imports {target} '
+                             f'({theirs.name})')
+    assert not wrong, '\n'.join(wrong)
+
+
+def test_only_the_ros_layer_imports_rclpy_or_message_packages() -> None:
+    wrong = []
+    for path in MODULES:
+        module = dotted(path)
+        if module.startswith('tensegrity_stiffness.ros'):
+            continue
+        tree = ast.parse(path.read_text(encoding='utf-8'))
+        for line, target in imported_modules(tree, module, path.name == '__init__.py'):
+            if any(target == name or target.startswith(name + '.') for name in ROS_ONLY_IMPORTS):
+                wrong.append(f'{path.relative_to(REPO)}:{line} imports {target}')
+    assert not wrong, '\n'.join(wrong)
+
+
+def own_member(value: ast.expr) -> bool:
+    """``self``, ``cls`` or ``super()``: the receiver of a class's own members."""
+    if isinstance(value, ast.Name):
+        return value.id in ('self', 'cls')
+    return isinstance(value, ast.Call) and isinstance(value.func, ast.Name) and \
+        value.func.id == 'super'
+
+
+def private_uses(tree: ast.AST) -> list[tuple[int, str]]:
+    """Private names this module uses that it does not define: ``from m import _x`` and
+    ``something._x`` where ``_x`` is neither defined nor assigned here; ``self._x``, ``cls._x``
+    and ``super()._x`` are a class's own (inherited) members."""
+    defined: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            defined.add(node.name)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            defined.add(node.attr)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            defined.add(node.id)
+        elif isinstance(node, ast.AnnAssign) and isinstance(node.target, ast.Name):
+            defined.add(node.target.id)
+        elif isinstance(node, ast.arg):
+            defined.add(node.arg)
+        elif isinstance(node, ast.alias):
+            defined.add(node.asname or node.name.split('.')[0])
+        elif isinstance(node, ast.keyword) and node.arg:
+            defined.add(node.arg)
+    uses = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module != '__future__':
+            uses += [(node.lineno, a.name) for a in node.names
+                     if a.name.startswith('_') and not a.name.startswith('__')]
+        elif isinstance(node, ast.Attribute) and node.attr.startswith('_') and \
+                not node.attr.startswith('__') and node.attr not in defined and \
+                not own_member(node.value):
+            uses.append((node.lineno, node.attr))
+    return uses
+
+
+# Private names of dependencies that their public documentation tells users to use.
+DOCUMENTED_PRIVATE_NAMES = {
+    '_asdict', '_replace', '_fields',  # collections.namedtuple's public API
+}
+
+
+def test_no_module_uses_another_module_s_private_names() -> None:
+    wrong = []
+    for path in MODULES:
+        tree = ast.parse(path.read_text(encoding='utf-8'))
+        for line, name in private_uses(tree):
+            if name not in DOCUMENTED_PRIVATE_NAMES:
+                wrong.append(f'{path.relative_to(REPO)}:{line} uses {name}')
+    assert not wrong, '\n'.join(wrong)
+
+
+@pytest.mark.parametrize('layer', LAYERS, ids=lambda layer: layer.name)
+def test_every_subpackage_says_what_it_may_import(layer) -> None:
+    for package in layer.packages:
+        init = REPO.joinpath(*package.split('.'), '__init__.py')
+        if init.is_file():
+            doc = ast.get_docstring(ast.parse(init.read_text(encoding='utf-8'))) or ''
+            assert doc, f'{package}/__init__.py has no docstring'
