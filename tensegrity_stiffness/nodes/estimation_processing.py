@@ -28,6 +28,7 @@ from tensegrity_stiffness.estimation.estimators import (
 from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.mechanics.chain import ChainState
 from tensegrity_stiffness.mechanics.joint import JointState
+from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS, SPINE_ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameters import (
     ESTIMATOR_INPUTS,
     SPINE_ESTIMATOR_INPUTS,
@@ -192,9 +193,9 @@ class EstimatorOutputs:
         return self.estimate.screw
 
 
-#: Names of the published arrays, in :func:`output_arrays` order.
-OUTPUT_NAMES = ('pose_estimate', 'pose covariance', 'wrench_estimate', 'screw_estimate',
-                'stiffness', 'cartesian_stiffness', 'string_tensions', 'cartesian_stiffness_std')
+#: Names of the published arrays, in :func:`output_arrays` order: the topics, and the pose's
+#: covariance after the pose.
+OUTPUT_NAMES = (ESTIMATOR_OUTPUTS[0], 'pose covariance', *ESTIMATOR_OUTPUTS[1:])
 
 
 def output_arrays(outputs: EstimatorOutputs) -> tuple[FloatArray, ...]:
@@ -266,8 +267,8 @@ class SpineEstimatorOutputs:
 
 
 #: Names of the spine's published arrays, in :func:`spine_output_arrays` order.
-SPINE_OUTPUT_NAMES = ('screws_estimate', 'tip_pose_estimate', 'tip pose covariance',
-                      'tip_wrench_estimate', 'tip_stiffness_base', 'tip_stiffness_base_std')
+SPINE_OUTPUT_NAMES = (*SPINE_ESTIMATOR_OUTPUTS[:2], 'tip pose covariance',
+                      *SPINE_ESTIMATOR_OUTPUTS[2:])
 
 
 def spine_output_arrays(outputs: SpineEstimatorOutputs) -> tuple[FloatArray, ...]:

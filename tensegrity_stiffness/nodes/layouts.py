@@ -107,32 +107,47 @@ def _array(dims: Sequence[tuple[str, int, int]]) -> OutputLayout:
     return OutputLayout(FLOAT64_MULTIARRAY, tuple(dims))
 
 
+#: ``stiffness_node``'s per-input outputs, topic names relative to the node, in the order they
+#: are computed, filled and published (:func:`processing.output_arrays`): the one home of
+#: their names and order, read by the node, the bag command and the message builders.
+JOINT_OUTPUTS = ('wrench', 'stiffness', 'cartesian_stiffness', 'string_tensions',
+                 'stiffness_interpretation')
+#: ``spine_node``'s per-input outputs, likewise (:func:`spine_processing.output_arrays`).
+SPINE_OUTPUTS = ('joint_wrenches', 'joint_stiffness', 'joint_cartesian_stiffness', 'tip_pose',
+                 'tip_wrench', 'tip_stiffness', 'tip_stiffness_base')
+
+#: ``estimator_node``'s per-estimate outputs, likewise (K, K_c and the tensions on the names of
+#: ``stiffness_node``'s, so that one remap serves both).
+ESTIMATOR_OUTPUTS = ('pose_estimate', 'wrench_estimate', 'screw_estimate', 'stiffness',
+                     'cartesian_stiffness', 'string_tensions', 'cartesian_stiffness_std')
+#: ``spine_estimator_node``'s, likewise (the tip stiffness on ``spine_node``'s name).
+SPINE_ESTIMATOR_OUTPUTS = ('screws_estimate', 'tip_pose_estimate', 'tip_wrench_estimate',
+                           'tip_stiffness_base', 'tip_stiffness_base_std')
+
+
 def joint_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
-    """``stiffness_node``'s per-input outputs by topic (relative to the node), in the order of
-    :func:`processing.output_arrays`: wrench, K, K_c, tensions, interpretation."""
+    """``stiffness_node``'s per-input outputs by topic, in :data:`JOINT_OUTPUTS` order: wrench,
+    K, K_c, tensions, interpretation."""
     n = len(string_names)
-    return {
-        'wrench': OutputLayout(WRENCH_STAMPED),
-        'stiffness': _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
-        'cartesian_stiffness': _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL,
-                                                  CARTESIAN_STIFFNESS_COL_LABEL)),
-        'string_tensions': _array(vector_dims(n, tensions_label(string_names))),
-        'stiffness_interpretation': _array(vector_dims(INTERPRETATION_SIZE,
-                                                       INTERPRETATION_LABEL)),
-    }
+    return dict(zip(JOINT_OUTPUTS, (
+        OutputLayout(WRENCH_STAMPED),
+        _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
+        _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL, CARTESIAN_STIFFNESS_COL_LABEL)),
+        _array(vector_dims(n, tensions_label(string_names))),
+        _array(vector_dims(INTERPRETATION_SIZE, INTERPRETATION_LABEL)),
+    ), strict=True))
 
 
 def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
-    """``spine_node``'s per-input outputs by topic, in the order of
-    :func:`spine_processing.output_arrays` (and its ``OUTPUT_NAMES``)."""
-    return {
-        'joint_wrenches': _array(matrix_dims(n_joints, 6, JOINTS_LABEL, WRENCH_LABEL)),
-        'joint_stiffness': _array(stacked_matrix_dims(
+    """``spine_node``'s per-input outputs by topic, in :data:`SPINE_OUTPUTS` order."""
+    return dict(zip(SPINE_OUTPUTS, (
+        _array(matrix_dims(n_joints, 6, JOINTS_LABEL, WRENCH_LABEL)),
+        _array(stacked_matrix_dims(
             n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
-        'joint_cartesian_stiffness': _array(stacked_matrix_dims(
+        _array(stacked_matrix_dims(
             n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, CARTESIAN_STIFFNESS_COL_LABEL)),
-        'tip_pose': OutputLayout(POSE_STAMPED),
-        'tip_wrench': OutputLayout(WRENCH_STAMPED),
-        'tip_stiffness': _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['tool'])),
-        'tip_stiffness_base': _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['base'])),
-    }
+        OutputLayout(POSE_STAMPED),
+        OutputLayout(WRENCH_STAMPED),
+        _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['tool'])),
+        _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['base'])),
+    ), strict=True))

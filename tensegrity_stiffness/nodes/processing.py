@@ -17,6 +17,7 @@ from tensegrity_stiffness.geometry.screw import check_in_chart, log_se3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
+from tensegrity_stiffness.nodes.layouts import JOINT_OUTPUTS
 
 FloatArray = NDArray[np.float64]
 
@@ -56,9 +57,8 @@ def joint_outputs(model: JointModel, screw: FloatArray) -> JointOutputs:
     return JointOutputs(screw, state, interpretation)
 
 
-#: The published arrays of :class:`JointOutputs`, in topic order (wrench, stiffness,
-#: cartesian_stiffness, string_tensions, stiffness_interpretation).
-OUTPUT_NAMES = ('wrench', 'stiffness', 'cartesian_stiffness', 'tensions', 'interpretation')
+#: The published arrays of :class:`JointOutputs` by topic, in :func:`output_arrays` order.
+OUTPUT_NAMES = JOINT_OUTPUTS
 
 
 def output_arrays(outputs: JointOutputs) -> tuple[FloatArray, ...]:

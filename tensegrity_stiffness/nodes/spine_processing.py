@@ -22,6 +22,7 @@ from tensegrity_stiffness.geometry.validation import require_all_finite, require
 from tensegrity_stiffness.mechanics.chain import ChainState, JointChain
 from tensegrity_stiffness.mechanics.equilibrium import stability_margin
 from tensegrity_stiffness.nodes.health import JointHealth
+from tensegrity_stiffness.nodes.layouts import SPINE_OUTPUTS
 
 FloatArray = NDArray[np.float64]
 
@@ -113,8 +114,7 @@ def output_arrays(outputs: SpineOutputs) -> tuple[FloatArray, ...]:
 
 
 #: Names of :func:`output_arrays` (the topics they are published on).
-OUTPUT_NAMES = ('joint_wrenches', 'joint_stiffness', 'joint_cartesian_stiffness', 'tip_pose',
-                'tip_wrench', 'tip_stiffness', 'tip_stiffness_base')
+OUTPUT_NAMES = SPINE_OUTPUTS
 
 
 def require_finite(outputs: SpineOutputs) -> None:

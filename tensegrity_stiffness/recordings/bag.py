@@ -970,10 +970,9 @@ def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, st
     written = Counter()
 
     def emit(a: Answers) -> None:
-        payloads = {'wrench': a.wrenches, 'stiffness': a.stiffness,
-                    'cartesian_stiffness': a.cartesian_stiffness,
-                    'string_tensions': a.tensions,
-                    'stiffness_interpretation': a.interpretation}
+        payloads = dict(zip(layouts.JOINT_OUTPUTS, (
+            a.wrenches, a.stiffness, a.cartesian_stiffness, a.tensions, a.interpretation),
+            strict=True))
         write_blocks(writer, out_connections, a.log_times, [templates[name].rows(
             payloads[name], a.stamps if name == 'wrench' else None) for name in outputs])
         for name in outputs:

@@ -42,6 +42,7 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     gravity_reading,
     measured_array,
 )
+from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameters import (
     ESTIMATOR_NODE_PARAMETERS,
     EstimatorNodeSettings,
@@ -62,11 +63,9 @@ class EstimatorNode(JointRestLengthTopic, StreamingNode):
     """Publishes the pose (with covariance), load, screw, K, K_c, its std and the tensions of
     every estimate; markers and diagnostics."""
 
-    OUTPUT_TOPICS = (
-        (PoseWithCovarianceStamped, '~/pose_estimate'), (WrenchStamped, '~/wrench_estimate'),
-        (Float64MultiArray, '~/screw_estimate'), (Float64MultiArray, '~/stiffness'),
-        (Float64MultiArray, '~/cartesian_stiffness'), (Float64MultiArray, '~/string_tensions'),
-        (Float64MultiArray, '~/cartesian_stiffness_std'))
+    OUTPUT_TOPICS = tuple(zip(
+        (PoseWithCovarianceStamped, WrenchStamped, *[Float64MultiArray] * 5),
+        (f'~/{name}' for name in ESTIMATOR_OUTPUTS), strict=True))
     WORKER_NAME = 'equilibrium worker'
     #: What the frame of ~/measured_pose and ~/measured_wrench is called in warnings.
     INPUT_FRAME_NAME = "link 1's frame"

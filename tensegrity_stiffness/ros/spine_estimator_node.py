@@ -28,6 +28,7 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     SpineEstimatorOutputs,
     spine_estimator_outputs,
 )
+from tensegrity_stiffness.nodes.layouts import SPINE_ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameters import (
     EstimatorNodeSettings,
     ParameterSpec,
@@ -50,11 +51,9 @@ class SpineEstimatorNode(SpineRestLengthTopic, EstimatorNode):
     """Publishes the screws, the tip pose (with covariance), the tip load and the tip stiffness
     with its std per estimate; markers and diagnostics."""
 
-    OUTPUT_TOPICS = (
-        (Float64MultiArray, '~/screws_estimate'),
-        (PoseWithCovarianceStamped, '~/tip_pose_estimate'),
-        (WrenchStamped, '~/tip_wrench_estimate'), (Float64MultiArray, '~/tip_stiffness_base'),
-        (Float64MultiArray, '~/tip_stiffness_base_std'))
+    OUTPUT_TOPICS = tuple(zip(
+        (Float64MultiArray, PoseWithCovarianceStamped, WrenchStamped, Float64MultiArray,
+         Float64MultiArray), (f'~/{name}' for name in SPINE_ESTIMATOR_OUTPUTS), strict=True))
     WORKER_NAME = 'chain equilibrium worker'
     INPUT_FRAME_NAME = 'the base frame'
     _build_settings = staticmethod(spine_estimator_node_settings)

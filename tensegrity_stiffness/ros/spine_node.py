@@ -21,13 +21,14 @@ from operator import attrgetter
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
+from geometry_msgs.msg import PoseArray
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.mechanics.chain import ChainState, solve_chain_equilibrium
+from tensegrity_stiffness.nodes.layouts import spine_output_layouts
 from tensegrity_stiffness.nodes.parameters import (
     CHAIN_PARAMETERS,
     ParameterSpec,
@@ -44,6 +45,7 @@ from tensegrity_stiffness.nodes.spine_processing import (
     spine_outputs,
 )
 from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.conversions.outputs import output_topics
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
@@ -54,11 +56,7 @@ from tensegrity_stiffness.srv import SolveChainEquilibrium
 
 NODE_NAME = 'spine_node'
 #: Output topics in the order of :meth:`conversions.SpineOutputMessages.messages`.
-OUTPUT_TOPICS = (
-    (Float64MultiArray, '~/joint_wrenches'), (Float64MultiArray, '~/joint_stiffness'),
-    (Float64MultiArray, '~/joint_cartesian_stiffness'), (PoseStamped, '~/tip_pose'),
-    (WrenchStamped, '~/tip_wrench'), (Float64MultiArray, '~/tip_stiffness'),
-    (Float64MultiArray, '~/tip_stiffness_base'))
+OUTPUT_TOPICS = output_topics(spine_output_layouts(1))
 
 
 def declared_joint_count(node: Node) -> int:

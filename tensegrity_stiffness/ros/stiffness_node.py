@@ -18,7 +18,7 @@ from operator import attrgetter
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import PoseStamped, WrenchStamped
+from geometry_msgs.msg import PoseStamped
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
@@ -27,6 +27,7 @@ from tensegrity_stiffness.mechanics.design import design_rest_lengths
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.health import joint_health
+from tensegrity_stiffness.nodes.layouts import joint_output_layouts
 from tensegrity_stiffness.nodes.parameters import (
     STIFFNESS_NODE_PARAMETERS,
     JointNodeSettings,
@@ -40,6 +41,7 @@ from tensegrity_stiffness.nodes.processing import (
     screw_input,
 )
 from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.conversions.outputs import output_topics
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
@@ -61,10 +63,7 @@ DESIGN_DEADLINE_S = 5.0
 class StiffnessNode(JointRestLengthTopic, StreamingNode):
     """Publishes wrench, K, K_c, tensions, interpretation, markers and diagnostics per input."""
 
-    OUTPUT_TOPICS = (
-        (WrenchStamped, '~/wrench'), (Float64MultiArray, '~/stiffness'),
-        (Float64MultiArray, '~/cartesian_stiffness'), (Float64MultiArray, '~/string_tensions'),
-        (Float64MultiArray, '~/stiffness_interpretation'))
+    OUTPUT_TOPICS = output_topics(joint_output_layouts(()))
     WORKER_NAME = 'equilibrium worker'
     _build_settings = staticmethod(joint_node_settings)
     _output_frame = attrgetter('link1_frame')

@@ -131,7 +131,8 @@ def own_member(value: ast.expr) -> bool:
 
 def private_uses(tree: ast.AST) -> list[tuple[int, str]]:
     """Private names this module uses that it does not define: ``from m import _x`` and
-    ``something._x`` where ``_x`` is neither defined nor assigned here; ``self._x``, ``cls._x``
+    ``something._x`` where ``_x`` is neither defined nor assigned here, or where ``something``
+    is an imported name (a method copied from another module's class); ``self._x``, ``cls._x``
     and ``super()._x`` are a class's own (inherited) members."""
     defined: set[str] = set()
     for node in ast.walk(tree):
@@ -149,14 +150,17 @@ def private_uses(tree: ast.AST) -> list[tuple[int, str]]:
             defined.add(node.asname or node.name.split('.')[0])
         elif isinstance(node, ast.keyword) and node.arg:
             defined.add(node.arg)
+    imported = {a.asname or a.name.split('.')[0] for node in ast.walk(tree)
+                if isinstance(node, (ast.Import, ast.ImportFrom)) for a in node.names}
     uses = []
     for node in ast.walk(tree):
         if isinstance(node, ast.ImportFrom) and node.module != '__future__':
             uses += [(node.lineno, a.name) for a in node.names
                      if a.name.startswith('_') and not a.name.startswith('__')]
         elif isinstance(node, ast.Attribute) and node.attr.startswith('_') and \
-                not node.attr.startswith('__') and node.attr not in defined and \
-                not own_member(node.value):
+                not node.attr.startswith('__') and not own_member(node.value) and (
+                    node.attr not in defined or (isinstance(node.value, ast.Name)
+                                                 and node.value.id in imported)):
             uses.append((node.lineno, node.attr))
     return uses
 
@@ -184,3 +188,32 @@ def test_every_subpackage_says_what_it_may_import(layer) -> None:
         if init.is_file():
             doc = ast.get_docstring(ast.parse(init.read_text(encoding='utf-8'))) or ''
             assert doc, f'{package}/__init__.py has no docstring'
+
+
+def test_output_names_and_order_have_one_home() -> None:
+    """stiffness_node's and spine_node's outputs are named and ordered once, in
+    ``nodes/layouts.py``: no other module writes a topic ``'~/<output>'`` or a sequence of
+    three or more output names (the node, the bag command, the message builders and the
+    processing read the table; a mapping such as the command line's JSON keys is no order)."""
+    from tensegrity_stiffness.nodes.layouts import (
+        ESTIMATOR_OUTPUTS,
+        JOINT_OUTPUTS,
+        SPINE_ESTIMATOR_OUTPUTS,
+        SPINE_OUTPUTS,
+    )
+
+    home = PACKAGE / 'nodes' / 'layouts.py'
+    wrong = []
+    for names in (JOINT_OUTPUTS, SPINE_OUTPUTS, ESTIMATOR_OUTPUTS,
+                  SPINE_ESTIMATOR_OUTPUTS):
+        for path in MODULES:
+            if path == home:
+                continue
+            for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+                if isinstance(node, ast.Constant) and node.value in {f'~/{n}' for n in names}:
+                    wrong.append(f'{path.relative_to(REPO)}:{node.lineno} {node.value!r}')
+                elif isinstance(node, (ast.Tuple, ast.List, ast.Set)):
+                    values = [i.value for i in node.elts if isinstance(i, ast.Constant)]
+                    if len(set(values) & set(names)) >= 3:
+                        wrong.append(f'{path.relative_to(REPO)}:{node.lineno} {values}')
+    assert not wrong, '\n'.join(wrong)

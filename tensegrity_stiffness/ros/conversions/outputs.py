@@ -6,6 +6,8 @@ refills them per input (the bag command does the same with rosbags' types)."""
 from __future__ import annotations
 
 import array
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -13,6 +15,7 @@ from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, Wre
 from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
 
+from tensegrity_stiffness.nodes.layouts import OutputLayout
 from tensegrity_stiffness.nodes.messages import (
     MESSAGE_CLASS_NAMES,
     MessageTypes,
@@ -21,7 +24,8 @@ from tensegrity_stiffness.nodes.messages import (
     write_wrench_stamped,
 )
 
-__all__ = ['RCLPY_TYPES', 'fill_outputs', 'payload', 'write_payload', 'write_wrench_stamped']
+__all__ = ['RCLPY_TYPES', 'fill_outputs', 'output_topics', 'payload', 'write_payload',
+           'write_wrench_stamped']
 
 
 def payload(arr: NDArray[np.float64]) -> array.array:
@@ -41,3 +45,10 @@ RCLPY_TYPES = MessageTypes(
 
 #: Writes an array into a ``Float64MultiArray`` of rclpy (:func:`fill_outputs`' writer form).
 write_payload = payload_writer(RCLPY_TYPES)
+
+
+def output_topics(layouts: Mapping[str, OutputLayout]) -> tuple[tuple[Any, str], ...]:
+    """``(rclpy message class, '~/<name>')`` of a node's outputs, in their order (the node's
+    ``OUTPUT_TOPICS`` from :mod:`tensegrity_stiffness.nodes.layouts`)."""
+    return tuple((RCLPY_TYPES.classes[layout.msgtype], f'~/{name}')
+                 for name, layout in layouts.items())
