@@ -141,6 +141,23 @@ def write_wrench(msg: Any, wrench: FloatArray) -> Any:
     return msg
 
 
+def stamp_nanoseconds(stamp: Any) -> int:
+    """Integer nanoseconds of a ``builtin_interfaces/Time`` of any message implementation
+    (exact)."""
+    return int(stamp.sec) * NANOSECONDS_PER_SECOND + int(stamp.nanosec)
+
+
+def stamp_is_set(stamp: Any) -> bool:
+    """False for a zero stamp, which every input reader takes to mean "now": the node's clock
+    at arrival, or the log time of a recorded message (the nodes and the bag command alike)."""
+    return bool(stamp.sec or stamp.nanosec)
+
+
+def stamp_nanoseconds_or(stamp: Any, now_ns: int) -> int:
+    """:func:`stamp_nanoseconds`, or ``now_ns`` for a zero stamp (:func:`stamp_is_set`)."""
+    return stamp_nanoseconds(stamp) if stamp_is_set(stamp) else now_ns
+
+
 def stamp_parts(nanoseconds: int) -> tuple[int, int]:
     """``(sec, nanosec)`` of a ``builtin_interfaces/Time`` for a non-negative integer count of
     nanoseconds.

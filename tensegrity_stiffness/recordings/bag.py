@@ -57,12 +57,14 @@ from tensegrity_stiffness import config
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG
 from tensegrity_stiffness.nodes import layouts, parameters, spine_processing
 from tensegrity_stiffness.nodes.messages import (
+    NANOSECONDS_PER_SECOND,
     MessageTypes,
     SpineOutputMessages,
     multiarray_to_array,
     new_message,
     output_writer,
     pose_message_to_transform,
+    stamp_nanoseconds_or,
 )
 from tensegrity_stiffness.nodes.parameters import JointNodeSettings, SpineNodeSettings
 from tensegrity_stiffness.nodes.processing import (
@@ -399,9 +401,8 @@ class StiffnessProcessor:
         except ValueError as exc:
             self.reject('pose', str(exc))
             return
-        stamp = msg.header.stamp
-        ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-        self._add('pose', [log_time], [ns if ns != 0 else log_time], xi[None], T)
+        self._add('pose', [log_time], [stamp_nanoseconds_or(msg.header.stamp, log_time)],
+                  xi[None], T)
 
     def rest_lengths(self, msg: Any, log_time: int) -> None:
         """A deserialized ``~/rest_lengths`` message (the node's ``_on_rest_lengths``)."""
@@ -560,9 +561,7 @@ class SpineProcessor:
         except ValueError as exc:
             self.reject('poses', str(exc))
             return
-        stamp = msg.header.stamp
-        ns = int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
-        self._compute(xi, log_time, ns if ns != 0 else log_time, 'poses')
+        self._compute(xi, log_time, stamp_nanoseconds_or(msg.header.stamp, log_time), 'poses')
 
     def rest_lengths(self, msg: Any, log_time: int) -> None:
         """A ``~/rest_lengths`` message (the node's ``_on_rest_lengths``): in force from its log
@@ -691,7 +690,8 @@ class _Template:
         msg = new_message(layout, types)
         probe = np.arange(1.0, size + 1.0)
         sec, nanosec = self._PROBE_STAMP
-        output_writer(layout, types)(msg, probe, types.time(sec * 1_000_000_000 + nanosec),
+        output_writer(layout, types)(msg, probe,
+                                     types.time(sec * NANOSECONDS_PER_SECOND + nanosec),
                                      frame_id)
         raw = np.frombuffer(bytes(typestore.serialize_cdr(msg, layout.msgtype)), dtype=np.uint8)
         payload = raw[raw.size - 8 * size:].view('<f8')
@@ -709,7 +709,7 @@ class _Template:
         out[:, self.raw.size - 8 * self.size:] = np.ascontiguousarray(
             values.reshape(n, self.size), dtype='<f8').view(np.uint8)
         if self.stamped:
-            sec, nanosec = np.divmod(stamps, 1_000_000_000)
+            sec, nanosec = np.divmod(stamps, NANOSECONDS_PER_SECOND)
             stamp = np.empty((n, 2), dtype='<i4')
             stamp[:, 0] = sec
             stamp[:, 1] = nanosec.astype(np.uint32).view(np.int32)

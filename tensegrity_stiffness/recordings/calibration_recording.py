@@ -56,6 +56,7 @@ from tensegrity_stiffness.nodes.messages import (
     multiarray_payload,
     multiarray_to_array,
     pose_message_to_transform,
+    stamp_nanoseconds_or,
 )
 
 FloatArray = NDArray[np.float64]
@@ -274,11 +275,8 @@ def _check_times_and_rest(rec: Recording, source: str) -> None:
 # ------------------------------------------------------------------------------ rosbag2
 def _stamp_seconds(msg: Any, log_time: int) -> float:
     header = getattr(msg, 'header', None)
-    if header is not None:
-        ns = int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
-        if ns:
-            return ns * 1e-9
-    return log_time * 1e-9
+    ns = log_time if header is None else stamp_nanoseconds_or(header.stamp, log_time)
+    return ns * 1e-9
 
 
 def _measured_array_of(msg: Any, n: int) -> FloatArray:

@@ -43,6 +43,7 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     measured_array,
 )
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
+from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameters import (
     ESTIMATOR_NODE_PARAMETERS,
     EstimatorNodeSettings,
@@ -138,7 +139,7 @@ class EstimatorNode(JointRestLengthTopic, StreamingNode):
         last = self._last.outputs
         snapshot = EstimatorInput(dict(self._readings), now,
                                   None if last is None else last.screw)
-        has_stamp = stamp is not None and (stamp.sec or stamp.nanosec)
+        has_stamp = stamp is not None and stamp_is_set(stamp)
         self._compute_and_publish(snapshot, stamp if has_stamp else None, f'~/{name}')
 
     def _measured(self, name: str, msg: Float64MultiArray) -> None:

@@ -29,6 +29,7 @@ from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.mechanics.chain import ChainState, solve_chain_equilibrium
 from tensegrity_stiffness.nodes.layouts import spine_output_layouts
+from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameters import (
     CHAIN_PARAMETERS,
     ParameterSpec,
@@ -132,7 +133,7 @@ class SpineNode(SpineRestLengthTopic, StreamingNode):
             self.reporter.reject('~/poses', str(exc))
             return
         stamp = msg.header.stamp
-        self._compute_and_publish(xi, stamp if stamp.sec or stamp.nanosec else None, '~/poses')
+        self._compute_and_publish(xi, stamp if stamp_is_set(stamp) else None, '~/poses')
 
     # ------------------------------------------------------------------ services
     @guarded_service('~/solve_equilibrium')

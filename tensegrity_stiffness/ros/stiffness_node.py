@@ -28,6 +28,7 @@ from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.health import joint_health
 from tensegrity_stiffness.nodes.layouts import joint_output_layouts
+from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameters import (
     STIFFNESS_NODE_PARAMETERS,
     JointNodeSettings,
@@ -131,7 +132,7 @@ class StiffnessNode(JointRestLengthTopic, StreamingNode):
             self.reporter.reject('~/pose', str(exc))
             return
         stamp = msg.header.stamp
-        self._compute_and_publish(xi, stamp if stamp.sec or stamp.nanosec else None,
+        self._compute_and_publish(xi, stamp if stamp_is_set(stamp) else None,
                                   '~/pose')
 
     # ------------------------------------------------------------------ services

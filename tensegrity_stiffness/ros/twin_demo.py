@@ -33,6 +33,7 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.nodes.messages import stamp_nanoseconds
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime.draining_subscription import create_draining_subscription
 from tensegrity_stiffness.ros.runtime.topics import output_qos
@@ -112,7 +113,7 @@ class Monitor:
     def _on_output(self, msg: Any) -> None:
         now = self.node.get_clock().now().nanoseconds
         stamp = msg.header.stamp
-        latency = (now - (stamp.sec * 1_000_000_000 + stamp.nanosec)) * 1e-9
+        latency = (now - stamp_nanoseconds(stamp)) * 1e-9
         with self._lock:
             self._latencies.append(latency)
 

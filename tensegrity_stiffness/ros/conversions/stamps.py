@@ -10,7 +10,11 @@ import math
 
 from builtin_interfaces.msg import Time
 
-from tensegrity_stiffness.nodes.messages import NANOSECONDS_PER_SECOND, stamp_parts
+from tensegrity_stiffness.nodes.messages import (
+    NANOSECONDS_PER_SECOND,
+    stamp_nanoseconds,
+    stamp_parts,
+)
 
 __all__ = [
     'NANOSECONDS_PER_SECOND',
@@ -44,7 +48,7 @@ def stamp_from_seconds(seconds: float) -> Time:
 
 def stamp_to_nanoseconds(stamp: Time) -> int:
     """Integer nanoseconds of a ``Time`` (exact)."""
-    return int(stamp.sec) * NANOSECONDS_PER_SECOND + int(stamp.nanosec)
+    return stamp_nanoseconds(stamp)
 
 
 def stamp_to_seconds(stamp: Time) -> float:
