@@ -93,6 +93,7 @@ from tensegrity_stiffness.mechanics.equilibrium import (
     solve_equilibrium,
 )
 from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.newton import damped_newton
 
 FloatArray = NDArray[np.float64]
 
@@ -703,42 +704,22 @@ class _Problem:
 
     def newton(self, x: FloatArray, scale: float, max_iterations: int, tolerance: float
                ) -> tuple[FloatArray, float, int]:
-        """Damped Newton on r(xi) with the analytic dr/dxi and a backtracking line search."""
-        got = self.evaluate(x, scale)
-        if got is None:
-            return x, math.inf, 0
-        state, r, D = got
-        norm = float(np.linalg.norm(r))
-        n = self.chain.n_joints
-        it = 0
-        for it in range(1, max_iterations + 1):
-            if norm <= tolerance or time.perf_counter() > self.deadline:
-                return x, norm, it - 1
+        """Damped Newton (:func:`.newton.damped_newton`) on r(xi) with the analytic dr/dxi."""
+
+        def evaluate(xi: FloatArray, tangent: bool
+                     ) -> tuple[FloatArray, tuple[ChainState, FloatArray | None]] | None:
+            got = self.evaluate(xi, scale, tangent)
+            return None if got is None else (got[1], (got[0], got[2]))
+
+        def jacobian(xi: FloatArray, context: tuple[ChainState, FloatArray | None]
+                     ) -> FloatArray:
+            state, D = context
             if D is None:
                 D = self.chain.equilibrium_system(state, scale * self.W, scale * self.g)[1]
-            A = self.chain.residual_screw_jacobian(D, x)
-            try:
-                step = np.linalg.solve(A, -r.ravel())
-            except np.linalg.LinAlgError:
-                step = np.linalg.lstsq(A, -r.ravel(), rcond=None)[0]
-            if not np.all(np.isfinite(step)):
-                break
-            step = _clip_steps(step.reshape(n, 6), self.lengths)
-            alpha = 1.0
-            accepted = False
-            for _ in range(30):
-                trial = _rechart(x + alpha * step)
-                got = self.evaluate(trial, scale, tangent=False)
-                if got is not None:
-                    trial_norm = float(np.linalg.norm(got[1]))
-                    if trial_norm < (1.0 - 1e-4 * alpha) * norm or trial_norm <= tolerance:
-                        accepted = True
-                        break
-                alpha *= 0.5
-            if not accepted:
-                break
-            x, (state, r, D), norm = trial, got, trial_norm
-        return x, norm, it
+            return self.chain.residual_screw_jacobian(D, xi)
+
+        return damped_newton(x, evaluate, jacobian, lambda step: _clip_steps(step, self.lengths),
+                             _rechart, tolerance, max_iterations, self.deadline)
 
     def joint_by_joint(self, x0: FloatArray, tolerance: float, max_iterations: int
                        ) -> tuple[FloatArray, float, int] | None:

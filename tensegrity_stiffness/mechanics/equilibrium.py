@@ -24,6 +24,7 @@ from scipy.optimize import least_squares
 
 from tensegrity_stiffness.geometry.screw import CHART_LIMIT, as_screws, log_se3
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
+from tensegrity_stiffness.mechanics.newton import damped_newton
 
 FloatArray = NDArray[np.float64]
 
@@ -128,44 +129,22 @@ def _rechart(xi: FloatArray) -> FloatArray:
 def _newton(model: JointModel, W: FloatArray, rest: FloatArray, x0: FloatArray,
             max_iterations: int, tolerance: float, deadline: float, min_iterations: int = 0
             ) -> tuple[FloatArray, float, int]:
-    """Damped Newton on r(xi) = F(xi) + W; the first ``min_iterations`` steps are taken
-    whatever the deadline. Returns (xi, |r|, iterations)."""
+    """Damped Newton (:func:`.newton.damped_newton`) on r(xi) = F(xi) + W with dr/dxi = K
+    (eq. 10); the first ``min_iterations`` steps are taken whatever the deadline. Returns
+    (xi, |r|, iterations)."""
     length = _length_scale(model, rest)
-    x = x0.copy()
-    state = model.evaluate(x, rest)
-    r = state.wrench + W
-    norm = float(np.linalg.norm(r))
-    it = 0
-    for it in range(1, max_iterations + 1):
-        if norm <= tolerance or (it > min_iterations and time.perf_counter() > deadline):
-            return x, norm, it - 1
-        K = state.stiffness
+
+    def evaluate(xi: FloatArray, tangent: bool) -> tuple[FloatArray, JointState] | None:
         try:
-            step = np.linalg.solve(K, -r)
-        except np.linalg.LinAlgError:
-            step = np.linalg.lstsq(K, -r, rcond=None)[0]
-        if not np.all(np.isfinite(step)):
-            break
-        step = _clip_step(step, length)
-        alpha = 1.0
-        accepted = False
-        for _ in range(30):
-            trial = _rechart(x + alpha * step)
-            try:
-                trial_state = model.evaluate(trial, rest)
-            except ValueError:  # a string collapsed to zero length: step too long
-                alpha *= 0.5
-                continue
-            trial_r = trial_state.wrench + W
-            trial_norm = float(np.linalg.norm(trial_r))
-            if trial_norm < (1.0 - 1e-4 * alpha) * norm or trial_norm <= tolerance:
-                accepted = True
-                break
-            alpha *= 0.5
-        if not accepted:
-            break
-        x, state, r, norm = trial, trial_state, trial_r, trial_norm
-    return x, norm, it
+            state = model.evaluate(xi, rest)
+        except ValueError:  # a string collapsed to zero length: step too long
+            return None
+        return state.wrench + W, state
+
+    start = model.evaluate(x0, rest)
+    return damped_newton(x0, evaluate, lambda xi, state: state.stiffness,
+                         lambda step: _clip_step(step, length), _rechart, tolerance,
+                         max_iterations, deadline, min_iterations, (start.wrench + W, start))
 
 
 def solve_equilibrium(
