@@ -71,16 +71,18 @@ class EstimatorInput:
     initial_screw: FloatArray | None = None
 
 
-def measured_array(values: FloatArray, n: int, name: str) -> FloatArray:
-    """A per-string reading: ``n`` values, finite or NaN (not measured), at least one
-    measured; ValueError naming ``name`` otherwise."""
+def measured_array(values: FloatArray, n: int, name: str, require_any: bool = True
+                   ) -> FloatArray:
+    """A per-string reading: ``n`` values, finite or NaN (not measured), at least one measured
+    when ``require_any``; ValueError naming ``name`` otherwise. The one check of measured
+    arrays, for the estimators' topics and the calibration's recordings."""
     arr = np.asarray(values, dtype=np.float64)
     if arr.shape != (n,):
         raise ValueError(f'{name}: expected {n} values (one per string, NaN = not measured), '
                          f'got {arr.size}')
     if np.any(np.isinf(arr)):
         raise ValueError(f'{name}: values must be finite or NaN (not measured), got inf')
-    if np.all(np.isnan(arr)):
+    if require_any and np.all(np.isnan(arr)):
         raise ValueError(f'{name}: every value is NaN (nothing measured)')
     return arr
 

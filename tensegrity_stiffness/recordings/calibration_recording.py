@@ -51,6 +51,7 @@ from tensegrity_stiffness.estimation.calibration import (
 )
 from tensegrity_stiffness.geometry.screw import log_so3_batch
 from tensegrity_stiffness.geometry.transforms import rigid_transform
+from tensegrity_stiffness.nodes.estimation_processing import measured_array
 from tensegrity_stiffness.nodes.messages import (
     DEFAULT_MAX_LENGTH,
     multiarray_payload,
@@ -279,17 +280,6 @@ def _stamp_seconds(msg: Any, log_time: int) -> float:
     return ns * 1e-9
 
 
-def _measured_array_of(msg: Any, n: int) -> FloatArray:
-    """A measured per-string array (NaN: not measured, so the payload as
-    :func:`messages.multiarray_payload` reads it, not the NaN-free ``multiarray_to_array``)."""
-    values = multiarray_payload(msg, max(n, DEFAULT_MAX_LENGTH))
-    if values.shape != (n,):
-        raise ValueError(f'expected {n} values, got {values.size}')
-    if np.isinf(values).any():
-        raise ValueError('values must be finite (NaN: not measured)')
-    return values
-
-
 def _wrench_of(msg: Any) -> FloatArray:
     f, m = msg.wrench.force, msg.wrench.torque
     values = np.array([f.x, f.y, f.z, m.x, m.y, m.z], dtype=np.float64)
@@ -371,8 +361,10 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
                     value = multiarray_to_array(msg, n_strings)
                     if np.any(value <= 0.0):
                         raise ValueError('rest lengths must be > 0')
-                else:
-                    value = _measured_array_of(msg, n_strings)
+                else:  # NaN: not measured, so the payload with NaN kept
+                    value = measured_array(multiarray_payload(
+                        msg, max(n_strings, DEFAULT_MAX_LENGTH)), n_strings, signal,
+                        require_any=False)
             except Exception:  # rosbags raises several types on corrupt CDR
                 skipped += 1
                 continue
