@@ -313,36 +313,24 @@ class JointModel:
             if arr.size == 1:
                 arr = np.full(n, arr[0])
             if arr.size != n:
-                raise ValueError(f'joint.{key} must have {n} values (one per string), '
+                raise ValueError(f'{key} must have {n} values (one per string), '
                                  f'got {arr.size}')
-            if np.any(np.isnan(arr)) or (not allow_empty and not np.all(np.isfinite(arr))):
-                raise ValueError(f'joint.{key} must be finite, got {arr.tolist()}')
             return arr
 
-        stiffness = per_string('stiffness', get('stiffness'))
-        if np.any(stiffness <= 0.0):
-            raise ValueError(f'joint.stiffness must be > 0, got {stiffness.tolist()}')
-        rest = per_string('rest_lengths', get('rest_lengths'))
-        if np.any(rest <= 0.0):
-            raise ValueError(f'joint.rest_lengths must be > 0, got {rest.tolist()}')
-        lmax = per_string('max_lengths', get('max_lengths', [], required=False), allow_empty=True)
-        if lmax is not None and np.any(lmax <= rest):
-            raise ValueError('joint.max_lengths must exceed joint.rest_lengths for every string')
-        law = str(get('force_law', 'hooke', required=False))
-        if law not in FORCE_LAWS:
-            raise ValueError(f'joint.force_law must be one of {FORCE_LAWS}, got {law!r}')
-        string_names = [str(x) for x in get('string_names', [], required=False)] or None
-        if string_names is not None and len(string_names) != n:
-            raise ValueError(f'joint.string_names must have {n} names, got {len(string_names)}')
         raw_x0 = np.asarray(get('initial_screw', [], required=False), dtype=np.float64).ravel()
-        if raw_x0.size not in (0, 6) or not np.all(np.isfinite(raw_x0)):
-            raise ValueError(f'joint.initial_screw must be empty or 6 finite values, '
-                             f'got {raw_x0.tolist()}')
-        if raw_x0.size and np.linalg.norm(raw_x0[:3]) >= CHART_LIMIT:
-            raise ValueError('joint.initial_screw must have |omega| < 2 pi')
-        return cls(p1, conn, stiffness, rest, link2_nodes=p2, max_lengths=lmax, force_law=law,
-                   node_names=names1, link2_node_names=names2, string_names=string_names,
-                   initial_screw=raw_x0 if raw_x0.size else None)
+        # The values are checked once, by the constructor; its errors name the argument, which
+        # is the config key.
+        try:
+            return cls(p1, conn, per_string('stiffness', get('stiffness')),
+                       per_string('rest_lengths', get('rest_lengths')), link2_nodes=p2,
+                       max_lengths=per_string('max_lengths', get('max_lengths', [],
+                                                                 required=False), True),
+                       force_law=str(get('force_law', 'hooke', required=False)),
+                       node_names=names1, link2_node_names=names2,
+                       string_names=[str(x) for x in get('string_names', [], required=False)]
+                       or None, initial_screw=raw_x0 if raw_x0.size else None)
+        except ValueError as exc:
+            raise ValueError(f'joint.{exc}') from None
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> JointModel:
