@@ -7,6 +7,7 @@ The twin publishes the truth on ``sim_node/pose``, which is remapped onto the in
 ``~/pose`` of ``stiffness_node``, so the whole loop runs without hardware; both read the same
 ``params_file`` (default: the installed ``config/default_joint.yaml``). ``swing_amplitude`` (N,
 default 0.1; 0: still) and ``swing_period`` (s, default 10) make the twin swing a load.
+``twin_spine.launch.py`` is the same for the spine (:data:`TWINS`, :func:`twin_description`).
 ``launch`` is not on PyPI: ``bash scripts/run_twin.sh`` starts the same pair (and prints a
 live summary); the test suite checks that this file compiles and names the installed
 executables and config.
@@ -23,34 +24,42 @@ from launch_ros.parameter_descriptions import ParameterValue
 
 PACKAGE = 'tensegrity_stiffness'
 EXECUTABLE = 'sim_node'
-PARTNER = 'stiffness_node'
-CONFIG = 'default_joint.yaml'
-#: The partner's input that the twin's truth feeds (relative: both nodes share the namespace).
-REMAPPING = ('~/pose', 'sim_node/pose')
+#: Per twin: the partner node, its packaged config, the partner's input that the twin's truth
+#: feeds (relative: both nodes share the namespace) and the default swing amplitude (N).
+TWINS = {
+    'joint': ('stiffness_node', 'default_joint.yaml', ('~/pose', 'sim_node/pose'), '0.1'),
+    'spine': ('spine_node', 'default_spine.yaml', ('~/poses', 'sim_node/poses'), '0.01'),
+}
 
 
-def generate_launch_description() -> LaunchDescription:
-    default_params = str(Path(get_package_share_directory(PACKAGE)) / 'config' / CONFIG)
+def twin_description(kind: str) -> LaunchDescription:
+    """The twin of ``kind`` (``'joint'`` or ``'spine'``) and its partner node."""
+    partner, config, remapping, swing = TWINS[kind]
+    default_params = str(Path(get_package_share_directory(PACKAGE)) / 'config' / config)
     params = LaunchConfiguration('params_file')
     return LaunchDescription([
         DeclareLaunchArgument('namespace', default_value='twin',
                               description='namespace of both nodes'),
         DeclareLaunchArgument('params_file', default_value=default_params,
                               description='ROS parameter file of the model (config/*.yaml)'),
-        DeclareLaunchArgument('swing_amplitude', default_value='0.1',
+        DeclareLaunchArgument('swing_amplitude', default_value=swing,
                               description='force of the swinging load, N (0: still)'),
         DeclareLaunchArgument('swing_period', default_value='10.0',
                               description='period of the swinging load, s'),
         Node(package=PACKAGE, executable=EXECUTABLE, name=EXECUTABLE,
              namespace=LaunchConfiguration('namespace'),
              parameters=[params, {
-                 'sim.spine': False,
+                 'sim.spine': kind == 'spine',
                  'load.swing_amplitude': ParameterValue(
                      LaunchConfiguration('swing_amplitude'), value_type=float),
                  'load.swing_period': ParameterValue(
                      LaunchConfiguration('swing_period'), value_type=float)}],
              output='screen', emulate_tty=True),
-        Node(package=PACKAGE, executable=PARTNER, name=PARTNER,
+        Node(package=PACKAGE, executable=partner, name=partner,
              namespace=LaunchConfiguration('namespace'), parameters=[params],
-             remappings=[REMAPPING], output='screen', emulate_tty=True),
+             remappings=[remapping], output='screen', emulate_tty=True),
     ])
+
+
+def generate_launch_description() -> LaunchDescription:
+    return twin_description('joint')

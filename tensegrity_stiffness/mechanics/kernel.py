@@ -66,6 +66,8 @@ _D = ctypes.c_double
 SERIES = np.ascontiguousarray(np.stack([
     screw._A_SERIES, screw._B_SERIES, screw._C_SERIES, screw._B1_SERIES, screw._C1_SERIES]))
 SERIES.flags.writeable = False
+#: File name of the C view of the constants every model passes (:func:`defaults_header`).
+DEFAULTS_HEADER = 'kernel_defaults.h'
 
 
 class KernelError(RuntimeError):
@@ -282,6 +284,40 @@ class JointKernel:
         """Pickled as its constants (a model sent to the solver worker process): the receiving
         process binds them to its own library, or gets ``None`` (numpy) without one."""
         return joint_kernel, (*self._arrays, self.law, self.min_string_length)
+
+
+def defaults_header() -> str:
+    """Text of ``kernel_defaults.h``: the constants every model of this package passes to the
+    kernel (:data:`SERIES`, ``screw.SERIES_THRESHOLD``, ``joint.MIN_STRING_LENGTH``) as exact
+    hexadecimal C literals, for C and C++ callers (``joint_kernel.hpp``).
+
+    The build writes it from this function (``cmake/kernel_defaults.py``), so the values have
+    their one home in the Python modules that the numpy path reads as well.
+    """
+    from tensegrity_stiffness.mechanics.joint import MIN_STRING_LENGTH  # joint imports kernel
+
+    rows, terms = SERIES.shape
+    values = [float(x).hex() for x in SERIES.ravel()]
+    table = ',\\\n'.join('  ' + ', '.join(values[i:i + 4]) for i in range(0, len(values), 4))
+    return f"""/* Generated at build time by cmake/kernel_defaults.py from
+ * tensegrity_stiffness.mechanics.kernel.defaults_header(): do not edit. The constants every
+ * tsk_joint_model of the Python package carries, from their one home: the Taylor tables and
+ * threshold of tensegrity_stiffness/geometry/screw.py and joint.MIN_STRING_LENGTH. */
+#ifndef TENSEGRITY_STIFFNESS__KERNEL_DEFAULTS_H_
+#define TENSEGRITY_STIFFNESS__KERNEL_DEFAULTS_H_
+
+/* Terms per row of the series table (tsk_joint_model.series_terms). */
+#define TSK_DEFAULT_SERIES_TERMS {terms}
+/* Initializer of the TSK_SERIES_ROWS ({rows}) x TSK_DEFAULT_SERIES_TERMS table, row-major:
+ * coefficients in theta^2 of a, b, c, b1, c1, highest power first. */
+#define TSK_DEFAULT_SERIES {{\\
+{table}}}
+/* tsk_joint_model.series_threshold (rad) and .min_string_length (m). */
+#define TSK_DEFAULT_SERIES_THRESHOLD {float(screw.SERIES_THRESHOLD).hex()}
+#define TSK_DEFAULT_MIN_STRING_LENGTH {float(MIN_STRING_LENGTH).hex()}
+
+#endif  /* TENSEGRITY_STIFFNESS__KERNEL_DEFAULTS_H_ */
+"""
 
 
 def joint_kernel(p1: NDArray, p2: NDArray, k: NDArray, max_stretch: NDArray, law: int,

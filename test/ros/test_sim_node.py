@@ -256,30 +256,37 @@ def test_run_twin_prints_summary_lines_and_stops_cleanly() -> None:
     assert 'stiffness_node exit 0, sim_node exit 0' in out.stdout
 
 
-@pytest.mark.parametrize(('launch_file', 'partner', 'config'), [
-    ('twin.launch.py', 'stiffness_node', 'default_joint.yaml'),
-    ('twin_spine.launch.py', 'spine_node', 'default_spine.yaml')])
-def test_twin_launch_files_name_the_installed_executables(launch_file, partner, config) -> None:
-    """``launch`` is not on PyPI: the file is compiled and read, not run (as
-    test_package_layout does for the node launch files)."""
+@pytest.mark.parametrize(('launch_file', 'kind', 'partner', 'config'), [
+    ('twin.launch.py', 'joint', 'stiffness_node', 'default_joint.yaml'),
+    ('twin_spine.launch.py', 'spine', 'spine_node', 'default_spine.yaml')])
+def test_twin_launch_files_name_the_installed_executables(launch_file, kind, partner,
+                                                          config) -> None:
+    """``launch`` is not on PyPI: the files are compiled and read, not run (as
+    test_package_layout does for the node launch files). Both twins are described by
+    ``twin.launch.py``'s table; ``twin_spine.launch.py`` asks it for the spine."""
     import ast
 
     from ament_index_python.packages import get_package_prefix
 
     prefix = Path(get_package_prefix('tensegrity_stiffness'))
-    installed = prefix / 'share' / 'tensegrity_stiffness' / 'launch' / launch_file
-    tree = ast.parse(installed.read_text())
-    compile(tree, str(installed), 'exec')
-    constants = {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
-                 if isinstance(node, ast.Assign) and isinstance(node.value, (ast.Constant,
-                                                                            ast.Tuple))}
-    assert constants['EXECUTABLE'] == 'sim_node' and constants['PARTNER'] == partner
+    launch = prefix / 'share' / 'tensegrity_stiffness' / 'launch'
+
+    def constants(name: str) -> dict:
+        tree = ast.parse((launch / name).read_text())
+        compile(tree, str(launch / name), 'exec')
+        return {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
+                if isinstance(node, ast.Assign) and isinstance(node.value, (
+                    ast.Constant, ast.Tuple, ast.Dict))}
+
+    table = constants('twin.launch.py')
+    assert constants(launch_file).get('KIND', 'joint') == kind
+    assert table['EXECUTABLE'] == 'sim_node' and table['TWINS'][kind][0] == partner
     for exe in ('sim_node', partner):
         assert (prefix / 'lib' / 'tensegrity_stiffness' / exe).is_file()
-    assert constants['CONFIG'] == config
+    assert table['TWINS'][kind][1] == config
     assert (prefix / 'share' / 'tensegrity_stiffness' / 'config' / config).is_file()
     topic = 'poses' if partner == 'spine_node' else 'pose'
-    assert constants['REMAPPING'] == (f'~/{topic}', f'sim_node/{topic}')
+    assert table['TWINS'][kind][2] == (f'~/{topic}', f'sim_node/{topic}')
 
 
 def test_imu_message_round_trip() -> None:
