@@ -80,7 +80,7 @@ def test_signal_stops_the_node_cleanly(sig: signal.Signals, to_group: bool) -> N
 INTERRUPTED_CONSTRUCTION = textwrap.dedent('''
     import importlib, os, signal, sys
     import rclpy
-    from tensegrity_stiffness.ros import runner
+    from tensegrity_stiffness.ros.runtime import runner
     module, name = sys.argv[1].rsplit('.', 1)
     node_class = getattr(importlib.import_module(module), name)
 
