@@ -646,3 +646,20 @@ def test_chain_modes_agree_with_the_chains_stability() -> None:
         res = solve_chain_equilibrium(chain, np.zeros(6), tolerance=1e-14)
         modes = ChainDynamics(chain, string_damping=0.2).modes(res.screws)
         assert modes.stable == res.stable == (scale == 1.0)
+
+
+def test_mode_figures_are_written(tmp_path: Path) -> None:
+    pytest.importorskip('matplotlib')
+    from tensegrity_stiffness.dynamics_plots import plot_joint_modes, plot_spine_modes
+
+    out = plot_joint_modes(MODEL, JointDynamics(MODEL, string_damping=0.5).modes(XI0),
+                           tmp_path / 'joint.png', width=600, height=400)
+    assert out.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    out = plot_spine_modes(CHAIN, ChainDynamics(CHAIN).modes(CHAIN.unloaded_screws()),
+                           tmp_path / 'spine.png', count=2, width=600, height=400)
+    assert out.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+    with pytest.raises(ValueError, match='count'):
+        plot_spine_modes(CHAIN, ChainDynamics(CHAIN).modes(CHAIN.unloaded_screws()),
+                         tmp_path / 'x.png', count=0)
+    with pytest.raises(ValueError, match='width'):
+        plot_joint_modes(MODEL, JointDynamics(MODEL).modes(XI0), tmp_path / 'x.png', width=5)
