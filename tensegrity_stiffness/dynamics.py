@@ -367,34 +367,57 @@ def _modes(A: FloatArray, twist_map: FloatArray, screw: FloatArray, damped: bool
     lam, vec = np.linalg.eig(A)
     scale = np.abs(lam)
     real = np.abs(lam.imag) <= REAL_TOLERANCE * np.maximum(scale, 1e-300)
-    picks: list[tuple[float, float, complex, ComplexArray]] = []
-    for k in np.flatnonzero(~real & (lam.imag > 0.0)):
-        w = abs(lam[k])
-        picks.append((w, -lam[k].real / w, lam[k], vec[:n, k]))
-    reals = np.flatnonzero(real)
-    order = reals[np.argsort(np.abs(lam[reals]))]
-    for a, b in zip(order[0::2], order[1::2], strict=False):
-        l1, l2 = lam[a].real, lam[b].real
-        w = math.sqrt(abs(l1 * l2))
-        zeta = -(l1 + l2) / (2.0 * w) if w > 0.0 else math.inf
-        picks.append((w, zeta, complex(l1), vec[:n, a]))
-    picks.sort(key=lambda p: p[0])
-    picks = picks[:n]
-    shapes = np.empty((len(picks), n), dtype=complex)
-    for k, (_, _, _, v) in enumerate(picks):
-        v = v / np.linalg.norm(v)
-        big = int(np.argmax(np.abs(v)))
-        shapes[k] = v * (abs(v[big]) / v[big])
+    upper = np.flatnonzero(~real & (lam.imag > 0.0))
+    w = scale[upper]
+    zeta = -lam.real[upper] / w
+    chosen = lam[upper]
+    shapes = vec[:n, upper].T
+    if upper.size < n:
+        # Real eigenvalues: overdamped (or unstable) pairs, by ascending |lambda|.
+        reals = np.flatnonzero(real)
+        order = reals[np.argsort(scale[reals])]
+        a, b = order[0::2], order[1::2]
+        l1, l2 = lam.real[a], lam.real[b]
+        wr = np.sqrt(np.abs(l1 * l2))
+        with np.errstate(divide='ignore', invalid='ignore'):
+            zr = np.where(wr > 0.0, -(l1 + l2) / (2.0 * wr), np.inf)
+        w, zeta = np.r_[w, wr], np.r_[zeta, zr]
+        chosen = np.r_[chosen, l1.astype(complex)]
+        shapes = np.vstack([shapes, vec[:n, a].T])
+    order = np.argsort(w, kind='stable')[:n]
+    w, zeta, chosen, shapes = w[order], zeta[order], chosen[order], shapes[order]
+    shapes = shapes / np.linalg.norm(shapes, axis=1, keepdims=True)
+    big = shapes[np.arange(shapes.shape[0]), np.argmax(np.abs(shapes), axis=1)]
+    shapes = shapes * (np.abs(big) / big)[:, None]
     if damped:
         stable = bool(np.all(lam.real < 0.0))
     else:
-        # Undamped: eigenvalues +-i w; stable when -A21 has only positive real eigenvalues.
-        ev = np.linalg.eigvals(-A[n:, :n])
-        stable = bool(np.all(np.abs(ev.imag) <= REAL_TOLERANCE * np.abs(ev)) and
-                      np.all(ev.real > 0.0))
-    return JointModes(np.array([p[0] for p in picks]) / (2.0 * math.pi),
-                      np.array([p[1] for p in picks]), np.array([p[2] for p in picks]),
-                      shapes, (twist_map @ shapes.T).real.T, stable, screw)
+        # Undamped: stable when every eigenvalue is +-i w with w > 0 (a constant wrench is not
+        # conservative on SE(3), so a loaded joint can also flutter: Re > 0 in a complex pair).
+        stable = bool(np.all(np.abs(lam.real) <= REAL_TOLERANCE * scale) and np.all(scale > 0.0))
+    return JointModes(w / (2.0 * math.pi), zeta, chosen, shapes, (twist_map @ shapes.T).real.T,
+                      stable, screw)
+
+
+def _undamped_modes(A21: FloatArray, twist_map: FloatArray, screw: FloatArray) -> JointModes:
+    """Modes without damping from the half-size problem: ``A`` has the eigenvalues
+    ``+-sqrt(mu)`` with ``mu`` those of ``A21`` (same shapes), so a 6x6 (6N x 6N) eigenproblem
+    replaces the 12x12 one. (Kept lean: this is the node's per-input path.)"""
+    mu, vec = np.linalg.eig(A21)
+    lam = 1j * np.sqrt(-mu + 0j)  # the root with Im >= 0: i w for mu = -w^2
+    w = np.abs(lam)
+    order = np.argsort(w)
+    lam, w = lam[order], w[order]
+    shapes = vec.T[order]  # unit norm from LAPACK
+    big = shapes[np.arange(order.size), np.argmax(np.abs(shapes), axis=1)]
+    shapes = (shapes * (np.abs(big) / big)[:, None]).astype(complex)
+    if np.isrealobj(mu):
+        stable = bool(np.all(mu < 0.0))
+    else:
+        stable = bool(np.all(np.abs(mu.imag) <= REAL_TOLERANCE * np.abs(mu)) and
+                      np.all(mu.real < 0.0))
+    return JointModes(w / (2.0 * math.pi), -lam.real / w, lam, shapes,
+                      (twist_map @ shapes.T).real.T, stable, screw)
 
 
 # ---------------------------------------------------------------------------- the joint
@@ -431,6 +454,11 @@ class JointDynamics:
         self.string_damping = _string_damping(string_damping, model.n_strings)
         self.spatial_inertia = inertia.spatial_inertia(model.link2_nodes)
         self._p1 = model.link1_nodes[model.connections[:, 0]]
+        # Permuted link-1 nodes for p1 x u without np.cross (a hot path of modes).
+        self._p1_yzx = np.ascontiguousarray(self._p1[:, [1, 2, 0]])
+        self._p1_zxy = np.ascontiguousarray(self._p1[:, [2, 0, 1]])
+        self._yzx = np.array([1, 2, 0])
+        self._zxy = np.array([2, 0, 1])
 
     @property
     def damped(self) -> bool:
@@ -458,10 +486,16 @@ class JointDynamics:
         return self._length_jacobian(state.string_vectors, state.lengths,
                                      ScrewKinematics(x).J)
 
-    def _length_jacobian(self, s: FloatArray, lengths: FloatArray, Jl: FloatArray) -> FloatArray:
+    def _unit_wrenches(self, s: FloatArray, lengths: FloatArray) -> FloatArray:
+        """(n, 6) ``[p1_j x u_j, u_j]`` (``[m; f]``): each string's wrench per newton."""
         u = s / lengths[:, None]
-        w = np.concatenate([np.cross(self._p1, u), u], axis=1)  # [m; f] per string
-        return -w @ Jl
+        out = np.empty((u.shape[0], 6))
+        out[:, :3] = self._p1_yzx * u[:, self._zxy] - self._p1_zxy * u[:, self._yzx]
+        out[:, 3:] = u
+        return out
+
+    def _length_jacobian(self, s: FloatArray, lengths: FloatArray, Jl: FloatArray) -> FloatArray:
+        return -self._unit_wrenches(s, lengths) @ Jl
 
     def _rest(self, rest_lengths: ArrayLike | None) -> FloatArray:
         return self.model.validate_rest_lengths(rest_lengths, batched=False)
@@ -512,8 +546,9 @@ class JointDynamics:
         rhs = self._force(state, Jl, W, r) - self._coriolis(x, r, Jb)
         return np.linalg.solve(M, rhs)
 
-    def _rest_derivative(self, state: Any, rest: FloatArray) -> FloatArray:
-        """``dF/dl0`` (6, n) ``[f; m]``: ``dt_j/dl0_j`` times the unit wrench of string j."""
+    def _rest_derivative(self, state: Any, rest: FloatArray,
+                         unit: FloatArray | None = None) -> FloatArray:
+        """``Pi dF/dl0`` (6, n) ``[m; f]``: ``dt_j/dl0_j`` times the unit wrench of string j."""
         model = self.model
         slack, sat = state.slack, state.saturated
         taut = ~(slack | sat)
@@ -523,9 +558,9 @@ class JointDynamics:
             lmax = rest + model.max_stretch
             dt = np.where(taut, -model.k / state.lengths,
                           np.where(sat, -model.k * model.max_stretch / lmax ** 2, 0.0))
-        u = state.string_vectors / state.lengths[:, None]
-        w = np.concatenate([u, np.cross(self._p1, u)], axis=1)  # [f; m]
-        return (w * dt[:, None]).T
+        if unit is None:
+            unit = self._unit_wrenches(state.string_vectors, state.lengths)
+        return (unit * dt[:, None]).T
 
     def linearize(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None,
                   external_wrench: ArrayLike | None = None) -> tuple[FloatArray, FloatArray]:
@@ -536,43 +571,66 @@ class JointDynamics:
         x = _screw(xi)
         W = _six(external_wrench, 'external_wrench')
         rest = self._rest(rest_lengths)
+        blocks = self._blocks(x, rest, W, inputs=True)
+        n = self.model.n_strings
+        A = np.zeros((12, 12))
+        A[:6, 6:] = np.eye(6)
+        A[6:, :6] = blocks[0]
+        A[6:, 6:] = blocks[1]
+        B = np.zeros((12, n + 6))
+        B[6:] = blocks[2]
+        return A, B
+
+    def _blocks(self, x: FloatArray, rest: FloatArray, W: FloatArray, inputs: bool
+                ) -> tuple[FloatArray, FloatArray, FloatArray | None, FloatArray]:
+        """``M^-1 dQ/dxi``, ``-M^-1 L^T C L``, ``M^-1 [dQ/dl0, dQ/dW]`` (or None) and ``J_l``:
+        one linear solve for all of them."""
         state = self.model.evaluate(x, rest)
-        _, Jl, Jb = self._kinematics(x)
+        Jl = ScrewKinematics(x).J
+        Jb = ScrewKinematics(-x).J
         G = self.spatial_inertia
         M = Jb.T @ G @ Jb
         net = state.wrench + W
         JlT_Pi = Jl.T[:, _SWAP]
-        dQ = JlT_Pi @ state.stiffness
         n = self.model.n_strings
-        tol = EQUILIBRIUM_TOLERANCE * max(float(np.max(state.tensions, initial=0.0)), 1e-300)
-        rhs_extra = None
-        if np.max(np.abs(net)) > tol:
+        damped = self.damped
+        unit = self._unit_wrenches(state.string_vectors, state.lengths) \
+            if damped or inputs else None
+        parts = [JlT_Pi @ state.stiffness]
+        tol = EQUILIBRIUM_TOLERANCE * max(float(state.tensions.max(initial=0.0)), 1e-300)
+        if float(abs(net).max()) > tol:
             dJl, dJb = jacobian_derivatives(x)
             acc = np.linalg.solve(M, JlT_Pi @ net)
-            rhs_extra = np.empty((6, 6))
+            extra = np.empty((6, 6))
             for i in range(6):
                 dM = dJb[i].T @ G @ Jb + Jb.T @ G @ dJb[i]
-                rhs_extra[:, i] = dJl[i].T @ net[_SWAP] - dM @ acc
-        Minv = np.linalg.inv(M)
-        A = np.zeros((12, 12))
-        A[:6, 6:] = np.eye(6)
-        A[6:, :6] = Minv @ (dQ if rhs_extra is None else dQ + rhs_extra)
-        if self.damped:
-            L = self._length_jacobian(state.string_vectors, state.lengths, Jl)
-            A[6:, 6:] = -Minv @ (L.T * self.string_damping) @ L
-        B = np.zeros((12, n + 6))
-        MJ = Minv @ JlT_Pi
-        B[6:, :n] = MJ @ self._rest_derivative(state, rest)
-        B[6:, n:] = MJ
-        return A, B
+                extra[:, i] = dJl[i].T @ net[_SWAP] - dM @ acc
+            parts[0] = parts[0] + extra
+        if damped:
+            L = -unit @ Jl
+            parts.append(-(L.T * self.string_damping) @ L)
+        if inputs:
+            parts.append(Jl.T @ self._rest_derivative(state, rest, unit))
+            parts.append(JlT_Pi)
+        solved = np.linalg.solve(M, np.concatenate(parts, axis=1))
+        dxi = solved[:, :6]
+        ddot = solved[:, 6:12] if damped else np.zeros((6, 6))
+        k = 12 if damped else 6
+        return dxi, ddot, (solved[:, k:k + n + 6] if inputs else None), Jl
 
     def modes(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None,
               external_wrench: ArrayLike | None = None) -> JointModes:
         """The 6 modes of :meth:`linearize` at ``xi`` (an equilibrium of ``rest_lengths`` and
         ``external_wrench``): see :class:`JointModes`; twists ``Pi J_l shape`` in {1}."""
         x = _screw(xi)
-        A, _ = self.linearize(x, rest_lengths, external_wrench)
-        Jl = ScrewKinematics(x).J
+        W = _six(external_wrench, 'external_wrench')
+        A21, A22, _, Jl = self._blocks(x, self._rest(rest_lengths), W, inputs=False)
+        if not self.damped:
+            return _undamped_modes(A21, Jl[_SWAP], x)
+        A = np.zeros((12, 12))
+        A[:6, 6:] = np.eye(6)
+        A[6:, :6] = A21
+        A[6:, 6:] = A22
         return _modes(A, Jl[_SWAP], x, self.damped)
 
     def frequency_response(self, xi: ArrayLike, frequencies_hz: ArrayLike,
@@ -792,8 +850,7 @@ class ChainDynamics:
             Jl = ScrewKinematics(xi[i]).J
             blk = slice(6 * i, 6 * i + 6)
             JT[blk, blk] = Jl.T[:, _SWAP]
-            dQdl[blk, starts[i]:starts[i + 1]] = JT[blk, blk] @ jd._rest_derivative(
-                states[i], rest[i])
+            dQdl[blk, starts[i]:starts[i + 1]] = Jl.T @ jd._rest_derivative(states[i], rest[i])
             dQdW[blk] = JT[blk, blk] @ Ad[i].T
             if jd.damped:
                 L = jd._length_jacobian(states[i].string_vectors, states[i].lengths, Jl)
@@ -813,7 +870,10 @@ class ChainDynamics:
         xi = self._screws(screws)
         A, _ = self.linearize(xi, rest_lengths, tip_wrench)
         twist = scipy.linalg.block_diag(*[ScrewKinematics(x).J[_SWAP] for x in xi])
-        return _modes(A, twist, xi, self.damped)
+        if not self.damped:
+            m = 6 * self.n_joints
+            return _undamped_modes(A[m:, :m], twist, xi)
+        return _modes(A, twist, xi, True)
 
     def tip_frequency_response(self, screws: ArrayLike, frequencies_hz: ArrayLike,
                                rest_lengths: Any = None, tip_wrench: ArrayLike | None = None
