@@ -932,3 +932,54 @@ def modes_report(modes: JointModes, inertias: Sequence[LinkInertia] | None = Non
     if string_damping is not None:
         out['string_damping'] = np.asarray(string_damping, dtype=float).tolist()
     return out
+
+
+def format_modes(modes: JointModes) -> str:
+    """A text table of the modes (frequency, damping ratio, dominant twist component)."""
+    names = ('dv_x', 'dv_y', 'dv_z', 'dw_x', 'dw_y', 'dw_z')
+    lines = ['mode  frequency (Hz)  damping ratio  dominant twist component',
+             *(f'{k + 1:4d}  {modes.frequencies[k]:14.4f}  {modes.damping_ratios[k]:13.4f}  '
+               f'{_dominant(modes.twists[k], names)}' for k in range(len(modes.frequencies))),
+             f'stable: {"yes" if modes.stable else "NO"}']
+    return '\n'.join(lines)
+
+
+def _dominant(twist: FloatArray, names: Sequence[str]) -> str:
+    k = int(np.argmax(np.abs(twist)))
+    prefix = '' if twist.size == 6 else f'joint {k // 6 + 1} '
+    return prefix + names[k % 6]
+
+
+def modes_from_config(config_path: Any = None, spine: bool = False,
+                      string_damping: ArrayLike | None = None
+                      ) -> tuple[JointModes, dict[str, Any]]:
+    """The modes of a config file's joint (``spine``: spine) at its unloaded equilibrium, and
+    their :func:`modes_report`: what ``tensegrity-stiffness modes`` prints. Default config: the
+    packaged one. Inertia: :meth:`LinkInertia.from_config` of the ``joint`` section (spine:
+    :func:`chain_inertias_from_config`); ``string_damping`` (N s/m) default: the config's
+    ``dynamics.string_damping`` or 0. ValueError names a bad field."""
+    from pathlib import Path
+
+    from tensegrity_stiffness.chain import DEFAULT_SPINE_CONFIG
+    from tensegrity_stiffness.equilibrium import solve_equilibrium
+
+    name = DEFAULT_SPINE_CONFIG if spine else config.DEFAULT_JOINT_CONFIG
+    path = Path(config_path) if config_path else config.packaged_config_path(name)
+    document = config.load_yaml(path)
+    if string_damping is None:
+        section = config.section(document, 'dynamics', required=False)
+        string_damping = section.get('string_damping', 0.0) or 0.0
+    if spine:
+        chain = JointChain.from_dict(document)
+        inertias = chain_inertias_from_config(document)
+        dyn = ChainDynamics(chain, inertias, string_damping)
+        modes = dyn.modes(chain.unloaded_screws())
+        return modes, modes_report(modes, inertias, None)
+    model = JointModel.from_dict(config.section(document, 'joint'))
+    inertia = LinkInertia.from_config(config.section(document, 'joint'))
+    jd = JointDynamics(model, inertia, string_damping)
+    res = solve_equilibrium(model, np.zeros(6))
+    if not res.success:
+        raise ValueError(f'config {path}: no unloaded equilibrium ({res.message})')
+    modes = jd.modes(res.screw)
+    return modes, modes_report(modes, [inertia], jd.string_damping)

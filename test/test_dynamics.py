@@ -29,7 +29,9 @@ from tensegrity_stiffness.dynamics import (
     body_jacobian_rate,
     chain_inertias_from_config,
     default_inertia_moments,
+    format_modes,
     jacobian_derivatives,
+    modes_from_config,
     modes_report,
     twin_link_inertias,
 )
@@ -662,3 +664,25 @@ def test_mode_figures_are_written(tmp_path: Path) -> None:
                          tmp_path / 'x.png', count=0)
     with pytest.raises(ValueError, match='width'):
         plot_joint_modes(MODEL, JointDynamics(MODEL).modes(XI0), tmp_path / 'x.png', width=5)
+
+
+def test_modes_from_config_and_table(tmp_path: Path) -> None:
+    import yaml
+
+    modes, report = modes_from_config()
+    np.testing.assert_allclose(modes.frequencies, JointDynamics(MODEL).modes(XI0).frequencies,
+                               rtol=1e-12)
+    assert json.loads(json.dumps(report))['inertias'][0]['mass'] == DEFAULT_LINK_MASS
+    table = format_modes(modes)
+    assert table.count('\n') == 7 and 'stable: yes' in table
+    document = yaml.safe_load(JOINT_CONFIG.read_text())
+    document['/**']['ros__parameters']['joint']['link2_mass'] = 0.005
+    document['/**']['ros__parameters']['dynamics'] = {'string_damping': 0.5}
+    path = tmp_path / 'joint.yaml'
+    path.write_text(yaml.safe_dump(document))
+    light, report = modes_from_config(path)
+    np.testing.assert_allclose(light.frequencies, JointDynamics(
+        MODEL, LinkInertia(0.005), 0.5).modes(XI0).frequencies, rtol=1e-12)
+    assert report['string_damping'] == [0.5] * 12
+    spine, report = modes_from_config(spine=True)
+    assert spine.frequencies.shape == (30,) and 'joint 1' in format_modes(spine)
