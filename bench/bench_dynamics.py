@@ -105,13 +105,14 @@ def main() -> None:
     print(f'numpy {np.__version__}; repeat {repeat} x {number} calls, best mean per call\n')
 
     print('joint (default, twin inertia, string damping 0.5 N s/m)')
-    mm, acc0, acc, lin, modes, modes0, lin_off = side_by_side([
+    mm, acc0, acc, lin, modes, modes0, pose, lin_off = side_by_side([
         lambda: dyn.mass_matrix(xi),
         lambda: dyn.acceleration(xi, np.zeros(6)),
         lambda: dyn.acceleration(xi, rate),
         lambda: dyn.linearize(xi),
         lambda: dyn.modes(xi),
         lambda: undamped.modes(xi),
+        lambda: dyn.modes_at_pose(off),
         lambda: dyn.linearize(off)], repeat, max(number // 10, 20))
     cd_number = max(number // 200, 5)
     cd_lin, cd_modes = side_by_side([
@@ -125,6 +126,7 @@ def main() -> None:
     print(f'  {"modes at the equilibrium":36s} {modes:9.1f} us   (target <= 100 us)   '
           f'central differences + eig {cd_modes:9.1f} us ({cd_modes / modes:.0f}x)')
     print(f'  {"modes without damping (6x6 eig)":36s} {modes0:9.1f} us')
+    print(f'  {"modes_at_pose, off equilibrium":36s} {pose:9.1f} us')
     print(f'  {"linearize off equilibrium":36s} {lin_off:9.1f} us')
     A = np.random.default_rng(0).normal(size=(12, 12))
     eig12, eig6 = side_by_side([lambda: np.linalg.eig(A), lambda: np.linalg.eig(A[:6, :6])],

@@ -633,6 +633,17 @@ class JointDynamics:
         A[6:, 6:] = A22
         return _modes(A, Jl[_SWAP], x, self.damped)
 
+    def modes_at_pose(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None
+                      ) -> tuple[JointModes, FloatArray]:
+        """The modes of the joint held at ``xi`` by the load that balances it there,
+        ``W = -F(xi)`` (every pose is the equilibrium of that load): what a node streaming
+        measured poses can publish at the cost of an equilibrium (no derivatives of ``J`` and
+        ``M``). Returns the modes and that wrench (6,) ``[f; m]`` in {1}."""
+        x = _screw(xi)
+        rest = self._rest(rest_lengths)
+        W = -self.model.evaluate(x, rest).wrench
+        return self.modes(x, rest, W), W
+
     def frequency_response(self, xi: ArrayLike, frequencies_hz: ArrayLike,
                            rest_lengths: ArrayLike | None = None,
                            external_wrench: ArrayLike | None = None) -> ComplexArray:

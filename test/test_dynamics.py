@@ -686,3 +686,14 @@ def test_modes_from_config_and_table(tmp_path: Path) -> None:
     assert report['string_damping'] == [0.5] * 12
     spine, report = modes_from_config(spine=True)
     assert spine.frequencies.shape == (30,) and 'joint 1' in format_modes(spine)
+
+
+def test_modes_at_a_pose_are_those_of_its_balancing_load() -> None:
+    dyn = JointDynamics(MODEL, GENERAL, 0.3)
+    xi = XI0 + np.r_[0.04, -0.03, 0.02, 0.001, 0.002, -0.001]
+    modes, W = dyn.modes_at_pose(xi)
+    np.testing.assert_allclose(W, -MODEL.wrench(xi), rtol=1e-14)
+    res = solve_equilibrium(MODEL, W, initial_screw=xi, tolerance=1e-14)
+    np.testing.assert_allclose(res.screw, xi, atol=1e-12)
+    np.testing.assert_allclose(modes.frequencies, dyn.modes(res.screw, external_wrench=W
+                                                            ).frequencies, rtol=1e-9)
