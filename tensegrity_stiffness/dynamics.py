@@ -61,7 +61,7 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.chain import JointChain
+from tensegrity_stiffness.chain import JointChain, adjoint
 from tensegrity_stiffness.joint import JointModel
 from tensegrity_stiffness.screw import ScrewKinematics, check_in_chart, hat, hat3, vee
 from tensegrity_stiffness.validation import finite_array
@@ -451,7 +451,9 @@ class JointDynamics:
             raise ValueError(f'inertia must be a LinkInertia, got {type(inertia).__name__}')
         self.model = model
         self.inertia = inertia
-        self.string_damping = _string_damping(string_damping, model.n_strings)
+        self._string_damping = _string_damping(string_damping, model.n_strings)
+        self._string_damping.flags.writeable = False
+        self._damped = bool(np.any(self._string_damping > 0.0))
         self.spatial_inertia = inertia.spatial_inertia(model.link2_nodes)
         self._p1 = model.link1_nodes[model.connections[:, 0]]
         # Permuted link-1 nodes for p1 x u without np.cross (a hot path of modes).
@@ -461,9 +463,14 @@ class JointDynamics:
         self._zxy = np.array([2, 0, 1])
 
     @property
+    def string_damping(self) -> FloatArray:
+        """(n,) N s/m per string (read-only)."""
+        return self._string_damping
+
+    @property
     def damped(self) -> bool:
         """Whether any string has damping."""
-        return bool(np.any(self.string_damping > 0.0))
+        return self._damped
 
     # -- kinematics
     def _kinematics(self, xi: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
@@ -612,7 +619,8 @@ class JointDynamics:
         if inputs:
             parts.append(Jl.T @ self._rest_derivative(state, rest, unit))
             parts.append(JlT_Pi)
-        solved = np.linalg.solve(M, np.concatenate(parts, axis=1))
+        solved = np.linalg.solve(M, parts[0] if len(parts) == 1 else
+                                 np.concatenate(parts, axis=1))
         dxi = solved[:, :6]
         ddot = solved[:, 6:12] if damped else np.zeros((6, 6))
         k = 12 if damped else 6
@@ -913,8 +921,6 @@ def _chain_rest(chain: JointChain, rest_lengths: Any) -> list[FloatArray]:
 
 def _chain_adjoints(chain: JointChain, xi: FloatArray) -> FloatArray:
     """``Ad_{P_i}`` (N, 6, 6) of the joints' frames {1}_i in the base (twists [v; w])."""
-    from tensegrity_stiffness.chain import adjoint
-
     state = chain.evaluate(xi)
     return adjoint(state.joint_frames)
 

@@ -347,18 +347,24 @@ def test_modes_solve_the_eigenproblem(damping: float) -> None:
         assert np.all(modes.damping_ratios > 0.0)
 
 
-def test_modes_flag_an_unstable_equilibrium() -> None:
-    """A joint with every rest length stretched to slack strings' edge: the library's own
-    stability (symmetric part of K_c) and the modes agree."""
-    from tensegrity_stiffness.equilibrium import is_stable
+#: Starting points from which the solver finds unstable unloaded equilibria of the default joint
+#: (slack strings; found by a seeded search), and the stable default.
+UNSTABLE_STARTS = [np.array([0.251, -0.264, 1.281, 0.003, -0.016, 0.011]),
+                   np.array([2.608, 1.894, -1.407, -0.038, -0.019, 0.001]),
+                   np.array([0.823, 2.085, -0.257, 0.041, -0.02, 0.011])]
 
-    for scale in (1.0, 1.5):
-        rest = MODEL.rest_lengths * scale
-        res = solve_equilibrium(MODEL, np.zeros(6), rest)
-        if not res.success:
-            continue
-        modes = JointDynamics(MODEL).modes(res.screw, rest)
-        assert modes.stable == is_stable(res.state.cartesian_stiffness)
+
+@pytest.mark.parametrize('damping', [0.0, 0.3])
+def test_modes_flag_unstable_equilibria(damping: float) -> None:
+    """The modes' stability equals the library's (symmetric part of K_c) at unstable
+    equilibria and at the stable default, damped or not."""
+    dyn = JointDynamics(MODEL, GENERAL, damping)
+    for start in [*UNSTABLE_STARTS, MODEL.initial_screw]:
+        res = solve_equilibrium(MODEL, np.zeros(6), initial_screw=start)
+        assert res.success
+        modes = dyn.modes(res.screw)
+        assert modes.stable == res.stable
+        assert res.stable == (start is MODEL.initial_screw)
 
 
 def test_frequency_response_at_zero_is_the_compliance() -> None:

@@ -20,6 +20,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from scipy.optimize import linear_sum_assignment
 
 from tensegrity_stiffness.chain import JointChain, solve_chain_equilibrium
 from tensegrity_stiffness.dynamics import (
@@ -64,12 +65,12 @@ def with_inertia(sim: JointSimulation, inertia: LinkInertia, nodes: np.ndarray
                  ) -> SimpleNamespace:
     """MuJoCo's model of ``sim`` rebuilt from its MJCF with link 2's ``inertial`` replaced by
     ``inertia`` (centre of mass and full inertia matrix: MuJoCo's ``fullinertia``)."""
-    I = inertia.inertia_matrix(nodes)
+    inertia_matrix = inertia.inertia_matrix(nodes)
 
     def text(values: object) -> str:
         return ' '.join(repr(float(v)) for v in values)
 
-    full = text((I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2]))
+    full = text(inertia_matrix[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]])
     element = (f'<inertial pos="{text(inertia.com)}" mass="{inertia.mass!r}" '
                f'fullinertia="{full}" />')
     xml, count = re.subn(r'<inertial [^>]*/>', element, sim.mjcf)
@@ -249,15 +250,15 @@ def test_joint_free_response_rings_at_the_predicted_frequencies() -> None:
     """The twin pushed along each mode (a velocity of 1e-3 times the mode shape), undamped,
     8 s at 10 kHz: its velocity spectrum peaks at that mode's frequency."""
     dt, duration = 1e-4, 8.0
-    sim, body, dof = joint_twin(0.0, None, timestep=dt, integrator='Euler')
+    sim, _, _ = joint_twin(0.0, None, timestep=dt, integrator='Euler')
     dyn = JointDynamics(MODEL)
     xi = MODEL.initial_screw
     modes = dyn.modes(xi)
-    steps = int(round(duration / dt))
+    steps = round(duration / dt)
     for k in range(6):
         sim.set_screw(xi)
         rate = 1e-3 * modes.shapes[k].real / np.abs(modes.shapes[k].real).max()
-        qpos, qvel = joint_qpos(xi, rate)
+        _, qvel = joint_qpos(xi, rate)
         sim.mj_data.qvel[:] = qvel
         mujoco.mj_forward(sim.mj_model, sim.mj_data)
         record = np.empty((steps, 6))
@@ -344,16 +345,16 @@ def test_chain_free_response_rings_at_the_predicted_frequencies() -> None:
     """The spine twin pushed along a few of its modes (slowest, a middle and a fast one),
     undamped: the velocity spectrum peaks at each mode's frequency."""
     dt = 2e-4
-    sim, body, dof = chain_twin(CHAIN, 0.0, timestep=dt, integrator='Euler')
+    sim, _, _ = chain_twin(CHAIN, 0.0, timestep=dt, integrator='Euler')
     dyn = ChainDynamics(CHAIN)
     xi = CHAIN.unloaded_screws()
     modes = dyn.modes(xi)
     for k in (0, 2, 8, 16):
         duration = 400.0 / modes.frequencies[0] if k == 0 else 8.0
-        steps = int(round(duration / dt))
+        steps = round(duration / dt)
         sim.set_screws(xi)
         shape = modes.shapes[k].real.reshape(5, 6)
-        qpos, qvel = chain_qpos(dyn, xi, 1e-3 * shape / np.abs(shape).max())
+        _, qvel = chain_qpos(dyn, xi, 1e-3 * shape / np.abs(shape).max())
         sim.mj_data.qvel[:] = qvel
         mujoco.mj_forward(sim.mj_model, sim.mj_data)
         record = np.empty((steps, 30))
@@ -363,3 +364,23 @@ def test_chain_free_response_rings_at_the_predicted_frequencies() -> None:
         peak = spectral_peak(record, dt, modes.frequencies[k])
         assert abs(peak - modes.frequencies[k]) <= PEAK_TOLERANCE * modes.frequencies[k], \
             (k, peak, modes.frequencies[k])
+
+
+@pytest.mark.parametrize('damping', [0.0, 0.3])
+def test_joint_unstable_equilibrium_is_unstable_in_the_twin(damping: float) -> None:
+    """At an unstable equilibrium (slack strings) every eigenvalue of the library's linear
+    model is the linearised twin's, including the one with Re > 0."""
+    start = np.array([2.608, 1.894, -1.407, -0.038, -0.019, 0.001])
+    res = solve_equilibrium(MODEL, np.zeros(6), initial_screw=start, tolerance=1e-13)
+    assert res.success and not res.stable
+    sim, body, dof = joint_twin(damping)
+    qpos, _ = joint_qpos(res.screw, np.zeros(6))
+    twin = twin_eigenvalues(sim, qpos, np.zeros(6), body, dof)
+    dyn = JointDynamics(MODEL, None, damping)
+    A, _ = dyn.linearize(res.screw)
+    library = np.linalg.eigvals(A)
+    # Pair each eigenvalue with its nearest (an assignment: sorting complex numbers is fragile).
+    rows, cols = linear_sum_assignment(np.abs(library[:, None] - twin[None, :]))
+    np.testing.assert_allclose(library[rows], twin[cols], rtol=0.0,
+                               atol=FREQUENCY_TOLERANCE * np.abs(twin).max())
+    assert twin.real.max() > 0.0 and not dyn.modes(res.screw).stable
