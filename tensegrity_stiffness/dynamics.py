@@ -339,6 +339,15 @@ def chain_inertias_from_config(document: Any) -> list[LinkInertia]:
         raise ValueError(f'chain.link_inertias: {exc}') from None
 
 
+def _config_damping(document: Any) -> Any:
+    """``dynamics.string_damping`` of a config document (N s/m), 0 when absent."""
+    value = config.section(document, 'dynamics', required=False).get('string_damping')
+    if value is None or (isinstance(value, Sequence) and not isinstance(value, str) and
+                         len(value) == 0):
+        return 0.0
+    return value
+
+
 # ---------------------------------------------------------------------------- modes
 @dataclass(frozen=True, eq=False)
 class JointModes:
@@ -461,6 +470,18 @@ class JointDynamics:
         self._p1_zxy = np.ascontiguousarray(self._p1[:, [2, 0, 1]])
         self._yzx = np.array([1, 2, 0])
         self._zxy = np.array([2, 0, 1])
+
+    @classmethod
+    def from_config(cls, document: Any, string_damping: ArrayLike | None = None
+                    ) -> JointDynamics:
+        """From a joint config document (``config/default_joint.yaml``): the ``joint``
+        section's model and :meth:`LinkInertia.from_config`; ``string_damping`` (N s/m) default:
+        ``dynamics.string_damping`` (scalar or one per string) or 0."""
+        section = config.section(document, 'joint')
+        if string_damping is None:
+            string_damping = _config_damping(document)
+        return cls(JointModel.from_dict(section), LinkInertia.from_config(section),
+                   string_damping)
 
     @property
     def string_damping(self) -> FloatArray:
@@ -716,6 +737,16 @@ class ChainDynamics:
                                zip(chain.joints, inertias, self.string_damping, strict=True)]
         self.spatial_inertias = np.array([jd.spatial_inertia for jd in self.joint_dynamics])
 
+    @classmethod
+    def from_config(cls, document: Any, string_damping: Any = None) -> ChainDynamics:
+        """From a spine config document (``config/default_spine.yaml``): the chain,
+        :func:`chain_inertias_from_config`, ``string_damping`` default ``dynamics.string_damping``
+        (a scalar) or 0."""
+        if string_damping is None:
+            string_damping = _config_damping(document)
+        return cls(JointChain.from_dict(document), chain_inertias_from_config(document),
+                   string_damping)
+
     @property
     def n_joints(self) -> int:
         """N."""
@@ -969,11 +1000,10 @@ def _dominant(twist: FloatArray, names: Sequence[str]) -> str:
 
 def modes_from_config(config_path: Any = None, spine: bool = False,
                       string_damping: ArrayLike | None = None
-                      ) -> tuple[JointModes, dict[str, Any]]:
-    """The modes of a config file's joint (``spine``: spine) at its unloaded equilibrium, and
-    their :func:`modes_report`: what ``tensegrity-stiffness modes`` prints. Default config: the
-    packaged one. Inertia: :meth:`LinkInertia.from_config` of the ``joint`` section (spine:
-    :func:`chain_inertias_from_config`); ``string_damping`` (N s/m) default: the config's
+                      ) -> tuple[JointDynamics | ChainDynamics, JointModes, dict[str, Any]]:
+    """The dynamics of a config file's joint (``spine``: spine), its modes at the unloaded
+    equilibrium and their :func:`modes_report`: what ``tensegrity-stiffness modes`` prints and
+    draws. Default config: the packaged one; ``string_damping`` (N s/m) default: the config's
     ``dynamics.string_damping`` or 0. ValueError names a bad field."""
     from pathlib import Path
 
@@ -983,20 +1013,13 @@ def modes_from_config(config_path: Any = None, spine: bool = False,
     name = DEFAULT_SPINE_CONFIG if spine else config.DEFAULT_JOINT_CONFIG
     path = Path(config_path) if config_path else config.packaged_config_path(name)
     document = config.load_yaml(path)
-    if string_damping is None:
-        section = config.section(document, 'dynamics', required=False)
-        string_damping = section.get('string_damping', 0.0) or 0.0
     if spine:
-        chain = JointChain.from_dict(document)
-        inertias = chain_inertias_from_config(document)
-        dyn = ChainDynamics(chain, inertias, string_damping)
-        modes = dyn.modes(chain.unloaded_screws())
-        return modes, modes_report(modes, inertias, None)
-    model = JointModel.from_dict(config.section(document, 'joint'))
-    inertia = LinkInertia.from_config(config.section(document, 'joint'))
-    jd = JointDynamics(model, inertia, string_damping)
-    res = solve_equilibrium(model, np.zeros(6))
+        cd = ChainDynamics.from_config(document, string_damping)
+        modes = cd.modes(cd.chain.unloaded_screws())
+        return cd, modes, modes_report(modes, cd.inertias, None)
+    jd = JointDynamics.from_config(document, string_damping)
+    res = solve_equilibrium(jd.model, np.zeros(6))
     if not res.success:
         raise ValueError(f'config {path}: no unloaded equilibrium ({res.message})')
     modes = jd.modes(res.screw)
-    return modes, modes_report(modes, [inertia], jd.string_damping)
+    return jd, modes, modes_report(modes, [jd.inertia], jd.string_damping)

@@ -675,7 +675,8 @@ def test_mode_figures_are_written(tmp_path: Path) -> None:
 def test_modes_from_config_and_table(tmp_path: Path) -> None:
     import yaml
 
-    modes, report = modes_from_config()
+    dyn, modes, report = modes_from_config()
+    assert isinstance(dyn, JointDynamics)
     np.testing.assert_allclose(modes.frequencies, JointDynamics(MODEL).modes(XI0).frequencies,
                                rtol=1e-12)
     assert json.loads(json.dumps(report))['inertias'][0]['mass'] == DEFAULT_LINK_MASS
@@ -686,11 +687,12 @@ def test_modes_from_config_and_table(tmp_path: Path) -> None:
     document['/**']['ros__parameters']['dynamics'] = {'string_damping': 0.5}
     path = tmp_path / 'joint.yaml'
     path.write_text(yaml.safe_dump(document))
-    light, report = modes_from_config(path)
+    _, light, report = modes_from_config(path)
     np.testing.assert_allclose(light.frequencies, JointDynamics(
         MODEL, LinkInertia(0.005), 0.5).modes(XI0).frequencies, rtol=1e-12)
     assert report['string_damping'] == [0.5] * 12
-    spine, report = modes_from_config(spine=True)
+    chain_dyn, spine, report = modes_from_config(spine=True)
+    assert isinstance(chain_dyn, ChainDynamics)
     assert spine.frequencies.shape == (30,) and 'joint 1' in format_modes(spine)
 
 
@@ -703,3 +705,10 @@ def test_modes_at_a_pose_are_those_of_its_balancing_load() -> None:
     np.testing.assert_allclose(res.screw, xi, atol=1e-12)
     np.testing.assert_allclose(modes.frequencies, dyn.modes(res.screw, external_wrench=W
                                                             ).frequencies, rtol=1e-9)
+
+
+def test_halving_the_mass_raises_every_frequency_by_sqrt2() -> None:
+    """The twin's default inertia scales with the mass, so M halves and f grows by sqrt(2)."""
+    heavy = JointDynamics(MODEL, LinkInertia(0.01)).modes(XI0).frequencies
+    light = JointDynamics(MODEL, LinkInertia(0.005)).modes(XI0).frequencies
+    np.testing.assert_allclose(light, math.sqrt(2.0) * heavy, rtol=1e-12)
