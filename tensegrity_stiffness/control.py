@@ -257,7 +257,11 @@ def pose_terms(model: JointModel, screw: ArrayLike) -> PoseTerms:
     if lengths.min() < 1e-12:
         raise ValueError('screw: a string has zero length at this screw')
     u = s / lengths[:, None]
-    X = np.concatenate([u, np.cross(p1, u)], axis=1)
+    X = np.empty((lengths.size, 6))
+    X[:, :3] = u
+    X[:, 3] = p1[:, 1] * u[:, 2] - p1[:, 2] * u[:, 1]
+    X[:, 4] = p1[:, 2] * u[:, 0] - p1[:, 0] * u[:, 2]
+    X[:, 5] = p1[:, 0] * u[:, 1] - p1[:, 1] * u[:, 0]
     hp, hq = hat3(p1), hat3(q)
     n = lengths.size
     ZE = np.empty((n, 6, 6))
@@ -335,10 +339,12 @@ def _face(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, t: FloatAr
     X = np.flatnonzero(~free)
     nf, m = F.size, A.shape[0]
     K = np.zeros((nf + m, nf + m))
-    K[:nf, :nf] = P[np.ix_(F, F)]
-    K[:nf, nf:] = A[:, F].T
-    K[nf:, :nf] = A[:, F]
-    rhs = np.concatenate([c[F] - P[np.ix_(F, X)] @ t[X], b - A[:, X] @ t[X]])
+    PF = P[F]
+    AF = A[:, F]
+    K[:nf, :nf] = PF[:, F]
+    K[:nf, nf:] = AF.T
+    K[nf:, :nf] = AF
+    rhs = np.concatenate([c[F] - PF[:, X] @ t[X], b - A[:, X] @ t[X]])
     try:
         sol = np.linalg.solve(K, rhs)
         if not (np.all(np.isfinite(sol)) and np.linalg.norm(K @ sol - rhs)
@@ -478,7 +484,10 @@ def _rate_limited(previous: FloatArray, wanted: FloatArray, step: FloatArray,
 def _pose_error(target: FloatArray, measured: FloatArray) -> tuple[FloatArray, FloatArray]:
     """``e = log(T* T_m^-1)`` (screw order [omega; v]) and the ROS-order error
     ``[p* - p_m; rotation vector of R* R_m^T]``."""
-    E = target @ np.linalg.inv(measured)
+    R, p = measured[:3, :3], measured[:3, 3]
+    inverse = np.eye(4)
+    inverse[:3, :3], inverse[:3, 3] = R.T, -R.T @ p
+    E = target @ inverse
     e = log_se3(E)
     ros = np.concatenate([target[:3, 3] - measured[:3, 3], e[:3]])
     return e, ros
