@@ -399,7 +399,7 @@ def _modes(A: FloatArray, twist_map: FloatArray, screw: FloatArray, damped: bool
     big = shapes[np.arange(shapes.shape[0]), np.argmax(np.abs(shapes), axis=1)]
     shapes = shapes * (np.abs(big) / big)[:, None]
     if damped:
-        stable = bool(np.all(lam.real < 0.0))
+        stable = bool(lam.real.max() < 0.0)
     else:
         # Undamped: stable when every eigenvalue is +-i w with w > 0 (a constant wrench is not
         # conservative on SE(3), so a loaded joint can also flutter: Re > 0 in a complex pair).
@@ -418,13 +418,15 @@ def _undamped_modes(A21: FloatArray, twist_map: FloatArray, screw: FloatArray) -
     order = np.argsort(w)
     lam, w = lam[order], w[order]
     shapes = vec.T[order]  # unit norm from LAPACK
-    big = shapes[np.arange(order.size), np.argmax(np.abs(shapes), axis=1)]
-    shapes = (shapes * (np.abs(big) / big)[:, None]).astype(complex)
+    rows = np.arange(order.size)
+    big = shapes[rows, np.abs(shapes).argmax(axis=1)]
     if np.isrealobj(mu):
-        stable = bool(np.all(mu < 0.0))
+        shapes = (shapes * np.sign(big)[:, None]).astype(complex)
+        stable = bool(mu.max() < 0.0)
     else:
-        stable = bool(np.all(np.abs(mu.imag) <= REAL_TOLERANCE * np.abs(mu)) and
-                      np.all(mu.real < 0.0))
+        shapes = shapes * (np.abs(big) / big)[:, None]
+        stable = bool((np.abs(mu.imag) <= REAL_TOLERANCE * np.abs(mu)).all() and
+                      mu.real.max() < 0.0)
     return JointModes(w / (2.0 * math.pi), -lam.real / w, lam, shapes,
                       (twist_map @ shapes.T).real.T, stable, screw)
 
