@@ -1,0 +1,853 @@
+"""Stiffness control at the actuators: rest-length commands that hold a pose with a chosen K_c.
+
+Every tick, :class:`StiffnessController` turns a :class:`ControlTarget` (a pose of link 2 in {1}
+and optionally a target Cartesian stiffness ``K_c*``), what the robot measures (the pose) and the
+known or estimated load into rest-length commands a motor can follow (:class:`ControlCommand`).
+No rclpy: the node ``stiffness_controller`` wraps it. The method is in ``docs/control.md``.
+
+The math (notation of :mod:`tensegrity_stiffness.design`)
+--------------------------------------------------------
+* **Feedforward: the exact design at the pose.** At a fixed screw the wrench is linear in the
+  tensions, ``F = B t`` (Monke & Vikas eq. 9), and ``K_c(t) = K_0 + sum_j t_j M_j`` is affine in
+  them (eqs. 10-11 in the Cartesian form; ``M_j``, ``K_0`` as in the design module's docstring,
+  for both force laws). The tensions solve the convex QP of ``design_rest_lengths``:
+  ``min |W o S (K_c(t) - K*) S|_F^2`` (``W`` the entry weights of
+  :attr:`ControlTarget.stiffness_weight`, ``S = diag(1, 1, 1, 1/L, 1/L, 1/L)``), or without a
+  target ``min |t - t_mid|^2`` (``t_mid`` the middle of the tension limits and caps, as the
+  design: the actuator range constrains but does not move the middle),
+  subject to ``S (B t + W_ext) = 0`` and box bounds. The box is the
+  tension limits, each string's physical caps (positive rest length, maximum stretch kept, as
+  in the design) and the **actuator range as tension bounds** (eq. 8): Hooke
+  ``t in [k (l - l0_max), k (l - l0_min)]``, paper law ``t in [k (l - l0_max) / l,
+  k (l - l0_min) / l]``; the rest lengths follow as ``l0 = l - t / k`` resp. ``l (1 - t / k)``.
+* **Why a QP of our own.** ``design_rest_lengths`` takes scalar tension limits only (no
+  per-string range bounds) and starts every solve cold (a phase-1 active set from the middle of
+  the box, then phase 2: about 1 ms). Here the QP is the same primal active-set method written
+  for warm starts: the working set (strings at a bound) and the tensions of the last tick are
+  carried over; the first try is one KKT solve on that face, which is already optimal in steady
+  state; otherwise the last tensions are projected onto the new equality and the method
+  continues from there. The public design is kept as the reference the tests compare to.
+* **Feedback: integral action on the measured pose error.** ``e = log(T* T_m^-1)`` (a spatial
+  twist in {1}, screw order ``[omega; v]``) integrates into a correction ``z``; the design is
+  done at the shifted pose ``T_d = exp(hat(z + k_p e)) T*``. With an exact model the twin settles
+  at ``T_d``, so ``e = -z`` and ``z -> 0``; with a model that is off (every ``k_j`` by 10 %, an
+  offset, an unknown load) ``z`` converges to the shift that puts the true pose at ``T*``
+  (no steady-state error; the stiffness then follows the model's error, about ``|dk/k|``).
+  Anti-windup: ``z`` is frozen while a rate or range limit binds (the commands lag the
+  feedforward) or the pose cannot be held, and clamped to ``integral_limit``.
+* **Limits.** Commands move at most ``max_rate * dt`` per string per tick and stay within
+  ``[rest_length_min, rest_length_max]``; a changed target is followed at the rate limit (no
+  jump). An infeasible pose keeps the last command (``feasible=False``).
+* **Offsets.** ``rest_length_offsets`` d (m): the model's (true) rest length is
+  ``l0 = command + d``; commands, limits and the controller's ``rest_lengths`` are motor
+  positions (``command = l0 - d``).
+
+:class:`ChainStiffnessController` does the same for a spine (see its docstring).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tensegrity_stiffness.chain import JointChain
+from tensegrity_stiffness.design import BOUND_MARGIN, DEFAULT_TENSION_MAX, DEFAULT_TENSION_MIN
+from tensegrity_stiffness.joint import JointModel
+from tensegrity_stiffness.quaternion import quaternion_to_rotation
+from tensegrity_stiffness.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
+from tensegrity_stiffness.validation import finite_array, finite_array_of_shape, finite_scalar
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: Default integral gain (1/s): the pose correction's bandwidth, well below the twin's
+#: mechanical settling (about 0.3 s with the default damping).
+DEFAULT_INTEGRAL_GAIN = 8.0
+#: Default proportional gain (dimensionless share of the pose error added to the shift).
+DEFAULT_PROPORTIONAL_GAIN = 0.0
+#: Default clamp of the integral correction: rotation (rad) and translation (m) parts.
+DEFAULT_INTEGRAL_LIMIT = (0.2, 0.01)
+#: Largest scaled residual |S (B t + W)| (N) of a feasible tick.
+FEASIBILITY_TOLERANCE = 1e-9
+#: Relative tolerance of the active-set method (steps, multiplier signs).
+ACTIVE_SET_TOLERANCE = 1e-12
+#: Active-set iterations per QP before giving up.
+MAX_ACTIVE_SET_ITERATIONS = 200
+#: A stiffness target counts as met when the relative scaled error is at most this.
+STIFFNESS_MET_TOLERANCE = 1e-3
+#: A command is "saturated" when it differs from the feedforward by more than this (m).
+SATURATION_TOLERANCE = 1e-12
+#: Gauss-Newton iterations of the spine's redundancy resolution per tick.
+CHAIN_IK_ITERATIONS = 3
+
+
+# ---------------------------------------------------------------------------------- inputs
+def _per_string(name: str, value: ArrayLike) -> FloatArray:
+    arr = finite_array(name, value)
+    if arr.ndim > 1:
+        raise ValueError(f'{name} must be a scalar or one value per string, got shape '
+                         f'{arr.shape}')
+    return arr.copy()
+
+
+@dataclass(frozen=True)
+class ActuatorLimits:
+    """Limits of the motors and strings, each a scalar or one value per string.
+
+    ``rest_length_min`` < ``rest_length_max`` (m, motor positions, > 0), ``max_rate`` (m/s,
+    > 0), ``tension_min`` (N, > 0) < ``tension_max`` (N). ValueError names the field."""
+
+    rest_length_min: Any
+    rest_length_max: Any
+    max_rate: Any
+    tension_min: Any = DEFAULT_TENSION_MIN
+    tension_max: Any = DEFAULT_TENSION_MAX
+
+    def __post_init__(self) -> None:
+        names = ('rest_length_min', 'rest_length_max', 'max_rate', 'tension_min', 'tension_max')
+        values = {name: _per_string(name, getattr(self, name)) for name in names}
+        try:
+            np.broadcast_shapes(*(v.shape for v in values.values()))
+        except ValueError:
+            raise ValueError('rest_length_min, rest_length_max, max_rate, tension_min and '
+                             'tension_max must be scalars or have the same length') from None
+        if np.any(values['rest_length_min'] <= 0.0):
+            raise ValueError('rest_length_min must be > 0')
+        if np.any(values['rest_length_min'] >= values['rest_length_max']):
+            raise ValueError('rest_length_max must exceed rest_length_min (min >= max)')
+        if np.any(values['max_rate'] <= 0.0):
+            raise ValueError('max_rate must be > 0 (m/s)')
+        if np.any(values['tension_min'] <= 0.0):
+            raise ValueError('tension_min must be > 0 (strings must stay taut)')
+        if np.any(values['tension_min'] >= values['tension_max']):
+            raise ValueError('tension_max must exceed tension_min (min >= max)')
+        for name, v in values.items():
+            object.__setattr__(self, name, v)
+
+    def for_strings(self, n: int) -> tuple[FloatArray, ...]:
+        """(rest_length_min, rest_length_max, max_rate, tension_min, tension_max), each (n,)."""
+        out = []
+        for name in ('rest_length_min', 'rest_length_max', 'max_rate', 'tension_min',
+                     'tension_max'):
+            v = getattr(self, name)
+            if v.ndim == 1 and v.size != n:
+                raise ValueError(f'{name} has {v.size} values for {n} strings')
+            out.append(np.broadcast_to(v, (n,)).astype(np.float64))
+        return tuple(out)
+
+
+def _transform(pose: ArrayLike, name: str) -> FloatArray:
+    """A (4, 4) rigid transform from a 4x4 or ``[x y z qx qy qz qw]``."""
+    arr = finite_array(name, pose)
+    if arr.shape == (7,):
+        try:
+            R = quaternion_to_rotation(arr[3:])
+        except ValueError as exc:
+            raise ValueError(f'{name}: {exc}') from None
+        T = np.eye(4)
+        T[:3, :3], T[:3, 3] = R, arr[:3]
+        return T
+    if arr.shape != (4, 4):
+        raise ValueError(f'{name} must be a (4, 4) transform or [x y z qx qy qz qw], got '
+                         f'shape {arr.shape}')
+    R = arr[:3, :3]
+    if not (np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0.0
+            and np.allclose(arr[3], [0, 0, 0, 1])):
+        raise ValueError(f'{name} is not a rigid transform')
+    return arr.copy()
+
+
+def _screw(screw: ArrayLike, name: str) -> FloatArray:
+    xi = as_screws(screw, name)
+    if xi.shape != (6,):
+        raise ValueError(f'{name} must have shape (6,), got {xi.shape}')
+    check_in_chart(xi, name)
+    return xi
+
+
+@dataclass(frozen=True)
+class ControlTarget:
+    """What to hold: ``pose`` (4x4 or ``[x y z qx qy qz qw]``, link 2 in {1}) or ``screw`` (6,),
+    exactly one; ``cartesian_stiffness`` K_c* (6, 6; rows ``[f; m]``, columns
+    ``[dx dy dz rx ry rz]``) or ``None`` (tensions nearest the middle of their limits);
+    ``stiffness_weight`` (6, 6) entry weights >= 0 of the stiffness objective, or (6,) ``w`` for
+    ``w_a w_b`` (default all 1; ``np.eye(6)`` shapes the diagonal only)."""
+
+    pose: Any = None
+    screw: Any = None
+    cartesian_stiffness: Any = None
+    stiffness_weight: Any = None
+    transform: FloatArray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if (self.pose is None) == (self.screw is None):
+            raise ValueError('pose: give exactly one of pose and screw')
+        if self.pose is not None:
+            T = _transform(self.pose, 'pose')
+        else:
+            T = exp_se3(_screw(self.screw, 'screw'))
+        object.__setattr__(self, 'transform', T)
+        if self.cartesian_stiffness is not None:
+            object.__setattr__(self, 'cartesian_stiffness', finite_array_of_shape(
+                'cartesian_stiffness', self.cartesian_stiffness, (6, 6)).copy())
+        if self.stiffness_weight is not None:
+            w = finite_array('stiffness_weight', self.stiffness_weight)
+            if np.any(w < 0.0):
+                raise ValueError('stiffness_weight must be >= 0')
+            if w.shape == (6,):
+                w = w[:, None] * w[None, :]
+            if w.shape != (6, 6) or np.any(w < 0.0) or not np.any(w > 0.0):
+                raise ValueError('stiffness_weight must be (6,) or (6, 6), >= 0, not all 0')
+            object.__setattr__(self, 'stiffness_weight', w)
+
+
+@dataclass(frozen=True)
+class ControlCommand:
+    """One tick's output. ``rest_lengths`` (n,) motor commands (m); ``feasible``: the pose can
+    be held under the load within the limits; ``stiffness_error`` = |S (K_c - K*) S|_F /
+    |S K* S|_F of the predicted K_c (0 without a target; NaN when infeasible);
+    ``predicted_cartesian_stiffness`` (6, 6) and ``tensions`` (n,) the model's prediction of the
+    feedforward design (reached once the rate limit has caught up); ``saturated`` (n,) bool,
+    strings held by a rate or range limit this tick; ``message`` why a target is not met;
+    ``design_screw`` (6,) the screw designed for (target shifted by the integral correction);
+    ``pose_error`` (6,) measured error ``[dx dy dz rx ry rz]`` (m, rad; zeros without a
+    measurement); ``iterations`` of the QP; ``warm`` True when the last tick's face was optimal."""
+
+    rest_lengths: FloatArray
+    feasible: bool
+    stiffness_error: float
+    predicted_cartesian_stiffness: FloatArray
+    tensions: FloatArray
+    saturated: BoolArray
+    message: str
+    design_screw: FloatArray
+    pose_error: FloatArray
+    iterations: int = 0
+    warm: bool = False
+
+
+# ---------------------------------------------------------------------------------- the pose
+@dataclass(frozen=True)
+class PoseTerms:
+    """What stays fixed at a screw (design module's notation): ``lengths`` (n,) m, ``B`` (6, n)
+    string wrenches per unit tension, ``K0`` (6, 6) and ``M`` (n, 6, 6) with
+    ``K_c(t) = K0 + sum_j t_j M_j``, ``dl0_dt`` (n,) and ``cap`` (n,) N the physical upper
+    tension caps (positive rest length, maximum stretch) shrunk by ``BOUND_MARGIN``."""
+
+    lengths: FloatArray
+    B: FloatArray
+    K0: FloatArray
+    M: FloatArray
+    cap: FloatArray
+
+
+def pose_terms(model: JointModel, screw: ArrayLike) -> PoseTerms:
+    """:class:`PoseTerms` of ``model`` at ``screw`` (6,) (the geometry of eqs. 7-11)."""
+    xi = _screw(screw, 'screw')
+    T = exp_se3(xi)
+    p1 = model.link1_nodes[model.connections[:, 0]]
+    q = model.link2_nodes[model.connections[:, 1]] @ T[:3, :3].T + T[:3, 3]
+    s = p1 - q
+    lengths = np.sqrt(np.einsum('ij,ij->i', s, s))
+    if lengths.min() < 1e-12:
+        raise ValueError('screw: a string has zero length at this screw')
+    u = s / lengths[:, None]
+    X = np.empty((lengths.size, 6))
+    X[:, :3] = u
+    X[:, 3] = p1[:, 1] * u[:, 2] - p1[:, 2] * u[:, 1]
+    X[:, 4] = p1[:, 2] * u[:, 0] - p1[:, 0] * u[:, 2]
+    X[:, 5] = p1[:, 0] * u[:, 1] - p1[:, 1] * u[:, 0]
+    hp, hq = hat3(p1), hat3(q)
+    n = lengths.size
+    ZE = np.empty((n, 6, 6))
+    ZE[:, :3, :3] = np.eye(3)
+    ZE[:, :3, 3:] = -hq
+    ZE[:, 3:, :3] = hp
+    ZE[:, 3:, 3:] = -hp @ hq
+    k, m = model.k, model.max_stretch
+    if model.force_law == 'hooke':
+        a, b = k, np.zeros(n)
+        positive, below_max = k * lengths, k * m
+    else:
+        a, b = k / lengths, -1.0 / lengths
+        positive, below_max = k.copy(), k * m / lengths
+    XX = X[:, :, None] * X[:, None, :]
+    K0 = np.einsum('j,jab->ab', a, XX)
+    M = (b - 1.0 / lengths)[:, None, None] * XX + ZE / lengths[:, None, None]
+    cap = (1.0 - BOUND_MARGIN) * np.minimum(positive, below_max)
+    return PoseTerms(lengths, X.T.copy(), K0, M, cap)
+
+
+def tension_bounds(model: JointModel, lengths: FloatArray, rest_min: FloatArray,
+                   rest_max: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The (true) rest-length range ``[rest_min, rest_max]`` as tension bounds at ``lengths``
+    (eq. 8): Hooke ``[k (l - l0_max), k (l - l0_min)]``, paper ``[k (l - l0_max) / l,
+    k (l - l0_min) / l]``."""
+    k = model.k
+    lo, hi = k * (lengths - rest_max), k * (lengths - rest_min)
+    if model.force_law != 'hooke':
+        lo, hi = lo / lengths, hi / lengths
+    return lo, hi
+
+
+def rest_from_tensions(model: JointModel, lengths: FloatArray, tensions: FloatArray
+                       ) -> FloatArray:
+    """True rest lengths that give ``tensions`` at ``lengths`` (eq. 8 inverted)."""
+    if model.force_law == 'hooke':
+        return lengths - tensions / model.k
+    return lengths * (1.0 - tensions / model.k)
+
+
+def _scale(length_scale: float) -> FloatArray:
+    inv = 1.0 / length_scale
+    return np.array([1.0, 1.0, 1.0, inv, inv, inv])
+
+
+def relative_stiffness_error(Kc: FloatArray, target: FloatArray, length_scale: float) -> float:
+    """|S (K_c - K*) S|_F / |S K* S|_F (``DesignResult.stiffness_error``)."""
+    S = _scale(length_scale)
+    SS = S[:, None] * S[None, :]
+    den = float(np.linalg.norm(target * SS))
+    num = float(np.linalg.norm((Kc - target) * SS))
+    return num / den if den > 0.0 else num
+
+
+# ---------------------------------------------------------------------------------- the QP
+@dataclass
+class QPResult:
+    """``t`` (n,), the working set ``at_lo`` / ``at_hi`` (n,), ``iterations``, ``converged``,
+    ``warm`` (the start face was optimal: one KKT solve)."""
+
+    t: FloatArray
+    at_lo: BoolArray
+    at_hi: BoolArray
+    iterations: int
+    converged: bool
+    warm: bool
+
+
+def _face(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, t: FloatArray,
+          free: BoolArray) -> tuple[FloatArray, FloatArray]:
+    """Minimiser of ``1/2 t'Pt - c't`` on the face (fixed variables at ``t``) with ``A t = b``:
+    the free values and the equality multipliers (least squares when the KKT is singular)."""
+    F = np.flatnonzero(free)
+    X = np.flatnonzero(~free)
+    nf, m = F.size, A.shape[0]
+    K = np.zeros((nf + m, nf + m))
+    PF = P[F]
+    AF = A[:, F]
+    K[:nf, :nf] = PF[:, F]
+    K[:nf, nf:] = AF.T
+    K[nf:, :nf] = AF
+    rhs = np.concatenate([c[F] - PF[:, X] @ t[X], b - A[:, X] @ t[X]])
+    try:
+        sol = np.linalg.solve(K, rhs)
+        if not (np.all(np.isfinite(sol)) and np.linalg.norm(K @ sol - rhs)
+                <= 1e-10 * (1.0 + np.linalg.norm(rhs))):
+            raise np.linalg.LinAlgError
+    except np.linalg.LinAlgError:
+        sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
+    return sol[:nf], sol[nf:]
+
+
+def _multipliers(P: FloatArray, c: FloatArray, A: FloatArray, t: FloatArray, nu: FloatArray,
+                 at_lo: BoolArray, at_hi: BoolArray) -> FloatArray:
+    """The bound multipliers of the working set (>= 0 at the optimum), 0 elsewhere."""
+    grad = P @ t - c + A.T @ nu
+    return np.where(at_lo, grad, np.where(at_hi, -grad, 0.0))
+
+
+def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
+                 hi: FloatArray, t_start: FloatArray, at_lo: BoolArray | None = None,
+                 at_hi: BoolArray | None = None) -> QPResult:
+    """``min 1/2 t'Pt - c't`` s.t. ``A t = b``, ``lo <= t <= hi`` (P positive semidefinite) by a
+    primal active-set method, warm-started from ``t_start`` and the working set ``at_lo`` /
+    ``at_hi`` of the last solve. First the start face alone (optimal in steady state); then a
+    feasible start: ``t_start`` projected onto ``A t = b`` over its free strings, or if that
+    leaves the box, the box least squares ``min |A t - b|`` from it; then the active set.
+    ``converged`` is False when no feasible point exists (residual above
+    :data:`FEASIBILITY_TOLERANCE`) or the iteration limit is hit."""
+    n = lo.size
+    scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
+    wl = np.zeros(n, bool) if at_lo is None else at_lo.copy()
+    wh = np.zeros(n, bool) if at_hi is None else (at_hi & ~wl)
+    # 1. The last face.
+    t = np.where(wl, lo, np.where(wh, hi, t_start))
+    free = ~(wl | wh)
+    if free.sum() >= 1:
+        tf, nu = _face(P, c, A, b, t, free)
+        trial = t.copy()
+        trial[free] = tf
+        span = 1e-12 * np.maximum(1.0, np.abs(hi - lo))
+        if (np.all(trial >= lo - span) and np.all(trial <= hi + span)
+                and np.linalg.norm(A @ trial - b) <= FEASIBILITY_TOLERANCE):
+            mu = _multipliers(P, c, A, trial, nu, wl, wh)
+            if mu.min() >= -ACTIVE_SET_TOLERANCE * scale:
+                return QPResult(np.clip(trial, lo, hi), wl, wh, 1, True, True)
+    # 2. A feasible start.
+    t = np.clip(t_start, lo, hi)
+    r = b - A @ t
+    if np.linalg.norm(r) > FEASIBILITY_TOLERANCE:
+        inside = (t > lo) & (t < hi)
+        Af = A[:, inside]
+        trial = t.copy()
+        if inside.any():
+            trial[inside] += np.linalg.lstsq(Af, r, rcond=None)[0]
+        if (np.all(trial >= lo) and np.all(trial <= hi)
+                and np.linalg.norm(A @ trial - b) <= FEASIBILITY_TOLERANCE):
+            t = trial
+        else:
+            AtA, Atb = A.T @ A, A.T @ b
+            phase1 = _active_set(AtA, Atb, np.zeros((0, n)), np.zeros(0), lo, hi, t)
+            t = phase1.t
+            if np.linalg.norm(A @ t - b) > FEASIBILITY_TOLERANCE:
+                return QPResult(t, phase1.at_lo, phase1.at_hi, phase1.iterations, False, False)
+    # 3. The active set.
+    sol = _active_set(P, c, A, b, lo, hi, t)
+    return sol
+
+
+def _active_set(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
+                hi: FloatArray, t0: FloatArray) -> QPResult:
+    """Primal active set from a feasible ``t0`` (its bounds form the first working set)."""
+    scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
+    t = np.clip(t0, lo, hi)
+    span = np.maximum(hi - lo, 1e-300)
+    at_lo = t - lo <= 1e-12 * span
+    at_hi = ~at_lo & (hi - t <= 1e-12 * span)
+    t[at_lo], t[at_hi] = lo[at_lo], hi[at_hi]
+    nu = np.zeros(A.shape[0])
+    for it in range(1, MAX_ACTIVE_SET_ITERATIONS + 1):
+        free = ~(at_lo | at_hi)
+        F = np.flatnonzero(free)
+        if F.size:
+            target, nu = _face(P, c, A, b, t, free)
+        else:
+            target = np.zeros(0)
+            nu = np.linalg.lstsq(A.T, c - P @ t, rcond=None)[0] if A.shape[0] else nu
+        step = target - t[F]
+        if np.all(np.abs(step) <= 1e-13 * (1.0 + np.abs(t[F]))):
+            t[F] = target
+            mu = _multipliers(P, c, A, t, nu, at_lo, at_hi)
+            j = int(np.argmin(mu))
+            if mu[j] >= -ACTIVE_SET_TOLERANCE * scale:
+                return QPResult(t, at_lo, at_hi, it, True, False)
+            at_lo[j] = at_hi[j] = False
+            continue
+        with np.errstate(divide='ignore', invalid='ignore'):
+            ratio = np.where(step < 0.0, (lo[F] - t[F]) / step,
+                             np.where(step > 0.0, (hi[F] - t[F]) / step, np.inf))
+        k = int(np.argmin(ratio))
+        alpha = min(1.0, float(ratio[k]))
+        t[F] += alpha * step
+        if alpha < 1.0:
+            j = F[k]
+            if step[k] < 0.0:
+                at_lo[j], t[j] = True, lo[j]
+            else:
+                at_hi[j], t[j] = True, hi[j]
+        t = np.clip(t, lo, hi)
+    return QPResult(t, at_lo, at_hi, MAX_ACTIVE_SET_ITERATIONS, False, False)
+
+
+def _objective(pose: PoseTerms, target: ControlTarget, S: FloatArray, middle: FloatArray
+               ) -> tuple[FloatArray, FloatArray]:
+    """``P = G'G``, ``c = G'g`` of the stiffness objective, or without a target of
+    ``|t - middle|^2`` (the middle of the tension limits and caps, as the design)."""
+    n = middle.size
+    if target.cartesian_stiffness is None:
+        return np.eye(n), middle.copy()
+    SS = S[:, None] * S[None, :]
+    if target.stiffness_weight is not None:
+        SS = SS * target.stiffness_weight
+    G = (pose.M * SS).reshape(n, 36).T
+    g = ((target.cartesian_stiffness - pose.K0) * SS).ravel()
+    return G.T @ G, G.T @ g
+
+
+def _rate_limited(previous: FloatArray, wanted: FloatArray, step: FloatArray,
+                  rest_min: FloatArray, rest_max: FloatArray) -> FloatArray:
+    """``wanted`` moved to within ``previous +- step`` and the range (toward the range when
+    ``previous`` is outside it, still at most ``step``)."""
+    low = np.maximum(rest_min, previous - step)
+    high = np.minimum(rest_max, previous + step)
+    low = np.minimum(low, previous + step)   # previous below the range: climb at the rate
+    high = np.maximum(high, previous - step)  # previous above the range: descend at the rate
+    return np.clip(wanted, low, high)
+
+
+def _pose_error(target: FloatArray, measured: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """``e = log(T* T_m^-1)`` (screw order [omega; v]) and the ROS-order error
+    ``[p* - p_m; rotation vector of R* R_m^T]``."""
+    R, p = measured[:3, :3], measured[:3, 3]
+    inverse = np.eye(4)
+    inverse[:3, :3], inverse[:3, 3] = R.T, -R.T @ p
+    E = target @ inverse
+    e = log_se3(E)
+    ros = np.concatenate([target[:3, 3] - measured[:3, 3], e[:3]])
+    return e, ros
+
+
+def _clamp_integral(z: FloatArray, limit: tuple[float, float]) -> FloatArray:
+    out = z.copy()
+    for part, lim in ((slice(0, 3), limit[0]), (slice(3, 6), limit[1])):
+        norm = float(np.linalg.norm(out[part]))
+        if norm > lim:
+            out[part] *= lim / norm
+    return out
+
+
+def _measured(pose: ArrayLike | None, screw: ArrayLike | None) -> FloatArray | None:
+    if pose is not None and screw is not None:
+        raise ValueError('pose: give at most one of pose and screw')
+    if pose is not None:
+        return _transform(pose, 'pose')
+    if screw is not None:
+        return exp_se3(_screw(screw, 'screw'))
+    return None
+
+
+def _check_dt(dt: float) -> float:
+    value = finite_scalar('dt', dt)
+    if value <= 0.0:
+        raise ValueError(f'dt must be > 0 (s), got {value:g}')
+    return value
+
+
+def _gains(integral_gain: float, proportional_gain: float,
+           integral_limit: Sequence[float]) -> tuple[float, float, tuple[float, float]]:
+    ki = finite_scalar('integral_gain', integral_gain)
+    kp = finite_scalar('proportional_gain', proportional_gain)
+    if ki < 0.0:
+        raise ValueError(f'integral_gain must be >= 0 (1/s), got {ki:g}')
+    if not 0.0 <= kp < 1.0:
+        raise ValueError(f'proportional_gain must be in [0, 1), got {kp:g}')
+    lim = finite_array('integral_limit', integral_limit)
+    if lim.shape != (2,) or np.any(lim < 0.0):
+        raise ValueError('integral_limit must be (rotation rad, translation m), both >= 0')
+    return ki, kp, (float(lim[0]), float(lim[1]))
+
+
+# ---------------------------------------------------------------------------------- joint
+class StiffnessController:
+    """Closed-loop rest-length commands for one joint (module docstring).
+
+    ``model``: the controller's (nominal) :class:`JointModel`; ``limits``:
+    :class:`ActuatorLimits`; ``rest_lengths`` (n,) the motors' present positions (m). Gains:
+    ``integral_gain`` k_i (1/s), ``proportional_gain`` k_p (share of the error added to the
+    shift, in [0, 1)), ``integral_limit`` (rad, m) clamp of the correction;
+    ``rest_length_offsets`` d (n,) m (true rest length = command + d); ``length_scale`` L (m) of
+    S (default as the design: the largest distance of a link-1 node from the origin)."""
+
+    def __init__(self, model: JointModel, limits: ActuatorLimits, rest_lengths: ArrayLike, *,
+                 integral_gain: float = DEFAULT_INTEGRAL_GAIN,
+                 proportional_gain: float = DEFAULT_PROPORTIONAL_GAIN,
+                 integral_limit: Sequence[float] = DEFAULT_INTEGRAL_LIMIT,
+                 rest_length_offsets: ArrayLike | None = None,
+                 length_scale: float | None = None) -> None:
+        if not isinstance(model, JointModel):
+            raise ValueError('model must be a JointModel')
+        if not isinstance(limits, ActuatorLimits):
+            raise ValueError('limits must be an ActuatorLimits')
+        self.model = model
+        self.limits = limits
+        n = model.n_strings
+        (self._rest_min, self._rest_max, self._rate, self._t_min,
+         self._t_max) = limits.for_strings(n)
+        self.integral_gain, self.proportional_gain, self.integral_limit = _gains(
+            integral_gain, proportional_gain, integral_limit)
+        self.offsets = np.zeros(n) if rest_length_offsets is None else finite_array_of_shape(
+            'rest_length_offsets', rest_length_offsets, (n,)).copy()
+        if length_scale is None:
+            self.length_scale = float(np.linalg.norm(model.link1_nodes, axis=1).max())
+        else:
+            self.length_scale = finite_scalar('length_scale', length_scale)
+            if self.length_scale <= 0.0:
+                raise ValueError('length_scale must be > 0')
+        self._S = _scale(self.length_scale)
+        self.reset(rest_lengths)
+
+    @property
+    def rest_lengths(self) -> FloatArray:
+        """The last command (n,), motor positions (m)."""
+        return self._command.copy()
+
+    @property
+    def integral(self) -> FloatArray:
+        """The integral pose correction z (6,), screw order [omega; v]."""
+        return self._z.copy()
+
+    def reset(self, rest_lengths: ArrayLike) -> None:
+        """Forget the integral and the warm start; ``rest_lengths`` (n,) the motors' positions."""
+        n = self.model.n_strings
+        rest = finite_array_of_shape('rest_lengths', rest_lengths, (n,))
+        if np.any(rest + self.offsets <= 0.0):
+            raise ValueError('rest_lengths: every true rest length (command + offset) must be '
+                             '> 0')
+        self._command = rest.copy()
+        self._z = np.zeros(6)
+        self._t = None
+        self._at_lo = np.zeros(n, bool)
+        self._at_hi = np.zeros(n, bool)
+        self._reference = self.model.initial_screw.copy()
+
+    # ------------------------------------------------------------------ tick
+    def update(self, dt: float, target: ControlTarget, pose: ArrayLike | None = None,
+               screw: ArrayLike | None = None, external_wrench: ArrayLike | None = None
+               ) -> ControlCommand:
+        """One tick of ``dt`` (s): the commands for ``target`` given the measured ``pose``
+        (4x4 or [x y z qx qy qz qw]) or ``screw`` (none: no feedback this tick) and the known
+        or estimated ``external_wrench`` (6,) on link 2 in {1} about its origin (default 0).
+        Bad input raises ValueError naming it and leaves the state unchanged."""
+        dt = _check_dt(dt)
+        if not isinstance(target, ControlTarget):
+            raise ValueError('target must be a ControlTarget')
+        measured = _measured(pose, screw)
+        W = np.zeros(6) if external_wrench is None else finite_array_of_shape(
+            'external_wrench', external_wrench, (6,))
+        T_star = target.transform
+        if measured is not None:
+            e, error = _pose_error(T_star, measured)
+        else:
+            e, error = np.zeros(6), np.zeros(6)
+        z = _clamp_integral(self._z + self.integral_gain * dt * e, self.integral_limit)
+        T_d = exp_se3(z + self.proportional_gain * e) @ T_star
+        xi_d = log_se3(T_d, reference=self._reference)
+        return self._tick(dt, target, xi_d, W, z, error)
+
+    def _tick(self, dt: float, target: ControlTarget, xi_d: FloatArray, W: FloatArray,
+              z: FloatArray, error: FloatArray) -> ControlCommand:
+        model, S = self.model, self._S
+        try:
+            terms = pose_terms(model, xi_d)
+        except ValueError as exc:
+            return self._hold(xi_d, error, f'infeasible: {exc}')
+        rest_lo = self._rest_min + self.offsets
+        rest_hi = self._rest_max + self.offsets
+        range_lo, range_hi = tension_bounds(model, terms.lengths, rest_lo, rest_hi)
+        upper = np.minimum(self._t_max, terms.cap)
+        lo = np.maximum(self._t_min, range_lo)
+        hi = np.minimum(upper, range_hi)
+        if np.any(hi <= lo):
+            bad = [model.string_names[j] for j in np.flatnonzero(hi <= lo)]
+            return self._hold(xi_d, error, 'infeasible: no tension within the tension and '
+                              f'rest-length limits at this pose for {", ".join(bad)}')
+        A, b = S[:, None] * terms.B, -S * W
+        P, c = _objective(terms, target, S, 0.5 * (self._t_min + upper))
+        start = 0.5 * (lo + hi) if self._t is None else self._t
+        sol = solve_box_qp(P, c, A, b, lo, hi, start, self._at_lo, self._at_hi)
+        if not sol.converged:
+            residual = float(np.linalg.norm(A @ sol.t - b))
+            what = ('the pose cannot be held under this load within the limits (closest '
+                    f'residual {residual:.3g} N)' if residual > FEASIBILITY_TOLERANCE
+                    else 'the active-set method did not converge')
+            return self._hold(xi_d, error, f'infeasible: {what}')
+        t = sol.t
+        wanted = rest_from_tensions(model, terms.lengths, t) - self.offsets
+        command = _rate_limited(self._command, wanted, self._rate * dt, self._rest_min,
+                                self._rest_max)
+        saturated = np.abs(command - wanted) > SATURATION_TOLERANCE
+        Kc = terms.K0 + np.einsum('j,jab->ab', t, terms.M)
+        if target.cartesian_stiffness is None:
+            err = 0.0
+        else:
+            err = relative_stiffness_error(Kc, target.cartesian_stiffness, self.length_scale)
+        messages = []
+        if target.cartesian_stiffness is not None and err > STIFFNESS_MET_TOLERANCE:
+            at = int(np.count_nonzero(sol.at_lo | sol.at_hi))
+            messages.append(f'stiffness target not reachable: closest within the limits has '
+                            f'relative error {err:.3g} ({at} strings at a tension bound)')
+        if saturated.any():
+            messages.append(f'{int(saturated.sum())} strings at the rate or range limit')
+        # Commit: anti-windup keeps z while a limit binds.
+        if not saturated.any():
+            self._z = z
+        self._command = command
+        self._t, self._at_lo, self._at_hi = t, sol.at_lo, sol.at_hi
+        self._reference = xi_d
+        return ControlCommand(command.copy(), True, err, Kc, t.copy(), saturated,
+                              '; '.join(messages) or 'ok', xi_d, error, sol.iterations,
+                              sol.warm)
+
+    def _hold(self, xi_d: FloatArray, error: FloatArray, message: str) -> ControlCommand:
+        """Keep the last safe command (infeasible target): the model's prediction of it at the
+        design screw, the integral frozen."""
+        n = self.model.n_strings
+        try:
+            state = self.model.evaluate(xi_d, self._command + self.offsets)
+            Kc, t = state.cartesian_stiffness.copy(), state.tensions.copy()
+        except ValueError:
+            Kc, t = np.full((6, 6), np.nan), np.full(n, np.nan)
+        return ControlCommand(self._command.copy(), False, math.nan, Kc, t, np.zeros(n, bool),
+                              message + '; the last command is kept', xi_d, error)
+
+
+# ---------------------------------------------------------------------------------- spine
+def _adjoint_twist(T: FloatArray) -> FloatArray:
+    """Ad_T for twists ``[dv; dw]``: ``[[R, hat(p) R], [0, R]]``."""
+    R, p = T[:3, :3], T[:3, 3]
+    out = np.zeros((6, 6))
+    out[:3, :3] = R
+    out[:3, 3:] = hat3(p) @ R
+    out[3:, 3:] = R
+    return out
+
+
+@dataclass(frozen=True)
+class ChainControlCommand:
+    """One spine tick: ``rest_lengths`` (N, n) motor commands; ``feasible``; ``stiffness_error``
+    of the predicted tip K_c (base frame; exact chain formula) to the target;
+    ``predicted_tip_stiffness`` (6, 6); ``tensions`` (N, n); ``saturated`` (N, n);
+    ``message``; ``design_screws`` (N, 6); ``pose_error`` (6,) of the tip ``[dx dy dz rx ry
+    rz]``; ``joint_commands`` the N joints' :class:`ControlCommand`."""
+
+    rest_lengths: FloatArray
+    feasible: bool
+    stiffness_error: float
+    predicted_tip_stiffness: FloatArray
+    tensions: FloatArray
+    saturated: BoolArray
+    message: str
+    design_screws: FloatArray
+    pose_error: FloatArray
+    joint_commands: tuple[ControlCommand, ...] = ()
+
+
+class ChainStiffnessController:
+    """Closed-loop rest-length commands for a spine: a tip pose target (base frame) and a tip
+    K_c* (base frame, about the tip link's origin as :meth:`JointChain.tip_stiffness`).
+
+    Per tick: (1) the integral correction z of the tip pose error shifts the target,
+    ``T_d = exp(hat(z)) T*``; (2) the joint screws that reach ``T_d`` closest to the reference
+    configuration (``initial_screws``, default the unloaded one): Gauss-Newton on
+    ``min |xi - xi_ref|^2 s.t. tip(xi) = T_d`` with :meth:`JointChain.jacobian` (the 6N - 6
+    redundant dofs are held at the reference); (3) each joint's load at those screws from
+    the chain's exact equilibrium residuals (``residuals - wrenches``: tip load and link
+    weights transported to {1}_i); (4) each joint's tensions by its own
+    :class:`StiffnessController` QP, exact equilibrium, with the joint K_c target
+    ``N Ad_i^T K* Ad_i`` (``Ad_i`` of {1}_i in the base): the equal split of the tip compliance,
+    exact for ``C_tip = sum_i Ad_i K_i^-1 Ad_i^T`` (no load, no weights). The tip stiffness is
+    then reported by the exact chain formula (loads and weights included). Gains and limits as
+    :class:`StiffnessController` (the joints' own integrals are off: the tip integral closes the
+    loop). Why only this much of the tip K_c can be shaped: ``docs/control.md``."""
+
+    def __init__(self, chain: JointChain, limits: ActuatorLimits | Sequence[ActuatorLimits],
+                 rest_lengths: Any, *, integral_gain: float = DEFAULT_INTEGRAL_GAIN,
+                 integral_limit: Sequence[float] = DEFAULT_INTEGRAL_LIMIT,
+                 rest_length_offsets: Any = None, initial_screws: ArrayLike | None = None
+                 ) -> None:
+        if not isinstance(chain, JointChain):
+            raise ValueError('chain must be a JointChain')
+        N = chain.n_joints
+        self.chain = chain
+        per_limits = [limits] * N if isinstance(limits, ActuatorLimits) else list(limits)
+        if len(per_limits) != N:
+            raise ValueError(f'limits must be one ActuatorLimits or one per joint ({N})')
+        offsets = [None] * N if rest_length_offsets is None else list(rest_length_offsets)
+        if len(offsets) != N:
+            raise ValueError(f'rest_length_offsets must hold one row per joint ({N})')
+        rows = self._rows(rest_lengths)
+        self.integral_gain, _, self.integral_limit = _gains(integral_gain, 0.0, integral_limit)
+        self.joints = [StiffnessController(m, lim, r, integral_gain=0.0,
+                                           rest_length_offsets=d)
+                       for m, lim, r, d in zip(chain.joints, per_limits, rows, offsets,
+                                               strict=True)]
+        ref = chain.unloaded_screws() if initial_screws is None else finite_array_of_shape(
+            'initial_screws', initial_screws, (N, 6))
+        self.reference_screws = np.array(ref, dtype=np.float64)
+        self._z = np.zeros(6)
+        self._xi = self.reference_screws.copy()
+
+    def _rows(self, rest_lengths: Any) -> list[FloatArray]:
+        N = self.chain.n_joints
+        rows = list(rest_lengths)
+        if len(rows) != N:
+            raise ValueError(f'rest_lengths must hold one row per joint ({N}), got {len(rows)}')
+        return [np.asarray(r, dtype=np.float64) for r in rows]
+
+    @property
+    def rest_lengths(self) -> FloatArray:
+        """(N, n) the last commands."""
+        return np.array([j.rest_lengths for j in self.joints])
+
+    def reset(self, rest_lengths: Any) -> None:
+        """Forget the integral and warm starts; ``rest_lengths`` one row per joint."""
+        rows = self._rows(rest_lengths)
+        for j, r in zip(self.joints, rows, strict=True):
+            j.reset(r)
+        self._z = np.zeros(6)
+        self._xi = self.reference_screws.copy()
+
+    def _screws_for(self, T_d: FloatArray) -> FloatArray:
+        """Screws (N, 6) with tip(xi) = T_d nearest the reference (Gauss-Newton)."""
+        xi = self._xi.copy()
+        ref = self.reference_screws.ravel()
+        for _ in range(CHAIN_IK_ITERATIONS):
+            tip = self.chain.tip_transform(xi)
+            e = log_se3(T_d @ np.linalg.inv(tip))
+            r = np.concatenate([e[3:], e[:3]])  # the Jacobian's [dv; dw] order (small e)
+            J = self.chain.jacobian(xi)
+            x = xi.ravel()
+            # min |x + dx - ref|^2 s.t. J dx = r
+            dx0 = ref - x
+            dx = dx0 + np.linalg.lstsq(J, r - J @ dx0, rcond=None)[0]
+            xi = (x + dx).reshape(-1, 6)
+        return xi
+
+    def update(self, dt: float, target: ControlTarget, tip_pose: ArrayLike | None = None,
+               tip_wrench: ArrayLike | None = None, gravity: ArrayLike | None = None
+               ) -> ChainControlCommand:
+        """One tick: ``target`` (tip pose in the base; ``cartesian_stiffness`` the tip K_c* in
+        the base), the measured ``tip_pose`` (4x4 or 7) and the known ``tip_wrench`` (6,)
+        (base, about the tip link's origin; default 0); ``gravity`` as the chain's."""
+        dt = _check_dt(dt)
+        if not isinstance(target, ControlTarget):
+            raise ValueError('target must be a ControlTarget')
+        measured = _measured(tip_pose, None)
+        W = np.zeros(6) if tip_wrench is None else finite_array_of_shape(
+            'tip_wrench', tip_wrench, (6,))
+        T_star = target.transform
+        e, error = (_pose_error(T_star, measured) if measured is not None
+                    else (np.zeros(6), np.zeros(6)))
+        z = _clamp_integral(self._z + self.integral_gain * dt * e, self.integral_limit)
+        xi = self._screws_for(exp_se3(z) @ T_star)
+        chain, N = self.chain, self.chain.n_joints
+        state = chain.evaluate(xi)
+        loads = chain.residuals(xi, W, gravity) - state.wrenches
+        commands = []
+        for i, ctl in enumerate(self.joints):
+            K_i = None
+            if target.cartesian_stiffness is not None:
+                Ad = _adjoint_twist(state.joint_frames[i])
+                K_i = N * Ad.T @ target.cartesian_stiffness @ Ad
+            joint_target = ControlTarget(screw=xi[i], cartesian_stiffness=K_i,
+                                         stiffness_weight=target.stiffness_weight)
+            commands.append(ctl._tick(dt, joint_target, xi[i], loads[i], ctl.integral,
+                                      np.zeros(6)))
+        feasible = all(c.feasible for c in commands)
+        saturated = np.array([c.saturated for c in commands])
+        if feasible and not saturated.any():
+            self._z = z
+        self._xi = xi
+        if feasible:
+            designed = [rest_from_tensions(ctl.model, pose_terms(ctl.model, x).lengths,
+                                           c.tensions)
+                        for c, ctl, x in zip(commands, self.joints, xi, strict=True)]
+            K_tip = chain.tip_stiffness(xi, W, gravity, rest_lengths=designed)
+        else:
+            K_tip = np.full((6, 6), np.nan)
+        if target.cartesian_stiffness is None or not feasible:
+            err = 0.0 if feasible else math.nan
+        else:
+            L = self.joints[0].length_scale
+            err = relative_stiffness_error(K_tip, target.cartesian_stiffness, L)
+        msgs = [f'joint {i + 1}: {c.message}' for i, c in enumerate(commands)
+                if c.message != 'ok']
+        return ChainControlCommand(np.array([c.rest_lengths for c in commands]), feasible, err,
+                                   K_tip, np.array([c.tensions for c in commands]), saturated,
+                                   '; '.join(msgs) or 'ok', xi, error, tuple(commands))
