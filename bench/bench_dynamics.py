@@ -28,11 +28,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from tensegrity_stiffness import kernel  # noqa: E402
-from tensegrity_stiffness.chain import JointChain  # noqa: E402
-from tensegrity_stiffness.dynamics import ChainDynamics, JointDynamics  # noqa: E402
-from tensegrity_stiffness.equilibrium import solve_equilibrium  # noqa: E402
-from tensegrity_stiffness.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.mechanics import kernel  # noqa: E402
+from tensegrity_stiffness.mechanics.chain import JointChain  # noqa: E402
+from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, JointDynamics  # noqa: E402
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
 STEP = 1e-6
 DAMPING = 0.5

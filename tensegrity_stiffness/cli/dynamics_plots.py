@@ -1,4 +1,5 @@
-"""Figures of vibration modes (:mod:`~tensegrity_stiffness.dynamics`): each mode drawn as the
+"""Figures of vibration modes (:mod:`~tensegrity_stiffness.mechanics.dynamics`): each mode drawn
+as the
 joint (or spine) displaced along its shape, next to the equilibrium, for ``tensegrity-stiffness
 modes --plot``. matplotlib only (no rclpy)."""
 
@@ -9,10 +10,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
-from tensegrity_stiffness.chain import JointChain
-from tensegrity_stiffness.dynamics import JointModes
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.plots import MM, MatplotlibMissingError, check_size
+from tensegrity_stiffness.cli.plots import MM, MatplotlibMissingError, check_size
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.dynamics import JointModes
+from tensegrity_stiffness.mechanics.joint import JointModel
 
 #: Default figure size (pixels).
 DEFAULT_SIZE = (1500, 1000)
@@ -114,7 +115,7 @@ def plot_joint_modes(model: JointModel, modes: JointModes, path: str | Path, *,
 
 
 def _transform(xi: ArrayLike) -> np.ndarray:
-    from tensegrity_stiffness.screw import exp_se3
+    from tensegrity_stiffness.geometry.screw import exp_se3
 
     return exp_se3(np.asarray(xi, dtype=np.float64))
 

@@ -4,14 +4,14 @@ The joint's link 2 (a spine's links 1..N) is a rigid body moved by its screw coo
 ``xi = [omega; v]`` (``T = exp(hat(xi))``, eq. 2 of Monke & Vikas); this module gives the
 Euler-Lagrange equations in those coordinates, their linearisation (for LQR / MPC) and the
 vibration modes. numpy / scipy only; time integration is the twin's (MuJoCo,
-:mod:`~tensegrity_stiffness.simulation`), which the tests use to prove these models.
+:mod:`~tensegrity_stiffness.simulation.twin`), which the tests use to prove these models.
 
 Conventions (every twist here is in the ``[omega; v]`` order of the screws, every wrench in the
 matching ``[m; f]`` order, unless it says ``[f; m]`` / ``[v; w]`` as the rest of the package)
 ------------------------------------------------------------------------------------------
 * Body twist of link 2, in {2}: ``hat(V_b) = T^-1 dT/dt``, ``V_b = J_b(xi) xi_dot`` with
   ``J_b(xi) = J_r(xi) = J_l(-xi)`` (the SE(3) right Jacobian, from the closed-form left Jacobian
-  of :class:`~tensegrity_stiffness.screw.ScrewKinematics`: exact at every angle, including
+  of :class:`~tensegrity_stiffness.geometry.screw.ScrewKinematics`: exact at every angle, including
   ``|omega| -> 0`` (series branch) and near ``pi``).
 * Spatial inertia about the origin of {2}, in {2}: ``G = [[I_c - m hat(c)^2, m hat(c)],
   [-m hat(c), m 1]]`` (``c`` the centre of mass, ``I_c`` the inertia about it).
@@ -42,7 +42,8 @@ matching ``[m; f]`` order, unless it says ``[f; m]`` / ``[v; w]`` as the rest of
   ``|lambda| / 2 pi`` (Hz), damping ratio ``-Re lambda / |lambda|``; an overdamped pair of real
   eigenvalues ``l1, l2`` gives ``sqrt(l1 l2) / 2 pi`` and ``-(l1 + l2) / (2 sqrt(l1 l2))``.
 * Spines: link i's body twist ``V_i = Ad_{X_i^-1} V_{i-1} + J_b(xi_i) xi_dot_i`` with
-  ``X_i = O_{i-1} T_i`` (:mod:`~tensegrity_stiffness.chain`); ``M = sum_i Jc_i^T G_i Jc_i`` over
+  ``X_i = O_{i-1} T_i`` (:mod:`~tensegrity_stiffness.mechanics.chain`); ``M = sum_i Jc_i^T G_i
+  Jc_i`` over
   the links' body Jacobians ``Jc_i`` (6, 6N); the generalized force of joint i is
   ``J_l(xi_i)^T Pi r_i`` with ``r_i`` the chain's equilibrium residual (strings, tip wrench and
   link weights above joint i), so that ``dQ/dxi = diag(J_l^T Pi) dr/dxi`` at an equilibrium with
@@ -61,10 +62,12 @@ import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.chain import JointChain, adjoint
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.screw import ScrewKinematics, check_in_chart, hat, hat3, vee
-from tensegrity_stiffness.validation import finite_array
+from tensegrity_stiffness.geometry.components import SCREW_NAMES
+from tensegrity_stiffness.geometry.screw import ScrewKinematics, check_in_chart, hat, hat3, vee
+from tensegrity_stiffness.geometry.transforms import adjoint
+from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.joint import JointModel
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -82,7 +85,7 @@ EQUILIBRIUM_TOLERANCE = 1e-9
 #: An eigenvalue is real when ``|Im| <= REAL_TOLERANCE |lambda|``.
 REAL_TOLERANCE = 1e-9
 #: Labels of the screw coordinates and of the modes' frequencies (for messages and reports).
-SCREW_LABELS = ('wx', 'wy', 'wz', 'vx', 'vy', 'vz')
+SCREW_LABELS = SCREW_NAMES
 
 _SWAP = np.array([3, 4, 5, 0, 1, 2])
 _EYE3 = np.eye(3)
@@ -446,7 +449,7 @@ def _string_damping(value: ArrayLike, n: int, name: str = 'string_damping') -> F
 class JointDynamics:
     """Euler-Lagrange dynamics of a joint's link 2 in screw coordinates (module docstring).
 
-    ``model``: the :class:`~tensegrity_stiffness.joint.JointModel`; ``inertia``: link 2's
+    ``model``: the :class:`~tensegrity_stiffness.mechanics.joint.JointModel`; ``inertia``: link 2's
     :class:`LinkInertia` (default: the twin's, ``LinkInertia()`` with the default inertia of
     ``model.link2_nodes``); ``string_damping``: N s/m, a scalar or one per string. The joint has
     no weights (the library's joint has none; the twin compensates gravity on its link 2).
@@ -703,7 +706,8 @@ def _frequency_response(A: FloatArray, B: FloatArray, C: FloatArray, frequencies
 
 # ---------------------------------------------------------------------------- spines
 class ChainDynamics:
-    """Dynamics of a spine (:class:`~tensegrity_stiffness.chain.JointChain`) in its joints'
+    """Dynamics of a spine (:class:`~tensegrity_stiffness.mechanics.chain.JointChain`) in its
+    joints'
     screw coordinates (6N, joint-major).
 
     ``inertias``: one :class:`LinkInertia` per moving link (default: the twin's,
@@ -1009,8 +1013,8 @@ def modes_from_config(config_path: Any = None, spine: bool = False,
     ``dynamics.string_damping`` or 0. ValueError names a bad field."""
     from pathlib import Path
 
-    from tensegrity_stiffness.chain import DEFAULT_SPINE_CONFIG
-    from tensegrity_stiffness.equilibrium import solve_equilibrium
+    from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG
+    from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 
     name = DEFAULT_SPINE_CONFIG if spine else config.DEFAULT_JOINT_CONFIG
     path = Path(config_path) if config_path else config.packaged_config_path(name)

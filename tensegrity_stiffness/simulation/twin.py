@@ -56,6 +56,7 @@ from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain
+from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS, default_inertia_moments
 from tensegrity_stiffness.mechanics.joint import JointModel
 
 __all__ = [
@@ -94,8 +95,6 @@ DEFAULT_TENDON_DAMPING = 0.5
 #: against the world that damps the spine's slow bending mode (about 4 rad/s with 10 g links),
 #: which the strings' damping barely reaches; negligible against the joint's own modes.
 DEFAULT_JOINT_DAMPING = 1e-3
-#: Default dynamic mass (kg) of a link whose config gives none.
-DEFAULT_LINK_MASS = 0.01
 #: Default gravity (m/s^2, base frame) of the single joint: the vertebra's axis is +y, as in
 #: ``config/default_spine.yaml``. Compensated (the library's joint has no weights); the IMU
 #: senses it.
@@ -238,8 +237,7 @@ def _inertia(model: JointModel, com: FloatArray, mass: float,
              options: SimulationOptions) -> FloatArray:
     if options.link_inertia is not None:
         return np.array(options.link_inertia)
-    r2 = float(np.mean(np.sum((model.link2_nodes - com) ** 2, axis=1)))
-    return np.full(3, mass * max(r2, 1e-8) / 2.0)
+    return default_inertia_moments(model.link2_nodes, mass, com)
 
 
 def _build_mjcf(layout: _Layout, options: SimulationOptions, model_name: str) -> str:

@@ -1,4 +1,4 @@
-"""Dynamics in screw coordinates (tensegrity_stiffness.dynamics), numpy-only checks.
+"""Dynamics in screw coordinates (tensegrity_stiffness.mechanics.dynamics), numpy-only checks.
 
 Every closed form against the geometry it came from: the mass matrix against the kinetic energy
 of link 2 from central differences of ``expm(hat(xi + t xi_dot))`` (scipy's exponential, not the
@@ -18,9 +18,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.linalg
+from support import REPO
 
-from tensegrity_stiffness.chain import JointChain, solve_chain_equilibrium
-from tensegrity_stiffness.dynamics import (
+from tensegrity_stiffness.geometry.screw import hat, left_jacobian_se3, vee, vee3
+from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium
+from tensegrity_stiffness.mechanics.dynamics import (
     DEFAULT_LINK_MASS,
     ChainDynamics,
     JointDynamics,
@@ -35,11 +37,9 @@ from tensegrity_stiffness.dynamics import (
     modes_report,
     twin_link_inertias,
 )
-from tensegrity_stiffness.equilibrium import solve_equilibrium
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.screw import hat, left_jacobian_se3, vee, vee3
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
+from tensegrity_stiffness.mechanics.joint import JointModel
 
-REPO = Path(__file__).resolve().parents[1]
 JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
 SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 #: The issue's tolerance of the mass matrix (relative).
@@ -391,8 +391,8 @@ def test_modes_report_is_plain_json() -> None:
 # ---------------------------------------------------------------------------- inertia, config
 def test_default_inertia_equals_the_twins_mjcf() -> None:
     """The twin's MJCF (joint and spine) carries exactly LinkInertia()'s default."""
-    from tensegrity_stiffness.simulation import DEFAULT_LINK_MASS as TWIN_MASS
-    from tensegrity_stiffness.simulation import chain_mjcf, joint_mjcf
+    from tensegrity_stiffness.simulation.twin import DEFAULT_LINK_MASS as TWIN_MASS
+    from tensegrity_stiffness.simulation.twin import chain_mjcf, joint_mjcf
 
     assert DEFAULT_LINK_MASS == TWIN_MASS
     inertial = re.findall(r'<inertial pos="([^"]*)" mass="([^"]*)" diaginertia="([^"]*)"',
@@ -657,7 +657,7 @@ def test_chain_modes_agree_with_the_chains_stability() -> None:
 
 def test_mode_figures_are_written(tmp_path: Path) -> None:
     pytest.importorskip('matplotlib')
-    from tensegrity_stiffness.dynamics_plots import plot_joint_modes, plot_spine_modes
+    from tensegrity_stiffness.cli.dynamics_plots import plot_joint_modes, plot_spine_modes
 
     out = plot_joint_modes(MODEL, JointDynamics(MODEL, string_damping=0.5).modes(XI0),
                            tmp_path / 'joint.png', width=600, height=400)

@@ -1,4 +1,4 @@
-"""Dynamics in screw coordinates against the MuJoCo twin (tensegrity_stiffness.simulation).
+"""Dynamics in screw coordinates against the MuJoCo twin (tensegrity_stiffness.simulation.twin).
 
 MuJoCo computes the reference here with its own dynamics (free joints, tendon springs and
 dampers, its composite-rigid-body mass matrix and bias forces): the library's accelerations
@@ -15,30 +15,29 @@ from __future__ import annotations
 
 import math
 import re
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
+from support import REPO
 
-from tensegrity_stiffness.chain import JointChain, solve_chain_equilibrium
-from tensegrity_stiffness.dynamics import (
+from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
+from tensegrity_stiffness.geometry.screw import exp_se3
+from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium
+from tensegrity_stiffness.mechanics.dynamics import (
     ChainDynamics,
     JointDynamics,
     LinkInertia,
     body_jacobian,
     body_jacobian_rate,
 )
-from tensegrity_stiffness.equilibrium import solve_equilibrium
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.quaternion import rotation_to_quaternion
-from tensegrity_stiffness.screw import exp_se3
-from tensegrity_stiffness.simulation import ChainSimulation, JointSimulation
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.simulation.twin import ChainSimulation, JointSimulation
 
 mujoco = pytest.importorskip('mujoco')
 
-REPO = Path(__file__).resolve().parents[1]
 JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
 SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 #: The issue's tolerances: accelerations (relative to the largest), frequencies (relative),

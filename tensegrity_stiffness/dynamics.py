@@ -1,0 +1,8 @@
+"""Documented import path of :mod:`tensegrity_stiffness.mechanics.dynamics`
+(this name is the same module object)."""
+
+import sys
+
+from tensegrity_stiffness.mechanics import dynamics as _module
+
+sys.modules[__name__] = _module
