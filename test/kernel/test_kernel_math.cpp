@@ -1,26 +1,36 @@
 // The kernel's math against closed forms worked out by hand (gtest through ament_cmake_gtest):
 // one string's wrench and stiffness in each region and force law, the rotation at 0, pi / 2, pi
 // and across the series threshold, the chain's frames and tip stiffness, and the ABI's checks of
-// counts, buffer sizes, modes and pointers. Run by ctest and by test/test_kernel_gtest.py.
+// counts, buffer sizes, modes and pointers. Run by ctest and by test/kernel/test_kernel_gtest.py.
 
 #include <gtest/gtest.h>
 
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
+#include <iterator>
+#include <limits>
 #include <vector>
 
 #include "tensegrity_stiffness/kernel.h"
+#include "tensegrity_stiffness/kernel_defaults.h"
 
 namespace {
 
-constexpr int kTerms = 12;
-constexpr double kThreshold = 0.5;
+// The model constants from their one home (kernel_defaults.h, generated from the Python
+// package); SeriesDefaultsAreTheTaylorCoefficients checks them against the formula.
+constexpr int kTerms = TSK_DEFAULT_SERIES_TERMS;
+constexpr double kThreshold = TSK_DEFAULT_SERIES_THRESHOLD;
+constexpr double kDefaultSeries[] = TSK_DEFAULT_SERIES;
 const double kInf = std::numeric_limits<double>::infinity();
+
+std::vector<double> series_table() {
+  return std::vector<double>(std::begin(kDefaultSeries), std::end(kDefaultSeries));
+}
 
 // Taylor coefficients in theta^2 (highest power first) of a = sum (-1)^j t^2j / (2j + 1)!,
 // b (2j + 2)!, c (2j + 3)! and of b1 = b' / t, c1 = c' / t (as screw.py's _series).
-std::vector<double> series_table() {
+std::vector<double> taylor_table() {
   std::vector<double> table(TSK_SERIES_ROWS * kTerms);
   auto coefficient = [](int j, int offset) {
     double f = 1.0;
@@ -59,7 +69,7 @@ struct Joint {
     model.series_terms = kTerms;
     model.series = series.data();
     model.series_threshold = kThreshold;
-    model.min_string_length = 1e-12;
+    model.min_string_length = TSK_DEFAULT_MIN_STRING_LENGTH;
   }
 };
 
@@ -142,6 +152,16 @@ TEST(KernelAbi, VersionAndModelLayout) {
   EXPECT_EQ(tsk_joint_batch_size(12, 2), 2 * (16 + 60 + 6 + 36 + 36) + 6);
   EXPECT_EQ(tsk_joint_packed_size(0), TSK_ERROR_COUNT);
   EXPECT_EQ(tsk_joint_batch_size(12, 0), TSK_ERROR_COUNT);
+}
+
+TEST(KernelAbi, SeriesDefaultsAreTheTaylorCoefficients) {
+  ASSERT_EQ(std::size(kDefaultSeries), static_cast<size_t>(TSK_SERIES_ROWS * kTerms));
+  const std::vector<double> taylor = taylor_table();
+  for (size_t i = 0; i < taylor.size(); ++i) {
+    EXPECT_NEAR(kDefaultSeries[i], taylor[i], 4e-16 * std::abs(taylor[i])) << "entry " << i;
+  }
+  EXPECT_EQ(kThreshold, 0.5);
+  EXPECT_EQ(TSK_DEFAULT_MIN_STRING_LENGTH, 1e-12);
 }
 
 // Hooke, taut, at xi = 0: s = a - b = (0, 0, 0.1), l = 0.1, l0 = 0.05, k = 100: tension 5 N,

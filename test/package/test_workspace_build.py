@@ -1,11 +1,13 @@
 """The repository builds in a colcon workspace as a ROS user builds it.
 
-``git clone <checkout> ws/src/tensegrity_stiffness`` next to another package that depends on it,
-``cd ws && colcon build`` (no options) in this environment, ``source install/setup.bash``, then
-``test/support/workspace_check.py`` starts the installed ``stiffness_node`` from ``ws/install``
-(through the ament index, as ``ros2 run`` does) and gets a correct K and an equilibrium back.
-Nothing of the
-checkout's own build (its install/) is on any path of the workspace's environment.
+``git clone <checkout> ws/src/tensegrity_stiffness`` next to another package that depends on it
+(a C++ package: ``find_package(tensegrity_stiffness)``, ``target_link_libraries(...
+tensegrity_stiffness::kernel)`` and ``joint_kernel.hpp``), ``cd ws && colcon build`` (no options)
+in this environment, ``source install/setup.bash``, then ``test/support/workspace_check.py`` runs
+the consumer's program (the default joint's K_c equal to the Python library's to 1e-12) and starts
+the installed ``stiffness_node`` from ``ws/install`` (through the ament index, as ``ros2 run``
+does) for a correct K and an equilibrium. Nothing of the checkout's own build (its install/) is
+on any path of the workspace's environment.
 """
 
 from __future__ import annotations
@@ -39,11 +41,17 @@ CONSUMER_PACKAGE_XML = """<?xml version="1.0"?>
 </package>
 """
 CONSUMER_CMAKE = """cmake_minimum_required(VERSION 3.8)
-project(tensegrity_consumer NONE)
+project(tensegrity_consumer CXX)
 find_package(ament_cmake REQUIRED)
 find_package(tensegrity_stiffness REQUIRED)
+add_executable(joint_stiffness src/joint_stiffness.cpp)
+target_compile_options(joint_stiffness PRIVATE -Wall -Wextra -Wpedantic -Werror)
+target_link_libraries(joint_stiffness tensegrity_stiffness::kernel)
+install(TARGETS joint_stiffness DESTINATION lib/${PROJECT_NAME})
 ament_package()
 """
+#: The consumer's C++ program (joint_kernel.hpp over the kernel): F, K, K_c of a joint.
+CONSUMER_SOURCE = REPO / 'test' / 'kernel' / 'consumer_joint_stiffness.cpp'
 
 
 def _without_checkout_build(env: dict[str, str]) -> dict[str, str]:
@@ -69,6 +77,8 @@ def test_clone_build_and_run_in_a_workspace(tmp_path: Path) -> None:
     consumer.mkdir()
     (consumer / 'package.xml').write_text(CONSUMER_PACKAGE_XML)
     (consumer / 'CMakeLists.txt').write_text(CONSUMER_CMAKE)
+    (consumer / 'src').mkdir()
+    shutil.copy(CONSUMER_SOURCE, consumer / 'src' / 'joint_stiffness.cpp')
 
     env = _without_checkout_build(os.environ.copy())
     script = f"""
@@ -89,4 +99,5 @@ python {src / 'tensegrity_stiffness' / 'test' / 'support' / 'workspace_check.py'
     assert result.returncode == 0, output[-6000:]
     listed = result.stdout.split()
     assert 'tensegrity_stiffness' in listed and 'tensegrity_consumer' in listed, output[-3000:]
+    assert 'C++ consumer: F, K, K_c relative error' in result.stdout, output[-6000:]
     assert 'WORKSPACE OK' in result.stdout, output[-6000:]

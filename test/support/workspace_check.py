@@ -1,8 +1,10 @@
 """Run inside a colcon workspace after ``source install/setup.bash`` (by test_workspace_build):
-the installed ``stiffness_node`` answers with the library's K and an equilibrium.
+the installed ``stiffness_node`` answers with the library's K and an equilibrium, and the C++
+consumer package's ``joint_stiffness`` (built against the target ``tensegrity_stiffness::kernel``)
+computes the default joint's F, K and K_c as the Python library does.
 
 Usage: ``python workspace_check.py WS_INSTALL_DIR``. Everything is taken from the workspace's
-install space, found as ``ros2 run`` finds it (the ament index): the executable, its config, the
+install space, found as ``ros2 run`` finds it (the ament index): the executables, the config, the
 Python package, the generated service type and the compiled kernel. Prints ``WORKSPACE OK`` and
 exits 0, or raises.
 """
@@ -20,6 +22,55 @@ import numpy as np
 
 # Run as a script: the test folder, which holds the support package, on the path.
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+
+#: The consumer package of test_workspace_build and its C++ program.
+CONSUMER, CONSUMER_PROGRAM = 'tensegrity_consumer', 'joint_stiffness'
+
+
+def check_cpp_consumer(install: Path, config: Path) -> float:
+    """The consumer's C++ program on the default joint at its initial_screw against the Python
+    library (the compiled path and the numpy reference): K and K_c to 1e-12 of their largest
+    entry, F of the largest tension. Returns the largest relative difference."""
+    from ament_index_python.packages import get_package_prefix
+
+    from tensegrity_stiffness.mechanics.joint import FORCE_LAWS, JointModel
+
+    program = Path(get_package_prefix(CONSUMER)) / 'lib' / CONSUMER / CONSUMER_PROGRAM
+    assert install in program.parents and program.is_file(), f'{program} not installed'
+    model = JointModel.from_yaml(config)
+    reference = JointModel(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+                           link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+                           force_law=model.force_law, initial_screw=model.initial_screw,
+                           use_kernel=False)
+    assert model.uses_kernel and not reference.uses_kernel
+    arrays = {'p1': model.link1_string_nodes, 'p2': model.link2_nodes[model.connections[:, 1]],
+              'k': model.k, 'max_stretch': model.max_stretch, 'rest': model.rest_lengths,
+              'xi': model.initial_screw, 'law': [FORCE_LAWS.index(model.force_law)]}
+    text = ''.join(f'{name} ' + ' '.join(repr(float(v)) for v in np.ravel(values)) + '\n'
+                   for name, values in arrays.items())
+    input_file = install.parent / 'joint_stiffness_input.txt'
+    input_file.write_text(text)
+    ran = subprocess.run([str(program), str(input_file)], capture_output=True, text=True,
+                         timeout=60)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    got = {line.split()[0]: np.array([float(v) for v in line.split()[1:]])
+           for line in ran.stdout.splitlines() if line.strip()}
+    worst = 0.0
+    for python in (model, reference):
+        state = python.evaluate(python.initial_screw)
+        for name, want in (('F', state.wrench), ('K', state.stiffness),
+                           ('K_c', state.cartesian_stiffness)):
+            want = np.ravel(want)
+            # F is zero at this equilibrium to 1e-13: measured against the largest tension.
+            scale = np.max(np.abs(want)) if name != 'F' else np.max(state.tensions)
+            error = float(np.max(np.abs(got[name] - want)) / scale)
+            assert error < 1e-12, f'C++ {name} differs from the library by {error:.2e}'
+            worst = max(worst, error)
+    if shutil.which('ldd'):
+        linked = subprocess.run(['ldd', str(program)], capture_output=True, text=True).stdout
+        assert str(install / 'tensegrity_stiffness' / 'lib') in linked, linked
+    return worst
 
 
 def main(install: Path) -> None:
@@ -42,6 +93,9 @@ def main(install: Path) -> None:
         'default_joint.yaml'
     launch_dir = config.parents[1] / 'launch'
     assert (launch_dir / 'stiffness_node.launch.py').is_file(), 'launch files not installed'
+
+    cpp_error = check_cpp_consumer(install, config)
+    print(f'C++ consumer: F, K, K_c relative error {cpp_error:.1e}')
 
     reference = JointModel.from_yaml(config)
     xi = np.array([0.05, -2.9, 0.3, 0.004, -0.01, 0.12])
