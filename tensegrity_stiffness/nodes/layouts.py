@@ -30,6 +30,10 @@ STIFFNESS_ROW_LABEL = 'rows: ' + WRENCH_LABEL
 STIFFNESS_COL_LABEL = 'cols: ' + SCREW_LABEL
 CARTESIAN_STIFFNESS_COL_LABEL = 'cols: ' + TWIST_LABEL
 
+#: Label of ``~/natural_frequencies`` (``dynamics.enabled``): the undamped natural frequencies
+#: of the joint's 6 modes (or a spine's 6N), ascending.
+NATURAL_FREQUENCIES_LABEL = 'natural frequencies [Hz], modes in ascending order'
+
 #: Label of ``~/string_tensions``: this prefix, then the string names in config order.
 TENSIONS_LABEL_PREFIX = 'tensions [N], strings in config order: '
 

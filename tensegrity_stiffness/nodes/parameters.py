@@ -21,6 +21,7 @@ from typing import Any
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS, JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.joint import FORCE_LAWS, JointModel
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
 
@@ -195,8 +196,28 @@ COMMON_PARAMETERS: tuple[ParameterSpec, ...] = (
 )
 
 #: Every parameter of ``stiffness_node``, in declaration order.
+#: The dynamics of ``stiffness_node``'s joint (:mod:`tensegrity_stiffness.mechanics.dynamics`):
+#: link 2's inertia (the twin's default when left at the defaults) and the strings' damping.
+LINK2_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('joint.link2_mass', 'double', DEFAULT_LINK_MASS,
+                  "link 2's mass, kg", range=(1e-12, 1e9)),
+    ParameterSpec('joint.link2_com', 'double_array', [0.0, 0.0, 0.0],
+                  "link 2's centre of mass in {2}, [x y z], m"),
+    ParameterSpec('joint.link2_inertia', 'double_array', None,
+                  "link 2's inertia about its centre of mass in {2}'s axes: 3 principal moments "
+                  'or 9 values row-major, kg m^2 (empty: the twin\'s default m r^2 / 2)'),
+)
+JOINT_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = LINK2_PARAMETERS + (
+    ParameterSpec('dynamics.enabled', 'bool', False,
+                  'publish ~/natural_frequencies of every input (the modes of the joint held '
+                  'at its pose by the load that balances it there)', read_only=True),
+    ParameterSpec('dynamics.string_damping', 'double', 0.0,
+                  'damping of every string along its length, N s/m', range=(0.0, 1e9)),
+)
+
 STIFFNESS_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
-    JOINT_PARAMETERS + FRAME_PARAMETERS + PLANAR_PARAMETERS + COMMON_PARAMETERS)
+    JOINT_PARAMETERS + FRAME_PARAMETERS + PLANAR_PARAMETERS + COMMON_PARAMETERS
+    + JOINT_DYNAMICS_PARAMETERS)
 
 
 def by_name(table: Iterable[ParameterSpec]) -> dict[str, ParameterSpec]:
@@ -264,8 +285,26 @@ class JointNodeSettings:
     equilibrium_time_budget: float
     equilibrium_max_iterations: int
     marker_period: float
+    dynamics: JointDynamics | None = None
     generation: int = 0
     values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+
+def joint_dynamics_from_values(model: JointModel, values: Mapping[str, Any]
+                               ) -> JointDynamics | None:
+    """The joint's dynamics from checked values (None unless ``dynamics.enabled``); errors
+    name the parameter."""
+    if not values['dynamics.enabled']:
+        return None
+    return JointDynamics(model, link2_inertia_from_values(values),
+                         values['dynamics.string_damping'])
+
+
+def link2_inertia_from_values(values: Mapping[str, Any]) -> LinkInertia:
+    """Link 2's :class:`LinkInertia` from checked ``joint.link2_*`` values (the dynamics' and
+    the twin's); errors name the key."""
+    return LinkInertia.from_config({key: values[f'joint.{key}'] for key in (
+        'link2_mass', 'link2_com', 'link2_inertia')})
 
 
 def marker_period(rate: float) -> float:
@@ -280,14 +319,16 @@ def joint_node_settings(values: Mapping[str, Any], generation: int = 0) -> Joint
     for name in ('frames.link1', 'frames.link2'):
         if not checked[name].strip():
             raise ValueError(f'{name} must not be empty')
+    model = joint_from_values(checked)
     return JointNodeSettings(
-        model=joint_from_values(checked), planar=planar_from_values(checked),
+        model=model, planar=planar_from_values(checked),
         link1_frame=checked['frames.link1'], link2_frame=checked['frames.link2'],
         max_array_length=checked['limits.max_array_length'],
         equilibrium_time_budget=checked['equilibrium.time_budget'],
         equilibrium_max_iterations=checked['equilibrium.max_iterations'],
         marker_period=marker_period(checked['markers.max_rate']),
-        generation=generation, values=checked)
+        dynamics=joint_dynamics_from_values(model, checked), generation=generation,
+        values=checked)
 
 
 # ---------------------------------------------------------------------------------- spine_node
@@ -506,8 +547,9 @@ SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'damping of each free-joint dof of every link against the world, N s/m and '
                   'N m s/rad', read_only=True, range=(0.0, 1e6)),
     ParameterSpec('sim.link_mass', 'double', 0.01,
-                  'dynamic mass of every link whose config gives none, kg (its weight is '
-                  'compensated: the library applies none)', read_only=True, range=(1e-9, 1e6)),
+                  "dynamic mass of every spine link whose config gives none, kg (its weight is "
+                  "compensated: the library applies none; a joint's link 2: joint.link2_mass)",
+                  read_only=True, range=(1e-9, 1e6)),
     ParameterSpec('sim.rest_length_rate', 'double', 0.0,
                   'largest change of a rest length per second, m/s, like a motor (0: at once)',
                   range=(0.0, 1e3)),
@@ -541,7 +583,8 @@ def sim_node_parameters(spine: bool = False, n_joints: int = 5) -> tuple[Paramet
     """Every parameter of ``sim_node``: the joint's model and frames, or (``spine``) the
     spine's, then the twin's own."""
     model = (JOINT_PARAMETERS + joint_override_parameters(n_joints) + CHAIN_PARAMETERS
-             + SPINE_FRAME_PARAMETERS) if spine else JOINT_PARAMETERS + FRAME_PARAMETERS
+             + SPINE_FRAME_PARAMETERS) if spine else (
+                 JOINT_PARAMETERS + LINK2_PARAMETERS + FRAME_PARAMETERS)
     return model + SIM_PARAMETERS + _SIM_COMMON
 
 

@@ -37,6 +37,7 @@ from tensegrity_stiffness.nodes.parameters import (
     SIM_PARAMETERS,
     SimNodeSettings,
     by_name,
+    link2_inertia_from_values,
     sim_node_parameters,
     sim_node_settings,
 )
@@ -174,7 +175,8 @@ class SimNode(Node):
                 settings.chain, initial_screws=screws, **options)
         else:
             self._sim = JointSimulation(settings.model, initial_screw=None if screws is None
-                                        else screws[0], **options)
+                                        else screws[0], link2=link2_inertia_from_values(values),
+                                        **options)
         self._swing_wrenches: np.ndarray | None = None
         self._held_wrench: np.ndarray | None = None  # the topic's wrench object the twin holds
 

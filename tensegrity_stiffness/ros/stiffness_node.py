@@ -27,7 +27,7 @@ from tensegrity_stiffness.mechanics.design import design_rest_lengths
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.health import joint_health
-from tensegrity_stiffness.nodes.layouts import joint_output_layouts
+from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL, joint_output_layouts
 from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameters import (
     STIFFNESS_NODE_PARAMETERS,
@@ -47,6 +47,7 @@ from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
 from tensegrity_stiffness.ros.runtime.rest_length_topics import JointRestLengthTopic
+from tensegrity_stiffness.ros.runtime.topics import create_output_publisher, output_qos
 from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
 from tensegrity_stiffness.ros.services import joint_services
 from tensegrity_stiffness.srv import (
@@ -72,6 +73,10 @@ class StiffnessNode(JointRestLengthTopic, StreamingNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
+        self._pub_frequencies = create_output_publisher(
+            self, Float64MultiArray, '~/natural_frequencies',
+            output_qos(self._settings.values['qos.depth'])) \
+            if self._settings.dynamics is not None else None
         # Own group: the coroutine holds its group while it awaits the worker; the default group
         # (topics, planar services, timer) stays free.
         self.create_service(SolveEquilibrium, '~/solve_equilibrium', self._on_solve_equilibrium,
@@ -92,6 +97,21 @@ class StiffnessNode(JointRestLengthTopic, StreamingNode):
     # ------------------------------------------------------------------ declarations
     def _parameter_table(self) -> tuple[ParameterSpec, ...]:
         return STIFFNESS_NODE_PARAMETERS
+
+    def _publish_extras(self, settings: JointNodeSettings, xi: np.ndarray) -> None:
+        """``~/natural_frequencies`` with ``dynamics.enabled``: the modes of the joint held at
+        ``xi`` by the load that balances it there (:meth:`JointDynamics.modes_at_pose`)."""
+        publisher = self._pub_frequencies
+        if settings.dynamics is None or publisher is None or \
+                publisher.get_subscription_count() == 0:
+            return
+        try:
+            modes, _ = settings.dynamics.modes_at_pose(xi, settings.model.rest_lengths)
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            self.reporter.warn('~/natural_frequencies', str(exc))
+            return
+        publisher.publish(conversions.vector_to_multiarray(modes.frequencies,
+                                                           NATURAL_FREQUENCIES_LABEL))
 
     def _streams(self) -> tuple[Stream, ...]:
         return ((Float64MultiArray, '~/screw', self._on_screw),

@@ -56,7 +56,11 @@ from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain
-from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS, default_inertia_moments
+from tensegrity_stiffness.mechanics.dynamics import (
+    DEFAULT_LINK_MASS,
+    LinkInertia,
+    default_inertia_moments,
+)
 from tensegrity_stiffness.mechanics.joint import JointModel
 
 __all__ = [
@@ -111,9 +115,12 @@ class SimulationOptions:
     ``'Euler'``, MuJoCo's names; default ``'implicitfast'``); ``tendon_damping`` (N s/m per
     string, default 0.5); ``joint_damping`` (on each of the 6 free-joint dofs of a link, N s/m
     and N m s/rad, default 1e-3); ``link_mass`` (kg, default 0.01: links whose config has no
-    mass); ``link_inertia`` ((3,) kg m^2 principal
-    moments about the centre of mass; default ``None``: ``m r^2 / 2`` on each axis, ``r`` the
-    RMS distance of the link's nodes from its centre of mass); ``gravity`` ((3,) m/s^2 in the
+    mass); ``link_inertia`` ((3,) kg m^2 principal moments about the centre of mass; default
+    ``None``: ``m r^2 / 2`` on each axis, ``r`` the RMS distance of the link's nodes from its
+    centre of mass); ``link2`` (a single joint's link 2: a
+    :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`, its mass, centre of mass and
+    full inertia, the config's ``joint.link2_*``; default ``None``: ``link_mass`` at the origin
+    with ``link_inertia``); ``gravity`` ((3,) m/s^2 in the
     base; default ``None``: the chain's ``gravity``, for the joint (0, -9.81, 0));
     ``max_length`` (``'limit'`` or ``'ignore'``, default ``'limit'``); ``rest_length_rate``
     (m/s, the largest change of a rest length per second, like a motor; default ``None``:
@@ -126,6 +133,7 @@ class SimulationOptions:
     joint_damping: float = DEFAULT_JOINT_DAMPING
     link_mass: float = DEFAULT_LINK_MASS
     link_inertia: tuple[float, float, float] | None = None
+    link2: LinkInertia | None = None
     gravity: tuple[float, float, float] | None = None
     max_length: str = 'limit'
     rest_length_rate: float | None = None
@@ -156,6 +164,8 @@ class SimulationOptions:
             if inertia.shape != (3,) or np.any(inertia <= 0.0):
                 raise ValueError(f'link_inertia must be 3 positive values, got {inertia}')
             object.__setattr__(self, 'link_inertia', tuple(float(v) for v in inertia))
+        if self.link2 is not None and not isinstance(self.link2, LinkInertia):
+            raise ValueError(f'link2 must be a LinkInertia, got {type(self.link2).__name__}')
         if self.gravity is not None:
             g = finite_array('gravity', self.gravity)
             if g.shape != (3,):
@@ -264,8 +274,16 @@ def _build_mjcf(layout: _Layout, options: SimulationOptions, model_name: str) ->
         free = ET.SubElement(body, 'joint', name=f'{_link_name(layout, i + 1)}_free', type='free')
         if options.joint_damping > 0.0:
             free.set('damping', _num(options.joint_damping))
-        ET.SubElement(body, 'inertial', pos=_vec(com), mass=_num(mass),
-                      diaginertia=_vec(_inertia(model, com, mass, options)))
+        if layout.single and options.link2 is not None:
+            link = options.link2
+            inertia = link.inertia_matrix(model.link2_nodes)
+            off = [inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+            shape = ({'fullinertia': _vec([*np.diag(inertia), *off])} if any(off)
+                     else {'diaginertia': _vec(np.diag(inertia))})
+            ET.SubElement(body, 'inertial', pos=_vec(link.com), mass=_num(link.mass), **shape)
+        else:
+            ET.SubElement(body, 'inertial', pos=_vec(com), mass=_num(mass),
+                          diaginertia=_vec(_inertia(model, com, mass, options)))
         bodies.append(body)
         if i < layout.n - 1:
             pose = pose @ layout.offsets[i]

@@ -14,8 +14,6 @@ omega (body)]``.
 from __future__ import annotations
 
 import math
-import re
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -60,24 +58,6 @@ GENERAL = LinkInertia(0.02, (0.001, 0.002, -0.003),
 
 
 # ---------------------------------------------------------------------------- MuJoCo helpers
-def with_inertia(sim: JointSimulation, inertia: LinkInertia, nodes: np.ndarray
-                 ) -> SimpleNamespace:
-    """MuJoCo's model of ``sim`` rebuilt from its MJCF with link 2's ``inertial`` replaced by
-    ``inertia`` (centre of mass and full inertia matrix: MuJoCo's ``fullinertia``)."""
-    inertia_matrix = inertia.inertia_matrix(nodes)
-
-    def text(values: object) -> str:
-        return ' '.join(repr(float(v)) for v in values)
-
-    full = text(inertia_matrix[[0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]])
-    element = (f'<inertial pos="{text(inertia.com)}" mass="{inertia.mass!r}" '
-               f'fullinertia="{full}" />')
-    xml, count = re.subn(r'<inertial [^>]*/>', element, sim.mjcf)
-    assert count == 1
-    model = mujoco.MjModel.from_xml_string(xml)
-    return SimpleNamespace(mj_model=model, mj_data=mujoco.MjData(model))
-
-
 def free_state(T: np.ndarray, V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """qpos (7,) and qvel (6,) of a free joint at pose T with body twist V = [w; v]."""
     R = T[:3, :3]
@@ -162,11 +142,11 @@ def spectral_peak(signal: np.ndarray, dt: float, near: float) -> float:
 def joint_twin(damping: float, inertia: LinkInertia | None = None, **options: object
                ) -> tuple[JointSimulation, int, int]:
     """The twin (joint damping off: the library models the strings' damping only) and link 2's
-    body and first dof; with ``inertia``, MuJoCo's model rebuilt with it."""
-    sim = JointSimulation(MODEL, joint_damping=0.0, tendon_damping=damping, **options)
+    body and first dof; with ``inertia``, the twin's link 2 has it (``SimulationOptions.link2``:
+    centre of mass and full inertia)."""
+    sim = JointSimulation(MODEL, joint_damping=0.0, tendon_damping=damping, link2=inertia,
+                          **options)
     body = mujoco.mj_name2id(sim.mj_model, mujoco.mjtObj.mjOBJ_BODY, 'link2')
-    if inertia is not None:
-        return with_inertia(sim, inertia, MODEL.link2_nodes), body, 0
     return sim, body, 0
 
 

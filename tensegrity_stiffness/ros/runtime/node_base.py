@@ -252,7 +252,12 @@ class StreamingNode(Node):
                     publisher.publish(msg)
             if markers is not None:
                 self._pub_markers.publish(markers)
+            self._publish_extras(settings, xi)
             self._last.record(xi, stamp, outputs, start)
+
+    def _publish_extras(self, settings: Any, xi: np.ndarray) -> None:
+        """Outputs a node publishes after the per-input ones, only when configured (none by
+        default); a problem there is warned about and leaves the input's outputs published."""
 
     def _wanted_outputs(self, settings: Any) -> tuple[bool, ...]:
         """Which of ``OUTPUT_TOPICS`` to compute, fill and publish under ``settings``: those

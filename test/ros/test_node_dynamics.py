@@ -1,0 +1,70 @@
+"""``stiffness_node`` with ``dynamics.enabled``: ``~/natural_frequencies`` of every input, the
+library's modes of the joint held at that pose (real node, real middleware)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+
+from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support import REPO  # noqa: E402
+from support.ros_harness import NodeProcess, RosClient, repeat_until, unique_namespace  # noqa: E402
+
+from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia  # noqa: E402
+from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL  # noqa: E402
+
+CONFIG = REPO / 'config' / 'default_joint.yaml'
+
+
+@pytest.mark.ros
+def test_natural_frequencies_are_the_library_s_modes_at_each_input() -> None:
+    model = JointModel.from_yaml(CONFIG)
+    inertia = LinkInertia(mass=0.02, com=(0.0, 0.001, 0.0))
+    dynamics = JointDynamics(model, inertia, string_damping=0.3)
+    ns = unique_namespace('dynamics')
+    proc = NodeProcess(ns, CONFIG, extra_args=[
+        '-p', 'dynamics.enabled:=true', '-p', 'dynamics.string_damping:=0.3',
+        '-p', 'joint.link2_mass:=0.02', '-p', 'joint.link2_com:=[0.0, 0.001, 0.0]'])
+    ros = RosClient('dynamics_test')
+    try:
+        base = f'{ns}/stiffness_node'
+        frequencies = ros.subscribe(Float64MultiArray, f'{base}/natural_frequencies')
+        screw = ros.publisher(Float64MultiArray, f'{base}/screw')
+        ros.wait_for_subscribers(screw)
+        for step in (np.zeros(6), np.array([0.05, -0.02, 0.03, 1e-3, 0.0, -5e-4])):
+            xi = model.initial_screw + step
+            expected = dynamics.modes_at_pose(xi)[0].frequencies
+            frequencies.clear()
+            msg = repeat_until(
+                lambda xi=xi: screw.publish(Float64MultiArray(data=xi.tolist())),
+                lambda expected=expected: next((m for m in frequencies.messages if np.allclose(
+                    m.data, expected, rtol=1e-12, atol=0.0)), None))
+            assert msg.layout.dim[0].label == NATURAL_FREQUENCIES_LABEL
+            assert msg.layout.dim[0].size == 6
+            assert np.all(np.diff(msg.data) >= 0.0)
+    finally:
+        ros.close()
+        code = proc.stop()
+    assert code == 0, proc.log()
+
+
+def test_dynamics_are_built_only_when_enabled() -> None:
+    """The node creates ``~/natural_frequencies`` only for settings with dynamics."""
+    from tensegrity_stiffness.nodes.parameters import (
+        STIFFNESS_NODE_PARAMETERS,
+        joint_node_settings,
+    )
+
+    values = {spec.name: spec.default for spec in STIFFNESS_NODE_PARAMETERS}
+    assert joint_node_settings(values).dynamics is None
+    values.update({'dynamics.enabled': True, 'joint.link2_inertia': [1e-6, 2e-6, 3e-6]})
+    dynamics = joint_node_settings(values).dynamics
+    assert isinstance(dynamics, JointDynamics)
+    np.testing.assert_allclose(np.diag(dynamics.inertia.inertia_matrix(
+        dynamics.model.link2_nodes)), [1e-6, 2e-6, 3e-6])
+    values['joint.link2_mass'] = -1.0
+    with pytest.raises(ValueError, match='link2_mass'):
+        joint_node_settings(values)
