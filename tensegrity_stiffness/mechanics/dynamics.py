@@ -322,7 +322,15 @@ def chain_inertias_from_config(document: Any) -> list[LinkInertia]:
     all; empty: the twin's default)."""
     chain = JointChain.from_dict(document)
     section = config.section(document, 'chain')
-    raw = finite_array('chain.link_inertias', section.get('link_inertias') or []).ravel()
+    return chain_link_inertias(chain, section.get('link_inertias') or [])
+
+
+def chain_link_inertias(chain: JointChain, link_inertias: ArrayLike) -> list[LinkInertia]:
+    """Per-link inertias of ``chain``: its masses and centres of mass (the twin's rule,
+    :func:`twin_link_inertias`) with the inertias of ``link_inertias`` (the value of
+    ``chain.link_inertias``: 3 or 9 values per link, or one set for all; empty: the twin's
+    default); errors name the key."""
+    raw = finite_array('chain.link_inertias', link_inertias).ravel()
     n = chain.n_joints
     inertias = twin_link_inertias(chain)
     if raw.size == 0:

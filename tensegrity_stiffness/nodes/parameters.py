@@ -21,7 +21,13 @@ from typing import Any
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.mechanics.chain import JointChain
-from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS, JointDynamics, LinkInertia
+from tensegrity_stiffness.mechanics.dynamics import (
+    DEFAULT_LINK_MASS,
+    ChainDynamics,
+    JointDynamics,
+    LinkInertia,
+    chain_link_inertias,
+)
 from tensegrity_stiffness.mechanics.joint import FORCE_LAWS, JointModel
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
 
@@ -390,10 +396,24 @@ def joint_override_parameters(n_joints: int) -> tuple[ParameterSpec, ...]:
     return tuple(specs)
 
 
+#: The dynamics of ``spine_node``'s spine: the links' inertias (masses and centres of mass are
+#: ``chain.link_masses`` / ``chain.link_coms``) and the strings' damping.
+SPINE_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('chain.link_inertias', 'double_array', None,
+                  'inertias of the links about their centres of mass: 3 principal moments or 9 '
+                  'values per link, or one set for all, kg m^2 (empty: the twin\'s m r^2 / 2)'),
+    ParameterSpec('dynamics.enabled', 'bool', False,
+                  'publish ~/natural_frequencies (6N) of every input that is an equilibrium of '
+                  'its implied tip wrench (a spine off equilibrium has no linear model here)',
+                  read_only=True),
+    JOINT_DYNAMICS_PARAMETERS[-1],
+)
+
+
 def spine_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, ...]:
     """Every parameter of ``spine_node`` for a spine of ``n_joints``, in declaration order."""
     return (JOINT_PARAMETERS + joint_override_parameters(n_joints) + CHAIN_PARAMETERS
-            + SPINE_FRAME_PARAMETERS + SPINE_COMMON_PARAMETERS)
+            + SPINE_FRAME_PARAMETERS + SPINE_COMMON_PARAMETERS + SPINE_DYNAMICS_PARAMETERS)
 
 
 #: The parameters of ``spine_node`` with the default ``chain.n_joints``.
@@ -476,6 +496,7 @@ class SpineNodeSettings:
     equilibrium_max_iterations: int
     marker_period: float
     rest_lengths: tuple[Any, ...] | None = None
+    dynamics: ChainDynamics | None = None
     generation: int = 0
     values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
@@ -515,6 +536,9 @@ def spine_node_settings(values: Mapping[str, Any], generation: int = 0) -> Spine
         equilibrium_time_budget=checked['equilibrium.time_budget'],
         equilibrium_max_iterations=checked['equilibrium.max_iterations'],
         marker_period=marker_period(checked['markers.max_rate']),
+        dynamics=ChainDynamics(chain, chain_link_inertias(chain, checked['chain.link_inertias']),
+                               checked['dynamics.string_damping'])
+        if checked['dynamics.enabled'] else None,
         generation=generation, values=checked)
 
 

@@ -28,7 +28,7 @@ from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.mechanics.chain import ChainState, solve_chain_equilibrium
-from tensegrity_stiffness.nodes.layouts import spine_output_layouts
+from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL, spine_output_layouts
 from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameters import (
     CHAIN_PARAMETERS,
@@ -51,6 +51,7 @@ from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
 from tensegrity_stiffness.ros.runtime.rest_length_topics import SpineRestLengthTopic
+from tensegrity_stiffness.ros.runtime.topics import create_output_publisher, output_qos
 from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
 from tensegrity_stiffness.ros.services import spine_services
 from tensegrity_stiffness.srv import SolveChainEquilibrium
@@ -81,6 +82,10 @@ class SpineNode(SpineRestLengthTopic, StreamingNode):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
+        self._pub_frequencies = create_output_publisher(
+            self, Float64MultiArray, '~/natural_frequencies',
+            output_qos(self._settings.values['qos.depth'])) \
+            if self._settings.dynamics is not None else None
         self.create_service(SolveChainEquilibrium, '~/solve_equilibrium',
                             self._on_solve_equilibrium,
                             callback_group=MutuallyExclusiveCallbackGroup())
@@ -99,6 +104,23 @@ class SpineNode(SpineRestLengthTopic, StreamingNode):
 
     def _output_messages(self, settings: SpineNodeSettings) -> conversions.SpineOutputMessages:
         return conversions.SpineOutputMessages(settings.n_joints)
+
+    def _publish_extras(self, settings: SpineNodeSettings, xi: np.ndarray,
+                        outputs: SpineOutputs) -> None:
+        """``~/natural_frequencies`` (6N) with ``dynamics.enabled``, for an input that is an
+        equilibrium of its implied tip wrench (:meth:`ChainDynamics.modes`); off equilibrium
+        nothing (a spine's linear model there is not implemented)."""
+        publisher = self._pub_frequencies
+        if settings.dynamics is None or publisher is None or \
+                publisher.get_subscription_count() == 0:
+            return
+        try:
+            modes = settings.dynamics.modes(xi, settings.current_rest_lengths(),
+                                            outputs.tip_wrench)
+        except (ValueError, np.linalg.LinAlgError):
+            return
+        publisher.publish(conversions.vector_to_multiarray(modes.frequencies,
+                                                           NATURAL_FREQUENCIES_LABEL))
 
     def _outputs(self, settings: SpineNodeSettings, xi: np.ndarray, wanted: tuple[bool, ...]
                  ) -> SpineOutputs:

@@ -98,7 +98,8 @@ class StiffnessNode(JointRestLengthTopic, StreamingNode):
     def _parameter_table(self) -> tuple[ParameterSpec, ...]:
         return STIFFNESS_NODE_PARAMETERS
 
-    def _publish_extras(self, settings: JointNodeSettings, xi: np.ndarray) -> None:
+    def _publish_extras(self, settings: JointNodeSettings, xi: np.ndarray,
+                        outputs: JointOutputs) -> None:
         """``~/natural_frequencies`` with ``dynamics.enabled``: the modes of the joint held at
         ``xi`` by the load that balances it there (:meth:`JointDynamics.modes_at_pose`)."""
         publisher = self._pub_frequencies

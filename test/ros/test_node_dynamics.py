@@ -68,3 +68,45 @@ def test_dynamics_are_built_only_when_enabled() -> None:
     values['joint.link2_mass'] = -1.0
     with pytest.raises(ValueError, match='link2_mass'):
         joint_node_settings(values)
+
+
+@pytest.mark.ros
+def test_spine_natural_frequencies_at_an_equilibrium_and_none_off_it() -> None:
+    from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium
+    from tensegrity_stiffness.mechanics.dynamics import ChainDynamics
+
+    spine_config = REPO / 'config' / 'default_spine.yaml'
+    chain = JointChain.from_yaml(spine_config)
+    tip = np.array([0.02, 0.0, 0.0, 0.0, 0.0, 0.0])
+    solved = solve_chain_equilibrium(chain, tip)
+    assert solved.success
+    expected = ChainDynamics(chain, string_damping=0.2).modes(solved.screws,
+                                                              tip_wrench=tip).frequencies
+    ns = unique_namespace('spinedyn')
+    proc = NodeProcess(ns, spine_config, executable='spine_node', extra_args=[
+        '-p', 'dynamics.enabled:=true', '-p', 'dynamics.string_damping:=0.2'])
+    ros = RosClient('spine_dynamics_test')
+    try:
+        base = f'{ns}/spine_node'
+        frequencies = ros.subscribe(Float64MultiArray, f'{base}/natural_frequencies')
+        screws = ros.publisher(Float64MultiArray, f'{base}/screws')
+        ros.wait_for_subscribers(screws)
+        msg = repeat_until(
+            lambda: screws.publish(Float64MultiArray(data=solved.screws.ravel().tolist())),
+            lambda: frequencies.messages[-1] if len(frequencies) else None)
+        np.testing.assert_allclose(msg.data, expected, rtol=1e-9)
+        assert len(msg.data) == 6 * chain.n_joints
+        # Off equilibrium: no frequencies. The node answers its inputs in order on each
+        # topic, so once the equilibrium sent after `off` is answered, an answer to `off` would
+        # have come before it, and every message since the clear is the equilibrium's.
+        frequencies.clear()
+        screws.publish(Float64MultiArray(data=(solved.screws + 0.01).ravel().tolist()))
+        repeat_until(
+            lambda: screws.publish(Float64MultiArray(data=solved.screws.ravel().tolist())),
+            lambda: True if len(frequencies) else None)
+        for got in list(frequencies.messages):
+            np.testing.assert_allclose(got.data, expected, rtol=1e-9)
+    finally:
+        ros.close()
+        code = proc.stop()
+    assert code == 0, proc.log()

@@ -252,10 +252,10 @@ class StreamingNode(Node):
                     publisher.publish(msg)
             if markers is not None:
                 self._pub_markers.publish(markers)
-            self._publish_extras(settings, xi)
+            self._publish_extras(settings, xi, outputs)
             self._last.record(xi, stamp, outputs, start)
 
-    def _publish_extras(self, settings: Any, xi: np.ndarray) -> None:
+    def _publish_extras(self, settings: Any, xi: np.ndarray, outputs: Any) -> None:
         """Outputs a node publishes after the per-input ones, only when configured (none by
         default); a problem there is warned about and leaves the input's outputs published."""
 
