@@ -85,6 +85,9 @@ _B_SERIES = _series(2, False)
 _C_SERIES = _series(3, False)
 _B1_SERIES = _series(2, True)
 _C1_SERIES = _series(3, True)
+#: The Taylor tables of the rotation coefficients a, b, c, b1, c1, in that order (the compiled
+#: kernel's copy is generated from these).
+ROTATION_SERIES = (_A_SERIES, _B_SERIES, _C_SERIES, _B1_SERIES, _C1_SERIES)
 # e = (1 - t sin t / (2 (1 - cos t))) / t^2, the omega^2 coefficient of the inverse left Jacobian.
 _E_SERIES = np.array([691.0 / 1307674368000.0, 1.0 / 47900160.0, 1.0 / 1209600.0,
                       1.0 / 30240.0, 1.0 / 720.0, 1.0 / 12.0])

@@ -63,8 +63,7 @@ _D = ctypes.c_double
 #: The Taylor tables of the rotation coefficients a, b, c, b1, c1 (``TSK_SERIES_ROWS`` x
 #: terms), taken from :mod:`~tensegrity_stiffness.geometry.screw` (their one home); every model
 #: points to this array, which lives as long as the module.
-SERIES = np.ascontiguousarray(np.stack([
-    screw._A_SERIES, screw._B_SERIES, screw._C_SERIES, screw._B1_SERIES, screw._C1_SERIES]))
+SERIES = np.ascontiguousarray(np.stack(screw.ROTATION_SERIES))
 SERIES.flags.writeable = False
 #: File name of the C view of the constants every model passes (:func:`defaults_header`).
 DEFAULTS_HEADER = 'kernel_defaults.h'

@@ -139,3 +139,19 @@ def test_library_examples_run(page: Path, index: int, code: str, monkeypatch, ca
     monkeypatch.chdir(REPO)
     exec(compile(code, f'{page.name} example {index}', 'exec'), {})
     capsys.readouterr()
+
+
+def test_install_layout_names_every_launch_file_and_subpackage():
+    """docs/install.md's layout and docs/architecture.md stay complete as files are added."""
+    install = (REPO / 'docs' / 'install.md').read_text(encoding='utf-8')
+    layout = install[install.index('## Layout'):]
+    for path in sorted((REPO / 'launch').glob('*.launch.py')):
+        name = path.name
+        preset = re.match(r'stiffness_bridge_(\w+)\.launch\.py', name)
+        assert name in layout or (preset and preset[1] in layout), name
+    architecture = (REPO / 'docs' / 'architecture.md').read_text(encoding='utf-8')
+    for init in sorted((REPO / 'tensegrity_stiffness').glob('*/__init__.py')):
+        if init.parent.name != 'srv':
+            assert f'`{init.parent.name}/`' in architecture, init.parent.name
+    for init in sorted((REPO / 'tensegrity_stiffness' / 'ros').glob('*/__init__.py')):
+        assert f'ros/{init.parent.name}/' in architecture, init.parent.name
