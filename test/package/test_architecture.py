@@ -217,3 +217,26 @@ def test_output_names_and_order_have_one_home() -> None:
                     if len(set(values) & set(names)) >= 3:
                         wrong.append(f'{path.relative_to(REPO)}:{node.lineno} {values}')
     assert not wrong, '\n'.join(wrong)
+
+
+def test_rclpy_internals_are_used_in_one_module_only() -> None:
+    """rclpy's implementation internals appear in ``ros/runtime/rclpy_internals.py`` alone
+    (``test/ros/test_rclpy_internals.py`` exercises them there)."""
+    home = PACKAGE / 'ros' / 'runtime' / 'rclpy_internals.py'
+    internals = ('rclpy_implementation', 'implementation_singleton', 'take_message', '_rclpy')
+    wrong = []
+    for path in MODULES:
+        if path == home:
+            continue
+        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+            names = []
+            if isinstance(node, ast.ImportFrom):
+                names = [node.module or '', *(a.name for a in node.names)]
+            elif isinstance(node, ast.Attribute):
+                names = [node.attr]
+            elif isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            if any(part in internals for name in names for part in name.split('.')) or (
+                    isinstance(node, ast.Attribute) and node.attr == 'pointer'):
+                wrong.append(f'{path.relative_to(REPO)}:{node.lineno}')
+    assert not wrong, '\n'.join(wrong)

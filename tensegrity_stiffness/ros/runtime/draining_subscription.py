@@ -1,13 +1,7 @@
-"""Subscriptions whose callback also takes the messages queued behind its own.
-
-rclpy's executor rebuilds its wait set and wraps a task around every callback it runs, which
-costs more than the node's whole computation for a screw (about 0.6 ms of 1.2 ms measured on the
-2-core CI machine): at 1 kHz the node fell behind, 15% of the screws were dropped and the
-latency grew to 100 ms. Taking a backlog in one callback pays that cost once per backlog. Used
-by the node for ``~/screw`` and ``~/pose`` and by the test and bench clients.
-
-Works on any rclpy subscription (it uses the take call of rclpy's own executor,
-``handle.take_message``).
+"""Subscriptions whose callback also takes the messages queued behind its own: the executor's
+per-callback cost is paid once per backlog instead of once per message (docs/nodes.md,
+"QoS"). Used by the nodes for their streamed inputs without the fast lane, and by the
+test and bench clients. The take is rclpy's own executor's (:func:`.rclpy_internals.take`).
 """
 
 from __future__ import annotations
@@ -15,6 +9,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from typing import Any
+
+from tensegrity_stiffness.ros.runtime.rclpy_internals import take
 
 #: A callback takes at most this many queued messages, for at most ``DRAIN_BUDGET_S`` seconds,
 #: so that services, parameter changes and the other topics are served in between.
@@ -29,12 +25,11 @@ def take_queued(subscription: Any, handle: Callable[[Any], None], limit: int = D
     deadline = time.perf_counter() + budget_s
     taken = 0
     while taken < limit and time.perf_counter() <= deadline:
-        with subscription.handle:
-            message = subscription.handle.take_message(subscription.msg_type, subscription.raw)
+        message = take(subscription)
         if message is None:
             break
         taken += 1
-        handle(message[0])
+        handle(message)
     return taken
 
 

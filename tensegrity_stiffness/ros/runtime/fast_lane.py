@@ -1,23 +1,14 @@
-"""A node's hot subscriptions served on a thread of their own, from a lean loop on rclpy's wait
-set, instead of by the executor.
-
-rclpy's executors gather every entity of every node, build a new wait set and wrap a task around
-each callback: 0.35-0.6 ms per message on the 2-core CI machine, more than the node's own work
-for a screw. The fast lane waits on a wait set that holds only its subscriptions and a guard
-condition (built once, refilled per wait: tens of microseconds) and calls the handlers directly,
-taking every message queued behind the first (:func:`.draining_subscription.take_queued`).
-A running lane is also stopped at the interpreter's exit (``atexit``): a daemon thread that
-returns from rclpy's C++ wait while Python finalizes is ended inside a ``noexcept`` frame, and
-the process aborts ("terminate called without an active exception"). That happened when SIGINT
-interrupted a node's construction after its lane had started: no one held the node to close it.
-Services, parameters, timers and the other topics stay with the node's executor on the main
-thread; the handlers and those callbacks share the node's state under the node's own locks.
+"""A node's hot subscriptions served on a thread of their own, from a lean loop on a wait set
+that holds only them and a guard condition (:class:`.rclpy_internals.SubscriptionWaitSet`),
+instead of by the executor; the handlers are called directly, with every message queued behind
+the first (:func:`.draining_subscription.take_queued`). Why, and what it costs and saves:
+docs/nodes.md, "QoS".
 
 Subscriptions join the lane through :meth:`FastLane.create_subscription`: they belong to a
-callback group that no executor may run (:class:`LaneCallbackGroup`), so the executor never
-waits on them. ``rclpy.experimental.EventsExecutor`` was measured as the alternative and fails
-in this rclpy build: it raises "Guard conditions not supported" for a node with a guard
-condition, and without one its spin delivered neither timers nor messages (docs/nodes.md, QoS).
+callback group that no executor may run (:class:`LaneCallbackGroup`). Services, parameters,
+timers and the other topics stay with the node's executor; both share the node's state under
+the node's own locks. A running lane is also stopped at the interpreter's exit (``atexit``):
+a thread still inside rclpy's C++ wait while Python finalizes would abort the process.
 """
 
 from __future__ import annotations
@@ -29,10 +20,10 @@ from contextlib import ExitStack
 from typing import Any
 
 from rclpy.callback_groups import CallbackGroup
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 
 from tensegrity_stiffness.ros.runtime.draining_subscription import take_queued
+from tensegrity_stiffness.ros.runtime.rclpy_internals import SubscriptionWaitSet
 
 #: Longest wait between checks that the context is still up (ns).
 WAIT_TIMEOUT_NS = 100_000_000
@@ -101,19 +92,14 @@ class FastLane:
                 handles.enter_context(subscription.handle)
             handles.enter_context(self._wake.handle)
             handles.enter_context(context.handle)
-            wait_set = _rclpy.WaitSet(len(entries), 1, 0, 0, 0, 0, context.handle)
+            wait_set = SubscriptionWaitSet([s for s, _ in entries], [self._wake], context)
+            handlers = dict((id(s), h) for s, h in entries)
             while not self._stop.is_set() and context.ok():
-                wait_set.clear_entities()
-                for subscription, _ in entries:
-                    wait_set.add_subscription(subscription.handle)
-                wait_set.add_guard_condition(self._wake.handle)
-                wait_set.wait(WAIT_TIMEOUT_NS)  # releases the GIL
+                ready = wait_set.wait(WAIT_TIMEOUT_NS)  # releases the GIL
                 if self._stop.is_set():
                     break
-                ready = wait_set.get_ready_entities('subscription')
-                for subscription, handler in entries:
-                    if subscription.handle.pointer in ready:
-                        try:
-                            take_queued(subscription, handler)
-                        except Exception as exc:  # a take of a destroyed handle, a bug
-                            self._on_error(subscription.topic_name, exc)
+                for subscription in ready:
+                    try:
+                        take_queued(subscription, handlers[id(subscription)])
+                    except Exception as exc:  # a take of a destroyed handle, a bug
+                        self._on_error(subscription.topic_name, exc)

@@ -2,9 +2,8 @@
 
 Not a thread of the node's process: a solve is Python and numpy holding the GIL for its whole
 budget, and the executor thread, which gives the GIL up at every wait and publish, then gets it
-back only after a switch interval each time (the convoy effect): back-to-back 50 ms solves on a
-thread cut a 1 kHz screw stream to about 250 Hz with drops. Spawned, not forked (the node's
-process runs the middleware's threads).
+back only after a switch interval each time (the convoy effect, docs/nodes.md "Robustness").
+Spawned, not forked (the node's process runs the middleware's threads).
 
 One reader thread per worker waits on the worker's pipe and on its process sentinel at once, so
 a worker that dies (the OOM killer, a signal) is noticed at once and a fresh one is started: the
