@@ -61,6 +61,9 @@ REQUIREMENTS=(
   'ruff==0.17.6'
   # plots of the tensegrity-stiffness CLI (optional at run time, needed by the tests)
   'matplotlib==3.11.2'
+  # the command line's progress bars (tqdm) and PNG facts (Pillow, also a matplotlib dependency)
+  'tqdm==4.70.1'
+  'pillow==13.0.0'
   # rosbag2 reading and writing of the bag command (pure Python, no ROS install needed)
   'rosbags==0.11.9'
   # the digital twin (tensegrity_stiffness.simulation, sim_node): MuJoCo physics, sensor_msgs/Imu

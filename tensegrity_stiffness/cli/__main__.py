@@ -2,6 +2,6 @@
 
 import sys
 
-from tensegrity_stiffness.cli.commands import main
+from tensegrity_stiffness.cli.parser import main
 
 sys.exit(main())

@@ -23,9 +23,16 @@ from scipy.spatial.transform import Rotation
 from support import REPO
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.cli import commands as cli
 from tensegrity_stiffness.cli import plots
-from tensegrity_stiffness.cli.commands import TerminalProgress, main, parse_number
+from tensegrity_stiffness.cli.common import (
+    EXIT_BAD_INPUT,
+    EXIT_NO_MATPLOTLIB,
+    EXIT_NO_SOLUTION,
+    parse_number,
+)
+from tensegrity_stiffness.cli.figure_commands import FIGURE_FILES, README_JOINT_SCREW, png_size
+from tensegrity_stiffness.cli.parser import main
+from tensegrity_stiffness.cli.progress import ProgressBar
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics import sweeps
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
@@ -41,7 +48,7 @@ from tensegrity_stiffness.mechanics.planar import PlanarMechanism
 REPO = REPO
 CONFIG = REPO / 'config' / 'default_joint.yaml'
 #: A screw near the unloaded equilibrium with two slack strings (docs/figures.md, the joint).
-SCREW = np.array(cli.README_JOINT_SCREW)
+SCREW = np.array(README_JOINT_SCREW)
 #: Small PNG size used by the plot tests (pixels).
 SMALL = (240, 180)
 #: Relative agreement of 6-significant-digit table entries with the library.
@@ -239,7 +246,7 @@ def test_equilibrium_table_and_failure(capsys):
     assert code == 0
     assert 'converged' in out and 'stiffness K = dF/dxi' in out
     code, out, err = run(capsys, 'equilibrium', '--wrench', '0', '100', '0', '0', '0', '0')
-    assert code == cli.EXIT_NO_SOLUTION
+    assert code == EXIT_NO_SOLUTION
     assert 'no equilibrium found' in err
     assert 'Traceback' not in err
 
@@ -287,7 +294,7 @@ def test_planar_ik_matches_library(capsys):
 def test_planar_ik_unreachable_is_exit_1_with_reason(capsys):
     code, out, err = run(capsys, 'planar-ik', '-0.43', '-1.5', '--K1', '200', '--K2', '100',
                          '--json')
-    assert code == cli.EXIT_NO_SOLUTION
+    assert code == EXIT_NO_SOLUTION
     data = json.loads(out)
     assert data['solutions'] == [] and 'fold circle' in data['reason']
     assert 'fold circle' in err
@@ -317,7 +324,7 @@ def test_planar_ik_unreachable_is_exit_1_with_reason(capsys):
 ])
 def test_bad_input_exit_2_with_message(capsys, argv, needle):
     code, out, err = run(capsys, *argv)
-    assert code == cli.EXIT_BAD_INPUT
+    assert code == EXIT_BAD_INPUT
     assert needle in err
     assert 'Traceback' not in err
     assert out == ''
@@ -338,7 +345,7 @@ PLOT_CASES = {
 
 
 def test_every_figure_has_a_case():
-    assert set(PLOT_CASES) == set(cli.FIGURE_FILES) == set(plots.DEFAULT_SIZES)
+    assert set(PLOT_CASES) == set(FIGURE_FILES) == set(plots.DEFAULT_SIZES)
 
 
 @pytest.mark.parametrize('figure', list(PLOT_CASES))
@@ -356,7 +363,7 @@ def test_plot_default_output_name(capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     code, _, err = run(capsys, 'plot', 'actuator-workspace', '--samples', '20')
     assert code == 0, err
-    check_png(tmp_path / cli.FIGURE_FILES['actuator-workspace'],
+    check_png(tmp_path / FIGURE_FILES['actuator-workspace'],
               plots.DEFAULT_SIZES['actuator-workspace'])
 
 
@@ -366,7 +373,7 @@ def test_figures_writes_every_figure(capsys, tmp_path):
     code, out, err = run(capsys, 'figures', '--out', str(out_dir), '--scale', str(scale),
                          '--resolution', '12')
     assert code == 0, err
-    for figure, name in cli.FIGURE_FILES.items():
+    for figure, name in FIGURE_FILES.items():
         w, h = plots.DEFAULT_SIZES[figure]
         check_png(out_dir / name, (round(w * scale), round(h * scale)))
         assert str(out_dir / name) in out
@@ -376,13 +383,13 @@ def test_missing_matplotlib_is_exit_3_with_clear_message(capsys, tmp_path, monke
     monkeypatch.setitem(sys.modules, 'matplotlib', None)  # `import matplotlib` -> ImportError
     path = tmp_path / 'theta2.png'
     code, out, err = run(capsys, 'plot', 'theta2', '--out', str(path))
-    assert code == cli.EXIT_NO_MATPLOTLIB
+    assert code == EXIT_NO_MATPLOTLIB
     assert out == ''
     assert err.strip() == 'tensegrity-stiffness: matplotlib is required for plots: pip install ' \
                           'matplotlib'
     assert not path.exists()
     code, _, err = run(capsys, 'figures', '--out', str(tmp_path / 'figs'))
-    assert code == cli.EXIT_NO_MATPLOTLIB and 'pip install matplotlib' in err
+    assert code == EXIT_NO_MATPLOTLIB and 'pip install matplotlib' in err
     with pytest.raises(plots.MatplotlibMissingError, match='pip install matplotlib'):
         plots.plot_theta2_curves(PlanarMechanism(1.0, 100.0, 10.0), path)
     code, _, _ = run(capsys, 'joint')  # the tables need no matplotlib
@@ -392,7 +399,7 @@ def test_missing_matplotlib_is_exit_3_with_clear_message(capsys, tmp_path, monke
 def test_committed_figures_and_docs():
     """docs/figures.md shows every committed figure (made by `bash scripts/make_figures.sh`)."""
     doc = (REPO / 'docs' / 'figures.md').read_text(encoding='utf-8')
-    for figure, name in cli.FIGURE_FILES.items():
+    for figure, name in FIGURE_FILES.items():
         path = REPO / 'docs' / 'figures' / name
         assert f'](figures/{name})' in doc, name
         assert png_header_size(path) == plots.DEFAULT_SIZES[figure], name
@@ -408,21 +415,29 @@ class FakeTerminal(io.StringIO):
 
 def test_progress_only_on_a_terminal():
     tty = FakeTerminal()
-    progress = TerminalProgress('map', tty)
+    progress = ProgressBar('map', stream=tty)
     for done in (0, 5, 5, 10):
         progress(done, 10)
+    progress(10, 10)  # after the end nothing more is drawn
     progress.finish()
-    assert tty.getvalue() == '\rmap:   0% (0/10)\rmap:  50% (5/10)\rmap: 100% (10/10)\n'
+    text = tty.getvalue()
+    last = text.split('\r')[-1]
+    assert last.startswith('map: 100%') and '10/10' in last
+    assert text.endswith('\n') and text.count('\n') == 1
     pipe = io.StringIO()
-    quiet = TerminalProgress('map', pipe)
+    quiet = ProgressBar('map', stream=pipe)
     quiet(5, 10)
     quiet.finish()
     assert pipe.getvalue() == ''
     started = FakeTerminal()
-    half = TerminalProgress('x', started)
+    half = ProgressBar('x', stream=started)
     half(1, 2)
     half.finish()
+    assert started.getvalue().split('\r')[-1].startswith('x:  50%')
     assert started.getvalue().endswith('\n')
+    never = FakeTerminal()
+    ProgressBar('y', stream=never).finish()  # nothing drawn: no line to end
+    assert never.getvalue() == ''
 
 
 def test_long_computations_report_progress(tmp_path):
@@ -489,3 +504,16 @@ def test_png_size_validation():
     with pytest.raises(ValueError, match='integer number of pixels'):
         plots.check_size(300.5, 200)
     assert plots.check_size(300, 200) == (300, 200)
+
+
+def test_png_size_reads_pngs_only(tmp_path):
+    from PIL import Image
+
+    png, jpeg, text = tmp_path / 'a.png', tmp_path / 'a.jpg', tmp_path / 'a.txt'
+    Image.new('RGB', (31, 17)).save(png)
+    Image.new('RGB', (31, 17)).save(jpeg)
+    text.write_text('not an image')
+    assert png_size(png) == png_header_size(png) == (31, 17)
+    for path in (jpeg, text):
+        with pytest.raises(ValueError, match='is not a PNG file'):
+            png_size(path)

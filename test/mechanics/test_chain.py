@@ -16,7 +16,8 @@ import yaml
 from scipy.spatial.transform import Rotation
 from support import REPO
 
-from tensegrity_stiffness.cli import commands as cli
+from tensegrity_stiffness import cli
+from tensegrity_stiffness.cli.figure_commands import png_size
 from tensegrity_stiffness.geometry.screw import exp_se3, hat3, log_se3
 from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium
 from tensegrity_stiffness.mechanics.equilibrium import is_stable, solve_equilibrium
@@ -472,4 +473,4 @@ def test_cli_chain_bad_input(capsys):
 def test_cli_plot_spine(tmp_path):
     out = tmp_path / 'spine.png'
     assert cli.main(['plot', 'spine', '--out', str(out), '--size', '300', '400']) == 0
-    assert cli.png_size(out) == (300, 400)
+    assert png_size(out) == (300, 400)

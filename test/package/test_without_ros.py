@@ -125,7 +125,7 @@ print(json.dumps({'modules': names, 'stiffness': out.state.stiffness.tolist()}))
     result = run_without_ros(no_ros_env, '-c', code)
     assert result.returncode == 0, result.stderr
     report = json.loads(result.stdout)
-    for name in ('recordings.bag', 'cli', 'cli.commands', 'nodes.layouts', 'nodes.messages',
+    for name in ('recordings.bag', 'cli', 'cli.parser', 'nodes.layouts', 'nodes.messages',
                  'nodes.processing', 'nodes.spine_processing', 'joint', 'mechanics.chain',
                  'estimation.calibration', 'simulation.twin', 'geometry.screw'):
         assert f'tensegrity_stiffness.{name}' in report['modules']

@@ -1,0 +1,216 @@
+"""The commands on recordings and models: ``bag`` (what a node would publish, for a whole rosbag2
+recording), ``calibrate`` (each string's stiffness and rest-length offset from a recording) and
+``export-mjcf`` (the digital twin's MuJoCo model)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from tensegrity_stiffness.cli.common import (
+    EXIT_NO_SOLUTION,
+    EXIT_OK,
+    PROG,
+    add_json,
+    parse_number,
+    print_json,
+)
+from tensegrity_stiffness.cli.progress import ProgressBar
+
+
+def _cmd_bag(args: argparse.Namespace) -> int:
+    from tensegrity_stiffness.recordings import bag
+
+    progress = ProgressBar('bag', unit='inputs')
+    try:
+        summary = bag.process_bag(
+            args.input, args.out, config_path=args.config, namespace=args.namespace,
+            storage=args.storage, csv_path=args.csv, topics=args.topics,
+            overwrite=args.overwrite, node=args.node, progress=progress)
+    except ImportError as exc:  # rosbags not installed
+        raise ValueError(f'the bag command needs rosbags ({exc})') from None
+    finally:
+        progress.finish()
+    report = summary.to_dict()
+    if args.json:
+        print_json(report)
+        return EXIT_OK
+    inputs = ', '.join(f'{n} {k}' for k, n in report['inputs'].items())
+    answered = ', '.join(f'{n} {k}' for k, n in report['answered'].items())
+    print(f"read {report['input']}: {inputs}")
+    print(f"answered {report['answers']} inputs ({answered}) in {report['seconds']:.2f} s"
+          + (f" ({report['inputs_per_second']:.0f} inputs/s)"
+             if report['inputs_per_second'] else ''))
+    print(f"wrote {report['output']} ({report['storage']}): "
+          + ', '.join(f'{t} {n}' for t, n in report['written'].items()))
+    if report['csv']:
+        print(f"wrote {report['csv']}: {report['answers']} rows")
+    if report['rejected']:
+        print(f"skipped {report['rejected_total']} bad messages:")
+        for kind, n in report['rejected'].items():
+            print(f"  {kind}: {n} (e.g. {report['rejection_examples'][kind]})")
+    return EXIT_OK
+
+
+def _noise_option(text: str) -> tuple[str, float]:
+    kind, sep, value = text.partition('=')
+    if not sep:
+        raise argparse.ArgumentTypeError(f"expected KIND=STD, got '{text}'")
+    return kind.strip(), parse_number(value)
+
+
+def _cmd_calibrate(args: argparse.Namespace) -> int:
+    from tensegrity_stiffness.cli import calibration_report
+
+    bars: list[ProgressBar] = []
+
+    def progress(label: str) -> ProgressBar:
+        bars.append(ProgressBar(f'calibrate: {label}'))
+        return bars[-1]
+
+    topics = {'pose': args.pose_topic, 'rest_lengths': args.rest_lengths_topic,
+              'tensions': args.tensions_topic, 'wrench': args.wrench_topic,
+              'lengths': args.lengths_topic}
+    required = [name for name, topic in topics.items() if topic is not None]
+    topics = {k: v for k, v in topics.items() if v is not None}
+    try:
+        result, report, lines = calibration_report.run(
+            args.recording, args.config, fmt=args.format, topics=topics, required=required,
+            fit=args.fit, noise=dict(args.noise or []), loss=args.loss,
+            rule={'window': args.window, 'max_speed': args.max_speed,
+                  'max_angular_speed': args.max_angular_speed},
+            max_age=args.max_age, out=args.out, plot=args.plot, progress=progress)
+    except ImportError as exc:  # rosbags not installed
+        raise ValueError(f'reading a bag needs rosbags ({exc})') from None
+    finally:
+        for bar in bars:
+            bar.finish()
+    if args.json:
+        print_json(report)
+    else:
+        print('\n'.join(lines))
+    return EXIT_OK if result.success else EXIT_NO_SOLUTION
+
+
+def _cmd_export_mjcf(args: argparse.Namespace) -> int:
+    from tensegrity_stiffness.simulation.twin import export_mjcf
+
+    text = export_mjcf(args.config, spine=args.spine, max_length=args.max_length)
+    if args.out:
+        Path(args.out).write_text(text)
+        print(f'{PROG}: wrote {args.out}; view it with: python -m mujoco.viewer --mjcf '
+              f'{args.out}', file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    return EXIT_OK
+
+
+def add_bag_parser(sub: Any) -> None:
+    """``bag``."""
+    p = sub.add_parser('bag', help='wrench and stiffness for a whole rosbag2 recording',
+                       description="Read the node's inputs (screw, pose, rest_lengths) from a "
+                                   'rosbag2 (mcap or sqlite3) and write what stiffness_node '
+                                   'would publish (wrench, stiffness, cartesian_stiffness, '
+                                   'string_tensions, stiffness_interpretation) to a new rosbag2, '
+                                   'each answer at the log time of its input (needs rosbags); '
+                                   "with --node spine, spine_node's topics.")
+    p.add_argument('input', metavar='INPUT', help='rosbag2 folder (or a .mcap / .db3 file)')
+    p.add_argument('--out', required=True, metavar='OUTPUT', help='rosbag2 folder to write')
+    p.add_argument('--node', choices=('stiffness', 'spine'), default='stiffness',
+                   help='the node whose topics are processed: stiffness_node (default; inputs '
+                        'screw, pose, rest_lengths) or spine_node (inputs screws, poses, '
+                        'rest_lengths; outputs joint_wrenches joint_stiffness '
+                        'joint_cartesian_stiffness tip_pose tip_wrench tip_stiffness '
+                        'tip_stiffness_base)')
+    p.add_argument('--config', metavar='YAML',
+                   help="the node's parameter file (default: the packaged "
+                        'config/default_joint.yaml, with --node spine '
+                        'config/default_spine.yaml; a file overrides the parameters it has)')
+    p.add_argument('--namespace', default=None, metavar='NS',
+                   help="the node's topics' prefix (default /stiffness_node, with --node spine "
+                        '/spine_node: the node in the root namespace)')
+    p.add_argument('--storage', metavar='mcap|sqlite3',
+                   help="storage of OUTPUT (default: the input's)")
+    p.add_argument('--csv', metavar='FILE', help='also write one row per answered input')
+    p.add_argument('--topics', nargs='+', metavar='TOPIC',
+                   help='outputs to write (default all: wrench stiffness cartesian_stiffness '
+                        'string_tensions stiffness_interpretation)')
+    p.add_argument('--overwrite', action='store_true',
+                   help='replace OUTPUT (a rosbag2) and FILE if they exist')
+    add_json(p)
+    p.set_defaults(handler=_cmd_bag)
+
+
+def add_calibrate_parser(sub: Any) -> None:
+    """``calibrate``."""
+    p = sub.add_parser('calibrate', help="each string's stiffness and rest-length offset from "
+                       'a recording', description=(
+                           "Fit each string's stiffness and rest-length offset to the "
+                           'quasi-static instants of a recording (rosbag2 mcap/sqlite3, or CSV '
+                           'with the columns of '
+                           'tensegrity_stiffness.recordings.calibration_recording), '
+                           'print the table and the residuals, write a calibrated config and a '
+                           'residual plot. Exit 1 when the fit does not converge.'))
+    p.add_argument('recording', metavar='RECORDING',
+                   help='rosbag2 folder (or .mcap / .db3 file), or a .csv file')
+    p.add_argument('--config', metavar='YAML',
+                   help='nominal joint config (default: the packaged default_joint.yaml)')
+    p.add_argument('--format', choices=('bag', 'csv'),
+                   help='recording format (default: csv for a .csv file, else bag)')
+    from tensegrity_stiffness.estimation.calibration import FIT_KINDS, LOSSES
+    from tensegrity_stiffness.recordings.calibration_recording import (
+        DEFAULT_MAX_ANGULAR_SPEED,
+        DEFAULT_MAX_SPEED,
+        DEFAULT_TOPICS,
+        DEFAULT_WINDOW,
+    )
+    for name, text in (('pose', 'PoseStamped or PoseWithCovarianceStamped of link 2 in {1}'),
+                       ('rest-lengths', 'Float64MultiArray of the commanded rest lengths'),
+                       ('tensions', 'Float64MultiArray of load-cell tensions, NaN = none'),
+                       ('wrench', 'WrenchStamped on link 2 in {1}'),
+                       ('lengths', 'Float64MultiArray of measured string lengths, NaN = none')):
+        p.add_argument(f'--{name}-topic', metavar='TOPIC',
+                       help=f"{text} (default {DEFAULT_TOPICS[name.replace('-', '_')]}"
+                            + ('' if name == 'rest-lengths' else ', used when present')
+                            + '; given: required)')
+    p.add_argument('--fit', nargs='+', choices=FIT_KINDS, default=list(FIT_KINDS),
+                   help='parameters to fit (default both)')
+    p.add_argument('--noise', nargs='+', type=_noise_option, metavar='KIND=STD',
+                   help='measurement std: position (m), rotation (rad), force (N), moment '
+                        '(N m), tension (N), length (m) (defaults 1e-4, 0.1 deg, 0.01, 5e-4, '
+                        '0.005, 1e-4)')
+    p.add_argument('--loss', choices=LOSSES, default='soft_l1',
+                   help='robust loss (default soft_l1; linear: plain least squares)')
+    p.add_argument('--window', type=parse_number, default=DEFAULT_WINDOW, metavar='S',
+                   help=f'quasi-static: rest lengths held and pose still for this long '
+                        f'(default {DEFAULT_WINDOW} s)')
+    p.add_argument('--max-speed', type=parse_number, default=DEFAULT_MAX_SPEED, metavar='M/S',
+                   help=f'quasi-static: largest mean pose speed (default {DEFAULT_MAX_SPEED})')
+    p.add_argument('--max-angular-speed', type=parse_number, default=DEFAULT_MAX_ANGULAR_SPEED,
+                   metavar='RAD/S', help='quasi-static: largest mean angular speed (default '
+                                         f'{DEFAULT_MAX_ANGULAR_SPEED:.4g})')
+    p.add_argument('--max-age', type=parse_number, default=0.1, metavar='S',
+                   help='tensions and wrench older than this at a pose are not used '
+                        '(default 0.1 s)')
+    p.add_argument('--out', metavar='YAML', help='write the calibrated config here')
+    p.add_argument('--plot', metavar='PNG', help='write the residual plot here (matplotlib)')
+    add_json(p)
+    p.set_defaults(handler=_cmd_calibrate)
+
+
+def add_export_mjcf_parser(sub: Any) -> None:
+    """``export-mjcf``."""
+    p = sub.add_parser('export-mjcf', help="MuJoCo model (MJCF) of the joint or the spine",
+                       description="Write the MuJoCo model of the digital twin "
+                                   "(tensegrity_stiffness.simulation.twin) built from a config; "
+                                   "open it with: python -m mujoco.viewer --mjcf FILE.xml")
+    p.add_argument('--config', metavar='YAML', help='config file (default: the packaged '
+                   'default_joint.yaml, or default_spine.yaml with --spine)')
+    p.add_argument('--spine', action='store_true', help='the spine (a chain config)')
+    p.add_argument('--out', metavar='FILE.xml', help='output file (default: standard output)')
+    p.add_argument('--max-length', choices=('limit', 'ignore'), default='limit',
+                   help="strings past lmax: 'limit' an inextensible stop (default), 'ignore' "
+                        "Hooke's law goes on (docs/simulation.md)")
+    p.set_defaults(handler=_cmd_export_mjcf)
