@@ -67,7 +67,7 @@ class EstimatorNode(JointRestLengthTopic, StreamingNode):
     OUTPUT_TOPICS = tuple(zip(
         (PoseWithCovarianceStamped, WrenchStamped, *[Float64MultiArray] * 5),
         (f'~/{name}' for name in ESTIMATOR_OUTPUTS), strict=True))
-    WORKER_NAME = 'equilibrium worker'
+    SERVES_SOLVES = False  # no services: no worker process
     #: What the frame of ~/measured_pose and ~/measured_wrench is called in warnings.
     INPUT_FRAME_NAME = "link 1's frame"
     _build_settings = staticmethod(estimator_node_settings)

@@ -54,7 +54,6 @@ class SpineEstimatorNode(SpineRestLengthTopic, EstimatorNode):
     OUTPUT_TOPICS = tuple(zip(
         (Float64MultiArray, PoseWithCovarianceStamped, WrenchStamped, Float64MultiArray,
          Float64MultiArray), (f'~/{name}' for name in SPINE_ESTIMATOR_OUTPUTS), strict=True))
-    WORKER_NAME = 'chain equilibrium worker'
     INPUT_FRAME_NAME = 'the base frame'
     _build_settings = staticmethod(spine_estimator_node_settings)
     _output_frame = attrgetter('base_frame')

@@ -32,6 +32,7 @@ from support.ros_harness import (  # noqa: E402
     NodeProcess,
     RosClient,
     log_has,
+    process_cmdline,
     unique_namespace,
     wait_settled,
     wrench_stamped,
@@ -214,3 +215,13 @@ def test_parameters_and_diagnostics(loop) -> None:
     assert values['inputs used'] == 'measured_tensions, imu'
     assert float(values['rank']) == 6 and 'chi2/dof' in values and 'age of imu [ms]' in values
 
+
+
+def test_the_estimator_runs_no_worker_process(loop) -> None:
+    """It serves no solver calls, so it starts no worker (the stiffness node does: its
+    services solve in one); it is estimating (the fixture got an estimate)."""
+    estimator = loop['estimator']
+    assert log_has(estimator, 'ready:', timeout=20.0)
+    workers = [pid for pid in estimator.children()
+               if '--multiprocessing-fork' in process_cmdline(pid)]
+    assert workers == [], [process_cmdline(pid) for pid in workers]

@@ -74,6 +74,8 @@ class StreamingNode(Node):
 
     OUTPUT_TOPICS: tuple[tuple[Any, str], ...] = ()
     WORKER_NAME = 'worker'
+    #: Whether the node serves solver calls (services): only then does it run a worker process.
+    SERVES_SOLVES = True
     _build_settings: Callable[..., Any]
     _output_frame: Callable[[Any], str]
 
@@ -91,8 +93,8 @@ class StreamingNode(Node):
         self._last_solution: np.ndarray | None = None
         self._clock = self.get_clock()
         self._messages = self._output_messages(self._settings)
-        self._solver = SolverWorker(self.WORKER_NAME)
-        self._in_worker = WorkerCalls(self, self._solver)
+        self._solver = SolverWorker(self.WORKER_NAME) if self.SERVES_SOLVES else None
+        self._in_worker = WorkerCalls(self, self._solver) if self._solver is not None else None
 
         values = self._settings.values
         depth = values['qos.depth']
@@ -128,8 +130,9 @@ class StreamingNode(Node):
             self._settings.marker_period or 1.0, self._publish_markers)
         self._marker_timer.cancel()
         self.create_timer(MARKER_WATCH_PERIOD_S, self._watch_markers)
-        self._solver.submit(warm_up, warm_up_args, {'time_budget': 1.0},
-                            lambda _: None, lambda _: None, deadline_s=1.0 + SOLVER_GRACE_S)
+        if self._solver is not None:
+            self._solver.submit(warm_up, warm_up_args, {'time_budget': 1.0},
+                                lambda _: None, lambda _: None, deadline_s=1.0 + SOLVER_GRACE_S)
         if self._lane is not None:
             self._lane.start()
         self.get_logger().info(
@@ -141,7 +144,8 @@ class StreamingNode(Node):
         destroyed)."""
         if self._lane is not None:
             self._lane.stop()
-        self._solver.close()
+        if self._solver is not None:
+            self._solver.close()
 
     # ------------------------------------------------------------------ what a node declares
     def _parameter_table(self) -> Iterable[ParameterSpec]:
@@ -319,7 +323,7 @@ class StreamingNode(Node):
             *self._last.statistics(),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
             ('parameter generation', settings.generation),
-            ('equilibrium worker restarts', self._solver.restarts),
+            ('equilibrium worker restarts', 0 if self._solver is None else self._solver.restarts),
             ('library', 'compiled kernel' if kernel.available() else 'numpy'),
         ]
         statuses = self._diagnostic_statuses(settings, self._last.outputs, values)
