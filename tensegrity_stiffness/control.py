@@ -218,7 +218,7 @@ class ControlCommand:
     ``predicted_cartesian_stiffness`` (6, 6) and ``tensions`` (n,) the model's prediction of the
     feedforward design (reached once the rate limit has caught up); ``saturated`` (n,) bool,
     strings held by a rate or range limit this tick; ``message`` why a target is not met;
-    ``design_screw`` (6,) the screw designed for (target shifted by the integral correction);
+    ``design_pose`` (4, 4) the pose designed for (target shifted by the integral correction);
     ``pose_error`` (6,) measured error ``[dx dy dz rx ry rz]`` (m, rad; zeros without a
     measurement); ``iterations`` of the QP; ``warm`` True when the last tick's face was optimal."""
 
@@ -229,7 +229,7 @@ class ControlCommand:
     tensions: FloatArray
     saturated: BoolArray
     message: str
-    design_screw: FloatArray
+    design_pose: FloatArray
     pose_error: FloatArray
     iterations: int = 0
     warm: bool = False
@@ -252,8 +252,11 @@ class PoseTerms:
 
 def pose_terms(model: JointModel, screw: ArrayLike) -> PoseTerms:
     """:class:`PoseTerms` of ``model`` at ``screw`` (6,) (the geometry of eqs. 7-11)."""
-    xi = _screw(screw, 'screw')
-    T = exp_se3(xi)
+    return pose_terms_at(model, exp_se3(_screw(screw, 'screw')))
+
+
+def pose_terms_at(model: JointModel, T: FloatArray) -> PoseTerms:
+    """:class:`PoseTerms` at the pose ``T`` (4, 4) of link 2 in {1} (no log map needed)."""
     p1 = model.link1_nodes[model.connections[:, 0]]
     q = model.link2_nodes[model.connections[:, 1]] @ T[:3, :3].T + T[:3, 3]
     s = p1 - q
@@ -351,8 +354,8 @@ def _face(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, t: FloatAr
     rhs = np.concatenate([c[F] - PF[:, X] @ t[X], b - A[:, X] @ t[X]])
     try:
         sol = np.linalg.solve(K, rhs)
-        if not (np.all(np.isfinite(sol)) and np.linalg.norm(K @ sol - rhs)
-                <= 1e-10 * (1.0 + np.linalg.norm(rhs))):
+        # NaN fails the comparison too; a near-singular face gives a large residual
+        if not float(np.abs(K @ sol - rhs).max()) <= 1e-10 * (1.0 + float(np.abs(rhs).max())):
             raise np.linalg.LinAlgError
     except np.linalg.LinAlgError:
         sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
@@ -377,7 +380,6 @@ def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo:
     ``converged`` is False when no feasible point exists (residual above
     :data:`FEASIBILITY_TOLERANCE`) or the iteration limit is hit."""
     n = lo.size
-    scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
     wl = np.zeros(n, bool) if at_lo is None else at_lo.copy()
     wh = np.zeros(n, bool) if at_hi is None else (at_hi & ~wl)
     # 1. The last face.
@@ -391,6 +393,7 @@ def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo:
         if (np.all(trial >= lo - span) and np.all(trial <= hi + span)
                 and np.linalg.norm(A @ trial - b) <= FEASIBILITY_TOLERANCE):
             mu = _multipliers(P, c, A, trial, nu, wl, wh)
+            scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
             if mu.min() >= -ACTIVE_SET_TOLERANCE * scale:
                 return QPResult(np.clip(trial, lo, hi), wl, wh, 1, True, True)
     # 2. A feasible start.
@@ -653,7 +656,6 @@ class StiffnessController:
         self._t = None
         self._at_lo = np.zeros(n, bool)
         self._at_hi = np.zeros(n, bool)
-        self._reference = self.model.initial_screw.copy()
 
     # ------------------------------------------------------------------ tick
     def update(self, dt: float, target: ControlTarget, pose: ArrayLike | None = None,
@@ -676,14 +678,13 @@ class StiffnessController:
             e, error = np.zeros(6), np.zeros(6)
         z = _clamp_integral(self._z + self.integral_gain * dt * e, self.integral_limit)
         T_d = exp_se3(z + self.proportional_gain * e) @ T_star
-        xi_d = log_se3(T_d, reference=self._reference)
-        return self._tick(dt, target, xi_d, W, z, error)
+        return self._tick(dt, target, T_d, W, z, error)
 
-    def _problem(self, xi_d: FloatArray, W: FloatArray) -> _JointProblem | str:
-        """The QP data at the design screw under the load W, or why there is none."""
+    def _problem(self, T_d: FloatArray, W: FloatArray) -> _JointProblem | str:
+        """The QP data at the design pose under the load W, or why there is none."""
         model, S = self.model, self._S
         try:
-            terms = pose_terms(model, xi_d)
+            terms = pose_terms_at(model, T_d)
         except ValueError as exc:
             return f'infeasible: {exc}'
         rest_lo = self._rest_min + self.offsets
@@ -700,18 +701,18 @@ class StiffnessController:
         return _JointProblem(terms, lo, hi, 0.5 * (self._t_min + upper), S[:, None] * terms.B,
                              -S * W, start)
 
-    def _tick(self, dt: float, target: ControlTarget, xi_d: FloatArray, W: FloatArray,
+    def _tick(self, dt: float, target: ControlTarget, T_d: FloatArray, W: FloatArray,
               z: FloatArray, error: FloatArray) -> ControlCommand:
-        pr = self._problem(xi_d, W)
+        pr = self._problem(T_d, W)
         if isinstance(pr, str):
-            return self._hold(xi_d, error, pr)
+            return self._hold(T_d, error, pr)
         P, c = _objective(pr.terms, target, self._S, pr.middle)
         sol = solve_box_qp(P, c, pr.A, pr.b, pr.lo, pr.hi, pr.start, self._at_lo, self._at_hi)
         if not sol.converged:
-            return self._hold(xi_d, error, _failure(pr.A, pr.b, sol))
-        return self._apply(dt, target, xi_d, z, error, pr.terms, sol)
+            return self._hold(T_d, error, _failure(pr.A, pr.b, sol))
+        return self._apply(dt, target, T_d, z, error, pr.terms, sol)
 
-    def _apply(self, dt: float, target: ControlTarget, xi_d: FloatArray, z: FloatArray,
+    def _apply(self, dt: float, target: ControlTarget, T_d: FloatArray, z: FloatArray,
                error: FloatArray, terms: PoseTerms, sol: QPResult) -> ControlCommand:
         """Rate and range limits on the designed rest lengths; commit the tick."""
         model = self.model
@@ -737,22 +738,22 @@ class StiffnessController:
             self._z = z
         self._command = command
         self._t, self._at_lo, self._at_hi = t, sol.at_lo, sol.at_hi
-        self._reference = xi_d
         return ControlCommand(command.copy(), True, err, Kc, t.copy(), saturated,
-                              '; '.join(messages) or 'ok', xi_d, error, sol.iterations,
+                              '; '.join(messages) or 'ok', T_d, error, sol.iterations,
                               sol.warm)
 
-    def _hold(self, xi_d: FloatArray, error: FloatArray, message: str) -> ControlCommand:
+    def _hold(self, T_d: FloatArray, error: FloatArray, message: str) -> ControlCommand:
         """Keep the last safe command (infeasible target): the model's prediction of it at the
-        design screw, the integral frozen."""
+        design pose, the integral frozen."""
         n = self.model.n_strings
         try:
+            xi_d = log_se3(T_d, reference=self.model.initial_screw)
             state = self.model.evaluate(xi_d, self._command + self.offsets)
             Kc, t = state.cartesian_stiffness.copy(), state.tensions.copy()
         except ValueError:
             Kc, t = np.full((6, 6), np.nan), np.full(n, np.nan)
         return ControlCommand(self._command.copy(), False, math.nan, Kc, t, np.zeros(n, bool),
-                              message + '; the last command is kept', xi_d, error)
+                              message + '; the last command is kept', T_d, error)
 
 
 # ---------------------------------------------------------------------------------- spine
@@ -869,13 +870,14 @@ class ChainStiffnessController:
             xi = (x + dx).reshape(-1, 6)
         return xi
 
-    def _shape_tip(self, dt: float, target: ControlTarget, xi: FloatArray, loads: FloatArray,
-                   frames: FloatArray) -> list[ControlCommand]:
+    def _shape_tip(self, dt: float, target: ControlTarget, transforms: FloatArray,
+                   loads: FloatArray, frames: FloatArray) -> list[ControlCommand]:
         """All joints' tensions in one QP: each joint's equilibrium exact (its 6 equalities),
         the tip stiffness of the series compliance ``C = sum_i Ad_i K_i^-1 Ad_i^T`` linearised
         at the last tick's tensions (one Gauss-Newton step per tick, damped by
         :data:`CHAIN_STIFFNESS_DAMPING`), all tension and range bounds."""
         N = self.chain.n_joints
+        xi = transforms
         problems = [ctl._problem(x, w) for ctl, x, w in zip(self.joints, xi, loads, strict=True)]
         bad = [(i, p) for i, p in enumerate(problems) if isinstance(p, str)]
         if bad:
@@ -928,7 +930,7 @@ class ChainStiffnessController:
             part = slice(start[i], start[i + 1])
             joint_sol = QPResult(sol.t[part], sol.at_lo[part], sol.at_hi[part], sol.iterations,
                                  True, sol.warm)
-            out.append(ctl._apply(dt, ControlTarget(screw=xi[i]), xi[i], ctl.integral,
+            out.append(ctl._apply(dt, ControlTarget(pose=xi[i]), xi[i], ctl.integral,
                                   np.zeros(6), p.terms, joint_sol))
         return out
 
@@ -953,11 +955,11 @@ class ChainStiffnessController:
         state = chain.evaluate(xi)
         loads = chain.residuals(xi, W, gravity) - state.wrenches
         if target.cartesian_stiffness is None:
-            commands = [ctl._tick(dt, ControlTarget(screw=xi[i]), xi[i], loads[i],
-                                  ctl.integral, np.zeros(6))
+            commands = [ctl._tick(dt, ControlTarget(screw=xi[i]), state.transforms[i],
+                                  loads[i], ctl.integral, np.zeros(6))
                         for i, ctl in enumerate(self.joints)]
         else:
-            commands = self._shape_tip(dt, target, xi, loads, state.joint_frames)
+            commands = self._shape_tip(dt, target, state.transforms, loads, state.joint_frames)
         feasible = all(c.feasible for c in commands)
         saturated = np.array([c.saturated for c in commands])
         if feasible and not saturated.any():
