@@ -25,10 +25,18 @@ pytest.importorskip('rclpy')
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+from rcl_interfaces.srv import SetParameters
 from std_msgs.msg import Float64MultiArray
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_harness import REPO, NodeProcess, RosClient, repeat_until, unique_namespace
+from ros_harness import (
+    REPO,
+    NodeProcess,
+    RosClient,
+    log_has,
+    repeat_until,
+    unique_namespace,
+)
 
 import msg_tools
 from tensegrity_stiffness.design import design_rest_lengths
@@ -108,7 +116,7 @@ def loop():
         '-r', f'{ctl_base}/wrench_estimate:={est_base}/wrench_estimate'])
     ros = RosClient('control_test')
     out = {
-        'sim': sim, 'estimator': estimator, 'controller': controller, 'ros': ros,
+        'ns': ns, 'sim': sim, 'estimator': estimator, 'controller': controller, 'ros': ros,
         'truth': ros.subscribe(PoseStamped, f'{sim_base}/pose'),
         'rest': ros.subscribe(Float64MultiArray, f'{ctl_base}/rest_lengths'),
         'diagnostics': ros.subscribe(DiagnosticArray, '/diagnostics'),
@@ -186,3 +194,22 @@ def test_pose_step_and_stiffness_step_across_processes(loop) -> None:
     steps = np.abs(np.diff(rest, axis=0)).max(axis=1)
     assert steps.max() <= MAX_RATE * 10.0 / RATE_HZ  # dt is capped at 10 periods per tick
     time.sleep(0.1)
+
+
+def test_bad_targets_and_parameters_are_refused_and_the_command_kept(loop) -> None:
+    ros = loop['ros']
+    before = np.array(loop['rest'].messages[-1].data)
+    params = ros.client(SetParameters, f'{loop["ns"]}/stiffness_controller/set_parameters')
+    result = ros.set_parameter(params, 'limits.rest_length_max', [0.01])
+    assert not result.successful and 'rest_length_max' in result.reason
+    result = ros.set_parameter(params, 'limits.max_rate', -1.0)
+    assert not result.successful
+    wrong = target_message(np.eye(4))
+    wrong.header.frame_id = 'somewhere_else'
+    loop['target'].publish(wrong)
+    assert log_has(loop['controller'], r'~/target_pose rejected: .*somewhere_else', 10.0)
+    loop['stiffness'].publish(Float64MultiArray(data=[1.0, 2.0, 3.0]))
+    assert log_has(loop['controller'], r'~/target_stiffness rejected: .*36, 6 or 0', 10.0)
+    # The loop goes on from where it was: the last command moved at most by the rate limit.
+    after = np.array(loop['rest'].wait_for(len(loop['rest']) + 5, timeout=30.0)[-1].data)
+    assert np.abs(after - before).max() < 1e-3
