@@ -21,6 +21,7 @@ Built from the shared parts (:mod:`.parameters` ParameterBinding, :mod:`.reporti
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -61,6 +62,8 @@ DEFAULT_RANGE = (0.5, 1.2)
 REST_LENGTHS_LABEL = 'rest lengths [m] (motor commands), string order of the config'
 STIFFNESS_ROW_LABEL = 'wrench [fx fy fz mx my mz]'
 STIFFNESS_COL_LABEL = 'twist [dx dy dz rx ry rz]'
+#: Ticks over which /diagnostics reports the tick time and the latency (median, p99).
+STATISTICS_WINDOW = 2000
 
 CONTROL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('joint.rest_length_offsets', 'double_array', None,
@@ -163,7 +166,10 @@ class StiffnessControllerNode(Node):
             lambda reason: self.reporter.warn('parameter change', reason))
         self._settings = controller_settings(self._binding.values())
         self._controller = self._new_controller(self._settings, None)
-        self._pose: tuple[np.ndarray, float] | None = None
+        self._pose: tuple[np.ndarray, float, int] | None = None
+        self._tick_times: deque[float] = deque(maxlen=STATISTICS_WINDOW)
+        self._latencies: deque[float] = deque(maxlen=STATISTICS_WINDOW)
+        self._old_state_ticks = 0
         self._wrench: np.ndarray | None = None
         self._known_wrench: np.ndarray | None = None
         self._target_pose: np.ndarray | None = None
@@ -249,7 +255,8 @@ class StiffnessControllerNode(Node):
         except ValueError as exc:
             self.reporter.reject('~/pose_estimate', str(exc))
             return
-        self._pose = (T, time.monotonic())
+        stamp = msg.header.stamp
+        self._pose = (T, time.monotonic(), stamp.sec * 1_000_000_000 + stamp.nanosec)
 
     def _wrench_input(self, name: str, msg: WrenchStamped) -> np.ndarray | None:
         try:
@@ -303,14 +310,20 @@ class StiffnessControllerNode(Node):
             start = time.perf_counter()
             cmd = self._controller.update(dt, target, pose=pose, external_wrench=load)
             self._tick_time = time.perf_counter() - start
+            self._tick_times.append(self._tick_time)
         except ValueError as exc:
             self.reporter.reject('tick', str(exc))
             return
         self._ticks += 1
         self._hold_reason = ''
         self._last = cmd
+        if self._state_age > self._period:
+            self._old_state_ticks += 1
         if cmd.feasible:
             self._publish_rest(cmd.rest_lengths)
+            if self._pose[2]:  # the reading's stamp (the estimator passes the sensors' on)
+                self._latencies.append(
+                    1e-9 * (self.get_clock().now().nanoseconds - self._pose[2]))
             if self._pub_stiffness.get_subscription_count():
                 self._pub_stiffness.publish(msg_tools.matrix_to_multiarray(
                     cmd.predicted_cartesian_stiffness, STIFFNESS_ROW_LABEL,
@@ -327,6 +340,9 @@ class StiffnessControllerNode(Node):
         values: list[tuple[str, Any]] = [
             ('ticks', self._ticks), ('held ticks (stale state)', self._held),
             ('missed ticks', self._missed), ('tick time [ms]', 1e3 * self._tick_time),
+            *_statistics('tick time', self._tick_times),
+            *_statistics('latency from the reading', self._latencies),
+            ('ticks on a state older than one period', self._old_state_ticks),
             ('age of the state used [s]', self._state_age),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0)]
         level, message = 'WARN', self._hold_reason or 'no command yet'
@@ -345,6 +361,15 @@ class StiffnessControllerNode(Node):
             [msg_tools.diagnostic_status(f'{self.get_name()}: controller', level, message,
                                          values, hardware_id=self._settings.link1_frame)],
             self.get_clock().now().to_msg()))
+
+
+def _statistics(name: str, seconds: deque[float]) -> list[tuple[str, Any]]:
+    """``<name> median [ms]`` and ``p99`` of the window (empty: none)."""
+    if not seconds:
+        return []
+    values = 1e3 * np.asarray(seconds)
+    return [(f'{name} median [ms]', float(np.median(values))),
+            (f'{name} p99 [ms]', float(np.percentile(values, 99)))]
 
 
 def main(args: list[str] | None = None) -> None:
