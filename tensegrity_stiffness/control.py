@@ -240,7 +240,7 @@ class ControlCommand:
 class PoseTerms:
     """What stays fixed at a screw (design module's notation): ``lengths`` (n,) m, ``B`` (6, n)
     string wrenches per unit tension, ``K0`` (6, 6) and ``M`` (n, 6, 6) with
-    ``K_c(t) = K0 + sum_j t_j M_j``, ``dl0_dt`` (n,) and ``cap`` (n,) N the physical upper
+    ``K_c(t) = K0 + sum_j t_j M_j`` (eqs. 10-11), and ``cap`` (n,) N the physical upper
     tension caps (positive rest length, maximum stretch) shrunk by ``BOUND_MARGIN``."""
 
     lengths: FloatArray
