@@ -5,8 +5,13 @@ in the same run: ``StiffnessController.update`` per 500 Hz tick (warm-started: t
 set and tensions carried from the last tick) and a full ``design_rest_lengths`` per tick (cold,
 what a controller without warm start would pay), in three regimes: holding a pose with a noisy
 measurement, following a moving target (a 1 Hz circle of 1 mm and 0.02 rad), and the same with
-a target K_c. Also the spine controller's tick (5 joints). Numbers only, no assertions; the
-issue's goal for the joint tick is <= 200 us (median).
+a target K_c. Also the spine controller's tick (5 joints). Part ``--loop``: the whole loop
+across processes (sim_node -> estimator_node with 12 load cells + IMU -> stiffness_controller ->
+sim_node, started as test/test_control_node.py does; needs ``source scripts/env.sh``) at 500 Hz
+and 1 kHz: the controller's ticks, missed ticks, tick time and the latency from the twin's
+reading (the stamp the estimate carries) to the command it causes (median, p99; goal median
+<= 3 ms), and the ticks that used a state older than one period, from its /diagnostics. Numbers
+only, no assertions; the issue's goal for the joint tick is <= 200 us (median).
 """
 
 from __future__ import annotations
@@ -110,12 +115,79 @@ def spine_part(ticks: int) -> None:
     print(f'spine ({chain.n_joints} joints): ChainStiffnessController.update  {stats(a)}')
 
 
+def loop_part(seconds: float, publish_every: int) -> None:
+    """The three nodes across processes at 500 Hz and 1 kHz (the controller's /diagnostics)."""
+    import os
+    import random
+
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(100, 200)))
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseStamped
+    from ros_harness import NodeProcess, RosClient, unique_namespace
+    from test_control_node import JOINT_CONFIG, ControllerProcess, target_message
+
+    from tensegrity_stiffness.screw import exp_se3
+
+    model = JointModel.from_yaml(config.packaged_config_path())
+    for rate in (500.0, 1000.0):
+        ns = unique_namespace('bench_control')
+        sim_base, est_base, ctl_base = (f'{ns}/sim_node', f'{ns}/estimator_node',
+                                        f'{ns}/stiffness_controller')
+        procs = [NodeProcess(ns, JOINT_CONFIG, executable='sim_node', extra_args=[
+                     '-p', f'sim.publish_every:={publish_every}',
+                     '-r', f'{sim_base}/rest_lengths:={ctl_base}/rest_lengths']),
+                 NodeProcess(ns, JOINT_CONFIG, executable='estimator_node', extra_args=[
+                     '-r', f'{est_base}/measured_tensions:={sim_base}/measured_tensions',
+                     '-r', f'{est_base}/imu:={sim_base}/imu',
+                     '-r', f'{est_base}/rest_lengths:={ctl_base}/rest_lengths']),
+                 ControllerProcess(ns, [
+                     '-p', f'control.rate:={rate}', '-p', 'control.integral_gain:=4.0',
+                     '-r', f'{ctl_base}/pose_estimate:={est_base}/pose_estimate'])]
+        ros = RosClient('bench_control')
+        try:
+            diagnostics = ros.subscribe(DiagnosticArray, '/diagnostics')
+            target = ros.publisher(PoseStamped, f'{ctl_base}/target_pose')
+            msg = target_message(exp_se3(model.initial_screw))
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                target.publish(msg)
+                time.sleep(0.5)
+            found = None
+            for array in reversed(diagnostics.messages):
+                for status in array.status:
+                    if status.name.endswith('stiffness_controller: controller'):
+                        found = {v.key: v.value for v in status.values}
+                        break
+                if found:
+                    break
+            print(f'loop at {rate:g} Hz ({seconds:g} s, three processes, twin readings at '
+                  f'{1000 / publish_every:g} Hz):')
+            keys = ('ticks', 'missed ticks', 'held ticks (stale state)',
+                    'tick time median [ms]', 'tick time p99 [ms]',
+                    'latency from the reading median [ms]', 'latency from the reading p99 [ms]',
+                    'ticks on a state older than one period')
+            for key in keys:
+                print(f'  {key:<42} {(found or {}).get(key, "-")}')
+        finally:
+            ros.close()
+            for proc in reversed(procs):
+                proc.stop()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--ticks', type=int, default=2000)
+    parser.add_argument('--loop', type=float, default=0.0, metavar='SECONDS',
+                        help='also run the loop across processes this long per rate')
+    parser.add_argument('--publish-every', type=int, default=1,
+                        help="the twin's sim.publish_every in the loop (1: readings at 1 kHz)")
     args = parser.parse_args()
     joint_part(args.ticks)
     spine_part(args.ticks)
+    if args.loop > 0.0:
+        loop_part(args.loop, args.publish_every)
 
 
 if __name__ == '__main__':

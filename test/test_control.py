@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.chain import JointChain
 from tensegrity_stiffness.control import (
     ActuatorLimits,
+    ChainStiffnessController,
     ControlTarget,
     StiffnessController,
+    adjoint_twist,
     pose_terms,
     relative_stiffness_error,
     rest_from_tensions,
@@ -418,3 +423,59 @@ def test_relative_stiffness_error_matches_the_design() -> None:
     L = float(np.linalg.norm(model.link1_nodes, axis=1).max())
     assert relative_stiffness_error(res.cartesian_stiffness, 2.0 * K, L) == \
         pytest.approx(res.stiffness_error, rel=1e-9)
+
+
+# ---------------------------------------------------------------------------------- spine
+def spine_chain() -> JointChain:
+    return JointChain.from_yaml(Path(config.packaged_config_path()).with_name(
+        'default_spine.yaml'))
+
+
+def spine_tip_stiffness(chain: JointChain, screws: np.ndarray, tmin: float, tmax: float
+                        ) -> tuple[np.ndarray, list[np.ndarray]]:
+    model = chain.joints[0]
+    rest = [design_rest_lengths(model, x, np.zeros(6), tmin, tmax).rest_lengths for x in screws]
+    return chain.tip_stiffness(screws, rest_lengths=rest), rest
+
+
+def test_series_compliance_is_the_chain_formula_without_load() -> None:
+    """The spine's stiffness objective, C_tip = sum Ad_i K_i^-1 Ad_i^T, against the library's
+    exact tip stiffness at zero load (no weights in the default spine)."""
+    chain = spine_chain()
+    xi = chain.unloaded_screws()
+    K_tip, rest = spine_tip_stiffness(chain, xi, 0.1, 1.5)
+    state = chain.evaluate(xi, rest)
+    C = sum(adjoint_twist(P) @ np.linalg.inv(K) @ adjoint_twist(P).T
+            for P, K in zip(state.joint_frames, state.cartesian_stiffness, strict=True))
+    np.testing.assert_allclose(np.linalg.inv(C), K_tip, rtol=1e-7, atol=1e-9 * np.abs(K_tip).max())
+
+
+def test_spine_meets_a_reachable_tip_stiffness_and_reports_an_unreachable_one() -> None:
+    chain = spine_chain()
+    model = chain.joints[0]
+    xi = chain.unloaded_screws()
+    T0 = chain.tip_transform(xi)
+    L = float(np.linalg.norm(model.link1_nodes, axis=1).max())
+    lim = ActuatorLimits(0.5 * model.rest_lengths, 1.2 * model.rest_lengths, 10.0)
+    K_mid, _ = spine_tip_stiffness(chain, xi, 0.1, 1.5)
+    for tmin, tmax in ((0.5, 1.5), (0.1, 0.5)):
+        K_star, _ = spine_tip_stiffness(chain, xi, tmin, tmax)
+        assert relative_stiffness_error(K_mid, K_star, L) > 0.1  # a real step
+        ctl = ChainStiffnessController(chain, lim, [model.rest_lengths] * chain.n_joints)
+        target = ControlTarget(pose=T0, cartesian_stiffness=K_star)
+        for _ in range(20):
+            cmd = ctl.update(DT, target, tip_pose=T0)
+        assert cmd.feasible and cmd.stiffness_error < 1e-3, cmd.stiffness_error
+        exact = chain.tip_stiffness(cmd.design_screws, rest_lengths=[
+            c.rest_lengths for c in cmd.joint_commands])
+        assert relative_stiffness_error(exact, K_star, L) < 1e-3
+    ctl = ChainStiffnessController(chain, lim, [model.rest_lengths] * chain.n_joints)
+    target = ControlTarget(pose=T0, cartesian_stiffness=3.0 * K_mid)
+    for _ in range(10):
+        cmd = ctl.update(DT, target, tip_pose=T0)
+    assert cmd.feasible and cmd.stiffness_error > 0.1
+    assert 'not met' in cmd.message
+    for c in cmd.joint_commands:
+        assert np.all(c.rest_lengths >= 0.5 * model.rest_lengths * (1 - 1e-12))
+        assert np.all(c.rest_lengths <= 1.2 * model.rest_lengths * (1 + 1e-12))
+        assert np.all(c.tensions >= 0.1 - 1e-9)
