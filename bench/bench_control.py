@@ -1,4 +1,4 @@
-"""Timing of the stiffness controller's tick (``tensegrity_stiffness.control``).
+"""Timing of the stiffness controller's tick (``tensegrity_stiffness.control.controller``).
 
 Run by hand: ``python3 bench/bench_control.py [--ticks N]``. For the default joint, side by side
 in the same run: ``StiffnessController.update`` per 500 Hz tick (warm-started: the QP's active
@@ -27,15 +27,15 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.chain import JointChain
-from tensegrity_stiffness.control import (
+from tensegrity_stiffness.control.controller import (
     ActuatorLimits,
     ChainStiffnessController,
     ControlTarget,
     StiffnessController,
 )
-from tensegrity_stiffness.design import design_rest_lengths
-from tensegrity_stiffness.joint import JointModel
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.design import design_rest_lengths
+from tensegrity_stiffness.mechanics.joint import JointModel
 
 DT = 0.002
 TICK_TARGET_US = 200.0
@@ -125,10 +125,10 @@ def loop_part(seconds: float, publish_every: int) -> None:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
-    from ros_harness import NodeProcess, RosClient, unique_namespace
+    from support.ros_harness import NodeProcess, RosClient, unique_namespace
     from test_control_node import JOINT_CONFIG, ControllerProcess, target_message
 
-    from tensegrity_stiffness.screw import exp_se3
+    from tensegrity_stiffness.geometry.screw import exp_se3
 
     model = JointModel.from_yaml(config.packaged_config_path())
     for rate in (500.0, 1000.0):

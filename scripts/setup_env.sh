@@ -128,8 +128,11 @@ build_hash="$( {
     printf '== %s\n' "$f"
     cat "$f" 2>/dev/null || true
   done
-  # Compiled or generated: contents count.
-  find cmake srv src include -type f 2>/dev/null | LC_ALL=C sort \
+  # Compiled or generated: contents count (the kernel's generated header is made from the
+  # series tables and thresholds of these three modules).
+  { find cmake srv src include -type f 2>/dev/null
+    printf '%s\n' tensegrity_stiffness/geometry/screw.py tensegrity_stiffness/mechanics/joint.py \
+      tensegrity_stiffness/mechanics/kernel.py; } | LC_ALL=C sort \
     | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
   # Installed as symlinks: names count.
   find tensegrity_stiffness config launch -type f ! -path '*__pycache__*' 2>/dev/null \

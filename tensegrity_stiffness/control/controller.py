@@ -5,7 +5,7 @@ and optionally a target Cartesian stiffness ``K_c*``), what the robot measures (
 known or estimated load into rest-length commands a motor can follow (:class:`ControlCommand`).
 No rclpy: the node ``stiffness_controller`` wraps it. The method is in ``docs/control.md``.
 
-The math (notation of :mod:`tensegrity_stiffness.design`)
+The math (notation of :mod:`tensegrity_stiffness.mechanics.design`)
 --------------------------------------------------------
 * **Feedforward: the exact design at the pose.** At a fixed screw the wrench is linear in the
   tensions, ``F = B t`` (Monke & Vikas eq. 9), and ``K_c(t) = K_0 + sum_j t_j M_j`` is affine in
@@ -55,12 +55,50 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.chain import JointChain
-from tensegrity_stiffness.design import BOUND_MARGIN, DEFAULT_TENSION_MAX, DEFAULT_TENSION_MIN
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.quaternion import quaternion_to_rotation
-from tensegrity_stiffness.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
-from tensegrity_stiffness.validation import finite_array, finite_array_of_shape, finite_scalar
+from tensegrity_stiffness.geometry.quaternion import quaternion_to_rotation
+from tensegrity_stiffness.geometry.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
+from tensegrity_stiffness.geometry.validation import (
+    finite_array,
+    finite_array_of_shape,
+    finite_scalar,
+)
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.design import (
+    BOUND_MARGIN,
+    DEFAULT_TENSION_MAX,
+    DEFAULT_TENSION_MIN,
+)
+from tensegrity_stiffness.mechanics.joint import JointModel
+
+__all__ = [
+    'ACTIVE_SET_TOLERANCE',
+    'CHAIN_IK_ITERATIONS',
+    'CHAIN_STIFFNESS_DAMPING',
+    'DEFAULT_INTEGRAL_GAIN',
+    'DEFAULT_INTEGRAL_LIMIT',
+    'DEFAULT_PROPORTIONAL_GAIN',
+    'FEASIBILITY_TOLERANCE',
+    'MAX_ACTIVE_SET_ITERATIONS',
+    'SATURATION_TOLERANCE',
+    'STIFFNESS_MET_TOLERANCE',
+    'WARM_ACTIVE_SET_ITERATIONS',
+    'ActuatorLimits',
+    'BoolArray',
+    'ChainControlCommand',
+    'ChainStiffnessController',
+    'ControlCommand',
+    'ControlTarget',
+    'PoseTerms',
+    'QPResult',
+    'StiffnessController',
+    'adjoint_twist',
+    'pose_terms',
+    'pose_terms_at',
+    'relative_stiffness_error',
+    'rest_from_tensions',
+    'solve_box_qp',
+    'tension_bounds',
+]
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]

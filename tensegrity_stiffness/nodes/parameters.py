@@ -436,10 +436,12 @@ class NodeTable:
 def node_tables() -> tuple[NodeTable, ...]:
     """Every node's parameter table, in the order of ``docs/parameters.md``: the one registry
     the page is generated from (:mod:`tensegrity_stiffness.nodes.parameter_docs`). A node's table
-    is
-    listed here once; after a change run ``python -m tensegrity_stiffness.nodes.parameter_docs
+    is listed here once; after a change run ``python -m tensegrity_stiffness.nodes.parameter_docs
     --write`` (``test/nodes/test_parameter_docs.py`` fails while the committed page differs). A
-    function, so that tables defined further down this module can be listed too."""
+    function, so that tables defined further down this module, and the controller's in
+    :mod:`.control_processing` (which builds on this module), can be listed too."""
+    from tensegrity_stiffness.nodes.control_processing import CONTROLLER_PARAMETERS
+
     return (
         NodeTable('stiffness_node', STIFFNESS_NODE_PARAMETERS, 'config/default_joint.yaml',
                   'one joint: wrench, K, K_c per screw or pose; equilibrium, design and planar '
@@ -462,6 +464,9 @@ def node_tables() -> tuple[NodeTable, ...]:
                   'config/default_spine.yaml',
                   'the estimator of a spine (the table for the default N = 5): every screw, the '
                   'tip load, tip pose and tip stiffness with their covariances'),
+        NodeTable('stiffness_controller', CONTROLLER_PARAMETERS, 'config/default_joint.yaml',
+                  'rest-length commands that hold a target pose with a target K_c in closed '
+                  'loop, within the actuators\' range and rate'),
     )
 
 

@@ -1,5 +1,5 @@
 """``stiffness_controller``: rest-length commands that hold a target pose with a target K_c, in
-closed loop (issue 27), around :class:`tensegrity_stiffness.control.StiffnessController`.
+closed loop, around :class:`tensegrity_stiffness.control.controller.StiffnessController`.
 
 Inputs (executor): ``~/target_pose`` (``PoseStamped`` in ``frames.link1``),
 ``~/target_stiffness`` (``Float64MultiArray``: 36 row-major, 6 for a diagonal, empty for none),
@@ -12,10 +12,9 @@ latest state and publishes ``~/rest_lengths`` (latched, the format ``sim_node``,
 ``control.max_state_age`` holds the last command and says so; a bad target or parameter is
 refused with a throttled warning and the last command is kept.
 
-Built from the shared parts (:mod:`.parameters` ParameterBinding, :mod:`.reporting`,
-:mod:`.topics`, :mod:`.runner`); the parameter table is this module's
-(:data:`CONTROLLER_PARAMETERS`, the joint and frame tables plus ``limits.*`` / ``control.*`` /
-``joint.rest_length_offsets``) until it moves into :mod:`tensegrity_stiffness.parameters`.
+Built from the shared parts (:mod:`.runtime.declared_parameters`, :mod:`.runtime.reporting`,
+:mod:`.runtime.topics`, :mod:`.runtime.runner`); the parameter table and the settings are
+:mod:`tensegrity_stiffness.nodes.control_processing`'s.
 """
 
 from __future__ import annotations
@@ -23,7 +22,6 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -32,127 +30,37 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, WrenchStam
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
-import msg_tools
-from msg_tools import estimation as estimation_msgs
-from tensegrity_stiffness.control import (
-    ActuatorLimits,
+from tensegrity_stiffness.control.controller import (
     ControlCommand,
     ControlTarget,
     StiffnessController,
 )
-from tensegrity_stiffness.design import DEFAULT_TENSION_MAX, DEFAULT_TENSION_MIN
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.parameters import (
-    COMMON_PARAMETERS,
-    FRAME_PARAMETERS,
-    JOINT_PARAMETERS,
-    ParameterSpec,
-    by_name,
-    joint_from_values,
+from tensegrity_stiffness.geometry.validation import require_frame
+from tensegrity_stiffness.nodes.control_processing import (
+    CONTROLLER_PARAMETERS,
+    REST_LENGTHS_LABEL,
+    ControllerSettings,
+    controller_settings,
+    stiffness_target,
 )
-from tensegrity_stiffness.ros import runner
-from tensegrity_stiffness.ros.parameters import ParameterBinding
-from tensegrity_stiffness.ros.reporting import Reporter, guarded
-from tensegrity_stiffness.ros.topics import LATCHED_QOS, create_output_publisher, input_qos
-from tensegrity_stiffness.validation import require_frame
+from tensegrity_stiffness.nodes.layouts import (
+    CARTESIAN_STIFFNESS_COL_LABEL,
+    ESTIMATOR_OUTPUTS,
+    STIFFNESS_ROW_LABEL,
+)
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
+from tensegrity_stiffness.ros.runtime import runner
+from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
+from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
+from tensegrity_stiffness.ros.runtime.topics import LATCHED_QOS, create_output_publisher, input_qos
+
+#: The state inputs carry estimator_node's output names, so that one remap each wires them.
+POSE_ESTIMATE, WRENCH_ESTIMATE = (f'~/{name}' for name in ESTIMATOR_OUTPUTS[:2])
 
 NODE_NAME = 'stiffness_controller'
-#: Default rest-length range as fractions of the config's rest lengths (the issue's example).
-DEFAULT_RANGE = (0.5, 1.2)
-REST_LENGTHS_LABEL = 'rest lengths [m] (motor commands), string order of the config'
-STIFFNESS_ROW_LABEL = 'wrench [fx fy fz mx my mz]'
-STIFFNESS_COL_LABEL = 'twist [dx dy dz rx ry rz]'
 #: Ticks over which /diagnostics reports the tick time and the latency (median, p99).
 STATISTICS_WINDOW = 2000
-
-CONTROL_PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec('joint.rest_length_offsets', 'double_array', None,
-                  'calibrated rest-length offsets d, m, one per string (empty: zeros); the '
-                  'true rest length is command + d'),
-    ParameterSpec('limits.rest_length_min', 'double_array', None,
-                  'smallest motor command, m: one value or one per string (empty: '
-                  f'{DEFAULT_RANGE[0]} x joint.rest_lengths)'),
-    ParameterSpec('limits.rest_length_max', 'double_array', None,
-                  'largest motor command, m: one value or one per string (empty: '
-                  f'{DEFAULT_RANGE[1]} x joint.rest_lengths)'),
-    ParameterSpec('limits.max_rate', 'double', 0.05, 'largest motor speed, m/s',
-                  range=(1e-9, 1e3)),
-    ParameterSpec('limits.tension_min', 'double', DEFAULT_TENSION_MIN,
-                  'smallest string tension, N (> 0: taut)', range=(1e-9, 1e6)),
-    ParameterSpec('limits.tension_max', 'double', DEFAULT_TENSION_MAX,
-                  'largest string tension, N', range=(1e-9, 1e6)),
-    ParameterSpec('control.rate', 'double', 500.0, 'controller ticks per second, Hz',
-                  read_only=True, range=(1.0, 10_000.0)),
-    ParameterSpec('control.max_state_age', 'double', 0.05,
-                  'a pose estimate older than this (s, by arrival) holds the last command',
-                  range=(0.0, 3600.0)),
-    ParameterSpec('control.integral_gain', 'double', 8.0,
-                  'integral gain on the pose error, 1/s (docs/control.md)', range=(0.0, 1e4)),
-    ParameterSpec('control.proportional_gain', 'double', 0.0,
-                  'share of the pose error added to the design pose, [0, 1)',
-                  range=(0.0, 0.999)),
-    ParameterSpec('control.use_wrench_estimate', 'bool', False,
-                  'feed ~/wrench_estimate forward as the load (false: ~/external_wrench, or '
-                  "none: the integral takes the load). Only for an estimator that measures the "
-                  "load: with estimation.external_wrench 'unknown' the estimate is -F of the "
-                  'commanded rest lengths, which during a transient feeds the command back '
-                  'into itself'),
-)
-
-#: Every parameter of ``stiffness_controller``, in declaration order.
-CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
-    JOINT_PARAMETERS + FRAME_PARAMETERS + CONTROL_PARAMETERS
-    + tuple(s for s in COMMON_PARAMETERS if s.name in ('qos.depth', 'limits.max_array_length',
-                                                       'diagnostics.period')))
-
-
-@dataclass(frozen=True)
-class ControllerSettings:
-    """One whole parameter set, validated (swapped as a whole)."""
-
-    values: Mapping[str, Any]
-    model: JointModel
-    limits: ActuatorLimits
-    offsets: np.ndarray
-    link1_frame: str
-
-
-def controller_settings(values: Mapping[str, Any]) -> ControllerSettings:
-    """The settings of a parameter set; ValueError names the bad field."""
-    specs = by_name(CONTROLLER_PARAMETERS)
-    checked = {name: specs[name].check(v) for name, v in values.items() if name in specs}
-    model = joint_from_values(checked)
-    n = model.n_strings
-
-    def per_string(name: str, default: np.ndarray) -> np.ndarray:
-        raw = checked[name]
-        if not raw:
-            return default
-        if len(raw) not in (1, n):
-            raise ValueError(f'{name} must have 1 or {n} values, got {len(raw)}')
-        return np.broadcast_to(np.asarray(raw, float), (n,)).copy()
-
-    offsets = per_string('joint.rest_length_offsets', np.zeros(n))
-    limits = ActuatorLimits(
-        per_string('limits.rest_length_min', DEFAULT_RANGE[0] * model.rest_lengths),
-        per_string('limits.rest_length_max', DEFAULT_RANGE[1] * model.rest_lengths),
-        checked['limits.max_rate'], checked['limits.tension_min'], checked['limits.tension_max'])
-    StiffnessController(model, limits, model.rest_lengths - offsets,  # gains and offsets valid
-                        integral_gain=checked['control.integral_gain'],
-                        proportional_gain=checked['control.proportional_gain'],
-                        rest_length_offsets=offsets)
-    return ControllerSettings(checked, model, limits, offsets, checked['frames.link1'])
-
-
-def stiffness_target(values: np.ndarray) -> np.ndarray | None:
-    """K_c* of a ``~/target_stiffness`` payload: 36 row-major, 6 a diagonal, empty none."""
-    if values.size == 0:
-        return None
-    if values.size == 6:
-        return np.diag(values)
-    if values.size == 36:
-        return values.reshape(6, 6)
-    raise ValueError(f'target_stiffness must have 36, 6 or 0 values, got {values.size}')
 
 
 class StiffnessControllerNode(Node):
@@ -192,9 +100,9 @@ class StiffnessControllerNode(Node):
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, qos)
         self.create_subscription(Float64MultiArray, '~/target_stiffness',
                                  self._on_target_stiffness, qos)
-        self.create_subscription(PoseWithCovarianceStamped, '~/pose_estimate',
+        self.create_subscription(PoseWithCovarianceStamped, POSE_ESTIMATE,
                                  self._on_pose_estimate, qos)
-        self.create_subscription(WrenchStamped, '~/wrench_estimate', self._on_wrench_estimate,
+        self.create_subscription(WrenchStamped, WRENCH_ESTIMATE, self._on_wrench_estimate,
                                  qos)
         self.create_subscription(WrenchStamped, '~/external_wrench', self._on_external_wrench,
                                  qos)
@@ -229,7 +137,7 @@ class StiffnessControllerNode(Node):
     def _on_target_pose(self, msg: PoseStamped) -> None:
         try:
             require_frame(msg.header.frame_id, self._settings.link1_frame, "link 1's frame")
-            T = msg_tools.pose_to_transform(msg.pose)
+            T = conversions.pose_message_to_transform(msg.pose)
             ControlTarget(pose=T)
         except ValueError as exc:
             self.reporter.reject('~/target_pose', str(exc))
@@ -239,7 +147,7 @@ class StiffnessControllerNode(Node):
     @guarded('~/target_stiffness')
     def _on_target_stiffness(self, msg: Float64MultiArray) -> None:
         try:
-            values = msg_tools.multiarray_to_array(
+            values = conversions.multiarray_to_array(
                 msg, max_length=self._settings.values['limits.max_array_length'])
             K = stiffness_target(values)
         except ValueError as exc:
@@ -247,13 +155,13 @@ class StiffnessControllerNode(Node):
             return
         self._target_stiffness = K
 
-    @guarded('~/pose_estimate')
+    @guarded(POSE_ESTIMATE)
     def _on_pose_estimate(self, msg: PoseWithCovarianceStamped) -> None:
         try:
             require_frame(msg.header.frame_id, self._settings.link1_frame, "link 1's frame")
             T, _ = estimation_msgs.pose_with_covariance_to_arrays(msg.pose)
         except ValueError as exc:
-            self.reporter.reject('~/pose_estimate', str(exc))
+            self.reporter.reject(POSE_ESTIMATE, str(exc))
             return
         stamp = msg.header.stamp
         self._pose = (T, time.monotonic(), stamp.sec * 1_000_000_000 + stamp.nanosec)
@@ -266,9 +174,9 @@ class StiffnessControllerNode(Node):
             self.reporter.reject(name, str(exc))
             return None
 
-    @guarded('~/wrench_estimate')
+    @guarded(WRENCH_ESTIMATE)
     def _on_wrench_estimate(self, msg: WrenchStamped) -> None:
-        W = self._wrench_input('~/wrench_estimate', msg)
+        W = self._wrench_input(WRENCH_ESTIMATE, msg)
         if W is not None:
             self._wrench = W
 
@@ -325,14 +233,14 @@ class StiffnessControllerNode(Node):
                 self._latencies.append(
                     1e-9 * (self.get_clock().now().nanoseconds - self._pose[2]))
             if self._pub_stiffness.get_subscription_count():
-                self._pub_stiffness.publish(msg_tools.matrix_to_multiarray(
+                self._pub_stiffness.publish(conversions.matrix_to_multiarray(
                     cmd.predicted_cartesian_stiffness, STIFFNESS_ROW_LABEL,
-                    STIFFNESS_COL_LABEL))
+                    CARTESIAN_STIFFNESS_COL_LABEL))
         else:
             self.reporter.warn('target', cmd.message)
 
     def _publish_rest(self, rest: np.ndarray) -> None:
-        self._pub_rest.publish(msg_tools.vector_to_multiarray(rest, REST_LENGTHS_LABEL))
+        self._pub_rest.publish(conversions.vector_to_multiarray(rest, REST_LENGTHS_LABEL))
 
     @guarded('/diagnostics')
     def _publish_diagnostics(self) -> None:
@@ -357,8 +265,8 @@ class StiffnessControllerNode(Node):
                        ('pose error [m, rad]', cmd.pose_error.tolist())]
             level = 'OK' if cmd.feasible and not self._hold_reason else 'WARN'
             message = self._hold_reason or cmd.message
-        self._pub_diagnostics.publish(msg_tools.diagnostic_array(
-            [msg_tools.diagnostic_status(f'{self.get_name()}: controller', level, message,
+        self._pub_diagnostics.publish(conversions.diagnostic_array(
+            [conversions.diagnostic_status(f'{self.get_name()}: controller', level, message,
                                          values, hardware_id=self._settings.link1_frame)],
             self.get_clock().now().to_msg()))
 

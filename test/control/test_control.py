@@ -1,4 +1,5 @@
-"""Unit tests of tensegrity_stiffness.control (no twin: the model itself is the plant)."""
+"""Unit tests of tensegrity_stiffness.control.controller (no twin: the model itself is the
+plant)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,7 @@ import numpy as np
 import pytest
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.chain import JointChain
-from tensegrity_stiffness.control import (
+from tensegrity_stiffness.control.controller import (
     ActuatorLimits,
     ChainStiffnessController,
     ControlTarget,
@@ -21,9 +21,10 @@ from tensegrity_stiffness.control import (
     solve_box_qp,
     tension_bounds,
 )
-from tensegrity_stiffness.design import design_rest_lengths, rest_length_sensitivity
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.screw import exp_se3
+from tensegrity_stiffness.geometry.screw import exp_se3
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.design import design_rest_lengths, rest_length_sensitivity
+from tensegrity_stiffness.mechanics.joint import JointModel
 
 DT = 0.002
 RATE = 0.05
@@ -81,7 +82,7 @@ def test_limits_per_string_and_scalar() -> None:
 def test_target_validation_and_forms() -> None:
     model = joint()
     T = exp_se3(model.initial_screw)
-    from tensegrity_stiffness.quaternion import rotation_to_quaternion
+    from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
     seven = np.concatenate([T[:3, 3], rotation_to_quaternion(T[:3, :3])])
     np.testing.assert_allclose(ControlTarget(pose=seven).transform, T, atol=1e-12)
     np.testing.assert_allclose(ControlTarget(screw=model.initial_screw).transform, T,
@@ -393,7 +394,7 @@ def test_rest_length_offsets_shift_the_commands() -> None:
 def test_integral_removes_a_model_error_on_the_model_plant(force_law: str) -> None:
     """Plant: the model with every k_j off by up to 10 %, solved to equilibrium each tick
     (quasi-static): the integral drives the true pose to the target."""
-    from tensegrity_stiffness.equilibrium import solve_equilibrium
+    from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
     model = joint(force_law)
     rng = np.random.default_rng(4)
     section = dict(config.load_section(config.packaged_config_path(), 'joint'))

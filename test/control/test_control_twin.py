@@ -11,18 +11,18 @@ import numpy as np
 import pytest
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.chain import JointChain
-from tensegrity_stiffness.control import (
+from tensegrity_stiffness.control.controller import (
     ActuatorLimits,
     ChainStiffnessController,
     ControlTarget,
     StiffnessController,
     relative_stiffness_error,
 )
-from tensegrity_stiffness.design import design_rest_lengths
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.screw import exp_se3, log_se3
-from tensegrity_stiffness.simulation import ChainSimulation, JointSimulation
+from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.design import design_rest_lengths
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.simulation.twin import ChainSimulation, JointSimulation
 
 RATE_HZ = 500.0
 DT = 1.0 / RATE_HZ

@@ -5,15 +5,12 @@ tensions + IMU, unknown load) estimates the pose and the load from them and the 
 lengths; ``stiffness_controller`` turns a target pose (and K_c*) and that state into rest-length
 commands, which the twin and the estimator both take (latched ``~/rest_lengths``). The
 controller is started as ``python -c '...main()'`` until its executable is installed; the other
-nodes as :class:`ros_harness.NodeProcess` starts them.
+nodes as :class:`support.ros_harness.NodeProcess` starts them.
 """
 
 from __future__ import annotations
 
-import itertools
 import os
-import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -29,7 +26,7 @@ from rcl_interfaces.srv import SetParameters
 from std_msgs.msg import Float64MultiArray
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_harness import (
+from support.ros_harness import (
     REPO,
     NodeProcess,
     RosClient,
@@ -38,10 +35,10 @@ from ros_harness import (
     unique_namespace,
 )
 
-import msg_tools
-from tensegrity_stiffness.design import design_rest_lengths
-from tensegrity_stiffness.joint import JointModel
-from tensegrity_stiffness.screw import exp_se3
+from tensegrity_stiffness.geometry.screw import exp_se3
+from tensegrity_stiffness.mechanics.design import design_rest_lengths
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.ros import conversions
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -55,42 +52,8 @@ STIFFNESS_TOLERANCE = 0.02
 TIMEOUT_S = 90.0
 
 
-class ControllerProcess:
-    """``stiffness_controller`` as a child process (``python -c``), log in a file; stopped by
-    SIGINT as NodeProcess does."""
-
-    _starts = itertools.count()
-
-    def __init__(self, namespace: str, extra_args: list[str]) -> None:
-        log_dir = Path(os.environ.get('TMPDIR', '/tmp'))
-        self.log_path = log_dir / (f'stiffness_controller{namespace.replace("/", "_")}_'
-                                   f'{os.getpid()}_{next(self._starts)}.log')
-        self._log = self.log_path.open('w')
-        code = 'from tensegrity_stiffness.ros.stiffness_controller import main; main()'
-        self.process = subprocess.Popen(
-            [sys.executable, '-c', code, '--ros-args', '--params-file', str(JOINT_CONFIG),
-             '-r', f'__ns:={namespace}', *extra_args],
-            stdout=self._log, stderr=subprocess.STDOUT, env=os.environ.copy())
-
-    def log(self) -> str:
-        if not self._log.closed:
-            self._log.flush()
-        return self.log_path.read_text(errors='replace')
-
-    def stop(self, timeout: float = 10.0) -> int:
-        if self.process.poll() is None:
-            self.process.send_signal(signal.SIGINT)
-            try:
-                self.process.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.process.kill()
-                self.process.wait(timeout)
-        self._log.close()
-        return self.process.returncode
-
-
 def pose_error(msg: PoseStamped, T_star: np.ndarray) -> tuple[float, float]:
-    T = msg_tools.pose_to_transform(msg.pose)
+    T = conversions.pose_message_to_transform(msg.pose)
     R = T_star[:3, :3].T @ T[:3, :3]
     angle = float(np.degrees(np.arccos(np.clip((np.trace(R) - 1) / 2, -1, 1))))
     return 1e3 * float(np.linalg.norm(T[:3, 3] - T_star[:3, 3])), angle
@@ -109,7 +72,7 @@ def loop():
         '-r', f'{est_base}/measured_tensions:={sim_base}/measured_tensions',
         '-r', f'{est_base}/imu:={sim_base}/imu',
         '-r', f'{est_base}/rest_lengths:={ctl_base}/rest_lengths'])
-    controller = ControllerProcess(ns, [
+    controller = NodeProcess(ns, JOINT_CONFIG, executable='stiffness_controller', extra_args=[
         '-p', f'control.rate:={RATE_HZ}', '-p', f'limits.max_rate:={MAX_RATE}',
         '-p', 'control.integral_gain:=4.0',
         '-r', f'{ctl_base}/pose_estimate:={est_base}/pose_estimate',
@@ -135,7 +98,7 @@ def loop():
 def target_message(T: np.ndarray) -> PoseStamped:
     msg = PoseStamped()
     msg.header.frame_id = 'tensegrity_link1'
-    msg.pose = msg_tools.transform_to_pose(T)
+    msg.pose = conversions.transform_to_pose(T)
     return msg
 
 
