@@ -4,10 +4,11 @@ plot out (the command's logic; :mod:`tensegrity_stiffness.estimation.calibration
 The calibrated config is the input config document (a ROS parameter file or a plain file, as
 ``JointModel.from_yaml`` and the nodes load them) with ``joint.stiffness``, ``joint.rest_lengths``
 (nominal + fitted offset), ``joint.max_lengths`` (each string's maximum stretch kept) and
-``joint.initial_screw`` (the calibrated joint's unloaded equilibrium) replaced; the table is in
-its header comment. The commanded rest lengths a controller sends (``~/rest_lengths``) are still
-commanded values: add each string's ``rest_length_offset`` to them (the offsets are in the header
-and in ``--json``).
+``joint.initial_screw`` (the calibrated joint's unloaded equilibrium) replaced and the fitted
+offsets written as ``joint.rest_length_offsets``; the table is in its header comment. The
+commanded rest lengths a controller sends (``~/rest_lengths``) stay commanded values: the nodes
+that load the config add the offsets to them (stiffness_node, estimator_node, sim_node; the
+controller subtracts them from its commands).
 """
 
 from __future__ import annotations
@@ -81,7 +82,8 @@ def unloaded_screw(model: JointModel, start: np.ndarray) -> np.ndarray:
 
 def calibrated_document(document: Any, result: CalibrationResult) -> Any:
     """A copy of the config ``document`` with the joint section's stiffness, rest lengths,
-    maximum lengths and initial screw taken from ``result.model``."""
+    maximum lengths and initial screw taken from ``result.model``, and the fitted offsets as
+    ``joint.rest_length_offsets`` (the nodes add them to commanded rest lengths)."""
     out = copy.deepcopy(document)
     params = config.parameters(out)
     joint = params.get('joint')
@@ -93,6 +95,7 @@ def calibrated_document(document: Any, result: CalibrationResult) -> Any:
     if np.isfinite(model.max_lengths).all() and len(joint.get('max_lengths') or []):
         joint['max_lengths'] = [float(v) for v in model.max_lengths]
     joint['initial_screw'] = [float(v) for v in unloaded_screw(model, model.initial_screw)]
+    joint['rest_length_offsets'] = [float(v) for v in result.offsets]
     return out
 
 

@@ -19,9 +19,11 @@ from tensegrity_stiffness.nodes.parameters import (
     COMMON_PARAMETERS,
     FRAME_PARAMETERS,
     JOINT_PARAMETERS,
+    REST_LENGTH_OFFSET_PARAMETERS,
     ParameterSpec,
     by_name,
     joint_from_values,
+    rest_length_offsets,
 )
 
 #: Default rest-length range as fractions of the config's rest lengths (the issue's example).
@@ -29,9 +31,6 @@ DEFAULT_RANGE = (0.5, 1.2)
 REST_LENGTHS_LABEL = 'rest lengths [m] (motor commands), string order of the config'
 
 CONTROL_PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec('joint.rest_length_offsets', 'double_array', None,
-                  'calibrated rest-length offsets d, m, one per string (empty: zeros); the '
-                  'true rest length is command + d'),
     ParameterSpec('limits.rest_length_min', 'double_array', None,
                   'smallest motor command, m: one value or one per string (empty: '
                   f'{DEFAULT_RANGE[0]} x joint.rest_lengths)'),
@@ -64,7 +63,7 @@ CONTROL_PARAMETERS: tuple[ParameterSpec, ...] = (
 
 #: Every parameter of ``stiffness_controller``, in declaration order.
 CONTROLLER_PARAMETERS: tuple[ParameterSpec, ...] = (
-    JOINT_PARAMETERS + FRAME_PARAMETERS + CONTROL_PARAMETERS
+    JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + FRAME_PARAMETERS + CONTROL_PARAMETERS
     + tuple(s for s in COMMON_PARAMETERS if s.name in ('qos.depth', 'limits.max_array_length',
                                                        'diagnostics.period')))
 
@@ -95,7 +94,7 @@ def controller_settings(values: Mapping[str, Any]) -> ControllerSettings:
             raise ValueError(f'{name} must have 1 or {n} values, got {len(raw)}')
         return np.broadcast_to(np.asarray(raw, float), (n,)).copy()
 
-    offsets = per_string('joint.rest_length_offsets', np.zeros(n))
+    offsets = rest_length_offsets(checked, n)
     limits = ActuatorLimits(
         per_string('limits.rest_length_min', DEFAULT_RANGE[0] * model.rest_lengths),
         per_string('limits.rest_length_max', DEFAULT_RANGE[1] * model.rest_lengths),

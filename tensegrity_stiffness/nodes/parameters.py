@@ -19,6 +19,8 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+import numpy as np
+
 from tensegrity_stiffness import config
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
@@ -202,6 +204,18 @@ COMMON_PARAMETERS: tuple[ParameterSpec, ...] = (
 )
 
 #: Every parameter of ``stiffness_node``, in declaration order.
+#: The calibration's offsets between a commanded rest length and the joint's (one home for the
+#: nodes that take commanded rest lengths: stiffness_node, estimator_node, sim_node,
+#: stiffness_controller).
+REST_LENGTH_OFFSET_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('joint.rest_length_offsets', 'double_array', None,
+                  'calibrated rest-length offsets d, m: one per string or one for all (empty: '
+                  'zeros); a commanded rest length c (~/rest_lengths, the controller\'s '
+                  'commands) is the rest length c + d of the model, whose joint.rest_lengths '
+                  'are true rest lengths'),
+)
+
+
 #: The dynamics of ``stiffness_node``'s joint (:mod:`tensegrity_stiffness.mechanics.dynamics`):
 #: link 2's inertia (the twin's default when left at the defaults) and the strings' damping.
 LINK2_PARAMETERS: tuple[ParameterSpec, ...] = (
@@ -222,8 +236,8 @@ JOINT_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = LINK2_PARAMETERS + (
 )
 
 STIFFNESS_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
-    JOINT_PARAMETERS + FRAME_PARAMETERS + PLANAR_PARAMETERS + COMMON_PARAMETERS
-    + JOINT_DYNAMICS_PARAMETERS)
+    JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + FRAME_PARAMETERS + PLANAR_PARAMETERS
+    + COMMON_PARAMETERS + JOINT_DYNAMICS_PARAMETERS)
 
 
 def by_name(table: Iterable[ParameterSpec]) -> dict[str, ParameterSpec]:
@@ -264,9 +278,27 @@ def values_from_config(path: Any, table: Iterable[ParameterSpec]) -> dict[str, A
 
 # ------------------------------------------------------------------------- building from values
 def joint_from_values(values: Mapping[str, Any]) -> JointModel:
-    """The joint model of the ``joint.*`` values (ValueError names the bad field)."""
+    """The joint model of the ``joint.*`` values (ValueError names the bad field), and the check
+    of ``joint.rest_length_offsets`` where the table has it."""
     section = {spec.name[len('joint.'):]: values[spec.name] for spec in JOINT_PARAMETERS}
-    return JointModel.from_dict({k: (v if v is not None else []) for k, v in section.items()})
+    model = JointModel.from_dict({k: (v if v is not None else []) for k, v in section.items()})
+    rest_length_offsets(values, model.n_strings)
+    return model
+
+
+def rest_length_offsets(values: Mapping[str, Any], n_strings: int) -> np.ndarray:
+    """``joint.rest_length_offsets`` (n,) m of checked values (zeros when empty or absent): the
+    true rest length of a commanded ``c`` is ``c + d``. ValueError names the key."""
+    raw = values.get('joint.rest_length_offsets') or []
+    if not raw:
+        return np.zeros(n_strings)
+    if len(raw) not in (1, n_strings):
+        raise ValueError(f'joint.rest_length_offsets must have 1 or {n_strings} values, got '
+                         f'{len(raw)}')
+    d = np.broadcast_to(np.asarray(raw, dtype=np.float64), (n_strings,)).copy()
+    if not np.all(np.isfinite(d)):
+        raise ValueError(f'joint.rest_length_offsets must be finite, got {raw}')
+    return d
 
 
 def planar_from_values(values: Mapping[str, Any]) -> PlanarMechanism:
@@ -613,7 +645,8 @@ def sim_node_parameters(spine: bool = False, n_joints: int = 5) -> tuple[Paramet
     spine's, then the twin's own."""
     model = (JOINT_PARAMETERS + joint_override_parameters(n_joints) + CHAIN_PARAMETERS
              + SPINE_FRAME_PARAMETERS) if spine else (
-                 JOINT_PARAMETERS + LINK2_PARAMETERS + FRAME_PARAMETERS)
+                 JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + LINK2_PARAMETERS
+                 + FRAME_PARAMETERS)
     return model + SIM_PARAMETERS + _SIM_COMMON
 
 
@@ -902,7 +935,8 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
 
 #: Every parameter of ``estimator_node``, in declaration order.
 ESTIMATOR_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
-    JOINT_PARAMETERS + FRAME_PARAMETERS + ESTIMATION_PARAMETERS + COMMON_PARAMETERS)
+    JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + FRAME_PARAMETERS + ESTIMATION_PARAMETERS
+    + COMMON_PARAMETERS)
 
 
 @dataclass(frozen=True)

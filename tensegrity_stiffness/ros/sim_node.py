@@ -38,6 +38,7 @@ from tensegrity_stiffness.nodes.parameters import (
     SimNodeSettings,
     by_name,
     link2_inertia_from_values,
+    rest_length_offsets,
     sim_node_parameters,
     sim_node_settings,
 )
@@ -225,8 +226,10 @@ class SimNode(Node):
                 max_length=settings.values['limits.max_array_length'])
             if settings.chain is not None:
                 rest: Any = list(rest_lengths_input(values, settings.chain))
-            else:
-                rest = settings.model.validate_rest_lengths(values, batched=False)
+            else:  # commanded: the twin's rest lengths are c + d (joint.rest_length_offsets)
+                rest = settings.model.validate_rest_lengths(
+                    values + rest_length_offsets(settings.values, settings.n_strings),
+                    batched=False)
         except ValueError as exc:
             self.reporter.reject('~/rest_lengths', str(exc))
             return

@@ -9,13 +9,17 @@ from typing import Any
 
 from std_msgs.msg import Float64MultiArray
 
+from tensegrity_stiffness.nodes.parameters import rest_length_offsets
 from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input
 from tensegrity_stiffness.ros import conversions
 
 
 class JointRestLengthTopic:
-    """Rest lengths of one joint (n values, config order) on a topic; settings with a ``model``
-    (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`) and ``max_array_length``."""
+    """Commanded rest lengths of one joint (n values, config order) on a topic, the model's
+    rest lengths after ``joint.rest_length_offsets`` (:func:`~tensegrity_stiffness.nodes.
+    parameters.rest_length_offsets`); settings with a ``model``
+    (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`), ``max_array_length`` and
+    ``values``."""
 
     def _keep_topic_rest_lengths(self, old: Any, settings: Any, names: set[str]) -> Any:
         rest = old.model.rest_lengths
@@ -24,8 +28,10 @@ class JointRestLengthTopic:
         return settings
 
     def _with_rest_lengths(self, settings: Any, msg: Float64MultiArray) -> Any:
-        rest = conversions.multiarray_to_array(msg, expected_length=settings.model.n_strings,
-                                               max_length=settings.max_array_length)
+        n = settings.model.n_strings
+        commanded = conversions.multiarray_to_array(msg, expected_length=n,
+                                                    max_length=settings.max_array_length)
+        rest = commanded + rest_length_offsets(settings.values, n)
         return replace(settings, model=settings.model.with_rest_lengths(rest))
 
 
