@@ -3,7 +3,7 @@
 # slowly swinging a load) and the stiffness node wired together, and print a live one-line
 # summary once a second (input rate, pose, smallest and largest eigenvalue of K_c, slack
 # strings, latency). Ctrl-C stops both nodes cleanly.
-#   bash scripts/run_twin.sh [--spine] [--duration SECONDS] [--swing N] [--swing-period S]
+#   bash scripts/run_twin.sh [--spine | --control] [--duration SECONDS] [--swing N] [--swing-period S]
 #                            [--rate HZ] [--config FILE.yaml]
 # Environment: see scripts/env.sh (LOCALHOST discovery, ROS_DOMAIN_ID default 42 if unset).
 set -euo pipefail

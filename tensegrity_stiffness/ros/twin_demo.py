@@ -51,7 +51,8 @@ SPINE_PUBLISH_EVERY = 5
 STOP_TIMEOUT_S = 10.0
 
 
-def _executable(name: str) -> str:
+def node_executable(name: str) -> str:
+    """The installed executable ``name`` of the package (where ``ros2 run`` looks)."""
     from ament_index_python.packages import get_package_prefix
 
     path = Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / name
@@ -156,7 +157,8 @@ class Monitor:
         return '  '.join(parts)
 
 
-def _stop(process: subprocess.Popen) -> int:
+def stop_process(process: subprocess.Popen) -> int:
+    """SIGINT, then a wait (killed after :data:`STOP_TIMEOUT_S`); the exit status."""
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
         try:
@@ -173,6 +175,10 @@ def main(argv: list[str] | None = None) -> int:
         'live one-line summary once a second (Ctrl-C stops both).')
     parser.add_argument('--spine', action='store_true',
                         help='the 5-joint spine (config/default_spine.yaml) and spine_node')
+    parser.add_argument('--control', action='store_true',
+                        help='the closed loop: twin -> estimator_node (12 load cells) -> '
+                        'stiffness_controller -> twin, with a scripted target sequence '
+                        '(docs/control.md)')
     parser.add_argument('--config', type=Path, default=None,
                         help='ROS parameter file (default: config/default_joint.yaml or '
                         'config/default_spine.yaml)')
@@ -187,6 +193,12 @@ def main(argv: list[str] | None = None) -> int:
                         help='the twin publishes every N-th step (default 1 for the joint, '
                              f'{SPINE_PUBLISH_EVERY} for the spine)')
     args = parser.parse_args(argv)
+    if args.control:
+        from tensegrity_stiffness.ros import control_demo
+
+        if args.spine:
+            parser.error('--control drives the joint (the spine controller is library-only)')
+        return control_demo.run(args.config, args.duration)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         parser.error(f'--duration must be a positive number of seconds, got {args.duration}')
     every = args.publish_every or (SPINE_PUBLISH_EVERY if args.spine else 1)
@@ -210,12 +222,12 @@ def main(argv: list[str] | None = None) -> int:
     stiffness = 'spine_node' if args.spine else 'stiffness_node'
     # As launch/twin*.launch.py: the partner's input is the twin's truth (same namespace).
     wired = '~/poses:=sim_node/poses' if args.spine else '~/pose:=sim_node/pose'
-    sim_args = [_executable('sim_node'), '--ros-args', '--params-file', str(params),
+    sim_args = [node_executable('sim_node'), '--ros-args', '--params-file', str(params),
                 '-r', f'__ns:={NAMESPACE}', '-p', f'sim.spine:={str(args.spine).lower()}',
                 '-p', f'sim.rate:={args.rate}', '-p', f'load.swing_amplitude:={amplitude}',
                 '-p', f'load.swing_period:={period}',
                 '-p', f'sim.publish_every:={every}']
-    node_args = [_executable(stiffness), '--ros-args', '--params-file', str(params),
+    node_args = [node_executable(stiffness), '--ros-args', '--params-file', str(params),
                  '-r', f'__ns:={NAMESPACE}', '-r', wired]
     logs = Path(tempfile.mkdtemp(prefix='twin_demo_'))
     print(f'twin_demo: sim_node + {stiffness} in {NAMESPACE} (ROS_DOMAIN_ID='
@@ -237,7 +249,7 @@ def main(argv: list[str] | None = None) -> int:
     monitor = Monitor(node, args.spine, n_strings)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    spinner = threading.Thread(target=_spin, args=(executor, stop), daemon=True)
+    spinner = threading.Thread(target=spin_until_stopped, args=(executor, stop), daemon=True)
     spinner.start()
     start = time.monotonic()
     code = 0
@@ -259,7 +271,7 @@ def main(argv: list[str] | None = None) -> int:
                 break
     finally:
         stop.set()
-        codes = [_stop(p) for p in processes]
+        codes = [stop_process(p) for p in processes]
         spinner.join(timeout=2.0)
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
@@ -269,7 +281,8 @@ def main(argv: list[str] | None = None) -> int:
     return code or int(any(codes))
 
 
-def _spin(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
+def spin_until_stopped(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
+    """Spin ``executor`` until ``stop`` is set or the context shuts down."""
     try:
         while not stop.is_set():
             executor.spin_once(timeout_sec=0.1)

@@ -11,6 +11,7 @@ nodes as :class:`support.ros_harness.NodeProcess` starts them.
 from __future__ import annotations
 
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -176,3 +177,35 @@ def test_bad_targets_and_parameters_are_refused_and_the_command_kept(loop) -> No
     # The loop goes on from where it was: the last command moved at most by the rate limit.
     after = np.array(loop['rest'].wait_for(len(loop['rest']) + 5, timeout=30.0)[-1].data)
     assert np.abs(after - before).max() < 1e-3
+
+
+@pytest.mark.slow
+def test_run_twin_control_closes_the_loop_and_stops_cleanly() -> None:
+    """``scripts/run_twin.sh --control``: the three nodes start, the controller's line shows a
+    pose error once it has a state, and Ctrl-C-like stops end all three with status 0."""
+    out = subprocess.run(['bash', str(REPO / 'scripts' / 'run_twin.sh'), '--control',
+                          '--duration', '25'], capture_output=True, text=True, timeout=300,
+                         env=os.environ.copy(), check=False)
+    assert out.returncode == 0, out.stdout + out.stderr
+    lines = [line for line in out.stdout.splitlines() if line.startswith('t ')]
+    assert len(lines) >= 20, out.stdout
+    assert any('pose error' in line and 'feasible true' in line for line in lines), out.stdout
+    assert ('sim_node exit 0, estimator_node exit 0, stiffness_controller exit 0'
+            in out.stdout), out.stdout
+
+
+def test_control_launch_file_names_the_installed_executables() -> None:
+    """``launch`` is not on PyPI: the file is compiled and read, not run."""
+    import ast
+
+    from ament_index_python.packages import get_package_prefix
+
+    prefix = Path(get_package_prefix('tensegrity_stiffness'))
+    path = prefix / 'share' / 'tensegrity_stiffness' / 'launch' / 'control.launch.py'
+    tree = ast.parse(path.read_text())
+    compile(tree, str(path), 'exec')
+    constants = {node.targets[0].id: ast.literal_eval(node.value) for node in tree.body
+                 if isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant)}
+    for name in ('EXECUTABLE', 'SIM', 'ESTIMATOR'):
+        assert (prefix / 'lib' / 'tensegrity_stiffness' / constants[name]).is_file(), name
+    assert (prefix / 'share' / 'tensegrity_stiffness' / 'config' / constants['CONFIG']).is_file()

@@ -1,0 +1,177 @@
+"""``twin_demo --control`` (``bash scripts/run_twin.sh --control``): the stiffness control loop
+without hardware. ``sim_node`` (the MuJoCo twin) -> ``estimator_node`` (its 12 load cells and
+IMU) -> ``stiffness_controller`` -> ``sim_node`` (the commanded rest lengths), wired as
+``launch/control.launch.py`` wires them, and a scripted target sequence: hold the unloaded pose,
+a pose step, a stiffness step (the design with every tension in [0.5, 1.5] N: a stiffer
+prestress), a swinging load.
+Once a second a line from the controller's ``/diagnostics``: the phase, the pose error, the
+``K_c`` error, the saturated strings and the tick time (blank until the controller has a
+state). Ctrl-C (or ``duration``) stops the three nodes and exits 0.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import tempfile
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from rclpy.executors import SingleThreadedExecutor
+from std_msgs.msg import Float64MultiArray
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.geometry.screw import exp_se3
+from tensegrity_stiffness.mechanics.design import design_rest_lengths
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.twin_demo import (
+    NAMESPACE,
+    node_executable,
+    spin_until_stopped,
+    stop_process,
+)
+
+#: The script: (start time s, phase name). The pose step and the load are the test's.
+PHASES = ((0.0, 'hold'), (4.0, 'pose step'), (10.0, 'stiffness step'), (16.0, 'load swing'))
+POSE_STEP = np.array([0.02, -0.01, 0.0, 0.0, 4e-4, 0.0])
+#: The stiffness step's design: its tension limits (N).
+STIFFNESS_TENSIONS = (0.5, 1.5)
+LOAD_AMPLITUDE_N = 0.1
+LOAD_PERIOD_S = 8.0
+#: The controller's rate here: three Python nodes share the machine with this monitor.
+CONTROL_RATE_HZ = 200.0
+
+
+def phase_at(t: float) -> str:
+    """The script's phase at ``t`` seconds."""
+    return [name for start, name in PHASES if t >= start][-1]
+
+
+class ControlMonitor:
+    """The controller's last diagnostic values (``/diagnostics``)."""
+
+    def __init__(self, node: Any) -> None:
+        self._lock = threading.Lock()
+        self._values: dict[str, str] = {}
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+
+    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.endswith('stiffness_controller: controller'):
+                with self._lock:
+                    self._values = {v.key: v.value for v in status.values}
+
+    def line(self, t: float) -> str:
+        with self._lock:
+            v = dict(self._values)
+        head = f't {t:5.1f} s  {phase_at(t):15s}'
+        if 'pose error [m, rad]' not in v:  # no state yet: nothing to show
+            return head
+        # [dx dy dz rx ry rz]: metres, then radians
+        error = np.array(v['pose error [m, rad]'].strip('[]').replace(',', ' ').split(), float)
+        rotation_deg = np.degrees(np.linalg.norm(error[3:]))
+        kc_error = v.get('stiffness error', '-') if v.get('stiffness target') == 'set' else '-'
+        return (f'{head}  pose error {1e3 * np.linalg.norm(error[:3]):.3f} mm '
+                f'{rotation_deg:.3f} deg  K_c error {kc_error}  '
+                f'saturated {v.get("saturated strings", "-")}  feasible {v.get("feasible", "-")}'
+                f'  tick {v.get("tick time [ms]", "-")} ms')
+
+
+def _targets(model: JointModel) -> tuple[PoseStamped, Float64MultiArray]:
+    xi = model.initial_screw + POSE_STEP
+    pose = PoseStamped()
+    pose.header.frame_id = 'tensegrity_link1'
+    pose.pose = conversions.transform_to_pose(exp_se3(xi))
+    design = design_rest_lengths(model, xi, None, *STIFFNESS_TENSIONS)
+    return pose, Float64MultiArray(data=design.cartesian_stiffness.ravel().tolist())
+
+
+def _node_args(params: Path) -> list[tuple[str, list[str]]]:
+    sim, est, ctl = 'sim_node', 'estimator_node', 'stiffness_controller'
+    common = ['--ros-args', '--params-file', str(params), '-r', f'__ns:={NAMESPACE}']
+    return [
+        (sim, [*common, '-p', 'sim.publish_every:=5',
+               '-r', f'~/rest_lengths:={ctl}/rest_lengths']),
+        (est, [*common, '-r', f'~/measured_tensions:={sim}/measured_tensions',
+               '-r', f'~/imu:={sim}/imu', '-r', f'~/rest_lengths:={ctl}/rest_lengths']),
+        (ctl, [*common, '-p', f'control.rate:={CONTROL_RATE_HZ}',
+               '-p', 'control.integral_gain:=4.0',
+               '-r', f'~/pose_estimate:={est}/pose_estimate',
+               '-r', f'~/wrench_estimate:={est}/wrench_estimate']),
+    ]
+
+
+def run(config_path: Path | None, duration: float | None) -> int:
+    """The demo; the exit status (0 after a clean stop of the three nodes)."""
+    params = Path(config_path or config.packaged_config_path())
+    model = JointModel.from_yaml(params)
+    logs = Path(tempfile.mkdtemp(prefix='control_demo_'))
+    print(f'control_demo: sim_node -> estimator_node -> stiffness_controller in {NAMESPACE} '
+          f'(ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}); logs in {logs}', flush=True)
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    processes = []
+    for name, args in _node_args(params):
+        with (logs / f'{name}.log').open('w') as out:
+            processes.append(subprocess.Popen([node_executable(name), *args], stdout=out,
+                                              stderr=subprocess.STDOUT, env=os.environ.copy(),
+                                              start_new_session=True))
+    rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
+    node = rclpy.create_node('control_monitor')
+    monitor = ControlMonitor(node)
+    pose_pub = node.create_publisher(PoseStamped, f'{NAMESPACE}/stiffness_controller/target_pose',
+                                     10)
+    stiffness_pub = node.create_publisher(
+        Float64MultiArray, f'{NAMESPACE}/stiffness_controller/target_stiffness', 10)
+    load_pub = node.create_publisher(WrenchStamped, f'{NAMESPACE}/sim_node/external_wrench', 10)
+    pose, stiffness = _targets(model)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    spinner = threading.Thread(target=spin_until_stopped, args=(executor, stop), daemon=True)
+    spinner.start()
+    start = time.monotonic()
+    code = 0
+    try:
+        next_line = start + 1.0
+        while not stop.wait(max(0.0, next_line - time.monotonic())):
+            t = time.monotonic() - start
+            phase = phase_at(t)
+            if phase != 'hold':  # targets are re-sent each second (a late subscriber gets them)
+                pose_pub.publish(pose)
+            if phase in ('stiffness step', 'load swing'):
+                stiffness_pub.publish(stiffness)
+            if phase == 'load swing':
+                f = LOAD_AMPLITUDE_N * np.sin(2 * np.pi * t / LOAD_PERIOD_S)
+                load = WrenchStamped()
+                load.header.frame_id = 'tensegrity_link1'
+                load.wrench.force.x = float(f)
+                load_pub.publish(load)
+            print(monitor.line(t), flush=True)
+            next_line += 1.0
+            dead = [Path(p.args[0]).name for p in processes if p.poll() is not None]
+            if dead:
+                print(f'control_demo: {", ".join(dead)} exited; see {logs}', flush=True)
+                code = 1
+                break
+            if duration is not None and t >= duration:
+                break
+    finally:
+        stop.set()
+        codes = [stop_process(p) for p in processes]
+        spinner.join(timeout=2.0)
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    print('control_demo: stopped (' + ', '.join(
+        f'{name} exit {c}' for (name, _), c in zip(_node_args(params), codes, strict=True))
+        + ')', flush=True)
+    return code or int(any(codes))
