@@ -780,25 +780,14 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
     return z, xi, iterations, converged
 
 
-def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
-                    fit: Sequence[str] | str = ('stiffness', 'rest_length_offsets'),
-                    noise: CalibrationNoise | Mapping[str, float] | None = None,
-                    loss: str = 'soft_l1',
-                    bounds: Mapping[str, tuple[float, float]] | None = None,
-                    progress: Callable[[int, int], None] | None = None) -> CalibrationResult:
-    """Fit each string's stiffness and rest-length offset of ``model`` (the nominal) to
-    ``samples``; see the module docstring for the data model and the method.
-
-    ``fit``: kinds of :data:`FIT_KINDS`; ``noise``: :class:`CalibrationNoise` or a mapping of
-    its fields (defaults: pose 0.1 mm and 0.1 deg, wrench 0.01 N and 0.0005 N m, tension
-    0.005 N, length 0.1 mm); ``loss``: one of :data:`LOSSES` (robust losses act beyond
-    :data:`ROBUST_SCALE` sigma); ``bounds``: ``{kind: (low, high)}`` plausibility limits on the
-    fitted values (stiffness in N/m, offsets in m): a value outside makes ``success`` False and
-    names it. ``progress(done, total)`` is called between the stages. Bad input raises
-    ValueError naming the field; too few samples or measurements raise ValueError saying what
-    is missing.
-    """
-    started = time.perf_counter()
+def _checked_request(model: JointModel, samples: Sequence[CalibrationSample],
+                     fit: Sequence[str] | str, noise: Any, loss: str,
+                     bounds: Mapping[str, tuple[float, float]] | None
+                     ) -> tuple[tuple[str, ...], CalibrationNoise, dict, _Data, list[str],
+                                NDArray[np.intp]]:
+    """:func:`calibrate_joint`'s arguments checked: the fitted kinds, the noise, the bounds, the
+    samples as arrays, the parameter names and their columns; ValueError names the problem
+    (bad arguments, no samples, nothing that fixes the configuration, too few measurements)."""
     kinds = _check_fit(fit)
     noise = CalibrationNoise.of(noise)
     if loss not in LOSSES:
@@ -825,6 +814,106 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         raise ValueError(f'too few measurements: {total_rows} values for {6 * N} screw '
                          f'coordinates ({N} samples) and {P} parameters; record more samples '
                          'or add a sensor (pose, wrench, tensions)')
+    return kinds, noise, bounds, data, names, columns
+
+
+def _outliers(problem: _Problem, z: FloatArray, xi: FloatArray, loss: str, n_parameters: int
+              ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """(outliers, inliers) sample indices at the robust estimate ``(z, xi)``: samples whose
+    whitened chi-square is improbable for their degrees of freedom (none for the linear loss);
+    ValueError when the inliers leave too few measurements."""
+    N = problem.mask.shape[0]
+    ev = problem.evaluate(z, xi, jacobians=False)
+    sample_chi2 = np.sum(ev.residuals ** 2, axis=1)
+    dof_i = problem.mask.sum(axis=1) - 6
+    limit = np.where(dof_i > 0, chdtri(np.maximum(dof_i, 1), OUTLIER_PROBABILITY), np.inf)
+    outliers = np.flatnonzero(sample_chi2 > limit) if loss != 'linear' else np.zeros(0, int)
+    inliers = np.setdiff1d(np.arange(N), outliers)
+    if inliers.size * 6 + n_parameters > int(problem.mask[inliers].sum()):
+        raise ValueError(f'too many outliers ({outliers.size} of {N} samples) left too few '
+                         'measurements')
+    return outliers, inliers
+
+
+def _std_map(names: list[str], std: FloatArray, flags: Any, ident: Any,
+             kinds: tuple[str, ...], n_parameters: int) -> dict[str, float]:
+    """The std by parameter name: NaN where not identifiable, except the stiffness ratios of a
+    scale-free fit, which keep their (constrained) std."""
+    std_map = {name: (float(s) if flag else math.nan)
+               for name, s, flag in zip(names, std, flags, strict=True)}
+    if 'stiffness' in kinds and not ident.basis.shape[1] == n_parameters:
+        for name, s, flag in zip(names, std, flags, strict=True):
+            if not flag and name.startswith('stiffness') and _only_scale_unidentifiable(
+                    ident, names, name):
+                std_map[name] = float(s)
+    return std_map
+
+
+def _outside_bounds(bounds: Mapping[str, tuple[float, float]], names: list[str],
+                    parameters: Mapping[str, float]) -> str:
+    """The message for the last fitted value outside its kind's ``bounds`` ('' when none)."""
+    message = ''
+    for key, (low, high) in bounds.items():
+        kind = _check_fit(key)[0]
+        for name in names:
+            if name.startswith(PARAMETER_NAMES[kind].split('[')[0] + '[') and \
+                    not low <= parameters[name] <= high:
+                message = f'{name} = {parameters[name]:.6g} is outside bounds [{low}, {high}]'
+    return message
+
+
+def _identified_basis(problem: _Problem, before: Any, columns: NDArray[np.intp],
+                      kinds: tuple[str, ...], names: list[str], noise: CalibrationNoise
+                      ) -> tuple[Any, FloatArray]:
+    """The identifiability of the fitted parameters at the nominal ``before`` (the overall
+    stiffness scale held when no force is measured) and its basis in all 2n parameters."""
+    model, data = problem.model, problem.data
+    n = model.n_strings
+    P = columns.size
+    held = np.zeros((P, 0))
+    if 'stiffness' in kinds and not measures_force(data, noise):
+        held = np.zeros((P, 1))
+        held[:n, 0] = 1.0 / math.sqrt(n)  # stiffness columns come first
+    ident = identifiability(problem.information(before, columns), names,
+                            lambda v: _describe(v, names, model, data, kinds, noise), held)
+    basis_full = np.zeros((2 * n, ident.basis.shape[1]))
+    basis_full[columns] = ident.basis
+    return ident, basis_full
+
+
+def _covariance(problem: _Problem, ev: Any, columns: NDArray[np.intp], basis: FloatArray
+                ) -> FloatArray:
+    """The fitted parameters' covariance (physical units) at the evaluation ``ev`` of the
+    inliers, within the identifiable subspace ``basis``."""
+    cov_scaled = _subspace_covariance(problem.information(ev, columns), basis)
+    unit = problem.unit[columns]
+    return cov_scaled * unit[:, None] * unit[None, :]
+
+
+def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
+                    fit: Sequence[str] | str = ('stiffness', 'rest_length_offsets'),
+                    noise: CalibrationNoise | Mapping[str, float] | None = None,
+                    loss: str = 'soft_l1',
+                    bounds: Mapping[str, tuple[float, float]] | None = None,
+                    progress: Callable[[int, int], None] | None = None) -> CalibrationResult:
+    """Fit each string's stiffness and rest-length offset of ``model`` (the nominal) to
+    ``samples``; see the module docstring for the data model and the method.
+
+    ``fit``: kinds of :data:`FIT_KINDS`; ``noise``: :class:`CalibrationNoise` or a mapping of
+    its fields (defaults: pose 0.1 mm and 0.1 deg, wrench 0.01 N and 0.0005 N m, tension
+    0.005 N, length 0.1 mm); ``loss``: one of :data:`LOSSES` (robust losses act beyond
+    :data:`ROBUST_SCALE` sigma); ``bounds``: ``{kind: (low, high)}`` plausibility limits on the
+    fitted values (stiffness in N/m, offsets in m): a value outside makes ``success`` False and
+    names it. ``progress(done, total)`` is called between the stages. Bad input raises
+    ValueError naming the field; too few samples or measurements raise ValueError saying what
+    is missing. (Long: the four stages in order, each a helper: check, identify, fit, and the
+    statistics of the estimate.)
+    """
+    started = time.perf_counter()
+    kinds, noise, bounds, data, names, columns = _checked_request(
+        model, samples, fit, noise, loss, bounds)
+    n = model.n_strings
+    P = columns.size
     stages = 4
     if progress:
         progress(0, stages)
@@ -833,15 +922,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     xi = problem.refine_screws(z_nominal, initial_screws(model, data))
     before = problem.evaluate(z_nominal, xi)
     rms_before = _rms_by_kind(before.raw, problem.mask, n)
-    info = problem.information(before, columns)
-    held = np.zeros((P, 0))
-    if 'stiffness' in kinds and not measures_force(data, noise):
-        held = np.zeros((P, 1))
-        held[:n, 0] = 1.0 / math.sqrt(n)  # stiffness columns come first
-    ident = identifiability(info, names, lambda v: _describe(v, names, model, data, kinds, noise),
-                            held)
-    basis_full = np.zeros((2 * n, ident.basis.shape[1]))
-    basis_full[columns] = ident.basis
+    ident, basis_full = _identified_basis(problem, before, columns, kinds, names, noise)
     if progress:
         progress(1, stages)
 
@@ -857,16 +938,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         iterations += used
     if progress:
         progress(2, stages)
-    # Outliers: samples whose whitened chi-square is improbable for their degrees of freedom.
-    ev = problem.evaluate(z, xi_fit, jacobians=False)
-    sample_chi2 = np.sum(ev.residuals ** 2, axis=1)
-    dof_i = problem.mask.sum(axis=1) - 6
-    limit = np.where(dof_i > 0, chdtri(np.maximum(dof_i, 1), OUTLIER_PROBABILITY), np.inf)
-    outliers = np.flatnonzero(sample_chi2 > limit) if loss != 'linear' else np.zeros(0, int)
-    inliers = np.setdiff1d(np.arange(N), outliers)
-    if inliers.size * 6 + P > int(problem.mask[inliers].sum()):
-        raise ValueError(f'too many outliers ({outliers.size} of {N} samples) left too few '
-                         'measurements')
+    outliers, inliers = _outliers(problem, z, xi_fit, loss, P)
     message = 'converged'
     if basis_full.shape[1] and loss != 'linear':
         # The final estimate: plain least squares on the inliers, from the robust solution.
@@ -891,10 +963,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     rms_after = _rms_by_kind(ev.raw, mask_in, n)
     chi2_value = float(np.sum(ev.residuals ** 2))
     dof = int(mask_in.sum()) - 6 * inliers.size - ident.basis.shape[1]
-    info = problem.information(ev, columns)
-    cov_scaled = _subspace_covariance(info, ident.basis)
-    unit = problem.unit[columns]
-    covariance = cov_scaled * unit[:, None] * unit[None, :]
+    covariance = _covariance(problem, ev, columns, ident.basis)
     k, d = problem.parameters(z)
     values_all = np.concatenate([k, d])
     nominal_all = np.concatenate([model.k, np.zeros(n)])
@@ -902,21 +971,10 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     std = np.sqrt(np.maximum(np.diag(covariance), 0.0))
     parameters = {name: float(values_all[c]) for name, c in zip(names, columns, strict=True)}
     nominal = {name: float(nominal_all[c]) for name, c in zip(names, columns, strict=True)}
-    std_map = {name: (float(s) if flag else math.nan)
-               for name, s, flag in zip(names, std, ident_flags, strict=True)}
-    if 'stiffness' in kinds and not ident.basis.shape[1] == P:
-        # Stiffness ratios of a scale-free fit keep their (constrained) std.
-        for name, s, flag in zip(names, std, ident_flags, strict=True):
-            if not flag and name.startswith('stiffness') and _only_scale_unidentifiable(
-                    ident, names, name):
-                std_map[name] = float(s)
-    for key, (low, high) in bounds.items():
-        kind = _check_fit(key)[0]
-        for name in names:
-            if name.startswith(PARAMETER_NAMES[kind].split('[')[0] + '[') and \
-                    not low <= parameters[name] <= high:
-                success = False
-                message = f'{name} = {parameters[name]:.6g} is outside bounds [{low}, {high}]'
+    std_map = _std_map(names, std, ident_flags, ident, kinds, P)
+    bounds_problem = _outside_bounds(bounds, names, parameters)
+    if bounds_problem:
+        success, message = False, bounds_problem
     calibrated = model_with_parameters(model, k, model.rest_lengths + d)
     if progress:
         progress(4, stages)

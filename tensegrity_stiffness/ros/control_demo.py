@@ -65,7 +65,7 @@ class ControlMonitor:
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
-            if status.name.endswith('stiffness_controller: controller'):
+            if status.name == f'{NAMESPACE}/stiffness_controller: controller':
                 with self._lock:
                     self._values = {v.key: v.value for v in status.values}
 

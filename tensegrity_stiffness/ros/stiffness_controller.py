@@ -265,9 +265,10 @@ class StiffnessControllerNode(Node):
                        ('pose error [m, rad]', cmd.pose_error.tolist())]
             level = 'OK' if cmd.feasible and not self._hold_reason else 'WARN'
             message = self._hold_reason or cmd.message
+        name = f'{self.get_fully_qualified_name()}: controller'
         self._pub_diagnostics.publish(conversions.diagnostic_array(
-            [conversions.diagnostic_status(f'{self.get_name()}: controller', level, message,
-                                         values, hardware_id=self._settings.link1_frame)],
+            [conversions.diagnostic_status(name, level, message, values,
+                                           hardware_id=self._settings.link1_frame)],
             self.get_clock().now().to_msg()))
 
 
