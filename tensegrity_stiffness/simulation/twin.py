@@ -338,8 +338,9 @@ def export_mjcf(config_path: str | Path | None = None, spine: bool = False,
                 options: SimulationOptions | None = None, **overrides: Any) -> str:
     """MJCF of the joint (``spine``: the spine) of a config file (default: the packaged
     ``default_joint.yaml`` / ``default_spine.yaml``), for MuJoCo's viewer (``python -m
-    mujoco.viewer --mjcf FILE.xml``); the command line's ``export-mjcf``. ValueError names
-    a bad field of the config."""
+    mujoco.viewer --mjcf FILE.xml``); the command line's ``export-mjcf``. A joint's link 2
+    has the config's ``joint.link2_mass`` / ``link2_com`` / ``link2_inertia`` (unless
+    ``link2`` is given). ValueError names a bad field of the config."""
     if spine:
         path = Path(config_path) if config_path else config.packaged_config_path(
             DEFAULT_SPINE_CONFIG)
@@ -351,6 +352,8 @@ def export_mjcf(config_path: str | Path | None = None, spine: bool = False,
     path = Path(config_path) if config_path else config.packaged_config_path()
     try:
         model = JointModel.from_yaml(path)
+        if 'link2' not in overrides and (options is None or options.link2 is None):
+            overrides['link2'] = LinkInertia.from_config(config.load_section(path, 'joint'))
     except ValueError as exc:
         raise ValueError(f'config {path}: {exc}') from None
     return joint_mjcf(model, options, **overrides)

@@ -387,3 +387,22 @@ def test_spine_tip_stiffness_under_load_from_small_loads(chain: JointChain) -> N
         C[:, j] = (twists[0] - twists[1]) / (2.0 * h[j])
     K_lib = chain.tip_stiffness(x0, tip_wrench=W)
     assert np.abs(np.linalg.inv(C) - K_lib).max() <= 1e-5 * np.abs(K_lib).max()
+
+
+def test_export_mjcf_takes_link2_inertia_from_the_config(tmp_path) -> None:
+    """The twin and the dynamics read the same ``joint.link2_*`` keys."""
+    import yaml
+
+    from tensegrity_stiffness.mechanics.dynamics import LinkInertia
+    from tensegrity_stiffness.simulation.twin import export_mjcf
+
+    document = config.load_yaml(config.packaged_config_path())
+    joint = config.parameters(document)['joint']
+    joint.update(link2_mass=0.02, link2_com=[0.0, 0.001, 0.0], link2_inertia=[1e-6, 2e-6, 3e-6])
+    path = tmp_path / 'joint.yaml'
+    path.write_text(yaml.safe_dump(document))
+    xml = export_mjcf(path)
+    inertia = LinkInertia.from_config(joint)
+    assert inertia.mass == 0.02
+    assert 'mass="0.02"' in xml and 'pos="0.0 0.001 0.0"' in xml
+    assert 'diaginertia="1e-06 2e-06 3e-06"' in xml
