@@ -20,7 +20,7 @@ setup(
                            exclude=[PACKAGE_NAME + '.ros', PACKAGE_NAME + '.ros.*']),
     data_files=[('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml'))],
     python_requires='>=3.10',
-    install_requires=['numpy', 'scipy', 'PyYAML', 'rosbags', 'tqdm'],
+    install_requires=['numpy', 'scipy', 'PyYAML', 'rosbags', 'tqdm', 'threadpoolctl'],
     extras_require={'plots': ['matplotlib', 'pillow'], 'simulation': ['mujoco']},
     zip_safe=False,
     maintainer='tensegrity_stiffness maintainers',

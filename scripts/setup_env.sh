@@ -64,6 +64,8 @@ REQUIREMENTS=(
   # the command line's progress bars (tqdm) and PNG facts (Pillow, also a matplotlib dependency)
   'tqdm==4.70.1'
   'pillow==13.0.0'
+  # BLAS thread control of the bag command's batched evaluation
+  'threadpoolctl==3.8.0'
   # rosbag2 reading and writing of the bag command (pure Python, no ROS install needed)
   'rosbags==0.11.9'
   # the digital twin (tensegrity_stiffness.simulation, sim_node): MuJoCo physics, sensor_msgs/Imu

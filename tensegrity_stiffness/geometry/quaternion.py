@@ -15,6 +15,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.geometry.errors import BadQuaternionError
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape
 
 __all__ = [
@@ -47,15 +48,18 @@ def quaternion_to_rotation(quaternion: ArrayLike,
 
     Raises
     ------
-    ValueError
-        ``'NaN or inf'``, ``'zero norm'`` or ``'not a unit quaternion'``.
+    BadQuaternionError
+        (a ValueError) ``'NaN or inf'``, ``'zero norm'`` or ``'not a unit quaternion'``.
     """
-    q = finite_array_of_shape('quaternion', quaternion, (4,))
+    try:
+        q = finite_array_of_shape('quaternion', quaternion, (4,))
+    except ValueError as exc:
+        raise BadQuaternionError(str(exc)) from None
     norm = float(np.linalg.norm(q))
     if norm < QUATERNION_ZERO_NORM:
-        raise ValueError('quaternion has zero norm')
+        raise BadQuaternionError('quaternion has zero norm')
     if abs(norm - 1.0) > unit_tolerance:
-        raise ValueError(
+        raise BadQuaternionError(
             f'not a unit quaternion: norm {norm:.9g} deviates from 1 by more than '
             f'unit_tolerance={unit_tolerance:g}')
     x, y, z, w = q / norm

@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.geometry.errors import OutsideChartError
+
 FloatArray = NDArray[np.float64]
 
 #: Below this rotation angle (rad) the Taylor series of the coefficients are used.
@@ -39,8 +41,8 @@ CHART_LIMIT = 2.0 * math.pi
 
 
 def check_in_chart(xi: ArrayLike, name: str = 'screw') -> None:
-    """ValueError naming ``name`` unless every screw of ``xi`` (shape (6,) or (N, 6)) has
-    |omega| < :data:`CHART_LIMIT`."""
+    """:class:`~.errors.OutsideChartError` (a ValueError) naming ``name`` unless every screw
+    of ``xi`` (shape (6,) or (N, 6)) has |omega| < :data:`CHART_LIMIT`."""
     arr = np.asarray(xi, dtype=np.float64)
     if arr.ndim == 1:  # one screw (the node's per-message path): plain floats
         wx, wy, wz = arr[:3].tolist()
@@ -60,7 +62,7 @@ def check_in_chart(xi: ArrayLike, name: str = 'screw') -> None:
         if np.all(thetas < CHART_LIMIT):
             return
         worst = float(np.max(np.where(np.isnan(thetas), np.inf, thetas)))
-    raise ValueError(f'{name}: |omega| = {worst:.6g} rad is outside the chart '
+    raise OutsideChartError(f'{name}: |omega| = {worst:.6g} rad is outside the chart '
                      f'(must be < 2 pi)')
 
 

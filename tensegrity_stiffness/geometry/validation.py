@@ -1,4 +1,5 @@
-"""Input validation shared by the library: ValueError messages that name the field."""
+"""Input validation shared by the library: ValueError messages that name the field (typed
+:mod:`.errors` where the kind of problem is known)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.geometry.errors import NotFiniteError, WrongFrameError
+
 
 def finite_scalar(name: str, value: float) -> float:
     """``float(value)``, or ValueError naming ``name`` when it is not a finite number."""
@@ -16,7 +19,7 @@ def finite_scalar(name: str, value: float) -> float:
     except (TypeError, ValueError) as exc:
         raise ValueError(f'{name} must be a finite number: {exc}') from None
     if not math.isfinite(v):
-        raise ValueError(f'{name} must be finite, got {v}')
+        raise NotFiniteError(f'{name} must be finite, got {v}')
     return v
 
 
@@ -31,7 +34,7 @@ def finite_array(name: str, value: ArrayLike) -> NDArray[np.float64]:
     """``np.asarray(value, float64)``; ValueError naming ``name`` if an entry is not finite."""
     a = _as_float_array(name, value)
     if not np.isfinite(a).all():
-        raise ValueError(f'{name} must be finite, got {a[~np.isfinite(a)].ravel()[0]}')
+        raise NotFiniteError(f'{name} must be finite, got {a[~np.isfinite(a)].ravel()[0]}')
     return a
 
 
@@ -43,7 +46,7 @@ def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...] | 
     if shape is not None and arr.shape != shape:
         raise ValueError(f'{name} must have shape {shape}, got {arr.shape}')
     if not np.isfinite(arr).all():
-        raise ValueError(f'{name} contains NaN or inf')
+        raise NotFiniteError(f'{name} contains NaN or inf')
     return arr
 
 
@@ -59,11 +62,11 @@ def require_all_finite(names: Sequence[str], arrays: Sequence[NDArray[np.float64
         return
     for name, array in zip(names, arrays, strict=True):
         if not np.isfinite(array).all():
-            raise ValueError(f'{name} contains NaN or inf')
+            raise NotFiniteError(f'{name} contains NaN or inf')
 
 
 def require_frame(frame_id: str, expected: str, what: str) -> None:
     """An input's ``header.frame_id`` must be ``expected`` (``what`` names that frame, e.g.
     "the base frame"); empty means "in the expected frame". ValueError otherwise."""
     if frame_id and frame_id != expected:
-        raise ValueError(f"header.frame_id '{frame_id}' is not {what} '{expected}'")
+        raise WrongFrameError(f"header.frame_id '{frame_id}' is not {what} '{expected}'")

@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.screw import (
     CHART_LIMIT,
     ScrewKinematics,
@@ -350,16 +351,21 @@ class JointModel:
     # ------------------------------------------------------------------ validation
     def validate_rest_lengths(self, rest_lengths: ArrayLike | None, batched: bool = True
                               ) -> FloatArray:
-        """Rest lengths as float array (n,) (or (N, n) when ``batched``): finite, > 0."""
+        """Rest lengths as float array (n,) (or (N, n) when ``batched``): finite, > 0;
+        :class:`~tensegrity_stiffness.geometry.errors.BadRestLengthsError` (a ValueError)
+        otherwise."""
         if rest_lengths is None:
             return self.rest_lengths
-        arr = finite_array('rest_lengths', rest_lengths)
+        try:
+            arr = finite_array('rest_lengths', rest_lengths)
+        except ValueError as exc:
+            raise BadRestLengthsError(str(exc)) from None
         n = self.n_strings
         if not (arr.shape == (n,) or (batched and arr.ndim == 2 and arr.shape[1] == n)):
-            raise ValueError(f'rest_lengths must have shape ({n},)'
+            raise BadRestLengthsError(f'rest_lengths must have shape ({n},)'
                              + (f' or (N, {n})' if batched else '') + f', got {arr.shape}')
         if np.any(arr <= 0.0):
-            raise ValueError(f'rest_lengths must be > 0, got minimum {arr.min()}')
+            raise BadRestLengthsError(f'rest_lengths must be > 0, got minimum {arr.min()}')
         return arr
 
     # ------------------------------------------------------------------ core evaluation

@@ -25,6 +25,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.geometry.errors import (
+    BadDataOffsetError,
+    OversizedArrayError,
+    WrongLengthError,
+)
 from tensegrity_stiffness.geometry.quaternion import (
     QUATERNION_UNIT_TOLERANCE,
     ROTATION_TOLERANCE,
@@ -62,11 +67,13 @@ def multiarray_to_array(msg: Any, expected_length: int | None = None,
     Raises
     ------
     ValueError
-        ``'too many elements'``, ``'data_offset'``, ``'expected N values'`` or ``'NaN or inf'``.
+        ``'too many elements'``, ``'data_offset'``, ``'expected N values'`` or ``'NaN or inf'``
+        (:mod:`~tensegrity_stiffness.geometry.errors`: ``OversizedArrayError``,
+        ``BadDataOffsetError``, ``WrongLengthError``, ``NotFiniteError``).
     """
     values = multiarray_payload(msg, max_length)
     if expected_length is not None and values.size != expected_length:
-        raise ValueError(f'expected {expected_length} values, got {values.size}')
+        raise WrongLengthError(f'expected {expected_length} values, got {values.size}')
     return finite_array_of_shape('array', values, None)
 
 
@@ -76,10 +83,10 @@ def multiarray_payload(msg: Any, max_length: int = DEFAULT_MAX_LENGTH) -> FloatA
     ``max_length`` elements (checked before any conversion) or a bad data offset."""
     n_total = len(msg.data)
     if n_total > max_length:
-        raise ValueError(f'too many elements: {n_total} > max_length {max_length}')
+        raise OversizedArrayError(f'too many elements: {n_total} > max_length {max_length}')
     offset = int(msg.layout.data_offset)
     if offset > n_total:
-        raise ValueError(f'data_offset {offset} exceeds the {n_total} data elements')
+        raise BadDataOffsetError(f'data_offset {offset} exceeds the {n_total} data elements')
     return np.array(msg.data, dtype=np.float64)[offset:]
 
 

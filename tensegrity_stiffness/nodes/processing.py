@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.screw import check_in_chart, log_se3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
@@ -36,6 +37,18 @@ def pose_input(frame_id: str, transform: ArrayLike, link1_frame: str,
     ``link1_frame``."""
     require_frame(frame_id, link1_frame, "link 1's frame")
     return log_se3(transform, reference=reference)
+
+
+def with_rest_lengths(model: JointModel, rest_lengths: FloatArray) -> JointModel:
+    """``model`` with the rest lengths of a ``~/rest_lengths`` message's finite values;
+    :class:`~tensegrity_stiffness.geometry.errors.BadRestLengthsError` (the model's text) when
+    the model refuses them (not positive, or no room for the maximum stretch)."""
+    try:
+        return model.with_rest_lengths(rest_lengths)
+    except BadRestLengthsError:
+        raise
+    except ValueError as exc:
+        raise BadRestLengthsError(str(exc)) from None
 
 
 @dataclass(frozen=True)
@@ -74,9 +87,9 @@ def require_finite(outputs: JointOutputs) -> None:
     require_all_finite(OUTPUT_NAMES, output_arrays(outputs))
 
 
-def screw_inputs(values: FloatArray) -> tuple[NDArray[np.bool_], dict[int, str]]:
+def screw_inputs(values: FloatArray) -> tuple[NDArray[np.bool_], dict[int, ValueError]]:
     """:func:`screw_input` over the rows of ``values`` (N, 6) of finite screws: which rows are
-    accepted, and for each rejected row its ValueError's text (the node's words)."""
+    accepted, and for each rejected row its ValueError (the node's words and kind)."""
     values = np.asarray(values, dtype=np.float64).reshape(-1, 6)
     try:
         check_in_chart(values, 'screw')
@@ -85,13 +98,13 @@ def screw_inputs(values: FloatArray) -> tuple[NDArray[np.bool_], dict[int, str]]
     else:
         return np.ones(len(values), dtype=bool), {}
     accepted = np.ones(len(values), dtype=bool)
-    problems: dict[int, str] = {}
+    problems: dict[int, ValueError] = {}
     for i, row in enumerate(values):
         try:
             screw_input(row)
         except ValueError as exc:
             accepted[i] = False
-            problems[i] = str(exc)
+            problems[i] = exc
     return accepted, problems
 
 

@@ -17,6 +17,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from tensegrity_stiffness.geometry.errors import (
+    SingularStiffnessError,
+    WrongLengthError,
+    in_context,
+)
 from tensegrity_stiffness.geometry.screw import CHART_LIMIT, check_in_chart, log_se3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
 from tensegrity_stiffness.mechanics.chain import ChainState, JointChain
@@ -31,7 +36,7 @@ def screws_input(values: FloatArray, n_joints: int) -> FloatArray:
     """The (N, 6) screws of a ``~/screws`` message's 6N finite values (joint-major);
     ValueError on another length or a screw outside the chart ``|omega| < 2 pi``."""
     if values.shape != (6 * n_joints,):
-        raise ValueError(f'expected 6 N = {6 * n_joints} values (one screw per joint), got '
+        raise WrongLengthError(f'expected 6 N = {6 * n_joints} values (one screw per joint), got '
                          f'{values.size}')
     xi = values.reshape(n_joints, 6)
     try:
@@ -51,13 +56,13 @@ def poses_input(frame_id: str, poses: Sequence[Any], base_frame: str, reference:
     require_frame(frame_id, base_frame, 'the base frame')
     n = reference.shape[0]
     if len(poses) != n:
-        raise ValueError(f'expected N = {n} poses (one per joint), got {len(poses)}')
+        raise WrongLengthError(f'expected N = {n} poses (one per joint), got {len(poses)}')
     out = np.empty((n, 6))
     for i, (pose, ref) in enumerate(zip(poses, reference, strict=True)):
         try:
             out[i] = log_se3(to_transform(pose), reference=ref)
         except ValueError as exc:
-            raise ValueError(f'joint {i + 1} pose: {exc}') from None
+            raise in_context(exc, f'joint {i + 1} pose') from None
     return out
 
 
@@ -66,7 +71,7 @@ def rest_lengths_input(values: FloatArray, chain: JointChain) -> tuple[FloatArra
     joint, joint-major); ValueError naming the joint."""
     counts = [model.n_strings for model in chain.joints]
     if values.shape != (sum(counts),):
-        raise ValueError(f'expected {sum(counts)} values (the strings of every joint, '
+        raise WrongLengthError(f'expected {sum(counts)} values (the strings of every joint, '
                          f'joint-major), got {values.size}')
     out = []
     for i, (model, part) in enumerate(zip(chain.joints, np.split(values, np.cumsum(counts)[:-1]),
@@ -74,7 +79,7 @@ def rest_lengths_input(values: FloatArray, chain: JointChain) -> tuple[FloatArra
         try:
             out.append(model.validate_rest_lengths(part, batched=False))
         except ValueError as exc:
-            raise ValueError(f'joint {i + 1}: {exc}') from None
+            raise in_context(exc, f'joint {i + 1}') from None
     return tuple(out)
 
 
@@ -95,14 +100,16 @@ def spine_outputs(chain: JointChain, screws: FloatArray,
                   rest_lengths: Sequence[ArrayLike] | None = None) -> SpineOutputs:
     """The outputs at ``screws`` (N, 6): the implied tip wrench ``W`` (minus the last joint's
     string wrench moved into the base, less the weight of link N), and the exact tip stiffness
-    under ``W`` and the link weights (``chain.gravity``). ValueError where the tip stiffness is
-    singular; overflow far out shows as non-finite values, which the publishers' checks reject."""
+    under ``W`` and the link weights (``chain.gravity``). ``SingularStiffnessError`` (a ValueError)
+    where the tip stiffness is singular; overflow far out shows as non-finite values, which the
+    publishers' checks reject."""
     with np.errstate(all='ignore'):
         state = chain.evaluate(screws, None if rest_lengths is None else list(rest_lengths))
         try:
             W, base, tool = chain.tip_outputs_from_state(state)
         except np.linalg.LinAlgError:
-            raise ValueError('the tip stiffness is singular at this configuration') from None
+            raise SingularStiffnessError('the tip stiffness is singular at this configuration'
+                                    ) from None
     return SpineOutputs(screws, state, W, tool, base)
 
 

@@ -1,41 +1,40 @@
-"""Offline: what ``stiffness_node`` would publish, for a whole rosbag2 recording.
+"""Offline: what ``stiffness_node`` or ``spine_node`` would publish, for a whole rosbag2 recording.
 
-Reads ``<namespace>/screw``, ``<namespace>/pose`` and ``<namespace>/rest_lengths`` from a rosbag2
-(mcap or sqlite3) with ``rosbags`` (pure Python, no ROS install: neither rclpy nor a ROS
-message package is imported), in log-time order, and writes a
-rosbag2 with the node's five array outputs (``wrench``, ``stiffness``, ``cartesian_stiffness``,
-``string_tensions``, ``stiffness_interpretation``): the same message types, layouts, labels
+Reads the node's inputs (``stiffness_node``: ``<namespace>/screw``, ``pose``, ``rest_lengths``;
+``spine_node``: ``screws``, ``poses``, ``rest_lengths``) from a rosbag2 (mcap or sqlite3) with
+``rosbags`` (pure Python, no ROS install: neither rclpy nor a ROS message package is imported),
+in log-time order, and writes a rosbag2 with the node's per-input outputs
+(:data:`NODE_TOPICS`): the same message types, layouts, labels
 (:mod:`tensegrity_stiffness.nodes.layouts`) and frame ids as the node, one of each per answered
-input,
-written at the log time of the input it answers.
+input, written at the log time of the input it answers.
 
 The node's behaviour, input by input, with the node's functions: inputs are decoded with
-:mod:`tensegrity_stiffness.nodes.messages` (the node's readers: they read messages by attribute, so
-rosbags' messages do as well as rclpy's),
-checked and computed with :mod:`tensegrity_stiffness.nodes.processing`, configured from the node's
-parameter table (:mod:`tensegrity_stiffness.nodes.parameters`); a bad input is skipped and counted
-by
-kind, with the node's text as the example. A pose is turned into a screw on the branch nearest
-the last answered screw (the config's initial screw before the first). New rest lengths apply
-from their log time on and re-publish the last answer, written at the log time of the
-rest-lengths message. Header stamps: a pose's stamp when it is non-zero; where the node stamps
-the time of computation (screws, zero-stamped poses) the input's log time; a re-publish keeps
-the stamp of the answer it repeats, as the node does.
+:mod:`tensegrity_stiffness.nodes.messages` (the node's readers: they read messages by attribute,
+so rosbags' messages do as well as rclpy's), checked and computed with
+:mod:`tensegrity_stiffness.nodes.processing` (``spine_processing`` for the spine), configured
+from the node's parameter table (:mod:`tensegrity_stiffness.nodes.parameters`). A bad input is
+skipped and counted by kind (the ``kind`` of the node's typed ValueError,
+:mod:`tensegrity_stiffness.geometry.errors`), with the node's text as the example. A pose is
+turned into a screw on the branch nearest the last answered screw (the config's initial screw
+before the first). New rest lengths apply from their log time on and re-publish the last
+answer, written at the log time of the rest-lengths message. Header stamps: a pose's stamp when
+it is non-zero; where the node stamps the time of computation (screws, zero-stamped poses) the
+input's log time; a re-publish keeps the stamp of the answer it repeats, as the node does.
 
-Speed: answers are computed in chunks with one batched evaluation
-(:func:`processing.joint_outputs_batch`, OpenBLAS on one thread); a screw of the plain layout
-is decoded with its chunk in one ``frombuffer``; an output message is a serialized template
-(the node's message of :func:`layouts.joint_output_layouts`, built and filled once with
-rosbags' types by :mod:`tensegrity_stiffness.nodes.messages` and serialized by rosbags) whose
-payload
-bytes are replaced; a chunk's messages are written with rosbags' public ``Writer.write``
-(:func:`write_blocks`).
+One loop for both nodes (:func:`process_bag`): the messages are read, checked for type,
+deserialized and handed to the node kind's processor (:class:`StiffnessProcessor`,
+:class:`SpineProcessor`, sharing the rejection counting of :class:`Processor`), whose answers
+are written by the node kind's writer and the CSV sink; :data:`_NODE_KINDS` holds what differs.
 
-``spine_node`` (``node='spine'``, :class:`SpineProcessor`): its inputs (``screws``, ``poses``,
-``rest_lengths``) and per-input outputs (:data:`spine_processing.OUTPUT_NAMES`), one input at a
-time with the node's functions (:mod:`tensegrity_stiffness.nodes.spine_processing`) and the node's
-messages (:class:`messages.SpineOutputMessages`, filled as the node fills them, with rosbags'
-types); the same stamp rules.
+``stiffness_node`` is answered in chunks with one batched evaluation
+(:func:`processing.joint_outputs_batch`, BLAS on one thread through ``threadpoolctl``); a
+screw of the plain layout is decoded with its chunk in one ``frombuffer``; an output message is
+a serialized template (the node's message of :func:`layouts.joint_output_layouts`, built and
+filled once with rosbags' types by :mod:`tensegrity_stiffness.nodes.messages` and serialized by
+rosbags) whose payload bytes are replaced; a chunk's messages are written with rosbags' public
+``Writer.write`` (:func:`write_blocks`). ``spine_node`` is answered one input at a time, with
+the node's messages (:class:`messages.SpineOutputMessages`, filled as the node fills them, with
+rosbags' types) serialized by rosbags.
 """
 
 from __future__ import annotations
@@ -44,8 +43,8 @@ import csv
 import shutil
 import time
 from collections import Counter
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -54,6 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.geometry.errors import INVALID, SingularStiffnessError, error_kind
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG
 from tensegrity_stiffness.nodes import layouts, parameters, spine_processing
 from tensegrity_stiffness.nodes.messages import (
@@ -76,6 +76,7 @@ from tensegrity_stiffness.nodes.processing import (
     require_finite,
     screw_input,
     screw_inputs,
+    with_rest_lengths,
 )
 
 FloatArray = NDArray[np.float64]
@@ -142,79 +143,86 @@ def node_settings(path: str | Path | None = None) -> JointNodeSettings:
                        ) from None
 
 
-# ------------------------------------------------------------------------------ BLAS threads
-#: (get, set) thread-count functions of the OpenBLAS builds numpy and scipy ship, by symbol.
-_OPENBLAS_THREAD_SYMBOLS = (
-    ('scipy_openblas_get_num_threads64_', 'scipy_openblas_set_num_threads64_'),
-    ('scipy_openblas_get_num_threads', 'scipy_openblas_set_num_threads'),
-    ('openblas_get_num_threads64_', 'openblas_set_num_threads64_'),
-    ('openblas_get_num_threads', 'openblas_set_num_threads'),
-)
-
-
-def _loaded_openblas() -> list[tuple[Any, Any]]:
-    """(get, set) thread-count functions of every OpenBLAS library loaded in this process
-    (Linux: from /proc/self/maps; elsewhere none)."""
-    import ctypes
-
+def spine_settings(path: str | Path | None = None) -> SpineNodeSettings:
+    """The settings ``spine_node`` runs with for ``--params-file path`` (default: the packaged
+    ``config/default_spine.yaml``): the parameter table of the file's ``chain.n_joints``,
+    overridden by the file's parameters; BagError names the file and the field."""
+    path = config.packaged_config_path(DEFAULT_SPINE_CONFIG) if path is None else path
     try:
-        with open('/proc/self/maps', encoding='utf-8') as maps:
-            paths = {line.split()[-1] for line in maps if 'openblas' in line.lower()}
-    except OSError:
-        return []
-    found = []
-    for path in sorted(p for p in paths if p.startswith('/')):
+        n = parameters.values_from_config(path, parameters.CHAIN_PARAMETERS)['chain.n_joints']
+        values = parameters.values_from_config(path, parameters.spine_node_parameters(n))
+        return parameters.spine_node_settings(values)
+    except ValueError as exc:
+        text = str(exc)
+        raise BagError(text if str(path) in text else f'config {path}: {text}') from None
+
+
+def single_threaded_blas() -> Any:
+    """A context manager holding BLAS to one thread inside its block (restored after):
+    ``threadpoolctl.threadpool_limits(limits=1, user_api='blas')``. The batched evaluation's
+    GEMMs are large enough for OpenBLAS to start its threads, whose busy waiting on a shared
+    machine costs more than it saves; the bag command runs one process that is already busy."""
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=1, user_api='blas')
+
+
+def jazzy_typestore() -> Any:
+    """rosbags' type store of ROS 2 Jazzy's messages (decodes and encodes recordings)."""
+    from rosbags.typesys import Stores, get_typestore
+
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def rosbags_types(typestore: Any) -> MessageTypes:
+    """rosbags' message classes of ``typestore`` for :mod:`tensegrity_stiffness.nodes.messages`
+    (``float64[]`` fields as float64 arrays)."""
+    return MessageTypes(classes=typestore.types,
+                        payload=lambda values: np.array(values, dtype=np.float64).reshape(-1))
+
+
+# ------------------------------------------------------------------------------ processors
+class Processor:
+    """What both node kinds' processors share: deserializing a message of the recording
+    (rosbags' ``typestore``, default Jazzy's) and counting rejections in :attr:`rejected` by
+    ``'<topic>: <kind>'``, the first problem's text in :attr:`examples`; answers by source in
+    :attr:`answered`. A subclass names its input handlers (:meth:`handlers`, deserialized
+    messages) and may take some inputs serialized (:meth:`raw_handlers`)."""
+
+    def __init__(self, typestore: Any | None = None) -> None:
+        self.typestore = jazzy_typestore() if typestore is None else typestore
+        self.rejected: Counter[str] = Counter()
+        self.examples: dict[str, str] = {}
+        self.answered: Counter[str] = Counter()
+
+    def handlers(self) -> dict[str, Callable[[Any, int], None]]:
+        """The handler ``(msg, log_time)`` of each input (name relative to the node)."""
+        raise NotImplementedError
+
+    def raw_handlers(self) -> dict[str, Callable[[bytes, int], None]]:
+        """Handlers ``(raw, log_time)`` of inputs taken serialized (deserialized by the
+        processor as it needs); none by default."""
+        return {}
+
+    def finish(self) -> None:
+        """Answer what is pending at the end of the recording."""
+
+    def reject(self, topic: str, problem: Exception | str, kind: str | None = None) -> None:
+        """Count a rejected input of ``topic``: of ``kind``, else of the problem's kind
+        (:func:`~tensegrity_stiffness.geometry.errors.error_kind`)."""
+        if kind is None:
+            kind = INVALID if isinstance(problem, str) else error_kind(problem)
+        key = f'{topic}: {kind}'
+        self.rejected[key] += 1
+        self.examples.setdefault(key, str(problem))
+
+    def decode(self, topic: str, raw: bytes, msgtype: str) -> Any:
+        """The deserialized message, or None (rejected as undecodable)."""
         try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for get_name, set_name in _OPENBLAS_THREAD_SYMBOLS:
-            get, put = getattr(lib, get_name, None), getattr(lib, set_name, None)
-            if get is not None and put is not None:
-                get.restype, put.argtypes = ctypes.c_int, [ctypes.c_int]
-                found.append((get, put))
-                break
-    return found
-
-
-@contextmanager
-def single_threaded_blas() -> Iterator[None]:
-    """OpenBLAS on one thread inside the block (restored after). The batched evaluation's
-    GEMMs (chunks of 512 rows) are large enough for OpenBLAS to start its threads, whose
-    busy waiting on a shared two-core machine costs more than it saves; the bag command runs
-    one process that is already busy. No effect without a loaded OpenBLAS."""
-    libraries = _loaded_openblas()
-    before = [get() for get, _ in libraries]
-    for _, put in libraries:
-        put(1)
-    try:
-        yield
-    finally:
-        for (_, put), n in zip(libraries, before, strict=True):
-            put(n)
-
-
-# ------------------------------------------------------------------------------ rejections
-#: Kind of a rejection from the text of the node's ValueError (first match wins).
-_REJECTION_KINDS = (
-    ('too many elements', 'oversized array'),
-    ('data_offset', 'bad data_offset'),
-    ('expected ', 'wrong length'),
-    ('outside the chart', 'outside the chart'),
-    ('frame_id', 'wrong frame_id'),
-    ('quaternion', 'bad quaternion'),
-    ('rest_lengths', 'bad rest lengths'),
-    ('nan or inf', 'NaN or inf'),
-)
-
-
-def rejection_kind(problem: str) -> str:
-    """Short name of the kind of problem a ValueError's text describes."""
-    text = problem.lower()
-    for needle, kind in _REJECTION_KINDS:
-        if needle in text:
-            return kind
-    return 'invalid'
+            return self.typestore.deserialize_cdr(raw, msgtype)
+        except Exception as exc:  # rosbags raises several types on corrupt CDR
+            self.reject(topic, f'cannot deserialize: {type(exc).__name__}: {exc}', 'undecodable')
+            return None
 
 
 # ------------------------------------------------------------------------------ screw CDR
@@ -266,33 +274,23 @@ class Answers:
                    state.tensions[rows], outputs.interpretation[rows])
 
 
-class StiffnessProcessor:
+class StiffnessProcessor(Processor):
     """The node's per-input behaviour (``_on_screw``, ``_on_pose``, ``_on_rest_lengths``,
     ``_compute_and_publish``) over a recording, answering in batches with the node's functions
     (:mod:`tensegrity_stiffness.nodes.processing`, :mod:`tensegrity_stiffness.nodes.messages`).
 
     Feed inputs in log-time order with :meth:`screw_raw` (serialized) or :meth:`screw`,
     :meth:`pose`, :meth:`rest_lengths`; answers go to ``emit`` in chunks (:class:`Answers`),
-    rejections are counted in :attr:`rejected` by ``'<topic>: <kind>'`` with the node's text
-    as the example. Call :meth:`finish` at the end.
+    rejections are counted as :class:`Processor` counts them. Call :meth:`finish` at the end.
     """
 
     def __init__(self, settings: JointNodeSettings, emit: Callable[[Answers], None],
-                 chunk_size: int = CHUNK_SIZE,
-                 deserialize: Callable[[bytes], Any] | None = None) -> None:
+                 chunk_size: int = CHUNK_SIZE, typestore: Any | None = None) -> None:
+        super().__init__(typestore)
         self.settings = settings
         self.model = settings.model
         self.emit = emit
         self.chunk_size = chunk_size
-        if deserialize is None:
-            store = jazzy_typestore()
-
-            def deserialize(raw: bytes) -> Any:
-                return store.deserialize_cdr(raw, FLOAT64_MULTIARRAY)
-        self.deserialize = deserialize
-        self.rejected: Counter[str] = Counter()
-        self.examples: dict[str, str] = {}
-        self.answered: Counter[str] = Counter()
         # Plain-layout screws not decoded yet (raw bytes, log times).
         self._raw: list[bytes] = []
         self._raw_times: list[int] = []
@@ -307,10 +305,11 @@ class StiffnessProcessor:
         self._last_screw: FloatArray | None = None
         self._last_stamp: int | None = None
 
-    def reject(self, topic: str, problem: str, kind: str | None = None) -> None:
-        key = f'{topic}: {kind or rejection_kind(problem)}'
-        self.rejected[key] += 1
-        self.examples.setdefault(key, problem)
+    def handlers(self) -> dict[str, Callable[[Any, int], None]]:
+        return {'screw': self.screw, 'pose': self.pose, 'rest_lengths': self.rest_lengths}
+
+    def raw_handlers(self) -> dict[str, Callable[[bytes, int], None]]:
+        return {'screw': self.screw_raw}
 
     def _reference(self) -> FloatArray:
         """Branch reference of the next pose: the last accepted screw (answered or pending)."""
@@ -340,21 +339,14 @@ class StiffnessProcessor:
             if len(self._raw) >= self.chunk_size:
                 self._decode()
             return
-        msg = self._deserialize('screw', raw)
+        msg = self.decode('screw', raw, FLOAT64_MULTIARRAY)
         if msg is not None:
             self.screw(msg, log_time)
-
-    def _deserialize(self, topic: str, raw: bytes) -> Any:
-        try:
-            return self.deserialize(raw)
-        except Exception as exc:  # rosbags raises several types on corrupt CDR
-            self.reject(topic, f'cannot deserialize: {type(exc).__name__}: {exc}', 'undecodable')
-            return None
 
     def _decode(self) -> None:
         """Check the pending plain screws as :meth:`screw` does, in one batch: the decoded
         values are exactly what ``messages.multiarray_to_array`` returns for them (no data
-        offset, six values); a non-finite one goes through that function for its message."""
+        offset, six values); a non-finite one goes through that function for its error."""
         if not self._raw:
             return
         raws, times = self._raw, self._raw_times
@@ -363,12 +355,13 @@ class StiffnessProcessor:
         finite = np.isfinite(values).all(axis=1)
         if not finite.all():
             max_length = self.settings.max_array_length
+            deserialize = self.typestore.deserialize_cdr
             for i in np.flatnonzero(~finite):
                 try:  # raises the node's 'array contains NaN or inf'
-                    multiarray_to_array(self.deserialize(raws[i]), expected_length=6,
-                                        max_length=max_length)
+                    multiarray_to_array(deserialize(raws[i], FLOAT64_MULTIARRAY),
+                                        expected_length=6, max_length=max_length)
                 except ValueError as exc:
-                    self.reject('screw', str(exc))
+                    self.reject('screw', exc)
             values, times = values[finite], [t for t, ok in zip(times, finite.tolist(),
                                                                 strict=True) if ok]
         accepted, problems = screw_inputs(values)
@@ -387,7 +380,7 @@ class StiffnessProcessor:
             xi = screw_input(multiarray_to_array(
                 msg, expected_length=6, max_length=self.settings.max_array_length))
         except ValueError as exc:
-            self.reject('screw', str(exc))
+            self.reject('screw', exc)
             return
         self._add('screw', [log_time], [log_time], xi[None])
 
@@ -399,7 +392,7 @@ class StiffnessProcessor:
             xi = pose_input(msg.header.frame_id, T, self.settings.link1_frame,
                             self._reference())
         except ValueError as exc:
-            self.reject('pose', str(exc))
+            self.reject('pose', exc)
             return
         self._add('pose', [log_time], [stamp_nanoseconds_or(msg.header.stamp, log_time)],
                   xi[None], T)
@@ -410,9 +403,9 @@ class StiffnessProcessor:
         try:
             rest = multiarray_to_array(msg, expected_length=self.model.n_strings,
                                        max_length=self.settings.max_array_length)
-            self.model = self.model.with_rest_lengths(rest)
+            self.model = with_rest_lengths(self.model, rest)
         except ValueError as exc:
-            self.reject('rest_lengths', str(exc))
+            self.reject('rest_lengths', exc)
             return
         if self._last_screw is not None:  # the node's _republish_last
             self._add('re-publish', [log_time], [None], self._last_screw[None])
@@ -424,10 +417,11 @@ class StiffnessProcessor:
     # -------------------------------------------------------------- batched answers
     def flush(self) -> None:
         """Answer the pending inputs with one :func:`joint_outputs_batch`. The first row the
-        node's publishers would refuse (a non-finite output) splits the chunk: the rows before
-        it are answered, it goes through the node's single path (``joint_outputs`` and the
-        finite check of ``JointOutputMessages.fill``, whose ValueError is the rejection), and the
-        poses after it get their branch again from the last answer."""
+        node would refuse (a non-finite output, a screw the model refuses) splits the chunk:
+        the rows before it are answered, it goes through the node's single path
+        (``joint_outputs`` and the finite check of ``JointOutputMessages.fill``, whose
+        ValueError is the rejection), and the poses after it get their branch again from the
+        last answer."""
         self._decode()
         while self._count:
             sources, times, stamps = self._sources, self._times, self._stamps
@@ -437,10 +431,8 @@ class StiffnessProcessor:
             self._transforms, self._count = {}, 0
             if stamps[0] is None:
                 stamps[0] = self._last_stamp
-            outputs = joint_outputs_batch(self.model, screws)
-            finite = finite_rows(outputs)
-            bad = len(screws) if finite.all() else int(np.flatnonzero(~finite)[0])
-            if bad:
+            outputs, bad = self._batch(screws)
+            if bad and outputs is not None:
                 self._answer(Answers.of(outputs, slice(0, bad), times[:bad], sources[:bad],
                                         stamps[:bad]))
             if bad == len(screws):
@@ -452,13 +444,38 @@ class StiffnessProcessor:
                     '', T, self.settings.link1_frame, self._reference())
                 self._add(sources[i], [times[i]], [stamps[i]], xi[None], T)
 
+    def _batch(self, screws: FloatArray) -> tuple[JointOutputs | None, int]:
+        """The batched outputs of ``screws`` and the index of the first row the node would not
+        answer (``len(screws)``: none): a non-finite output, or a screw the model refuses (a
+        ValueError of the batch, e.g. a string of zero length; the rows before it are
+        evaluated again without it)."""
+        try:
+            outputs = joint_outputs_batch(self.model, screws)
+        except ValueError:
+            first = next((i for i, xi in enumerate(screws) if not self._answerable(xi)),
+                         len(screws))
+            return (joint_outputs_batch(self.model, screws[:first]) if first else None), first
+        finite = finite_rows(outputs)
+        return outputs, len(screws) if finite.all() else int(np.flatnonzero(~finite)[0])
+
+    def _answerable(self, xi: FloatArray) -> bool:
+        try:
+            require_finite(joint_outputs(self.model, xi))
+        except ValueError:
+            return False
+        return True
+
     def _single(self, source: str, log_time: int, stamp: int | None, xi: FloatArray) -> None:
         """One input through the node's own single-screw path."""
-        outputs = joint_outputs(self.model, xi)
+        try:
+            outputs = joint_outputs(self.model, xi)
+        except ValueError as exc:  # the model refuses the screw (the node's _outputs)
+            self.reject(source, exc)
+            return
         try:  # the check of JointOutputMessages.fill (filling the joint's messages cannot fail)
             require_finite(outputs)
         except ValueError as exc:
-            self.reject(source, str(exc), 'non-finite result')
+            self.reject(source, exc, 'non-finite result')
             return
         state = outputs.state
         self._answer(Answers(
@@ -476,27 +493,6 @@ class StiffnessProcessor:
 
 
 # ------------------------------------------------------------------------------ spine
-def spine_settings(path: str | Path | None = None) -> SpineNodeSettings:
-    """The settings ``spine_node`` runs with for ``--params-file path`` (default: the packaged
-    ``config/default_spine.yaml``): the parameter table of the file's ``chain.n_joints``,
-    overridden by the file's parameters; BagError names the file and the field."""
-    path = config.packaged_config_path(DEFAULT_SPINE_CONFIG) if path is None else path
-    try:
-        n = parameters.values_from_config(path, parameters.CHAIN_PARAMETERS)['chain.n_joints']
-        values = parameters.values_from_config(path, parameters.spine_node_parameters(n))
-        return parameters.spine_node_settings(values)
-    except ValueError as exc:
-        text = str(exc)
-        raise BagError(text if str(path) in text else f'config {path}: {text}') from None
-
-
-def rosbags_types(typestore: Any) -> MessageTypes:
-    """rosbags' message classes of ``typestore`` for :mod:`tensegrity_stiffness.nodes.messages`
-    (``float64[]`` fields as float64 arrays)."""
-    return MessageTypes(classes=typestore.types,
-                        payload=lambda values: np.array(values, dtype=np.float64).reshape(-1))
-
-
 @dataclass
 class SpineAnswer:
     """One answer of the spine node: the input's log time (ns), its source ('screws', 'poses'
@@ -510,31 +506,27 @@ class SpineAnswer:
     messages: tuple[Any, ...]
 
 
-class SpineProcessor:
+class SpineProcessor(Processor):
     """``spine_node``'s per-input behaviour (``_on_screws``, ``_on_poses``,
     ``_on_rest_lengths``, ``_compute_and_publish``) over a recording, one input at a time with
     the node's functions (:mod:`tensegrity_stiffness.nodes.spine_processing`,
     :mod:`tensegrity_stiffness.nodes.messages`; the node's ``SpineOutputMessages`` with rosbags'
-    ``types``, default Jazzy's, for the messages). Each answer goes to ``emit``
-    (:class:`SpineAnswer`, its messages reused by the next answer); rejections are counted in
-    :attr:`rejected` by ``'<topic>: <kind>'`` with the node's text as the example."""
+    types of ``typestore``, default Jazzy's, for the messages). Each answer goes to ``emit``
+    (:class:`SpineAnswer`, its messages reused by the next answer); rejections are counted as
+    :class:`Processor` counts them."""
 
     def __init__(self, settings: SpineNodeSettings, emit: Callable[[SpineAnswer], None],
-                 types: MessageTypes | None = None) -> None:
+                 typestore: Any | None = None) -> None:
+        super().__init__(typestore)
         self.settings = settings
         self.emit = emit
-        self.types = rosbags_types(jazzy_typestore()) if types is None else types
+        self.types = rosbags_types(self.typestore)
         self.messages = SpineOutputMessages(settings.n_joints, self.types)
-        self.rejected: Counter[str] = Counter()
-        self.examples: dict[str, str] = {}
-        self.answered: Counter[str] = Counter()
         self._last_screws: FloatArray | None = None
         self._last_stamp: int | None = None
 
-    def reject(self, topic: str, problem: str, kind: str | None = None) -> None:
-        key = f'{topic}: {kind or rejection_kind(problem)}'
-        self.rejected[key] += 1
-        self.examples.setdefault(key, problem)
+    def handlers(self) -> dict[str, Callable[[Any, int], None]]:
+        return {'screws': self.screws, 'poses': self.poses, 'rest_lengths': self.rest_lengths}
 
     def screws(self, msg: Any, log_time: int) -> None:
         """A ``~/screws`` message (the node's ``_on_screws``); stamped with its log time, as the
@@ -544,7 +536,7 @@ class SpineProcessor:
             xi = spine_processing.screws_input(multiarray_to_array(
                 msg, max_length=settings.max_array_length), settings.n_joints)
         except ValueError as exc:
-            self.reject('screws', str(exc))
+            self.reject('screws', exc)
             return
         self._compute(xi, log_time, log_time, 'screws')
 
@@ -559,7 +551,7 @@ class SpineProcessor:
                                               settings.base_frame, reference,
                                               pose_message_to_transform)
         except ValueError as exc:
-            self.reject('poses', str(exc))
+            self.reject('poses', exc)
             return
         self._compute(xi, log_time, stamp_nanoseconds_or(msg.header.stamp, log_time), 'poses')
 
@@ -571,7 +563,7 @@ class SpineProcessor:
             rest = spine_processing.rest_lengths_input(multiarray_to_array(
                 msg, max_length=settings.max_array_length), settings.chain)
         except ValueError as exc:
-            self.reject('rest_lengths', str(exc))
+            self.reject('rest_lengths', exc)
             return
         self.settings = replace(settings, rest_lengths=rest,
                                 generation=settings.generation + 1)
@@ -584,89 +576,12 @@ class SpineProcessor:
             outputs = spine_processing.spine_outputs(settings.chain, xi, settings.rest_lengths)
             self.messages.fill(outputs, self.types.time(stamp), settings.base_frame)
         except ValueError as exc:
-            text = str(exc)
-            self.reject(source, text, 'singular tip stiffness' if 'singular' in text
+            self.reject(source, exc, exc.kind if isinstance(exc, SingularStiffnessError)
                         else 'non-finite result')
             return
         self._last_screws, self._last_stamp = xi, stamp
         self.answered[source] += 1
         self.emit(SpineAnswer(log_time, source, stamp, outputs, self.messages.messages()))
-
-
-class _SpineCsvSink:
-    """One row per spine answer: log time, source, stamp, the joints' screws (joint-major),
-    the tip wrench (base frame) and the tip stiffness (tool frame, row-major)."""
-
-    def __init__(self, path: Path, n_joints: int) -> None:
-        self._file = path.open('w', newline='')
-        self._writer = csv.writer(self._file)
-        w, s, t = layouts.WRENCH_NAMES, layouts.SCREW_NAMES, layouts.TWIST_NAMES
-        self._writer.writerow(
-            ['log_time_ns', 'source', 'stamp_ns',
-             *(f'joint_{i}_{c}' for i in range(1, n_joints + 1) for c in s),
-             *(f'tip_{c}' for c in w), *(f'Ktip_{r}_{c}' for r in w for c in t)])
-
-    def write(self, a: SpineAnswer) -> None:
-        o = a.outputs
-        self._writer.writerow([a.log_time, a.source, a.stamp, *np.concatenate(
-            [o.screws.ravel(), o.tip_wrench, o.tip_stiffness_tool.ravel()]).tolist()])
-
-    def close(self) -> None:
-        self._file.close()
-
-
-def _run_spine(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, str]],
-               writer: Any, typestore: Any, settings: SpineNodeSettings, outputs: list[str],
-               spec: NodeTopics, prefix: str, csv_sink: _SpineCsvSink | None,
-               summary: BagSummary, total: int,
-               progress: Callable[[int, int], None] | None) -> BagSummary:
-    """The read - process - write loop of :func:`process_bag` for ``spine_node``: one input
-    at a time, each answer's messages (rosbags') serialized."""
-    names = spine_processing.OUTPUT_NAMES
-    chosen = [names.index(name) for name in outputs]
-    out_connections = [writer.add_connection(f'{prefix}/{names[k]}', spec.outputs[names[k]],
-                                             typestore=typestore) for k in chosen]
-    serialize = typestore.serialize_cdr
-
-    def emit(a: SpineAnswer) -> None:
-        for k, connection in zip(chosen, out_connections, strict=True):
-            writer.write(connection, a.log_time,
-                         bytes(serialize(a.messages[k], connection.msgtype)))
-        if csv_sink is not None:
-            csv_sink.write(a)
-
-    processor = SpineProcessor(settings, emit, rosbags_types(typestore))
-    handlers = {'screws': processor.screws, 'poses': processor.poses,
-                'rest_lengths': processor.rest_lengths}
-    inputs: Counter[str] = Counter()
-    next_report = time.perf_counter() + PROGRESS_PERIOD
-    done = 0
-    for connection, log_time, raw in reader.messages(connections=connections):
-        done += 1
-        name, msgtype = wanted[connection.topic]
-        inputs[name] += 1
-        if connection.msgtype != msgtype:
-            processor.reject(name, f'message type {connection.msgtype}, expected {msgtype}',
-                             'wrong message type')
-        else:
-            try:
-                msg = typestore.deserialize_cdr(raw, msgtype)
-            except Exception as exc:  # rosbags raises several types on corrupt CDR
-                processor.reject(name, f'cannot deserialize: {type(exc).__name__}: {exc}',
-                                 'undecodable')
-            else:
-                handlers[name](msg, log_time)
-        if progress is not None and time.perf_counter() >= next_report:
-            next_report = time.perf_counter() + PROGRESS_PERIOD
-            progress(done, total)
-    if progress is not None:
-        progress(done, total)
-    summary.inputs = {name: inputs[name] for name in spec.inputs if inputs[name]}
-    summary.answered = dict(processor.answered)
-    summary.written = {f'{prefix}/{name}': summary.answers for name in outputs}
-    summary.rejected = dict(processor.rejected)
-    summary.rejection_examples = dict(processor.examples)
-    return summary
 
 
 # ------------------------------------------------------------------------------ output messages
@@ -717,14 +632,129 @@ class _Template:
         return out
 
 
+# ------------------------------------------------------------------------------ writing
+class _CsvSink:
+    """One CSV row per answer: log time, source, stamp, then the node kind's columns."""
+
+    def __init__(self, path: Path, columns: Sequence[str]) -> None:
+        self._file = path.open('w', newline='')
+        self._writer = csv.writer(self._file)
+        self._writer.writerow(['log_time_ns', 'source', 'stamp_ns', *columns])
+
+    def write(self, rows: Iterable[Sequence[Any]]) -> None:
+        self._writer.writerows(rows)
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def _joint_csv_columns(settings: JointNodeSettings) -> list[str]:
+    """The screw, wrench, K, K_c and the tension of each string."""
+    w, s, t = layouts.WRENCH_NAMES, layouts.SCREW_NAMES, layouts.TWIST_NAMES
+    return [*s, *w, *(f'K_{r}_{c}' for r in w for c in s), *(f'Kc_{r}_{c}' for r in w for c in t),
+            *(f'tension_{name}' for name in settings.model.string_names)]
+
+
+def _joint_csv_rows(a: Answers) -> Iterable[list[Any]]:
+    n = len(a)
+    values = np.hstack([a.screws, a.wrenches, a.stiffness.reshape(n, 36),
+                        a.cartesian_stiffness.reshape(n, 36), a.tensions]).tolist()
+    return ([t, source, stamp, *row] for t, source, stamp, row in
+            zip(a.log_times.tolist(), a.sources, a.stamps.tolist(), values, strict=True))
+
+
+def _spine_csv_columns(settings: SpineNodeSettings) -> list[str]:
+    """The joints' screws (joint-major), the tip wrench (base frame) and the tip stiffness
+    (tool frame, row-major)."""
+    w, s, t = layouts.WRENCH_NAMES, layouts.SCREW_NAMES, layouts.TWIST_NAMES
+    return [*(f'joint_{i}_{c}' for i in range(1, settings.n_joints + 1) for c in s),
+            *(f'tip_{c}' for c in w), *(f'Ktip_{r}_{c}' for r in w for c in t)]
+
+
+def _spine_csv_rows(a: SpineAnswer) -> Iterable[list[Any]]:
+    o = a.outputs
+    return [[a.log_time, a.source, a.stamp, *np.concatenate(
+        [o.screws.ravel(), o.tip_wrench, o.tip_stiffness_tool.ravel()]).tolist()]]
+
+
+def _joint_writer(writer: Any, typestore: Any, connections: Sequence[Any],
+                  outputs: Sequence[str], settings: JointNodeSettings
+                  ) -> Callable[[Answers], None]:
+    """Writes a chunk's answers on ``connections`` (of ``outputs``): the templates' rows."""
+    output_layouts = layouts.joint_output_layouts(settings.model.string_names)
+    templates = [_Template(typestore, output_layouts[name], settings.link1_frame)
+                 for name in outputs]
+
+    def write(a: Answers) -> None:
+        payloads = dict(zip(layouts.JOINT_OUTPUTS, (
+            a.wrenches, a.stiffness, a.cartesian_stiffness, a.tensions, a.interpretation),
+            strict=True))
+        write_blocks(writer, connections, a.log_times, [template.rows(
+            payloads[name], a.stamps if name == 'wrench' else None)
+            for name, template in zip(outputs, templates, strict=True)])
+
+    return write
+
+
+def _spine_writer(writer: Any, typestore: Any, connections: Sequence[Any],
+                  outputs: Sequence[str], settings: SpineNodeSettings
+                  ) -> Callable[[SpineAnswer], None]:
+    """Writes an answer's messages on ``connections`` (of ``outputs``), serialized by
+    rosbags."""
+    chosen = [spine_processing.OUTPUT_NAMES.index(name) for name in outputs]
+    serialize = typestore.serialize_cdr
+
+    def write(a: SpineAnswer) -> None:
+        for k, connection in zip(chosen, connections, strict=True):
+            writer.write(connection, a.log_time,
+                         bytes(serialize(a.messages[k], connection.msgtype)))
+
+    return write
+
+
+@dataclass(frozen=True)
+class _NodeKind:
+    """What :func:`process_bag` does differently for one node kind: its settings from
+    ``--config``, its CSV columns and rows, the writer of its answers, its processor
+    ``(settings, emit, typestore, chunk_size)``; ``batched``: BLAS on one thread meanwhile
+    and the clock read every 1024 inputs (else every input) for the progress reports."""
+
+    settings: Callable[[str | Path | None], Any]
+    csv_columns: Callable[[Any], list[str]]
+    csv_rows: Callable[[Any], Iterable[Sequence[Any]]]
+    writer: Callable[[Any, Any, Sequence[Any], Sequence[str], Any], Callable[[Any], None]]
+    processor: Callable[[Any, Callable[[Any], None], Any, int], Processor]
+    batched: bool
+
+
+_NODE_KINDS = {
+    'stiffness': _NodeKind(
+        node_settings, _joint_csv_columns, _joint_csv_rows, _joint_writer,
+        lambda settings, emit, typestore, chunk_size: StiffnessProcessor(
+            settings, emit, chunk_size, typestore), batched=True),
+    'spine': _NodeKind(
+        spine_settings, _spine_csv_columns, _spine_csv_rows, _spine_writer,
+        lambda settings, emit, typestore, _: SpineProcessor(settings, emit, typestore),
+        batched=False),
+}
+
+
+def write_blocks(writer: Any, connections: Sequence[Any], log_times: NDArray[np.int64],
+                 rows: Sequence[NDArray[np.uint8]]) -> None:
+    """Write a block of messages through rosbags' public ``Writer.write``: ``rows[k]``
+    (N, bytes) on ``connections[k]``, the messages of input i at ``log_times[i]`` in
+    connection order (the order the node publishes them)."""
+    write = writer.write
+    columns = []
+    for block in rows:
+        data, width = np.ascontiguousarray(block).tobytes(), block.shape[1]
+        columns.append([data[at:at + width] for at in range(0, len(data), width)])
+    for t, *datas in zip(log_times.tolist(), *columns, strict=True):
+        for connection, data in zip(connections, datas, strict=True):
+            write(connection, t, data)
+
+
 # ------------------------------------------------------------------------------ files
-def jazzy_typestore() -> Any:
-    """rosbags' type store of ROS 2 Jazzy's messages (decodes and encodes recordings)."""
-    from rosbags.typesys import Stores, get_typestore
-
-    return get_typestore(Stores.ROS2_JAZZY)
-
-
 def namespace_prefix(namespace: str) -> str:
     """``'/stiffness_node'`` for ``'stiffness_node'``, ``'/a/b/'`` ...; ``''`` for ``'/'``."""
     parts = [p for p in str(namespace).split('/') if p]
@@ -805,30 +835,6 @@ class BagSummary:
         }
 
 
-class _CsvSink:
-    """One row per answer: log time, source, stamp, screw, wrench, K, K_c, tensions."""
-
-    def __init__(self, path: Path, string_names: Sequence[str]) -> None:
-        self._file = path.open('w', newline='')
-        self._writer = csv.writer(self._file)
-        w, s, t = layouts.WRENCH_NAMES, layouts.SCREW_NAMES, layouts.TWIST_NAMES
-        self._writer.writerow(
-            ['log_time_ns', 'source', 'stamp_ns', *s, *w,
-             *(f'K_{r}_{c}' for r in w for c in s), *(f'Kc_{r}_{c}' for r in w for c in t),
-             *(f'tension_{name}' for name in string_names)])
-
-    def write(self, a: Answers) -> None:
-        n = len(a)
-        values = np.hstack([a.screws, a.wrenches, a.stiffness.reshape(n, 36),
-                            a.cartesian_stiffness.reshape(n, 36), a.tensions]).tolist()
-        self._writer.writerows(
-            [t, source, stamp, *row] for t, source, stamp, row in
-            zip(a.log_times.tolist(), a.sources, a.stamps.tolist(), values, strict=True))
-
-    def close(self) -> None:
-        self._file.close()
-
-
 def _output_topics(topics: Sequence[str] | None, prefix: str,
                    names: Sequence[str] = OUTPUT_NAMES) -> list[str]:
     """Output names (of ``names``, the node kind's outputs) selected by ``--topics``
@@ -865,13 +871,13 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     Raises :class:`BagError` (a ValueError) for the files and options, and when no input
     was answered.
     """
-    from rosbags.rosbag2 import Reader, StoragePlugin, Writer
-    from rosbags.rosbag2.errors import ReaderError, WriterError
+    from rosbags.rosbag2 import Reader
+    from rosbags.rosbag2.errors import ReaderError
 
     started = time.perf_counter()
     if node not in NODE_TOPICS:
         raise BagError(f"--node: unknown node '{node}' (known: {', '.join(NODE_TOPICS)})")
-    spec = NODE_TOPICS[node]
+    spec, kind = NODE_TOPICS[node], _NODE_KINDS[node]
     src, out = Path(input_path), Path(output_path)
     csv_file = Path(csv_path) if csv_path is not None else None
     check_input(src)
@@ -879,8 +885,7 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
         raise BagError(f"unknown storage '{storage}' (mcap or sqlite3)")
     prefix = namespace_prefix(DEFAULT_NAMESPACES[node] if namespace is None else namespace)
     outputs = _output_topics(topics, prefix, tuple(spec.outputs))
-    spine = node == 'spine'
-    settings = spine_settings(config_path) if spine else node_settings(config_path)
+    settings = kind.settings(config_path)
     if out.resolve() == src.resolve():
         raise BagError(f'{out}: the output must not be the input')
 
@@ -890,45 +895,8 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     except (ReaderError, OSError, KeyError, ValueError) as exc:
         raise BagError(f'{src}: not a readable rosbag2: {exc}') from None
     try:
-        in_storage = _storage_of(src)
-        out_storage = storage or (in_storage if in_storage in STORAGES else 'mcap')
-        wanted = {f'{prefix}/{name}': (name, msgtype) for name, msgtype in spec.inputs.items()}
-        present = {c.topic: c.msgtype for c in reader.connections}
-        if not set(wanted) & set(present):
-            have = ', '.join(f'{t} ({m})' for t, m in sorted(present.items())) or 'none'
-            raise BagError(f"{src}: none of the topics {', '.join(wanted)} is in the bag; "
-                           f'its topics: {have}')
-        connections = [c for c in reader.connections if c.topic in wanted]
-        total = sum(c.msgcount for c in connections)
-        summary = BagSummary(input=str(src), output=str(out), storage=out_storage,
-                             csv=str(csv_file) if csv_file else None, namespace=prefix)
-        _clear_output(out, overwrite, 'output')
-        if csv_file is not None:
-            _clear_output(csv_file, overwrite, 'csv file')
-        typestore = jazzy_typestore()
-        summary.written = dict.fromkeys(f'{prefix}/{name}' for name in outputs)
-        try:
-            writer = Writer(out, version=9,
-                            storage_plugin=StoragePlugin[out_storage.upper()])
-            writer.open()
-        except (WriterError, OSError) as exc:
-            raise BagError(f'{out}: cannot write: {exc}') from None
-        csv_sink = None
-        try:
-            if spine:
-                csv_sink = _SpineCsvSink(csv_file, settings.n_joints) if csv_file else None
-                summary = _run_spine(reader, connections, wanted, writer, typestore, settings,
-                                     outputs, spec, prefix, csv_sink, summary, total, progress)
-            else:
-                csv_sink = _CsvSink(csv_file, settings.model.string_names) if csv_file else None
-                with single_threaded_blas():
-                    summary = _run(reader, connections, wanted, writer, typestore, settings,
-                                   outputs, spec, prefix, csv_sink, summary, total, progress,
-                                   chunk_size)
-        finally:
-            writer.close()
-            if csv_sink is not None:
-                csv_sink.close()
+        summary = _process(reader, _Job(src, out, csv_file, storage, prefix, outputs, spec,
+                                        kind, settings, overwrite, chunk_size), progress)
     finally:
         reader.close()
     summary.seconds = time.perf_counter() - started
@@ -941,86 +909,121 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     return summary
 
 
-def write_blocks(writer: Any, connections: Sequence[Any], log_times: NDArray[np.int64],
-                 rows: Sequence[NDArray[np.uint8]]) -> None:
-    """Write a block of messages through rosbags' public ``Writer.write``: ``rows[k]``
-    (N, bytes) on ``connections[k]``, the messages of input i at ``log_times[i]`` in
-    connection order (the order the node publishes them)."""
-    write = writer.write
-    columns = []
-    for block in rows:
-        data, width = np.ascontiguousarray(block).tobytes(), block.shape[1]
-        columns.append([data[at:at + width] for at in range(0, len(data), width)])
-    for t, *datas in zip(log_times.tolist(), *columns, strict=True):
-        for connection, data in zip(connections, datas, strict=True):
-            write(connection, t, data)
+@dataclass(frozen=True)
+class _Job:
+    """The checked options of one :func:`process_bag`."""
+
+    src: Path
+    out: Path
+    csv_file: Path | None
+    storage: str | None
+    prefix: str
+    outputs: list[str]
+    spec: NodeTopics
+    kind: _NodeKind
+    settings: Any
+    overwrite: bool
+    chunk_size: int
 
 
-def _run(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, str]],
-         writer: Any, typestore: Any, settings: JointNodeSettings, outputs: list[str],
-         spec: NodeTopics, prefix: str, csv_sink: _CsvSink | None, summary: BagSummary,
-         total: int, progress: Callable[[int, int], None] | None,
-         chunk_size: int) -> BagSummary:
-    """The read - process - write loop of :func:`process_bag`."""
-    output_layouts = layouts.joint_output_layouts(settings.model.string_names)
-    templates = {name: _Template(typestore, output_layouts[name], settings.link1_frame)
-                 for name in outputs}
-    out_connections = [writer.add_connection(f'{prefix}/{name}', spec.outputs[name],
-                                             typestore=typestore) for name in outputs]
-    written = Counter()
+def _process(reader: Any, job: _Job, progress: Callable[[int, int], None] | None
+             ) -> BagSummary:
+    """Open the outputs of :func:`process_bag`, run the node kind's processor over the
+    recording (:func:`_read`) and sum up."""
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.rosbag2.errors import WriterError
 
-    def emit(a: Answers) -> None:
-        payloads = dict(zip(layouts.JOINT_OUTPUTS, (
-            a.wrenches, a.stiffness, a.cartesian_stiffness, a.tensions, a.interpretation),
-            strict=True))
-        write_blocks(writer, out_connections, a.log_times, [templates[name].rows(
-            payloads[name], a.stamps if name == 'wrench' else None) for name in outputs])
-        for name in outputs:
-            written[name] += len(a)
+    src, out, prefix, kind = job.src, job.out, job.prefix, job.kind
+    in_storage = _storage_of(src)
+    out_storage = job.storage or (in_storage if in_storage in STORAGES else 'mcap')
+    wanted = {f'{prefix}/{name}': (name, msgtype) for name, msgtype in job.spec.inputs.items()}
+    present = {c.topic: c.msgtype for c in reader.connections}
+    if not set(wanted) & set(present):
+        have = ', '.join(f'{t} ({m})' for t, m in sorted(present.items())) or 'none'
+        raise BagError(f"{src}: none of the topics {', '.join(wanted)} is in the bag; "
+                       f'its topics: {have}')
+    connections = [c for c in reader.connections if c.topic in wanted]
+    summary = BagSummary(input=str(src), output=str(out), storage=out_storage,
+                         csv=str(job.csv_file) if job.csv_file else None, namespace=prefix)
+    _clear_output(out, job.overwrite, 'output')
+    if job.csv_file is not None:
+        _clear_output(job.csv_file, job.overwrite, 'csv file')
+    typestore = jazzy_typestore()
+    try:
+        writer = Writer(out, version=9, storage_plugin=StoragePlugin[out_storage.upper()])
+        writer.open()
+    except (WriterError, OSError) as exc:
+        raise BagError(f'{out}: cannot write: {exc}') from None
+    csv_sink = None
+    try:
+        if job.csv_file is not None:
+            csv_sink = _CsvSink(job.csv_file, kind.csv_columns(job.settings))
+        emit = kind.writer(writer, typestore, [
+            writer.add_connection(f'{prefix}/{name}', job.spec.outputs[name],
+                                  typestore=typestore) for name in job.outputs],
+            job.outputs, job.settings)
         if csv_sink is not None:
-            csv_sink.write(a)
+            emit = _and_csv(emit, csv_sink, kind.csv_rows)
+        processor = kind.processor(job.settings, emit, typestore, job.chunk_size)
+        with single_threaded_blas() if kind.batched else nullcontext():
+            inputs = _read(reader, connections, wanted, processor,
+                           1023 if kind.batched else 0, progress)
+    finally:
+        writer.close()
+        if csv_sink is not None:
+            csv_sink.close()
+    summary.inputs = {name: inputs[name] for name in job.spec.inputs if inputs[name]}
+    summary.answered = dict(processor.answered)
+    summary.written = {f'{prefix}/{name}': summary.answers for name in job.outputs}
+    summary.rejected = dict(processor.rejected)
+    summary.rejection_examples = dict(processor.examples)
+    return summary
 
-    deserialize = typestore.deserialize_cdr
-    processor = StiffnessProcessor(settings, emit, chunk_size=chunk_size,
-                                   deserialize=lambda raw: deserialize(raw, FLOAT64_MULTIARRAY))
-    handlers = {'pose': processor.pose, 'rest_lengths': processor.rest_lengths}
+
+def _and_csv(write: Callable[[Any], None], sink: _CsvSink,
+             rows: Callable[[Any], Iterable[Sequence[Any]]]) -> Callable[[Any], None]:
+    """``write`` an answer, then its CSV ``rows`` to ``sink``."""
+    def emit(answer: Any) -> None:
+        write(answer)
+        sink.write(rows(answer))
+
+    return emit
+
+
+def _read(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, str]],
+          processor: Processor, clock_mask: int,
+          progress: Callable[[int, int], None] | None) -> Counter[str]:
+    """The read loop of :func:`process_bag`: each message of ``connections`` (log-time order)
+    of its expected type to the processor's handler of its input (serialized to a raw
+    handler, else deserialized), one of another type rejected; ``progress`` reported at most
+    every :data:`PROGRESS_PERIOD` (the clock read when ``done & clock_mask`` is 0). The inputs
+    read, by name."""
+    handlers, raw_handlers = processor.handlers(), processor.raw_handlers()
+    routes = {topic: (name, msgtype, raw_handlers.get(name))
+              for topic, (name, msgtype) in wanted.items()}
+    total = sum(c.msgcount for c in connections)
     inputs: Counter[str] = Counter()
     next_report = time.perf_counter() + PROGRESS_PERIOD
     done = 0
-    screw_raw = processor.screw_raw
-    screw_topic = f'{prefix}/screw'
     # rosbags yields each storage file in log-time order; the files of a split bag follow
     # each other in time.
     for connection, log_time, raw in reader.messages(connections=connections):
         done += 1
-        topic = connection.topic
-        if topic == screw_topic and connection.msgtype == FLOAT64_MULTIARRAY:
-            screw_raw(raw, log_time)
+        name, msgtype, raw_handler = routes[connection.topic]
+        inputs[name] += 1
+        if connection.msgtype != msgtype:
+            processor.reject(name, f'message type {connection.msgtype}, expected {msgtype}',
+                             'wrong message type')
+        elif raw_handler is not None:
+            raw_handler(raw, log_time)
         else:
-            name, msgtype = wanted[topic]
-            inputs[name] += 1
-            if connection.msgtype != msgtype:
-                processor.reject(name, f'message type {connection.msgtype}, expected '
-                                 f'{msgtype}', 'wrong message type')
-            else:
-                try:
-                    msg = deserialize(raw, msgtype)
-                except Exception as exc:  # rosbags raises several types on corrupt CDR
-                    processor.reject(name, f'cannot deserialize: {type(exc).__name__}: {exc}',
-                                     'undecodable')
-                else:
-                    handlers[name](msg, log_time)
-        if progress is not None and not done & 1023 and time.perf_counter() >= next_report:
+            msg = processor.decode(name, raw, msgtype)
+            if msg is not None:
+                handlers[name](msg, log_time)
+        if progress is not None and not done & clock_mask and time.perf_counter() >= next_report:
             next_report = time.perf_counter() + PROGRESS_PERIOD
             progress(done, total)
     processor.finish()
     if progress is not None:
         progress(done, total)
-    inputs['screw'] += done - sum(inputs.values())
-    summary.inputs = {name: inputs[name] for name in spec.inputs if inputs[name]}
-    summary.answered = dict(processor.answered)
-    summary.written = {f'{prefix}/{name}': written[name] for name in outputs}
-    summary.rejected = dict(processor.rejected)
-    summary.rejection_examples = dict(processor.examples)
-    return summary
-
+    return inputs
