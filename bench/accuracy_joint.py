@@ -25,8 +25,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'test'))
 sys.path.insert(0, str(ROOT))
 
-from test_equilibrium import moderate_wrench  # noqa: E402  (the tests' generators and oracle)
-from test_screw import random_screws, reference_dexp  # noqa: E402
+from support.screw_samples import (  # noqa: E402  (the tests' generators and oracle)
+    moderate_wrench,
+    random_screws,
+    reference_dexp,
+)
 
 from tensegrity_stiffness.geometry.screw import dexp_se3, exp_se3  # noqa: E402
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402

@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'test'))
 sys.path.insert(0, str(ROOT))
 
-from test_bag import TYPESTORE, In, multiarray, screw_stream, write_bag  # noqa: E402
+from support.bag_recordings import TYPESTORE, In, multiarray, screw_stream, write_bag  # noqa: E402
 
 from tensegrity_stiffness.nodes import layouts, messages, processing  # noqa: E402
 from tensegrity_stiffness.recordings import bag  # noqa: E402

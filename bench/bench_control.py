@@ -125,31 +125,32 @@ def loop_part(seconds: float, publish_every: int) -> None:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'test'))
     from diagnostic_msgs.msg import DiagnosticArray
     from geometry_msgs.msg import PoseStamped
-    from support.ros_harness import NodeProcess, RosClient, unique_namespace
-    from test_control_node import JOINT_CONFIG, ControllerProcess, target_message
+    from support.ros_harness import NodeProcess, RosClient, pose_stamped, unique_namespace
 
     from tensegrity_stiffness.geometry.screw import exp_se3
+
+    joint_config = config.packaged_config_path()
 
     model = JointModel.from_yaml(config.packaged_config_path())
     for rate in (500.0, 1000.0):
         ns = unique_namespace('bench_control')
         sim_base, est_base, ctl_base = (f'{ns}/sim_node', f'{ns}/estimator_node',
                                         f'{ns}/stiffness_controller')
-        procs = [NodeProcess(ns, JOINT_CONFIG, executable='sim_node', extra_args=[
+        procs = [NodeProcess(ns, joint_config, executable='sim_node', extra_args=[
                      '-p', f'sim.publish_every:={publish_every}',
                      '-r', f'{sim_base}/rest_lengths:={ctl_base}/rest_lengths']),
-                 NodeProcess(ns, JOINT_CONFIG, executable='estimator_node', extra_args=[
+                 NodeProcess(ns, joint_config, executable='estimator_node', extra_args=[
                      '-r', f'{est_base}/measured_tensions:={sim_base}/measured_tensions',
                      '-r', f'{est_base}/imu:={sim_base}/imu',
                      '-r', f'{est_base}/rest_lengths:={ctl_base}/rest_lengths']),
-                 ControllerProcess(ns, [
+                 NodeProcess(ns, joint_config, executable='stiffness_controller', extra_args=[
                      '-p', f'control.rate:={rate}', '-p', 'control.integral_gain:=4.0',
                      '-r', f'{ctl_base}/pose_estimate:={est_base}/pose_estimate'])]
         ros = RosClient('bench_control')
         try:
             diagnostics = ros.subscribe(DiagnosticArray, '/diagnostics')
             target = ros.publisher(PoseStamped, f'{ctl_base}/target_pose')
-            msg = target_message(exp_se3(model.initial_screw))
+            msg = pose_stamped(exp_se3(model.initial_screw))
             end = time.monotonic() + seconds
             while time.monotonic() < end:
                 target.publish(msg)

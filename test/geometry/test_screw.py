@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 from scipy.linalg import expm
+from support.screw_samples import random_screws, reference_dexp
 
 from tensegrity_stiffness.geometry.screw import (
     SERIES_THRESHOLD,
@@ -31,28 +32,9 @@ SPECIAL_ANGLES = [0.0, 1e-12, 1e-8, 1e-6, 1e-4, SERIES_THRESHOLD * (1 - 1e-9),
                   math.pi + 1e-9, 4.0, 2 * math.pi - 0.1]
 
 
-def random_screws(rng, n, max_angle=math.pi, translation=1.0):
-    axis = rng.normal(size=(n, 3))
-    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
-    angle = rng.uniform(0.0, max_angle, size=(n, 1))
-    return np.hstack([axis * angle, rng.normal(scale=translation, size=(n, 3))])
-
-
 def screw_with_angle(rng, theta):
     axis = rng.normal(size=3)
     return np.r_[axis / np.linalg.norm(axis) * theta, rng.normal(size=3)]
-
-
-def reference_dexp(xi):
-    """Exact dT/dxi from the block-triangular matrix exponential (Van Loan):
-    expm([[A, E], [0, A]]) has d/dt expm(A + t E) as its upper-right block."""
-    A = hat(xi)
-    out = np.zeros((4, 4, 6))
-    for i in range(6):
-        E = hat(np.eye(6)[i])
-        block = np.block([[A, E], [np.zeros((4, 4)), A]])
-        out[:, :, i] = expm(block)[:4, 4:]
-    return out
 
 
 def central_dexp(xi, step=CD_STEP):

@@ -15,6 +15,7 @@ import pytest
 import yaml
 from scipy.spatial.transform import Rotation
 from support import REPO
+from support.screw_samples import moderate_wrench as joint_moderate_wrench
 
 from tensegrity_stiffness import cli
 from tensegrity_stiffness.cli.figure_commands import png_size
@@ -64,9 +65,9 @@ def three_joints(model: JointModel, spine: JointChain, seed: int = 1, masses: bo
 
 
 def moderate_wrench(rng: np.random.Generator) -> np.ndarray:
-    """The single joint's moderate load (forces ~0.1 N, moments ~2 mN m), a third of it: the
-    tip of three vertebrae has a lever arm of ~0.1 m on joint 1."""
-    return np.r_[rng.normal(scale=0.1, size=3), rng.normal(scale=0.002, size=3)] / 3.0
+    """The single joint's moderate load, a third of it: the tip of three vertebrae has a lever
+    arm of ~0.1 m on joint 1."""
+    return joint_moderate_wrench(rng) / 3.0
 
 
 def twist(T: np.ndarray) -> np.ndarray:

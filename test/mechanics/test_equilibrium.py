@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 from support import REPO
+from support.screw_samples import moderate_wrench
 
 from tensegrity_stiffness.mechanics.equilibrium import (
     MIN_NEWTON_ITERATIONS,
@@ -20,11 +21,6 @@ RESIDUAL_GOAL = 1e-9
 @pytest.fixture(scope='module')
 def model():
     return JointModel.from_yaml(CONFIG)
-
-
-def moderate_wrench(rng):
-    """About a third of the preload: forces ~0.1 N (tensions 0.3-0.55 N), moments ~2 mN m."""
-    return np.r_[rng.normal(scale=0.1, size=3), rng.normal(scale=0.002, size=3)]
 
 
 @pytest.mark.slow

@@ -152,7 +152,7 @@ def test_cli_commands_print_what_they_print_with_ros(no_ros_env: dict[str, str],
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_bag_command_answers_like_the_node_without_ros(no_ros_env: dict[str, str],
                                                        tmp_path: Path, storage: str) -> None:
-    import test_bag
+    from support import bag_recordings as test_bag
 
     msgs, expected, rejected = test_bag.scenario()
     src = test_bag.write_bag(tmp_path / 'in', msgs, storage)
@@ -166,7 +166,7 @@ def test_bag_command_answers_like_the_node_without_ros(no_ros_env: dict[str, str
 
 def test_spine_bag_command_answers_like_the_node_without_ros(no_ros_env: dict[str, str],
                                                              tmp_path: Path) -> None:
-    import test_bag_spine
+    from support import spine_bag_recordings as test_bag_spine
 
     msgs, expected, rejected = test_bag_spine.scenario()
     src = test_bag_spine.write_bag(tmp_path / 'in', msgs, 'mcap')

@@ -32,6 +32,7 @@ from support.ros_harness import (
     NodeProcess,
     RosClient,
     log_has,
+    pose_stamped,
     repeat_until,
     unique_namespace,
 )
@@ -96,17 +97,10 @@ def loop():
     assert 'internal error' not in controller.log(), controller.log()
 
 
-def target_message(T: np.ndarray) -> PoseStamped:
-    msg = PoseStamped()
-    msg.header.frame_id = 'tensegrity_link1'
-    msg.pose = conversions.transform_to_pose(T)
-    return msg
-
-
 def test_pose_step_and_stiffness_step_across_processes(loop) -> None:
     model = JointModel.from_yaml(JOINT_CONFIG)
     T_star = exp_se3(model.initial_screw + STEP)
-    msg = target_message(T_star)
+    msg = pose_stamped(T_star)
 
     def held() -> tuple[float, float] | None:
         msgs = loop['truth'].messages[-20:]
@@ -168,7 +162,7 @@ def test_bad_targets_and_parameters_are_refused_and_the_command_kept(loop) -> No
     assert not result.successful and 'rest_length_max' in result.reason
     result = ros.set_parameter(params, 'limits.max_rate', -1.0)
     assert not result.successful
-    wrong = target_message(np.eye(4))
+    wrong = pose_stamped(np.eye(4))
     wrong.header.frame_id = 'somewhere_else'
     loop['target'].publish(wrong)
     assert log_has(loop['controller'], r'~/target_pose rejected: .*somewhere_else', 10.0)

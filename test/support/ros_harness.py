@@ -157,6 +157,18 @@ def process_alive(pid: int) -> bool:
     return stat.rsplit(')', 1)[1].split()[0] != 'Z'
 
 
+def pose_stamped(T: np.ndarray, frame_id: str = 'tensegrity_link1') -> Any:
+    """A ``geometry_msgs/PoseStamped`` of the transform ``T`` in ``frame_id`` (zero stamp)."""
+    from geometry_msgs.msg import PoseStamped
+
+    from tensegrity_stiffness.ros import conversions
+
+    msg = PoseStamped()
+    msg.header.frame_id = frame_id
+    msg.pose = conversions.transform_to_pose(T)
+    return msg
+
+
 def unique_namespace(prefix: str = 'test') -> str:
     return f'/{prefix}_{uuid.uuid4().hex[:8]}'
 
