@@ -105,6 +105,21 @@ def test_errata_page_names_tests_that_exist():
             assert f'def {name[1]}(' in source, f'{module}::{name[1]}'
 
 
+#: A path into the repository's own folders as the pages write it (in text or code).
+REPO_PATH = re.compile(r'(?<![\w/.~-])((?:test|bench|scripts|config|launch|examples|docs|'
+                       r'tensegrity_stiffness)/[\w./-]*\w\.(?:py|sh|yaml|md|launch\.py|json|rviz))')
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: p.name)
+def test_repository_paths_named_by_the_pages_exist(page: Path):
+    """Every repository file a page names (``test/...py``, ``bench/...``, ``config/...``) is
+    there: a page that survives a move of the files it cites is not true."""
+    missing = sorted({m for m in REPO_PATH.findall(page.read_text(encoding='utf-8'))
+                      if '*' not in m and not (REPO / m).exists()
+                      and not (page.parent / m).exists()})
+    assert not missing, f'{page.name} names files that do not exist: {missing}'
+
+
 def _cells(row: str) -> int:
     return len(re.split(r'(?<!\\)\|', row.strip().strip('|')))
 
