@@ -120,6 +120,37 @@ def test_repository_paths_named_by_the_pages_exist(page: Path):
     assert not missing, f'{page.name} names files that do not exist: {missing}'
 
 
+#: A dotted name in the package as the pages write it (``tensegrity_stiffness.mechanics.joint``).
+DOTTED_NAME = re.compile(r'(?<![\w/])tensegrity_stiffness(?:\.\w+)+')
+
+
+def _resolves(dotted: str) -> bool:
+    """The longest importable module prefix of ``dotted``, then attributes for the rest."""
+    import importlib
+
+    parts = dotted.split('.')
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module('.'.join(parts[:i]))
+        except ImportError:
+            continue
+        for name in parts[i:]:
+            if not hasattr(obj, name):
+                return False
+            obj = getattr(obj, name)
+        return True
+    return False
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: p.name)
+def test_dotted_names_named_by_the_pages_import(page: Path):
+    """Every ``tensegrity_stiffness.<module>[.<name>]`` a page names imports (ROS modules
+    included: the tests run with the built package on the path)."""
+    names = set(DOTTED_NAME.findall(page.read_text(encoding='utf-8')))
+    missing = sorted(n for n in names if not _resolves(n))
+    assert not missing, f'{page.name} names what does not import: {missing}'
+
+
 def _cells(row: str) -> int:
     return len(re.split(r'(?<!\\)\|', row.strip().strip('|')))
 
