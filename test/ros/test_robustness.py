@@ -164,7 +164,8 @@ def test_fuzz_every_input_publishes_nothing_wrong(node, model, record_property):
     assert figures['node alive'], proc.log()[-3000:]
     assert figures['generator errors'] == [], figures['generator errors']
     assert figures['wrong publications'] == 0, figures['wrong examples']
-    assert figures['missing answers'] == 0 and figures['sync timeouts'] == 0, figures
+    assert figures['missing answers'] == 0 and figures['sync timeouts'] == 0, (
+        figures['missing inputs'], figures, proc.log()[-3000:])
     assert figures['wrong answers'] == 0, figures['wrong answer examples']
     assert figures['messages'] >= FUZZ_MESSAGES and figures['requests'] == FUZZ_REQUESTS
     assert figures['invalid messages'] > FUZZ_MESSAGES // 3

@@ -553,6 +553,7 @@ class StreamMatcher:
         self.received = 0
         self.matched = 0
         self.missing = 0
+        self.skipped: list[int] = []  # seq of each expectation a later message skipped
         self.wrong = 0
         self.wrong_examples: list[str] = []
 
@@ -570,8 +571,9 @@ class StreamMatcher:
                                                                  self.LOOKAHEAD)):
                 if value.shape == expected.shape and np.allclose(
                         value, expected, rtol=self._rtol, atol=self._atol):
-                    for _ in range(j + 1):
-                        self._expected.popleft()
+                    for _ in range(j):
+                        self.skipped.append(self._expected.popleft()[0])
+                    self._expected.popleft()
                     self.missing += j
                     self.matched += 1
                     if self._on_match is not None:
@@ -609,7 +611,7 @@ class StreamMatcher:
         with self._cond:
             n = max(0, len(self._expected) - keep)
             for _ in range(n):
-                self._expected.popleft()
+                self.skipped.append(self._expected.popleft()[0])
             self.missing += n
             return n
 
@@ -673,6 +675,8 @@ class NodeFuzzer:
         self._next_send = time.perf_counter()
         self._lock = threading.Lock()
         self.sent: Counter[str] = Counter()  # '<target> valid' / '<target> invalid'
+        self.case_of: dict[int, str] = {}  # seq -> '<target>/<kind> (<phase>)' of answered inputs
+        self.phase = 'topics'
         self.kinds: Counter[str] = Counter()  # '<target>/<kind>'
         self.requests: Counter[str] = Counter()
         self.failed_valid: Counter[str] = Counter()  # valid requests answered success: false
@@ -717,6 +721,7 @@ class NodeFuzzer:
         self._pace()
         self.seq += 1
         if out is not None:
+            self.case_of[self.seq] = f'{case.target}/{case.kind} ({self.phase})'
             self.stiffness.expect(self.seq, out.stiffness)
             self.wrench.expect(self.seq, out.wrench)
             if self.track_latency:
@@ -758,6 +763,7 @@ class NodeFuzzer:
     def run_services(self, cases: Iterable[Any], screws: Iterator[Any]) -> None:
         """Answer ``cases`` (one worker thread per service) while ``screws`` stream on."""
         self.sync()
+        self.phase = 'services'
         model = self.oracle.model  # constant meanwhile: only screws are sent
         by_target: dict[str, list[Any]] = {}
         for case in cases:
@@ -803,6 +809,8 @@ class NodeFuzzer:
             'wrench received': self.wrench.received,
             'wrong publications': max(self.stiffness.wrong, self.wrench.wrong),
             'missing answers': max(self.stiffness.missing, self.wrench.missing),
+            'missing inputs': [f'{seq}: {self.case_of.get(seq, "?")}' for seq in sorted(
+                set(self.stiffness.skipped) | set(self.wrench.skipped))][:10],
             'wrong examples': self.stiffness.wrong_examples + self.wrench.wrong_examples,
             'wrong answers': self.wrong_answers,
             'wrong answer examples': self.wrong_answer_examples,
