@@ -51,6 +51,7 @@ from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
 from tensegrity_stiffness.ros.runtime.rest_length_topics import SpineRestLengthTopic
+from tensegrity_stiffness.ros.runtime.tf_broadcast import SpineFrames
 from tensegrity_stiffness.ros.runtime.topics import create_output_publisher, output_qos
 from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
 from tensegrity_stiffness.ros.services import spine_services
@@ -70,7 +71,7 @@ def declared_joint_count(node: Node) -> int:
     return spec.check(value)
 
 
-class SpineNode(SpineRestLengthTopic, StreamingNode):
+class SpineNode(SpineFrames, SpineRestLengthTopic, StreamingNode):
     """Publishes per-joint wrenches, K, K_c and the tip pose, implied wrench and stiffness per
     input; solves the chain's equilibrium as a service."""
 

@@ -47,6 +47,7 @@ from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
 from tensegrity_stiffness.ros.runtime.rest_length_topics import JointRestLengthTopic
+from tensegrity_stiffness.ros.runtime.tf_broadcast import JointFrames
 from tensegrity_stiffness.ros.runtime.topics import create_output_publisher, output_qos
 from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
 from tensegrity_stiffness.ros.services import joint_services
@@ -62,7 +63,7 @@ NODE_NAME = 'stiffness_node'
 DESIGN_DEADLINE_S = 5.0
 
 
-class StiffnessNode(JointRestLengthTopic, StreamingNode):
+class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
     """Publishes wrench, K, K_c, tensions, interpretation, markers and diagnostics per input."""
 
     OUTPUT_TOPICS = output_topics(joint_output_layouts(()))

@@ -36,6 +36,7 @@ from tensegrity_stiffness.ros.runtime.fast_lane import FastLane
 from tensegrity_stiffness.ros.runtime.last_input import LastInput
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.solver_worker import SolverWorker, WorkerDiedError
+from tensegrity_stiffness.ros.runtime.tf_broadcast import FrameBroadcaster
 from tensegrity_stiffness.ros.runtime.topics import (
     LATCHED_QOS,
     create_output_publisher,
@@ -68,8 +69,9 @@ class StreamingNode(Node):
     ``_output_frame(settings)`` (the frame of the outputs' headers); and the methods
     :meth:`_parameter_table`, :meth:`_streams`, :meth:`_output_messages`, :meth:`_outputs`,
     :meth:`_markers`, :meth:`_keep_topic_rest_lengths`, :meth:`_with_rest_lengths` and
-    :meth:`_diagnostic_statuses`. Its ``__init__`` calls ``super().__init__``, creates its
-    services, then calls :meth:`_start`.
+    :meth:`_diagnostic_statuses`, and its frames on ``/tf`` (:meth:`_frame_transforms`,
+    :meth:`_static_frame_transforms`: a mixin of :mod:`.tf_broadcast`). Its ``__init__`` calls
+    ``super().__init__``, creates its services, then calls :meth:`_start`.
     """
 
     OUTPUT_TOPICS: tuple[tuple[Any, str], ...] = ()
@@ -103,6 +105,7 @@ class StreamingNode(Node):
                                    for t, topic in self.OUTPUT_TOPICS]
         self._pub_markers = create_output_publisher(self, MarkerArray, '~/markers', out_qos)
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics', 10)
+        self._frames = FrameBroadcaster(self)
 
         qos = input_qos(depth, values['qos.input_reliability'])
         self._lane = FastLane(self, self.reporter.internal_error) \
@@ -135,9 +138,10 @@ class StreamingNode(Node):
                                 lambda _: None, lambda _: None, deadline_s=1.0 + SOLVER_GRACE_S)
         if self._lane is not None:
             self._lane.start()
+        self._send_static_frames(self._settings)
         self.get_logger().info(
             f'ready: {summary}, inputs {values["qos.input_reliability"]} depth '
-            f'{values["qos.depth"]}; {kernel.status()}')
+            f'{values["qos.depth"]}; {kernel.status()}; {self._frames.status}')
 
     def close(self) -> None:
         """End the fast lane and the worker process (called by the runner before the node is
@@ -185,6 +189,22 @@ class StreamingNode(Node):
         the node's own key-value pairs (input rates, rejections, generation, restarts)."""
         raise NotImplementedError
 
+    def _frame_transforms(self, settings: Any, state: Any) -> tuple[Any, ...]:
+        """The frames of a configuration's ``state`` on ``/tf`` (none unless a mixin of
+        :mod:`.tf_broadcast` gives them)."""
+        return ()
+
+    def _static_frame_transforms(self, settings: Any) -> tuple[Any, ...]:
+        """The frames fixed under ``settings``, on ``/tf_static``."""
+        return ()
+
+    def _send_static_frames(self, settings: Any) -> None:
+        """The fixed frames on ``/tf_static`` (at the start and after a parameter change), with
+        ``tf.enabled``."""
+        if settings.values['tf.enabled']:
+            self._frames.send_static(self._static_frame_transforms(settings),
+                                     self._clock.now().to_msg())
+
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, values: Mapping[str, Any], names: set[str]) -> None:
         """After a successful set: swap in the new settings (and output messages), keeping
@@ -208,6 +228,7 @@ class StreamingNode(Node):
                 return
             self.get_logger().info(f'parameters applied: {sorted(names)}')
             try:  # an exception here would reach the parameter service, and the executor
+                self._send_static_frames(settings)
                 self._republish_last()
             except Exception as exc:  # the safety net: no callback may end the node
                 self.reporter.internal_error('re-publish', exc)
@@ -247,6 +268,8 @@ class StreamingNode(Node):
                 markers = None
                 if settings.marker_period == 0.0:  # one per input; else _publish_markers
                     markers = self._markers(settings, outputs.state, stamp)
+                frames = self._frames.message(self._frame_transforms(
+                    settings, outputs.state), stamp) if settings.values['tf.enabled'] else None
             except ValueError as exc:
                 self.reporter.reject(source, str(exc))
                 return
@@ -256,6 +279,8 @@ class StreamingNode(Node):
                     publisher.publish(msg)
             if markers is not None:
                 self._pub_markers.publish(markers)
+            if frames is not None:
+                self._frames.publish(frames)
             self._publish_extras(settings, xi, outputs)
             self._last.record(xi, stamp, outputs, start)
 
