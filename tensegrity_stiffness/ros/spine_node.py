@@ -76,6 +76,7 @@ class SpineNode(SpineFrames, SpineRestLengthTopic, StreamingNode):
     input; solves the chain's equilibrium as a service."""
 
     OUTPUT_TOPICS = OUTPUT_TOPICS
+    EIGENVALUES_TOPIC = '~/tip_stiffness_eigenvalues'
     WORKER_NAME = 'chain equilibrium worker'
     _build_settings = staticmethod(spine_node_settings)
     _output_frame = attrgetter('base_frame')
@@ -98,6 +99,9 @@ class SpineNode(SpineFrames, SpineRestLengthTopic, StreamingNode):
     # ------------------------------------------------------------------ declarations
     def _parameter_table(self) -> tuple[ParameterSpec, ...]:
         return spine_node_parameters(declared_joint_count(self))
+
+    def _cartesian_stiffness(self, outputs: SpineOutputs) -> np.ndarray:
+        return outputs.tip_stiffness_tool
 
     def _streams(self) -> tuple[Stream, ...]:
         return ((Float64MultiArray, '~/screws', self._on_screws),

@@ -67,6 +67,7 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
     """Publishes wrench, K, K_c, tensions, interpretation, markers and diagnostics per input."""
 
     OUTPUT_TOPICS = output_topics(joint_output_layouts(()))
+    EIGENVALUES_TOPIC = '~/stiffness_eigenvalues'
     WORKER_NAME = 'equilibrium worker'
     _build_settings = staticmethod(joint_node_settings)
     _output_frame = attrgetter('link1_frame')
@@ -114,6 +115,9 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
             return
         publisher.publish(conversions.vector_to_multiarray(modes.frequencies,
                                                            NATURAL_FREQUENCIES_LABEL))
+
+    def _cartesian_stiffness(self, outputs: JointOutputs) -> np.ndarray:
+        return outputs.state.cartesian_stiffness
 
     def _streams(self) -> tuple[Stream, ...]:
         return ((Float64MultiArray, '~/screw', self._on_screw),

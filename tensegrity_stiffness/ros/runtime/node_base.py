@@ -28,6 +28,8 @@ from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.mechanics import kernel
+from tensegrity_stiffness.mechanics.interpretation import principal_stiffnesses
+from tensegrity_stiffness.nodes.layouts import STIFFNESS_EIGENVALUES_LABEL
 from tensegrity_stiffness.nodes.parameters import ParameterSpec
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
@@ -75,6 +77,8 @@ class StreamingNode(Node):
     """
 
     OUTPUT_TOPICS: tuple[tuple[Any, str], ...] = ()
+    #: The topic of the principal stiffnesses of :meth:`_cartesian_stiffness` ('' : none).
+    EIGENVALUES_TOPIC = ''
     WORKER_NAME = 'worker'
     #: Whether the node serves solver calls (services): only then does it run a worker process.
     SERVES_SOLVES = True
@@ -104,6 +108,9 @@ class StreamingNode(Node):
         self._output_publishers = [create_output_publisher(self, t, topic, out_qos)
                                    for t, topic in self.OUTPUT_TOPICS]
         self._pub_markers = create_output_publisher(self, MarkerArray, '~/markers', out_qos)
+        self._pub_eigenvalues = create_output_publisher(
+            self, Float64MultiArray, self.EIGENVALUES_TOPIC, out_qos) \
+            if self.EIGENVALUES_TOPIC else None
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics', 10)
         self._frames = FrameBroadcaster(self)
 
@@ -281,8 +288,24 @@ class StreamingNode(Node):
                 self._pub_markers.publish(markers)
             if frames is not None:
                 self._frames.publish(frames)
+            self._publish_eigenvalues(outputs)
             self._publish_extras(settings, xi, outputs)
             self._last.record(xi, stamp, outputs, start)
+
+    def _cartesian_stiffness(self, outputs: Any) -> np.ndarray:
+        """The Cartesian stiffness (linear first) whose principal stiffnesses go on
+        ``EIGENVALUES_TOPIC``."""
+        raise NotImplementedError
+
+    def _publish_eigenvalues(self, outputs: Any) -> None:
+        """``EIGENVALUES_TOPIC`` (6 values, :func:`principal_stiffnesses`), while someone
+        subscribes (two 3x3 eigenvalue problems: some 20 us)."""
+        publisher = self._pub_eigenvalues
+        if publisher is None or publisher.get_subscription_count() == 0:
+            return
+        publisher.publish(conversions.vector_to_multiarray(
+            principal_stiffnesses(self._cartesian_stiffness(outputs)),
+            STIFFNESS_EIGENVALUES_LABEL))
 
     def _publish_extras(self, settings: Any, xi: np.ndarray, outputs: Any) -> None:
         """Outputs a node publishes after the per-input ones, only when configured (none by
