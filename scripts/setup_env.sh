@@ -12,7 +12,7 @@
 #   .venv/.tensegrity_venv_stamp       requirement pins + constraints.txt + python version + path
 #   install/.tensegrity_build_stamp    venv stamp + the build files (package.xml, CMakeLists.txt,
 #                                      cmake/), srv/ and the kernel's sources (contents), and the
-#                                      names of the Python, config and launch files (installed as
+#                                      names of the Python, config, launch and viewer files (installed as
 #                                      one symlink per file: a new file needs a build, an edited
 #                                      one does not).
 # Usage: bash scripts/setup_env.sh            (then: source scripts/env.sh)
@@ -137,7 +137,7 @@ build_hash="$( {
       tensegrity_stiffness/mechanics/kernel.py; } | LC_ALL=C sort \
     | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done
   # Installed as symlinks: names count.
-  find tensegrity_stiffness config launch -type f ! -path '*__pycache__*' 2>/dev/null \
+  find tensegrity_stiffness config launch rviz foxglove -type f ! -path '*__pycache__*' 2>/dev/null \
     | LC_ALL=C sort
 } | sha)"
 

@@ -19,6 +19,8 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
 * ``bag``          what the node would publish, for a whole rosbag2 recording (needs rosbags)
 * ``calibrate``    each string's stiffness and rest-length offset from a recording (rosbag2 or
   CSV), with identifiability and std (:mod:`tensegrity_stiffness.cli.calibration_report`)
+* ``record``       a rosbag2 of a running node's topics (:mod:`.record_command`; rclpy, in a
+  child process)
 * ``export-mjcf``  the digital twin's MuJoCo model of the joint or the spine
 * ``modes``        natural frequencies, damping ratios and mode shapes at the unloaded
   equilibrium (:mod:`tensegrity_stiffness.mechanics.dynamics`; ``--plot`` draws them)
@@ -41,6 +43,7 @@ from tensegrity_stiffness.cli import (
     figure_commands,
     joint_commands,
     planar_commands,
+    record_command,
     recording_commands,
     spine_commands,
 )
@@ -63,6 +66,7 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     figure_commands.add_plot_parser,
     recording_commands.add_bag_parser,
     recording_commands.add_calibrate_parser,
+    record_command.add_record_parser,
     spine_commands.add_chain_parser,
     recording_commands.add_export_mjcf_parser,
     figure_commands.add_figures_parser,

@@ -46,6 +46,20 @@ def interpret_stiffness(stiffness: ArrayLike) -> StiffnessInterpretation:
                                    np.linalg.norm(K, axis=1))
 
 
+def principal_stiffnesses(cartesian_stiffness: ArrayLike) -> FloatArray:
+    """(6,) principal stiffnesses of a Cartesian stiffness (rows a wrench ``[fx fy fz mx my
+    mz]``, columns a twist ``[dx dy dz rx ry rz]``, linear first, as ``K_c`` and a spine's tip
+    stiffness): the eigenvalues of the symmetric part of its translational block (force per
+    displacement, N/m), then of its rotational block (moment per rotation, N m/rad), each
+    ascending. The viewers plot them (``~/stiffness_eigenvalues``)."""
+    K = np.asarray(cartesian_stiffness, dtype=np.float64)
+    if K.shape != (6, 6):
+        raise ValueError(f'cartesian_stiffness must have shape (6, 6), got {K.shape}')
+    translational, rotational = K[:3, :3], K[3:, 3:]
+    return np.concatenate([np.linalg.eigvalsh(0.5 * (translational + translational.T)),
+                           np.linalg.eigvalsh(0.5 * (rotational + rotational.T))])
+
+
 def _summing_map() -> FloatArray:
     """(36, 16) 0/1 matrix: squared entries of K (row-major) -> the squares of the 16 norms of
     :func:`interpretation_vector`."""

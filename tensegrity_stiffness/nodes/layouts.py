@@ -33,6 +33,12 @@ CARTESIAN_STIFFNESS_COL_LABEL = 'cols: ' + TWIST_LABEL
 #: Label of ``~/natural_frequencies`` (``dynamics.enabled``): the undamped natural frequencies
 #: of the joint's 6 modes (or a spine's 6N), ascending.
 NATURAL_FREQUENCIES_LABEL = 'natural frequencies [Hz], modes in ascending order'
+#: Label of ``~/stiffness_eigenvalues`` (a spine's ``~/tip_stiffness_eigenvalues``): the
+#: principal stiffnesses of K_c (the tip stiffness in the tool frame),
+#: :func:`~tensegrity_stiffness.mechanics.interpretation.principal_stiffnesses`.
+STIFFNESS_EIGENVALUES_LABEL = ('principal stiffnesses: eigenvalues of the symmetric part of the '
+                               'translational block [N/m] x3, then of the rotational block '
+                               '[N m/rad] x3, each ascending')
 
 #: Label of ``~/string_tensions``: this prefix, then the string names in config order.
 TENSIONS_LABEL_PREFIX = 'tensions [N], strings in config order: '

@@ -32,6 +32,7 @@ from tensegrity_stiffness.mechanics.dynamics import (
 )
 from tensegrity_stiffness.mechanics.joint import FORCE_LAWS, JointModel
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
+from tensegrity_stiffness.nodes.frames import spine_link_frame
 
 TYPES = ('bool', 'int', 'double', 'string', 'double_array', 'string_array')
 RELIABILITIES = ('reliable', 'best_effort')
@@ -157,6 +158,14 @@ FRAME_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "link 2's frame (child frame of ~/pose)"),
 )
 
+#: The frames a node broadcasts on /tf (:mod:`tensegrity_stiffness.nodes.frames`): the joint's
+#: link 1 -> link 2, a spine's base -> every link (and link N -> tool on /tf_static).
+TF_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('tf.enabled', 'bool', True,
+                  "broadcast every input's frames on /tf (a spine's tool frame on /tf_static) "
+                  'when tf2_msgs is installed; the frames: docs/nodes.md, section TF'),
+)
+
 _ANGLE_RANGE = (-2.0 * math.pi, 2.0 * math.pi)
 PLANAR_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('planar.L', 'double', 1.0, 'mobile triangle side L (base side 2 L), m',
@@ -236,8 +245,8 @@ JOINT_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = LINK2_PARAMETERS + (
 )
 
 STIFFNESS_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
-    JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + FRAME_PARAMETERS + PLANAR_PARAMETERS
-    + COMMON_PARAMETERS + JOINT_DYNAMICS_PARAMETERS)
+    JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + FRAME_PARAMETERS + TF_PARAMETERS
+    + PLANAR_PARAMETERS + COMMON_PARAMETERS + JOINT_DYNAMICS_PARAMETERS)
 
 
 def by_name(table: Iterable[ParameterSpec]) -> dict[str, ParameterSpec]:
@@ -445,7 +454,8 @@ SPINE_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = (
 def spine_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, ...]:
     """Every parameter of ``spine_node`` for a spine of ``n_joints``, in declaration order."""
     return (JOINT_PARAMETERS + joint_override_parameters(n_joints) + CHAIN_PARAMETERS
-            + SPINE_FRAME_PARAMETERS + SPINE_COMMON_PARAMETERS + SPINE_DYNAMICS_PARAMETERS)
+            + SPINE_FRAME_PARAMETERS + TF_PARAMETERS + SPINE_COMMON_PARAMETERS
+            + SPINE_DYNAMICS_PARAMETERS)
 
 
 #: The parameters of ``spine_node`` with the default ``chain.n_joints``.
@@ -647,7 +657,7 @@ def sim_node_parameters(spine: bool = False, n_joints: int = 5) -> tuple[Paramet
              + SPINE_FRAME_PARAMETERS) if spine else (
                  JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + LINK2_PARAMETERS
                  + FRAME_PARAMETERS)
-    return model + SIM_PARAMETERS + _SIM_COMMON
+    return model + TF_PARAMETERS + SIM_PARAMETERS + _SIM_COMMON
 
 
 @dataclass(frozen=True)
@@ -691,7 +701,7 @@ def sim_node_settings(values: Mapping[str, Any], generation: int = 0) -> SimNode
                 raise ValueError(f'{name} must not be empty')
         chain = JointChain.from_dict(chain_document(checked))
         base, child = checked['frames.base'], checked['frames.tool']
-        imu = checked['frames.imu'] or f'{base}_link_{n}'
+        imu = checked['frames.imu'] or spine_link_frame(base, n)
         model = None
         longest = max(6 * n, sum(m.n_strings for m in chain.joints))
     else:
@@ -935,8 +945,8 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
 
 #: Every parameter of ``estimator_node``, in declaration order.
 ESTIMATOR_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
-    JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + FRAME_PARAMETERS + ESTIMATION_PARAMETERS
-    + COMMON_PARAMETERS)
+    JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + FRAME_PARAMETERS + TF_PARAMETERS
+    + ESTIMATION_PARAMETERS + COMMON_PARAMETERS)
 
 
 @dataclass(frozen=True)

@@ -783,9 +783,10 @@ def check_input(path: Path) -> None:
                        '.db3 file)')
 
 
-def _clear_output(path: Path, overwrite: bool, what: str) -> None:
-    """Make room for an output: an error if it exists unless ``overwrite``; only a rosbag2
-    folder (or an empty folder) or a plain file is removed."""
+def clear_output(path: Path, overwrite: bool, what: str) -> None:
+    """Make room for an output (of the bag command and ``record``): a :class:`BagError` if it
+    exists unless ``overwrite``; only a rosbag2 folder (or an empty folder) or a plain file is
+    removed."""
     if not path.exists() and not path.is_symlink():
         return
     if not overwrite:
@@ -945,9 +946,9 @@ def _process(reader: Any, job: _Job, progress: Callable[[int, int], None] | None
     connections = [c for c in reader.connections if c.topic in wanted]
     summary = BagSummary(input=str(src), output=str(out), storage=out_storage,
                          csv=str(job.csv_file) if job.csv_file else None, namespace=prefix)
-    _clear_output(out, job.overwrite, 'output')
+    clear_output(out, job.overwrite, 'output')
     if job.csv_file is not None:
-        _clear_output(job.csv_file, job.overwrite, 'csv file')
+        clear_output(job.csv_file, job.overwrite, 'csv file')
     typestore = jazzy_typestore()
     try:
         writer = Writer(out, version=9, storage_plugin=StoragePlugin[out_storage.upper()])

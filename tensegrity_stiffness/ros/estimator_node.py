@@ -56,11 +56,12 @@ from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded
 from tensegrity_stiffness.ros.runtime.rest_length_topics import JointRestLengthTopic
+from tensegrity_stiffness.ros.runtime.tf_broadcast import JointFrames
 
 NODE_NAME = 'estimator_node'
 
 
-class EstimatorNode(JointRestLengthTopic, StreamingNode):
+class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     """Publishes the pose (with covariance), load, screw, K, K_c, its std and the tensions of
     every estimate; markers and diagnostics."""
 

@@ -32,6 +32,12 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness.geometry.validation import require_frame
+from tensegrity_stiffness.nodes.frames import (
+    FrameTransform,
+    joint_frame_transforms,
+    spine_frame_transforms,
+    spine_tool_transform,
+)
 from tensegrity_stiffness.nodes.parameters import (
     CHAIN_PARAMETERS,
     SIM_PARAMETERS,
@@ -47,6 +53,7 @@ from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
+from tensegrity_stiffness.ros.runtime.tf_broadcast import FrameBroadcaster
 from tensegrity_stiffness.ros.runtime.topics import (
     LATCHED_QOS,
     create_output_publisher,
@@ -144,6 +151,8 @@ class SimNode(Node):
         self._wanted_cache: tuple[bool, ...] = ()
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics',
                                                         10)
+        self._frames = FrameBroadcaster(self)
+        self._send_static_frames()
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self._diagnosed = (time.perf_counter(), 0, 0.0)
         self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
@@ -160,7 +169,8 @@ class SimNode(Node):
         self.get_logger().info(
             f'ready: MuJoCo twin of the {kind}, {values["sim.rate"]:g} Hz '
             f'{"real time" if self._real_time else "as fast as possible (/clock)"}, publishing '
-            f'every {values["sim.publish_every"]} steps, max_length {values["sim.max_length"]}')
+            f'every {values["sim.publish_every"]} steps, max_length {values["sim.max_length"]}; '
+            f'{self._frames.status}')
 
     # ------------------------------------------------------------------ construction
     def _build_twin(self, settings: SimNodeSettings, screws: np.ndarray | None) -> None:
@@ -271,6 +281,7 @@ class SimNode(Node):
                 screws = sim.screws() if isinstance(sim, ChainSimulation) else sim.screw()[None]
                 self._build_twin(settings, screws)
             self._use_settings(settings)
+            self._send_static_frames()
         rest = self._pending_rest
         if rest is not None:
             self._pending_rest = None
@@ -347,11 +358,29 @@ class SimNode(Node):
             self._wanted_until = now + SUBSCRIBERS_PERIOD_S
         return self._wanted_cache
 
+    def _frame_transforms(self) -> tuple[FrameTransform, ...]:
+        """The twin's frames now: link 1 -> link 2, or base -> every link of the spine."""
+        settings, sim = self._settings, self._sim
+        if isinstance(sim, ChainSimulation):
+            return spine_frame_transforms(settings.base_frame, sim.link_poses())
+        return joint_frame_transforms(settings.base_frame, settings.child_frame, sim.pose())
+
+    def _send_static_frames(self) -> None:
+        """A spine's tool frame, fixed in link N, on ``/tf_static`` (with ``tf.enabled``)."""
+        settings = self._settings
+        if settings.chain is not None and settings.values['tf.enabled']:
+            self._frames.send_static(
+                [spine_tool_transform(settings.base_frame, settings.chain.n_joints,
+                                      settings.child_frame, settings.chain.tool)],
+                self.get_clock().now().to_msg())
+
     def _publish(self) -> None:
         settings, sim = self._settings, self._sim
         stamp = self._stamp()
         if self._pub_clock is not None:
             self._pub_clock.publish(Clock(clock=stamp))
+        if settings.values['tf.enabled']:
+            self._frames.send(self._frame_transforms(), stamp)
         spine = isinstance(sim, ChainSimulation)
         truth, pose, lengths_wanted, tensions_wanted, imu_wanted = self._wanted()
         if truth:

@@ -42,12 +42,13 @@ from tensegrity_stiffness.ros.estimator_node import EstimatorNode
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream
 from tensegrity_stiffness.ros.runtime.rest_length_topics import SpineRestLengthTopic
+from tensegrity_stiffness.ros.runtime.tf_broadcast import SpineFrames
 from tensegrity_stiffness.ros.spine_node import declared_joint_count
 
 NODE_NAME = 'spine_estimator_node'
 
 
-class SpineEstimatorNode(SpineRestLengthTopic, EstimatorNode):
+class SpineEstimatorNode(SpineFrames, SpineRestLengthTopic, EstimatorNode):
     """Publishes the screws, the tip pose (with covariance), the tip load and the tip stiffness
     with its std per estimate; markers and diagnostics."""
 

@@ -51,6 +51,7 @@ from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
 from tensegrity_stiffness.ros.runtime.rest_length_topics import SpineRestLengthTopic
+from tensegrity_stiffness.ros.runtime.tf_broadcast import SpineFrames
 from tensegrity_stiffness.ros.runtime.topics import create_output_publisher, output_qos
 from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
 from tensegrity_stiffness.ros.services import spine_services
@@ -70,11 +71,12 @@ def declared_joint_count(node: Node) -> int:
     return spec.check(value)
 
 
-class SpineNode(SpineRestLengthTopic, StreamingNode):
+class SpineNode(SpineFrames, SpineRestLengthTopic, StreamingNode):
     """Publishes per-joint wrenches, K, K_c and the tip pose, implied wrench and stiffness per
     input; solves the chain's equilibrium as a service."""
 
     OUTPUT_TOPICS = OUTPUT_TOPICS
+    EIGENVALUES_TOPIC = '~/tip_stiffness_eigenvalues'
     WORKER_NAME = 'chain equilibrium worker'
     _build_settings = staticmethod(spine_node_settings)
     _output_frame = attrgetter('base_frame')
@@ -97,6 +99,9 @@ class SpineNode(SpineRestLengthTopic, StreamingNode):
     # ------------------------------------------------------------------ declarations
     def _parameter_table(self) -> tuple[ParameterSpec, ...]:
         return spine_node_parameters(declared_joint_count(self))
+
+    def _cartesian_stiffness(self, outputs: SpineOutputs) -> np.ndarray:
+        return outputs.tip_stiffness_tool
 
     def _streams(self) -> tuple[Stream, ...]:
         return ((Float64MultiArray, '~/screws', self._on_screws),

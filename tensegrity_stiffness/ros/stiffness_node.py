@@ -47,6 +47,7 @@ from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded, guarded_service
 from tensegrity_stiffness.ros.runtime.rest_length_topics import JointRestLengthTopic
+from tensegrity_stiffness.ros.runtime.tf_broadcast import JointFrames
 from tensegrity_stiffness.ros.runtime.topics import create_output_publisher, output_qos
 from tensegrity_stiffness.ros.runtime.worker_calls import SOLVER_GRACE_S
 from tensegrity_stiffness.ros.services import joint_services
@@ -62,10 +63,11 @@ NODE_NAME = 'stiffness_node'
 DESIGN_DEADLINE_S = 5.0
 
 
-class StiffnessNode(JointRestLengthTopic, StreamingNode):
+class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
     """Publishes wrench, K, K_c, tensions, interpretation, markers and diagnostics per input."""
 
     OUTPUT_TOPICS = output_topics(joint_output_layouts(()))
+    EIGENVALUES_TOPIC = '~/stiffness_eigenvalues'
     WORKER_NAME = 'equilibrium worker'
     _build_settings = staticmethod(joint_node_settings)
     _output_frame = attrgetter('link1_frame')
@@ -113,6 +115,9 @@ class StiffnessNode(JointRestLengthTopic, StreamingNode):
             return
         publisher.publish(conversions.vector_to_multiarray(modes.frequencies,
                                                            NATURAL_FREQUENCIES_LABEL))
+
+    def _cartesian_stiffness(self, outputs: JointOutputs) -> np.ndarray:
+        return outputs.state.cartesian_stiffness
 
     def _streams(self) -> tuple[Stream, ...]:
         return ((Float64MultiArray, '~/screw', self._on_screw),

@@ -28,6 +28,8 @@ from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.mechanics import kernel
+from tensegrity_stiffness.mechanics.interpretation import principal_stiffnesses
+from tensegrity_stiffness.nodes.layouts import STIFFNESS_EIGENVALUES_LABEL
 from tensegrity_stiffness.nodes.parameters import ParameterSpec
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
@@ -36,6 +38,7 @@ from tensegrity_stiffness.ros.runtime.fast_lane import FastLane
 from tensegrity_stiffness.ros.runtime.last_input import LastInput
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.solver_worker import SolverWorker, WorkerDiedError
+from tensegrity_stiffness.ros.runtime.tf_broadcast import FrameBroadcaster
 from tensegrity_stiffness.ros.runtime.topics import (
     LATCHED_QOS,
     create_output_publisher,
@@ -68,11 +71,14 @@ class StreamingNode(Node):
     ``_output_frame(settings)`` (the frame of the outputs' headers); and the methods
     :meth:`_parameter_table`, :meth:`_streams`, :meth:`_output_messages`, :meth:`_outputs`,
     :meth:`_markers`, :meth:`_keep_topic_rest_lengths`, :meth:`_with_rest_lengths` and
-    :meth:`_diagnostic_statuses`. Its ``__init__`` calls ``super().__init__``, creates its
-    services, then calls :meth:`_start`.
+    :meth:`_diagnostic_statuses`, and its frames on ``/tf`` (:meth:`_frame_transforms`,
+    :meth:`_static_frame_transforms`: a mixin of :mod:`.tf_broadcast`). Its ``__init__`` calls
+    ``super().__init__``, creates its services, then calls :meth:`_start`.
     """
 
     OUTPUT_TOPICS: tuple[tuple[Any, str], ...] = ()
+    #: The topic of the principal stiffnesses of :meth:`_cartesian_stiffness` ('' : none).
+    EIGENVALUES_TOPIC = ''
     WORKER_NAME = 'worker'
     #: Whether the node serves solver calls (services): only then does it run a worker process.
     SERVES_SOLVES = True
@@ -102,7 +108,11 @@ class StreamingNode(Node):
         self._output_publishers = [create_output_publisher(self, t, topic, out_qos)
                                    for t, topic in self.OUTPUT_TOPICS]
         self._pub_markers = create_output_publisher(self, MarkerArray, '~/markers', out_qos)
+        self._pub_eigenvalues = create_output_publisher(
+            self, Float64MultiArray, self.EIGENVALUES_TOPIC, out_qos) \
+            if self.EIGENVALUES_TOPIC else None
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics', 10)
+        self._frames = FrameBroadcaster(self)
 
         qos = input_qos(depth, values['qos.input_reliability'])
         self._lane = FastLane(self, self.reporter.internal_error) \
@@ -135,9 +145,10 @@ class StreamingNode(Node):
                                 lambda _: None, lambda _: None, deadline_s=1.0 + SOLVER_GRACE_S)
         if self._lane is not None:
             self._lane.start()
+        self._send_static_frames(self._settings)
         self.get_logger().info(
             f'ready: {summary}, inputs {values["qos.input_reliability"]} depth '
-            f'{values["qos.depth"]}; {kernel.status()}')
+            f'{values["qos.depth"]}; {kernel.status()}; {self._frames.status}')
 
     def close(self) -> None:
         """End the fast lane and the worker process (called by the runner before the node is
@@ -185,6 +196,22 @@ class StreamingNode(Node):
         the node's own key-value pairs (input rates, rejections, generation, restarts)."""
         raise NotImplementedError
 
+    def _frame_transforms(self, settings: Any, state: Any) -> tuple[Any, ...]:
+        """The frames of a configuration's ``state`` on ``/tf`` (none unless a mixin of
+        :mod:`.tf_broadcast` gives them)."""
+        return ()
+
+    def _static_frame_transforms(self, settings: Any) -> tuple[Any, ...]:
+        """The frames fixed under ``settings``, on ``/tf_static``."""
+        return ()
+
+    def _send_static_frames(self, settings: Any) -> None:
+        """The fixed frames on ``/tf_static`` (at the start and after a parameter change), with
+        ``tf.enabled``."""
+        if settings.values['tf.enabled']:
+            self._frames.send_static(self._static_frame_transforms(settings),
+                                     self._clock.now().to_msg())
+
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, values: Mapping[str, Any], names: set[str]) -> None:
         """After a successful set: swap in the new settings (and output messages), keeping
@@ -208,6 +235,7 @@ class StreamingNode(Node):
                 return
             self.get_logger().info(f'parameters applied: {sorted(names)}')
             try:  # an exception here would reach the parameter service, and the executor
+                self._send_static_frames(settings)
                 self._republish_last()
             except Exception as exc:  # the safety net: no callback may end the node
                 self.reporter.internal_error('re-publish', exc)
@@ -247,6 +275,8 @@ class StreamingNode(Node):
                 markers = None
                 if settings.marker_period == 0.0:  # one per input; else _publish_markers
                     markers = self._markers(settings, outputs.state, stamp)
+                frames = self._frames.message(self._frame_transforms(
+                    settings, outputs.state), stamp) if settings.values['tf.enabled'] else None
             except ValueError as exc:
                 self.reporter.reject(source, str(exc))
                 return
@@ -256,8 +286,26 @@ class StreamingNode(Node):
                     publisher.publish(msg)
             if markers is not None:
                 self._pub_markers.publish(markers)
+            if frames is not None:
+                self._frames.publish(frames)
+            self._publish_eigenvalues(outputs)
             self._publish_extras(settings, xi, outputs)
             self._last.record(xi, stamp, outputs, start)
+
+    def _cartesian_stiffness(self, outputs: Any) -> np.ndarray:
+        """The Cartesian stiffness (linear first) whose principal stiffnesses go on
+        ``EIGENVALUES_TOPIC``."""
+        raise NotImplementedError
+
+    def _publish_eigenvalues(self, outputs: Any) -> None:
+        """``EIGENVALUES_TOPIC`` (6 values, :func:`principal_stiffnesses`), while someone
+        subscribes (two 3x3 eigenvalue problems: some 20 us)."""
+        publisher = self._pub_eigenvalues
+        if publisher is None or publisher.get_subscription_count() == 0:
+            return
+        publisher.publish(conversions.vector_to_multiarray(
+            principal_stiffnesses(self._cartesian_stiffness(outputs)),
+            STIFFNESS_EIGENVALUES_LABEL))
 
     def _publish_extras(self, settings: Any, xi: np.ndarray, outputs: Any) -> None:
         """Outputs a node publishes after the per-input ones, only when configured (none by
