@@ -5,7 +5,9 @@ in the same run: ``StiffnessController.update`` per 500 Hz tick (warm-started: t
 set and tensions carried from the last tick) and a full ``design_rest_lengths`` per tick (cold,
 what a controller without warm start would pay), in three regimes: holding a pose with a noisy
 measurement, following a moving target (a 1 Hz circle of 1 mm and 0.02 rad), and the same with
-a target K_c. Also the spine controller's tick (5 joints). Part ``--loop``: the whole loop
+a target K_c. Then the same tick on a paced clock at 500 Hz and 1 kHz (``--paced``, as the node's
+timer runs it): tick time and missed ticks, against a full design per tick. Also the spine
+controller's tick (5 joints). Part ``--loop``: the whole loop
 across processes (sim_node -> estimator_node with 12 load cells + IMU -> stiffness_controller ->
 sim_node, started as test/test_control_node.py does; needs ``source scripts/env.sh``) at 500 Hz
 and 1 kHz: the controller's ticks, missed ticks, tick time and the latency from the twin's
@@ -101,6 +103,65 @@ def joint_part(ticks: int) -> None:
         print(f'  design_rest_lengths (cold) {stats(b)}   ({np.median(b) / med:.1f}x)')
 
 
+def paced(fn: Callable[[int], object], rate: float, seconds: float) -> tuple[np.ndarray, int]:
+    """``fn`` on a wall clock at ``rate`` Hz for ``seconds``, as the node's timer runs its tick:
+    the tick times (us) and the missed ticks (slots that passed while a tick was still running,
+    so they never ran)."""
+    period = 1.0 / rate
+    n = int(seconds * rate)
+    times, missed, k = [], 0, 0
+    start = time.perf_counter()
+    while k < n:
+        slot = start + k * period
+        now = time.perf_counter()
+        if now < slot:
+            time.sleep(slot - now)
+        t0 = time.perf_counter()
+        fn(k)
+        t1 = time.perf_counter()
+        times.append((t1 - t0) * 1e6)
+        following = max(k + 1, int((t1 - start) / period))  # the slot running at t1 is late
+        missed += following - (k + 1)  # slots that began and ended while this tick ran
+        k = following
+    return np.asarray(times), missed
+
+
+def paced_part(seconds: float) -> None:
+    """The moving-target tick with K_c* on a paced clock at 500 Hz and 1 kHz: update() against
+    a full design per tick, side by side."""
+    model = JointModel.from_yaml(config.packaged_config_path())
+    lim = ActuatorLimits(0.5 * model.rest_lengths, 1.2 * model.rest_lengths, 0.05)
+    rng = np.random.default_rng(1)
+    xi0 = model.initial_screw
+    K = design_rest_lengths(model, xi0, np.zeros(6), 0.5, 1.5).cartesian_stiffness
+    print(f'paced ticks, moving target + K_c*, {seconds:g} s per row:')
+    for rate in (500.0, 1000.0):
+        dt = 1.0 / rate
+        ctl = StiffnessController(model, lim, model.rest_lengths)
+
+        def target(k: int, dt: float = dt) -> ControlTarget:
+            phase = 2 * np.pi * k * dt
+            d = np.array([0.02 * np.cos(phase), 0.02 * np.sin(phase), 0,
+                          1e-3 * np.sin(phase), 1e-3 * np.cos(phase), 0])
+            return ControlTarget(screw=xi0 + d, cartesian_stiffness=K)
+
+        def tick(k: int, ctl: StiffnessController = ctl, dt: float = dt) -> None:
+            tgt = target(k)
+            ctl.update(dt, tgt, screw=tgt.screw + rng.normal(0, NOISE, 6))
+
+        def design(k: int) -> None:
+            tgt = target(k)
+            design_rest_lengths(model, tgt.screw, np.zeros(6),
+                                target_stiffness=tgt.cartesian_stiffness)
+
+        for k in range(200):
+            tick(k)
+        for label, fn in (('update() warm-started', tick), ('design_rest_lengths (cold)', design)):
+            times, missed = paced(fn, rate, seconds)
+            print(f'  {rate:6g} Hz {label:<28} {stats(times)}   missed {missed} of '
+                  f'{int(seconds * rate)}')
+
+
 def spine_part(ticks: int) -> None:
     chain = JointChain.from_yaml(Path(config.packaged_config_path()).with_name(
         'default_spine.yaml'))
@@ -182,10 +243,15 @@ def main() -> None:
     parser.add_argument('--ticks', type=int, default=2000)
     parser.add_argument('--loop', type=float, default=0.0, metavar='SECONDS',
                         help='also run the loop across processes this long per rate')
+    parser.add_argument('--paced', type=float, default=3.0, metavar='SECONDS',
+                        help='the tick on a paced 500 Hz / 1 kHz clock this long per row '
+                        '(0: skip)')
     parser.add_argument('--publish-every', type=int, default=1,
                         help="the twin's sim.publish_every in the loop (1: readings at 1 kHz)")
     args = parser.parse_args()
     joint_part(args.ticks)
+    if args.paced > 0.0:
+        paced_part(args.paced)
     spine_part(args.ticks)
     if args.loop > 0.0:
         loop_part(args.loop, args.publish_every)

@@ -15,8 +15,9 @@ library). Client ``stiffness`` subscribes to ``~/stiffness`` alone (a controller
 the other four outputs. The client receives on a lean wait-set loop (``lane``, the node's own
 :class:`FastLane`, as a compiled controller's loop would) or on its rclpy executor
 (``executor``, whose per-message cost then shares the 2 cores with the node). Then the round
-trip of each service on the first path. Prints median /
-p99 / max latency and drops, side by side.
+trip of each service on the first path, and the equilibrium service against its floor (an rclpy
+round trip plus the library's solve, both measured in the run). Prints median / p99 / max
+latency and drops, side by side.
 Targets (issue 12): at 1 kHz median <= 0.8 ms, p99 <= 3 ms, 0 drops; at 2 kHz 0 drops, median
 <= 1.5 ms.
 """
@@ -59,6 +60,7 @@ from tensegrity_stiffness.srv import (  # noqa: E402
     SolveEquilibrium,
 )
 
+from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.ros import conversions  # noqa: E402
 
@@ -141,6 +143,26 @@ def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Ge
     return out
 
 
+def equilibrium_floor(model: JointModel, times: dict[str, list[float]], calls: int,
+                      rng: np.random.Generator) -> str:
+    """The equilibrium service's floor, measured in this run: an rclpy service round trip (the
+    planar forward service, whose computation is 20 us) plus the library's solve of the same
+    kind of request from the last solution; and the service's median against it."""
+    solves, start = [], model.initial_screw
+    for _ in range(calls):
+        W = np.r_[rng.normal(scale=0.1, size=3), rng.normal(scale=0.002, size=3)]
+        t0 = time.perf_counter()
+        result = solve_equilibrium(model, W, initial_screw=start)
+        solves.append(time.perf_counter() - t0)
+        start = result.screw if result.success else start
+    trip = float(np.median(times['planar_forward_kinematics']))
+    solve = float(np.median(solves))
+    service = float(np.median(times['solve_equilibrium']))
+    return (f'  equilibrium floor: round trip {trip * 1e3:.3f} ms + solve {solve * 1e3:.3f} ms '
+            f'= {(trip + solve) * 1e3:.3f} ms; service median {service * 1e3:.3f} ms '
+            f'= {service / (trip + solve):.2f}x the floor')
+
+
 PATHS = {'fast': 'true', 'executor': 'false'}
 
 
@@ -160,8 +182,10 @@ def run(path: str, rate: float, client: str, loop: str, args: argparse.Namespace
                               latencies)
               + f'  drops {drops} of {sent}', flush=True)
         if services:
-            for name, times in service_round_trips(ros, base, args.calls, rng).items():
+            trips = service_round_trips(ros, base, args.calls, rng)
+            for name, times in trips.items():
                 print(latency_summary(f'  {name}', times), flush=True)
+            print(equilibrium_floor(model, trips, args.calls, rng), flush=True)
     finally:
         ros.close()
         code = proc.stop()

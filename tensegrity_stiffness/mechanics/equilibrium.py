@@ -156,12 +156,15 @@ def solve_equilibrium(
     tolerance: float = RESIDUAL_TOLERANCE,
     max_iterations: int = MAX_NEWTON_ITERATIONS,
     time_budget: float | None = None,
+    newton_only: bool = False,
 ) -> EquilibriumResult:
     """Find ``xi`` with ``F(xi) + W = 0`` starting from ``initial_screw``.
 
     ``external_wrench`` W (6,) = [force (N); moment (N m)] on link 2, in {1} about its origin.
     ``initial_screw`` defaults to ``model.initial_screw``. ``time_budget`` (s) bounds the whole
-    solve, except the first :data:`MIN_NEWTON_ITERATIONS` Newton steps. Bad input raises
+    solve, except the first :data:`MIN_NEWTON_ITERATIONS` Newton steps. ``newton_only``: at most
+    ``max_iterations`` damped Newton steps, without the trust-region fallback and the
+    continuation (a cheap first try, e.g. a node's before it asks its worker). Bad input raises
     ValueError; failure to converge returns ``success=False`` with a reason (no exception).
     """
     W = np.asarray(external_wrench, dtype=np.float64)
@@ -189,10 +192,10 @@ def solve_equilibrium(
 
     x, norm, iterations = _newton(model, W, rest, x0, max_iterations, tolerance, deadline,
                                   min(MIN_NEWTON_ITERATIONS, max_iterations))
-    if norm > tolerance and time.perf_counter() < deadline:
+    if norm > tolerance and not newton_only and time.perf_counter() < deadline:
         x, norm, iterations = _fallback(model, W, rest, x, norm, iterations, tolerance,
                                         max_iterations, deadline)
-    if norm > tolerance and time.perf_counter() < deadline:
+    if norm > tolerance and not newton_only and time.perf_counter() < deadline:
         x, norm, iterations = _continuation(model, W, rest, x0, x, norm, iterations, tolerance,
                                             max_iterations, deadline)
     state = model.evaluate(x, rest)

@@ -8,7 +8,8 @@ documented in docs/nodes.md; the conventions (frames, orderings, signs) in
 
 Built on :class:`.StreamingNode` (:mod:`.node_base`: concurrency, the settings swap, the
 publication under one lock); ``~/screw`` and ``~/pose`` are its streamed inputs, the equilibrium
-and design services await the worker process, the planar services answer on the executor. All
+and design services await the worker process (an equilibrium request is first tried on the
+executor under a small budget), the planar services answer on the executor. All
 the configuration a computation needs is one immutable :class:`JointNodeSettings`.
 """
 
@@ -166,16 +167,20 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
     async def _on_solve_equilibrium(self, request: SolveEquilibrium.Request,
                                     response: SolveEquilibrium.Response
                                     ) -> SolveEquilibrium.Response:
-        """Validated here, solved in the worker process within ``equilibrium.time_budget``."""
+        """Validated here and tried here under a small budget
+        (:meth:`.EquilibriumJob.quick_kwargs`); a request that try does not solve goes to the
+        worker process, within ``equilibrium.time_budget``."""
         kind = '~/solve_equilibrium'
         settings = self._settings
         try:
             job = joint_services.equilibrium_job(request, settings, self._last_solution)
         except ValueError as exc:
             return self._invalid_request(kind, response, exc)
-        result = await self._in_worker_or_fail(
-            kind, response, solve_equilibrium, (settings.model, job.external_wrench),
-            job.kwargs(), job.time_budget + SOLVER_GRACE_S)
+        result = solve_equilibrium(settings.model, job.external_wrench, **job.quick_kwargs())
+        if not result.success:
+            result = await self._in_worker_or_fail(
+                kind, response, solve_equilibrium, (settings.model, job.external_wrench),
+                job.kwargs(), job.time_budget + SOLVER_GRACE_S)
         if result is not None and joint_services.fill_equilibrium(response, result):
             self._last_solution = result.screw
         return response

@@ -142,3 +142,21 @@ def test_an_easy_solve_is_not_cut_short_by_a_spent_budget(model):
     assert 1 <= res.iterations <= MIN_NEWTON_ITERATIONS
     hard = solve_equilibrium(model, np.r_[100.0, 0, 0, 0, 0, 0], time_budget=1e-9)
     assert not hard.success and 'time budget' in hard.message
+
+
+def test_newton_only_stops_at_its_iterations_without_the_fallback(model):
+    """The nodes' first try (ros/services/joint_services.QUICK_SOLVE_ITERATIONS): from this start
+    Newton needs 9 steps; with 8 and ``newton_only`` it fails after exactly 8, where the full
+    solve's trust-region fallback finishes the job."""
+    start = [2.4408, -0.426, -1.4901, 0.0369, -0.0106, 0.0204]
+    full = solve_equilibrium(model, np.zeros(6), initial_screw=start)
+    assert full.success and full.iterations == 9
+    assert np.allclose(full.screw, model.initial_screw, atol=1e-9)
+    quick = solve_equilibrium(model, np.zeros(6), initial_screw=start, max_iterations=8,
+                              newton_only=True)
+    assert not quick.success and quick.iterations == 8
+    assert 'no convergence' in quick.message
+    assert solve_equilibrium(model, np.zeros(6), initial_screw=start, max_iterations=8).success
+    nine = solve_equilibrium(model, np.zeros(6), initial_screw=start, max_iterations=9,
+                             newton_only=True)
+    assert nine.success and np.allclose(nine.screw, full.screw, atol=1e-12)

@@ -180,9 +180,9 @@ class SolverWorker:
             process = self._process if key in self._jobs else None
         if process is None:
             return
+        process.kill()  # the reader sees it end and starts a fresh worker
         self._settle(key, error=WorkerOverrunError(
             f'no result within {deadline_s:.3g} s; {self.name} replaced'))
-        process.kill()  # the reader sees it end and starts a fresh worker
 
     def _read(self, process: Any, conn: Connection) -> None:
         """Results of ``process`` until it ends; then fail what it held and replace it."""

@@ -2,8 +2,10 @@
 no rclpy (requests and responses are the generated message objects, or anything with the same
 fields), so they are tested without a node.
 
-``~/solve_equilibrium`` and ``~/design_rest_lengths`` are validated here and computed in the
-worker process; the planar services are answered here whole.
+``~/solve_equilibrium`` is validated here, tried on the node's executor under a small budget
+(:data:`QUICK_SOLVE_ITERATIONS`, :data:`QUICK_SOLVE_BUDGET_S`) and handed to the worker process
+only when that try does not converge; ``~/design_rest_lengths`` is computed in the worker; the
+planar services are answered here whole.
 """
 
 from __future__ import annotations
@@ -28,6 +30,15 @@ from tensegrity_stiffness.ros import conversions
 
 FloatArray = NDArray[np.float64]
 
+#: Newton iterations of the equilibrium solve tried on the node's executor before a request goes
+#: to the worker process. A request near the last solution converges in 3 (docs/performance.md:
+#: 0.15-0.7 ms), which the worker's hop (about 2 ms) would multiply; a hard one goes on in the
+#: worker, with its time budget and kill-on-hang.
+QUICK_SOLVE_ITERATIONS = 8
+#: Wall-clock budget (s) of that try, past its first ``MIN_NEWTON_ITERATIONS`` steps: what the
+#: executor (and the GIL the fast lane shares) gives a service request at most.
+QUICK_SOLVE_BUDGET_S = 0.002
+
 
 @dataclass(frozen=True)
 class EquilibriumJob:
@@ -40,8 +51,17 @@ class EquilibriumJob:
     max_iterations: int
 
     def kwargs(self) -> dict[str, Any]:
+        """The solver's keyword arguments for the worker: the node's budget and iterations."""
         return {'rest_lengths': self.rest_lengths, 'initial_screw': self.initial_screw,
                 'time_budget': self.time_budget, 'max_iterations': self.max_iterations}
+
+    def quick_kwargs(self) -> dict[str, Any]:
+        """The same for the try on the executor: Newton steps only, at most
+        :data:`QUICK_SOLVE_ITERATIONS` and :data:`QUICK_SOLVE_BUDGET_S` (never more than the
+        node's own)."""
+        return {**self.kwargs(), 'time_budget': min(self.time_budget, QUICK_SOLVE_BUDGET_S),
+                'max_iterations': min(self.max_iterations, QUICK_SOLVE_ITERATIONS),
+                'newton_only': True}
 
 
 def equilibrium_job(request: Any, settings: JointNodeSettings,
