@@ -240,3 +240,24 @@ def test_rclpy_internals_are_used_in_one_module_only() -> None:
                     isinstance(node, ast.Attribute) and node.attr == 'pointer'):
                 wrong.append(f'{path.relative_to(REPO)}:{node.lineno}')
     assert not wrong, '\n'.join(wrong)
+
+
+#: A function longer than this says why in its docstring, with the marker below.
+LONG_FUNCTION_LINES = 80
+LONG_FUNCTION_MARKER = '(Long:'
+
+
+def test_long_functions_say_why() -> None:
+    """No function of the package over :data:`LONG_FUNCTION_LINES` lines unless its docstring
+    gives the reason, as ``(Long: ...)``."""
+    unexplained = []
+    for path in MODULES:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            length = node.end_lineno - node.lineno + 1
+            if length > LONG_FUNCTION_LINES and \
+                    LONG_FUNCTION_MARKER not in (ast.get_docstring(node) or ''):
+                unexplained.append(f'{path.relative_to(REPO)}:{node.lineno} {node.name} '
+                                   f'({length} lines)')
+    assert not unexplained, 'split these or say why in the docstring:\n' + '\n'.join(unexplained)
