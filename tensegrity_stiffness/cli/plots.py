@@ -67,11 +67,18 @@ DPI = 100
 MIN_PIXELS = 100
 MAX_PIXELS = 8000
 #: Default PNG size (width, height) in pixels of each figure.
+#: The spine figure's tip-force arrow: its length as a fraction of the spine's largest extent
+#: (the force's direction, not its size, is drawn) and its colour (apart from the strings'
+#: colour map and the frames' RGB).
+TIP_FORCE_ARROW = 0.4
+TIP_FORCE_COLOUR = 'deepskyblue'
+#: Zoom of a 3D box fitted to a slender body (matplotlib leaves a margin for any rotation).
+FIT_ZOOM = 1.1
 DEFAULT_SIZES = {
     'joint': (800, 700),
     'extension': (1000, 450),
     'actuator-workspace': (900, 600),
-    'cartesian-workspace': (800, 700),
+    'cartesian-workspace': (800, 820),
     'theta2': (900, 750),
     'actuator-stiffness': (900, 600),
     'cartesian-stiffness': (800, 700),
@@ -187,15 +194,25 @@ def _finite_rows(curve: FloatArray) -> FloatArray:
 
 # ---------------------------------------------------------------------------- six-DOF joint
 def _equal_axes_3d(ax: Any, points: FloatArray, span: float, elevation: float,
-                   azimuth: float) -> None:
-    """Equal-scale 3D axes of side 1.1 ``span`` around ``points`` (mm), y of the base frame up."""
+                   azimuth: float, fit: bool = False) -> None:
+    """Equal-scale 3D axes around ``points`` (mm), y of the base frame up: a cube of side 1.1
+    ``span``, or with ``fit`` a box of 1.1 times each axis' extent (at least a quarter of
+    ``span``), so that a slender body (a spine) fills the figure at the same scale on each
+    axis."""
     centre = 0.5 * (points.max(axis=0) + points.min(axis=0))
-    half = 0.55 * span
-    ax.set_xlim(centre[0] - half, centre[0] + half)
-    ax.set_ylim(centre[1] - half, centre[1] + half)
-    ax.set_zlim(centre[2] - half, centre[2] + half)
-    ax.set_box_aspect((1.0, 1.0, 1.0))
+    extent = np.maximum(np.ptp(points, axis=0), 0.25 * span) if fit else np.full(3, span)
+    half = 0.55 * extent
+    ax.set_xlim(centre[0] - half[0], centre[0] + half[0])
+    ax.set_ylim(centre[1] - half[1], centre[1] + half[1])
+    ax.set_zlim(centre[2] - half[2], centre[2] + half[2])
+    # The view first: set_box_aspect maps the aspect through the vertical axis in effect.
     ax.view_init(elev=elevation, azim=azimuth, vertical_axis='y')
+    ax.set_box_aspect(tuple(extent / extent.max()), zoom=FIT_ZOOM if fit else 1.0)
+    if fit:  # narrow axes: fewer ticks, so that their labels do not run into each other
+        from matplotlib.ticker import MaxNLocator
+
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+            axis.set_major_locator(MaxNLocator(4))
     ax.set_xlabel('x (mm)')
     ax.set_ylabel('y (mm)')
     ax.set_zlabel('z (mm)')
@@ -305,8 +322,10 @@ def plot_extension_sweep(sweep: ExtensionSweep, path: str | Path, *,
     left.set_ylabel('Frobenius norm of the block')
     right.set_ylabel(r'$|K e_i|$ (rotation columns N/rad & N m/rad, translation N/m & N)',
                      fontsize=8)
-    left.legend(fontsize=8, loc='center right')
-    right.legend(fontsize=8, loc='center right', ncol=2)
+    # Below the axes: inside, every corner of a log-scale panel is crossed by some curve.
+    for ax, ncol in ((left, 2), (right, 3)):
+        ax.legend(fontsize=8, loc='upper center', bbox_to_anchor=(0.5, -0.16), ncol=ncol,
+                  frameon=False)
     return save_figure(fig, path)
 
 
@@ -410,7 +429,8 @@ def plot_cartesian_workspace(mech: PlanarMechanism, path: str | Path, *,
     ax.set_xlabel('x (m)')
     ax.set_ylabel('y (m)')
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8, loc='lower right', framealpha=0.9)
+    # Below the axes: inside, it covered the base triangle and the singular curves.
+    fig.legend(fontsize=8, loc='outside lower center', ncol=2, frameon=False)
     ax.set_title(f'Fig. 3: Cartesian workspace and singular curves '
                  f'(K1 = {mech.K1:g}, K2 = {mech.K2:g} N/m)', fontsize=10)
     return save_figure(fig, path)
@@ -690,15 +710,19 @@ def plot_spine(chain: JointChain, screws: ArrayLike, path: str | Path, *,
     W = None if tip_wrench is None else np.asarray(tip_wrench, dtype=np.float64)
     if W is not None and np.linalg.norm(W[:3]) > 0.0:
         origin = state.tip_transform[:3, 3] * MM
-        arrow = 0.25 * span * W[:3] / np.linalg.norm(W[:3])
-        ax.quiver(*origin, *arrow, color='black', linewidth=1.5)
-        handles.append(Line2D([], [], color='black', label=f'tip force '
-                              f'{np.linalg.norm(W[:3]):.3g} N'))
-    _equal_axes_3d(ax, cloud, span, elevation, azimuth)
+        arrow = TIP_FORCE_ARROW * span * W[:3] / np.linalg.norm(W[:3])
+        ax.quiver(*origin, *arrow, color=TIP_FORCE_COLOUR, linewidth=3.0,
+                  arrow_length_ratio=0.25)
+        cloud = np.vstack([cloud, origin + arrow])
+        handles.append(Line2D([], [], color=TIP_FORCE_COLOUR, linewidth=3.0,
+                              label=f'tip force {np.linalg.norm(W[:3]):.3g} N (direction)'))
+    _equal_axes_3d(ax, cloud, span, elevation, azimuth, fit=True)
     fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.5, pad=0.08,
                  label='string tension (N)')
-    ax.legend(handles=handles, loc='upper left', fontsize=8)
-    p = state.tip_transform[:3, 3] * MM
+    # Below the axes: inside, it covered the top of the spine.
+    fig.legend(handles=handles, loc='outside lower center', ncol=len(handles), fontsize=8,
+               frameon=False)
+    p = np.round(state.tip_transform[:3, 3] * MM, 1) + 0.0  # no '-0.0'
     ax.set_title(title or (f'spine of {chain.n_joints} joints, tip at '
                            f'({p[0]:.1f}, {p[1]:.1f}, {p[2]:.1f}) mm'), fontsize=10)
     return save_figure(fig, path)

@@ -153,6 +153,56 @@ def render(tables: Sequence[NodeTable] | None = None) -> str:
     return '\n'.join(head) + '\n' + '\n'.join(render_table(t) for t in tables)
 
 
+#: The flags that make a node executable print its usage instead of starting (before
+#: ``--ros-args``; after it, the arguments are ROS's).
+HELP_FLAGS = ('-h', '--help')
+
+
+def asks_for_help(argv: Sequence[str]) -> bool:
+    """Whether a node's command line ``argv`` (``sys.argv``: the program first) holds ``-h`` or
+    ``--help`` before ``--ros-args``."""
+    arguments = list(argv[1:])
+    if '--ros-args' in arguments:
+        arguments = arguments[:arguments.index('--ros-args')]
+    return any(flag in arguments for flag in HELP_FLAGS)
+
+
+def node_usage(node: str) -> str:
+    """The ``--help`` text of the node executable ``node`` (a name of
+    :func:`~tensegrity_stiffness.nodes.parameters.node_tables`): what it is, how to start it
+    with ROS arguments, and where its parameters, topics and services are documented."""
+    from tensegrity_stiffness.config import packaged_config_path
+
+    table = next((t for t in node_tables() if t.node == node), None)
+    if table is None:
+        raise ValueError(f'node {node!r} has no parameter table (known: '
+                         f'{", ".join(t.node for t in node_tables())})')
+    params = ''
+    if table.config:
+        config = Path(table.config).name
+        params = f' --params-file {packaged_config_path(config)}'
+    summary = table.summary[0].upper() + table.summary[1:] + '.' if table.summary else ''
+    lines = [
+        f'usage: {node} [-h] [--ros-args [--params-file FILE] [-p NAME:=VALUE ...] '
+        "[-r '~/TOPIC:=/OTHER' ...] [-r __ns:=/NAMESPACE]]",
+        '',
+        f'{node}, a ROS 2 node of the tensegrity_stiffness package. {summary}',
+        '',
+        'Start it (ros2 run finds the same executable):',
+        f'  ros2 run tensegrity_stiffness {node} --ros-args{params}',
+        '  Quote a remap of a private name (~/...) so that the shell leaves the ~ alone.',
+        '',
+        'options:',
+        '  -h, --help  print this text and exit, without starting the node',
+        '',
+        f'Parameters (names, types, defaults, ranges): docs/parameters.md#{node} of the '
+        f'tensegrity_stiffness repository'
+        + (f'; defaults as in config/{Path(table.config).name}' if table.config else '') + '.',
+        f'Topics, services and QoS: {table.page or "docs/nodes.md"}.',
+    ]
+    return '\n'.join(lines) + '\n'
+
+
 def check(path: Path, text: str | None = None) -> str:
     """An empty string when ``path`` holds the generated page, else what differs (a short
     unified diff, or that the file is missing)."""

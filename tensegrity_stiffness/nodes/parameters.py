@@ -467,12 +467,14 @@ SPINE_NODE_PARAMETERS: tuple[ParameterSpec, ...] = spine_node_parameters()
 class NodeTable:
     """One node's parameter table as ``docs/parameters.md`` shows it: the ``node`` (executable)
     name, its ``parameters`` in declaration order, the packaged ``config`` file that agrees with
-    their defaults (empty: none) and a one-line ``summary``."""
+    their defaults (empty: none), a one-line ``summary`` and the docs ``page`` of its topics and
+    services (the node's ``--help`` names them)."""
 
     node: str
     parameters: tuple[ParameterSpec, ...]
     config: str = ''
     summary: str = ''
+    page: str = ''
 
 
 def node_tables() -> tuple[NodeTable, ...]:
@@ -487,28 +489,32 @@ def node_tables() -> tuple[NodeTable, ...]:
     return (
         NodeTable('stiffness_node', STIFFNESS_NODE_PARAMETERS, 'config/default_joint.yaml',
                   'one joint: wrench, K, K_c per screw or pose; equilibrium, design and planar '
-                  'services'),
+                  'services', 'docs/nodes.md'),
         NodeTable('spine_node', SPINE_NODE_PARAMETERS, 'config/default_spine.yaml',
                   'a spine of chain.n_joints joints (the table for the default N = 5): '
                   'per-joint outputs, tip pose, tip wrench and tip stiffness; chain '
-                  'equilibrium service'),
+                  'equilibrium service', 'docs/nodes.md'),
         NodeTable('sim_node', sim_node_parameters(), 'config/default_joint.yaml',
                   'the MuJoCo twin of the joint (with sim.spine true and a spine config, of the '
-                  'spine): truth in the nodes\' input formats and simulated sensors'),
+                  'spine): truth in the nodes\' input formats and simulated sensors',
+                  'docs/simulation.md'),
         NodeTable('stiffness_bridge', BRIDGE_PARAMETERS, '',
                   'the stiffness in the form an impedance or admittance controller takes: '
                   'frame change, symmetric positive definite projection, clamps, low-pass, rate '
-                  'limit; published or set as the controller\'s parameters'),
+                  'limit; published or set as the controller\'s parameters',
+                  'docs/controllers.md'),
         NodeTable('estimator_node', ESTIMATOR_NODE_PARAMETERS, 'config/default_joint.yaml',
                   'pose, load and stiffness with their uncertainty from measured tensions, '
-                  'lengths, an IMU, motion capture or a force-torque sensor'),
+                  'lengths, an IMU, motion capture or a force-torque sensor',
+                  'docs/estimation.md'),
         NodeTable('spine_estimator_node', spine_estimator_node_parameters(),
                   'config/default_spine.yaml',
                   'the estimator of a spine (the table for the default N = 5): every screw, the '
-                  'tip load, tip pose and tip stiffness with their covariances'),
+                  'tip load, tip pose and tip stiffness with their covariances',
+                  'docs/estimation.md'),
         NodeTable('stiffness_controller', CONTROLLER_PARAMETERS, 'config/default_joint.yaml',
                   'rest-length commands that hold a target pose with a target K_c in closed '
-                  'loop, within the actuators\' range and rate'),
+                  'loop, within the actuators\' range and rate', 'docs/control.md'),
     )
 
 

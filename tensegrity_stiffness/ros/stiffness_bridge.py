@@ -58,6 +58,10 @@ INPUT_TOPIC = '~/input_stiffness'
 OUTPUT_TOPIC = '~/output_stiffness'
 #: Largest accepted input (a 6x6 matrix).
 MAX_INPUT_LENGTH = 36
+#: Seconds after the start at which a bridge that got no input and sees no publisher of its
+#: input topic says so (once): a remap that went wrong (e.g. ``-r ~/input_stiffness:=...``
+#: unquoted, which the shell turns into ``/root/input_stiffness:=...``) is otherwise silent.
+NO_PUBLISHER_WARNING_S = 5.0
 
 
 class StiffnessBridge(Node):
@@ -116,6 +120,7 @@ class StiffnessBridge(Node):
                 on_error=lambda exc: self.reporter.internal_error(INPUT_TOPIC, exc))
         self._tick_timer = self.create_timer(settings.tick_period, self._tick)
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
+        self._input_check = self.create_timer(NO_PUBLISHER_WARNING_S, self._check_input)
         if self._lane is not None:
             self._lane.start()
         target = (f'{OUTPUT_TOPIC} ({settings.layout})' if settings.kind == 'topic' else
@@ -148,6 +153,20 @@ class StiffnessBridge(Node):
         self.get_logger().info(f'parameters applied: {sorted(names)}')
 
     # ------------------------------------------------------------------ input
+    @guarded('input check')
+    def _check_input(self) -> None:
+        """Once, :data:`NO_PUBLISHER_WARNING_S` after the start: warn when no input came and
+        nobody publishes the input topic."""
+        self._input_check.cancel()
+        topic = self.resolve_topic_name(INPUT_TOPIC)
+        with self._lock:
+            inputs = self._inputs
+        if inputs == 0 and self.count_publishers(topic) == 0:
+            self.get_logger().warning(
+                f'{INPUT_TOPIC} ({topic}) has no publisher after {NO_PUBLISHER_WARNING_S:g} s: '
+                f'check the remap (-r \'{INPUT_TOPIC}:=/<node>/cartesian_stiffness\', quoted: '
+                'unquoted, the shell expands the ~)')
+
     @guarded(INPUT_TOPIC)
     def _on_input(self, msg: Float64MultiArray) -> None:
         settings = self._settings

@@ -128,33 +128,48 @@ class Monitor:
             self._tensions = np.asarray(msg.data, dtype=np.float64)
 
     def summary(self, elapsed: float, period: float) -> str:
-        """One line: rate, pose, K_c eigenvalues, slack strings, latency (and resets the
+        """One line (:func:`summary_line`) of what arrived since the last call (and resets the
         counters of the period)."""
         with self._lock:
             inputs, self._inputs = self._inputs, 0
             latencies, self._latencies = self._latencies, []
             pose, K, tensions = self._pose, self._stiffness, self._tensions
-        parts = [f't {elapsed:6.1f} s', f'input {inputs / period:6.0f} Hz']
-        if pose is not None:
-            p = pose[:3, 3] * 1e3
-            angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(pose[:3, :3]) - 1) / 2))))
-            parts.append(f'{"tip" if self.spine else "pose"} [{p[0]:6.2f} {p[1]:6.2f} '
-                         f'{p[2]:6.2f}] mm {angle:6.2f} deg')
-        else:
-            parts.append('pose -')
-        if K is not None:
-            eig = np.linalg.eigvalsh(0.5 * (K + K.T))
-            parts.append(f'{"K_tip" if self.spine else "K_c"} eig {eig[0]:.4g} .. {eig[-1]:.4g}')
-        else:
-            parts.append('K_c -')
-        slack = '-' if tensions is None else f'{int(np.count_nonzero(tensions <= 0.0))}'
-        parts.append(f'slack {slack}/{self.n_strings}')
-        if latencies:
-            parts.append(f'latency median {statistics.median(latencies) * 1e3:.2f} ms '
-                         f'max {max(latencies) * 1e3:.2f} ms')
-        else:
-            parts.append('latency -')
-        return '  '.join(parts)
+        return summary_line(elapsed, inputs / period, pose, K, tensions, latencies,
+                            spine=self.spine, n_strings=self.n_strings)
+
+
+def summary_line(elapsed: float, input_rate: float, pose: np.ndarray | None,
+                 stiffness: np.ndarray | None, tensions: np.ndarray | None,
+                 latencies: list[float], *, spine: bool, n_strings: int) -> str:
+    """The live line: time, input rate, pose (4x4; the tip's for a spine), the smallest and
+    largest eigenvalue of the symmetric part of ``stiffness`` (K_c or the tip stiffness), slack
+    strings, latency median and maximum (s). A field with nothing to show is ``-``; so are the
+    stiffness and the latency while no input arrives (a rate of 0 Hz: at the start, before the
+    subscriptions have matched, or after the twin stopped), as they would describe old or
+    unrelated messages."""
+    parts = [f't {elapsed:6.1f} s', f'input {input_rate:6.0f} Hz']
+    if pose is not None:
+        p = pose[:3, 3] * 1e3
+        angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(pose[:3, :3]) - 1) / 2))))
+        parts.append(f'{"tip" if spine else "pose"} [{p[0]:6.2f} {p[1]:6.2f} '
+                     f'{p[2]:6.2f}] mm {angle:6.2f} deg')
+    else:
+        parts.append('pose -')
+    live = input_rate > 0.0
+    label = 'K_tip' if spine else 'K_c'
+    if stiffness is not None and live:
+        eig = np.linalg.eigvalsh(0.5 * (stiffness + stiffness.T))
+        parts.append(f'{label} eig {eig[0]:.4g} .. {eig[-1]:.4g}')
+    else:
+        parts.append(f'{label} -')
+    slack = '-' if tensions is None else f'{int(np.count_nonzero(tensions <= 0.0))}'
+    parts.append(f'slack {slack}/{n_strings}')
+    if latencies and live:
+        parts.append(f'latency median {statistics.median(latencies) * 1e3:.2f} ms '
+                     f'max {max(latencies) * 1e3:.2f} ms')
+    else:
+        parts.append('latency -')
+    return '  '.join(parts)
 
 
 def stop_process(process: subprocess.Popen) -> int:

@@ -179,10 +179,13 @@ LIBRARY_EXAMPLES = [(page, i, code) for page in PAGES
 
 @pytest.mark.parametrize('page, index, code', LIBRARY_EXAMPLES,
                          ids=[f'{p.name}-{i}' for p, i, _ in LIBRARY_EXAMPLES])
-def test_library_examples_run(page: Path, index: int, code: str, monkeypatch, capsys):
-    """Every Python example of the docs that needs no ROS graph runs as printed (from the
-    repository root, as the examples' relative config paths assume)."""
-    monkeypatch.chdir(REPO)
+def test_library_examples_run(page: Path, index: int, code: str, tmp_path: Path, monkeypatch,
+                              capsys):
+    """Every Python example of the docs that needs no ROS graph runs as printed from a
+    directory outside the repository (the examples find the configs through
+    ``config.packaged_config_path``, not through paths relative to the repository root)."""
+    assert REPO not in tmp_path.resolve().parents
+    monkeypatch.chdir(tmp_path)
     exec(compile(code, f'{page.name} example {index}', 'exec'), {})
     capsys.readouterr()
 
@@ -201,3 +204,65 @@ def test_install_layout_names_every_launch_file_and_subpackage():
             assert f'`{init.parent.name}/`' in architecture, init.parent.name
     for init in sorted((REPO / 'tensegrity_stiffness' / 'ros').glob('*/__init__.py')):
         assert f'ros/{init.parent.name}/' in architecture, init.parent.name
+
+
+#: Fenced blocks of the pages that are not shell (their ``~/`` is no shell word).
+NOT_SHELL = {'python', 'yaml', 'json', 'xml', 'cpp', 'c++', 'cmake', 'text', 'msg', 'srv'}
+#: A word that starts with ``~/`` and is a ROS remap or parameter (``~/name:=...``) with the
+#: tilde unquoted: bash expands it to ``$HOME/name:=...`` before the node sees it.
+UNQUOTED_TILDE_REMAP = re.compile(r'''(?:^|[\s=`(])~/[^\s'"`]*:=''')
+
+
+def _shell_texts(page: Path) -> list[tuple[int, str]]:
+    """(line number, text) of every line of a shell block (a fence whose language is not
+    ``NOT_SHELL``) and of every inline code span of the prose of ``page``."""
+    out, language = [], None
+    for number, line in enumerate(page.read_text(encoding='utf-8').splitlines(), 1):
+        fence = re.match(r'^\s*```(\S*)', line)
+        if fence:
+            language = fence[1].lower() if language is None else None
+            continue
+        if language is None:
+            out += [(number, span) for span in re.findall(r'`([^`]+)`', line)]
+        elif language not in NOT_SHELL:
+            out.append((number, line))
+    return out
+
+
+@pytest.mark.parametrize('page', PAGES, ids=lambda p: p.name)
+def test_tilde_remaps_are_quoted(page: Path):
+    """A ``~/`` remap in a shell command is quoted (``-r '~/input_stiffness:=/x'``): unquoted,
+    bash turns it into ``/root/input_stiffness:=/x`` and the node waits on a topic nobody
+    publishes."""
+    found = [f'{page.name}:{number}: {text.strip()}' for number, text in _shell_texts(page)
+             if UNQUOTED_TILDE_REMAP.search(text)]
+    assert not found, 'unquoted ~/ remaps:\n' + '\n'.join(found)
+
+
+def test_the_tilde_check_finds_an_unquoted_remap(tmp_path: Path):
+    """The check above catches the form docs/controllers.md once had, in a block and inline,
+    and passes the quoted form and a home path."""
+    page = tmp_path / 'page.md'
+    page.write_text('```\nros2 run p n --ros-args -r ~/input_stiffness:=/j1/k\n```\n'
+                    "Or `-r ~/output_stiffness:=/c/t`, not `-r '~/output_stiffness:=/c/t'`.\n"
+                    '```bash\ncd ~/ws && x -r "~/a:=/b"\n```\n', encoding='utf-8')
+    hits = [n for n, text in _shell_texts(page) if UNQUOTED_TILDE_REMAP.search(text)]
+    assert hits == [2, 4]
+
+
+def test_command_line_table_names_every_command():
+    """docs/command_line.md's table has a row for every subcommand the parser has (read from
+    ``cli.parser.COMMANDS``, the commands of ``build_parser``, so a new command needs its row),
+    and no row for a command the parser does not have."""
+    import argparse
+
+    from tensegrity_stiffness.cli.parser import COMMANDS
+
+    commands = argparse.ArgumentParser().add_subparsers()
+    for add_parser in COMMANDS:  # as build_parser does
+        add_parser(commands)
+    text = (REPO / 'docs' / 'command_line.md').read_text(encoding='utf-8')
+    table = text[text.index('| command | what it prints |'):].split('\n\n')[0]
+    rows = {re.match(r'\| `([\w-]+)', row)[1] for row in table.splitlines()[2:]}
+    assert rows == set(commands.choices), (sorted(set(commands.choices) - rows),
+                                           sorted(rows - set(commands.choices)))

@@ -253,6 +253,9 @@ def test_run_twin_prints_summary_lines_and_stops_cleanly() -> None:
     live = [line for line in lines if 'K_c eig' in line and 'latency median' in line]
     assert live, out.stdout
     assert re.search(r'input +\d+ Hz', live[-1]) and 'slack 0/12' in live[-1]
+    for line in lines:  # no K_c or latency of old messages while no input arrives
+        if re.search(r'input +0 Hz', line):
+            assert 'K_c -' in line and 'latency -' in line, line
     assert 'stiffness_node exit 0, sim_node exit 0' in out.stdout
 
 

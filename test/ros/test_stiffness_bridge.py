@@ -493,3 +493,24 @@ def test_a_controller_that_answers_late_counts_as_lost_and_is_retried(world, loa
     lost = int(kv(world.bridge_status(bridge_ns))['calls lost'])
     world.bridge_status(bridge_ns, lambda s: int(kv(s)['calls lost']) >= lost + 2, timeout=15.0)
     assert bridge.alive()
+
+
+def test_a_bridge_whose_input_nobody_publishes_says_so(tmp_path):
+    """A remap that points nowhere (what an unquoted ``-r ~/input_stiffness:=...`` becomes
+    after the shell expanded the ~) is logged once, naming the resolved topic, instead of a
+    silent wait; the bridge keeps running and stops cleanly."""
+    from tensegrity_stiffness.ros.stiffness_bridge import NO_PUBLISHER_WARNING_S
+
+    ns = unique_namespace('lonely_bridge')
+    bridge = start_bridge(tmp_path, ns, f'{ns}/nobody_publishes', {'preset': 'crisp'})
+    try:
+        line = repeat_until(
+            lambda: None,
+            lambda: next((x for x in bridge.log().splitlines() if 'has no publisher' in x),
+                         None),
+            timeout=60.0 + NO_PUBLISHER_WARNING_S, explain=bridge.log)
+        assert f'~/input_stiffness ({ns}/nobody_publishes) has no publisher' in line
+        assert "-r '~/input_stiffness:=" in line and 'WARN' in line
+        assert bridge.alive()
+    finally:
+        assert bridge.stop() == 0, bridge.log()

@@ -4,7 +4,7 @@
 can pin (:mod:`.middleware`), creates the node, moves what lives as long as the process out of the
 garbage collector's reach, spins, and on SIGINT or SIGTERM (rclpy's signal handlers shut the
 context down; Ctrl-C and supervisors that signal the whole process group alike) closes the node's
-workers and exits with status 0.
+workers and exits with status 0. ``--help`` prints the node's usage and starts nothing.
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ from typing import Any
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
+from tensegrity_stiffness.nodes.parameter_docs import asks_for_help, node_usage
 from tensegrity_stiffness.ros.runtime.middleware import bound_input_memory
 
 #: Python's thread switch interval while a node runs (s): a thread that holds the GIL (a
@@ -31,7 +32,12 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
     """Create the node with ``node_factory`` (after ``rclpy.init(args=args)``) and spin it until
     shutdown (also one that lands inside rclpy's own calls); then ``node.close()`` (if it has
     one), destroy it and shut rclpy down. SIGINT is ignored from the clean-up on: ``run`` is the
-    last thing its process does."""
+    last thing its process does. With ``-h``/``--help`` before ``--ros-args`` it prints the
+    node's usage (``nodes.parameter_docs.node_usage``; the node is named by the module of
+    ``node_factory``) and returns without starting rclpy."""
+    if asks_for_help(sys.argv if args is None else args):
+        sys.stdout.write(node_usage(node_factory.__module__.rpartition('.')[2]))
+        return
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     profile = bound_input_memory()
     rclpy.init(args=args)

@@ -1,0 +1,46 @@
+"""The twin demo's live line (``scripts/run_twin.sh``): the stiffness and the latency are shown
+only while input arrives, so a line at 0 Hz (the first seconds, before the subscriptions have
+matched; a stopped twin) never shows a K_c or a latency of old or unrelated messages."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+
+from tensegrity_stiffness.config import packaged_config_path
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.ros.twin_demo import summary_line
+
+
+@pytest.fixture(scope='module')
+def state():
+    model = JointModel.from_yaml(packaged_config_path())
+    return model.evaluate(model.initial_screw)
+
+
+@pytest.mark.parametrize('spine', [False, True])
+def test_no_input_blanks_the_stiffness_and_the_latency(state, spine: bool) -> None:
+    label = 'K_tip' if spine else 'K_c'
+    line = summary_line(2.0, 0.0, state.transform, state.cartesian_stiffness, state.tensions,
+                        [0.0012, 0.0030], spine=spine, n_strings=12)
+    assert 'input      0 Hz' in line
+    assert f'{label} -' in line and 'eig' not in line
+    assert 'latency -' in line and 'median' not in line
+    assert 'slack 0/12' in line and ('tip [' if spine else 'pose [') in line
+
+
+def test_with_input_the_line_shows_the_eigenvalues_and_latency(state) -> None:
+    K = state.cartesian_stiffness
+    eig = np.linalg.eigvalsh(0.5 * (K + K.T))
+    line = summary_line(4.0, 812.0, state.transform, K, state.tensions, [0.0012, 0.0030, 0.0016],
+                        spine=False, n_strings=12)
+    assert 'input    812 Hz' in line
+    assert f'K_c eig {eig[0]:.4g} .. {eig[-1]:.4g}' in line
+    assert 'latency median 1.60 ms max 3.00 ms' in line
+
+
+def test_nothing_received_yet_is_blank_everywhere() -> None:
+    line = summary_line(1.0, 0.0, None, None, None, [], spine=False, n_strings=12)
+    assert line == ('t    1.0 s  input      0 Hz  pose -  K_c -  slack -/12  latency -')
