@@ -33,6 +33,11 @@ from tensegrity_stiffness.mechanics.dynamics import (
 from tensegrity_stiffness.mechanics.joint import FORCE_LAWS, JointModel
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
 from tensegrity_stiffness.nodes.frames import spine_link_frame
+from tensegrity_stiffness.simulation.twin import (
+    DEFAULT_MAX_FORCE,
+    DEFAULT_MAX_MOMENT,
+    SimulationOptions,
+)
 
 TYPES = ('bool', 'int', 'double', 'string', 'double_array', 'string_array')
 RELIABILITIES = ('reliable', 'best_effort')
@@ -590,9 +595,6 @@ def spine_node_settings(values: Mapping[str, Any], generation: int = 0) -> Spine
 
 
 # ---------------------------------------------------------------------------------- sim_node
-#: What the twin may be asked to hold: larger external wrenches are rejected as absurd.
-DEFAULT_MAX_FORCE = 100.0    # N
-DEFAULT_MAX_MOMENT = 10.0    # N m
 #: Noise kinds of the simulated sensors (fields of simulation.SensorNoise).
 NOISE_KINDS = ('lengths', 'tensions', 'gyro', 'accelerometer')
 _NOISE_UNITS = {'lengths': 'm', 'tensions': 'N', 'gyro': 'rad/s', 'accelerometer': 'm/s^2'}
@@ -640,6 +642,9 @@ SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('limits.max_moment', 'double', DEFAULT_MAX_MOMENT,
                   '~/external_wrench with a larger moment is rejected as absurd, N m',
                   range=(0.0, 1e9)),
+    ParameterSpec('limits.rest_length_range', 'double_array', None,
+                  '[min, max] of the rest lengths the twin takes (c + d of ~/rest_lengths), m '
+                  '(empty: each string\'s physical range, docs/simulation.md)', read_only=True),
     ParameterSpec('frames.imu', 'string', '',
                   'frame_id of ~/imu (empty: frames.link2 for the joint, '
                   '"<frames.base>_link_<N>" for a spine)'),
@@ -687,6 +692,12 @@ class SimNodeSettings:
         """``{kind: standard deviation}`` of the simulated sensors."""
         return {kind: self.values[f'noise.{kind}'] for kind in NOISE_KINDS}
 
+    @property
+    def rest_length_range(self) -> tuple[float, float] | None:
+        """``limits.rest_length_range`` as ``(min, max)`` (None: the twin's physical range)."""
+        bounds = self.values['limits.rest_length_range']
+        return (bounds[0], bounds[1]) if bounds else None
+
 
 def sim_node_settings(values: Mapping[str, Any], generation: int = 0) -> SimNodeSettings:
     """Validate a whole parameter set of ``sim_node`` and build its settings; ValueError names
@@ -715,6 +726,11 @@ def sim_node_settings(values: Mapping[str, Any], generation: int = 0) -> SimNode
     if checked['limits.max_array_length'] < longest:
         raise ValueError(f'limits.max_array_length = {checked["limits.max_array_length"]} is '
                          f'below the longest input of this model ({longest} values)')
+    if checked['limits.rest_length_range']:
+        try:
+            SimulationOptions(rest_length_range=tuple(checked['limits.rest_length_range']))
+        except ValueError as exc:
+            raise ValueError(f'limits.{exc}') from None
     return SimNodeSettings(model=model, chain=chain, base_frame=base, child_frame=child,
                            imu_frame=imu, values=checked)
 
