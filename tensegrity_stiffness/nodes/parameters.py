@@ -14,7 +14,9 @@ optional array left out, e.g. ``joint.link2_nodes``: link 2 uses link 1's nodes)
 
 from __future__ import annotations
 
+import difflib
 import math
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -275,6 +277,38 @@ def flatten(section: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
         else:
             out[name] = value
     return out
+
+
+#: A spine's per-joint override section ``joint_<i>`` (any i) as one section.
+_OVERRIDE_SECTION = re.compile(r'^joint_\d+(?=\.)')
+
+
+def _generic(name: str) -> str:
+    return _OVERRIDE_SECTION.sub('joint_<i>', name)
+
+
+def unknown_parameter_warnings(given: Iterable[str], table: Iterable[ParameterSpec]
+                               ) -> list[str]:
+    """One line per name of ``given`` (the parameters a node's parameter file and overrides
+    set) that lies under one of the node's own sections (the first part of a dotted name of
+    ``table``: ``joint``, ``joint_<i>``, ``estimation``, ``control``, ...) and is a parameter of
+    none of the package's nodes: ``unknown parameter joint.stifness (did you mean
+    joint.stiffness?)``. Such a value would be left out silently and the default used instead.
+    A parameter of another node (a shared file) is no mistake; names outside the node's
+    sections (``use_sim_time``, ``qos_overrides.*``, another package's) are not judged."""
+    own = sorted({_generic(spec.name) for spec in table})
+    sections = {name.split('.', 1)[0] for name in own if '.' in name}
+    known = set(own) | {_generic(spec.name) for t in node_tables() for spec in t.parameters}
+    lines = []
+    for name in sorted(set(given)):
+        generic = _generic(name)
+        if '.' not in name or generic.split('.', 1)[0] not in sections or generic in known:
+            continue
+        close = difflib.get_close_matches(generic, own, n=1, cutoff=0.75)
+        section = name.split('.', 1)[0]
+        hint = f' (did you mean {close[0].replace("joint_<i>", section)}?)' if close else ''
+        lines.append(f'unknown parameter {name}{hint}: ignored')
+    return lines
 
 
 def values_from_config(path: Any, table: Iterable[ParameterSpec]) -> dict[str, Any]:

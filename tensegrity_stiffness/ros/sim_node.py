@@ -115,7 +115,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.reporter = Reporter(self.get_logger())
+        self.reporter = Reporter(self.get_logger(), context=self.context)
         spine, n_joints = _declared_layout(self)
         self._binding = ParameterBinding(
             self, sim_node_parameters(spine, n_joints), sim_node_settings,

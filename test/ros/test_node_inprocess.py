@@ -79,3 +79,38 @@ def test_a_range_from_the_table_is_enforced(node):
     result = node.set_parameters([Parameter('markers.max_rate', value=-1.0)])[0]
     assert not result.successful
     assert node._settings.marker_period == pytest.approx(0.1)
+
+
+def test_a_publish_that_races_the_shutdown_is_a_quiet_stop():
+    """The race of SIGTERM, made deterministic: the context is shut down (as rclpy's signal
+    handler does, on its own thread) while a callback is about to publish. The publish fails
+    with rclpy's ``RCLError: ... publisher's context is invalid``; the guarded callback (here
+    the diagnostics timer's) takes it as the stop: nothing counted, no internal error logged.
+    The same error while the context is up is still an internal error."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from tensegrity_stiffness.ros.runtime.reporting import Reporter
+
+    context = Context()
+    rclpy.init(context=context)
+    node = StiffnessNode(context=context, parameter_overrides=[
+        Parameter('realtime.fast_lane', value=False)])
+    try:
+        node._publish_diagnostics()  # publishes while up
+        assert node.reporter.rejected == {}
+        rclpy.shutdown(context=context)
+        with pytest.raises(RuntimeError, match="publisher's context is invalid"):
+            node._pub_diagnostics.publish(DiagnosticArray())
+        node._publish_diagnostics()  # the race: a publish after the shutdown
+        assert node.reporter.rejected == {}
+        # without the context's state the same failure is a fault
+        blind = Reporter(node.get_logger())
+        try:
+            node._pub_diagnostics.publish(DiagnosticArray())
+        except RuntimeError as exc:
+            blind.internal_error('diagnostics', exc)
+        assert blind.rejected == {'diagnostics internal error': 1}
+    finally:
+        node.close()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
