@@ -291,7 +291,10 @@ class SimNode(Node):
         if rest is not None:
             self._pending_rest = None
             rate = self._settings.values['sim.rest_length_rate']
-            self._sim.set_rest_lengths(rest, rate=rate if rate > 0.0 else math.inf)
+            try:  # checked on arrival; a model rebuilt since may have other strings
+                self._sim.set_rest_lengths(rest, rate=rate if rate > 0.0 else math.inf)
+            except ValueError as exc:
+                self.reporter.reject('~/rest_lengths', f'{exc} (the model changed)')
 
     def _wrench_at(self, sim_time: float) -> np.ndarray:
         """The topic's wrench plus the swinging load at ``sim_time``."""
