@@ -257,3 +257,14 @@ def test_a_config_error_is_one_line_and_a_nonzero_exit(executable, args, problem
     lines = [line for line in log.splitlines() if 'configuration error' in line]
     assert len(lines) == 1 and problem in lines[0], log
     assert 'Traceback' not in log, log
+
+
+def test_a_parameter_file_that_is_not_yaml_is_one_line_and_a_nonzero_exit(tmp_path):
+    """rclpy.init refuses it: one line naming the file, exit 2, no traceback."""
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('/**:\n  ros__parameters:\n    joint: {stiffness: [1, 2\n')
+    code, log = _run_to_exit('stiffness_node', bad, [])
+    assert code == 2, log
+    lines = [line for line in log.splitlines() if 'configuration error' in line]
+    assert len(lines) == 1 and "Couldn't parse params file" in lines[0], log
+    assert 'Traceback' not in log, log

@@ -26,7 +26,8 @@ from tensegrity_stiffness.ros.runtime.middleware import bound_input_memory
 
 #: What a node's construction raises for a bad configuration (the settings' ValueError naming the
 #: field; rclpy's refusal of a parameter file's value for a declared type or range): reported in
-#: one line, and the process exits with :data:`CONFIG_ERROR_EXIT_CODE`.
+#: one line, and the process exits with :data:`CONFIG_ERROR_EXIT_CODE` (as it does when
+#: ``rclpy.init`` refuses the arguments, e.g. a parameter file that is not YAML).
 CONFIG_ERRORS = (ValueError, ParameterException)
 CONFIG_ERROR_EXIT_CODE = 2
 #: Python's thread switch interval while a node runs (s): a thread that holds the GIL (a
@@ -43,7 +44,13 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
     last thing its process does."""
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     profile = bound_input_memory()
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args)
+    except RuntimeError as exc:  # rcl refused the arguments: a parameter file it cannot parse
+        if profile is not None:
+            profile.unlink(missing_ok=True)
+        report_config_error(exc)
+        sys.exit(CONFIG_ERROR_EXIT_CODE)
     node = None
     config_error = False
     try:
