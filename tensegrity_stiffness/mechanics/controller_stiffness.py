@@ -274,23 +274,32 @@ class Conditioner:
         object.__setattr__(self, '_adjoint', None if self.pose is None else adjoint(self.pose))
 
     def apply(self, K: ArrayLike) -> Conditioned:
-        """The conditioned stiffness of the input ``K`` (ValueError: not 6x6 or not finite).
+        """The conditioned stiffness of the input ``K`` (ValueError: not 6x6, not finite, or so
+        large that its conditioning overflows).
         The steps of :func:`transform_cartesian_stiffness` and
         :func:`nearest_positive_definite`, with one eigen-decomposition for the projection and
         the report."""
         K = stiffness_matrix(K)
-        Ad = self._adjoint
-        if Ad is not None:
-            K = Ad.T @ K @ Ad
-        S = 0.5 * (K + K.T)
-        eigenvalues, vectors = np.linalg.eigh(S)
-        projected = _eigenvalues_clipped(S, eigenvalues, vectors, self.min_eigenvalue)
-        norm = math.sqrt(float(np.vdot(K, K)))
-        D = projected - K
-        distance = math.sqrt(float(np.vdot(D, D)))
-        A = K - K.T
-        asymmetry = math.sqrt(float(np.vdot(A, A)))
-        out = projected * self.scale if self.scale != 1.0 else projected
+        largest = float(np.abs(K).max())
+        with np.errstate(over='ignore', invalid='ignore'):  # overflow: refused below
+            Ad = self._adjoint
+            if Ad is not None:
+                K = Ad.T @ K @ Ad
+            S = 0.5 * (K + K.T)
+            norm = math.sqrt(float(np.vdot(K, K)))
+            if not math.isfinite(norm):
+                raise ValueError(f'K is too large to condition: its norm overflows (largest '
+                                 f'|entry| {largest:.3g})')
+            eigenvalues, vectors = np.linalg.eigh(S)
+            projected = _eigenvalues_clipped(S, eigenvalues, vectors, self.min_eigenvalue)
+            D = projected - K
+            distance = math.sqrt(float(np.vdot(D, D)))
+            A = K - K.T
+            asymmetry = math.sqrt(float(np.vdot(A, A)))
+            out = projected * self.scale if self.scale != 1.0 else projected
+            if not (np.all(np.isfinite(out)) and math.isfinite(distance)):
+                raise ValueError(f'K is too large to condition: the result overflows (largest '
+                                 f'|entry| {largest:.3g}, output.scale {self.scale:g})')
         clamps = {'translational': False, 'rotational': False, 'coupling_scaled': False}
         if self.translational is not None or self.rotational is not None:
             out, clamps = clamp(out, self.translational, self.rotational)

@@ -14,7 +14,9 @@ optional array left out, e.g. ``joint.link2_nodes``: link 2 uses link 1's nodes)
 
 from __future__ import annotations
 
+import difflib
 import math
+import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
@@ -33,6 +35,11 @@ from tensegrity_stiffness.mechanics.dynamics import (
 from tensegrity_stiffness.mechanics.joint import FORCE_LAWS, JointModel
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
 from tensegrity_stiffness.nodes.frames import spine_link_frame
+from tensegrity_stiffness.simulation.twin import (
+    DEFAULT_MAX_FORCE,
+    DEFAULT_MAX_MOMENT,
+    SimulationOptions,
+)
 
 TYPES = ('bool', 'int', 'double', 'string', 'double_array', 'string_array')
 RELIABILITIES = ('reliable', 'best_effort')
@@ -270,6 +277,38 @@ def flatten(section: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
         else:
             out[name] = value
     return out
+
+
+#: A spine's per-joint override section ``joint_<i>`` (any i) as one section.
+_OVERRIDE_SECTION = re.compile(r'^joint_\d+(?=\.)')
+
+
+def _generic(name: str) -> str:
+    return _OVERRIDE_SECTION.sub('joint_<i>', name)
+
+
+def unknown_parameter_warnings(given: Iterable[str], table: Iterable[ParameterSpec]
+                               ) -> list[str]:
+    """One line per name of ``given`` (the parameters a node's parameter file and overrides
+    set) that lies under one of the node's own sections (the first part of a dotted name of
+    ``table``: ``joint``, ``joint_<i>``, ``estimation``, ``control``, ...) and is a parameter of
+    none of the package's nodes: ``unknown parameter joint.stifness (did you mean
+    joint.stiffness?)``. Such a value would be left out silently and the default used instead.
+    A parameter of another node (a shared file) is no mistake; names outside the node's
+    sections (``use_sim_time``, ``qos_overrides.*``, another package's) are not judged."""
+    own = sorted({_generic(spec.name) for spec in table})
+    sections = {name.split('.', 1)[0] for name in own if '.' in name}
+    known = set(own) | {_generic(spec.name) for t in node_tables() for spec in t.parameters}
+    lines = []
+    for name in sorted(set(given)):
+        generic = _generic(name)
+        if '.' not in name or generic.split('.', 1)[0] not in sections or generic in known:
+            continue
+        close = difflib.get_close_matches(generic, own, n=1, cutoff=0.75)
+        section = name.split('.', 1)[0]
+        hint = f' (did you mean {close[0].replace("joint_<i>", section)}?)' if close else ''
+        lines.append(f'unknown parameter {name}{hint}: ignored')
+    return lines
 
 
 def values_from_config(path: Any, table: Iterable[ParameterSpec]) -> dict[str, Any]:
@@ -596,9 +635,6 @@ def spine_node_settings(values: Mapping[str, Any], generation: int = 0) -> Spine
 
 
 # ---------------------------------------------------------------------------------- sim_node
-#: What the twin may be asked to hold: larger external wrenches are rejected as absurd.
-DEFAULT_MAX_FORCE = 100.0    # N
-DEFAULT_MAX_MOMENT = 10.0    # N m
 #: Noise kinds of the simulated sensors (fields of simulation.SensorNoise).
 NOISE_KINDS = ('lengths', 'tensions', 'gyro', 'accelerometer')
 _NOISE_UNITS = {'lengths': 'm', 'tensions': 'N', 'gyro': 'rad/s', 'accelerometer': 'm/s^2'}
@@ -646,6 +682,9 @@ SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('limits.max_moment', 'double', DEFAULT_MAX_MOMENT,
                   '~/external_wrench with a larger moment is rejected as absurd, N m',
                   range=(0.0, 1e9)),
+    ParameterSpec('limits.rest_length_range', 'double_array', None,
+                  '[min, max] of the rest lengths the twin takes (c + d of ~/rest_lengths), m '
+                  '(empty: each string\'s physical range, docs/simulation.md)', read_only=True),
     ParameterSpec('frames.imu', 'string', '',
                   'frame_id of ~/imu (empty: frames.link2 for the joint, '
                   '"<frames.base>_link_<N>" for a spine)'),
@@ -693,6 +732,12 @@ class SimNodeSettings:
         """``{kind: standard deviation}`` of the simulated sensors."""
         return {kind: self.values[f'noise.{kind}'] for kind in NOISE_KINDS}
 
+    @property
+    def rest_length_range(self) -> tuple[float, float] | None:
+        """``limits.rest_length_range`` as ``(min, max)`` (None: the twin's physical range)."""
+        bounds = self.values['limits.rest_length_range']
+        return (bounds[0], bounds[1]) if bounds else None
+
 
 def sim_node_settings(values: Mapping[str, Any], generation: int = 0) -> SimNodeSettings:
     """Validate a whole parameter set of ``sim_node`` and build its settings; ValueError names
@@ -721,6 +766,11 @@ def sim_node_settings(values: Mapping[str, Any], generation: int = 0) -> SimNode
     if checked['limits.max_array_length'] < longest:
         raise ValueError(f'limits.max_array_length = {checked["limits.max_array_length"]} is '
                          f'below the longest input of this model ({longest} values)')
+    if checked['limits.rest_length_range']:
+        try:
+            SimulationOptions(rest_length_range=tuple(checked['limits.rest_length_range']))
+        except ValueError as exc:
+            raise ValueError(f'limits.{exc}') from None
     return SimNodeSettings(model=model, chain=chain, base_frame=base, child_frame=child,
                            imu_frame=imu, values=checked)
 

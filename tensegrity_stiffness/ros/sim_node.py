@@ -60,7 +60,12 @@ from tensegrity_stiffness.ros.runtime.topics import (
     input_qos,
     output_qos,
 )
-from tensegrity_stiffness.simulation.twin import ChainSimulation, JointSimulation, SensorNoise
+from tensegrity_stiffness.simulation.twin import (
+    ChainSimulation,
+    JointSimulation,
+    SensorNoise,
+    checked_wrench,
+)
 
 NODE_NAME = 'sim_node'
 #: Seconds between the questions which outputs have a subscriber (outputs nobody reads are
@@ -110,7 +115,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.reporter = Reporter(self.get_logger())
+        self.reporter = Reporter(self.get_logger(), context=self.context)
         spine, n_joints = _declared_layout(self)
         self._binding = ParameterBinding(
             self, sim_node_parameters(spine, n_joints), sim_node_settings,
@@ -177,10 +182,14 @@ class SimNode(Node):
         """The twin at ``screws`` (None: its unloaded configuration); the swinging load's
         wrench directions follow its gravity at the next swing step."""
         values = settings.values
+        # The node checks every wrench against its own limits.* (changeable at run time, the
+        # swinging load added): the twin's own bound would only repeat that check.
         options = {'timestep': 1.0 / values['sim.rate'], 'max_length': values['sim.max_length'],
                    'tendon_damping': values['sim.tendon_damping'],
                    'joint_damping': values['sim.joint_damping'],
-                   'link_mass': values['sim.link_mass']}
+                   'link_mass': values['sim.link_mass'],
+                   'rest_length_range': settings.rest_length_range,
+                   'max_force': math.inf, 'max_moment': math.inf}
         if settings.chain is not None:
             self._sim: JointSimulation | ChainSimulation = ChainSimulation(
                 settings.chain, initial_screws=screws, **options)
@@ -240,6 +249,7 @@ class SimNode(Node):
                 rest = settings.model.validate_rest_lengths(
                     values + rest_length_offsets(settings.values, settings.n_strings),
                     batched=False)
+            self._sim.validated_rest_lengths(rest)  # the twin's range (its bounds are fixed)
         except ValueError as exc:
             self.reporter.reject('~/rest_lengths', str(exc))
             return
@@ -251,14 +261,9 @@ class SimNode(Node):
         values = settings.values
         try:
             require_frame(msg.header.frame_id, settings.base_frame, 'the base frame')
-            W = conversions.msg_to_wrench(msg.wrench)
-            force, moment = float(np.linalg.norm(W[:3])), float(np.linalg.norm(W[3:]))
-            if force > values['limits.max_force']:
-                raise ValueError(f'|force| = {force:.6g} N exceeds limits.max_force = '
-                                 f'{values["limits.max_force"]:g} N')
-            if moment > values['limits.max_moment']:
-                raise ValueError(f'|moment| = {moment:.6g} N m exceeds limits.max_moment = '
-                                 f'{values["limits.max_moment"]:g} N m')
+            W = checked_wrench(conversions.msg_to_wrench(msg.wrench),
+                               values['limits.max_force'], values['limits.max_moment'],
+                               ('limits.max_force', 'limits.max_moment'))
         except ValueError as exc:
             self.reporter.reject('~/external_wrench', str(exc))
             return
@@ -286,7 +291,10 @@ class SimNode(Node):
         if rest is not None:
             self._pending_rest = None
             rate = self._settings.values['sim.rest_length_rate']
-            self._sim.set_rest_lengths(rest, rate=rate if rate > 0.0 else math.inf)
+            try:  # checked on arrival; a model rebuilt since may have other strings
+                self._sim.set_rest_lengths(rest, rate=rate if rate > 0.0 else math.inf)
+            except ValueError as exc:
+                self.reporter.reject('~/rest_lengths', f'{exc} (the model changed)')
 
     def _wrench_at(self, sim_time: float) -> np.ndarray:
         """The topic's wrench plus the swinging load at ``sim_time``."""

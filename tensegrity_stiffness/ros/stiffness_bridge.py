@@ -69,7 +69,7 @@ class StiffnessBridge(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.reporter = Reporter(self.get_logger())
+        self.reporter = Reporter(self.get_logger(), context=self.context)
         self._lock = threading.RLock()
         self._binding = ParameterBinding(
             self, BRIDGE_PARAMETERS, bridge_settings, self._apply_parameters,
@@ -192,6 +192,11 @@ class StiffnessBridge(Node):
                                             conditioned.relative_projection)
         if not conditioned.input_positive_definite:
             self._not_positive_definite += 1
+            self.reporter.warn(
+                INPUT_TOPIC, f'not positive definite (min eigenvalue '
+                f'{conditioned.input_min_eigenvalue:.3g} of its symmetric part): the joint is '
+                f'unstable here; the output is its nearest positive definite matrix '
+                f'({100 * conditioned.relative_projection:.3g} % moved)', label='projected')
         for name, hit in conditioned.clamps.items():
             self._clamp_counts[name] += int(hit)
 
@@ -209,9 +214,11 @@ class StiffnessBridge(Node):
                 self._reachable = False
                 self._pending = True  # sent again (the controller may not have applied it)
                 self._client.remove_pending_request(future)
-                self.reporter.warn('set_parameters call',
-                                   f'{settings.target_node}/set_parameters gave no answer within '
-                                   f'target.timeout = {settings.timeout:g} s')
+                # a controller that is gone (or too slow to count as there): the documented
+                # warning of an unavailable target, with the reason
+                reason = ('gone' if not self._client.service_is_ready() else
+                          f'gave no answer within target.timeout = {settings.timeout:g} s')
+                self._warn_unavailable(settings, f' ({reason})')
             if self._filter.target is None:
                 return
             if not self._filter.settled():
@@ -244,8 +251,7 @@ class StiffnessBridge(Node):
             return  # sent when the answer is in (a later tick)
         if not self._client.service_is_ready():
             self._reachable = False
-            self.reporter.warn('target', f'{settings.target_node}/set_parameters is not '
-                               'available; retrying')
+            self._warn_unavailable(settings, '')
             return
         request = SetParameters.Request(parameters=_parameter_messages(
             settings.parameter_names, values))
@@ -254,6 +260,12 @@ class StiffnessBridge(Node):
         self._pending = False
         self._last_emit = now
         future.add_done_callback(self._on_answer)
+
+    def _warn_unavailable(self, settings: BridgeSettings, reason: str) -> None:
+        """``target: <node>/set_parameters is not available; retrying`` (throttled), with the
+        ``reason`` of a lost call."""
+        self.reporter.warn('target', f'{settings.target_node}/set_parameters is not available; '
+                           f'retrying{reason}', label='unreachable')
 
     def _on_answer(self, future: Any) -> None:
         try:

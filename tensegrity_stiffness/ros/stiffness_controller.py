@@ -68,7 +68,7 @@ class StiffnessControllerNode(Node):
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.reporter = Reporter(self.get_logger())
+        self.reporter = Reporter(self.get_logger(), context=self.context)
         self._binding = ParameterBinding(
             self, CONTROLLER_PARAMETERS, controller_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))

@@ -52,6 +52,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.geometry.validation import finite_array
@@ -67,10 +68,14 @@ __all__ = [
     'DEFAULT_JOINT_DAMPING',
     'DEFAULT_JOINT_GRAVITY',
     'DEFAULT_LINK_MASS',
+    'DEFAULT_MAX_FORCE',
+    'DEFAULT_MAX_MOMENT',
     'DEFAULT_TENDON_DAMPING',
     'DEFAULT_TIMESTEP',
     'INTEGRATORS',
     'MAX_LENGTH_MODES',
+    'MIN_REST_LENGTH_FRACTION',
+    'REST_LENGTH_MARGIN',
     'REST_SPEED_FACTOR',
     'ChainSimulation',
     'ImuReading',
@@ -79,6 +84,7 @@ __all__ = [
     'SensorNoise',
     'SimulationOptions',
     'chain_mjcf',
+    'checked_wrench',
     'export_mjcf',
     'joint_mjcf',
     'measure',
@@ -105,6 +111,18 @@ DEFAULT_JOINT_DAMPING = 1e-3
 DEFAULT_JOINT_GRAVITY = (0.0, -9.81, 0.0)
 #: Settled: the largest link speed (m/s and rad/s) is at most this factor times ``tolerance``.
 REST_SPEED_FACTOR = 1.0
+#: The physical range of a rest length the twin takes (unless ``rest_length_range`` sets one):
+#: above this fraction of the string's configured rest length, and at most its maximum length
+#: (its configured rest length when it has none) times ``1 + REST_LENGTH_MARGIN``. Outside it a
+#: string could not be mounted (1e308, 1e6 or 5e-324 m: MuJoCo's soft length limit then drives
+#: the links far away or crushes them together, and the twin needs minutes to recover).
+MIN_REST_LENGTH_FRACTION = 0.1
+REST_LENGTH_MARGIN = 0.5
+#: The largest external force (N) and moment (N m) the twin is asked to hold by default
+#: (``max_force`` / ``max_moment``; the sim node's ``limits.max_force`` / ``limits.max_moment``):
+#: a larger wrench is refused as absurd (the default joint's strings carry about 1.5 N each).
+DEFAULT_MAX_FORCE = 100.0
+DEFAULT_MAX_MOMENT = 10.0
 
 
 @dataclass(frozen=True)
@@ -124,7 +142,11 @@ class SimulationOptions:
     base; default ``None``: the chain's ``gravity``, for the joint (0, -9.81, 0));
     ``max_length`` (``'limit'`` or ``'ignore'``, default ``'limit'``); ``rest_length_rate``
     (m/s, the largest change of a rest length per second, like a motor; default ``None``:
-    changes apply at once); ``string_width`` (m, drawn width of the tendons, default 5e-4).
+    changes apply at once); ``string_width`` (m, drawn width of the tendons, default 5e-4);
+    ``rest_length_range`` ((min, max) m for every string; default ``None``: each string's
+    physical range, :data:`MIN_REST_LENGTH_FRACTION` and :data:`REST_LENGTH_MARGIN`);
+    ``max_force`` / ``max_moment`` (N, N m: a larger external wrench is refused; default
+    :data:`DEFAULT_MAX_FORCE` / :data:`DEFAULT_MAX_MOMENT`; ``inf``: no bound but finiteness).
     """
 
     timestep: float = DEFAULT_TIMESTEP
@@ -138,13 +160,18 @@ class SimulationOptions:
     max_length: str = 'limit'
     rest_length_rate: float | None = None
     string_width: float = 5e-4
+    rest_length_range: tuple[float, float] | None = None
+    max_force: float = DEFAULT_MAX_FORCE
+    max_moment: float = DEFAULT_MAX_MOMENT
 
     def __post_init__(self) -> None:
-        def positive(name: str, value: Any, allow_zero: bool = False) -> None:
+        def positive(name: str, value: Any, allow_zero: bool = False,
+                     allow_inf: bool = False) -> None:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and \
-                math.isfinite(value) and (value >= 0.0 if allow_zero else value > 0.0)
+                (math.isfinite(value) or (allow_inf and value == math.inf)) and \
+                (value >= 0.0 if allow_zero else value > 0.0)
             if not ok:
-                bound = '>= 0' if allow_zero else '> 0'
+                bound = ('>= 0' if allow_zero else '> 0') + (' or inf' if allow_inf else '')
                 raise ValueError(f'{name} must be a finite number {bound}, got {value!r}')
 
         positive('timestep', self.timestep)
@@ -152,6 +179,14 @@ class SimulationOptions:
         positive('joint_damping', self.joint_damping, allow_zero=True)
         positive('link_mass', self.link_mass)
         positive('string_width', self.string_width)
+        positive('max_force', self.max_force, allow_inf=True)
+        positive('max_moment', self.max_moment, allow_inf=True)
+        if self.rest_length_range is not None:
+            bounds = finite_array('rest_length_range', self.rest_length_range)
+            if bounds.shape != (2,) or not 0.0 < bounds[0] < bounds[1]:
+                raise ValueError(f'rest_length_range must be (min, max) with 0 < min < max (m), '
+                                 f'got {self.rest_length_range!r}')
+            object.__setattr__(self, 'rest_length_range', (float(bounds[0]), float(bounds[1])))
         if self.integrator not in INTEGRATORS:
             raise ValueError(f'integrator must be one of {INTEGRATORS}, got {self.integrator!r}')
         if self.max_length not in MAX_LENGTH_MODES:
@@ -180,6 +215,24 @@ def _options(options: SimulationOptions | None, overrides: dict[str, Any]) -> Si
         raise ValueError(f'unknown simulation options {sorted(unknown)}; known: '
                          f'{sorted(SimulationOptions.__dataclass_fields__)}')
     return replace(base, **overrides) if overrides else base
+
+
+def checked_wrench(wrench: ArrayLike, max_force: float = DEFAULT_MAX_FORCE,
+                   max_moment: float = DEFAULT_MAX_MOMENT,
+                   names: tuple[str, str] = ('max_force', 'max_moment')) -> FloatArray:
+    """The wrench (6,) ``[f; m]`` as a float array if it is finite and ``|f| <= max_force`` (N),
+    ``|m| <= max_moment`` (N m); ValueError naming the value and the bound (called ``names``)
+    otherwise. The one check of an external wrench the twin takes (library and sim node)."""
+    W = finite_array('wrench', wrench)
+    if W.shape != (6,):
+        raise ValueError(f'wrench must have 6 values [fx fy fz mx my mz], got shape {W.shape}')
+    with np.errstate(over='ignore'):  # 1e308: an infinite norm, refused below
+        force, moment = float(np.linalg.norm(W[:3])), float(np.linalg.norm(W[3:]))
+    if force > max_force:
+        raise ValueError(f'|force| = {force:.6g} N exceeds {names[0]} = {max_force:g} N')
+    if moment > max_moment:
+        raise ValueError(f'|moment| = {moment:.6g} N m exceeds {names[1]} = {max_moment:g} N m')
+    return W
 
 
 @dataclass(frozen=True)
@@ -215,6 +268,20 @@ def _chain_layout(chain: JointChain, options: SimulationOptions) -> _Layout:
     names = [[f'j{i + 1}_{s}' for s in m.string_names] for i, m in enumerate(chain.joints)]
     return _Layout(list(chain.joints), chain.link_offsets.copy(), chain.link_masses.copy(),
                    chain.link_coms.copy(), g, chain.unloaded_screws(), False, names)
+
+
+def _rest_length_bounds(layout: _Layout, options: SimulationOptions
+                        ) -> tuple[FloatArray, FloatArray]:
+    """(low, high) (n_total,) m: the rest lengths the twin takes (``options.rest_length_range``
+    or each string's physical range, :data:`MIN_REST_LENGTH_FRACTION`,
+    :data:`REST_LENGTH_MARGIN`)."""
+    rest = np.concatenate([m.rest_lengths for m in layout.joints])
+    if options.rest_length_range is not None:
+        low, high = options.rest_length_range
+        return np.full(rest.shape, low), np.full(rest.shape, high)
+    lmax = np.concatenate([m.max_lengths for m in layout.joints])
+    longest = np.where(np.isfinite(lmax), lmax, rest)
+    return MIN_REST_LENGTH_FRACTION * rest, (1.0 + REST_LENGTH_MARGIN) * longest
 
 
 def _num(value: float) -> str:
@@ -404,6 +471,7 @@ class _Simulation:
         self._stretch = np.concatenate([m.max_stretch for m in layout.joints])
         self._limited = np.array(self.model.tendon_limited, dtype=bool)
         self._rest = np.concatenate([m.rest_lengths for m in layout.joints])
+        self._rest_bounds = _rest_length_bounds(layout, options)
         self._target = self._rest.copy()
         self._ramping = False
         self._rate: float | None = None
@@ -510,12 +578,22 @@ class _Simulation:
                              f'{len(rows)}')
         for model, row in zip(self._layout.joints, rows, strict=True):
             flat.append(model.validate_rest_lengths(row, batched=False))
-        return np.concatenate(flat)
+        rest = np.concatenate(flat)
+        low, high = self._rest_bounds
+        outside = np.flatnonzero((rest < low) | (rest > high))
+        if outside.size:
+            j = int(outside[0])
+            name = [n for names in self._layout.string_names for n in names][j]
+            raise BadRestLengthsError(
+                f'rest length of {name} = {rest[j]:.6g} m is outside its range [{low[j]:.6g}, '
+                f'{high[j]:.6g}] m' + (f' ({outside.size} strings outside)'
+                                       if outside.size > 1 else ''))
+        return rest
 
     def _set_rest(self, rest: FloatArray, rate: float | None) -> None:
-        self._target = rest.copy()
         if rate is not None and not (isinstance(rate, (int, float)) and rate > 0.0):
             raise ValueError(f'rate must be > 0 (m/s) or None, got {rate!r}')
+        self._target = rest.copy()
         self._rate = self.options.rest_length_rate if rate is None else float(rate)
         self._ramping = True
         if self._rate is None or self._rate == math.inf:
@@ -538,10 +616,7 @@ class _Simulation:
         self._write_rest(self._rest + np.clip(self._target - self._rest, -step, step))
 
     def _set_load(self, wrench: ArrayLike) -> None:
-        W = finite_array('wrench', wrench)
-        if W.shape != (6,):
-            raise ValueError(f'wrench must have 6 values [fx fy fz mx my mz], got shape '
-                             f'{W.shape}')
+        W = checked_wrench(wrench, self.options.max_force, self.options.max_moment)
         self._load = W.copy()
         self._load_list = W.tolist()
         self._loaded = bool(np.any(W))
@@ -693,16 +768,37 @@ class _Twin:
         the fixed frame about that link's origin."""
         return self._sim._load.copy()
 
+    @property
+    def rest_length_bounds(self) -> tuple[FloatArray, FloatArray]:
+        """(low, high): the rest lengths (m) the twin takes, one pair per string (all strings,
+        joint-major): ``options.rest_length_range``, or each string's physical range
+        (above :data:`MIN_REST_LENGTH_FRACTION` of its configured rest length, at most
+        ``1 + REST_LENGTH_MARGIN`` times its maximum length, or its rest length without one)."""
+        low, high = self._sim._rest_bounds
+        return low.copy(), high.copy()
+
+    def validated_rest_lengths(self, rest_lengths: ArrayLike | Sequence[ArrayLike]
+                               ) -> FloatArray:
+        """The rest lengths :meth:`set_rest_lengths` takes, flat (joint-major), checked: finite,
+        of the right shape, inside :attr:`rest_length_bounds`; otherwise
+        :class:`~tensegrity_stiffness.geometry.errors.BadRestLengthsError` (a ValueError) naming
+        the string and the value. Changes nothing."""
+        return self._sim._validated_rest(rest_lengths)
+
     def set_rest_lengths(self, rest_lengths: ArrayLike | Sequence[ArrayLike],
                          rate: float | None = None) -> None:
-        """New rest lengths (m, > 0): (n,) for a joint; (N, n) or one (n_i,) array per joint for
-        a spine. Each string keeps its maximum stretch. ``rate`` (m/s) limits the change per
-        second (default ``options.rest_length_rate``; None: at once)."""
+        """New rest lengths (m): (n,) for a joint; (N, n) or one (n_i,) array per joint for a
+        spine; inside :attr:`rest_length_bounds` (else a ValueError naming the string and the
+        value, and the twin keeps its rest lengths). Each string keeps its maximum stretch.
+        ``rate`` (m/s) limits the change per second (default ``options.rest_length_rate``;
+        None: at once)."""
         self._sim._set_rest(self._sim._validated_rest(rest_lengths), rate)
 
     def apply_wrench(self, wrench: ArrayLike) -> None:
         """External wrench (6,) [f; m] on the last link (link 2 of a joint, link N of a spine),
-        in the fixed frame about that link's origin, held constant."""
+        in the fixed frame about that link's origin, held constant; finite and within
+        ``options.max_force`` / ``max_moment`` (:func:`checked_wrench`), else a ValueError
+        naming the value, and the twin keeps its load."""
         self._sim._set_load(wrench)
 
     def step(self, n: int = 1) -> None:

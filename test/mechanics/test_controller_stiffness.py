@@ -131,6 +131,21 @@ def test_bad_matrix_raises_naming_it(K, match):
         transform_cartesian_stiffness(K, [0, 0, 0, 0, 0, 0, 1])
 
 
+@pytest.mark.parametrize('K', [np.full((6, 6), 1e308), np.eye(6) * 1e308, -np.eye(6) * 1e308,
+                               np.full((6, 6), 1e200)])
+def test_a_matrix_whose_conditioning_overflows_is_refused(K):
+    """Finite but absurd entries (a hostile input): a ValueError naming the size, not numpy's
+    LinAlgError or a NaN output; a tiny (denormal) matrix is conditioned to the floor."""
+    conditioner = Conditioner(pose=[0.02, 0, 0.01, 0, 0, math.sin(0.3), math.cos(0.3)],
+                              min_eigenvalue=1e-3)
+    with pytest.raises(ValueError, match='too large to condition'):
+        conditioner.apply(K)
+    with pytest.raises(ValueError, match='too large to condition'):
+        Conditioner(min_eigenvalue=1e-3, scale=1e12).apply(np.eye(6) * 1e300)
+    tiny = conditioner.apply(np.full((6, 6), 5e-324))
+    np.testing.assert_allclose(np.linalg.eigvalsh(tiny.matrix), 1e-3)
+
+
 # --------------------------------------------------------------------------- projection
 def _optimised_distance(K: np.ndarray, floor: float, rng: np.random.Generator) -> float:
     """min |X - K|_F over X = floor I + L L^T (every symmetric X with eigenvalues >= floor),

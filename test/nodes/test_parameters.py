@@ -126,3 +126,29 @@ def test_the_cli_planar_defaults_are_the_table():
 
     assert PLANAR_KEYS == tuple(name[len('planar.'):] for name in TABLE
                                 if name.startswith('planar.'))
+
+
+def test_unknown_parameters_under_a_nodes_own_sections_are_named_with_the_nearest():
+    """Misspelt names under the node's own sections are named with the nearest parameter (a
+    spine's joint_<i> overrides for any i); another node's parameters (a shared file), names
+    outside the node's sections and names without a section are no mistake."""
+    from tensegrity_stiffness.nodes.parameters import (
+        BRIDGE_PARAMETERS,
+        STIFFNESS_NODE_PARAMETERS,
+        spine_node_parameters,
+        unknown_parameter_warnings,
+    )
+
+    given = ['joint.stifness', 'joint.stiffness', 'limits.max_force', 'use_sim_time',
+             'qos_overrides./x.publisher.depth', 'other_package.anything', 'planar.LL',
+             'estimation.max_age']
+    assert unknown_parameter_warnings(given, STIFFNESS_NODE_PARAMETERS) == [
+        'unknown parameter joint.stifness (did you mean joint.stiffness?): ignored',
+        'unknown parameter planar.LL (did you mean planar.L?): ignored']
+    assert unknown_parameter_warnings(['joint_9.rest_lenghts', 'chain.n_joint'],
+                                      spine_node_parameters(9)) == [
+        'unknown parameter chain.n_joint (did you mean chain.n_joints?): ignored',
+        'unknown parameter joint_9.rest_lenghts (did you mean joint_9.rest_lengths?): ignored']
+    assert unknown_parameter_warnings(['target.nod', 'target.zzzzzz'], BRIDGE_PARAMETERS) == [
+        'unknown parameter target.nod (did you mean target.node?): ignored',
+        'unknown parameter target.zzzzzz: ignored']

@@ -79,3 +79,94 @@ def test_a_range_from_the_table_is_enforced(node):
     result = node.set_parameters([Parameter('markers.max_rate', value=-1.0)])[0]
     assert not result.successful
     assert node._settings.marker_period == pytest.approx(0.1)
+
+
+def test_a_publish_that_races_the_shutdown_is_a_quiet_stop():
+    """The race of SIGTERM, made deterministic: the context is shut down (as rclpy's signal
+    handler does, on its own thread) while a callback is about to publish. The publish fails
+    with rclpy's ``RCLError: ... publisher's context is invalid``; the guarded callback (here
+    the diagnostics timer's) takes it as the stop: nothing counted, no internal error logged.
+    The same error while the context is up is still an internal error."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from tensegrity_stiffness.ros.runtime.reporting import Reporter
+
+    context = Context()
+    rclpy.init(context=context)
+    node = StiffnessNode(context=context, parameter_overrides=[
+        Parameter('realtime.fast_lane', value=False)])
+    try:
+        node._publish_diagnostics()  # publishes while up
+        assert node.reporter.rejected == {}
+        rclpy.shutdown(context=context)
+        with pytest.raises(RuntimeError, match="publisher's context is invalid"):
+            node._pub_diagnostics.publish(DiagnosticArray())
+        node._publish_diagnostics()  # the race: a publish after the shutdown
+        assert node.reporter.rejected == {}
+        # without the context's state the same failure is a fault
+        blind = Reporter(node.get_logger())
+        try:
+            node._pub_diagnostics.publish(DiagnosticArray())
+        except RuntimeError as exc:
+            blind.internal_error('diagnostics', exc)
+        assert blind.rejected == {'diagnostics internal error': 1}
+    finally:
+        node.close()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_the_fast_lane_publishing_into_the_shutdown_stops_quietly():
+    """The race as SIGTERM makes it, through the fast lane, made deterministic: the context is
+    shut down (as rclpy's signal handler does on its own thread) between the lane's check of the
+    context and a handler's publish, here by the handler itself on its fifth message. The
+    publish fails with ``RCLError: ... publisher's context is invalid``, which the node's
+    reporter takes as the stop: nothing is counted as an internal error and the lane's thread
+    ends without an exception of its own."""
+    import threading
+
+    from std_msgs.msg import Float64MultiArray
+
+    from tensegrity_stiffness.ros.runtime.fast_lane import FastLane
+    from tensegrity_stiffness.ros.runtime.reporting import Reporter
+
+    context = Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('lane_shutdown_test', context=context)
+    reporter = Reporter(node.get_logger(), context=context)
+    seen: list[BaseException] = []
+    thread_errors: list[BaseException] = []
+    previous_hook = threading.excepthook
+    threading.excepthook = lambda args: thread_errors.append(args.exc_value)
+
+    def on_error(topic: str, exc: BaseException) -> None:
+        seen.append(exc)
+        reporter.internal_error(topic, exc)
+
+    lane = FastLane(node, on_error)
+    try:
+        publisher = node.create_publisher(Float64MultiArray, 'lane_loop', 10)
+        handled: list[Float64MultiArray] = []
+        stopped = threading.Event()
+
+        def handler(msg: Float64MultiArray) -> None:
+            handled.append(msg)
+            if len(handled) == 5:
+                rclpy.shutdown(context=context)  # the signal lands here
+                stopped.set()
+            publisher.publish(msg)  # feeds the lane (and is refused after the shutdown)
+
+        lane.create_subscription(Float64MultiArray, 'lane_loop', handler, 10)
+        lane.start()
+        publisher.publish(Float64MultiArray(data=[1.0]))
+        assert stopped.wait(20.0)
+        lane.stop(timeout=10.0)
+        assert seen, 'the shutdown did not land on a publish'
+        assert all("context is invalid" in str(exc) for exc in seen), seen
+        assert reporter.rejected == {}
+        assert thread_errors == []
+    finally:
+        threading.excepthook = previous_hook
+        lane.stop()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)

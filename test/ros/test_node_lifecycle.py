@@ -221,3 +221,71 @@ def test_a_stopped_worker_is_an_overrun_and_is_replaced(slow_solver_node):
     again = ros.call(client, _request(initial_screw=WORKER_START), timeout=30.0)
     assert again.success, again.message
     assert again.iterations > joint_services.QUICK_SOLVE_ITERATIONS
+
+
+def _run_to_exit(executable: str, params_file, extra_args: list[str],
+                 until: str | None = None) -> tuple[int | None, str]:
+    """Start ``executable``; wait for its exit, or (``until``) for that text in its log and then
+    stop it. Returns (exit code, log)."""
+    proc = NodeProcess(unique_namespace('config'), params_file, extra_args=extra_args,
+                       executable=executable)
+    try:
+        if until is None:
+            code = proc.process.wait(timeout=60.0)
+        else:
+            deadline = time.monotonic() + 60.0
+            while until not in proc.log():
+                assert proc.alive(), proc.log()
+                assert time.monotonic() < deadline, proc.log()
+                time.sleep(0.05)
+            code = proc.stop()
+    finally:
+        if proc.alive():
+            proc.kill()
+    return code, proc.log()
+
+
+@pytest.mark.parametrize(('executable', 'config', 'key', 'hint'), [
+    ('stiffness_node', CONFIG, 'joint.stifness', 'joint.stiffness'),
+    ('sim_node', CONFIG, 'limits.max_forse', 'limits.max_force'),
+    ('estimator_node', CONFIG, 'estimation.max_agee', 'estimation.max_age'),
+])
+def test_a_misspelt_parameter_is_warned_about_by_name(tmp_path, executable, config, key, hint):
+    """A misspelt key under the node's own sections in a parameter file: a warning naming it
+    and the nearest parameter; the node runs (with the default of the parameter it missed)."""
+    import yaml
+
+    section, name = key.split('.')
+    extra = tmp_path / 'typo.yaml'
+    extra.write_text(yaml.safe_dump({'/**': {'ros__parameters': {section: {name: 1.0}}}}))
+    code, log = _run_to_exit(executable, config, ['--params-file', str(extra)], until='ready:')
+    assert code == 0, log
+    assert f'unknown parameter {key} (did you mean {hint}?)' in log, log
+
+
+@pytest.mark.parametrize(('executable', 'args', 'problem'), [
+    ('stiffness_node', ['-p', 'joint.stiffness:=[77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0, 77.0]'],
+     'joint.stiffness must have 12 values (one per string), got 8'),
+    ('sim_node', ['-p', 'limits.rest_length_range:=[0.04, 0.03]'],
+     'limits.rest_length_range must be (min, max)'),
+    ('estimator_node', ['-p', 'sensors.gravity_base:=[0.0, 0.0, 0.0]'],
+     'sensors.gravity_base must be 3 finite values'),
+    ('stiffness_node', ['-p', 'qos.depth:=0'], 'qos.depth'),
+])
+def test_a_config_error_is_one_line_and_a_nonzero_exit(executable, args, problem):
+    code, log = _run_to_exit(executable, CONFIG, args)
+    assert code == 2, log
+    lines = [line for line in log.splitlines() if 'configuration error' in line]
+    assert len(lines) == 1 and problem in lines[0], log
+    assert 'Traceback' not in log, log
+
+
+def test_a_parameter_file_that_is_not_yaml_is_one_line_and_a_nonzero_exit(tmp_path):
+    """rclpy.init refuses it: one line naming the file, exit 2, no traceback."""
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('/**:\n  ros__parameters:\n    joint: {stiffness: [1, 2\n')
+    code, log = _run_to_exit('stiffness_node', bad, [])
+    assert code == 2, log
+    lines = [line for line in log.splitlines() if 'configuration error' in line]
+    assert len(lines) == 1 and "Couldn't parse params file" in lines[0], log
+    assert 'Traceback' not in log, log

@@ -17,6 +17,7 @@ from std_msgs.msg import Float64MultiArray  # noqa: E402
 
 from tensegrity_stiffness.ros.runtime.rclpy_internals import (  # noqa: E402
     SubscriptionWaitSet,
+    parameter_override_names,
     take,
 )
 
@@ -74,3 +75,20 @@ def test_wait_set_reports_ready_subscriptions_and_take_reads_them_in_order(node)
         assert wait_set.wait(5_000_000_000) == []
         assert time.monotonic() - start < 5.0
     assert received == []  # nothing went through a callback
+
+
+def test_parameter_override_names_are_the_files_and_the_command_lines(tmp_path) -> None:
+    """The names a node's parameter file (its own and ``/**``) and ``-p`` set, declared or not;
+    not another node's."""
+    params = tmp_path / 'p.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    joint:\n      stifness: [1.0]\n'
+                      'other_node:\n  ros__parameters:\n    elsewhere: 1\n')
+    context = rclpy.context.Context()
+    rclpy.init(context=context, args=['--ros-args', '--params-file', str(params),
+                                      '-p', 'qos.depth:=5'])
+    node = rclpy.create_node('overrides_test', context=context)
+    try:
+        assert parameter_override_names(node) == ['joint.stifness', 'qos.depth']
+    finally:
+        node.destroy_node()
+        rclpy.shutdown(context=context)

@@ -404,6 +404,9 @@ def test_unstable_joint_output_is_spd_and_diagnostics_say_so(world, unstable_scr
     assert 'not positive definite' in status.message and 'unstable' in status.message
     assert kv(status)['input positive definite'] == 'false'
     assert float(kv(status)['input min eigenvalue (symmetric part, output frame)']) < 0
+    # and a WARN in the log that it was projected
+    assert '~/input_stiffness projected: not positive definite' in bridge.log()
+    assert 'nearest positive definite matrix' in bridge.log()
     # bad input (on the remapped input topic): nothing published, warned about, counted, the
     # node keeps running
     bad = world.ros.publisher(Float64MultiArray, world.source)
@@ -514,3 +517,119 @@ def test_a_bridge_whose_input_nobody_publishes_says_so(tmp_path):
         assert bridge.alive()
     finally:
         assert bridge.stop() == 0, bridge.log()
+
+
+def test_a_controller_that_disappears_is_not_available_retrying(world, loaded_screw):
+    """The controller stops after it was reached: the bridge warns with the documented
+    "…/set_parameters is not available; retrying", says the target is not reachable, keeps
+    going, and delivers to a controller that comes back under the same name."""
+    ctrl = world.start(StandIn('cartesian_controllers', world.ns, name='vanishing'))
+    bridge_ns = world.ns + '/vanishing'
+    bridge = world.start(start_bridge(world.tmp, bridge_ns, world.source, {
+        'preset': 'cartesian_controllers', 'target.node': ctrl.full_name,
+        'output.pose': POSE, 'output.min_eigenvalue': MIN_EIGENVALUE,
+        'target.timeout': 0.5}))
+    world.bridge_status(bridge_ns)
+    names = ['stiffness.trans_x', 'stiffness.trans_y', 'stiffness.trans_z',
+             'stiffness.rot_x', 'stiffness.rot_y', 'stiffness.rot_z']
+    K = world.model.cartesian_stiffness(loaded_screw)
+    wait_values(world, ctrl.full_name, names, np.diag(expected(K)),
+                resend=lambda: world.send_screw(loaded_screw))
+    assert ctrl.stop() == 0
+    xi = world.model.initial_screw  # another stiffness: a new update for the gone controller
+    repeat_until(lambda: world.send_screw(xi),
+                 lambda: True if 'set_parameters is not available; retrying' in bridge.log()
+                 else None, explain=lambda: bridge.log()[-2000:])
+    world.bridge_status(bridge_ns, lambda s: kv(s)['target reachable'] == 'false')
+    back = world.start(StandIn('cartesian_controllers', world.ns, name='vanishing'))
+    wait_values(world, back.full_name, names,
+                np.diag(expected(world.model.cartesian_stiffness(xi))),
+                resend=lambda: world.send_screw(xi))
+    assert bridge.alive() and 'internal error' not in bridge.log()
+
+
+def test_a_bridge_without_target_node_says_so_in_one_line(world):
+    """A parameters preset without target.node: one line naming it, no traceback, exit 2."""
+    bridge = start_bridge(world.tmp, world.ns + '/no_target', world.source,
+                          {'preset': 'cartesian_controllers'})
+    try:
+        code = bridge.process.wait(timeout=60.0)
+    finally:
+        if bridge.alive():
+            bridge.kill()
+    log = bridge.log()
+    assert code == 2, log
+    lines = [line for line in log.splitlines() if 'configuration error' in line]
+    assert len(lines) == 1 and 'target.node must name the controller node' in lines[0], log
+    assert 'Traceback' not in log, log
+
+
+#: Hostile ~/input_stiffness payloads: overflowing, non-finite, the wrong size (one of 10**6
+#: values), and valid but odd (negative definite, denormal, asymmetric) ones.
+BRIDGE_BURST_ROUNDS = 100
+
+
+def _bridge_burst(rng: np.random.Generator) -> list[tuple[list[float], bool]]:
+    """(payload, valid) of one round of the burst."""
+    invalid = [[1e308] * 36, (np.eye(6) * 1e308).ravel().tolist(), [math.nan] * 36,
+               [math.inf] + [1.0] * 35, [1.0] * 35, [1.0] * 37, [1e200] * 36]
+    valid = [(-100.0 * np.eye(6)).ravel().tolist(), [5e-324] * 36,
+             rng.normal(scale=1e3, size=36).tolist()]
+    return [(v, False) for v in invalid] + [(v, True) for v in valid]
+
+
+@pytest.mark.slow
+def test_hostile_burst_then_the_right_output(world, loaded_screw, record_property):
+    """100 rounds of hostile payloads at a topic bridge (one output per input): nothing is
+    published for the invalid ones, the not positive definite ones are projected (and said
+    so), no internal error, no crash, the output for a valid input after the burst is the
+    library's, RSS growth < 5 MB."""
+    bridge_ns = world.ns + '/burst'
+    source = world.ns + '/burst_input'
+    bridge = world.start(start_bridge(world.tmp, bridge_ns, source, {
+        'preset': 'crisp_full', 'output.pose': POSE, 'output.min_eigenvalue': MIN_EIGENVALUE,
+        'output.max_rate': 0.0}))
+    out = world.ros.subscribe(Float64MultiArray, f'{bridge_ns}/stiffness_bridge/output_stiffness')
+    pub = world.ros.publisher(Float64MultiArray, source)
+    world.ros.wait_for_subscribers(pub)
+    world.ros.wait_for_publishers(f'{bridge_ns}/stiffness_bridge/output_stiffness')
+    K0 = world.model.cartesian_stiffness(world.model.initial_screw)
+    repeat_until(lambda: pub.publish(Float64MultiArray(data=K0.ravel().tolist())),
+                 lambda: True if len(out) else None)
+    rss_before = bridge.rss_bytes()
+    rng = np.random.default_rng(31)
+    sent = {'valid': 0, 'invalid': 0}
+    big = Float64MultiArray(data=[1.0] * 10**6)
+    for i in range(BRIDGE_BURST_ROUNDS):
+        for data, valid in _bridge_burst(rng):
+            pub.publish(Float64MultiArray(data=data))
+            sent['valid' if valid else 'invalid'] += 1
+        if i % 25 == 0:
+            pub.publish(big)
+            sent['invalid'] += 1
+    K = world.model.cartesian_stiffness(loaded_screw)
+    want = expected(K)
+    got = repeat_until(
+        lambda: pub.publish(Float64MultiArray(data=K.ravel().tolist())),
+        lambda: next((m for m in reversed(out.messages) if np.allclose(
+            np.asarray(m.data).reshape(6, 6), want, rtol=1e-9,
+            atol=1e-12 * np.abs(want).max())), None), timeout=60.0)
+    assert got is not None
+    for message in out.messages:  # every output finite, symmetric positive definite
+        M = np.asarray(message.data).reshape(6, 6)
+        assert np.all(np.isfinite(M)) and np.array_equal(M, M.T)
+        assert np.linalg.eigvalsh(M).min() >= MIN_EIGENVALUE * (1 - 1e-9)
+    status = world.bridge_status(bridge_ns, lambda s: '~/input_stiffness' in kv(s)[
+        'rejected inputs'])
+    rss_after = bridge.rss_bytes()
+    log = bridge.log()
+    figures = {**sent, 'outputs': len(out), 'rejected': kv(status)['rejected inputs'],
+               'not positive definite': kv(status)['inputs not positive definite'],
+               'rss growth [MB]': round((rss_after - rss_before) / 2**20, 2)}
+    for key, value in figures.items():
+        record_property(key, value)
+    print('\nbridge burst:', figures)
+    assert bridge.alive()
+    assert 'internal error' not in log and 'Traceback' not in log, log[-3000:]
+    assert 'too large to condition' in log and '~/input_stiffness projected' in log
+    assert rss_after - rss_before < 5 * 2**20, figures

@@ -10,6 +10,7 @@ equilibrium, the IMU against finite differences of MuJoCo's own velocities.
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -23,6 +24,8 @@ from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilib
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.simulation.twin import (
+    MIN_REST_LENGTH_FRACTION,
+    REST_LENGTH_MARGIN,
     ChainSimulation,
     JointSimulation,
     SensorNoise,
@@ -123,6 +126,62 @@ def test_bad_options_and_models_are_named(model: JointModel) -> None:
         sim.apply_wrench([0.0, math.nan, 0, 0, 0, 0])
     with pytest.raises(ValueError, match='wrench'):
         sim.apply_wrench([1.0, 2.0])
+
+
+#: The issue's hostile rest lengths and wrenches: each refused, naming the value.
+HOSTILE_REST_LENGTHS = (1e308, 1e6, 5e-324)
+HOSTILE_WRENCHES = ([1e308, 0, 0, 0, 0, 0], [0, 0, math.inf, 0, 0, 0], [0, 0, 0, 0, 0, -1e6],
+                    [1e3, 0, 0, 0, 0, 0], [0, 0, 0, math.nan, 0, 0])
+
+
+def test_twin_refuses_impossible_rest_lengths_and_wrenches_and_keeps_its_state(
+        model: JointModel, chain: JointChain) -> None:
+    """Rest lengths outside the physical range (above MIN_REST_LENGTH_FRACTION of the configured
+    one, at most 1 + REST_LENGTH_MARGIN times the maximum length) and non-finite or absurd
+    wrenches: a ValueError naming the value, and the twin keeps its rest lengths, load and
+    motion; a configured range replaces the physical one."""
+    W = np.array([0.04, -0.05, 0.02, 0.0, 5e-4, 0.0])
+    sim = JointSimulation(model)
+    sim.apply_wrench(W)
+    sim.step(50)  # moving
+    low, high = sim.rest_length_bounds
+    np.testing.assert_allclose(low, MIN_REST_LENGTH_FRACTION * model.rest_lengths)
+    np.testing.assert_allclose(high, (1.0 + REST_LENGTH_MARGIN) * model.max_lengths)
+    qpos, qvel = sim.mj_data.qpos.copy(), sim.mj_data.qvel.copy()
+    for value in HOSTILE_REST_LENGTHS:
+        rest = model.rest_lengths.copy()
+        rest[5] = value
+        message = re.escape(f'straight_AC = {value:.6g} m is outside')
+        with pytest.raises(ValueError, match=message):
+            sim.set_rest_lengths(rest)
+    for wrench in HOSTILE_WRENCHES:
+        with pytest.raises(ValueError, match=r'wrench must be finite|exceeds max_'):
+            sim.apply_wrench(wrench)
+    np.testing.assert_array_equal(sim.rest_lengths, model.rest_lengths)
+    np.testing.assert_array_equal(sim.external_wrench, W)
+    np.testing.assert_array_equal(sim.mj_data.qpos, qpos)
+    np.testing.assert_array_equal(sim.mj_data.qvel, qvel)
+    assert sim.settle(max_time=10.0)
+    res = solve_equilibrium(model, W)
+    dp, dr = pose_errors(sim.pose(), res.state.transform)
+    assert dp <= POSITION_TOLERANCE and dr <= ROTATION_TOLERANCE
+    # the edges of the range are taken; a configured range and bound replace the defaults
+    sim.set_rest_lengths(high)
+    sim.set_rest_lengths(low * (1.0 + 1e-12))
+    narrow = JointSimulation(model, rest_length_range=(0.03, 0.04), max_force=1.0)
+    with pytest.raises(ValueError, match=r'range \[0.03, 0.04\]'):
+        narrow.set_rest_lengths(np.full(12, 0.041))
+    with pytest.raises(ValueError, match='exceeds max_force = 1 N'):
+        narrow.apply_wrench([2.0, 0, 0, 0, 0, 0])
+    narrow.set_rest_lengths(np.full(12, 0.035))
+    with pytest.raises(ValueError, match='rest_length_range'):
+        SimulationOptions(rest_length_range=(0.04, 0.03))
+    spine = ChainSimulation(chain)
+    rest = [m.rest_lengths.copy() for m in chain.joints]
+    rest[2][0] = 1e6
+    with pytest.raises(ValueError, match='j3_cross_AA = 1e\\+06 m is outside'):
+        spine.set_rest_lengths(rest)
+    np.testing.assert_array_equal(spine.rest_lengths[2], chain.joints[2].rest_lengths)
 
 
 def test_string_wrench_equals_the_library_at_200_configurations(model: JointModel) -> None:

@@ -18,7 +18,8 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from tensegrity_stiffness.nodes.parameters import ParameterSpec
+from tensegrity_stiffness.nodes.parameters import ParameterSpec, unknown_parameter_warnings
+from tensegrity_stiffness.ros.runtime.rclpy_internals import parameter_override_names
 
 _ROS_TYPES = {
     'bool': Parameter.Type.BOOL, 'int': Parameter.Type.INTEGER,
@@ -64,9 +65,11 @@ def current_values(node: Node, table: Iterable[ParameterSpec]) -> dict[str, Any]
 
 
 class ParameterBinding:
-    """Validates every parameter change of ``node`` as a whole with ``build`` (values -> settings,
-    ValueError naming the field) and, once ROS has applied it, rebuilds the settings and hands
-    them to ``apply``. ``on_rejected(reason)`` reports a rejected change."""
+    """Declares ``table`` on ``node`` (warning by name about a misspelt parameter of the node's
+    own sections in its parameter file or overrides), validates every parameter change of
+    ``node`` as a whole with ``build`` (values -> settings, ValueError naming the field) and,
+    once ROS has applied it, rebuilds the settings and hands them to ``apply``.
+    ``on_rejected(reason)`` reports a rejected change."""
 
     def __init__(self, node: Node, table: Iterable[ParameterSpec],
                  build: Callable[[Mapping[str, Any]], Any],
@@ -78,6 +81,8 @@ class ParameterBinding:
         self._apply = apply
         self._on_rejected = on_rejected
         declare(node, self._table)
+        for line in unknown_parameter_warnings(parameter_override_names(node), self._table):
+            node.get_logger().warning(line)
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._applied)
 

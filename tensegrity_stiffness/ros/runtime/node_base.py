@@ -87,7 +87,7 @@ class StreamingNode(Node):
 
     def __init__(self, node_name: str, **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
-        self.reporter = Reporter(self.get_logger())
+        self.reporter = Reporter(self.get_logger(), context=self.context)
         # Publication lock: the fast lane and the executor both publish; settings are swapped
         # (and re-published) under it too. Re-entrant: a swap re-publishes.
         self._output_lock = threading.RLock()

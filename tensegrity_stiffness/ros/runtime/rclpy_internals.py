@@ -1,8 +1,9 @@
 """The only place that uses rclpy's implementation internals (``rclpy_implementation``, a
-subscription's ``handle.take_message`` and ``handle.pointer``), for the fast lane's latency:
-a wait set built once for the lane's own subscriptions, refilled per wait, and a take of the
-messages queued behind the first. rclpy's public alternatives (an executor per thread) cost a
-wait-set rebuild and a task per message (docs/nodes.md, "QoS").
+subscription's ``handle.take_message`` and ``handle.pointer``, a node's ``handle.get_parameters``),
+for the fast lane's latency: a wait set built once for the lane's own subscriptions, refilled
+per wait, and a take of the messages queued behind the first (rclpy's public alternatives, an
+executor per thread, cost a wait-set rebuild and a task per message: docs/nodes.md, "QoS"); and
+for the names a node's parameter file and overrides set (rclpy keeps them in a private dict).
 
 ``test/ros/test_rclpy_internals.py`` exercises every name used here against the installed
 rclpy, so a release that changes them fails that test by name instead of the nodes silently.
@@ -13,6 +14,7 @@ from __future__ import annotations
 from typing import Any
 
 from rclpy.impl.implementation_singleton import rclpy_implementation as _implementation
+from rclpy.parameter import Parameter
 
 
 def take(subscription: Any) -> Any | None:
@@ -46,3 +48,10 @@ class SubscriptionWaitSet:
         wait_set.wait(timeout_ns)
         ready = wait_set.get_ready_entities('subscription')
         return [s for s in self._subscriptions if s.handle.pointer in ready]
+
+
+def parameter_override_names(node: Any) -> list[str]:
+    """The names of the parameters that the process's parameter files and ``-p`` overrides set
+    for ``node`` (its own and the ``/**`` ones): what rclpy reads its start-up values from."""
+    with node.handle:
+        return sorted(node.handle.get_parameters(Parameter))

@@ -19,10 +19,13 @@ WARN_THROTTLE_S = 1.0
 class Reporter:
     """Counts rejected inputs by kind and logs ``<kind> rejected: <problem>`` at most once per
     ``WARN_THROTTLE_S`` per kind; the next warning says how many were left out. Thread-safe (a
-    node's fast lane and its executor both report)."""
+    node's fast lane and its executor both report). ``context``: the node's rclpy context; an
+    rclpy error once it is shut down is the stop, not a fault (:meth:`internal_error`)."""
 
-    def __init__(self, logger: Any, throttle_s: float = WARN_THROTTLE_S) -> None:
+    def __init__(self, logger: Any, throttle_s: float = WARN_THROTTLE_S,
+                 context: Any = None) -> None:
         self._logger = logger
+        self._context = context
         self._throttle_s = throttle_s
         self._lock = threading.Lock()
         self._rejected: dict[str, int] = {}
@@ -43,16 +46,19 @@ class Reporter:
         self._count(kind)
         self.warn(kind, problem)
 
-    def warn(self, kind: str, problem: str, error: bool = False) -> None:
-        """``<kind> rejected: <problem>`` (throttled per kind), as an error if ``error``."""
+    def warn(self, kind: str, problem: str, error: bool = False, label: str = 'rejected'
+             ) -> None:
+        """``<kind> <label>: <problem>`` (throttled per kind and label), as an error if
+        ``error``."""
         now = time.monotonic()
+        key = f'{kind} {label}'
         with self._lock:
-            last, left_out = self._warned.get(kind, (-math.inf, 0))
+            last, left_out = self._warned.get(key, (-math.inf, 0))
             if now - last < self._throttle_s:
-                self._warned[kind] = (last, left_out + 1)
+                self._warned[key] = (last, left_out + 1)
                 return
-            self._warned[kind] = (now, 0)
-        text = f'{kind} rejected: {problem}' + (
+            self._warned[key] = (now, 0)
+        text = f'{key}: {problem}' + (
             f' ({left_out} more since the last warning)' if left_out else '')
         # One severity per call site: rclpy raises when a call site changes its severity.
         if error:
@@ -60,8 +66,23 @@ class Reporter:
         else:
             self._logger.warning(text)
 
+    def stopped(self, exc: BaseException) -> bool:
+        """True when ``exc`` is rclpy's refusal of a call on a shut-down context (``RCLError:
+        ... publisher's context is invalid``, an invalid handle: RuntimeErrors): a callback, the
+        fast lane or a timer that was publishing when SIGINT or SIGTERM shut the context down
+        on rclpy's signal thread. The context's state is final, so the test cannot race."""
+        return isinstance(exc, RuntimeError) and self._context is not None and \
+            not self._context.ok()
+
     def internal_error(self, kind: str, exc: BaseException) -> None:
-        """An exception no validation anticipated (a bug): counted and logged, never raised."""
+        """An exception no validation anticipated (a bug): counted and logged, never raised.
+        A failure of the shutdown itself (:meth:`stopped`) is a quiet stop: a debug line."""
+        if self.stopped(exc):
+            try:
+                self._logger.debug(f'{kind} stopped by the shutdown: {exc}')
+            except Exception:  # logging may be finalized already
+                pass
+            return
         key = f'{kind} internal error'
         self._count(key)
         try:

@@ -4,7 +4,9 @@
 can pin (:mod:`.middleware`), creates the node, moves what lives as long as the process out of the
 garbage collector's reach, spins, and on SIGINT or SIGTERM (rclpy's signal handlers shut the
 context down; Ctrl-C and supervisors that signal the whole process group alike) closes the node's
-workers and exits with status 0. ``--help`` prints the node's usage and starts nothing.
+workers and exits with status 0. ``--help`` prints the node's usage and starts nothing. A bad
+configuration (the node's construction raises one of :data:`CONFIG_ERRORS`) is one line naming
+the problem and exit status 2, not a traceback.
 """
 
 from __future__ import annotations
@@ -13,14 +15,23 @@ import gc
 import signal
 import sys
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import rclpy
+import rclpy.logging
+from rclpy.exceptions import ParameterException
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 
 from tensegrity_stiffness.nodes.parameter_docs import asks_for_help, node_usage
 from tensegrity_stiffness.ros.runtime.middleware import bound_input_memory
 
+#: What a node's construction raises for a bad configuration (the settings' ValueError naming the
+#: field; rclpy's refusal of a parameter file's value for a declared type or range): reported in
+#: one line, and the process exits with :data:`CONFIG_ERROR_EXIT_CODE` (as it does when
+#: ``rclpy.init`` refuses the arguments, e.g. a parameter file that is not YAML).
+CONFIG_ERRORS = (ValueError, ParameterException)
+CONFIG_ERROR_EXIT_CODE = 2
 #: Python's thread switch interval while a node runs (s): a thread that holds the GIL (a
 #: service, the worker's reader) yields it to the executor thread at least this often (the
 #: default, 5 ms, would dominate the p99 latency).
@@ -40,11 +51,22 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
         return
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     profile = bound_input_memory()
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args)
+    except RuntimeError as exc:  # rcl refused the arguments: a parameter file it cannot parse
+        if profile is not None:
+            profile.unlink(missing_ok=True)
+        report_config_error(exc)
+        sys.exit(CONFIG_ERROR_EXIT_CODE)
     node = None
+    config_error = False
     try:
         try:
             node = node_factory()
+        except CONFIG_ERRORS as exc:
+            config_error = True
+            report_config_error(exc)
+            return
         finally:  # Fast DDS read the profile when the node's participant was created
             if profile is not None:
                 profile.unlink(missing_ok=True)
@@ -75,3 +97,14 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
                 close()
             node.destroy_node()
         rclpy.try_shutdown()
+        if config_error:
+            sys.exit(CONFIG_ERROR_EXIT_CODE)
+
+
+def report_config_error(exc: BaseException) -> None:
+    """One line naming the problem of a node's configuration (the executable's name, the
+    ValueError of the settings' validation or rclpy's refusal of a parameter's type or range),
+    on the log's error stream: no traceback."""
+    name = Path(sys.argv[0]).name or 'node'
+    text = ' '.join(str(exc).split())
+    rclpy.logging.get_logger(name).fatal(f'configuration error: {text}; not started')

@@ -40,7 +40,11 @@ class WorkerCalls:
                     done.set_result(result)
                 else:  # reported to the caller by `await done`
                     done.set_exception(error)
-            self._wake.trigger()
+            try:
+                self._wake.trigger()
+            except RuntimeError:  # a result racing the shutdown: no executor left to wake
+                if self._node.context.ok():
+                    raise
 
         self._worker.submit(fn, args, kwargs, lambda result: settle(result=result),
                             lambda error: settle(error=error), deadline_s=deadline_s)
