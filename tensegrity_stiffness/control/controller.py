@@ -55,8 +55,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.geometry.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.geometry.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
+from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import (
     finite_array,
     finite_array_of_shape,
@@ -89,6 +89,7 @@ __all__ = [
     'DEFAULT_PROPORTIONAL_GAIN',
     'FEASIBILITY_TOLERANCE',
     'MAX_ACTIVE_SET_ITERATIONS',
+    'POSE_ROTATION_TOLERANCE',
     'SATURATION_TOLERANCE',
     'STIFFNESS_MET_TOLERANCE',
     'WARM_ACTIVE_SET_ITERATIONS',
@@ -120,6 +121,9 @@ DEFAULT_INTEGRAL_GAIN = 8.0
 DEFAULT_PROPORTIONAL_GAIN = 0.0
 #: Default clamp of the integral correction: rotation (rad) and translation (m) parts.
 DEFAULT_INTEGRAL_LIMIT = (0.2, 0.01)
+#: Largest accepted deviation of R^T R from I in a 4x4 target or measured pose (the controller's
+#: since it was written; the library's default, ``geometry.transforms.RIGID_TOLERANCE``, is 1e-9).
+POSE_ROTATION_TOLERANCE = 1e-6
 #: Iterations of a warm-started active set before it is redone cold.
 WARM_ACTIVE_SET_ITERATIONS = 100
 #: A stiffness target counts as met when the relative scaled error is at most this.
@@ -187,27 +191,6 @@ class ActuatorLimits:
         return tuple(out)
 
 
-def _transform(pose: ArrayLike, name: str) -> FloatArray:
-    """A (4, 4) rigid transform from a 4x4 or ``[x y z qx qy qz qw]``."""
-    arr = finite_array(name, pose)
-    if arr.shape == (7,):
-        try:
-            R = quaternion_to_rotation(arr[3:])
-        except ValueError as exc:
-            raise ValueError(f'{name}: {exc}') from None
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R, arr[:3]
-        return T
-    if arr.shape != (4, 4):
-        raise ValueError(f'{name} must be a (4, 4) transform or [x y z qx qy qz qw], got '
-                         f'shape {arr.shape}')
-    R = arr[:3, :3]
-    if not (np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0.0
-            and np.allclose(arr[3], [0, 0, 0, 1])):
-        raise ValueError(f'{name} is not a rigid transform')
-    return arr.copy()
-
-
 def _screw(screw: ArrayLike, name: str) -> FloatArray:
     xi = as_screws(screw, name)
     if xi.shape != (6,):
@@ -234,7 +217,7 @@ class ControlTarget:
         if (self.pose is None) == (self.screw is None):
             raise ValueError('pose: give exactly one of pose and screw')
         if self.pose is not None:
-            T = _transform(self.pose, 'pose')
+            T = rigid_transform(self.pose, 'pose', POSE_ROTATION_TOLERANCE)
         else:
             T = exp_se3(_screw(self.screw, 'screw'))
         object.__setattr__(self, 'transform', T)
@@ -532,7 +515,7 @@ def _measured(pose: ArrayLike | None, screw: ArrayLike | None) -> FloatArray | N
     if pose is not None and screw is not None:
         raise ValueError('pose: give at most one of pose and screw')
     if pose is not None:
-        return _transform(pose, 'pose')
+        return rigid_transform(pose, 'pose', POSE_ROTATION_TOLERANCE)
     if screw is not None:
         return exp_se3(_screw(screw, 'screw'))
     return None
