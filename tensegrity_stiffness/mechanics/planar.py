@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -343,11 +344,14 @@ class PlanarMechanism:
         return (0.5 * (K1 + K2) * (5.0 * L * L + L3 * L3 + 2.0 * SQRT3 * L * L3 * s1)
                 + (K1 - K2) * L * L3 * c1)
 
-    def _energy_terms(self, L3: FloatArray, c1: FloatArray, s1: FloatArray
+    def _energy_terms(self, L3: FloatArray, theta1: FloatArray, trig: ModuleType
                       ) -> tuple[FloatArray, ...]:
-        """``u, v`` (m, node D1 at ``L3 (cos, sin) theta1``) and the coefficients
-        ``A, B, U0`` of eq. (4) (J), for scalars or arrays alike."""
-        return L3 * c1, L3 * s1, *self._AB(L3, c1, s1), self._U0(L3, c1, s1)
+        """``cos theta1, sin theta1``, ``u, v`` (m, node D1 at ``L3 (cos, sin) theta1``), the
+        coefficients ``A, B, U0`` of eq. (4) (J) and ``R = hypot(A, B)`` (eq. 42 at the stable
+        root), with ``trig`` ``math`` for scalars (:meth:`forward`) or ``numpy`` for arrays."""
+        c1, s1 = trig.cos(theta1), trig.sin(theta1)
+        A, B = self._AB(L3, c1, s1)
+        return c1, s1, L3 * c1, L3 * s1, A, B, self._U0(L3, c1, s1), trig.hypot(A, B)
 
     def _jacobian_entries(self, L3: FloatArray, c1: FloatArray, s1: FloatArray,
                           c2: FloatArray, s2: FloatArray, K: FloatArray
@@ -552,9 +556,7 @@ class PlanarMechanism:
             raise ValueError(f'L3 must be >= 0, got {L3}')
         L = self.L
         rtol = self.range_tol
-        c1, s1 = math.cos(theta1), math.sin(theta1)
-        u, v, A, B, U0 = self._energy_terms(L3, c1, s1)
-        R = math.hypot(A, B)
+        c1, s1, u, v, A, B, U0, R = self._energy_terms(L3, theta1, math)
         _, t1_ok = _wrap_scalar(theta1, self.theta1_min, self.theta1_max, rtol)
         act_ok = t1_ok and self.L3_min - rtol <= L3 <= self.L3_max + rtol
         if R <= NEUTRAL_TOL * L * (self.K1 + self.K2) * (L + L3):
@@ -581,9 +583,7 @@ class PlanarMechanism:
             raise ValueError(f'L3 must be >= 0, got {L3[L3 < 0.0].ravel()[0]}')
         L = self.L
         rtol = self.range_tol
-        c1, s1 = np.cos(t1), np.sin(t1)
-        u, v, A, B, U0 = self._energy_terms(L3, c1, s1)
-        R = np.hypot(A, B)
+        c1, s1, u, v, A, B, U0, R = self._energy_terms(L3, t1, np)
         neutral = R <= NEUTRAL_TOL * L * (self.K1 + self.K2) * (L + L3)
         Rs = np.where(neutral, np.nan, R)
         c2, s2 = -A / Rs, -B / Rs
