@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import gc
 import os
-import random
 import sys
 import time
 from pathlib import Path
@@ -35,12 +34,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'test'))
 sys.path.insert(0, str(ROOT))
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
 from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support import use_own_ros_domain  # noqa: E402
 from support.ros_harness import (  # noqa: E402
     Inbox,
     NodeProcess,
@@ -63,6 +61,8 @@ from tensegrity_stiffness.srv import (  # noqa: E402
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.ros import conversions  # noqa: E402
+
+use_own_ros_domain()
 
 #: Seconds between the node being reachable and the start of the stream.
 STARTUP_SETTLE_S = 3.0

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import itertools
 import os
-import random
 import sys
 import threading
 import time
@@ -28,11 +27,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'test'))
 sys.path.insert(0, str(ROOT))
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support import use_own_ros_domain  # noqa: E402
 from support.ros_harness import (  # noqa: E402
     DEEP,
     NodeProcess,
@@ -45,6 +43,8 @@ from tensegrity_stiffness.srv import SolveEquilibrium  # noqa: E402
 
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.ros import conversions  # noqa: E402
+
+use_own_ros_domain()
 
 HARD_WRENCH = np.r_[50.0, 0.0, 0.0, 0.0, 0.0, 0.0]
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import sys
 import time
 from collections import Counter
@@ -28,14 +27,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'test'))
 sys.path.insert(0, str(ROOT))
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from support import fuzz_inputs as fi  # noqa: E402
+from support import use_own_ros_domain  # noqa: E402
 from support.ros_harness import NodeFuzzer, NodeProcess, RosClient, unique_namespace  # noqa: E402
 
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+
+use_own_ros_domain()
 
 MB = 2**20
 

@@ -18,22 +18,21 @@ import argparse
 import gc
 import json
 import os
-import random
 import statistics
 import sys
 import threading
 import time
 from collections import deque
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'test'))
 sys.path.insert(0, str(ROOT))
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-os.environ['ROS_DOMAIN_ID'] = str(random.randint(100, 200))  # a domain of this run
 
 import numpy as np  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support import use_own_ros_domain  # noqa: E402
 from support.ros_harness import (  # noqa: E402
     DEEP,
     NodeProcess,
@@ -44,6 +43,8 @@ from support.ros_harness import (  # noqa: E402
 )
 
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+
+use_own_ros_domain()
 
 MB = 2**20
 #: Bound on the growth of the node's resident memory over the soak (issue: under 5 MB).
@@ -93,8 +94,7 @@ class Matcher:
 
 
 
-def main() -> int:
-    sys.setswitchinterval(2e-4)  # the client publishes while its executor thread receives
+def _arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--minutes', type=float, default=10.0)
     parser.add_argument('--rate', type=float, default=1000.0, help='screw rate, Hz')
@@ -102,7 +102,52 @@ def main() -> int:
                         help='node parameter override NAME:=VALUE (repeatable)')
     parser.add_argument('--seed', type=int, default=0)
     parser.add_argument('--json', type=Path, help='also write the figures to this file')
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def _warm_up(ros: RosClient, pub: Any, base: str, screw: np.ndarray, matcher: Matcher) -> None:
+    """Publish ``screw`` until answers come back (the node's writer may match this reader
+    later), then forget the warm-up answers. Its own subscription, destroyed afterwards: kept
+    for the whole run, it would hold every answer (an Inbox keeps them all), and the client's
+    full garbage collections would grow with them (a once-a-minute stall of 0.2% of the
+    elapsed time, seen)."""
+    answered = threading.Event()
+    warm = ros.subscribe_callback(Float64MultiArray, f'{base}/stiffness',
+                                  lambda _msg: answered.set())
+    deadline = time.monotonic() + 30.0
+    while not answered.is_set() and time.monotonic() < deadline:
+        pub.publish(Float64MultiArray(data=screw.tolist()))
+        time.sleep(0.01)
+    ros.node.destroy_subscription(warm)
+    time.sleep(1.0)
+    with matcher.lock:
+        matcher.unmatched = 0  # the warm-up answers
+
+
+def _summary(rows: list[dict[str, float]], matcher: Matcher, alive: bool, code: int | None,
+             json_path: Path | None) -> bool:
+    """Print (and with ``json_path`` write) the totals and the memory growth; whether the soak
+    passed (node alive, exit 0, growth under the limit, no wrong answer)."""
+    growth = rows[-1]['rss MB'] - rows[0]['rss MB'] if rows else float('nan')
+    total_drops = sum(r['drops'] for r in rows) + sum(
+        v for m, v in matcher.drops.items() if m >= len(rows))
+    print(f'\nsent {sum(r["sent"] for r in rows)}, answers {sum(r["answers"] for r in rows)}, '
+          f'drops {total_drops}, unmatched (wrong) {matcher.unmatched}, node alive {alive}, '
+          f'exit code {code}')
+    print(f'node RSS: minute 1 {rows[0]["rss MB"]:.2f} MB -> minute {len(rows)} '
+          f'{rows[-1]["rss MB"]:.2f} MB: growth {growth:+.2f} MB (limit {RSS_GROWTH_LIMIT_MB} MB)')
+    if json_path:
+        json_path.write_text(json.dumps({'rows': rows, 'growth MB': growth,
+                                         'unmatched': matcher.unmatched, 'exit code': code},
+                                        indent=1))
+    ok = alive and code == 0 and growth < RSS_GROWTH_LIMIT_MB and matcher.unmatched == 0
+    print('RESULT:', 'PASS' if ok else 'FAIL')
+    return ok
+
+
+def main() -> int:
+    sys.setswitchinterval(2e-4)  # the client publishes while its executor thread receives
+    args = _arguments()
 
     model = JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
     rng = np.random.default_rng(args.seed)
@@ -118,21 +163,7 @@ def main() -> int:
     try:
         ros.wait_for_subscribers(pub)
         ros.wait_for_publishers(f'{base}/stiffness')
-        # Warm up until answers come back (the node's writer may match this reader later).
-        # Its own subscription, destroyed afterwards: kept for the whole run, it would hold
-        # every answer (an Inbox keeps them all), and the client's full garbage collections
-        # would grow with them (a once-a-minute stall of 0.2% of the elapsed time, seen).
-        answered = threading.Event()
-        warm = ros.subscribe_callback(Float64MultiArray, f'{base}/stiffness',
-                                      lambda _msg: answered.set())
-        deadline = time.monotonic() + 30.0
-        while not answered.is_set() and time.monotonic() < deadline:
-            pub.publish(Float64MultiArray(data=model.initial_screw.tolist()))
-            time.sleep(0.01)
-        ros.node.destroy_subscription(warm)
-        time.sleep(1.0)
-        with matcher.lock:
-            matcher.unmatched = 0  # the warm-up answers
+        _warm_up(ros, pub, base, model.initial_screw, matcher)
         minutes = max(1, round(args.minutes))
         per_minute = int(args.rate * 60 * args.minutes / minutes)
         print(f'ROS_DOMAIN_ID={os.environ["ROS_DOMAIN_ID"]}, node pid {proc.pid}, '
@@ -188,21 +219,7 @@ def main() -> int:
         ros.close()
         alive = proc.alive()
         code = proc.stop()
-    growth = rows[-1]['rss MB'] - rows[0]['rss MB'] if rows else float('nan')
-    total_drops = sum(r['drops'] for r in rows) + sum(
-        v for m, v in matcher.drops.items() if m >= len(rows))
-    print(f'\nsent {sum(r["sent"] for r in rows)}, answers {sum(r["answers"] for r in rows)}, '
-          f'drops {total_drops}, unmatched (wrong) {matcher.unmatched}, node alive {alive}, '
-          f'exit code {code}')
-    print(f'node RSS: minute 1 {rows[0]["rss MB"]:.2f} MB -> minute {len(rows)} '
-          f'{rows[-1]["rss MB"]:.2f} MB: growth {growth:+.2f} MB (limit {RSS_GROWTH_LIMIT_MB} MB)')
-    if args.json:
-        args.json.write_text(json.dumps({'rows': rows, 'growth MB': growth,
-                                         'unmatched': matcher.unmatched, 'exit code': code},
-                                        indent=1))
-    ok = alive and code == 0 and growth < RSS_GROWTH_LIMIT_MB and matcher.unmatched == 0
-    print('RESULT:', 'PASS' if ok else 'FAIL')
-    return 0 if ok else 1
+    return 0 if _summary(rows, matcher, alive, code, args.json) else 1
 
 
 if __name__ == '__main__':

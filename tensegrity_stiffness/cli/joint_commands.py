@@ -290,15 +290,19 @@ def add_joint_options(p: argparse.ArgumentParser, screw: bool = True) -> None:
     g.add_argument('--force-law', choices=FORCE_LAWS,
                    help="string force law (default: the config's; 'paper' = the authors' code)")
     if screw:
-        s = g.add_mutually_exclusive_group()
-        s.add_argument('--screw', nargs=6, type=parse_number,
-                       metavar=('WX', 'WY', 'WZ', 'VX', 'VY', 'VZ'),
-                       help="screw xi = [omega; v] (rad, m); default: the config's "
-                            'initial_screw (unloaded equilibrium)')
-        s.add_argument('--pose', nargs=7, type=parse_number,
-                       metavar=('X', 'Y', 'Z', 'QX', 'QY', 'QZ', 'QW'),
-                       help='pose of link 2 in {1}: position (m) and unit quaternion (ROS '
-                            'order); turned into the screw nearest the initial screw')
+        _add_screw_or_pose(g, "screw xi = [omega; v] (rad, m); default: the config's "
+                              'initial_screw (unloaded equilibrium)',
+                           'pose of link 2 in {1}: position (m) and unit quaternion (ROS '
+                           'order); turned into the screw nearest the initial screw')
+
+
+def _add_screw_or_pose(g: Any, screw_help: str, pose_help: str) -> None:
+    """The mutually exclusive --screw (6 values) and --pose (7 values) of a joint command."""
+    s = g.add_mutually_exclusive_group()
+    s.add_argument('--screw', nargs=6, type=parse_number,
+                   metavar=('WX', 'WY', 'WZ', 'VX', 'VY', 'VZ'), help=screw_help)
+    s.add_argument('--pose', nargs=7, type=parse_number,
+                   metavar=('X', 'Y', 'Z', 'QX', 'QY', 'QZ', 'QW'), help=pose_help)
 
 
 def add_design_options(p: argparse.ArgumentParser, limits_required: bool) -> None:
@@ -308,15 +312,10 @@ def add_design_options(p: argparse.ArgumentParser, limits_required: bool) -> Non
                    help='joint config (default: the packaged config/default_joint.yaml)')
     g.add_argument('--force-law', choices=FORCE_LAWS,
                    help="string force law (default: the config's)")
-    s = g.add_mutually_exclusive_group()
-    s.add_argument('--screw', nargs=6, type=parse_number,
-                   metavar=('WX', 'WY', 'WZ', 'VX', 'VY', 'VZ'),
-                   help="target screw xi = [omega; v] (rad, m); default: the config's "
-                        'initial_screw')
-    s.add_argument('--pose', nargs=7, type=parse_number,
-                   metavar=('X', 'Y', 'Z', 'QX', 'QY', 'QZ', 'QW'),
-                   help='target pose of link 2 in {1}: position (m) and unit quaternion '
-                        '(ROS order), on the branch nearest the initial screw')
+    _add_screw_or_pose(g, "target screw xi = [omega; v] (rad, m); default: the config's "
+                          'initial_screw',
+                       'target pose of link 2 in {1}: position (m) and unit quaternion '
+                       '(ROS order), on the branch nearest the initial screw')
     p.add_argument('--wrench', nargs=6, type=parse_number, default=[0.0] * 6,
                    metavar=('FX', 'FY', 'FZ', 'MX', 'MY', 'MZ'),
                    help='external wrench on link 2 in {1} about its origin (N, N m; default 0)')

@@ -55,18 +55,28 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.geometry.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.geometry.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
+from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import (
     finite_array,
     finite_array_of_shape,
     finite_scalar,
+)
+from tensegrity_stiffness.mechanics.active_set import (
+    ACTIVE_SET_TOLERANCE,
+    MAX_ACTIVE_SET_ITERATIONS,
+    active_set,
+    kkt_system,
 )
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.design import (
     BOUND_MARGIN,
     DEFAULT_TENSION_MAX,
     DEFAULT_TENSION_MIN,
+    FEASIBILITY_TOLERANCE,
+    length_scaling,
+    relative_stiffness_error,
+    rest_from_tensions,
 )
 from tensegrity_stiffness.mechanics.joint import JointModel
 
@@ -79,6 +89,7 @@ __all__ = [
     'DEFAULT_PROPORTIONAL_GAIN',
     'FEASIBILITY_TOLERANCE',
     'MAX_ACTIVE_SET_ITERATIONS',
+    'POSE_ROTATION_TOLERANCE',
     'SATURATION_TOLERANCE',
     'STIFFNESS_MET_TOLERANCE',
     'WARM_ACTIVE_SET_ITERATIONS',
@@ -110,12 +121,9 @@ DEFAULT_INTEGRAL_GAIN = 8.0
 DEFAULT_PROPORTIONAL_GAIN = 0.0
 #: Default clamp of the integral correction: rotation (rad) and translation (m) parts.
 DEFAULT_INTEGRAL_LIMIT = (0.2, 0.01)
-#: Largest scaled residual |S (B t + W)| (N) of a feasible tick.
-FEASIBILITY_TOLERANCE = 1e-9
-#: Relative tolerance of the active-set method (steps, multiplier signs).
-ACTIVE_SET_TOLERANCE = 1e-12
-#: Active-set iterations per QP before giving up.
-MAX_ACTIVE_SET_ITERATIONS = 500
+#: Largest accepted deviation of R^T R from I in a 4x4 target or measured pose (the controller's
+#: since it was written; the library's default, ``geometry.transforms.RIGID_TOLERANCE``, is 1e-9).
+POSE_ROTATION_TOLERANCE = 1e-6
 #: Iterations of a warm-started active set before it is redone cold.
 WARM_ACTIVE_SET_ITERATIONS = 100
 #: A stiffness target counts as met when the relative scaled error is at most this.
@@ -183,27 +191,6 @@ class ActuatorLimits:
         return tuple(out)
 
 
-def _transform(pose: ArrayLike, name: str) -> FloatArray:
-    """A (4, 4) rigid transform from a 4x4 or ``[x y z qx qy qz qw]``."""
-    arr = finite_array(name, pose)
-    if arr.shape == (7,):
-        try:
-            R = quaternion_to_rotation(arr[3:])
-        except ValueError as exc:
-            raise ValueError(f'{name}: {exc}') from None
-        T = np.eye(4)
-        T[:3, :3], T[:3, 3] = R, arr[:3]
-        return T
-    if arr.shape != (4, 4):
-        raise ValueError(f'{name} must be a (4, 4) transform or [x y z qx qy qz qw], got '
-                         f'shape {arr.shape}')
-    R = arr[:3, :3]
-    if not (np.allclose(R.T @ R, np.eye(3), atol=1e-6) and np.linalg.det(R) > 0.0
-            and np.allclose(arr[3], [0, 0, 0, 1])):
-        raise ValueError(f'{name} is not a rigid transform')
-    return arr.copy()
-
-
 def _screw(screw: ArrayLike, name: str) -> FloatArray:
     xi = as_screws(screw, name)
     if xi.shape != (6,):
@@ -230,7 +217,7 @@ class ControlTarget:
         if (self.pose is None) == (self.screw is None):
             raise ValueError('pose: give exactly one of pose and screw')
         if self.pose is not None:
-            T = _transform(self.pose, 'pose')
+            T = rigid_transform(self.pose, 'pose', POSE_ROTATION_TOLERANCE)
         else:
             T = exp_se3(_screw(self.screw, 'screw'))
         object.__setattr__(self, 'transform', T)
@@ -340,28 +327,6 @@ def tension_bounds(model: JointModel, lengths: FloatArray, rest_min: FloatArray,
     return lo, hi
 
 
-def rest_from_tensions(model: JointModel, lengths: FloatArray, tensions: FloatArray
-                       ) -> FloatArray:
-    """True rest lengths that give ``tensions`` at ``lengths`` (eq. 8 inverted)."""
-    if model.force_law == 'hooke':
-        return lengths - tensions / model.k
-    return lengths * (1.0 - tensions / model.k)
-
-
-def _scale(length_scale: float) -> FloatArray:
-    inv = 1.0 / length_scale
-    return np.array([1.0, 1.0, 1.0, inv, inv, inv])
-
-
-def relative_stiffness_error(Kc: FloatArray, target: FloatArray, length_scale: float) -> float:
-    """|S (K_c - K*) S|_F / |S K* S|_F (``DesignResult.stiffness_error``)."""
-    S = _scale(length_scale)
-    SS = S[:, None] * S[None, :]
-    den = float(np.linalg.norm(target * SS))
-    num = float(np.linalg.norm((Kc - target) * SS))
-    return num / den if den > 0.0 else num
-
-
 # ---------------------------------------------------------------------------------- the QP
 @dataclass
 class QPResult:
@@ -380,16 +345,8 @@ def _face(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, t: FloatAr
           free: BoolArray) -> tuple[FloatArray, FloatArray]:
     """Minimiser of ``1/2 t'Pt - c't`` on the face (fixed variables at ``t``) with ``A t = b``:
     the free values and the equality multipliers (least squares when the KKT is singular)."""
-    F = np.flatnonzero(free)
-    X = np.flatnonzero(~free)
-    nf, m = F.size, A.shape[0]
-    K = np.zeros((nf + m, nf + m))
-    PF = P[F]
-    AF = A[:, F]
-    K[:nf, :nf] = PF[:, F]
-    K[:nf, nf:] = AF.T
-    K[nf:, :nf] = AF
-    rhs = np.concatenate([c[F] - PF[:, X] @ t[X], b - A[:, X] @ t[X]])
+    nf = int(np.count_nonzero(free))
+    K, rhs = kkt_system(P, c, A, b, t, free)
     try:
         sol = np.linalg.solve(K, rhs)
         # NaN fails the comparison too; a near-singular face gives a large residual
@@ -496,44 +453,15 @@ def _active_set(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: 
                 hi: FloatArray, t0: FloatArray,
                 max_iterations: int = MAX_ACTIVE_SET_ITERATIONS) -> QPResult:
     """Primal active set from a feasible ``t0`` (its bounds form the first working set)."""
-    scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
-    t = np.clip(t0, lo, hi)
-    span = np.maximum(hi - lo, 1e-300)
-    at_lo = t - lo <= 1e-12 * span
-    at_hi = ~at_lo & (hi - t <= 1e-12 * span)
-    t[at_lo], t[at_hi] = lo[at_lo], hi[at_hi]
-    nu = np.zeros(A.shape[0])
-    for it in range(1, max_iterations + 1):
-        free = ~(at_lo | at_hi)
-        F = np.flatnonzero(free)
-        if F.size:
-            target, nu = _face(P, c, A, b, t, free)
-        else:
-            target = np.zeros(0)
-            nu = np.linalg.lstsq(A.T, c - P @ t, rcond=None)[0] if A.shape[0] else nu
-        step = target - t[F]
-        if np.all(np.abs(step) <= 1e-13 * (1.0 + np.abs(t[F]))):
-            t[F] = target
-            mu = _multipliers(P, c, A, t, nu, at_lo, at_hi)
-            j = int(np.argmin(mu))
-            if mu[j] >= -ACTIVE_SET_TOLERANCE * scale:
-                return QPResult(t, at_lo, at_hi, it, True, False)
-            at_lo[j] = at_hi[j] = False
-            continue
-        with np.errstate(divide='ignore', invalid='ignore'):
-            ratio = np.where(step < 0.0, (lo[F] - t[F]) / step,
-                             np.where(step > 0.0, (hi[F] - t[F]) / step, np.inf))
-        k = int(np.argmin(ratio))
-        alpha = min(1.0, float(ratio[k]))
-        t[F] += alpha * step
-        if alpha < 1.0:
-            j = F[k]
-            if step[k] < 0.0:
-                at_lo[j], t[j] = True, lo[j]
-            else:
-                at_hi[j], t[j] = True, hi[j]
-        t = np.clip(t, lo, hi)
-    return QPResult(t, at_lo, at_hi, max_iterations, False, False)
+
+    def face(t: FloatArray, free: BoolArray, nu: FloatArray) -> tuple[FloatArray, FloatArray]:
+        if free.any():
+            return _face(P, c, A, b, t, free)
+        return np.zeros(0), (np.linalg.lstsq(A.T, c - P @ t, rcond=None)[0] if A.shape[0]
+                             else nu)
+
+    sol = active_set(P, c, A, lo, hi, t0, face, max_iterations)
+    return QPResult(sol.t, sol.at_lo, sol.at_hi, sol.iterations, sol.converged, False)
 
 
 def _objective(pose: PoseTerms, target: ControlTarget, S: FloatArray, middle: FloatArray
@@ -587,7 +515,7 @@ def _measured(pose: ArrayLike | None, screw: ArrayLike | None) -> FloatArray | N
     if pose is not None and screw is not None:
         raise ValueError('pose: give at most one of pose and screw')
     if pose is not None:
-        return _transform(pose, 'pose')
+        return rigid_transform(pose, 'pose', POSE_ROTATION_TOLERANCE)
     if screw is not None:
         return exp_se3(_screw(screw, 'screw'))
     return None
@@ -634,7 +562,35 @@ def _failure(A: FloatArray, b: FloatArray, sol: QPResult) -> str:
 
 
 # ---------------------------------------------------------------------------------- joint
-class StiffnessController:
+class _PoseFeedback:
+    """The integral pose feedback the joint's and the spine's controllers share: each sets
+    ``integral_gain``, ``integral_limit`` and the integral ``_z`` (6,)."""
+
+    integral_gain: float
+    integral_limit: tuple[float, float]
+    _z: FloatArray
+
+    def _feedback(self, dt: float, target: ControlTarget, pose: ArrayLike | None,
+                  screw: ArrayLike | None, wrench_name: str, wrench: ArrayLike | None
+                  ) -> tuple[float, FloatArray, FloatArray, FloatArray, FloatArray]:
+        """The checked ``dt`` and wrench (6,) (default 0) of one tick, the pose error ``e`` of
+        the measured ``pose`` or ``screw`` (zero when none is given) as the integrator reads it
+        and as reported, and the clamped integral after this tick (not yet committed). Bad
+        input raises ValueError naming it."""
+        dt = _check_dt(dt)
+        if not isinstance(target, ControlTarget):
+            raise ValueError('target must be a ControlTarget')
+        measured = _measured(pose, screw)
+        W = np.zeros(6) if wrench is None else finite_array_of_shape(wrench_name, wrench, (6,))
+        if measured is not None:
+            e, error = _pose_error(target.transform, measured)
+        else:
+            e, error = np.zeros(6), np.zeros(6)
+        z = _clamp_integral(self._z + self.integral_gain * dt * e, self.integral_limit)
+        return dt, W, e, error, z
+
+
+class StiffnessController(_PoseFeedback):
     """Closed-loop rest-length commands for one joint (module docstring).
 
     ``model``: the controller's (nominal) :class:`JointModel`; ``limits``:
@@ -669,7 +625,7 @@ class StiffnessController:
             self.length_scale = finite_scalar('length_scale', length_scale)
             if self.length_scale <= 0.0:
                 raise ValueError('length_scale must be > 0')
-        self._S = _scale(self.length_scale)
+        self._S = length_scaling(self.length_scale)
         self.reset(rest_lengths)
 
     @property
@@ -703,19 +659,9 @@ class StiffnessController:
         (4x4 or [x y z qx qy qz qw]) or ``screw`` (none: no feedback this tick) and the known
         or estimated ``external_wrench`` (6,) on link 2 in {1} about its origin (default 0).
         Bad input raises ValueError naming it and leaves the state unchanged."""
-        dt = _check_dt(dt)
-        if not isinstance(target, ControlTarget):
-            raise ValueError('target must be a ControlTarget')
-        measured = _measured(pose, screw)
-        W = np.zeros(6) if external_wrench is None else finite_array_of_shape(
-            'external_wrench', external_wrench, (6,))
-        T_star = target.transform
-        if measured is not None:
-            e, error = _pose_error(T_star, measured)
-        else:
-            e, error = np.zeros(6), np.zeros(6)
-        z = _clamp_integral(self._z + self.integral_gain * dt * e, self.integral_limit)
-        T_d = exp_se3(z + self.proportional_gain * e) @ T_star
+        dt, W, e, error, z = self._feedback(dt, target, pose, screw, 'external_wrench',
+                                            external_wrench)
+        T_d = exp_se3(z + self.proportional_gain * e) @ target.transform
         return self._tick(dt, target, T_d, W, z, error)
 
     def _problem(self, T_d: FloatArray, W: FloatArray) -> _JointProblem | str:
@@ -825,7 +771,7 @@ class ChainControlCommand:
     joint_commands: tuple[ControlCommand, ...] = ()
 
 
-class ChainStiffnessController:
+class ChainStiffnessController(_PoseFeedback):
     """Closed-loop rest-length commands for a spine: a tip pose target (base frame) and a tip
     K_c* (base frame, about the tip link's origin as :meth:`JointChain.tip_stiffness`).
 
@@ -978,17 +924,9 @@ class ChainStiffnessController:
         """One tick: ``target`` (tip pose in the base; ``cartesian_stiffness`` the tip K_c* in
         the base), the measured ``tip_pose`` (4x4 or 7) and the known ``tip_wrench`` (6,)
         (base, about the tip link's origin; default 0); ``gravity`` as the chain's."""
-        dt = _check_dt(dt)
-        if not isinstance(target, ControlTarget):
-            raise ValueError('target must be a ControlTarget')
-        measured = _measured(tip_pose, None)
-        W = np.zeros(6) if tip_wrench is None else finite_array_of_shape(
-            'tip_wrench', tip_wrench, (6,))
-        T_star = target.transform
-        e, error = (_pose_error(T_star, measured) if measured is not None
-                    else (np.zeros(6), np.zeros(6)))
-        z = _clamp_integral(self._z + self.integral_gain * dt * e, self.integral_limit)
-        xi = self._screws_for(exp_se3(z) @ T_star)
+        dt, W, _, error, z = self._feedback(dt, target, tip_pose, None, 'tip_wrench',
+                                            tip_wrench)
+        xi = self._screws_for(exp_se3(z) @ target.transform)
         chain = self.chain
         state = chain.evaluate(xi)
         loads = chain.residuals(xi, W, gravity) - state.wrenches

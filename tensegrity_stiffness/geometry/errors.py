@@ -15,63 +15,51 @@ INVALID = 'invalid'
 
 
 class InputError(ValueError):
-    """A rejected input; ``kind`` names its kind (the subclass's)."""
+    """A rejected input; ``kind`` names its kind (a subclass gives it in its class line:
+    ``class WrongFrameError(InputError, kind='wrong frame_id')``)."""
 
     kind: ClassVar[str] = INVALID
 
+    def __init_subclass__(cls, kind: str | None = None, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        if kind is not None:
+            cls.kind = kind
 
-class OversizedArrayError(InputError):
+
+class OversizedArrayError(InputError, kind='oversized array'):
     """An array message with more elements than allowed."""
 
-    kind = 'oversized array'
 
-
-class BadDataOffsetError(InputError):
+class BadDataOffsetError(InputError, kind='bad data_offset'):
     """An array message whose ``layout.data_offset`` is past its data."""
 
-    kind = 'bad data_offset'
 
-
-class WrongLengthError(InputError):
+class WrongLengthError(InputError, kind='wrong length'):
     """An array or a list with another number of values than expected."""
 
-    kind = 'wrong length'
 
-
-class OutsideChartError(InputError):
+class OutsideChartError(InputError, kind='outside the chart'):
     """A screw with ``|omega| >= 2 pi`` (outside the chart of screw coordinates)."""
 
-    kind = 'outside the chart'
 
-
-class WrongFrameError(InputError):
+class WrongFrameError(InputError, kind='wrong frame_id'):
     """A ``header.frame_id`` that is not the expected frame."""
 
-    kind = 'wrong frame_id'
 
-
-class BadQuaternionError(InputError):
+class BadQuaternionError(InputError, kind='bad quaternion'):
     """A quaternion that is not finite, zero or not of unit norm."""
 
-    kind = 'bad quaternion'
 
-
-class BadRestLengthsError(InputError):
+class BadRestLengthsError(InputError, kind='bad rest lengths'):
     """Rest lengths that are not finite, positive or of the right shape."""
 
-    kind = 'bad rest lengths'
 
-
-class NotFiniteError(InputError):
+class NotFiniteError(InputError, kind='NaN or inf'):
     """An array containing NaN or inf."""
 
-    kind = 'NaN or inf'
 
-
-class SingularStiffnessError(InputError):
+class SingularStiffnessError(InputError, kind='singular tip stiffness'):
     """A stiffness matrix that cannot be inverted at the configuration."""
-
-    kind = 'singular tip stiffness'
 
 
 def error_kind(exc: BaseException) -> str:

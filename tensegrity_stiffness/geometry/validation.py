@@ -50,6 +50,17 @@ def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...] | 
     return arr
 
 
+def optional_vector(name: str, value: ArrayLike | None, size: int = 6) -> NDArray[np.float64]:
+    """A finite ``(size,)`` array (a wrench, a screw rate), zeros when ``value`` is None;
+    ValueError naming ``name`` when an entry is not finite or the shape is another."""
+    if value is None:
+        return np.zeros(size)
+    arr = finite_array(name, value)
+    if arr.shape != (size,):
+        raise ValueError(f'{name} must have shape ({size},), got {arr.shape}')
+    return arr
+
+
 def require_all_finite(names: Sequence[str], arrays: Sequence[NDArray[np.float64]]) -> None:
     """ValueError ``'<name> contains NaN or inf'`` for the first of ``arrays`` that is not finite
     (an input gets all of its outputs or none). One sum over all of them on the common, finite

@@ -80,7 +80,7 @@ from tensegrity_stiffness.geometry.screw import (
     log_se3,
 )
 from tensegrity_stiffness.geometry.transforms import adjoint, rigid_transform
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.equilibrium import (
     CONTINUATION_STEPS,
@@ -93,7 +93,7 @@ from tensegrity_stiffness.mechanics.equilibrium import (
     solve_equilibrium,
 )
 from tensegrity_stiffness.mechanics.joint import JointModel
-from tensegrity_stiffness.mechanics.newton import damped_newton
+from tensegrity_stiffness.mechanics.newton import damped_newton, solve_deadline
 
 FloatArray = NDArray[np.float64]
 
@@ -316,14 +316,6 @@ class JointChain:
                              f'got {xi.shape}')
         check_in_chart(xi, 'screws')
         return xi
-
-    def _wrench(self, wrench: ArrayLike | None, name: str = 'tip_wrench') -> FloatArray:
-        if wrench is None:
-            return np.zeros(6)
-        W = finite_array(name, wrench)
-        if W.shape != (6,):
-            raise ValueError(f'{name} must have shape (6,), got {W.shape}')
-        return W
 
     def rest_lengths_per_joint(self, rest_lengths: Any) -> list[FloatArray | None]:
         """Per-joint rest lengths: None, an (N, n) array, or a sequence of N arrays/None."""
@@ -564,7 +556,7 @@ class JointChain:
         """:meth:`tip_stiffness` at an evaluated ``state`` (no second evaluation)."""
         if frame not in ('base', 'tool'):
             raise ValueError(f"frame must be 'base' or 'tool', got {frame!r}")
-        _, base, tool = self._tip(state, self._wrench(tip_wrench),
+        _, base, tool = self._tip(state, optional_vector('tip_wrench', tip_wrench),
                                   self.resolved_gravity(gravity), frame == 'base',
                                   frame == 'tool')
         return base if frame == 'base' else tool
@@ -585,7 +577,7 @@ class JointChain:
                   gravity: ArrayLike | None = None, rest_lengths: Any = None) -> FloatArray:
         """Equilibrium residuals ``r_i = F_i + Ad_{P_i}^T B_i`` (N, 6)."""
         state = self.evaluate(screws, rest_lengths)
-        return self.equilibrium_system(state, self._wrench(tip_wrench),
+        return self.equilibrium_system(state, optional_vector('tip_wrench', tip_wrench),
                                        self.resolved_gravity(gravity), False)[0]
 
     def residual_jacobian(self, screws: ArrayLike, tip_wrench: ArrayLike | None = None,
@@ -593,7 +585,7 @@ class JointChain:
                           ) -> FloatArray:
         """``dr/dxi`` (6N, 6N), joint-major rows and columns."""
         state = self.evaluate(screws, rest_lengths)
-        D = self.equilibrium_system(state, self._wrench(tip_wrench),
+        D = self.equilibrium_system(state, optional_vector('tip_wrench', tip_wrench),
                                        self.resolved_gravity(gravity))[1]
         return self.residual_screw_jacobian(D, state.screws)
 
@@ -603,7 +595,7 @@ class JointChain:
         """The chain's tangent stiffness (6N, 6N): minus the residuals' derivative with respect
         to the joints' spatial twists in {1}_i ([dv; dw]); K_c for one joint."""
         state = self.evaluate(screws, rest_lengths)
-        return -self.equilibrium_system(state, self._wrench(tip_wrench),
+        return -self.equilibrium_system(state, optional_vector('tip_wrench', tip_wrench),
                                        self.resolved_gravity(gravity))[1]
 
     def implied_tip_wrench(self, screws: ArrayLike, gravity: ArrayLike | None = None,
@@ -769,23 +761,37 @@ def solve_chain_equilibrium(
     equilibrium. Bad input raises ValueError naming the field; an equilibrium that is not found
     returns ``success=False`` with the reason.
     """
-    W = chain._wrench(tip_wrench)
+    W = optional_vector('tip_wrench', tip_wrench)
     g = chain.resolved_gravity(gravity)
     rest = chain.rest_lengths_per_joint(rest_lengths)
     x0 = chain.unloaded_screws(rest) if initial_screws is None else chain.validated_screws(
         initial_screws).copy()
-    if not (math.isfinite(tolerance) and tolerance > 0.0):
-        raise ValueError(f'tolerance must be finite and > 0, got {tolerance}')
-    if max_iterations < 1:
-        raise ValueError(f'max_iterations must be >= 1, got {max_iterations}')
-    start = time.perf_counter()
-    deadline = math.inf if time_budget is None else start + float(time_budget)
+    deadline = solve_deadline(tolerance, max_iterations, time_budget)
     problem = _Problem(chain, W, g, rest, deadline)
     if problem.evaluate(x0, tangent=False) is None:
         return ChainEquilibriumResult(False, 'initial screws are not admissible (a string of '
                                       'zero length)', x0, math.inf, 0, None, None, False)
+    x, norm, iterations = _search(problem, x0, tolerance, max_iterations)
+    got = problem.evaluate(x)
+    if got is None:
+        return ChainEquilibriumResult(False, 'no usable equilibrium: the last iterate cannot '
+                                      'be evaluated', x, math.inf, iterations, None, None, False)
+    state, _, D = got
+    if norm > tolerance:
+        reason = 'time budget exhausted' if time.perf_counter() >= deadline else 'no convergence'
+        return ChainEquilibriumResult(False, f'{reason}: residual |r| = {norm:.3e} after '
+                                      f'{iterations} iterations', x, norm, iterations,
+                                      state.tip_transform, None, False, None, state)
+    return _equilibrium_result(chain, x, norm, iterations, state, D, W, g)
+
+
+def _search(problem: _Problem, x0: FloatArray, tolerance: float, max_iterations: int
+            ) -> tuple[FloatArray, float, int]:
+    """Newton on the full load from ``x0``; if that stalls within the time budget, joint by
+    joint (no link weights) and then continuation in the load. ``(x, |r|, iterations)``."""
+    chain, deadline = problem.chain, problem.deadline
     x, norm, iterations = problem.newton(x0, 1.0, max_iterations, tolerance)
-    if norm > tolerance and not chain.has_weights(g) and time.perf_counter() < deadline:
+    if norm > tolerance and not chain.has_weights(problem.g) and time.perf_counter() < deadline:
         got = problem.joint_by_joint(x0, tolerance, max_iterations)
         if got is not None:
             iterations += got[2]
@@ -800,16 +806,14 @@ def solve_chain_equilibrium(
                 break
         else:
             x, norm = y, y_norm
-    got = problem.evaluate(x)
-    if got is None:
-        return ChainEquilibriumResult(False, 'no usable equilibrium: the last iterate cannot '
-                                      'be evaluated', x, math.inf, iterations, None, None, False)
-    state, _, D = got
-    if norm > tolerance:
-        reason = 'time budget exhausted' if time.perf_counter() >= deadline else 'no convergence'
-        return ChainEquilibriumResult(False, f'{reason}: residual |r| = {norm:.3e} after '
-                                      f'{iterations} iterations', x, norm, iterations,
-                                      state.tip_transform, None, False, None, state)
+    return x, norm, iterations
+
+
+def _equilibrium_result(chain: JointChain, x: FloatArray, norm: float, iterations: int,
+                        state: ChainState, D: FloatArray, W: FloatArray, g: FloatArray
+                        ) -> ChainEquilibriumResult:
+    """The result at a converged ``x``: failed when a joint's strings are all slack, else its
+    stability (of ``-D``), tip stiffness (None when singular) and message."""
     slack = [int(np.count_nonzero(s)) for s in state.slack]
     loose = [i + 1 for i, (s, m) in enumerate(zip(slack, chain.joints, strict=True))
              if s == m.n_strings]

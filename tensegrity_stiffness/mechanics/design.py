@@ -71,6 +71,12 @@ from tensegrity_stiffness.geometry.components import TWIST_NAMES
 from tensegrity_stiffness.geometry.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.geometry.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape, finite_scalar
+from tensegrity_stiffness.mechanics.active_set import (  # noqa: F401 (re-exported)
+    ACTIVE_SET_TOLERANCE,
+    MAX_ACTIVE_SET_ITERATIONS,
+    active_set,
+    kkt_system,
+)
 from tensegrity_stiffness.mechanics.equilibrium import is_stable
 from tensegrity_stiffness.mechanics.joint import MIN_STRING_LENGTH, JointModel, JointState
 
@@ -84,10 +90,6 @@ DEFAULT_TENSION_MAX = 1.5
 BOUND_MARGIN = 1e-9
 #: Largest scaled residual |S (B t + W)| (N) of a feasible request.
 FEASIBILITY_TOLERANCE = 1e-9
-#: Relative tolerance of the active-set method (steps, multiplier signs).
-ACTIVE_SET_TOLERANCE = 1e-12
-#: Active-set iterations per QP before giving up (n = 12 strings need about 5-20).
-MAX_ACTIVE_SET_ITERATIONS = 500
 #: Diagonal entries of K_c in ROS order and their units (rows of :class:`StiffnessRange`).
 DIAGONAL_NAMES = TWIST_NAMES
 DIAGONAL_UNITS = ('N/m', 'N/m', 'N/m', 'N m/rad', 'N m/rad', 'N m/rad')
@@ -211,14 +213,26 @@ def _pose(model: JointModel, screw: FloatArray) -> _Pose:
     return _Pose(lengths, X.T.copy(), K0, M, cap, reason)
 
 
-def _rest_from_tensions(model: JointModel, lengths: FloatArray, t: FloatArray) -> FloatArray:
+def rest_from_tensions(model: JointModel, lengths: FloatArray, tensions: FloatArray
+                       ) -> FloatArray:
+    """True rest lengths that give ``tensions`` at ``lengths`` (eq. 8 inverted)."""
     if model.force_law == 'hooke':
-        return lengths - t / model.k
-    return lengths * (1.0 - t / model.k)
+        return lengths - tensions / model.k
+    return lengths * (1.0 - tensions / model.k)
 
 
-def _scale_matrix(length_scale: float) -> FloatArray:
+def length_scaling(length_scale: float) -> FloatArray:
+    """The diagonal of ``S = diag(1, 1, 1, 1/L, 1/L, 1/L)`` for ``L = length_scale`` (m)."""
     return np.array([1.0, 1.0, 1.0, 1.0 / length_scale, 1.0 / length_scale, 1.0 / length_scale])
+
+
+def relative_stiffness_error(Kc: FloatArray, target: FloatArray, length_scale: float) -> float:
+    """|S (K_c - K*) S|_F / |S K* S|_F (:attr:`DesignResult.stiffness_error`; the distance
+    itself when ``K* = 0``)."""
+    S = length_scaling(length_scale)
+    denominator = float(np.linalg.norm(S[:, None] * target * S[None, :]))
+    distance = float(np.linalg.norm(S[:, None] * (Kc - target) * S[None, :]))
+    return distance / denominator if denominator > 0.0 else distance
 
 
 # ---------------------------------------------------------------------------------- the QP
@@ -246,65 +260,33 @@ def _kkt_solve(K: FloatArray, rhs: FloatArray) -> FloatArray:
 
 def _box_qp(G: FloatArray, g: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
             hi: FloatArray, t0: FloatArray) -> _QPSolution:
-    """Primal active set for ``min 1/2 |G t - g|^2`` s.t. ``A t = b``, ``lo <= t <= hi`` from a
-    box-feasible ``t0`` with ``A t0 = b`` (to rounding). Each iteration solves the KKT system of
-    the current face by least squares; bounds block steps, the most negative multiplier leaves.
-    Returns the multipliers of ``grad + A^T nu - mu_lower + mu_upper = 0``."""
+    """Primal active set (:func:`~.active_set.active_set`) for ``min 1/2 |G t - g|^2`` s.t.
+    ``A t = b``, ``lo <= t <= hi`` from a box-feasible ``t0`` with ``A t0 = b`` (to rounding).
+    Each face is solved by least squares (no equalities) or its KKT system. Returns the
+    multipliers of ``grad + A^T nu - mu_lower + mu_upper = 0``."""
     n, m = G.shape[1], A.shape[0]
     P = G.T @ G
     c = G.T @ g
-    scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
-    t = np.clip(t0, lo, hi)
-    span = np.maximum(hi - lo, 1e-300)
-    at_lo = t - lo <= 1e-12 * span
-    at_hi = ~at_lo & (hi - t <= 1e-12 * span)
-    t[at_lo], t[at_hi] = lo[at_lo], hi[at_hi]
-    nu = np.zeros(m)
-    for it in range(1, MAX_ACTIVE_SET_ITERATIONS + 1):
-        free = ~(at_lo | at_hi)
+
+    def face(t: FloatArray, free: NDArray[np.bool_], nu: FloatArray
+             ) -> tuple[FloatArray, FloatArray]:
         F = np.flatnonzero(free)
-        fixed = np.flatnonzero(~free)
-        nf = F.size
         if m == 0:  # least squares on the face: the smallest step to its minimiser
-            step = (np.linalg.lstsq(G[:, F], g - G @ t, rcond=None)[0] if nf
+            step = (np.linalg.lstsq(G[:, F], g - G @ t, rcond=None)[0] if F.size
                     else np.zeros(0))
-            target = t[F] + step
-        else:
-            K = np.zeros((nf + m, nf + m))
-            K[:nf, :nf] = P[F][:, F]
-            K[:nf, nf:] = A[:, F].T
-            K[nf:, :nf] = A[:, F]
-            rhs = np.concatenate([c[F] - P[F][:, fixed] @ t[fixed], b - A[:, fixed] @ t[fixed]])
-            sol = _kkt_solve(K, rhs)
-            target, nu = sol[:nf], sol[nf:]
-        step = target - t[F]
-        if np.all(np.abs(step) <= 1e-13 * (1.0 + np.abs(t[F]))):
-            t[F] = target
-            grad = P @ t - c + A.T @ nu
-            mu_lo = np.where(at_lo, grad, 0.0)
-            mu_hi = np.where(at_hi, -grad, 0.0)
-            worst = np.minimum(mu_lo, mu_hi)
-            j = int(np.argmin(worst))
-            if worst[j] >= -ACTIVE_SET_TOLERANCE * scale:
-                return _QPSolution(t, nu, np.maximum(mu_lo, 0.0), np.maximum(mu_hi, 0.0), it,
-                                   True)
-            at_lo[j] = at_hi[j] = False
-            continue
-        # Longest step along `step` that keeps the free variables inside their bounds.
-        with np.errstate(divide='ignore', invalid='ignore'):
-            ratio = np.where(step < 0.0, (lo[F] - t[F]) / step,
-                             np.where(step > 0.0, (hi[F] - t[F]) / step, np.inf))
-        k = int(np.argmin(ratio))
-        alpha = min(1.0, float(ratio[k]))
-        t[F] = t[F] + alpha * step
-        if alpha < 1.0:
-            j = F[k]
-            if step[k] < 0.0:
-                at_lo[j], t[j] = True, lo[j]
-            else:
-                at_hi[j], t[j] = True, hi[j]
-        t = np.clip(t, lo, hi)
-    return _QPSolution(t, nu, np.zeros(n), np.zeros(n), MAX_ACTIVE_SET_ITERATIONS, False)
+            return t[F] + step, nu
+        sol = _kkt_solve(*kkt_system(P, c, A, b, t, free))
+        return sol[:F.size], sol[F.size:]
+
+    result = active_set(P, c, A, lo, hi, t0, face)
+    t, nu = result.t, result.nu
+    if not result.converged:
+        return _QPSolution(t, nu, np.zeros(n), np.zeros(n), result.iterations, False)
+    grad = P @ t - c + A.T @ nu
+    mu_lo = np.where(result.at_lo, grad, 0.0)
+    mu_hi = np.where(result.at_hi, -grad, 0.0)
+    return _QPSolution(t, nu, np.maximum(mu_lo, 0.0), np.maximum(mu_hi, 0.0), result.iterations,
+                       True)
 
 
 def _closest_feasible(A: FloatArray, b: FloatArray, lo: FloatArray, hi: FloatArray
@@ -375,6 +357,19 @@ def _validate(model: JointModel, screw: ArrayLike, external_wrench: ArrayLike | 
     return xi, W, t_min, t_max, L
 
 
+def _constraints(model: JointModel, xi: FloatArray, W: FloatArray, t_min: float, t_max: float,
+                 L: float) -> tuple[_Pose, FloatArray, FloatArray, FloatArray, FloatArray,
+                                    FloatArray]:
+    """The pose terms at ``xi``, ``S`` (6,) and the constraints of the tensions: the scaled
+    equilibrium ``A t = b`` (``S (B t + W) = 0``) and the box ``[lo, hi]`` (the limits and the
+    strings' caps)."""
+    pose = _pose(model, xi)
+    S = length_scaling(L)
+    lo = np.full(model.n_strings, t_min)
+    hi = np.minimum(t_max, pose.cap)
+    return pose, S, S[:, None] * pose.B, -S * W, lo, hi
+
+
 def _nan_result(model: JointModel, xi: FloatArray, message: str, L: float,
                 lo: FloatArray | None = None, hi: FloatArray | None = None) -> DesignResult:
     n = model.n_strings
@@ -411,12 +406,8 @@ def design_rest_lengths(
                                        length_scale)
     target = None if target_stiffness is None else finite_array_of_shape(
         'target_stiffness', target_stiffness, (6, 6))
-    pose = _pose(model, xi)
+    pose, S, A, b, lo, hi = _constraints(model, xi, W, t_min, t_max, L)
     n = model.n_strings
-    S = _scale_matrix(L)
-    A, b = S[:, None] * pose.B, -S * W
-    lo = np.full(n, t_min)
-    hi = np.minimum(t_max, pose.cap)
     if np.any(hi <= lo):
         return _nan_result(model, xi, 'string caps: at this pose these strings cannot carry '
                            f'tension_min = {t_min:g} N: '
@@ -436,15 +427,10 @@ def design_rest_lengths(
         return _nan_result(model, xi, 'the active-set method did not converge in '
                            f'{MAX_ACTIVE_SET_ITERATIONS} iterations', L, lo, hi)
     t = sol.t
-    rest = _rest_from_tensions(model, pose.lengths, t)
+    rest = rest_from_tensions(model, pose.lengths, t)
     state = model.evaluate(xi, rest)
     Kc = state.cartesian_stiffness
-    if target is None:
-        error = 0.0
-    else:
-        denominator = float(np.linalg.norm(S[:, None] * target * S[None, :]))
-        distance = float(np.linalg.norm(S[:, None] * (Kc - target) * S[None, :]))
-        error = distance / denominator if denominator > 0.0 else distance
+    error = 0.0 if target is None else relative_stiffness_error(Kc, target, L)
     held = float(np.linalg.norm(S * (state.wrench + W)))
     if np.any(state.slack) or np.any(state.saturated) or held > 10 * FEASIBILITY_TOLERANCE:
         return _nan_result(model, xi, f'internal check failed: residual {held:.3g} N, '
@@ -472,12 +458,8 @@ def stiffness_range(
 
     xi, W, t_min, t_max, L = _validate(model, screw, external_wrench, tension_min, tension_max,
                                        None)
-    pose = _pose(model, xi)
+    pose, _, A, b, lo, hi = _constraints(model, xi, W, t_min, t_max, L)
     n = model.n_strings
-    S = _scale_matrix(L)
-    A, b = S[:, None] * pose.B, -S * W
-    lo = np.full(n, t_min)
-    hi = np.minimum(t_max, pose.cap)
     nan6, nan6n = np.full(6, np.nan), np.full((6, n), np.nan)
 
     def failed(message: str) -> StiffnessRange:

@@ -65,7 +65,7 @@ from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.components import SCREW_NAMES
 from tensegrity_stiffness.geometry.screw import ScrewKinematics, check_in_chart, hat, hat3, vee
 from tensegrity_stiffness.geometry.transforms import adjoint
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
 
@@ -128,15 +128,6 @@ def _screw(xi: ArrayLike, name: str = 'xi') -> FloatArray:
     return x
 
 
-def _six(value: ArrayLike | None, name: str) -> FloatArray:
-    if value is None:
-        return np.zeros(6)
-    x = finite_array(name, value)
-    if x.shape != (6,):
-        raise ValueError(f'{name} must have 6 values, got shape {x.shape}')
-    return x
-
-
 def body_jacobian(xi: ArrayLike) -> FloatArray:
     """``J_b(xi) = J_l(-xi)`` (6, 6): ``xi_dot`` to link 2's body twist ``[w; v]`` in {2}
     (``hat(V_b) = T^-1 dT/dt``). Exact at every angle (closed form with series branch)."""
@@ -160,7 +151,7 @@ def body_jacobian_rate(xi: ArrayLike, xi_dot: ArrayLike) -> FloatArray:
     """``(d J_b / dt) xi_dot`` (6,) along ``xi + t xi_dot``: ``vee(T^-1 Tddot - hat(V_b)^2)``
     with ``Tddot`` the second derivative of ``exp`` (the Coriolis part of the body
     acceleration, ``V_b_dot = J_b xi_ddot + Jdot_b xi_dot``)."""
-    x, r = _screw(xi), _six(xi_dot, 'xi_dot')
+    x, r = _screw(xi), optional_vector('xi_dot', xi_dot)
     T, T1, S = _block_exponential(x, r)
     Ti = _inverse_se3(T)
     Vh = Ti @ T1
@@ -544,7 +535,7 @@ class JointDynamics:
     def coriolis(self, xi: ArrayLike, xi_dot: ArrayLike) -> FloatArray:
         """``J_b^T (G Jdot_b xi_dot - ad_{V_b}^T G V_b)`` (6,): the velocity-product terms of the
         Euler-Lagrange equations (``= dM/dt xi_dot - 1/2 d(xi_dot^T M xi_dot)/dxi``)."""
-        x, r = _screw(xi), _six(xi_dot, 'xi_dot')
+        x, r = _screw(xi), optional_vector('xi_dot', xi_dot)
         Jb = ScrewKinematics(-x).J
         return self._coriolis(x, r, Jb)
 
@@ -561,8 +552,8 @@ class JointDynamics:
                           external_wrench: ArrayLike | None = None) -> FloatArray:
         """``Q = J_l^T Pi (F + W) - L^T C L xi_dot`` (6,)."""
         x = _screw(xi)
-        r = _six(xi_dot, 'xi_dot')
-        W = _six(external_wrench, 'external_wrench')
+        r = optional_vector('xi_dot', xi_dot)
+        W = optional_vector('external_wrench', external_wrench)
         state = self.model.evaluate(x, self._rest(rest_lengths))
         Jl = ScrewKinematics(x).J
         return self._force(state, Jl, W, r)
@@ -579,8 +570,8 @@ class JointDynamics:
                      external_wrench: ArrayLike | None = None) -> FloatArray:
         """``xi_ddot`` (6,) from ``M xi_ddot + coriolis = Q`` (module docstring); the external
         wrench ``W`` on link 2 in {1} about its origin ``[f; m]``, constant in {1}."""
-        x, r = _screw(xi), _six(xi_dot, 'xi_dot')
-        W = _six(external_wrench, 'external_wrench')
+        x, r = _screw(xi), optional_vector('xi_dot', xi_dot)
+        W = optional_vector('external_wrench', external_wrench)
         state = self.model.evaluate(x, self._rest(rest_lengths))
         _, Jl, Jb = self._kinematics(x)
         M = Jb.T @ self.spatial_inertia @ Jb
@@ -610,7 +601,7 @@ class JointDynamics:
         equilibrium (:data:`EQUILIBRIUM_TOLERANCE`) without the derivatives of ``J`` and ``M``
         (they multiply ``F + W = 0``)."""
         x = _screw(xi)
-        W = _six(external_wrench, 'external_wrench')
+        W = optional_vector('external_wrench', external_wrench)
         rest = self._rest(rest_lengths)
         blocks = self._blocks(x, rest, W, inputs=True)
         n = self.model.n_strings
@@ -665,7 +656,7 @@ class JointDynamics:
         """The 6 modes of :meth:`linearize` at ``xi`` (an equilibrium of ``rest_lengths`` and
         ``external_wrench``): see :class:`JointModes`; twists ``Pi J_l shape`` in {1}."""
         x = _screw(xi)
-        W = _six(external_wrench, 'external_wrench')
+        W = optional_vector('external_wrench', external_wrench)
         A21, A22, _, Jl = self._blocks(x, self._rest(rest_lengths), W, inputs=False)
         if not self.damped:
             return _undamped_modes(A21, Jl[_SWAP], x)
@@ -846,7 +837,7 @@ class ChainDynamics:
         damping ``L_i^T C_i L_i xi_dot_i`` of each joint."""
         xi = self._screws(screws)
         r = np.zeros_like(xi) if rates is None else self._screws(rates, 'rates')
-        return self._force(xi, r, rest_lengths, _six(tip_wrench, 'tip_wrench'))
+        return self._force(xi, r, rest_lengths, optional_vector('tip_wrench', tip_wrench))
 
     def _force(self, xi: FloatArray, r: FloatArray, rest_lengths: Any, W: FloatArray
                ) -> FloatArray:
@@ -869,7 +860,7 @@ class ChainDynamics:
         recursive Newton-Euler pass with ``xi_ddot = 0``)."""
         xi = self._screws(screws)
         r = self._screws(rates, 'rates')
-        W = _six(tip_wrench, 'tip_wrench')
+        W = optional_vector('tip_wrench', tip_wrench)
         kins, X = self._frames(xi)
         Jc = self._body_jacobians(kins, X)
         G = self.spatial_inertias
@@ -889,7 +880,7 @@ class ChainDynamics:
         to the largest tension): off equilibrium the derivatives of the links' Jacobians would
         enter, which this model does not have for spines."""
         xi = self._screws(screws)
-        W = _six(tip_wrench, 'tip_wrench')
+        W = optional_vector('tip_wrench', tip_wrench)
         chain = self.chain
         n = self.n_joints
         rest = _chain_rest(chain, rest_lengths)

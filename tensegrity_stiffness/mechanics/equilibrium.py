@@ -24,7 +24,7 @@ from scipy.optimize import least_squares
 
 from tensegrity_stiffness.geometry.screw import CHART_LIMIT, as_screws, log_se3
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
-from tensegrity_stiffness.mechanics.newton import damped_newton
+from tensegrity_stiffness.mechanics.newton import damped_newton, solve_deadline
 
 FloatArray = NDArray[np.float64]
 
@@ -179,12 +179,7 @@ def solve_equilibrium(
         raise ValueError(f'initial_screw must have shape (6,), got {x0.shape}')
     if np.linalg.norm(x0[:3]) >= CHART_LIMIT:
         raise ValueError('initial_screw must have |omega| < 2 pi')
-    if not (math.isfinite(tolerance) and tolerance > 0.0):
-        raise ValueError(f'tolerance must be finite and > 0, got {tolerance}')
-    if max_iterations < 1:
-        raise ValueError(f'max_iterations must be >= 1, got {max_iterations}')
-    start = time.perf_counter()
-    deadline = math.inf if time_budget is None else start + float(time_budget)
+    deadline = solve_deadline(tolerance, max_iterations, time_budget)
     try:
         model.evaluate(x0, rest)
     except ValueError as exc:

@@ -30,6 +30,17 @@ ARMIJO = 1e-4
 Evaluate = Callable[[FloatArray, bool], tuple[FloatArray, Any] | None]
 
 
+def solve_deadline(tolerance: float, max_iterations: int, time_budget: float | None) -> float:
+    """Check a solver's ``tolerance`` (finite, > 0) and ``max_iterations`` (>= 1), raising a
+    ValueError naming the one that is wrong, and start its clock: the deadline in
+    ``time.perf_counter()`` seconds (inf when ``time_budget`` is None)."""
+    if not (math.isfinite(tolerance) and tolerance > 0.0):
+        raise ValueError(f'tolerance must be finite and > 0, got {tolerance}')
+    if max_iterations < 1:
+        raise ValueError(f'max_iterations must be >= 1, got {max_iterations}')
+    return math.inf if time_budget is None else time.perf_counter() + float(time_budget)
+
+
 def damped_newton(x0: FloatArray, evaluate: Evaluate,
                   jacobian: Callable[[FloatArray, Any], FloatArray],
                   clip: Callable[[FloatArray], FloatArray],

@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -343,6 +344,31 @@ class PlanarMechanism:
         return (0.5 * (K1 + K2) * (5.0 * L * L + L3 * L3 + 2.0 * SQRT3 * L * L3 * s1)
                 + (K1 - K2) * L * L3 * c1)
 
+    def _energy_terms(self, L3: FloatArray, theta1: FloatArray, trig: ModuleType
+                      ) -> tuple[FloatArray, ...]:
+        """``cos theta1, sin theta1``, ``u, v`` (m, node D1 at ``L3 (cos, sin) theta1``), the
+        coefficients ``A, B, U0`` of eq. (4) (J) and ``R = hypot(A, B)`` (eq. 42 at the stable
+        root), with ``trig`` ``math`` for scalars (:meth:`forward`) or ``numpy`` for arrays."""
+        c1, s1 = trig.cos(theta1), trig.sin(theta1)
+        A, B = self._AB(L3, c1, s1)
+        return c1, s1, L3 * c1, L3 * s1, A, B, self._U0(L3, c1, s1), trig.hypot(A, B)
+
+    def _jacobian_entries(self, L3: FloatArray, c1: FloatArray, s1: FloatArray,
+                          c2: FloatArray, s2: FloatArray, K: FloatArray
+                          ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        """``J = d(x, y)/d(L3, theta1)`` entries ``j00, j01, j10, j11`` (eqs. 18-21) at the
+        equilibrium ``theta2`` (cos ``c2``, sin ``s2``) of stiffness ``K`` (eq. 42), with
+        ``dtheta2`` by implicit differentiation of dU/dtheta2 = 0 (eq. 22; = cos^2 theta2
+        d(tan theta2)); scalars or arrays alike."""
+        L = self.L
+        u, v = L3 * c1, L3 * s1
+        a, b = self.m_real, 0.5 * SQRT3 * self.K1
+        A_L3, B_L3 = L * (a * c1 + b * s1), L * (a * s1 - b * c1)
+        dt2_dL3 = (A_L3 * s2 - B_L3 * c2) / K
+        dt2_dt1 = (-L3 * B_L3 * s2 - L3 * A_L3 * c2) / K
+        return (c1 - L * s2 * dt2_dL3, -v - L * s2 * dt2_dt1, s1 + L * c2 * dt2_dL3,
+                u + L * c2 * dt2_dt1)
+
     # ------------------------------------------------------------------ model (vectorised)
     def node_positions(self, L3: ArrayLike, theta1: ArrayLike, theta2: ArrayLike) -> FloatArray:
         """Eq. (1) and D3 (eqs. 2-3): shape ``S + (6, 2)`` in the order ``NODE_NAMES`` (m)."""
@@ -530,11 +556,7 @@ class PlanarMechanism:
             raise ValueError(f'L3 must be >= 0, got {L3}')
         L = self.L
         rtol = self.range_tol
-        c1, s1 = math.cos(theta1), math.sin(theta1)
-        u, v = L3 * c1, L3 * s1
-        A, B = self._AB(L3, c1, s1)
-        U0 = self._U0(L3, c1, s1)
-        R = math.hypot(A, B)
+        c1, s1, u, v, A, B, U0, R = self._energy_terms(L3, theta1, math)
         _, t1_ok = _wrap_scalar(theta1, self.theta1_min, self.theta1_max, rtol)
         act_ok = t1_ok and self.L3_min - rtol <= L3 <= self.L3_max + rtol
         if R <= NEUTRAL_TOL * L * (self.K1 + self.K2) * (L + L3):
@@ -546,15 +568,7 @@ class PlanarMechanism:
         theta2, t2_ok = _wrap_scalar(math.atan2(s2, c2), self.theta2_min, self.theta2_max, rtol)
         theta2_u, _ = _wrap_scalar(theta2 + math.pi, self.theta2_min, self.theta2_max, rtol)
         K = -A * c2 - B * s2  # eq. (42) at the stable root (= R)
-        # eq. (22) by implicit differentiation of dU/dtheta2 = 0 (= cos^2 theta2 d(tan theta2))
-        a, b = self.m_real, 0.5 * SQRT3 * self.K1
-        A_L3, B_L3 = L * (a * c1 + b * s1), L * (a * s1 - b * c1)
-        dt2_dL3 = (A_L3 * s2 - B_L3 * c2) / K
-        dt2_dt1 = (-L3 * B_L3 * s2 - L3 * A_L3 * c2) / K
-        j00 = c1 - L * s2 * dt2_dL3  # eq. (18)
-        j01 = -v - L * s2 * dt2_dt1  # eq. (19)
-        j10 = s1 + L * c2 * dt2_dL3  # eq. (20)
-        j11 = u + L * c2 * dt2_dt1  # eq. (21)
+        j00, j01, j10, j11 = self._jacobian_entries(L3, c1, s1, c2, s2, K)
         jac = np.array([[j00, j01], [j10, j11]])
         jac.flags.writeable = False
         return PlanarForwardResult(
@@ -569,26 +583,16 @@ class PlanarMechanism:
             raise ValueError(f'L3 must be >= 0, got {L3[L3 < 0.0].ravel()[0]}')
         L = self.L
         rtol = self.range_tol
-        c1, s1 = np.cos(t1), np.sin(t1)
-        u, v = L3 * c1, L3 * s1
-        A, B = self._AB(L3, c1, s1)
-        U0 = self._U0(L3, c1, s1)
-        R = np.hypot(A, B)
+        c1, s1, u, v, A, B, U0, R = self._energy_terms(L3, t1, np)
         neutral = R <= NEUTRAL_TOL * L * (self.K1 + self.K2) * (L + L3)
         Rs = np.where(neutral, np.nan, R)
         c2, s2 = -A / Rs, -B / Rs
         theta2, t2_ok = wrap_angles(np.arctan2(s2, c2), self.theta2_min, self.theta2_max, rtol)
         _, t1_ok = wrap_angles(t1, self.theta1_min, self.theta1_max, rtol)
         act_ok = t1_ok & (L3 >= self.L3_min - rtol) & (L3 <= self.L3_max + rtol)
-        a, b = self.m_real, 0.5 * SQRT3 * self.K1
-        A_L3, B_L3 = L * (a * c1 + b * s1), L * (a * s1 - b * c1)
-        dt2_dL3 = (A_L3 * s2 - B_L3 * c2) / Rs
-        dt2_dt1 = -L3 * (B_L3 * s2 + A_L3 * c2) / Rs
         jac = np.empty(L3.shape + (2, 2))
-        jac[..., 0, 0] = c1 - L * s2 * dt2_dL3
-        jac[..., 0, 1] = -v - L * s2 * dt2_dt1
-        jac[..., 1, 0] = s1 + L * c2 * dt2_dL3
-        jac[..., 1, 1] = u + L * c2 * dt2_dt1
+        (jac[..., 0, 0], jac[..., 0, 1], jac[..., 1, 0],
+         jac[..., 1, 1]) = self._jacobian_entries(L3, c1, s1, c2, s2, Rs)
         det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
         tol = self.singularity_tol
         singular = {

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import yaml
 from scipy.spatial.transform import Rotation
-from support import REPO
+from support import JOINT_CONFIG, REPO, SPINE_CONFIG
 from support.screw_samples import moderate_wrench as joint_moderate_wrench
 
 from tensegrity_stiffness import cli
@@ -25,8 +25,6 @@ from tensegrity_stiffness.mechanics.equilibrium import is_stable, solve_equilibr
 from tensegrity_stiffness.mechanics.joint import JointModel
 
 REPO = REPO
-JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
-SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 RESIDUAL_GOAL = 1e-9
 #: Relative tolerances of the derivative checks (the issue's figures).
 JACOBIAN_TOLERANCE = 1e-7

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import scipy.linalg
-from support import REPO
+from support import JOINT_CONFIG, SPINE_CONFIG
 
 from tensegrity_stiffness.geometry.screw import hat, left_jacobian_se3, vee, vee3
 from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium
@@ -40,8 +40,6 @@ from tensegrity_stiffness.mechanics.dynamics import (
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointModel
 
-JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
-SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 #: The issue's tolerance of the mass matrix (relative).
 MASS_TOLERANCE = 1e-6
 #: Central-difference checks of derivatives (relative to the largest entry).

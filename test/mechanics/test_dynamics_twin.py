@@ -14,11 +14,12 @@ omega (body)]``.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
-from support import REPO
+from support import JOINT_CONFIG, SPINE_CONFIG
 
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3
@@ -36,8 +37,6 @@ from tensegrity_stiffness.simulation.twin import ChainSimulation, JointSimulatio
 
 mujoco = pytest.importorskip('mujoco')
 
-JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
-SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 #: The issue's tolerances: accelerations (relative to the largest), frequencies (relative),
 #: damping ratios (absolute).
 ACCELERATION_TOLERANCE = 1e-6
@@ -224,6 +223,20 @@ def test_joint_modes_with_a_general_inertia_are_the_linearised_twins() -> None:
     np.testing.assert_allclose(modes.damping_ratios, zeta_twin, rtol=0.0, atol=DAMPING_TOLERANCE)
 
 
+def check_ringing(sim: Any, qvel: np.ndarray, steps: int, dt: float, frequency: float,
+                  k: int) -> None:
+    """The twin ``sim`` started with the velocities ``qvel`` and run ``steps`` steps of ``dt``:
+    its velocity spectrum peaks at mode ``k``'s ``frequency`` (Hz, within PEAK_TOLERANCE)."""
+    sim.mj_data.qvel[:] = qvel
+    mujoco.mj_forward(sim.mj_model, sim.mj_data)
+    record = np.empty((steps, qvel.size))
+    for s in range(steps):
+        sim.step()
+        record[s] = sim.mj_data.qvel
+    peak = spectral_peak(record, dt, frequency)
+    assert abs(peak - frequency) <= PEAK_TOLERANCE * frequency, (k, peak, frequency)
+
+
 @pytest.mark.slow
 def test_joint_free_response_rings_at_the_predicted_frequencies() -> None:
     """The twin pushed along each mode (a velocity of 1e-3 times the mode shape), undamped,
@@ -238,15 +251,7 @@ def test_joint_free_response_rings_at_the_predicted_frequencies() -> None:
         sim.set_screw(xi)
         rate = 1e-3 * modes.shapes[k].real / np.abs(modes.shapes[k].real).max()
         _, qvel = joint_qpos(xi, rate)
-        sim.mj_data.qvel[:] = qvel
-        mujoco.mj_forward(sim.mj_model, sim.mj_data)
-        record = np.empty((steps, 6))
-        for s in range(steps):
-            sim.step()
-            record[s] = sim.mj_data.qvel
-        peak = spectral_peak(record, dt, modes.frequencies[k])
-        assert abs(peak - modes.frequencies[k]) <= PEAK_TOLERANCE * modes.frequencies[k], \
-            (k, peak, modes.frequencies[k])
+        check_ringing(sim, qvel, steps, dt, modes.frequencies[k], k)
 
 
 # ---------------------------------------------------------------------------- the spine
@@ -334,15 +339,7 @@ def test_chain_free_response_rings_at_the_predicted_frequencies() -> None:
         sim.set_screws(xi)
         shape = modes.shapes[k].real.reshape(5, 6)
         _, qvel = chain_qpos(dyn, xi, 1e-3 * shape / np.abs(shape).max())
-        sim.mj_data.qvel[:] = qvel
-        mujoco.mj_forward(sim.mj_model, sim.mj_data)
-        record = np.empty((steps, 30))
-        for s in range(steps):
-            sim.step()
-            record[s] = sim.mj_data.qvel
-        peak = spectral_peak(record, dt, modes.frequencies[k])
-        assert abs(peak - modes.frequencies[k]) <= PEAK_TOLERANCE * modes.frequencies[k], \
-            (k, peak, modes.frequencies[k])
+        check_ringing(sim, qvel, steps, dt, modes.frequencies[k], k)
 
 
 @pytest.mark.parametrize('damping', [0.0, 0.3])

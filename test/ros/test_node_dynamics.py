@@ -3,6 +3,8 @@ library's modes of the joint held at that pose (real node, real middleware)."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -19,6 +21,15 @@ from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL  # noqa
 CONFIG = REPO / 'config' / 'default_joint.yaml'
 
 
+def frequencies_and_input(ros: RosClient, base: str, topic: str) -> tuple[Any, Any]:
+    """The subscription to the node ``base``'s ``natural_frequencies`` and a publisher on its
+    input ``topic`` that the node has subscribed to."""
+    frequencies = ros.subscribe(Float64MultiArray, f'{base}/natural_frequencies')
+    publisher = ros.publisher(Float64MultiArray, f'{base}/{topic}')
+    ros.wait_for_subscribers(publisher)
+    return frequencies, publisher
+
+
 @pytest.mark.ros
 def test_natural_frequencies_are_the_library_s_modes_at_each_input() -> None:
     model = JointModel.from_yaml(CONFIG)
@@ -30,10 +41,7 @@ def test_natural_frequencies_are_the_library_s_modes_at_each_input() -> None:
         '-p', 'joint.link2_mass:=0.02', '-p', 'joint.link2_com:=[0.0, 0.001, 0.0]'])
     ros = RosClient('dynamics_test')
     try:
-        base = f'{ns}/stiffness_node'
-        frequencies = ros.subscribe(Float64MultiArray, f'{base}/natural_frequencies')
-        screw = ros.publisher(Float64MultiArray, f'{base}/screw')
-        ros.wait_for_subscribers(screw)
+        frequencies, screw = frequencies_and_input(ros, f'{ns}/stiffness_node', 'screw')
         for step in (np.zeros(6), np.array([0.05, -0.02, 0.03, 1e-3, 0.0, -5e-4])):
             xi = model.initial_screw + step
             expected = dynamics.modes_at_pose(xi)[0].frequencies
@@ -87,10 +95,7 @@ def test_spine_natural_frequencies_at_an_equilibrium_and_none_off_it() -> None:
         '-p', 'dynamics.enabled:=true', '-p', 'dynamics.string_damping:=0.2'])
     ros = RosClient('spine_dynamics_test')
     try:
-        base = f'{ns}/spine_node'
-        frequencies = ros.subscribe(Float64MultiArray, f'{base}/natural_frequencies')
-        screws = ros.publisher(Float64MultiArray, f'{base}/screws')
-        ros.wait_for_subscribers(screws)
+        frequencies, screws = frequencies_and_input(ros, f'{ns}/spine_node', 'screws')
         msg = repeat_until(
             lambda: screws.publish(Float64MultiArray(data=solved.screws.ravel().tolist())),
             lambda: frequencies.messages[-1] if len(frequencies) else None)

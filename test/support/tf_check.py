@@ -34,7 +34,7 @@ from geometry_msgs.msg import PoseArray, PoseStamped, PoseWithCovarianceStamped
 from std_msgs.msg import Float64MultiArray
 from tf2_msgs.msg import TFMessage
 
-from support import REPO
+from support import JOINT_CONFIG, SPINE_CONFIG
 from support.ros_harness import (
     NodeProcess,
     RosClient,
@@ -50,8 +50,6 @@ from tensegrity_stiffness.nodes.messages import (
 )
 from tensegrity_stiffness.ros.runtime.tf_broadcast import TF_QOS, TF_STATIC_QOS
 
-JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
-SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 #: The poses must agree to this (rotation entries, and translations in m).
 TOLERANCE = 1e-12
 TIMEOUT = 60.0
@@ -135,7 +133,17 @@ class Session:
         expected = [{('tensegrity_link1', 'tensegrity_link2'): model.evaluate(xi).transform}
                     for xi in screws]
         base = f'{ns}/stiffness_node'
-        pub = self.ros.publisher(Float64MultiArray, f'{base}/screw')
+        pub, worst = self._send_and_match(f'{base}/screw', screws, expected, proc)
+        self._check_switch(base, pub, model)
+        return len(expected), worst
+
+    def _send_and_match(self, topic: str, screws: list[np.ndarray],
+                        expected: list[dict[tuple[str, str], np.ndarray]], proc: NodeProcess
+                        ) -> tuple[Any, float]:
+        """Publish ``screws`` on ``topic`` (the first until a frame comes, then the rest once)
+        and wait until the frames received hold each one's ``expected`` frames: the publisher
+        and the largest difference."""
+        pub = self.ros.publisher(Float64MultiArray, topic)
         self.ros.wait_for_subscribers(pub)
         repeat_until(lambda: pub.publish(screws_message(screws[0])),
                      lambda: len(self.tf) or None, TIMEOUT, explain=proc.log)
@@ -143,8 +151,7 @@ class Session:
             pub.publish(screws_message(xi))
         worst = repeat_until(lambda: None, lambda: matched(self.tf.messages, expected),
                              TIMEOUT, 0.05, explain=proc.log)
-        self._check_switch(base, pub, model)
-        return len(expected), worst
+        return pub, worst
 
     def _check_switch(self, base: str, pub: Any, model: JointModel) -> None:
         """``tf.enabled: false`` at run time: an input's frames are not sent; true again: sent,
@@ -180,14 +187,7 @@ class Session:
         states = [chain.evaluate(xi) for xi in screws]
         expected = [{('spine_base', f'spine_base_link_{i + 1}'): L
                      for i, L in enumerate(state.link_transforms)} for state in states]
-        pub = self.ros.publisher(Float64MultiArray, f'{ns}/spine_node/screws')
-        self.ros.wait_for_subscribers(pub)
-        repeat_until(lambda: pub.publish(screws_message(screws[0])),
-                     lambda: len(self.tf) or None, TIMEOUT, explain=proc.log)
-        for xi in screws[1:]:
-            pub.publish(screws_message(xi))
-        worst = repeat_until(lambda: None, lambda: matched(self.tf.messages, expected),
-                             TIMEOUT, 0.05, explain=proc.log)
+        _, worst = self._send_and_match(f'{ns}/spine_node/screws', screws, expected, proc)
         tool = frames_of(self.static.wait_for(1, TIMEOUT)[-1])
         assert set(tool) == {('spine_base_link_5', 'spine_tool')}, tool
         O_tool = tool[('spine_base_link_5', 'spine_tool')]
