@@ -23,6 +23,7 @@ import sys
 import tempfile
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -184,7 +185,8 @@ def stop_process(process: subprocess.Popen) -> int:
     return process.returncode
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """The demo's command line."""
     parser = argparse.ArgumentParser(
         prog='twin_demo', description='MuJoCo twin + stiffness node, wired together, with a '
         'live one-line summary once a second (Ctrl-C stops both).')
@@ -207,13 +209,45 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--publish-every', type=int, default=None, metavar='N',
                         help='the twin publishes every N-th step (default 1 for the joint, '
                              f'{SPINE_PUBLISH_EVERY} for the spine)')
-    args = parser.parse_args(argv)
-    if args.control:
-        from tensegrity_stiffness.ros import control_demo
+    return parser
 
-        if args.spine:
-            parser.error('--control drives the joint (the spine controller is library-only)')
-        return control_demo.run(args.config, args.duration)
+
+@dataclass(frozen=True)
+class DemoSetup:
+    """What the twin demo runs, checked: the parameter file, joint or spine, its string count,
+    the swinging load (N, s), the twin's rate (Hz) and publication step, the duration (s or
+    None: until Ctrl-C)."""
+
+    params: Path
+    spine: bool
+    n_strings: int
+    amplitude: float
+    period: float
+    rate: float
+    publish_every: int
+    duration: float | None
+
+    @property
+    def stiffness_node(self) -> str:
+        return 'spine_node' if self.spine else 'stiffness_node'
+
+    def commands(self) -> tuple[list[str], list[str]]:
+        """The command lines of the stiffness node and the twin, wired as
+        launch/twin*.launch.py wires them: the partner's input is the twin's truth."""
+        wired = '~/poses:=sim_node/poses' if self.spine else '~/pose:=sim_node/pose'
+        sim_args = [node_executable('sim_node'), '--ros-args', '--params-file', str(self.params),
+                    '-r', f'__ns:={NAMESPACE}', '-p', f'sim.spine:={str(self.spine).lower()}',
+                    '-p', f'sim.rate:={self.rate}',
+                    '-p', f'load.swing_amplitude:={self.amplitude}',
+                    '-p', f'load.swing_period:={self.period}',
+                    '-p', f'sim.publish_every:={self.publish_every}']
+        node_args = [node_executable(self.stiffness_node), '--ros-args', '--params-file',
+                     str(self.params), '-r', f'__ns:={NAMESPACE}', '-r', wired]
+        return node_args, sim_args
+
+
+def demo_setup(args: argparse.Namespace, parser: argparse.ArgumentParser) -> DemoSetup:
+    """The checked :class:`DemoSetup` of parsed ``args`` (``parser.error`` on a bad one)."""
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         parser.error(f'--duration must be a positive number of seconds, got {args.duration}')
     every = args.publish_every or (SPINE_PUBLISH_EVERY if args.spine else 1)
@@ -223,8 +257,8 @@ def main(argv: list[str] | None = None) -> int:
     amplitude = amplitude if args.swing is None else args.swing
     period = period if args.swing_period is None else args.swing_period
     name = 'default_spine.yaml' if args.spine else 'default_joint.yaml'
-    params = args.config or config.packaged_config_path(name)
-    if not Path(params).is_file():
+    params = Path(args.config or config.packaged_config_path(name))
+    if not params.is_file():
         parser.error(f'--config {params}: no such file')
     if args.spine:
         chain_doc = config.parameters(config.load_yaml(params))
@@ -233,21 +267,31 @@ def main(argv: list[str] | None = None) -> int:
     else:
         from tensegrity_stiffness.mechanics.joint import JointModel
         n_strings = JointModel.from_yaml(params).n_strings
+    return DemoSetup(params, args.spine, n_strings, amplitude, period, args.rate, every,
+                     args.duration)
 
-    stiffness = 'spine_node' if args.spine else 'stiffness_node'
-    # As launch/twin*.launch.py: the partner's input is the twin's truth (same namespace).
-    wired = '~/poses:=sim_node/poses' if args.spine else '~/pose:=sim_node/pose'
-    sim_args = [node_executable('sim_node'), '--ros-args', '--params-file', str(params),
-                '-r', f'__ns:={NAMESPACE}', '-p', f'sim.spine:={str(args.spine).lower()}',
-                '-p', f'sim.rate:={args.rate}', '-p', f'load.swing_amplitude:={amplitude}',
-                '-p', f'load.swing_period:={period}',
-                '-p', f'sim.publish_every:={every}']
-    node_args = [node_executable(stiffness), '--ros-args', '--params-file', str(params),
-                 '-r', f'__ns:={NAMESPACE}', '-r', wired]
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.control:
+        from tensegrity_stiffness.ros import control_demo
+
+        if args.spine:
+            parser.error('--control drives the joint (the spine controller is library-only)')
+        return control_demo.run(args.config, args.duration)
+    return run_demo(demo_setup(args, parser))
+
+
+def run_demo(setup: DemoSetup) -> int:
+    """Start the stiffness node and the twin, print a line a second until Ctrl-C, the
+    duration or a node's exit; stop both. The exit status: 0, or 1 when a node failed."""
+    stiffness = setup.stiffness_node
+    node_args, sim_args = setup.commands()
     logs = Path(tempfile.mkdtemp(prefix='twin_demo_'))
     print(f'twin_demo: sim_node + {stiffness} in {NAMESPACE} (ROS_DOMAIN_ID='
-          f'{os.environ.get("ROS_DOMAIN_ID", "0")}), swinging {amplitude:g} N every '
-          f'{period:g} s; logs in {logs}', flush=True)
+          f'{os.environ.get("ROS_DOMAIN_ID", "0")}), swinging {setup.amplitude:g} N every '
+          f'{setup.period:g} s; logs in {logs}', flush=True)
 
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -261,7 +305,7 @@ def main(argv: list[str] | None = None) -> int:
                                               env=os.environ.copy(), start_new_session=True))
     rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node('twin_monitor')
-    monitor = Monitor(node, args.spine, n_strings)
+    monitor = Monitor(node, setup.spine, setup.n_strings)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     spinner = threading.Thread(target=spin_until_stopped, args=(executor, stop), daemon=True)
@@ -282,7 +326,7 @@ def main(argv: list[str] | None = None) -> int:
                       flush=True)
                 code = 1
                 break
-            if args.duration is not None and now - start >= args.duration:
+            if setup.duration is not None and now - start >= setup.duration:
                 break
     finally:
         stop.set()
