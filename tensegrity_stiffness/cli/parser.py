@@ -116,16 +116,26 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(protect_negative_numbers(argv))
     except SystemExit as exc:  # --help (0) or a usage error (2, message already printed)
         return int(exc.code) if isinstance(exc.code, int) else EXIT_BAD_INPUT
-    with warnings.catch_warnings():
-        warnings.simplefilter('default', InitialScrewWarning)
-        warnings.showwarning = _warning_line
+    # Not warnings.catch_warnings: it would reset which warnings were already shown.
+    previous = warnings.showwarning
+    warnings.showwarning = _warning_line(previous)
+    try:
         return _run(args)
+    finally:
+        warnings.showwarning = previous
 
 
-def _warning_line(message: Warning | str, *_: Any, **__: Any) -> None:
-    """A library warning (a config's ``initial_screw`` that is not an unloaded equilibrium) as
-    one line on stderr."""
-    print(f'{PROG}: warning: {message}', file=sys.stderr)
+def _warning_line(previous: Callable[..., None]) -> Callable[..., None]:
+    """``warnings.showwarning`` that prints a config's :class:`InitialScrewWarning` (an
+    ``initial_screw`` that is not an unloaded equilibrium) as one line on stderr and hands any
+    other warning to ``previous``."""
+    def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any
+             ) -> None:
+        if issubclass(category, InitialScrewWarning):
+            print(f'{PROG}: warning: {message}', file=sys.stderr)
+        else:
+            previous(message, category, *args, **kwargs)
+    return show
 
 
 def _run(args: argparse.Namespace) -> int:

@@ -129,7 +129,8 @@ def check_initial_screw(model: JointModel, screw: ArrayLike, label: str = 'joint
     if residual <= INITIAL_SCREW_TOLERANCE:
         return InitialScrewCheck(residual, None, '')
     result = solve_equilibrium(model, np.zeros(6), initial_screw=xi)
-    where = (f'a solve from it reaches {np.array2string(result.screw, precision=15)}'
+    screw_text = '[' + ', '.join(f'{v:.15g}' for v in result.screw) + ']'
+    where = (f'a solve from it reaches {screw_text}'
              + ('' if result.stable else ' (not stable)') if result.success
              else f'a solve from it fails: {result.message}')
     return InitialScrewCheck(residual, result, f'{label}.initial_screw is not an unloaded '
