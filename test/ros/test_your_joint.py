@@ -25,6 +25,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from support.ros_harness import (  # noqa: E402
+    REPO,
     NodeProcess,
     RosClient,
     log_has,
@@ -32,10 +33,11 @@ from support.ros_harness import (  # noqa: E402
     unique_namespace,
     wait_settled,
 )
-from tensegrity_stiffness.srv import SolveEquilibrium  # noqa: E402
+from tensegrity_stiffness.srv import SolveChainEquilibrium, SolveEquilibrium  # noqa: E402
 
 from tensegrity_stiffness import config  # noqa: E402
 from tensegrity_stiffness.cli.parser import main  # noqa: E402
+from tensegrity_stiffness.mechanics.chain import JointChain  # noqa: E402
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.mechanics.unloaded import InitialScrewWarning  # noqa: E402
@@ -180,3 +182,32 @@ def test_the_rule_for_initial_screw(running, files, capsys):
         written, _ = _library(files['ring'])
         np.testing.assert_allclose(model.initial_screw, written.initial_screw, rtol=0,
                                    atol=AGREE)
+
+
+def test_the_worked_spine_in_spine_node_and_the_twin(capsys):
+    """config/examples/ring8_spine.yaml (docs/your_joint.md): spine_node's unloaded solve, the
+    spine twin (sim_node, sim.spine) settled and `chain` agree with the library's chain."""
+    path = REPO / 'config' / 'examples' / 'ring8_spine.yaml'
+    chain = JointChain.from_yaml(path)
+    expected = chain.unloaded_screws()
+    code, report, _ = _cli(['chain', '--config', str(path), '--json'], capsys)
+    assert code == 0
+    np.testing.assert_allclose(np.reshape(report['screws'], (3, 6)), expected, atol=AGREE)
+    ns = unique_namespace('own_spine')
+    spine = NodeProcess(ns, path, executable='spine_node')
+    sim = NodeProcess(ns, path, executable='sim_node', extra_args=[
+        '-p', 'sim.spine:=true', '-p', 'sim.publish_every:=10'])
+    ros = RosClient('own_spine_test')
+    try:
+        solve = ros.client(SolveChainEquilibrium, f'{ns}/spine_node/solve_equilibrium')
+        res = ros.call(solve, SolveChainEquilibrium.Request(), timeout=60.0)
+        assert res.success and res.stable, res.message
+        np.testing.assert_allclose(np.reshape(res.screws, (3, 6)), expected, atol=AGREE)
+        screws = ros.subscribe(Float64MultiArray, f'{ns}/sim_node/screws')
+        screws.wait_until(lambda m: np.abs(np.reshape(m.data, (3, 6)) - expected).max()
+                          <= AGREE, timeout=120.0)
+    finally:
+        ros.close()
+        codes = sim.stop(), spine.stop()
+    assert codes == (0, 0), sim.log() + spine.log()
+    assert not re.search(WARNING, spine.log() + sim.log())
