@@ -122,6 +122,11 @@ class _Layout:
     tensions: FloatArray | None = None
 
 
+def _or(value: float | None, default: float) -> float:
+    """``value``, or ``default`` when it is None (a given 0 stays 0, and is refused)."""
+    return default if value is None else value
+
+
 def _positive(name: str, value: float) -> float:
     value = float(value)
     if not (math.isfinite(value) and value > 0.0):
@@ -130,7 +135,7 @@ def _positive(name: str, value: float) -> float:
 
 
 def _vertebra(choices: JointChoices) -> _Layout:
-    scale = _positive('radius', choices.radius or VERTEBRA_RADIUS) / VERTEBRA_RADIUS
+    scale = _positive('radius', _or(choices.radius, VERTEBRA_RADIUS)) / VERTEBRA_RADIUS
     screw = np.array(_VERTEBRA_POSE)
     screw[3:] *= scale
     return _Layout(list(VERTEBRA_NODE_NAMES), scale * np.reshape(VERTEBRA_NODES, (-1, 3)),
@@ -143,9 +148,9 @@ def _ring(choices: JointChoices) -> _Layout:
     if n < 6 or n % 2:
         raise ValueError(f'n_strings must be even and >= 6 for the ring template, got {n}')
     m = n // 2
-    radius = _positive('radius', choices.radius or DEFAULT_RING_RADIUS)
-    height = _positive('height', choices.height or radius)
-    gap = _positive('gap', choices.gap or height / 2.0)
+    radius = _positive('radius', _or(choices.radius, DEFAULT_RING_RADIUS))
+    height = _positive('height', _or(choices.height, radius))
+    gap = _positive('gap', _or(choices.gap, height / 2.0))
     if gap >= height:
         raise ValueError(f'gap must be below the mast height {height}, got {gap}')
     angles = 2.0 * math.pi * np.arange(m) / m
@@ -154,8 +159,7 @@ def _ring(choices: JointChoices) -> _Layout:
     strings = ([(f'vertical_{i}', f'R{i}', f'R{i}') for i in range(m)]
                + [(f'apex_{i}', 'P', f'R{i}') for i in range(m)])
     apex_length = math.hypot(radius, height - gap)
-    apex = choices.pretension if choices.pretension is not None else DEFAULT_PRETENSION
-    apex = _positive('pretension', apex)
+    apex = _positive('pretension', _or(choices.pretension, DEFAULT_PRETENSION))
     tensions = np.r_[np.full(m, apex * (height - gap) / apex_length), np.full(m, apex)]
     return _Layout(names, np.vstack([ring, [0.0, 0.0, height]]), strings,
                    np.array([0.0, 0.0, 0.0, 0.0, 0.0, gap]), None, np.array([0.0, 0.0, 1.0]),
@@ -280,7 +284,7 @@ def starter_config(choices: JointChoices, spine_joints: int = 0, spacing: float 
     joint, _, axis, default_spacing = starter_joint(choices)
     params: dict[str, Any] = {'joint': joint}
     if spine_joints:
-        params['chain'] = chain_section(joint, axis, spacing or default_spacing, spine_joints)
+        params['chain'] = chain_section(joint, axis, _or(spacing, default_spacing), spine_joints)
     return {'/**': {'ros__parameters': params}}
 
 
