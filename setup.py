@@ -3,7 +3,8 @@
 colcon builds the ROS package from CMakeLists.txt (interfaces, compiled kernel, nodes, launch
 files); this file is not used there. A pip install has the numpy path of the library (the compiled
 kernel is built by colcon), the ``tensegrity-stiffness`` command (``bag`` included) and the
-packaged configs under ``<prefix>/share/tensegrity_stiffness/config``.
+packaged configs under ``<prefix>/share/tensegrity_stiffness/config`` (the worked examples of
+docs/your_joint.md under ``config/examples``).
 """
 
 from glob import glob
@@ -18,7 +19,8 @@ setup(
     # the library's subpackages; the ROS layer (tensegrity_stiffness.ros) is colcon's
     packages=find_packages(include=[PACKAGE_NAME, PACKAGE_NAME + '.*'],
                            exclude=[PACKAGE_NAME + '.ros', PACKAGE_NAME + '.ros.*']),
-    data_files=[('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml'))],
+    data_files=[('share/' + PACKAGE_NAME + '/config', glob('config/*.yaml')),
+                ('share/' + PACKAGE_NAME + '/config/examples', glob('config/examples/*.yaml'))],
     python_requires='>=3.10',
     install_requires=['numpy', 'scipy', 'PyYAML', 'rosbags', 'tqdm', 'threadpoolctl'],
     extras_require={'plots': ['matplotlib', 'pillow'], 'simulation': ['mujoco']},

@@ -21,6 +21,8 @@ from typing import Any
 PACKAGE = 'tensegrity_stiffness'
 #: The packaged configuration of the joint node (the default joint, frames, planar mechanism).
 DEFAULT_JOINT_CONFIG = 'default_joint.yaml'
+#: Folder of config/ with the worked examples of docs/your_joint.md.
+EXAMPLES = 'examples'
 #: Key under which a ROS parameter file holds a node's parameters.
 ROS_PARAMETERS = 'ros__parameters'
 
@@ -37,6 +39,16 @@ def packaged_config_path(name: str = DEFAULT_JOINT_CONFIG) -> Path:
     return Path(__file__).resolve().parents[1] / 'config' / name
 
 
+def example_config_path(name: str) -> Path:
+    """``config/examples/<name>`` of the installed package (:func:`packaged_config_path`): the
+    worked examples of docs/your_joint.md. ValueError names a missing example."""
+    path = packaged_config_path(f'{EXAMPLES}/{name}')
+    if not path.is_file():
+        raise ValueError(f'no packaged example {name!r} (config/{EXAMPLES}: '
+                         f'{", ".join(sorted(p.name for p in path.parent.glob("*.yaml")))})')
+    return path
+
+
 def load_yaml(path: str | Path) -> Any:
     """Read a YAML file (PyYAML), with a clear error for a missing or malformed file."""
     import yaml
@@ -49,6 +61,26 @@ def load_yaml(path: str | Path) -> Any:
         raise ValueError(f'cannot read config {path}: {exc.strerror}') from None
     except yaml.YAMLError as exc:
         raise ValueError(f'config {path} is not valid YAML: {exc}') from None
+
+
+def write_yaml(path: str | Path, document: Any, header: list[str] | tuple[str, ...] = ()
+               ) -> Path:
+    """Write a config document as YAML (block mappings, flow lists, keys in order) after the
+    ``header`` lines as ``#`` comments; ValueError when the folder does not exist."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise ValueError(f'output folder {path.parent} does not exist')
+    path.write_text(yaml_text(document, header), encoding='utf-8')
+    return path
+
+
+def yaml_text(document: Any, header: list[str] | tuple[str, ...] = ()) -> str:
+    """The text :func:`write_yaml` writes."""
+    import yaml
+
+    comments = ''.join(f'# {line}\n' if line else '#\n' for line in header)
+    return comments + yaml.safe_dump(document, default_flow_style=None, sort_keys=False,
+                                     width=99)
 
 
 def parameters(document: Any) -> Mapping[str, Any]:

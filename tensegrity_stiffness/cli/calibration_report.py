@@ -114,16 +114,8 @@ def header_lines(result: CalibrationResult, recording: str) -> list[str]:
 def write_config(path: str | Path, document: Any, result: CalibrationResult,
                  recording: str) -> Path:
     """Write the calibrated config YAML (header comment + document)."""
-    import yaml
-
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise ValueError(f'output folder {path.parent} does not exist')
-    text = yaml.safe_dump(calibrated_document(document, result), default_flow_style=None,
-                          sort_keys=False, width=99)
-    header = ''.join(f'# {line}\n' if line else '#\n' for line in header_lines(result, recording))
-    path.write_text(header + text, encoding='utf-8')
-    return path
+    return config.write_yaml(path, calibrated_document(document, result),
+                             header_lines(result, recording))
 
 
 def _cell(value: float, scale: float = 1.0) -> str:

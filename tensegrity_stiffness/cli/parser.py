@@ -22,6 +22,10 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
 * ``record``       a rosbag2 of a running node's topics (:mod:`.record_command`; rclpy, in a
   child process)
 * ``export-mjcf``  the digital twin's MuJoCo model of the joint or the spine
+* ``new-config``   a starter joint (or spine) config from a template, its unloaded equilibrium
+  written as ``initial_screw`` (:mod:`tensegrity_stiffness.mechanics.templates`)
+* ``check-config`` a config's unloaded equilibrium, stability, strings, modes and whether its
+  ``initial_screw`` is an equilibrium (exit 0 sound, 2 with the reason)
 * ``modes``        natural frequencies, damping ratios and mode shapes at the unloaded
   equilibrium (:mod:`tensegrity_stiffness.mechanics.dynamics`; ``--plot`` draws them)
 
@@ -35,10 +39,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from tensegrity_stiffness.cli import (
+    config_commands,
     dynamics_commands,
     figure_commands,
     joint_commands,
@@ -55,6 +61,7 @@ from tensegrity_stiffness.cli.common import (
     protect_negative_numbers,
 )
 from tensegrity_stiffness.cli.plots import MatplotlibMissingError
+from tensegrity_stiffness.mechanics.unloaded import InitialScrewWarning
 
 #: Each command's ``add_parser(subparsers)``, in the order of ``--help``.
 COMMANDS: tuple[Callable[[Any], None], ...] = (
@@ -71,6 +78,8 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     recording_commands.add_export_mjcf_parser,
     figure_commands.add_figures_parser,
     dynamics_commands.add_modes_parser,
+    config_commands.add_new_config_parser,
+    config_commands.add_check_config_parser,
 )
 
 
@@ -107,6 +116,30 @@ def main(argv: Sequence[str] | None = None) -> int:
         args = parser.parse_args(protect_negative_numbers(argv))
     except SystemExit as exc:  # --help (0) or a usage error (2, message already printed)
         return int(exc.code) if isinstance(exc.code, int) else EXIT_BAD_INPUT
+    # Not warnings.catch_warnings: it would reset which warnings were already shown.
+    previous = warnings.showwarning
+    warnings.showwarning = _warning_line(previous)
+    try:
+        return _run(args)
+    finally:
+        warnings.showwarning = previous
+
+
+def _warning_line(previous: Callable[..., None]) -> Callable[..., None]:
+    """``warnings.showwarning`` that prints a config's :class:`InitialScrewWarning` (an
+    ``initial_screw`` that is not an unloaded equilibrium) as one line on stderr and hands any
+    other warning to ``previous``."""
+    def show(message: Warning | str, category: type[Warning], *args: Any, **kwargs: Any
+             ) -> None:
+        if issubclass(category, InitialScrewWarning):
+            print(f'{PROG}: warning: {message}', file=sys.stderr)
+        else:
+            previous(message, category, *args, **kwargs)
+    return show
+
+
+def _run(args: argparse.Namespace) -> int:
+    """Run the parsed command; errors to exit codes (module docstring)."""
     try:
         return args.handler(args)
     except MatplotlibMissingError as exc:

@@ -147,7 +147,8 @@ class JointModel:
     force_law : ``'hooke'`` (default) or ``'paper'`` (the authors' code, see module docstring).
     node_names, link2_node_names, string_names : labels (optional).
     initial_screw : (6,) default starting point of equilibrium solves (e.g. the unloaded
-        equilibrium); zeros when omitted.
+        equilibrium); zeros when omitted here (a config reader, :meth:`from_dict`, solves it
+        instead: :mod:`~tensegrity_stiffness.mechanics.unloaded`).
     use_kernel : evaluate with the compiled kernel (:mod:`~tensegrity_stiffness.mechanics.kernel`)
     when it
         is available (default); ``False`` keeps the numpy implementation, its reference.
@@ -260,7 +261,10 @@ class JointModel:
         empty = same as link 1), ``link2_node_names`` (empty = same), ``string_names``,
         ``string_link1_nodes`` / ``string_link2_nodes`` (node names), ``stiffness`` (N/m, one per
         string or one for all), ``rest_lengths`` (m), ``max_lengths`` (m, empty = no limit),
-        ``force_law``. Errors name the offending key.
+        ``force_law``, ``initial_screw`` (the unloaded equilibrium: solved when missing, a
+        :class:`~tensegrity_stiffness.mechanics.unloaded.InitialScrewWarning` when it is not
+        one; :func:`~tensegrity_stiffness.mechanics.unloaded.resolve_initial_screw`). Errors
+        name the offending key.
         """
         def get(key: str, default: Any = None, required: bool = True) -> Any:
             if key in section and section[key] is not None:
@@ -322,7 +326,7 @@ class JointModel:
         # The values are checked once, by the constructor; its errors name the argument, which
         # is the config key.
         try:
-            return cls(p1, conn, per_string('stiffness', get('stiffness')),
+            model = cls(p1, conn, per_string('stiffness', get('stiffness')),
                        per_string('rest_lengths', get('rest_lengths')), link2_nodes=p2,
                        max_lengths=per_string('max_lengths', get('max_lengths', [],
                                                                  required=False), True),
@@ -332,6 +336,11 @@ class JointModel:
                        or None, initial_screw=raw_x0 if raw_x0.size else None)
         except ValueError as exc:
             raise ValueError(f'joint.{exc}') from None
+        # The one rule for a missing or non-equilibrium initial_screw (mechanics.unloaded).
+        from tensegrity_stiffness.mechanics.unloaded import resolve_initial_screw
+
+        model.initial_screw = resolve_initial_screw(model, raw_x0 if raw_x0.size else None)
+        return model
 
     @classmethod
     def from_yaml(cls, path: str | Path) -> JointModel:

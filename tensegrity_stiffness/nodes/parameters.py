@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.mechanics import templates
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
     DEFAULT_LINK_MASS,
@@ -116,46 +117,38 @@ def _is_number(value: Any) -> bool:
 
 # ---------------------------------------------------------------------------------- the table
 #: The default joint: the sub-vertebra of the authors' published code (docs/conventions.md, "The
-#: default joint"); nodes A, B, C, D, the same set on both links.
-_DEFAULT_NODES = [-0.030162, 0.0, 0.0, -0.01524, -0.026035, 0.0,
-                  0.01524, -0.026035, 0.0, 0.030162, 0.0, 0.0]
-#: Its unloaded equilibrium (solve_equilibrium, |F| < 1e-13): a rotation by pi about
-#: (1, 0, -1)/sqrt(2), link 2 turned over.
-_DEFAULT_INITIAL_SCREW = [2.221441469079183, 0.0, -2.221441469079183,
-                          0.016657666062385, 0.0, 0.016657666062385]
+#: default joint"; its one home: mechanics.templates); nodes A, B, C, D, the same set on both
+#: links.
+_VERTEBRA_STRINGS = tuple(zip(*templates.VERTEBRA_STRINGS, strict=True))
 
 JOINT_PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec('joint.node_names', 'string_array', ['A', 'B', 'C', 'D'],
+    ParameterSpec('joint.node_names', 'string_array', list(templates.VERTEBRA_NODE_NAMES),
                   'names of the link-1 nodes (string ends refer to them)'),
-    ParameterSpec('joint.link1_nodes', 'double_array', _DEFAULT_NODES,
+    ParameterSpec('joint.link1_nodes', 'double_array', list(templates.VERTEBRA_NODES),
                   'link-1 node coordinates in {1}, flat [x y z] per node, m'),
     ParameterSpec('joint.link2_nodes', 'double_array', None,
                   'link-2 node coordinates in {2}, flat [x y z] per node, m (empty: same as '
                   'link1_nodes)'),
     ParameterSpec('joint.link2_node_names', 'string_array', None,
                   'names of the link-2 nodes (empty: same as node_names)'),
-    ParameterSpec('joint.string_names', 'string_array',
-                  ['cross_AA', 'cross_AD', 'cross_DA', 'cross_DD',
-                   'straight_AB', 'straight_AC', 'straight_BA', 'straight_BD',
-                   'straight_CA', 'straight_CD', 'straight_DB', 'straight_DC'],
+    ParameterSpec('joint.string_names', 'string_array', list(_VERTEBRA_STRINGS[0]),
                   'one name per string (orders every per-string array)'),
-    ParameterSpec('joint.string_link1_nodes', 'string_array',
-                  ['A', 'A', 'D', 'D', 'A', 'A', 'B', 'B', 'C', 'C', 'D', 'D'],
+    ParameterSpec('joint.string_link1_nodes', 'string_array', list(_VERTEBRA_STRINGS[1]),
                   'link-1 node of each string'),
-    ParameterSpec('joint.string_link2_nodes', 'string_array',
-                  ['A', 'D', 'A', 'D', 'B', 'C', 'A', 'D', 'A', 'D', 'B', 'C'],
+    ParameterSpec('joint.string_link2_nodes', 'string_array', list(_VERTEBRA_STRINGS[2]),
                   'link-2 node of each string'),
-    ParameterSpec('joint.stiffness', 'double_array', [77.0] * 12,
+    ParameterSpec('joint.stiffness', 'double_array',
+                  [templates.DEFAULT_STIFFNESS] * len(templates.VERTEBRA_STRINGS),
                   'string stiffness k, N/m, one per string (or one for all)'),
-    ParameterSpec('joint.rest_lengths', 'double_array',
-                  [0.0381] * 4 + [0.03175] * 8, 'rest lengths l0, m, one per string'),
-    ParameterSpec('joint.max_lengths', 'double_array',
-                  [0.0581] * 4 + [0.05175] * 8,
+    ParameterSpec('joint.rest_lengths', 'double_array', list(templates.VERTEBRA_REST),
+                  'rest lengths l0, m, one per string'),
+    ParameterSpec('joint.max_lengths', 'double_array', list(templates.VERTEBRA_MAX),
                   'maximum lengths lmax, m, one per string (empty: no limit)'),
     ParameterSpec('joint.force_law', 'string', 'hooke', 'string force law', choices=FORCE_LAWS),
-    ParameterSpec('joint.initial_screw', 'double_array', _DEFAULT_INITIAL_SCREW,
-                  'starting screw [wx wy wz vx vy vz] of equilibrium solves and reference '
-                  'branch of the first pose (rad, m)'),
+    ParameterSpec('joint.initial_screw', 'double_array', None,
+                  'the unloaded equilibrium [wx wy wz vx vy vz] (rad, m): start of equilibrium '
+                  'solves and reference branch of the first pose (empty: solved from the '
+                  'documented starts; not an equilibrium: a warning, docs/your_joint.md)'),
 )
 
 FRAME_PARAMETERS: tuple[ParameterSpec, ...] = (

@@ -120,7 +120,7 @@ class SimNode(Node):
         self._binding = ParameterBinding(
             self, sim_node_parameters(spine, n_joints), sim_node_settings,
             self._apply_parameters, lambda reason: self.reporter.warn('parameter change', reason))
-        settings = sim_node_settings(self._binding.values())
+        settings = self._binding.build(self._binding.values())
         values = settings.values
         self._use_settings(settings)
         self._period = 1.0 / values['sim.rate']
@@ -227,7 +227,7 @@ class SimNode(Node):
         change of the model (``joint*.*``, ``chain.*``) rebuilds the twin at its current
         configuration."""
         try:
-            settings = sim_node_settings(values)
+            settings = self._binding.build(values)
         except Exception as exc:  # validated before: only a bug gets here; the old set stays
             self.reporter.internal_error('parameters', exc)
             return

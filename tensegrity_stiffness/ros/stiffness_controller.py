@@ -72,7 +72,7 @@ class StiffnessControllerNode(Node):
         self._binding = ParameterBinding(
             self, CONTROLLER_PARAMETERS, controller_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
-        self._settings = controller_settings(self._binding.values())
+        self._settings = self._binding.build(self._binding.values())
         self._controller = self._new_controller(self._settings, None)
         self._pose: tuple[np.ndarray, float, int] | None = None
         self._tick_times: deque[float] = deque(maxlen=STATISTICS_WINDOW)
@@ -124,7 +124,7 @@ class StiffnessControllerNode(Node):
     def _apply_parameters(self, values: Mapping[str, Any], names: set[str]) -> None:
         """A validated change: a new controller from the last command (the integral restarts)."""
         try:
-            settings = controller_settings(values)
+            settings = self._binding.build(values)
             self._controller = self._new_controller(settings, self._controller.rest_lengths)
             self._settings = settings
         except Exception as exc:  # validated before: only a bug gets here

@@ -48,6 +48,9 @@ def test_default_spine_yaml_agrees_with_the_table():
     defaults = params.defaults(params.SPINE_NODE_PARAMETERS)
     assert from_file.keys() == defaults.keys()
     for name, value in defaults.items():
+        if name == 'joint.initial_screw':  # empty in the table: solved (mechanics.unloaded)
+            assert value == []
+            continue
         if isinstance(value, list) and value and isinstance(value[0], float):
             np.testing.assert_allclose(from_file[name], value, rtol=1e-15, err_msg=name)
         else:

@@ -21,6 +21,7 @@ from typing import Any
 import pytest
 
 PACKAGE = 'tensegrity_stiffness'
+REPO = Path(__file__).resolve().parents[2]
 INTERFACES = 'tensegrity_stiffness.srv'
 EXECUTABLE = 'stiffness_node'
 SPINE_EXECUTABLE = 'spine_node'
@@ -87,6 +88,11 @@ def test_config_files_installed(prefix: Path) -> None:
     assert any(p.name == 'default_joint.yaml' for p in configs)
     for path in configs:
         assert path.resolve().is_file(), f'{path} is a dangling link'
+    # The worked examples of docs/your_joint.md, where config.example_config_path finds them.
+    examples = sorted((prefix / 'share' / PACKAGE / 'config' / 'examples').glob('*.yaml'))
+    assert [p.name for p in examples] == sorted(
+        p.name for p in (REPO / 'config' / 'examples').glob('*.yaml'))
+    assert all(p.resolve().is_file() for p in examples)
 
 
 def test_interfaces_kernel_and_command_line_in_the_one_package(prefix: Path) -> None:

@@ -5,6 +5,7 @@ settings are rebuilt and swapped as one object after it."""
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
@@ -18,6 +19,7 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from tensegrity_stiffness.mechanics.unloaded import InitialScrewWarning
 from tensegrity_stiffness.nodes.parameters import ParameterSpec, unknown_parameter_warnings
 from tensegrity_stiffness.ros.runtime.rclpy_internals import parameter_override_names
 
@@ -92,9 +94,21 @@ class ParameterBinding:
         values.update(overrides or {})
         return values
 
+    def build(self, values: Mapping[str, Any], *args: Any) -> Any:
+        """The settings of ``values`` (``build(values, *args)``); a config's warnings (an
+        ``initial_screw`` that is not an unloaded equilibrium) become log warnings."""
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter('always', InitialScrewWarning)
+            settings = self._build(values, *args)
+        for warning in caught:
+            self._node.get_logger().warning(str(warning.message))
+        return settings
+
     def _validate(self, parameters: list[Parameter]) -> SetParametersResult:
         try:
-            self._build(self.values({p.name: p.value for p in parameters}))
+            with warnings.catch_warnings():  # logged once, when the change is applied
+                warnings.simplefilter('ignore', InitialScrewWarning)
+                self._build(self.values({p.name: p.value for p in parameters}))
         except Exception as exc:  # ValueError / TypeError name the field; anything else: a bug
             reason = str(exc) if isinstance(exc, (ValueError, TypeError)) else \
                 f'internal error: {type(exc).__name__}: {exc}'

@@ -94,7 +94,7 @@ class StreamingNode(Node):
         self._binding = ParameterBinding(
             self, self._parameter_table(), self._build_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
-        self._settings = self._build_settings(self._binding.values())
+        self._settings = self._binding.build(self._binding.values())
         self._last = LastInput()
         self._last_solution: np.ndarray | None = None
         self._clock = self.get_clock()
@@ -221,7 +221,7 @@ class StreamingNode(Node):
             try:
                 old = self._settings
                 settings = self._keep_topic_rest_lengths(
-                    old, self._build_settings(values, old.generation + 1), names)
+                    old, self._binding.build(values, old.generation + 1), names)
                 self._messages = self._output_messages(settings)
                 self._settings = settings
                 if 'markers.max_rate' in names:

@@ -1,0 +1,163 @@
+"""The config commands: ``new-config`` (a starter joint or spine config from a template, with its
+unloaded equilibrium solved and written as ``initial_screw``;
+:mod:`tensegrity_stiffness.mechanics.templates`) and ``check-config`` (a config's unloaded
+equilibrium, stability, slack and saturated strings, modes and whether its ``initial_screw`` is
+an equilibrium; :func:`~tensegrity_stiffness.mechanics.templates.check_config`)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+from typing import Any
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.cli.common import (
+    EXIT_BAD_INPUT,
+    EXIT_OK,
+    PROG,
+    add_json,
+    num,
+    parse_number,
+    positive_int,
+    print_json,
+    vector,
+    yes,
+)
+from tensegrity_stiffness.mechanics import templates
+
+
+def _choices(args: argparse.Namespace) -> templates.JointChoices:
+    """The template choices of the parsed options (None: the template's default)."""
+    given = {name: getattr(args, name) for name in (
+        'radius', 'pretension', 'rest_lengths', 'height', 'gap', 'link2_com', 'link2_inertia')
+        if getattr(args, name) is not None}
+    for name in ('stiffness', 'max_stretch', 'link2_mass'):
+        if getattr(args, name) is not None:
+            given[name] = getattr(args, name)
+    return templates.JointChoices(template=args.template, n_strings=args.strings, **given)
+
+
+def _cmd_new_config(args: argparse.Namespace) -> int:
+    document = templates.starter_config(_choices(args), args.spine or 0, args.spacing)
+    joint = config.parameters(document)['joint']
+    header = [f'Starter config written by {PROG} new-config (template {args.template}).',
+              f"Template {args.template}, {len(joint['string_names'])} strings; initial_screw: "
+              'its unloaded equilibrium (docs/your_joint.md).',
+              f'Check it with: {PROG} check-config FILE']
+    if args.out:
+        path = config.write_yaml(args.out, document, header)
+        print(f'{PROG}: wrote {path}', file=sys.stderr)
+    else:
+        sys.stdout.write(config.yaml_text(document, header))
+    return EXIT_OK
+
+
+def _print_check(path: Path, report: dict[str, Any]) -> None:
+    screw_info = report['initial_screw']
+    print(f"config: {path} ({report['n_strings']} strings)")
+    print(f"unloaded equilibrium xi [wx wy wz vx vy vz] (rad, m): {vector(report['screw'])}")
+    print(f"  residual |F| {num(report['residual'])} (N, N m); {report['message']}")
+    print(f"  stable (K_c positive definite): {yes(report['stable'])}, margin "
+          f"{num(report.get('stability_margin', float('nan')))}")
+    print(f"  slack strings: {', '.join(report.get('slack', [])) or 'none'}; saturated: "
+          f"{', '.join(report.get('saturated', [])) or 'none'}")
+    if screw_info['given']:
+        print(f"initial_screw: given, residual |F| {num(screw_info['residual'])}: "
+              f"{'an' if screw_info['equilibrium'] else 'NOT an'} unloaded equilibrium")
+    else:
+        print('initial_screw: missing (solved from the documented starts)')
+    if 'modes' in report:
+        print(f"modes (Hz): {vector(report['modes']['frequencies_hz'])}")
+    if 'chain' in report:
+        print(f"spine: {report['chain']['n_joints']} joints, unloaded screws:")
+        for i, xi in enumerate(report['chain']['unloaded_screws'], 1):
+            print(f'  joint {i}: {vector(xi)}')
+    for note in report['notes']:
+        print(f'note: {note}')
+    print(f"sound: {yes(report['sound'])}")
+
+
+def _cmd_check_config(args: argparse.Namespace) -> int:
+    if (args.file is None) == (args.example is None):
+        raise ValueError('give a config FILE or --example NAME (one of them)')
+    path = Path(args.file) if args.file else config.example_config_path(args.example)
+    report = templates.check_config(config.load_yaml(path))
+    report['config'] = str(path)
+    if args.json:
+        print_json(report)
+    else:
+        _print_check(path, report)
+    if report['problems']:
+        for problem in report['problems']:
+            print(f'{PROG}: error: {problem}', file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return EXIT_OK
+
+
+def add_new_config_parser(sub: Any) -> None:
+    """``new-config``."""
+    p = sub.add_parser('new-config', help='a starter joint (or spine) config from a template',
+                       description='Write a starter config (a ROS parameter file that every '
+                                   'reader takes) from a template, with the unloaded '
+                                   'equilibrium solved and written as joint.initial_screw. '
+                                   'Templates: vertebra (the default sub-vertebra, scaled to '
+                                   '--radius), ring (--strings strings between two rings of '
+                                   'nodes with an apex on a mast). docs/your_joint.md.')
+    p.add_argument('--template', choices=templates.TEMPLATES, default='vertebra',
+                   help='the joint template (default: vertebra)')
+    p.add_argument('--strings', type=positive_int, default=8, metavar='N',
+                   help='ring: number of strings (even, >= 6; default 8)')
+    p.add_argument('--radius', type=parse_number, metavar='M',
+                   help='node radius, m (vertebra: of nodes A and D, default 0.030162; ring: '
+                        f'of the ring, default {templates.DEFAULT_RING_RADIUS})')
+    p.add_argument('--height', type=parse_number, metavar='M',
+                   help='ring: mast height of the apex, m (default: the radius)')
+    p.add_argument('--gap', type=parse_number, metavar='M',
+                   help='ring: design height of link 2 over link 1, m (default: half the mast)')
+    p.add_argument('--stiffness', type=parse_number, nargs='+', metavar='K',
+                   help=f'string stiffness, N/m (one for all or one per string; default '
+                        f'{templates.DEFAULT_STIFFNESS:g})')
+    tension = p.add_mutually_exclusive_group()
+    tension.add_argument('--pretension', type=parse_number, metavar='N',
+                         help='string tension at the design pose, N (ring: of the apex '
+                              f'strings, default {templates.DEFAULT_PRETENSION:g}; vertebra: of '
+                              'every string); sets the rest lengths')
+    tension.add_argument('--rest-lengths', type=parse_number, nargs='+', metavar='L0',
+                         help='rest lengths, m (one for all or one per string)')
+    p.add_argument('--max-stretch', type=parse_number, metavar='M',
+                   help=f'maximum length minus rest length, m (default '
+                        f'{templates.DEFAULT_MAX_STRETCH:g})')
+    p.add_argument('--link2-mass', type=parse_number, metavar='KG',
+                   help="link 2's mass, kg (dynamics and the twin)")
+    p.add_argument('--link2-com', type=parse_number, nargs=3, metavar=('X', 'Y', 'Z'),
+                   help="link 2's centre of mass in {2}, m")
+    p.add_argument('--link2-inertia', type=parse_number, nargs='+', metavar='I',
+                   help="link 2's inertia about its centre of mass, kg m^2 (3 principal moments "
+                        'or 9 values)')
+    p.add_argument('--spine', type=positive_int, metavar='N',
+                   help='write a spine of N joints of this one, stacked upright (chain section)')
+    p.add_argument('--spacing', type=parse_number, metavar='M',
+                   help="spine: distance between vertebrae along the template's axis, m "
+                        '(default: the unloaded height, the vertebra: 0.040003 scaled)')
+    p.add_argument('--out', metavar='FILE', help='write here (default: stdout)')
+    p.set_defaults(handler=_cmd_new_config)
+
+
+def add_check_config_parser(sub: Any) -> None:
+    """``check-config``."""
+    p = sub.add_parser('check-config', help="a config's unloaded equilibrium, stability, "
+                                            'strings, modes and initial_screw',
+                       description='Validate a joint (or spine) config and report its unloaded '
+                                   'equilibrium (residual), stability (K_c positive definite), '
+                                   'slack and saturated strings, the modes, and whether the '
+                                   'written joint.initial_screw is an equilibrium. Exit 0 when '
+                                   'the file is sound, 2 with the reason on stderr.')
+    p.add_argument('file', nargs='?', metavar='FILE', help='the config (YAML)')
+    p.add_argument('--example', metavar='NAME',
+                   help='a packaged example of config/examples instead of FILE (its path is '
+                        'printed), e.g. ring8_joint.yaml')
+    add_json(p)
+    p.set_defaults(handler=_cmd_check_config)
+
+

@@ -1,0 +1,114 @@
+"""docs/your_joint.md on the command line: every ``tensegrity-stiffness`` command of the page runs
+(in a scratch folder, in process) and the worked examples it makes are the files shipped in
+config/examples/; ``new-config`` / ``check-config`` and the rule for ``initial_screw`` at the
+command line (a missing one solved, a wrong one a line on stderr; ``check-config`` exit 2)."""
+
+from __future__ import annotations
+
+import json
+import re
+import shlex
+
+import numpy as np
+import pytest
+import yaml
+from support import REPO
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.cli.parser import main
+
+PAGE = REPO / 'docs' / 'your_joint.md'
+EXAMPLES = REPO / 'config' / 'examples'
+
+
+def _page_commands() -> list[list[str]]:
+    blocks = re.findall(r'```bash\n(.*?)```', PAGE.read_text(encoding='utf-8'), re.S)
+    return [shlex.split(line)[1:] for block in blocks for line in block.splitlines()
+            if line.startswith('tensegrity-stiffness ')]
+
+
+def test_every_command_of_the_page_runs(tmp_path, monkeypatch, capsys):
+    commands = _page_commands()
+    assert len(commands) >= 12
+    monkeypatch.chdir(tmp_path)
+    for argv in commands:
+        code = main(argv)
+        out, err = capsys.readouterr()
+        assert code == 0, (argv, err)
+        assert 'warning' not in err, (argv, err)
+        if argv[0] == 'check-config':
+            assert 'sound: yes' in out
+    made = sorted(p.name for p in tmp_path.glob('ring*.yaml'))
+    assert made == sorted(p.name for p in EXAMPLES.glob('*.yaml'))
+    for name in made:  # the shipped examples are what the page's commands write
+        assert (tmp_path / name).read_text() == (EXAMPLES / name).read_text(), name
+
+
+def test_example_paths_and_check_config_example(capsys):
+    path = config.example_config_path('ring8_joint.yaml')
+    assert path.is_file() and path.parent.name == 'examples'
+    assert main(['check-config', '--example', 'ring8_joint.yaml', '--json']) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report['config'] == str(path) and report['sound']
+    with pytest.raises(ValueError, match='no packaged example'):
+        config.example_config_path('nope.yaml')
+    assert main(['check-config', '--example', 'nope.yaml']) == 2
+    assert 'ring16_joint.yaml' in capsys.readouterr().err
+
+
+def _write(path, joint):
+    path.write_text(yaml.safe_dump({'joint': joint}))
+    return path
+
+
+def test_check_config_json_and_exit_codes(tmp_path, capsys):
+    good = tmp_path / 'good.yaml'
+    assert main(['new-config', '--template', 'ring', '--strings', '10', '--out', str(good)]) == 0
+    capsys.readouterr()
+    assert main(['check-config', str(good), '--json']) == 0
+    report = json.loads(capsys.readouterr().out)
+    joint = config.load_section(good, 'joint')
+    assert report['screw'] == pytest.approx(joint['initial_screw'], abs=1e-12)
+    assert report['residual'] < 1e-9 and report['stable'] and report['sound']
+    assert report['initial_screw'] == {'given': True, 'value': joint['initial_screw'],
+                                       'residual': pytest.approx(report['residual']),
+                                       'equilibrium': True}
+    wrong = dict(joint, initial_screw=[0.0, 0.0, 0.0, 0.0, 0.0, 0.02])
+    assert main(['check-config', str(_write(tmp_path / 'wrong.yaml', wrong))]) == 2
+    out, err = capsys.readouterr()
+    assert 'NOT an unloaded equilibrium' in out
+    assert re.search(r'error: joint\.initial_screw is not an unloaded equilibrium: residual '
+                     r'\|F\| = [0-9.]+e[-+]\d+', err)
+    assert main(['check-config', str(_write(tmp_path / 'bad.yaml', dict(joint, stiffness=[-1])))
+                 ]) == 2
+    assert 'joint.stiffness must be > 0' in capsys.readouterr().err
+
+
+def test_joint_and_equilibrium_follow_the_rule(tmp_path, capsys):
+    """Missing: solved, no warning; wrong: one stderr line naming the residual, and the command
+    still reports at it (as the node would)."""
+    joint = dict(config.load_section(EXAMPLES / 'ring8_joint.yaml', 'joint'))
+    written = np.asarray(joint.pop('initial_screw'))
+    missing = _write(tmp_path / 'missing.yaml', joint)
+    assert main(['joint', '--config', str(missing), '--json']) == 0
+    out, err = capsys.readouterr()
+    assert err == ''
+    np.testing.assert_allclose(json.loads(out)['screw'], written, atol=1e-12)
+    wrong = _write(tmp_path / 'wrong.yaml', dict(joint, initial_screw=[0, 0, 0, 0, 0, 0.02]))
+    assert main(['equilibrium', '--config', str(wrong), '--wrench', '0', '0', '0', '0', '0', '0',
+                 '--json']) == 0
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('tensegrity-stiffness: warning: joint.'
+                                                   'initial_screw is not an unloaded equilibrium')
+    np.testing.assert_allclose(json.loads(out)['screw'], written, atol=1e-12)
+
+
+def test_new_config_to_stdout_and_bad_choices(capsys):
+    assert main(['new-config', '--template', 'vertebra', '--radius', '0.04']) == 0
+    out = capsys.readouterr().out
+    assert out.startswith('# Starter config written by tensegrity-stiffness new-config')
+    assert config.section(yaml.safe_load(out), 'joint')['link1_nodes'][0] == pytest.approx(-0.04)
+    assert main(['new-config', '--template', 'ring', '--strings', '7']) == 2
+    assert 'n_strings must be even' in capsys.readouterr().err
+    assert main(['new-config', '--pretension', '1', '--rest-lengths', '0.03']) == 2
