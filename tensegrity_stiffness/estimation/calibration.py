@@ -14,7 +14,12 @@ measurement gives whitened residuals (measurement noise std ``sigma`` from
   ``[x y z rx ry rz]``); a measured ``screw`` is the pose ``exp(hat(screw))``;
 * equilibrium with a measured external wrench ``W_m`` (force-torque sensor on link 2, in {1}
   about its origin; zeros for "unloaded"): ``(F(xi; theta) + W_m) / sigma`` (Monke & Vikas eq. 9
-  for ``F``); no residual when the load is unknown;
+  for ``F``); no residual when the load is unknown. With a known load the sample's own unknown
+  is its true load ``W = -F(xi)`` instead of its screw (:meth:`_Problem.load_chart`: the screw
+  is the equilibrium under ``W``, solved by Newton after every step, :meth:`_Problem.advance`),
+  so that a precise reading converges; an **exact** load (zeros, or every known load when the
+  load noise is 0: :attr:`CalibrationNoise.exact_loads`) is no unknown: the equilibrium under it
+  is a constraint and its rows are no residuals;
 * load cells: ``(phi_j(xi; theta) - t_j) / sigma`` for every measured string (eq. 8, the
   model's force law);
 * string lengths: ``(l_j(xi) - l_m) / sigma`` (eq. 7).
@@ -58,6 +63,9 @@ Method
    sparse Jacobian (LSMR) reaches the same estimate (``bench/bench_calibration.py`` prints both:
    0.001 std apart, 2.3x the time at 1,000 samples); the elimination solves each step exactly
    and gives the information of step 2 and the covariance from the same blocks.
+   Then the samples with a string within :data:`SLACK_MARGIN` std of slack (:func:`_near_slack`:
+   the model is not smooth there, and a fit that disagrees with the truth on a string's slack
+   reports too small a std) are left out, and the fit is repeated (``near_slack``).
 4. Covariance ``V (V^T S V)^-1 V^T`` (``V`` the identifiable subspace, ``S`` at the estimate):
    the Gauss-Newton covariance, equal to the Cramer-Rao bound of the same data model at the
    truth (:func:`cramer_rao_std`).
