@@ -26,6 +26,7 @@ from tensegrity_stiffness.cli import plots
 from tensegrity_stiffness.estimation.calibration import (
     RESIDUAL_KINDS,
     RESIDUAL_UNITS,
+    SLACK_MARGIN,
     CalibrationResult,
     calibrate_joint,
 )
@@ -74,6 +75,13 @@ def pick_samples(recording: Recording, **rule: float) -> tuple[list[int], list[A
     return indices, recording.samples(indices)
 
 
+def missing_topics(recording: Recording) -> str:
+    """Words for the signals the recording lacks, by topic and option (for an error)."""
+    return ''.join(f'no {signal} topic {topic} in the bag (name yours with '
+                   f"--{signal.replace('_', '-')}-topic); "
+                   for signal, topic in recording.absent.items())
+
+
 def unloaded_screw(model: JointModel, start: np.ndarray) -> np.ndarray:
     """The calibrated joint's unloaded equilibrium from ``start`` (``start`` when it fails)."""
     eq = solve_equilibrium(model, np.zeros(6), initial_screw=start)
@@ -102,7 +110,8 @@ def calibrated_document(document: Any, result: CalibrationResult) -> Any:
 def header_lines(result: CalibrationResult, recording: str) -> list[str]:
     """Comment lines for the calibrated config: source, table, what is not identifiable."""
     lines = [f'Calibrated by tensegrity-stiffness calibrate from {recording}',
-             f'{len(result.screws)} samples, {len(result.outliers)} outliers left out; '
+             f'{len(result.screws)} samples, {len(result.outliers)} outliers and '
+             f'{len(result.near_slack)} near slack left out; '
              f'chi2/dof {result.chi2 / max(result.dof, 1):.3f}',
              *table_lines(result)]
     if result.unidentifiable:
@@ -185,6 +194,7 @@ def report_dict(result: CalibrationResult, recording: Recording, indices: Sequen
         'residual_rms_before': result.residual_rms_before,
         'residual_rms_after': result.residual_rms_after,
         'residual_units': RESIDUAL_UNITS, 'outliers': result.outliers,
+        'near_slack': result.near_slack,
         'iterations': result.iterations, 'chi2': result.chi2, 'dof': result.dof,
         'singular_values': result.singular_values, 'seconds': result.seconds,
         **{key: value for key, value in outputs.items()},
@@ -209,7 +219,12 @@ def run(recording_path: str, config_path: str | None, *, fmt: str | None,
                                max_age, reading)
     indices, samples = pick_samples(recording, **rule)
     fitting = progress('fit') if progress else None
-    result = calibrate_joint(model, samples, fit=fit, noise=noise, loss=loss, progress=fitting)
+    try:
+        result = calibrate_joint(model, samples, fit=fit, noise=noise, loss=loss,
+                                 progress=fitting)
+    except ValueError as exc:
+        raise RecordingError(f'{recording.source}: {missing_topics(recording)}{exc}'
+                             if recording.absent else str(exc)) from None
     written: dict[str, str | None] = {'config': None, 'plot': None}
     if out:
         written['config'] = str(write_config(out, document, result, recording.source))
@@ -223,6 +238,10 @@ def run(recording_path: str, config_path: str | None, *, fmt: str | None,
     if result.outliers:
         lines.append(f'outliers ({len(result.outliers)} samples, left out): '
                      + ' '.join(map(str, result.outliers)))
+    if result.near_slack:
+        lines.append(f'near slack ({len(result.near_slack)} samples with a string within '
+                     f'{SLACK_MARGIN:g} std of slack, left out): '
+                     + ' '.join(map(str, result.near_slack)))
     if result.unidentifiable:
         lines.append('not identifiable from this recording (held at nominal):')
         lines.extend(f'  {text}' for text in result.unidentifiable)

@@ -180,7 +180,8 @@ def add_calibrate_parser(sub: Any) -> None:
     p.add_argument('--noise', nargs='+', type=_noise_option, metavar='KIND=STD',
                    help='measurement std: position (m), rotation (rad), force (N), moment '
                         '(N m), tension (N), length (m) (defaults 1e-4, 0.1 deg, 0.01, 5e-4, '
-                        '0.005, 1e-4)')
+                        '0.005, 1e-4; force=0 moment=0: the known loads are exact, '
+                        'constraints; a zero load is always exact)')
     p.add_argument('--loss', choices=LOSSES, default='soft_l1',
                    help='robust loss (default soft_l1; linear: plain least squares)')
     p.add_argument('--window', type=parse_number, default=DEFAULT_WINDOW, metavar='S',

@@ -14,7 +14,12 @@ measurement gives whitened residuals (measurement noise std ``sigma`` from
   ``[x y z rx ry rz]``); a measured ``screw`` is the pose ``exp(hat(screw))``;
 * equilibrium with a measured external wrench ``W_m`` (force-torque sensor on link 2, in {1}
   about its origin; zeros for "unloaded"): ``(F(xi; theta) + W_m) / sigma`` (Monke & Vikas eq. 9
-  for ``F``); no residual when the load is unknown;
+  for ``F``); no residual when the load is unknown. With a known load the sample's own unknown
+  is its true load ``W = -F(xi)`` instead of its screw (:meth:`_Problem.load_chart`: the screw
+  is the equilibrium under ``W``, solved by Newton after every step, :meth:`_Problem.advance`),
+  so that a precise reading converges; an **exact** load (zeros, or every known load when the
+  load noise is 0: :attr:`CalibrationNoise.exact_loads`) is no unknown: the equilibrium under it
+  is a constraint and its rows are no residuals;
 * load cells: ``(phi_j(xi; theta) - t_j) / sigma`` for every measured string (eq. 8, the
   model's force law);
 * string lengths: ``(l_j(xi) - l_m) / sigma`` (eq. 7).
@@ -58,6 +63,9 @@ Method
    sparse Jacobian (LSMR) reaches the same estimate (``bench/bench_calibration.py`` prints both:
    0.001 std apart, 2.3x the time at 1,000 samples); the elimination solves each step exactly
    and gives the information of step 2 and the covariance from the same blocks.
+   Then the samples with a string within :data:`SLACK_MARGIN` std of slack (:func:`_near_slack`:
+   the model is not smooth there, and a fit that disagrees with the truth on a string's slack
+   reports too small a std) are left out, and the fit is repeated (``near_slack``).
 4. Covariance ``V (V^T S V)^-1 V^T`` (``V`` the identifiable subspace, ``S`` at the estimate):
    the Gauss-Newton covariance, equal to the Cramer-Rao bound of the same data model at the
    truth (:func:`cramer_rao_std`).
@@ -127,8 +135,15 @@ SCREW_ITERATIONS = 8
 FIT_TOLERANCE = 1e-8
 #: ... and the robust stage (followed by the final plain least-squares stage).
 ROBUST_TOLERANCE = 1e-6
+#: A sample with a string whose stretch is within this many std of 0 (slack) is left out.
+SLACK_MARGIN = 3.0
 #: Levenberg-Marquardt iterations of one fit stage.
 MAX_ITERATIONS = 100
+#: A sample with a known load is at equilibrium when every component of ``F + W`` is below this
+#: (N, N m) ...
+EQUILIBRIUM_TOLERANCE = 1e-11
+#: ... within this many Newton iterations.
+EQUILIBRIUM_ITERATIONS = 30
 
 
 @dataclass(frozen=True)
@@ -146,8 +161,17 @@ class CalibrationNoise:
     def __post_init__(self) -> None:
         for kind in RESIDUAL_KINDS:
             value = finite_scalar(f'noise.{kind}', getattr(self, kind))
-            if value <= 0.0:
+            if value < 0.0 or (value == 0.0 and kind not in ('force', 'moment')):
                 raise ValueError(f'noise.{kind} must be > 0, got {value}')
+        if (self.force == 0.0) != (self.moment == 0.0):
+            raise ValueError('noise.force and noise.moment must both be 0 (the known loads are '
+                             f'exact) or both > 0, got {self.force} and {self.moment}')
+
+    @property
+    def exact_loads(self) -> bool:
+        """Whether the known loads are exact (force and moment noise 0): each is a constraint
+        on its sample's screw, not a reading."""
+        return self.force == 0.0
 
     @classmethod
     def of(cls, noise: CalibrationNoise | Mapping[str, float] | None) -> CalibrationNoise:
@@ -320,11 +344,25 @@ class _Evaluation:
     jac_screw: FloatArray
     jac_parameters: FloatArray
     raw: FloatArray  # unwhitened residuals (N, R)
+    wrench: FloatArray  # F(xi; theta) (N, 6), every sample
+    wrench_screw: FloatArray  # d F / d xi = K (N, 6, 6) (with the Jacobians)
+    wrench_parameters: FloatArray  # d F / d z (N, 6, 2n), scaled coordinates, unwhitened
+    stretch: FloatArray  # l_j - l0_j (N, n): negative when slack
+    stretch_screw: FloatArray  # d l_j / d xi (N, n, 6) (with the Jacobians)
+    index: NDArray[np.intp]  # the samples evaluated (N,)
 
     def subset(self, rows: NDArray[np.int64]) -> _Evaluation:
         """The evaluation of the samples ``rows`` only."""
-        return _Evaluation(self.residuals[rows], self.jac_screw[rows],
-                           self.jac_parameters[rows], self.raw[rows])
+        return _Evaluation(*(a[rows] if a.size else a for a in (
+            self.residuals, self.jac_screw, self.jac_parameters, self.raw, self.wrench,
+            self.wrench_screw, self.wrench_parameters, self.stretch, self.stretch_screw,
+            self.index)))
+
+    def replace(self, jac_screw: FloatArray, jac_parameters: FloatArray) -> _Evaluation:
+        """The same point with other Jacobians (another chart)."""
+        return _Evaluation(self.residuals, jac_screw, jac_parameters, self.raw, self.wrench,
+                           self.wrench_screw, self.wrench_parameters, self.stretch,
+                           self.stretch_screw, self.index)
 
 
 class _Problem:
@@ -335,8 +373,14 @@ class _Problem:
         self.model = model
         self.data = data
         self.n = model.n_strings
-        self.std = noise.row_std(self.n)
+        std = noise.row_std(self.n)
+        self.std = np.where(std > 0.0, std, 1.0)  # exact loads: constraints, no residual rows
+        # Known loads: each sample's own unknown is its true load (the screw is the equilibrium
+        # under it); exact loads (zeros: "unloaded", or zero load noise) have none.
+        self.loaded = data.has_wrench.copy()
+        self.exact = data.has_wrench & (noise.exact_loads | np.all(data.wrench == 0.0, axis=1))
         self.mask = data.mask()
+        self.mask[self.exact, 6:12] = False
         self.k_nominal = model.k.copy()
         # Scaled coordinates: k = k_nom (1 + STIFFNESS_UNIT z_k), d = OFFSET_UNIT z_d.
         self.unit = np.concatenate([STIFFNESS_UNIT * self.k_nominal, np.full(self.n, OFFSET_UNIT)])
@@ -387,8 +431,11 @@ class _Problem:
         raw[:, 12 + n:] = state.lengths - data.lengths
         raw = np.where(self.mask, raw, 0.0)
         residuals = raw / self.std
+        none = np.empty(0)
+        stretch = state.lengths - rest
         if not jacobians:
-            return _Evaluation(residuals, np.empty(0), np.empty(0), raw)
+            return _Evaluation(residuals, none, none, raw, state.wrench, none, none, stretch,
+                               none, np.arange(N))
         J = left_jacobian_se3(xi)  # (N, 6, 6): twist [omega; v] = J dxi
         jx = np.zeros((N, R, 6))
         # Pose: d p = omega x p + v, d log(R R_m^T) = Jl^-1(phi) omega.
@@ -406,7 +453,8 @@ class _Problem:
         scale = self.mask / self.std  # (N, R)
         jx *= scale[..., None]
         if not parameter_jacobians:
-            return _Evaluation(residuals, jx, np.empty(0), raw)
+            return _Evaluation(residuals, jx, none, raw, state.wrench, state.stiffness, none,
+                               stretch, dl, np.arange(N))
         dphi_dl0 = _tension_rest_length_slopes(model, state, rest)
         jp = np.zeros((N, R, 2 * n))
         dphi_dk = state.tensions / k
@@ -415,41 +463,138 @@ class _Problem:
         idx = np.arange(n)
         jp[:, 12 + idx, idx] = dphi_dk
         jp[:, 12 + idx, n + idx] = dphi_dl0
-        jp *= scale[..., None] * self.unit
-        return _Evaluation(residuals, jx, jp, raw)
+        jp *= self.unit
+        wrench_parameters = jp[:, 6:12].copy()
+        jp *= scale[..., None]
+        return _Evaluation(residuals, jx, jp, raw, state.wrench, state.stiffness,
+                           wrench_parameters, stretch, dl, np.arange(N))
+
+    # -------------------------------------------------------------- known loads
+    def load_chart(self, ev: _Evaluation) -> _Evaluation:
+        """``ev`` with the Jacobians of every sample with a known load taken w.r.t. its true
+        load ``W = -F(xi)`` instead of its screw (the screw is the equilibrium under ``W``:
+        ``d xi = -K^-1 (dW + dF/dz dz)``): ``Jx' = -Jx K^-1``, ``Jz' = Jz - Jx K^-1 dF/dz``.
+        An exact load is no unknown (``Jx' = 0``): the equilibrium is a constraint and the
+        parameters' Jacobian is that of the constrained model."""
+        rows = np.flatnonzero(self.loaded[ev.index])
+        if rows.size == 0:
+            return ev
+        jx, jp = ev.jac_screw.copy(), ev.jac_parameters
+        K_t = np.swapaxes(ev.wrench_screw[rows], -1, -2)
+        moved = -np.swapaxes(np.linalg.solve(K_t, np.swapaxes(jx[rows], -1, -2)), -1, -2)
+        jx[rows] = moved
+        if jp.size:
+            jp = jp.copy()
+            jp[rows] += moved @ ev.wrench_parameters[rows]
+        jx[self.exact[ev.index]] = 0.0
+        return ev.replace(jx, jp)
+
+    def advance(self, z: FloatArray, xi: FloatArray, ev: _Evaluation, z_new: FloatArray,
+                step: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """The screws after a step from ``(z, xi)`` (evaluated: ``ev``) to ``z_new``
+        with ``step`` (N, 6) in :meth:`load_chart`'s coordinates: ``xi + step`` without a known
+        load; else the equilibrium at ``z_new`` under the true load ``-F(xi) + step`` (an exact
+        load: the load itself), by Newton from the linear prediction. Returns (screws, found)."""
+        xi_new = xi + step
+        rows = np.flatnonzero(self.loaded)
+        found = np.ones(len(xi), bool)
+        if rows.size == 0:
+            return xi_new, found
+        target = np.where(self.exact[rows, None], self.data.wrench[rows],
+                          -ev.wrench[rows] + step[rows])
+        change = target + ev.wrench[rows]
+        if ev.wrench_parameters.size:  # parameters moved as well
+            change = change + ev.wrench_parameters[rows] @ (z_new - z)
+        start = xi[rows] - np.linalg.solve(ev.wrench_screw[rows], change[..., None])[..., 0]
+        xi_new[rows], found[rows] = self.settle(z_new, start, target, rows)
+        return xi_new, found
+
+    def settle(self, z: FloatArray, xi: FloatArray, loads: FloatArray, rows: NDArray[np.intp]
+               ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Screws of the samples ``rows`` at equilibrium under ``loads`` (``F(xi; z) + W = 0``
+        within :data:`EQUILIBRIUM_TOLERANCE`) by Newton's method from ``xi``. Returns (screws,
+        found)."""
+        k, d = self.parameters(z)
+        model = self._model(k)
+        rest = self.data.rest[rows] + d
+        xi = xi.copy()
+        found = np.zeros(len(rows), bool)
+        for _ in range(EQUILIBRIUM_ITERATIONS):
+            try:
+                state = model.evaluate(xi, rest)
+            except ValueError:
+                return xi, np.zeros(len(rows), bool)
+            error = state.wrench + loads
+            found = np.max(np.abs(error), axis=1) <= EQUILIBRIUM_TOLERANCE
+            if found.all():
+                break
+            try:
+                step = np.linalg.solve(state.stiffness, error[..., None])[..., 0]
+            except np.linalg.LinAlgError:
+                return xi, np.zeros(len(rows), bool)
+            xi = np.where(found[:, None], xi, xi - step)
+            if not np.isfinite(xi).all():
+                return xi, np.zeros(len(rows), bool)
+        return xi, found
 
     # -------------------------------------------------------------- screws with fixed theta
     def refine_screws(self, z: FloatArray, xi: FloatArray,
                       iterations: int = SCREW_ITERATIONS) -> FloatArray:
         """Every sample's screw by Gauss-Newton with the parameters fixed (batched; a step that
         raises a sample's cost is halved up to 4 times, else that sample keeps its screw)."""
-        xi = xi.copy()
+        xi = self.settle_exact(z, xi)
         ev = self.evaluate(z, xi, parameter_jacobians=False)
         cost = np.sum(ev.residuals ** 2, axis=1)
         for _ in range(iterations):
-            A = np.swapaxes(ev.jac_screw, -1, -2) @ ev.jac_screw
-            g = np.einsum('nri,nr->ni', ev.jac_screw, ev.residuals)
+            jx = self.load_chart(ev).jac_screw
+            A = np.swapaxes(jx, -1, -2) @ jx
+            g = np.einsum('nri,nr->ni', jx, ev.residuals)
             step = -_solve_psd(A, g)
             if np.max(np.abs(step)) < 1e-13:
                 break
             alpha = np.ones(len(xi))
             for _ in range(5):
-                trial = xi + alpha[:, None] * step
+                trial, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
+                trial[~found] = xi[~found]
                 try:
                     tev = self.evaluate(z, trial, jacobians=False)
                 except ValueError:
                     alpha *= 0.5
                     continue
                 tcost = np.sum(tev.residuals ** 2, axis=1)
-                worse = tcost > cost * (1 + 1e-12) + 1e-300
+                worse = (tcost > cost * (1 + 1e-12) + 1e-300) | ~found
                 if not worse.any():
                     break
                 alpha[worse] *= 0.5
             else:
                 alpha[worse] = 0.0
-            xi = xi + alpha[:, None] * step
+            xi, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
+            if not found.all():
+                raise ValueError('no equilibrium under a sample\'s known load')
             ev = self.evaluate(z, xi, parameter_jacobians=False)
             cost = np.sum(ev.residuals ** 2, axis=1)
+        return xi
+
+    def settle_exact(self, z: FloatArray, xi: FloatArray) -> FloatArray:
+        """``xi`` with every sample of an exact load at its equilibrium under it (Newton from
+        ``xi``, else the equilibrium solver); ValueError naming a sample without one."""
+        start = xi
+        xi = xi.copy()
+        rows = np.flatnonzero(self.exact)
+        if rows.size == 0:
+            return xi
+        xi[rows], found = self.settle(z, xi[rows], self.data.wrench[rows], rows)
+        if found.all():
+            return xi
+        k, d = self.parameters(z)
+        model = self._model(k)
+        for i in rows[~found]:
+            eq = solve_equilibrium(model, self.data.wrench[i], self.data.rest[i] + d,
+                                   initial_screw=start[i])
+            if not eq.success:
+                raise ValueError(f'samples[{i}]: no equilibrium under its exact load '
+                                 f'{self.data.wrench[i].tolist()} ({eq.message})')
+            xi[i] = eq.screw
         return xi
 
     # -------------------------------------------------------------- information
@@ -457,6 +602,7 @@ class _Problem:
                     weights: FloatArray | None = None) -> FloatArray:
         """Parameters' information with the screws eliminated (Schur complement per sample),
         scaled coordinates, over ``columns`` of the parameter vector."""
+        ev = self.load_chart(ev)
         jx = ev.jac_screw
         jp = ev.jac_parameters[:, :, columns]
         if weights is not None:
@@ -492,7 +638,9 @@ class CalibrationResult:
     the data cannot determine in words, ``singular_values`` of the weighted Jacobian (screws
     eliminated, scaled coordinates), ``residual_rms_before`` / ``residual_rms_after`` per
     measurement kind (its unit, :data:`RESIDUAL_UNITS`; before: nominal parameters with each
-    screw fitted), ``outliers`` the sample indices left out, ``screws`` (N, 6) the fitted screws,
+    screw fitted), ``outliers`` the sample indices left out, ``near_slack`` the (inlier) samples
+    left out because a string was within :data:`SLACK_MARGIN` std of slack, ``screws`` (N, 6)
+    the fitted screws,
     ``chi2`` and ``dof`` of the final fit (``chi2 / dof`` near 1 when the noise model is right).
     """
 
@@ -518,6 +666,7 @@ class CalibrationResult:
     residuals_before: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     residuals_after: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
     seconds: float = 0.0
+    near_slack: list[int] = field(default_factory=list)
 
     def residuals(self, kind: str, after: bool = True) -> FloatArray:
         """Residuals (N, m) of one measurement kind (:data:`RESIDUAL_KINDS`, its unit) of every
@@ -659,15 +808,19 @@ def _describe(v: FloatArray, names: Sequence[str], model: JointModel, data: _Dat
 # ------------------------------------------------------------------------------ the fit
 def measures_force(data: _Data, noise: CalibrationNoise,
                    probability: float = SCALE_TEST_PROBABILITY) -> bool:
-    """Whether the samples measure a force: a load cell, or known loads that differ from zero
-    beyond their noise (their whitened chi-square exceeds its ``1 - probability`` quantile).
-    Without one, the common scale of the stiffnesses is unidentifiable: ``F(c k) = c F(k)`` and
-    ``F = -W = 0`` at every sample, whatever ``c``."""
+    """Whether the samples measure a force: a load cell, an exact load other than zero, or
+    noisy known loads that differ from zero beyond their noise (their whitened chi-square
+    exceeds its ``1 - probability`` quantile; zeros are exact, "unloaded"). Without one, the
+    common scale of the stiffnesses is unidentifiable: ``F(c k) = c F(k)`` and ``F = -W = 0`` at
+    every sample, whatever ``c``."""
     if np.isfinite(data.tensions).any():
         return True
     loads = data.wrench[data.has_wrench]
+    loads = loads[np.any(loads != 0.0, axis=1)]
     if loads.size == 0:
         return False
+    if noise.exact_loads:
+        return True
     std = np.concatenate([np.full(3, noise.force), np.full(3, noise.moment)])
     return float(np.sum((loads / std) ** 2)) > chdtri(loads.size, probability)
 
@@ -684,7 +837,7 @@ def initial_screws(model: JointModel, data: _Data) -> FloatArray:
         if data.has_pose[i]:
             xi[i] = log_se3(data.poses[i], reference=previous)
         else:
-            eq = solve_equilibrium(model, -data.wrench[i] if data.has_wrench[i] else np.zeros(6),
+            eq = solve_equilibrium(model, data.wrench[i] if data.has_wrench[i] else np.zeros(6),
                                    data.rest[i], initial_screw=previous)
             xi[i] = eq.screw
         previous = xi[i]
@@ -737,8 +890,9 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
     iterations = 0
     for iterations in range(1, max_iterations + 1):  # noqa: B007 (returned)
         sw = np.sqrt(weight)
-        jx = ev.jac_screw * sw[..., None]
-        jp = (ev.jac_parameters @ basis) * sw[..., None]
+        chart = problem.load_chart(ev)
+        jx = chart.jac_screw * sw[..., None]
+        jp = (chart.jac_parameters @ basis) * sw[..., None]
         r = ev.residuals * sw
         A = np.swapaxes(jx, -1, -2) @ jx
         B = np.swapaxes(jx, -1, -2) @ jp
@@ -756,8 +910,11 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
             rhs = gp - np.einsum('nia,ni->a', B, Ainv_g)
             dy = -np.linalg.solve(S, rhs) if q else np.zeros(0)
             dxi = -(Ainv_g + Ainv_B @ dy)
-            z_trial, xi_trial = z + basis @ dy, xi + dxi
+            z_trial = z + basis @ dy
             try:
+                xi_trial, found = problem.advance(z, xi, ev, z_trial, dxi)
+                if not found.all():
+                    raise ValueError('no equilibrium under a known load')
                 ev_trial = problem.evaluate(z_trial, xi_trial)
             except ValueError:
                 lam *= 10.0
@@ -825,11 +982,11 @@ def _outliers(problem: _Problem, z: FloatArray, xi: FloatArray, loss: str, n_par
     N = problem.mask.shape[0]
     ev = problem.evaluate(z, xi, jacobians=False)
     sample_chi2 = np.sum(ev.residuals ** 2, axis=1)
-    dof_i = problem.mask.sum(axis=1) - 6
+    dof_i = problem.mask.sum(axis=1) - 6 * ~problem.exact
     limit = np.where(dof_i > 0, chdtri(np.maximum(dof_i, 1), OUTLIER_PROBABILITY), np.inf)
     outliers = np.flatnonzero(sample_chi2 > limit) if loss != 'linear' else np.zeros(0, int)
     inliers = np.setdiff1d(np.arange(N), outliers)
-    if inliers.size * 6 + n_parameters > int(problem.mask[inliers].sum()):
+    if 6 * int(np.sum(~problem.exact[inliers])) + n_parameters > int(problem.mask[inliers].sum()):
         raise ValueError(f'too many outliers ({outliers.size} of {N} samples) left too few '
                          'measurements')
     return outliers, inliers
@@ -940,12 +1097,21 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         progress(2, stages)
     outliers, inliers = _outliers(problem, z, xi_fit, loss, P)
     message = 'converged'
+    rows[outliers] = False
     if basis_full.shape[1] and loss != 'linear':
         # The final estimate: plain least squares on the inliers, from the robust solution.
-        rows_in = rows.copy()
-        rows_in[outliers] = False
-        z, xi_fit, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear', rows_in)
+        z, xi_fit, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear', rows)
         iterations += used
+    near_slack = np.zeros(0, np.intp)
+    if basis_full.shape[1] and converged:
+        # Samples with a string within SLACK_MARGIN std of slack: left out, and the fit again.
+        near_slack = _near_slack(problem, problem.evaluate(z, xi_fit).subset(inliers), columns,
+                                 ident.basis, P)
+        if near_slack.size:
+            rows[near_slack] = False
+            inliers = np.setdiff1d(inliers, near_slack)
+            z, xi_fit, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear', rows)
+            iterations += used
     success = True
     if not basis_full.shape[1]:
         success, message = False, ('no parameter is identifiable from these samples: all held '
@@ -962,7 +1128,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     mask_in = problem.mask[inliers]
     rms_after = _rms_by_kind(ev.raw, mask_in, n)
     chi2_value = float(np.sum(ev.residuals ** 2))
-    dof = int(mask_in.sum()) - 6 * inliers.size - ident.basis.shape[1]
+    dof = int(mask_in.sum()) - 6 * int(np.sum(~problem.exact[inliers])) - ident.basis.shape[1]
     covariance = _covariance(problem, ev, columns, ident.basis)
     k, d = problem.parameters(z)
     values_all = np.concatenate([k, d])
@@ -984,11 +1150,56 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         identifiable=dict(zip(names, map(bool, ident_flags), strict=True)),
         unidentifiable=ident.descriptions, singular_values=ident.singular_values,
         residual_rms_before=rms_before, residual_rms_after=rms_after,
-        outliers=outliers.tolist(), iterations=iterations, screws=xi_fit, chi2=chi2_value,
-        dof=dof, nominal=nominal, offsets=d,
+        outliers=outliers.tolist(), near_slack=near_slack.tolist(), iterations=iterations,
+        screws=xi_fit, chi2=chi2_value, dof=dof, nominal=nominal, offsets=d,
         residuals_before=np.where(problem.mask, before.raw, np.nan),
         residuals_after=np.where(problem.mask, ev_all.raw, np.nan),
         seconds=time.perf_counter() - started)
+
+
+def _near_slack(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
+                basis: FloatArray, n_parameters: int) -> NDArray[np.intp]:
+    """The samples of ``ev`` (a linear fit's inliers, with Jacobians) with a string whose
+    stretch ``l_j - l0_j`` is within :data:`SLACK_MARGIN` std of 0 (slack or taut is then
+    uncertain: the model is not smooth there and the covariance would not hold); none when
+    leaving them out would leave too few measurements. The std is linearized in the sample's
+    own unknown and the parameters with their joint covariance (Schur complement:
+    ``Cov u = A^+ + A^+ B C B^T A^+``, ``Cov(u, z) = -A^+ B C``; the screw
+    ``d xi = G du + H dz``, ``G = -K^-1``, ``H = G dF/dz`` for a known load, else ``G = I``,
+    ``H = 0``)."""
+    n = problem.n
+    C = _subspace_covariance(problem.information(ev, columns), basis)
+    chart = problem.load_chart(ev)
+    jx, jp = chart.jac_screw, chart.jac_parameters[:, :, columns]
+    A = np.swapaxes(jx, -1, -2) @ jx
+    AB = _solve_psd(A, np.swapaxes(jx, -1, -2) @ jp)  # (N, 6, P)
+    N = len(ev.index)
+    cov_u = _solve_psd(A, np.broadcast_to(np.eye(6), (N, 6, 6))) + AB @ C @ np.swapaxes(AB, 1, 2)
+    cov_uz = -AB @ C
+    G = np.broadcast_to(np.eye(6), (N, 6, 6)).copy()
+    H = np.zeros((N, 6, columns.size))
+    loaded = problem.loaded[ev.index]
+    if loaded.any():
+        G[loaded] = -np.linalg.inv(ev.wrench_screw[loaded])
+        H[loaded] = G[loaded] @ ev.wrench_parameters[loaded][:, :, columns]
+    Gt, Ht = np.swapaxes(G, 1, 2), np.swapaxes(H, 1, 2)
+    cov_xi = G @ cov_u @ Gt + G @ cov_uz @ Ht + H @ np.swapaxes(cov_uz, 1, 2) @ Gt + H @ C @ Ht
+    cov_xz = G @ cov_uz + H @ C  # (N, 6, P)
+    L = ev.stretch_screw  # (N, n, 6)
+    var = np.einsum('nja,nab,njb->nj', L, cov_xi, L)
+    for j in range(n):  # the offset d_j = OFFSET_UNIT z_{n+j} when fitted
+        at = np.flatnonzero(columns == n + j)
+        if at.size:
+            c = int(at[0])
+            var[:, j] += OFFSET_UNIT * (OFFSET_UNIT * C[c, c]
+                                        - 2.0 * np.einsum('na,na->n', L[:, j], cov_xz[:, :, c]))
+    std = np.sqrt(np.maximum(var, 0.0))
+    near = np.any(np.abs(ev.stretch) < SLACK_MARGIN * std, axis=1)
+    keep = ~near
+    if 6 * int(np.sum(~problem.exact[ev.index[keep]])) + n_parameters > \
+            int(problem.mask[ev.index[keep]].sum()):
+        return np.zeros(0, np.intp)
+    return ev.index[near]
 
 
 def _only_scale_unidentifiable(ident: Identifiability, names: Sequence[str], name: str) -> bool:

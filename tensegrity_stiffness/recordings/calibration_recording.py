@@ -28,9 +28,13 @@ Quasi-static rule (:func:`quasi_static_indices`): an instant with a pose is quas
 rest lengths have not changed for at least ``window`` seconds before it and every pose of that
 window lies within ``max_speed * window`` (m) and ``max_angular_speed * window`` (rad) of the
 instant's pose (the poses of the window must span at least half of it); without poses, when the
-rest lengths have been held for ``window`` seconds. Of each run of consecutive quasi-static
-instants the last one is the sample (the most settled; one per hold, so that the samples' noise
-is independent).
+rest lengths have been held for ``window`` seconds. One sample per hold: the last quasi-static
+instant of the hold (the most settled; one per hold, so that the samples' noise is independent).
+A hold ends where the rest lengths change or link 2 moves: two quasi-static instants belong to
+the same hold when the rest lengths did not change between them and the later pose lies within
+``max_speed * window`` and ``max_angular_speed * window`` of the earlier (the tolerance of the
+rule), whatever lies between them (a gap in the poses or a glitch only interrupts a run of
+quasi-static instants, it does not start a new hold).
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ from __future__ import annotations
 import csv
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -97,7 +101,8 @@ class Recording:
     """Time series on a common clock (M instants, n strings): ``times`` (M,) s; ``rest`` (M, n)
     commanded rest lengths in force; ``poses`` (M, 4, 4), NaN where none; ``wrench`` (M, 6),
     NaN where unknown; ``tensions`` and ``lengths`` (M, n), NaN where not measured. ``source``
-    names what was read."""
+    names what was read; ``absent`` the signals whose (default) topic the bag does not have, or
+    has no message on, by signal (``{'wrench': '/stiffness_node/measured_wrench'}``)."""
 
     times: FloatArray
     rest: FloatArray
@@ -106,6 +111,7 @@ class Recording:
     tensions: FloatArray
     lengths: FloatArray
     source: str = ''
+    absent: dict[str, str] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return self.times.shape[0]
@@ -159,13 +165,29 @@ def quasi_static_indices(recording: Recording, window: float = DEFAULT_WINDOW,
             turn = np.max(np.linalg.norm(log_so3_batch(P[:, :3, :3] @ B[:3, :3].T),
                                          axis=1))
             quiet[i] = drift <= max_speed * window and turn <= max_angular_speed * window
-    # The last instant of each run of quiet instants with the same rest lengths.
-    picked = []
+    # The last quiet instant of each hold (module docstring).
+    picked: list[int] = []
     for i in np.flatnonzero(quiet):
-        ends_run = i + 1 >= M or not quiet[i + 1] or changed[i + 1]
-        if ends_run:
+        if picked and _same_hold(recording, changed, picked[-1], int(i), max_speed * window,
+                                 max_angular_speed * window):
+            picked[-1] = int(i)
+        else:
             picked.append(int(i))
     return picked
+
+
+def _same_hold(recording: Recording, changed: NDArray[np.bool_], a: int, b: int, distance: float,
+               angle: float) -> bool:
+    """Whether the quiet instants ``a < b`` are of one hold: no rest-length change after ``a``
+    up to ``b``, and (with poses) link 2 within ``distance`` (m) and ``angle`` (rad) of where it
+    was at ``a``."""
+    if changed[a + 1:b + 1].any():
+        return False
+    A, B = recording.poses[a], recording.poses[b]
+    if not (np.isfinite(A).all() and np.isfinite(B).all()):
+        return True
+    turn = float(np.linalg.norm(log_so3_batch((B[:3, :3] @ A[:3, :3].T)[None])[0]))
+    return float(np.linalg.norm(B[:3, 3] - A[:3, 3])) <= distance and turn <= angle
 
 
 # ------------------------------------------------------------------------------ CSV
@@ -324,6 +346,7 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
                     'tensions': (ARRAY_TYPE,), 'wrench': (WRENCH_TYPE,),
                     'lengths': (ARRAY_TYPE,)}
         use: dict[str, str] = {}
+        absent: dict[str, str] = {}
         for signal, topic in wanted.items():
             if topic is None:
                 continue
@@ -332,6 +355,7 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
                     have = ', '.join(f'{t} ({m})' for t, m in sorted(present.items())) or 'none'
                     raise RecordingError(f'{path}: no {signal} topic {topic} in the bag; its '
                                          f'topics: {have}')
+                absent[signal] = topic
                 continue
             if present[topic] not in expected[signal]:
                 raise RecordingError(f'{path}: topic {topic} has type {present[topic]}, '
@@ -375,9 +399,18 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
             progress(total, total)
     finally:
         reader.close()
-    return _align(series, n_strings, max_age,
-                  f'{path} ({", ".join(f"{s} {len(v)}" for s, v in series.items())}'
-                  + (f', {skipped} bad messages skipped' if skipped else '') + ')')
+    for signal, items in series.items():
+        if not items:  # the topic is there, without a (valid) message
+            if signal in required or signal == 'rest_lengths':
+                raise RecordingError(f'{path}: no valid message on the {signal} topic '
+                                     f'{use[signal]} in the bag'
+                                     + (f' ({skipped} bad messages skipped)' if skipped else ''))
+            absent[signal] = use[signal]
+    recording = _align(series, n_strings, max_age,
+                       f'{path} ({", ".join(f"{s} {len(v)}" for s, v in series.items())}'
+                       + (f', {skipped} bad messages skipped' if skipped else '') + ')')
+    recording.absent = absent
+    return recording
 
 
 def _align(series: dict[str, list[tuple[float, Any]]], n: int, max_age: float,
@@ -389,7 +422,9 @@ def _align(series: dict[str, list[tuple[float, Any]]], n: int, max_age: float,
     rests = series.get('rest_lengths', [])
     if not rests:
         raise RecordingError(f'{source}: no rest lengths recorded')
-    clock = next(s for s in ('pose', 'tensions', 'wrench', 'lengths') if series.get(s))
+    clock = next((s for s in ('pose', 'tensions', 'wrench', 'lengths') if series.get(s)), None)
+    if clock is None:
+        raise RecordingError(f'{source}: no pose, tensions, wrench or lengths message recorded')
     times = np.array([t for t, _ in series[clock]])
     rest_t = np.array([t for t, _ in rests])
     k = np.searchsorted(rest_t, times, 'right') - 1

@@ -59,6 +59,42 @@ def test_quasi_static_rule_picks_the_last_held_instant_of_every_hold(recording):
     assert rec.quasi_static_indices(moving) == []
 
 
+def test_one_sample_per_hold_when_a_gap_or_a_glitch_interrupts_it(recording):
+    """A hold whose quasi-static run is interrupted (poses missing for 0.15 s, or one pose 5 mm
+    off) still gives one sample, its last quasi-static instant; two holds at the same rest
+    lengths with link 2 moved between them (a new load) give two."""
+    series = recording[3]
+    extra = 20  # each hold 1 s longer: room for an interruption and quiet instants after it
+    per_hold = MOVING + HELD + extra
+    rows = []
+    for i in range(HOLDS):
+        hold = np.arange(i * (MOVING + HELD), (i + 1) * (MOVING + HELD))
+        rows.extend(hold.tolist() + [hold[-1]] * extra)
+    rows = np.array(rows)
+    times = np.arange(rows.size) / 20.0
+    poses = series.poses[rows].copy()
+    for i in range(0, HOLDS, 2):  # every other hold: a gap of 3 instants ...
+        start = i * per_hold + MOVING + HELD + 2
+        poses[start:start + 3] = np.nan
+    for i in range(1, HOLDS, 4):  # ... or a motion-capture glitch
+        poses[i * per_hold + MOVING + HELD + 2, :3, 3] += 5e-3
+    long = rec.Recording(times, series.rest[rows], poses, series.wrench[rows],
+                         series.tensions[rows], series.lengths[rows])
+    picked = rec.quasi_static_indices(long)
+    assert picked == [per_hold * (i + 1) - 1 for i in range(HOLDS)]
+    # (The previous rule, the last instant of each run of quasi-static instants, gave two
+    # samples for each of these holds.)
+    # Loads only: the same rest lengths, link 2 moved 3 mm between two holds: two samples.
+    twice = rec.Recording(times[:2 * per_hold], np.repeat(series.rest[:1], 2 * per_hold, 0),
+                          poses[:2 * per_hold].copy(), series.wrench[rows][:2 * per_hold],
+                          series.tensions[rows][:2 * per_hold],
+                          series.lengths[rows][:2 * per_hold])
+    twice.poses[:per_hold] = series.poses[HELD + MOVING - 1]
+    twice.poses[per_hold:] = series.poses[HELD + MOVING - 1]
+    twice.poses[per_hold:, 0, 3] += 3e-3
+    assert rec.quasi_static_indices(twice) == [per_hold - 1, 2 * per_hold - 1]
+
+
 def _check_fit(report: dict, k: np.ndarray, d: np.ndarray) -> None:
     n = len(k)
     kf = np.array([report['parameters'][f'stiffness[{j}]'] for j in range(n)])
@@ -130,6 +166,16 @@ def test_bad_input_exits_2_and_says_what_is_missing(recording, tmp_path: Path):
     assert code == 2 and 'no wrench topic /ft_sensor/wrench in the bag' in err
     code, _, err = run_cli('calibrate', bag, '--rest-lengths-topic', '/motors')
     assert code == 2 and 'no rest_lengths topic /motors' in err
+    # The force-torque sensor on another topic than the default, --wrench-topic not given:
+    # poses alone are too few, and the message names the topic the bag lacks.
+    renamed = tmp_path / 'renamed'
+    write_bag(renamed, rec.Recording(series.times, series.rest, series.poses, series.wrench,
+                                     np.full_like(series.tensions, np.nan), series.lengths),
+              'mcap', topics={'wrench': '/ft_sensor/wrench'})
+    code, _, err = run_cli('calibrate', renamed)
+    assert code == 2, err
+    assert 'no wrench topic /stiffness_node/measured_wrench in the bag (name yours with ' \
+           '--wrench-topic)' in err, err
     code, _, err = run_cli('calibrate', tmp_path / 'missing')
     assert code == 2 and 'no such rosbag2' in err
     # No quasi-static instants: a recording that never holds still.

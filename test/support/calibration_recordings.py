@@ -71,11 +71,14 @@ def twin_available() -> bool:
 
 def configurations(model: JointModel, k: np.ndarray, d: np.ndarray, count: int, seed: int,
                    force: float = FORCE_SPREAD, moment: float = MOMENT_SPREAD,
-                   rest_spread: float = REST_SPREAD, backend: str = 'twin') -> States:
+                   rest_spread: float = REST_SPREAD, backend: str = 'twin',
+                   taut: bool = False) -> States:
     """``count`` stable quasi-static states of the true joint (stiffness ``k``, rest lengths
     commanded + ``d``) under random commanded rest lengths (uniform, +-``rest_spread``) and
     loads (normal, std ``force`` N and ``moment`` N m): settled in the MuJoCo twin
-    (``backend='twin'``, when mujoco is installed) or solved by the library."""
+    (``backend='twin'``, when mujoco is installed) or solved by the library. ``taut``: only
+    states with every string taut (docs/calibration.md: loads "as large as the strings allow
+    without going slack"), so that many sit near a string's slack boundary."""
     rng = np.random.default_rng(seed + 1000)
     true = model_with_parameters(model, k, model.rest_lengths + d)
     n = model.n_strings
@@ -93,7 +96,8 @@ def configurations(model: JointModel, k: np.ndarray, d: np.ndarray, count: int, 
         eq = solve_equilibrium(true, W, command + d, initial_screw=previous)
         # A string at its maximum length is beyond the model (the twin stops it, the library
         # saturates its tension): such states are left out, as a lab avoids them.
-        if not (eq.success and eq.stable) or eq.state.saturated.any():
+        if not (eq.success and eq.stable) or eq.state.saturated.any() or \
+                (taut and eq.state.slack.any()):
             continue
         if sim is None:
             rows.append((command, W, eq.screw, eq.state.transform, eq.state.tensions))
