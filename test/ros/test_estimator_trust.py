@@ -23,7 +23,6 @@ pytestmark = pytest.mark.ros
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from geometry_msgs.msg import PoseWithCovarianceStamped  # noqa: E402
 from rclpy.qos import DurabilityPolicy  # noqa: E402
-from scipy.stats import chi2  # noqa: E402
 from sensor_msgs.msg import Imu  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from support import fuzz_inputs as fi  # noqa: E402
@@ -36,6 +35,7 @@ from support.ros_harness import (  # noqa: E402
     repeat_until,
     unique_namespace,
 )
+from test_estimator_node import THREE_SIGMA_6D  # noqa: E402
 
 from tensegrity_stiffness.estimation import sensor_models as sm  # noqa: E402
 from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium  # noqa: E402
@@ -45,7 +45,6 @@ from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs  
 
 JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
 SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
-THREE_SIGMA_6D = chi2.ppf(0.9973, 6)
 TENSION_NOISE = 0.005
 MB = 1024 * 1024
 #: Inputs an estimate takes are fresh for this long (s): a loaded machine may delay the IMU.
