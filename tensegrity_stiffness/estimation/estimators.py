@@ -32,6 +32,7 @@ naming what is missing; it never gets a number.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import weakref
 from collections.abc import Sequence
@@ -142,7 +143,13 @@ def consistency_threshold(redundancy: int, probability: float = CONSISTENCY_PROB
         return math.inf
     if not 0.0 < probability < 1.0:
         raise ValueError(f'consistency_probability must be in (0, 1), got {probability}')
-    return float(chdtri(redundancy, probability))
+    return _chi2_quantile(redundancy, probability)
+
+
+@functools.lru_cache(maxsize=256)
+def _chi2_quantile(dof: int, probability: float) -> float:
+    """The upper ``probability`` quantile of chi-square(dof) (a tracker asks for a few)."""
+    return float(chdtri(dof, probability))
 
 
 def _consistent(chi2: float, redundancy: int, probability: float) -> bool | None:
@@ -277,6 +284,25 @@ class Measurements:
         return PreparedMeasurements(self, n_strings)
 
 
+_STRING_LIMITS: weakref.WeakKeyDictionary[JointModel, tuple[FloatArray, FloatArray,
+                                                             FloatArray]] = \
+    weakref.WeakKeyDictionary()
+
+
+def _string_limits(model: JointModel, rest: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(maximum lengths, the tensions there: the most each string can carry) (n,) at rest
+    lengths ``rest`` (inf without a maximum length); the last per model is kept."""
+    cached = _STRING_LIMITS.get(model)
+    if cached is not None and (rest is cached[0] or np.array_equal(rest, cached[0])):
+        return cached[1], cached[2]
+    lmax = rest + model.max_stretch
+    limited = np.isfinite(lmax)
+    top = np.where(limited, model.string_forces(np.where(limited, lmax, rest), rest)[0],
+                   np.inf)
+    _STRING_LIMITS[model] = (rest if rest is model.rest_lengths else rest.copy(), lmax, top)
+    return lmax, top
+
+
 #: :meth:`PreparedMeasurements.describe`'s texts by sensor pattern (a tracker's pattern rarely
 #: changes, its measurements are prepared anew for every estimate). A few are kept.
 _DESCRIPTIONS: dict[tuple, str] = {}
@@ -370,31 +396,29 @@ class PreparedMeasurements:
         names = model.string_names
         if not (self.tension_index.size or self.length_index.size):
             return out
-        lmax = rest + model.max_stretch
-        limited = np.isfinite(lmax)
-        top = np.where(limited, model.string_forces(np.where(limited, lmax, rest), rest)[0],
-                       np.inf)
+        lmax, top = _string_limits(model, rest)
         wild = IMPOSSIBLE_STD ** 6
         for label, unit, index, values, weight, upper in (
                 ('tension', 'N', self.tension_index, self.tensions, self.tension_weight, top),
                 ('length', 'm', self.length_index, self.lengths, self.length_weight, lmax)):
-            for i, value, w in zip(index.tolist(), values.tolist(), weight.tolist(),
-                                   strict=True):
-                std = 1.0 / w
-                low = -IMPOSSIBLE_STD * std if label == 'tension' else 0.0
-                high = upper[i] + IMPOSSIBLE_STD * std if math.isfinite(upper[i]) else (
-                    wild * std)
-                if value < low:
-                    why = f'{value:.6g} {unit} is below {low:.3g} {unit}'
-                elif value > high:
-                    what = (f'the most the string can carry ({upper[i]:.4g} N)' if
-                            label == 'tension' else f'its maximum length ({upper[i]:.4g} m)')
-                    why = (f'{value:.6g} {unit} exceeds {what} by more than '
-                           f'{IMPOSSIBLE_STD:g} std' if math.isfinite(upper[i]) else
-                           f'{value:.6g} {unit} is more than {wild:g} std')
+            if not index.size:
+                continue
+            std = 1.0 / weight
+            bound = upper[index]
+            low = -IMPOSSIBLE_STD * std if label == 'tension' else np.zeros(index.size)
+            high = np.where(np.isfinite(bound), bound + IMPOSSIBLE_STD * std, wild * std)
+            bad = np.flatnonzero((values < low) | (values > high))  # one test per estimate
+            for k in bad.tolist():
+                value, limit = float(values[k]), float(bound[k])
+                if value < low[k]:
+                    why = f'{value:.6g} {unit} is below {low[k]:.3g} {unit}'
+                elif math.isfinite(limit):
+                    what = (f'the most the string can carry ({limit:.4g} N)' if
+                            label == 'tension' else f'its maximum length ({limit:.4g} m)')
+                    why = f'{value:.6g} {unit} exceeds {what} by more than {IMPOSSIBLE_STD:g} std'
                 else:
-                    continue
-                out.append((f'{label}[{names[i]}]', f'impossible: {why}'))
+                    why = f'{value:.6g} {unit} is more than {wild:g} std'
+                out.append((f'{label}[{names[int(index[k])]}]', f'impossible: {why}'))
         return out
 
     @property
