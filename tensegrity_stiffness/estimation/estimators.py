@@ -1376,11 +1376,14 @@ def estimate_chain_state(chain: JointChain,
     inputs = '; '.join(names)
     size = 6 * n + 6
 
-    def measured_dof(preps: list[PreparedMeasurements | None]) -> int:
-        return sum(p.dof for p in preps if p is not None) + (6 if pose_T is not None else 0) + (
-            6 if W_m is not None else 0)
+    #: The tip's readings present (left out ones are taken away).
+    tip = frozenset(name for name, value in (('pose', pose_T), ('wrench', W_m))
+                    if value is not None)
 
-    measured = measured_dof(preps)
+    def measured_dof(preps: list[PreparedMeasurements | None], tip: frozenset[str]) -> int:
+        return sum(p.dof for p in preps if p is not None) + 6 * len(tip)
+
+    measured = measured_dof(preps, tip)
 
     def failed(msg: str, observable: bool, rank: int, cond: float, iterations: int = 0
                ) -> ChainEstimate:
@@ -1396,13 +1399,15 @@ def estimate_chain_state(chain: JointChain,
                       'unknowns left by the equilibria (the tip load). Add string tensions or '
                       'lengths, a pose, or the tip load (tip_wrench)', False, measured, math.inf)
 
-    def fit(preps: list[PreparedMeasurements | None], z0: FloatArray) -> dict[str, Any]:
-        problem = _ChainProblem(chain, preps, rest, g, pose_T, pose_whitener, W_m, W_whitener)
+    def fit(preps: list[PreparedMeasurements | None], tip: frozenset[str], z0: FloatArray
+            ) -> dict[str, Any]:
+        problem = _ChainProblem(chain, preps, rest, g, pose_T if 'pose' in tip else None,
+                                pose_whitener, W_m if 'wrench' in tip else None, W_whitener)
         z, ev, iterations, converged, why = _constrained_gauss_newton(
             problem, z0, max_iterations, tolerance)
-        out = dict(problem=problem, preps=preps, z=z, ev=ev, iterations=iterations,
+        out = dict(problem=problem, preps=preps, tip=tip, z=z, ev=ev, iterations=iterations,
                    converged=converged, why=why, rank=0, cond=math.inf, chi2=math.inf,
-                   redundancy=measured_dof(preps) - 6, ok=False)
+                   redundancy=measured_dof(preps, tip) - 6, ok=False)
         if ev is not None:
             r, J, _, Jc, _ = ev
             C, rank, cond, null = _chain_information(problem, J, Jc, rank_tolerance)
@@ -1412,17 +1417,18 @@ def estimate_chain_state(chain: JointChain,
                                         consistency_probability)
         return out
 
-    def tracked(preps: list[PreparedMeasurements | None], z0: FloatArray, warm: bool
-                ) -> tuple[dict[str, Any], bool]:
-        first = fit(preps, z0)
+    def tracked(preps: list[PreparedMeasurements | None], tip: frozenset[str], z0: FloatArray,
+                warm: bool) -> tuple[dict[str, Any], bool]:
+        first = fit(preps, tip, z0)
         if not warm or (first['ok'] and first['consistent'] is not False):
             return first, False
-        W_cold = W_m.copy() if W_m is not None else np.zeros(6)
-        cold = fit(preps, np.concatenate([chain.unloaded_screws(rest).reshape(-1), W_cold]))
+        W_cold = W_m.copy() if 'wrench' in tip else np.zeros(6)
+        cold = fit(preps, tip,
+                   np.concatenate([chain.unloaded_screws(rest).reshape(-1), W_cold]))
         return (cold, True) if cold['ok'] and (
             not first['ok'] or cold['chi2'] < first['chi2']) else (first, False)
 
-    def readings(preps: list[PreparedMeasurements | None]
+    def readings(preps: list[PreparedMeasurements | None], tip: frozenset[str]
                  ) -> list[tuple[str, NDArray[np.intp], int]]:
         out: list[tuple[str, NDArray[np.intp], int]] = []
         row = 0
@@ -1432,32 +1438,35 @@ def estimate_chain_state(chain: JointChain,
             out += [(f'joint {i + 1} {name}', rows + row, dof)
                     for name, rows, dof in p.readings(model.string_names)]
             row += p.rows
-        for name, present in (('pose', pose_T is not None), ('wrench', W_m is not None)):
-            if present:
+        for name in ('pose', 'wrench'):
+            if name in tip:
                 out.append((name, np.arange(row, row + 6), 6))
                 row += 6
         return out
 
     z0 = np.concatenate([x0.reshape(-1), W0])
-    result, restarted = tracked(preps, z0, initial_screws is not None)
+    result, restarted = tracked(preps, tip, z0, initial_screws is not None)
     while (reject_outliers and result['ok'] and result['redundancy'] > 0
            and result['consistent'] is False):
         r, J = result['ev'][:2]
-        suspect = suspect_reading(r, J, result['C'], readings(result['preps']),
+        suspect = suspect_reading(r, J, result['C'], readings(result['preps'], result['tip']),
                                   result['redundancy'])
-        if suspect is None or suspect[0] in ('pose', 'wrench'):
-            break  # the tip's readings are not left out: their zero is the spine's load
-        joint, _, name = suspect[0].partition(' ')[2].partition(' ')
-        i = int(joint) - 1
-        reduced = list(result['preps'])
-        reduced[i] = reduced[i].without([name], chain.joints[i].string_names)
-        refit, again = tracked(reduced, result['z'], True)
+        if suspect is None:
+            break
+        reduced, kept = list(result['preps']), result['tip']
+        if suspect[0] in kept:  # the tip pose, or the tip load (which becomes unknown)
+            kept = kept - {suspect[0]}
+        else:
+            joint, _, name = suspect[0].partition(' ')[2].partition(' ')
+            i = int(joint) - 1
+            reduced[i] = reduced[i].without([name], chain.joints[i].string_names)
+        refit, again = tracked(reduced, kept, result['z'], True)
         if not refit['ok']:
             break
         result, restarted = refit, restarted or again
         dropped.append(suspect)
     preps = result['preps']
-    measured = measured_dof(preps)
+    measured = measured_dof(preps, result['tip'])
     z, ev, iterations = result['z'], result['ev'], result['iterations']
     if ev is None:
         return failed(f'{inputs}: {result["why"]}', True, 0, math.inf, iterations)

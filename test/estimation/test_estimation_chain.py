@@ -220,3 +220,19 @@ def test_a_spine_tracker_that_lost_track_restarts_cold(chain, truths):
                                stiffness_std=False)
     assert est.success and est.consistent, est.message
     np.testing.assert_allclose(est.tip_transform, cold.tip_transform, atol=1e-6)
+
+
+def test_a_contradicted_tip_pose_is_left_out(chain, truths):
+    """12 load cells per joint and a tip pose 5 mm off: ``pose`` left out, the tip pose
+    estimated from the load cells within 3 sigma."""
+    rng = np.random.default_rng(14)
+    _, screws, state = truths[1]
+    wrong = perturbed_pose(state.tip_transform, POSE_COVARIANCE, rng)
+    wrong[:3, 3] += [0.005, 0.0, 0.0]
+    est = estimate_chain_state(chain, joint_tensions(state, ALL_STRINGS, rng), tip_pose=wrong,
+                               tip_pose_covariance=POSE_COVARIANCE, initial_screws=screws,
+                               stiffness_std=False)
+    assert est.success and est.outliers == ('pose',), est.outlier_reasons
+    assert est.consistent is True and est.redundancy == 12 * N_JOINTS - 6
+    e = sm.pose_error(est.tip_transform, state.tip_transform)
+    assert nees(e, est.tip_pose_covariance) <= chi2.ppf(0.9973, 6)
