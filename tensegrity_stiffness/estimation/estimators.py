@@ -27,6 +27,13 @@ columns scaled by the mean rest length (so that radians and metres weigh alike).
 cannot determine the pose (fewer than 6 independent measured degrees of freedom, e.g. 3 tensions
 and an unknown load, or gravity alone) gets ``success=False, observable=False`` and a message
 naming what is missing; it never gets a number.
+
+Trust (``docs/estimation.md#trust``): every estimate says ``consistent`` (the chi-square test of
+its whitened residual at :data:`CONSISTENCY_PROBABILITY`; None without redundancy), its
+``redundancy`` and the ``outliers`` left out by name: impossible readings
+(:data:`IMPOSSIBLE_STD`) before the fit, then, while the estimate is inconsistent and redundancy
+remains, the reading the others contradict (:func:`suspect_reading`). A warm start that loses
+track (inconsistent or failed) is restarted from a cold start.
 """
 
 from __future__ import annotations
@@ -899,7 +906,7 @@ def _fit_joint(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
     return _JointFit(problem, x, r, J, state, kin, iterations, converged, why, C, s, rank, cond)
 
 
-def _better(cold: _JointFit | Any, warm: _JointFit | Any) -> bool:
+def _better(cold: _JointFit, warm: _JointFit) -> bool:
     """Whether the cold start's fit beats a warm start's (it succeeded where the warm one did
     not, or reached a lower chi2)."""
     return cold.ok and (not warm.ok or cold.chi2 < warm.chi2)
