@@ -27,10 +27,19 @@ columns scaled by the mean rest length (so that radians and metres weigh alike).
 cannot determine the pose (fewer than 6 independent measured degrees of freedom, e.g. 3 tensions
 and an unknown load, or gravity alone) gets ``success=False, observable=False`` and a message
 naming what is missing; it never gets a number.
+
+Trust (``docs/estimation.md#trust``): every estimate says ``consistent`` (the chi-square test of
+its whitened residual at :data:`CONSISTENCY_PROBABILITY`; None without redundancy), its
+``redundancy`` and the ``outliers`` left out by name: impossible readings
+(:data:`IMPOSSIBLE_STD`) before the fit, then, while the estimate is inconsistent and redundancy
+remains, the reading the others contradict (:func:`suspect_reading`). A warm start that loses
+track (inconsistent or failed) is restarted from a cold start.
 """
 
 from __future__ import annotations
 
+import copy
+import functools
 import math
 import weakref
 from collections.abc import Sequence
@@ -40,6 +49,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.linalg import lapack
+from scipy.special import chdtri
 
 from tensegrity_stiffness.estimation import sensor_models as sm
 from tensegrity_stiffness.geometry.screw import (
@@ -61,12 +71,15 @@ from tensegrity_stiffness.mechanics.joint import JointModel, JointState
 
 __all__ = [
     'CHAIN_EQUILIBRIUM_TOLERANCE',
+    'CONSISTENCY_PROBABILITY',
     'DAMPING_GROWTH',
     'DECREMENT_TOLERANCE',
+    'IMPOSSIBLE_STD',
     'INITIAL_DAMPING',
     'MAX_DAMPING',
     'MAX_ITERATIONS',
     'MAX_RESTORATION_STEPS',
+    'MIN_LENGTH_SCALE',
     'POSE_AXES',
     'RANK_TOLERANCE',
     'STALL_TOLERANCE',
@@ -77,8 +90,10 @@ __all__ = [
     'Measurements',
     'PreparedMeasurements',
     'cartesian_stiffness_jacobian',
+    'consistency_threshold',
     'estimate_chain_state',
     'estimate_joint_state',
+    'suspect_reading',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -108,6 +123,53 @@ CHAIN_EQUILIBRIUM_TOLERANCE = 1e-9
 MAX_RESTORATION_STEPS = 8
 #: Names of the pose coordinates in the PoseWithCovariance order.
 POSE_AXES = ('x', 'y', 'z', 'rx', 'ry', 'rz')
+#: Probability of the consistency test (the one home of its default, read by the nodes'
+#: ``estimation.consistency_probability``): an estimate is inconsistent when its chi2 exceeds
+#: the ``1 - p`` quantile of chi-square(redundancy), which a set of sound readings does once in
+#: ``1 / p`` estimates.
+CONSISTENCY_PROBABILITY = 1e-3
+#: A reading more than this many of its std outside its physical range is impossible: a tension
+#: below ``-IMPOSSIBLE_STD`` std or above what the string can carry (its tension at its maximum
+#: length) plus as many, a length above the string's maximum length plus as many; for a string
+#: without a maximum length, a tension or length more than ``IMPOSSIBLE_STD ** 6`` (15,625) std.
+IMPOSSIBLE_STD = 5.0
+#: The length (m) that scales translations against rotations is at least this: rest lengths of
+#: denormal size (a hostile ``~/rest_lengths``) would make it zero.
+MIN_LENGTH_SCALE = 1e-6
+#: Two suspects whose normalized residuals (Wilson-Hilferty z) are within this fraction of each
+#: other cannot be told apart (with a redundancy of 1 every reading's is the same): none is left
+#: out.
+AMBIGUITY = 0.02
+
+
+def consistency_threshold(redundancy: int, probability: float = CONSISTENCY_PROBABILITY
+                          ) -> float:
+    """The chi2 above which an estimate with ``redundancy`` degrees of freedom is inconsistent
+    (the ``1 - probability`` quantile of chi-square(redundancy)); inf without redundancy."""
+    if redundancy <= 0:
+        return math.inf
+    if not 0.0 < probability < 1.0:
+        raise ValueError(f'consistency_probability must be in (0, 1), got {probability}')
+    return _chi2_quantile(redundancy, probability)
+
+
+@functools.lru_cache(maxsize=256)
+def _chi2_quantile(dof: int, probability: float) -> float:
+    """The upper ``probability`` quantile of chi-square(dof) (a tracker asks for a few)."""
+    return float(chdtri(dof, probability))
+
+
+def _consistent(chi2: float, redundancy: int, probability: float) -> bool | None:
+    """The chi-square test of a whitened residual: None without redundancy (nothing checks the
+    readings)."""
+    if redundancy <= 0:
+        return None
+    return bool(chi2 <= consistency_threshold(redundancy, probability))
+
+
+def _length_scale(rest: FloatArray) -> float:
+    """The mean rest length (m), at least :data:`MIN_LENGTH_SCALE`."""
+    return max(float(rest.sum()) / rest.size, MIN_LENGTH_SCALE)
 
 
 # ---------------------------------------------------------------------------------- inputs
@@ -229,6 +291,25 @@ class Measurements:
         return PreparedMeasurements(self, n_strings)
 
 
+_STRING_LIMITS: weakref.WeakKeyDictionary[JointModel, tuple[FloatArray, FloatArray,
+                                                             FloatArray]] = \
+    weakref.WeakKeyDictionary()
+
+
+def _string_limits(model: JointModel, rest: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(maximum lengths, the tensions there: the most each string can carry) (n,) at rest
+    lengths ``rest`` (inf without a maximum length); the last per model is kept."""
+    cached = _STRING_LIMITS.get(model)
+    if cached is not None and (rest is cached[0] or np.array_equal(rest, cached[0])):
+        return cached[1], cached[2]
+    lmax = rest + model.max_stretch
+    limited = np.isfinite(lmax)
+    top = np.where(limited, model.string_forces(np.where(limited, lmax, rest), rest)[0],
+                   np.inf)
+    _STRING_LIMITS[model] = (rest if rest is model.rest_lengths else rest.copy(), lmax, top)
+    return lmax, top
+
+
 #: :meth:`PreparedMeasurements.describe`'s texts by sensor pattern (a tracker's pattern rarely
 #: changes, its measurements are prepared anew for every estimate). A few are kept.
 _DESCRIPTIONS: dict[tuple, str] = {}
@@ -266,6 +347,10 @@ class PreparedMeasurements:
             self.wrench = W
             self.wrench_covariance, self.wrench_whitener = _covariance(
                 'wrench_covariance', m.wrench_covariance, 6)
+        self._count()
+
+    def _count(self) -> None:
+        """The whitened rows and the measured degrees of freedom of the readings."""
         nt, nl = self.tension_index.size, self.length_index.size
         self.rows = nt + nl + (6 if self.pose is not None else 0) + (
             3 if self.gravity is not None else 0) + (6 if self.wrench is not None else 0)
@@ -273,6 +358,75 @@ class PreparedMeasurements:
         self.dof = nt + nl + (6 if self.pose is not None else 0) + (
             sm.GRAVITY_DOF if self.gravity is not None else 0) + (
             6 if self.wrench is not None else 0)
+
+    def readings(self, string_names: Sequence[str]
+                 ) -> list[tuple[str, NDArray[np.intp], int]]:
+        """Every reading that can be left out: (name, its whitened rows, its degrees of
+        freedom), in row order; names ``tension[<string>]``, ``length[<string>]``, ``pose``,
+        ``gravity``, ``wrench``."""
+        out: list[tuple[str, NDArray[np.intp], int]] = []
+        row = 0
+        for label, index in (('tension', self.tension_index), ('length', self.length_index)):
+            for i in index.tolist():
+                out.append((f'{label}[{string_names[i]}]', np.array([row]), 1))
+                row += 1
+        for name, rows, dof in (('pose', 6, 6), ('gravity', 3, sm.GRAVITY_DOF),
+                                ('wrench', 6, 6)):
+            if getattr(self, name) is not None:
+                out.append((name, np.arange(row, row + rows), dof))
+                row += rows
+        return out
+
+    def without(self, names: Sequence[str], string_names: Sequence[str]
+                ) -> PreparedMeasurements:
+        """A copy without the readings named as :meth:`readings` names them."""
+        out = copy.copy(self)
+        drop = set(names)
+        for label in ('tension', 'length'):
+            index = getattr(self, f'{label}_index')
+            keep = np.array([f'{label}[{string_names[i]}]' not in drop for i in index.tolist()],
+                            dtype=bool)
+            if not keep.all():
+                setattr(out, f'{label}_index', index[keep])
+                setattr(out, f'{label}s', getattr(self, f'{label}s')[keep])
+                setattr(out, f'{label}_weight', getattr(self, f'{label}_weight')[keep])
+        for name in ('pose', 'gravity', 'wrench'):
+            if name in drop:
+                setattr(out, name, None)
+        out._count()
+        return out
+
+    def impossible(self, model: JointModel, rest: FloatArray) -> list[tuple[str, str]]:
+        """The string readings outside their physical range (:data:`IMPOSSIBLE_STD`): (name,
+        why) each, in the names of :meth:`readings`."""
+        out: list[tuple[str, str]] = []
+        names = model.string_names
+        if not (self.tension_index.size or self.length_index.size):
+            return out
+        lmax, top = _string_limits(model, rest)
+        wild = IMPOSSIBLE_STD ** 6
+        for label, unit, index, values, weight, upper in (
+                ('tension', 'N', self.tension_index, self.tensions, self.tension_weight, top),
+                ('length', 'm', self.length_index, self.lengths, self.length_weight, lmax)):
+            if not index.size:
+                continue
+            std = 1.0 / weight
+            bound = upper[index]
+            low = -IMPOSSIBLE_STD * std if label == 'tension' else np.zeros(index.size)
+            high = np.where(np.isfinite(bound), bound + IMPOSSIBLE_STD * std, wild * std)
+            bad = np.flatnonzero((values < low) | (values > high))  # one test per estimate
+            for k in bad.tolist():
+                value, limit = float(values[k]), float(bound[k])
+                if value < low[k]:
+                    why = f'{value:.6g} {unit} is below {low[k]:.3g} {unit}'
+                elif math.isfinite(limit):
+                    what = (f'the most the string can carry ({limit:.4g} N)' if
+                            label == 'tension' else f'its maximum length ({limit:.4g} m)')
+                    why = f'{value:.6g} {unit} exceeds {what} by more than {IMPOSSIBLE_STD:g} std'
+                else:
+                    why = f'{value:.6g} {unit} is more than {wild:g} std'
+                out.append((f'{label}[{names[int(index[k])]}]', f'impossible: {why}'))
+        return out
 
     @property
     def needs_strings(self) -> bool:
@@ -321,6 +475,14 @@ class JointEstimate:
     of freedom minus 6); ``observable``, ``rank`` (of 6) and ``condition_number`` of the scaled
     whitened Jacobian; ``iterations``. When ``success`` is False the numbers are NaN (never a
     guess) and ``message`` says why.
+
+    Trust: ``redundancy`` the measured degrees of freedom of the readings kept minus the 6
+    unknowns (= ``dof``); ``consistent`` the chi-square test of ``chi2`` at
+    ``consistency_probability`` (True / False; None without redundancy: the set cannot check
+    itself); ``outliers`` the readings left out by name (``tension[<string>]``,
+    ``length[<string>]``, ``gravity``, ``pose``, ``wrench``) with ``outlier_reasons`` (why, one
+    each: impossible, or contradicted by the others); ``restarted`` when the warm start lost
+    track (an inconsistent or failed estimate) and the estimate is a cold start's.
     """
 
     success: bool
@@ -341,6 +503,11 @@ class JointEstimate:
     iterations: int
     inputs: str = ''
     singular_values: FloatArray = field(default_factory=lambda: np.empty(0), repr=False)
+    consistent: bool | None = None
+    redundancy: int = 0
+    outliers: tuple[str, ...] = ()
+    outlier_reasons: tuple[str, ...] = ()
+    restarted: bool = False
 
 
 def _nan(*shape: int) -> FloatArray:
@@ -354,7 +521,7 @@ class _JointProblem:
         self.model = model
         self.prep = prep
         self.rest = rest
-        self.length_scale = float(rest.sum()) / rest.size
+        self.length_scale = _length_scale(rest)
 
     def evaluate(self, xi: FloatArray, jacobian: bool = True
                  ) -> tuple[FloatArray, FloatArray | None, JointState, ScrewKinematics | None]:
@@ -589,7 +756,7 @@ def _stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray
     if cached is not None:
         at, cached_rest, G = cached
         d = xi - at
-        length = float(rest.sum()) / rest.size
+        length = _length_scale(rest)
         wx, wy, wz, vx, vy, vz = d.tolist()
         if (max(abs(wx), abs(wy), abs(wz), abs(vx) / length, abs(vy) / length, abs(vz) / length)
                 <= STIFFNESS_JACOBIAN_REUSE
@@ -616,12 +783,15 @@ def _entry_std(jacobian: FloatArray, covariance: FloatArray) -> FloatArray:
 
 def _failed_joint(message: str, prep: PreparedMeasurements | None, names: Sequence[str],
                   observable: bool, rank: int, cond: float, iterations: int = 0,
-                  s: FloatArray | None = None) -> JointEstimate:
+                  s: FloatArray | None = None, dropped: Sequence[tuple[str, str]] = ()
+                  ) -> JointEstimate:
     return JointEstimate(False, message, _nan(6), _nan(4, 4), _nan(6, 6), _nan(6, 6), _nan(6),
                          _nan(6, 6), None, _nan(6, 6), math.nan,
                          0 if prep is None else prep.dof - 6, observable, rank, cond,
                          iterations, '' if prep is None else prep.describe(names),
-                         np.empty(0) if s is None else s)
+                         np.empty(0) if s is None else s, None,
+                         0 if prep is None else prep.dof - 6, tuple(n for n, _ in dropped),
+                         tuple(f'{n}: {why}' for n, why in dropped))
 
 
 def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
@@ -642,38 +812,89 @@ def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArr
     return model.initial_screw.copy()
 
 
-def estimate_joint_state(model: JointModel, measurements: Measurements | PreparedMeasurements,
-                         rest_lengths: ArrayLike | None = None,
-                         initial_screw: ArrayLike | None = None, *,
-                         tolerance: float = DECREMENT_TOLERANCE,
-                         max_iterations: int = MAX_ITERATIONS,
-                         rank_tolerance: float = RANK_TOLERANCE,
-                         stiffness_std: bool = True) -> JointEstimate:
-    """Estimate the screw, the pose, the load and the stiffness from ``measurements``.
+def _wilson_hilferty(value: float, dof: int) -> float:
+    """The standard normal quantile of a chi-square(dof) ``value`` (Wilson-Hilferty): readings
+    of different degrees of freedom compared on one scale."""
+    a = 2.0 / (9.0 * dof)
+    return ((value / dof) ** (1.0 / 3.0) - (1.0 - a)) / math.sqrt(a)
 
-    ``rest_lengths`` (n,) the encoders' values (default: the model's); ``initial_screw`` the warm
-    start (a tracker's previous estimate; default: the measured pose, else the equilibrium under
-    a known load, else ``model.initial_screw``). ``stiffness_std=False`` skips the std of K_c
-    (NaN). Bad input raises ValueError naming the field; an unobservable set returns
-    ``success=False, observable=False`` with a message naming what is missing.
-    """
-    prep = (measurements if isinstance(measurements, PreparedMeasurements)
-            else Measurements.prepared(measurements, model.n_strings))
-    if prep.n_strings != model.n_strings:
-        raise ValueError(f'measurements were prepared for {prep.n_strings} strings, the model '
-                         f'has {model.n_strings}')
-    rest = model.validate_rest_lengths(rest_lengths, batched=False)
-    names = model.string_names
-    if prep.dof < 6:
-        return _failed_joint(_missing_message(prep, names, prep.dof, [], []), prep, names,
-                             False, min(prep.dof, 6), math.inf)
-    x0 = _initial_screw(model, prep, rest, initial_screw)
+
+def suspect_reading(r: FloatArray, J: FloatArray, C: FloatArray,
+                    readings: Sequence[tuple[str, NDArray[np.intp], int]], redundancy: int
+                    ) -> tuple[str, str] | None:
+    """The reading the others contradict most, as robust estimators find it (Baarda's data
+    snooping): for each reading's rows ``g`` of the whitened residual ``r`` (Jacobian ``J``,
+    covariance ``C = (J^T J)^-1`` of the unknowns), ``r_g^T S_gg^+ r_g`` with
+    ``S = I - J C J^T`` the residual's covariance, which is the drop of chi2 when the reading
+    is left out (chi-square with its degrees of freedom for a sound reading). Returns (name, why)
+    of the largest (Wilson-Hilferty z) among the readings that can be left out (no more degrees
+    of freedom than ``redundancy``, checked by the others), or None when there is none or the
+    two largest cannot be told apart (:data:`AMBIGUITY`)."""
+    S = np.eye(r.size) - J @ C @ J.T
+    scored: list[tuple[float, float, str]] = []
+    for name, rows, dof in readings:
+        if dof > redundancy:
+            continue
+        w, V = np.linalg.eigh(S[np.ix_(rows, rows)])
+        checked = w > 1e-6
+        if not checked.any():
+            continue
+        proj = V[:, checked].T @ r[rows]
+        statistic = float(np.sum(proj * proj / w[checked]))
+        k = min(dof, int(checked.sum()))
+        scored.append((_wilson_hilferty(statistic, k), statistic, name))
+    if not scored:
+        return None
+    scored.sort(reverse=True)
+    z, statistic, name = scored[0]
+    if len(scored) > 1 and scored[1][0] >= z - AMBIGUITY * abs(z):
+        return None
+    return name, (f'contradicted by the others: leaving it out lowers chi2 by '
+                  f'{statistic:.4g} (normalized residual z = {z:.3g})')
+
+
+@dataclass
+class _JointFit:
+    """One Gauss-Newton fit of a joint's readings and its information."""
+
+    problem: _JointProblem
+    x: FloatArray
+    r: FloatArray
+    J: FloatArray
+    state: JointState
+    kin: ScrewKinematics
+    iterations: int
+    converged: bool
+    why: str
+    C: FloatArray
+    s: FloatArray
+    rank: int
+    cond: float
+
+    @property
+    def chi2(self) -> float:
+        return float(self.r @ self.r)
+
+    @property
+    def redundancy(self) -> int:
+        return self.problem.prep.dof - 6
+
+    @property
+    def ok(self) -> bool:
+        return self.converged and self.rank == 6 and math.isfinite(self.chi2)
+
+    def consistent(self, probability: float) -> bool | None:
+        return _consistent(self.chi2, self.redundancy, probability)
+
+
+def _fit_joint(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
+               x0: FloatArray, tolerance: float, max_iterations: int, rank_tolerance: float
+               ) -> _JointFit:
+    """Gauss-Newton from ``x0`` and the covariance, rank and condition at the optimum;
+    :class:`_InitialPointError` when ``x0`` cannot be evaluated."""
     problem = _JointProblem(model, prep, rest)
-    try:
-        x, ev, iterations, converged, why = _gauss_newton(
-            problem.evaluate, x0, problem.length_scale, max_iterations, tolerance)
-    except _InitialPointError as exc:
-        raise ValueError(f'initial_screw: {exc}') from None
+    x, ev, iterations, converged, why = _gauss_newton(
+        problem.evaluate, x0, problem.length_scale, max_iterations, tolerance)
     r, J, state, kin = ev
     if kin is None:  # the kinematics at the estimate x (J: at the linearisation)
         kin = ScrewKinematics(x)
@@ -682,20 +903,126 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     largest, smallest = values[0], values[-1]
     rank = sum(1 for v in values if v > rank_tolerance * largest) if largest > 0 else 0
     cond = largest / smallest if smallest > 0 else math.inf
-    if rank < 6:
-        rank, cond, s, message = _observability(problem, J, state, kin, rank_tolerance)
-        return _failed_joint(message, prep, names, False, rank, cond, iterations, s)
-    if not converged:
-        return _failed_joint(f'{prep.describe(names)}: {why}', prep, names, True, rank, cond,
-                             iterations, s)
-    P = sm.pose_jacobian(x, kin)  # at the estimate
+    return _JointFit(problem, x, r, J, state, kin, iterations, converged, why, C, s, rank, cond)
+
+
+def _better(cold: _JointFit, warm: _JointFit) -> bool:
+    """Whether the cold start's fit beats a warm start's (it succeeded where the warm one did
+    not, or reached a lower chi2)."""
+    return cold.ok and (not warm.ok or cold.chi2 < warm.chi2)
+
+
+def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
+                 warm: FloatArray | None, probability: float, options: tuple[float, int, float]
+                 ) -> tuple[_JointFit, bool]:
+    """The fit from the warm start ``warm`` (a tracker's last estimate) and whether it was
+    restarted: a warm start that cannot be evaluated, fails or is inconsistent has lost track
+    and is fitted again from a cold start (:func:`_initial_screw` without it), whose fit is
+    kept when better. Without ``warm``, the cold start's fit (ValueError when its starting
+    point cannot be evaluated)."""
+    cold_start = _initial_screw(model, prep, rest, None)
+    if warm is not None:
+        try:
+            fit = _fit_joint(model, prep, rest, warm, *options)
+        except _InitialPointError:
+            fit = None
+        if fit is not None and fit.ok and fit.consistent(probability) is not False:
+            return fit, False
+        try:
+            cold = _fit_joint(model, prep, rest, cold_start, *options)
+        except _InitialPointError:
+            cold = None
+        if fit is None:
+            if cold is None:
+                raise ValueError('initial_screw: neither the warm nor the cold start can be '
+                                 'evaluated')
+            return cold, True
+        return (cold, True) if cold is not None and _better(cold, fit) else (fit, False)
+    try:
+        return _fit_joint(model, prep, rest, cold_start, *options), False
+    except _InitialPointError as exc:
+        raise ValueError(f'initial_screw: {exc}') from None
+
+
+def estimate_joint_state(model: JointModel, measurements: Measurements | PreparedMeasurements,
+                         rest_lengths: ArrayLike | None = None,
+                         initial_screw: ArrayLike | None = None, *,
+                         tolerance: float = DECREMENT_TOLERANCE,
+                         max_iterations: int = MAX_ITERATIONS,
+                         rank_tolerance: float = RANK_TOLERANCE,
+                         stiffness_std: bool = True,
+                         consistency_probability: float = CONSISTENCY_PROBABILITY,
+                         reject_outliers: bool = True) -> JointEstimate:
+    """Estimate the screw, the pose, the load and the stiffness from ``measurements``.
+
+    ``rest_lengths`` (n,) the encoders' values (default: the model's); ``initial_screw`` the warm
+    start (a tracker's previous estimate; default: the measured pose, else the equilibrium under
+    a known load, else ``model.initial_screw``). ``stiffness_std=False`` skips the std of K_c
+    (NaN). Bad input raises ValueError naming the field; an unobservable set returns
+    ``success=False, observable=False`` with a message naming what is missing.
+
+    Trust (docs/estimation.md#trust): impossible readings (:data:`IMPOSSIBLE_STD`) are left out
+    by name; a warm start that loses track (inconsistent or failed) is restarted cold; while
+    the estimate fails the chi-square test at ``consistency_probability`` and redundancy is
+    left, the reading the others contradict (:func:`suspect_reading`) is left out and the rest
+    refitted (``reject_outliers=False``: none is). The estimate says ``consistent``,
+    ``redundancy`` and ``outliers``.
+    """
+    prep = (measurements if isinstance(measurements, PreparedMeasurements)
+            else Measurements.prepared(measurements, model.n_strings))
+    if prep.n_strings != model.n_strings:
+        raise ValueError(f'measurements were prepared for {prep.n_strings} strings, the model '
+                         f'has {model.n_strings}')
+    consistency_threshold(1, consistency_probability)  # checks the probability
+    rest = model.validate_rest_lengths(rest_lengths, batched=False)
+    names = model.string_names
+    dropped = prep.impossible(model, rest)
+    if dropped:
+        prep = prep.without([name for name, _ in dropped], names)
+    if prep.dof < 6:
+        message = _missing_message(prep, names, prep.dof, [], [])
+        if dropped:
+            message += ' (left out: ' + '; '.join(f'{n} {why}' for n, why in dropped) + ')'
+        return _failed_joint(message, prep, names, False, min(prep.dof, 6), math.inf,
+                             dropped=dropped)
+    options = (tolerance, max_iterations, rank_tolerance)
+    warm = None if initial_screw is None else _initial_screw(model, prep, rest, initial_screw)
+    fit, restarted = _tracked_fit(model, prep, rest, warm, consistency_probability, options)
+    while (reject_outliers and fit.ok and fit.redundancy > 0
+           and fit.consistent(consistency_probability) is False):
+        suspect = suspect_reading(fit.r, fit.J, fit.C, prep.readings(names), fit.redundancy)
+        if suspect is None:
+            break
+        reduced = prep.without([suspect[0]], names)
+        try:
+            refit, again = _tracked_fit(model, reduced, rest, fit.x, consistency_probability,
+                                        options)
+        except ValueError:
+            break
+        if not refit.ok:
+            break
+        prep, fit, restarted = reduced, refit, restarted or again
+        dropped.append(suspect)
+    if fit.rank < 6:
+        rank, cond, s, message = _observability(fit.problem, fit.J, fit.state, fit.kin,
+                                                rank_tolerance)
+        return _failed_joint(message, prep, names, False, rank, cond, fit.iterations, s,
+                             dropped)
+    if not fit.converged:
+        return _failed_joint(f'{prep.describe(names)}: {fit.why}', prep, names, True, fit.rank,
+                             fit.cond, fit.iterations, fit.s, dropped)
+    x, C, state = fit.x, fit.C, fit.state
+    P = sm.pose_jacobian(x, fit.kin)  # at the estimate
     pose_cov = P @ C @ P.T
     K = state.stiffness
     Kc_std = (_entry_std(_stiffness_jacobian_near(model, x, rest), C) if stiffness_std
               else _nan(6, 6))
     return JointEstimate(True, 'ok', x, state.transform.copy(), 0.5 * (pose_cov + pose_cov.T), C,
-                         -state.wrench, K @ C @ K.T, state, Kc_std, float(r @ r), prep.dof - 6,
-                         True, rank, cond, iterations, prep.describe(names), s)
+                         -state.wrench, K @ C @ K.T, state, Kc_std, fit.chi2, prep.dof - 6,
+                         True, fit.rank, fit.cond, fit.iterations, prep.describe(names), fit.s,
+                         fit.consistent(consistency_probability), prep.dof - 6,
+                         tuple(n for n, _ in dropped),
+                         tuple(f'{n}: {why}' for n, why in dropped), restarted)
 
 
 def _information(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatArray]:
@@ -739,7 +1066,10 @@ class ChainEstimate:
     ``tip_stiffness`` (6, 6) the exact tip stiffness under the estimated load (base frame, rows
     [f; m], columns [dv; dw]) with ``tip_stiffness_std`` (first order, central differences);
     ``chi2``, ``dof``, ``observable``, ``rank`` (of 6N + 6), ``condition_number``,
-    ``iterations``; ``state`` the :class:`ChainState` at the estimate.
+    ``iterations``; ``state`` the :class:`ChainState` at the estimate; ``consistent``,
+    ``redundancy``, ``outliers``, ``outlier_reasons`` and ``restarted`` as
+    :class:`JointEstimate`'s (a joint's readings named ``joint <i> tension[<string>]``,
+    ``joint <i> length[<string>]``, ``joint <i> pose``; the tip's ``pose`` and ``wrench``).
     """
 
     success: bool
@@ -760,6 +1090,11 @@ class ChainEstimate:
     condition_number: float
     iterations: int
     state: ChainState | None = field(default=None, repr=False)
+    consistent: bool | None = None
+    redundancy: int = 0
+    outliers: tuple[str, ...] = ()
+    outlier_reasons: tuple[str, ...] = ()
+    restarted: bool = False
 
 
 class _ChainProblem:
@@ -784,7 +1119,8 @@ class _ChainProblem:
             None if p is None or p.rows == 0
             else _JointProblem(model, p, model.validate_rest_lengths(r, False))
             for model, p, r in zip(chain.joints, preps, rest, strict=True)]
-        self.length_scale = float(np.mean([np.mean(m.rest_lengths) for m in chain.joints]))
+        self.length_scale = max(float(np.mean([np.mean(m.rest_lengths) for m in chain.joints])),
+                                MIN_LENGTH_SCALE)
         size = 6 * self.n + 6
         #: Column scale of z for rank and clipping: radians, metres / length_scale, the load.
         self.scale = np.array(([1.0] * 3 + [self.length_scale] * 3) * self.n + [1.0] * 6)
@@ -974,7 +1310,9 @@ def estimate_chain_state(chain: JointChain,
                          tolerance: float = DECREMENT_TOLERANCE,
                          max_iterations: int = MAX_ITERATIONS,
                          rank_tolerance: float = RANK_TOLERANCE,
-                         stiffness_std: bool = True) -> ChainEstimate:
+                         stiffness_std: bool = True,
+                         consistency_probability: float = CONSISTENCY_PROBABILITY,
+                         reject_outliers: bool = True) -> ChainEstimate:
     """Every joint's screw, the tip load, the tip pose and the exact tip stiffness of a spine,
     each with its covariance.
 
@@ -988,7 +1326,8 @@ def estimate_chain_state(chain: JointChain,
     values) with ``tip_pose_covariance`` (6, 6, PoseWithCovariance convention). ``gravity``
     (3,) for the link weights (default ``chain.gravity``). ``initial_screws`` (N, 6) and
     ``initial_tip_wrench`` warm-start (default: the unloaded screws and the known load or
-    zero).
+    zero). Trust as :func:`estimate_joint_state`'s: impossible readings left out, a lost warm
+    start restarted cold, contradicted readings left out while redundancy remains.
     """
     n = chain.n_joints
     if len(joint_measurements) != n:
@@ -1007,8 +1346,16 @@ def estimate_chain_state(chain: JointChain,
             preps.append(m.prepared(model.n_strings))
         except ValueError as exc:
             raise ValueError(f'joint_measurements[{i}].{exc}') from None
+    consistency_threshold(1, consistency_probability)  # checks the probability
     g = chain.resolved_gravity(gravity)
     rest = chain.rest_lengths_per_joint(rest_lengths)
+    dropped: list[tuple[str, str]] = []
+    for i, (model, p) in enumerate(zip(chain.joints, preps, strict=True)):
+        if p is not None:
+            bad = p.impossible(model, model.validate_rest_lengths(rest[i], False))
+            if bad:
+                preps[i] = p.without([name for name, _ in bad], model.string_names)
+                dropped += [(f'joint {i + 1} {name}', why) for name, why in bad]
     pose_T = pose_whitener = None
     if tip_pose is not None:
         pose_T = rigid_transform(tip_pose, 'tip_pose')
@@ -1027,7 +1374,6 @@ def estimate_chain_state(chain: JointChain,
         W0 = finite_array('initial_tip_wrench', initial_tip_wrench)
         if W0.shape != (6,):
             raise ValueError(f'initial_tip_wrench must have shape (6,), got {W0.shape}')
-    problem = _ChainProblem(chain, preps, rest, g, pose_T, pose_whitener, W_m, W_whitener)
     names = [f'joint {i + 1}: {p.describe(model.string_names, load=False)}'
              for i, (model, p) in enumerate(zip(chain.joints, preps, strict=True))
              if p is not None and p.rows]
@@ -1035,33 +1381,109 @@ def estimate_chain_state(chain: JointChain,
         names.append('a tip pose')
     names.append('a known tip load' if W_m is not None else 'unknown tip load')
     inputs = '; '.join(names)
-    measured = sum(p.dof for p in preps if p is not None) + (6 if pose_T is not None else 0) + (
-        6 if W_m is not None else 0)
     size = 6 * n + 6
+
+    #: The tip's readings present (left out ones are taken away).
+    tip = frozenset(name for name, value in (('pose', pose_T), ('wrench', W_m))
+                    if value is not None)
+
+    def measured_dof(preps: list[PreparedMeasurements | None], tip: frozenset[str]) -> int:
+        return sum(p.dof for p in preps if p is not None) + 6 * len(tip)
+
+    measured = measured_dof(preps, tip)
 
     def failed(msg: str, observable: bool, rank: int, cond: float, iterations: int = 0
                ) -> ChainEstimate:
         return ChainEstimate(False, msg, _nan(n, 6), _nan(6 * n, 6 * n), _nan(n, 6, 6),
                              _nan(6), _nan(6, 6), _nan(4, 4), _nan(6, 6), _nan(6, 6),
                              _nan(6, 6), math.nan, measured - 6, observable, rank, cond,
-                             iterations)
+                             iterations, None, None, measured - 6,
+                             tuple(name for name, _ in dropped),
+                             tuple(f'{name}: {why}' for name, why in dropped))
 
     if measured < 6:
         return failed(f'{inputs}: {measured} measured degrees of freedom cannot determine the 6 '
                       'unknowns left by the equilibria (the tip load). Add string tensions or '
                       'lengths, a pose, or the tip load (tip_wrench)', False, measured, math.inf)
+
+    def fit(preps: list[PreparedMeasurements | None], tip: frozenset[str], z0: FloatArray
+            ) -> dict[str, Any]:
+        problem = _ChainProblem(chain, preps, rest, g, pose_T if 'pose' in tip else None,
+                                pose_whitener, W_m if 'wrench' in tip else None, W_whitener)
+        z, ev, iterations, converged, why = _constrained_gauss_newton(
+            problem, z0, max_iterations, tolerance)
+        out = dict(problem=problem, preps=preps, tip=tip, z=z, ev=ev, iterations=iterations,
+                   converged=converged, why=why, rank=0, cond=math.inf, chi2=math.inf,
+                   redundancy=measured_dof(preps, tip) - 6, ok=False)
+        if ev is not None:
+            r, J, _, Jc, _ = ev
+            C, rank, cond, null = _chain_information(problem, J, Jc, rank_tolerance)
+            out.update(C=C, rank=rank, cond=cond, null=null, chi2=float(r @ r))
+            out['ok'] = converged and rank == 6 and math.isfinite(out['chi2'])
+        out['consistent'] = _consistent(out['chi2'], out['redundancy'],
+                                        consistency_probability)
+        return out
+
+    def tracked(preps: list[PreparedMeasurements | None], tip: frozenset[str], z0: FloatArray,
+                warm: bool) -> tuple[dict[str, Any], bool]:
+        first = fit(preps, tip, z0)
+        if not warm or (first['ok'] and first['consistent'] is not False):
+            return first, False
+        W_cold = W_m.copy() if 'wrench' in tip else np.zeros(6)
+        cold = fit(preps, tip,
+                   np.concatenate([chain.unloaded_screws(rest).reshape(-1), W_cold]))
+        return (cold, True) if cold['ok'] and (
+            not first['ok'] or cold['chi2'] < first['chi2']) else (first, False)
+
+    def readings(preps: list[PreparedMeasurements | None], tip: frozenset[str]
+                 ) -> list[tuple[str, NDArray[np.intp], int]]:
+        out: list[tuple[str, NDArray[np.intp], int]] = []
+        row = 0
+        for i, (model, p) in enumerate(zip(chain.joints, preps, strict=True)):
+            if p is None or not p.rows:
+                continue
+            out += [(f'joint {i + 1} {name}', rows + row, dof)
+                    for name, rows, dof in p.readings(model.string_names)]
+            row += p.rows
+        for name in ('pose', 'wrench'):
+            if name in tip:
+                out.append((name, np.arange(row, row + 6), 6))
+                row += 6
+        return out
+
     z0 = np.concatenate([x0.reshape(-1), W0])
-    z, ev, iterations, converged, why = _constrained_gauss_newton(problem, z0, max_iterations,
-                                                                  tolerance)
+    result, restarted = tracked(preps, tip, z0, initial_screws is not None)
+    while (reject_outliers and result['ok'] and result['redundancy'] > 0
+           and result['consistent'] is False):
+        r, J = result['ev'][:2]
+        suspect = suspect_reading(r, J, result['C'], readings(result['preps'], result['tip']),
+                                  result['redundancy'])
+        if suspect is None:
+            break
+        reduced, kept = list(result['preps']), result['tip']
+        if suspect[0] in kept:  # the tip pose, or the tip load (which becomes unknown)
+            kept = kept - {suspect[0]}
+        else:
+            joint, _, name = suspect[0].partition(' ')[2].partition(' ')
+            i = int(joint) - 1
+            reduced[i] = reduced[i].without([name], chain.joints[i].string_names)
+        refit, again = tracked(reduced, kept, result['z'], True)
+        if not refit['ok']:
+            break
+        result, restarted = refit, restarted or again
+        dropped.append(suspect)
+    preps = result['preps']
+    measured = measured_dof(preps, result['tip'])
+    z, ev, iterations = result['z'], result['ev'], result['iterations']
     if ev is None:
-        return failed(f'{inputs}: {why}', True, 0, math.inf, iterations)
-    r, J, _, Jc, state = ev
-    C, rank, cond, null = _chain_information(problem, J, Jc, rank_tolerance)
+        return failed(f'{inputs}: {result["why"]}', True, 0, math.inf, iterations)
+    r, _, _, _, state = ev
+    C, rank, cond = result['C'], result['rank'], result['cond']
     if rank < 6:
-        return failed(_chain_missing_message(null, n, inputs, rank), False, rank, cond,
-                      iterations)
-    if not converged:
-        return failed(f'{inputs}: {why}', True, rank, cond, iterations)
+        return failed(_chain_missing_message(result['null'], n, inputs, rank), False, rank,
+                      cond, iterations)
+    if not result['converged']:
+        return failed(f'{inputs}: {result["why"]}', True, rank, cond, iterations)
     xi = z[:6 * n].reshape(n, 6)
     W = z[6 * n:]
     joint_cov = np.empty((n, 6, 6))
@@ -1077,7 +1499,9 @@ def estimate_chain_state(chain: JointChain,
     return ChainEstimate(True, 'ok', xi.copy(), C[:6 * n, :6 * n], joint_cov, W.copy(),
                          C[6 * n:, 6 * n:], T_tip.copy(), 0.5 * (tip_cov + tip_cov.T), K_tip,
                          K_tip_std, float(r @ r), measured - 6, True, rank, cond, iterations,
-                         state)
+                         state, result['consistent'], measured - 6,
+                         tuple(name for name, _ in dropped),
+                         tuple(f'{name}: {why}' for name, why in dropped), restarted)
 
 
 def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,

@@ -219,7 +219,8 @@ def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
     readings, ages = _usable_readings(snapshot, settings.max_age)
     est = estimate_joint_state(settings.model, measurements(settings, readings),
                                initial_screw=snapshot.initial_screw,
-                               stiffness_std=stiffness_std)
+                               stiffness_std=stiffness_std,
+                               consistency_probability=settings.consistency_probability)
     _require_success(est, snapshot, readings, settings.max_age)
     outputs = EstimatorOutputs(est, tuple(name for name in ESTIMATOR_INPUTS if name in readings),
                                ages, stiffness_std)
@@ -243,7 +244,34 @@ def diagnostic_values(outputs: EstimatorOutputs | SpineEstimatorOutputs
         ('inputs used', ', '.join(outputs.used)),
     ]
     values += [(f'age of {name} [ms]', 1e3 * age) for name, age in sorted(outputs.ages.items())]
+    values += [('consistent', 'none (no redundancy)' if est.consistent is None
+                else est.consistent),
+               ('redundancy', est.redundancy),
+               ('outliers', ', '.join(est.outliers) or 'none'),
+               *((f'left out: {reason.partition(": ")[0]}', reason.partition(': ')[2])
+                 for reason in est.outlier_reasons),
+               ('cold restart', est.restarted)]
     return values
+
+
+def diagnostic_summary(outputs: EstimatorOutputs | SpineEstimatorOutputs
+                       ) -> tuple[str, str]:
+    """(level, message) of the last estimate for /diagnostics: WARN when it is inconsistent
+    or left a reading out (the message names them), OK otherwise; without redundancy the
+    message says that the readings cannot check themselves."""
+    est = outputs.estimate
+    message = (f'estimating from {", ".join(outputs.used)}; chi2/dof {est.chi2:.3g}/{est.dof}, '
+               f'rank {est.rank}')
+    level = 'OK'
+    if est.outliers:
+        level = 'WARN'
+        message += f'; left out {", ".join(est.outliers)}'
+    if est.consistent is False:
+        level = 'WARN'
+        message += '; inconsistent: the readings contradict each other'
+    elif est.consistent is None:
+        message += '; no redundancy: the readings cannot check themselves'
+    return level, message
 
 
 # ---------------------------------------------------------------------------------- spines
@@ -311,7 +339,8 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
     est = estimate_chain_state(
         settings.chain, joints, tip_pose, tip_cov, load, load_covariance,
         rest_lengths=settings.current_rest_lengths(), initial_screws=initial_screws,
-        initial_tip_wrench=initial_wrench, stiffness_std=stiffness_std)
+        initial_tip_wrench=initial_wrench, stiffness_std=stiffness_std,
+        consistency_probability=options.consistency_probability)
     _require_success(est, snapshot, readings, options.max_age)
     outputs = SpineEstimatorOutputs(
         est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages,

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.estimation.estimators import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.mechanics import templates
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
@@ -963,6 +964,10 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('estimation.max_age', 'double', 0.05,
                   'inputs older than this (s, by arrival) are left out of an estimate',
                   range=(0.0, 3600.0)),
+    ParameterSpec('estimation.consistency_probability', 'double', CONSISTENCY_PROBABILITY,
+                  'probability of the chi-square test of each estimate (consistent: False when '
+                  'its chi2 exceeds the 1 - p quantile; contradicted readings are then left out '
+                  'while redundancy remains)', range=(1e-15, 0.5)),
     ParameterSpec('estimation.stiffness_std', 'bool', True,
                   'publish the first-order std of the stiffness (~/cartesian_stiffness_std; the '
                   "spine's ~/tip_stiffness_base_std), computed only while it has a subscriber"),
@@ -1010,6 +1015,7 @@ class EstimatorNodeSettings:
     trigger: str
     max_age: float
     stiffness_std: bool
+    consistency_probability: float
     tension_std: float
     length_std: float
     gravity_std: float
@@ -1043,6 +1049,7 @@ def estimator_node_settings(values: Mapping[str, Any], generation: int = 0
         load_mode=checked['estimation.external_wrench'], trigger=checked['estimation.trigger'],
         max_age=checked['estimation.max_age'],
         stiffness_std=checked['estimation.stiffness_std'],
+        consistency_probability=checked['estimation.consistency_probability'],
         tension_std=checked['sensors.tension_std'], length_std=checked['sensors.length_std'],
         gravity_std=checked['sensors.gravity_std'],
         gravity_base=(float(base[0]), float(base[1]), float(base[2])),

@@ -37,6 +37,7 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     EstimatorInput,
     EstimatorOutputs,
     Reading,
+    diagnostic_summary,
     diagnostic_values,
     estimator_outputs,
     gravity_reading,
@@ -200,12 +201,10 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         level, message = 'WARN', 'no estimate yet'
         if outputs is not None:
             values += diagnostic_values(outputs)
-            est = outputs.estimate
-            level = 'OK'
-            message = (f'estimating from {", ".join(outputs.used)}; chi2/dof '
-                       f'{est.chi2:.3g}/{est.dof}, rank {est.rank}')
+            level, message = diagnostic_summary(outputs)
         values += [('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
-                   ('max age [s]', options.max_age)]
+                   ('max age [s]', options.max_age),
+                   ('consistency probability', options.consistency_probability)]
         return [conversions.diagnostic_status(f'{self.get_name()}: estimator', level, message,
                                             values, hardware_id=self._output_frame(settings))]
 

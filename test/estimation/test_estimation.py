@@ -297,3 +297,83 @@ def test_bad_rest_lengths_and_initial_screw(model):
 def test_four_strings_are_the_documented_ones(model):
     assert [model.string_names[i] for i in FOUR_STRINGS] == [
         'cross_AA', 'cross_DA', 'straight_BA', 'straight_DC']
+
+
+# ------------------------------------------------------------------------------------ trust
+TWELVE_AND_IMU = ('all', None, True, False, False)
+
+
+def test_denormal_rest_lengths_divide_nothing_by_zero(model):
+    """Issue 31's ZeroDivisionError: rest lengths of 5e-324 (a hostile ~/rest_lengths) made the
+    length scale 0.5 * 5e-324 = 0 in the step clipping; now an answer or a ValueError."""
+    truth = truth_from_model(model, model.initial_screw)
+    tiny = model.with_rest_lengths([5e-324] * 12)
+    m = Measurements(tensions=truth.tensions, tension_std=TENSION_STD, pose=truth.transform,
+                     pose_covariance=POSE_COVARIANCE)
+    for initial in (model.initial_screw + 0.3, model.initial_screw, None):
+        est = estimate_joint_state(tiny, m, initial_screw=initial)
+        assert est.success or est.message
+
+
+def test_a_tracker_that_lost_track_restarts_cold(model):
+    """Warm starts far from the truth (an absurd earlier estimate): every estimate is the cold
+    start's; those whose warm fit was lost say ``restarted``."""
+    rng = np.random.default_rng(3)
+    truth = truth_from_model(model, model.initial_screw + rng.normal(scale=TRUTH_SPREAD))
+    m = measure(truth, TWELVE_AND_IMU, rng)
+    cold = estimate_joint_state(model, m)
+    assert cold.success and cold.consistent and not cold.restarted
+    restarted = 0
+    for _ in range(20):
+        far = model.initial_screw + rng.normal(scale=[1.0] * 3 + [0.02] * 3)
+        est = estimate_joint_state(model, m, initial_screw=far)
+        assert est.success and est.consistent and est.outliers == ()
+        # the same minimum, to the solver's tolerance (0.03 std of the step left)
+        assert nees(sm.pose_error(est.transform, cold.transform), cold.covariance) < 0.01
+        restarted += est.restarted
+    assert restarted >= 5
+
+
+@pytest.mark.parametrize(('change', 'name', 'why'), [
+    (lambda m: m.tensions.__setitem__(1, -0.3), 'tension[cross_AD]', 'below -0.025 N'),
+    (lambda m: m.tensions.__setitem__(3, 1e308), 'tension[cross_DD]',
+     'exceeds the most the string can carry'),
+    (lambda m: m.lengths.__setitem__(5, 0.2), 'length[straight_AC]',
+     'exceeds its maximum length'),
+])
+def test_impossible_readings_are_left_out_by_name(model, change, name, why):
+    rng = np.random.default_rng(8)
+    truth = truth_from_model(model, model.initial_screw)
+    m = measure(truth, ('all', 'all', True, False, False), rng)
+    change(m)
+    est = estimate_joint_state(model, m)
+    assert est.success and est.outliers == (name,), est.outlier_reasons
+    assert 'impossible' in est.outlier_reasons[0] and why in est.outlier_reasons[0]
+    assert est.consistent and est.redundancy == 12 + 12 + 2 - 1 - 6
+    assert nees(pose_error(est, truth), est.covariance) < 20.0
+
+
+def test_a_contradicted_reading_is_only_left_out_with_redundancy(model):
+    """5 load cells + IMU (redundancy 1): a load cell 0.8 N off is detected (inconsistent) but
+    cannot be told apart from the others, so none is left out; with
+    ``reject_outliers=False`` none is either."""
+    rng = np.random.default_rng(9)
+    truth = truth_from_model(model, model.initial_screw)
+    m = measure(truth, ((*FOUR_STRINGS, 4), None, True, False, False), rng)
+    m.tensions[0] += 0.8
+    est = estimate_joint_state(model, m)
+    assert est.success and est.redundancy == 1 and est.consistent is False
+    assert est.outliers == ()
+    m = measure(truth, TWELVE_AND_IMU, rng)
+    m.tensions[0] += 0.8
+    est = estimate_joint_state(model, m, reject_outliers=False)
+    assert est.consistent is False and est.outliers == ()
+    assert estimate_joint_state(model, m).outliers == ('tension[cross_AA]',)
+
+
+def test_the_consistency_probability_is_checked(model):
+    truth = truth_from_model(model, model.initial_screw)
+    m = measure(truth, TWELVE_AND_IMU, np.random.default_rng(1))
+    with pytest.raises(ValueError, match='consistency_probability'):
+        estimate_joint_state(model, m, consistency_probability=1.5)
+    assert estimation.consistency_threshold(8) == pytest.approx(26.1245, rel=1e-4)

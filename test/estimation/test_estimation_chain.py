@@ -5,6 +5,7 @@ every joint's equilibrium): NEES of the tip pose and of the tip load in the chi-
 
 import numpy as np
 import pytest
+from scipy.stats import chi2
 from support import REPO
 from support.estimation_trials import (
     FOUR_STRINGS,
@@ -183,3 +184,55 @@ def test_spine_bad_input(chain):
     with pytest.raises(ValueError, match='per-joint external_wrench'):
         estimate_chain_state(chain, [Measurements(external_wrench=np.zeros(6),
                                                   wrench_covariance=np.eye(6)), None, None])
+
+
+def test_a_broken_load_cell_on_a_spine_is_named_and_left_out(chain, truths):
+    """12 load cells per joint and an unknown tip load (redundancy 30): a load cell 0.8 N off
+    is left out by name, the tip pose within 3 sigma; one at -0.3 N is impossible."""
+    rng = np.random.default_rng(12)
+    bound = chi2.ppf(0.9973, 6)
+    for trial, (fault, joint, string) in enumerate([(0.8, 0, 3), (-0.8, 2, 7), (None, 1, 5)]):
+        _, screws, state = truths[trial]
+        joints = joint_tensions(state, ALL_STRINGS, rng)
+        t = joints[joint].tensions
+        t[string] = -0.3 if fault is None else t[string] + fault
+        est = estimate_chain_state(chain, joints, initial_screws=screws, stiffness_std=False)
+        assert est.success, est.message
+        name = f'joint {joint + 1} tension[{chain.joints[joint].string_names[string]}]'
+        assert est.outliers == (name,), est.outlier_reasons
+        assert est.consistent is True and est.redundancy == 12 * N_JOINTS - 1 - 6
+        e = sm.pose_error(est.tip_transform, state.tip_transform)
+        assert nees(e, est.tip_pose_covariance) <= bound
+
+
+def test_a_spine_tracker_that_lost_track_restarts_cold(chain, truths):
+    """A warm start from an absurd earlier estimate (after a hostile burst): the estimate is
+    the cold start's, not a wrong minimum near the absurd one."""
+    rng = np.random.default_rng(13)
+    state = truths[0][2]
+    joints = joint_tensions(state, ALL_STRINGS, rng)
+    cold = estimate_chain_state(chain, joints, stiffness_std=False)
+    assert cold.success and cold.consistent
+    absurd = chain.unloaded_screws() + rng.normal(scale=[0.8] * 3 + [0.01] * 3,
+                                                  size=(N_JOINTS, 6))
+    est = estimate_chain_state(chain, joints, initial_screws=absurd,
+                               initial_tip_wrench=[5.0, -5.0, 3.0, 0.1, 0.1, 0.1],
+                               stiffness_std=False)
+    assert est.success and est.consistent, est.message
+    np.testing.assert_allclose(est.tip_transform, cold.tip_transform, atol=1e-6)
+
+
+def test_a_contradicted_tip_pose_is_left_out(chain, truths):
+    """12 load cells per joint and a tip pose 5 mm off: ``pose`` left out, the tip pose
+    estimated from the load cells within 3 sigma."""
+    rng = np.random.default_rng(14)
+    _, screws, state = truths[1]
+    wrong = perturbed_pose(state.tip_transform, POSE_COVARIANCE, rng)
+    wrong[:3, 3] += [0.005, 0.0, 0.0]
+    est = estimate_chain_state(chain, joint_tensions(state, ALL_STRINGS, rng), tip_pose=wrong,
+                               tip_pose_covariance=POSE_COVARIANCE, initial_screws=screws,
+                               stiffness_std=False)
+    assert est.success and est.outliers == ('pose',), est.outlier_reasons
+    assert est.consistent is True and est.redundancy == 12 * N_JOINTS - 6
+    e = sm.pose_error(est.tip_transform, state.tip_transform)
+    assert nees(e, est.tip_pose_covariance) <= chi2.ppf(0.9973, 6)

@@ -11,10 +11,12 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 from support.estimation_trials import GRAVITY_BASE, TENSION_STD, truth_from_model
 
+from tensegrity_stiffness.estimation.estimators import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.nodes import parameters
 from tensegrity_stiffness.nodes.estimation_processing import (
     EstimatorInput,
     Reading,
+    diagnostic_summary,
     diagnostic_values,
     estimator_outputs,
     gravity_reading,
@@ -200,3 +202,36 @@ def test_spine_settings_and_outputs():
     np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.estimate.tip_stiffness)
     assert pose.header.frame_id == wrench.header.frame_id == 'spine_base'
     assert len(K_std.data) == 36
+
+
+def test_diagnostics_warn_on_a_reading_left_out_and_say_when_nothing_checks(settings):
+    rng = np.random.default_rng(2)
+    now = time.monotonic()
+    truth, readings = readings_at(settings.model, rng, now)
+    out = estimator_outputs(settings, EstimatorInput(readings, now, truth.screw))
+    assert diagnostic_summary(out)[0] == 'OK'
+    keys = dict(diagnostic_values(out))
+    assert keys['consistent'] is True and keys['redundancy'] == 8 and keys['outliers'] == 'none'
+    broken = readings['measured_tensions'].value.copy()
+    broken[3] += 0.8
+    readings['measured_tensions'] = Reading(broken, now)
+    out = estimator_outputs(settings, EstimatorInput(readings, now, truth.screw))
+    level, message = diagnostic_summary(out)
+    assert level == 'WARN' and 'left out tension[cross_DD]' in message
+    keys = dict(diagnostic_values(out))
+    assert keys['outliers'] == 'tension[cross_DD]' and keys['redundancy'] == 7
+    assert 'contradicted by the others' in keys['left out: tension[cross_DD]']
+    four = np.full(12, np.nan)
+    four[[0, 2, 6, 11]] = truth.tensions[[0, 2, 6, 11]]
+    readings['measured_tensions'] = Reading(four, now)
+    out = estimator_outputs(settings, EstimatorInput(readings, now, truth.screw))
+    level, message = diagnostic_summary(out)
+    assert level == 'OK' and 'cannot check themselves' in message
+    assert dict(diagnostic_values(out))['consistent'] == 'none (no redundancy)'
+
+
+def test_the_consistency_probability_is_a_parameter(settings):
+    assert settings.consistency_probability == CONSISTENCY_PROBABILITY
+    values = parameters.defaults(ESTIMATOR_NODE_PARAMETERS)
+    with pytest.raises(ValueError, match='consistency_probability'):
+        estimator_node_settings({**values, 'estimation.consistency_probability': 0.9})
