@@ -24,7 +24,6 @@ import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, WrenchStamped
-from rclpy.executors import SingleThreadedExecutor
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness import config
@@ -34,8 +33,8 @@ from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.twin_demo import (
     NAMESPACE,
+    BackgroundSpin,
     node_executable,
-    spin_until_stopped,
     stop_process,
 )
 
@@ -134,10 +133,7 @@ def run(config_path: Path | None, duration: float | None) -> int:
         Float64MultiArray, f'{NAMESPACE}/stiffness_controller/target_stiffness', 10)
     load_pub = node.create_publisher(WrenchStamped, f'{NAMESPACE}/sim_node/external_wrench', 10)
     pose, stiffness = _targets(model)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinner = threading.Thread(target=spin_until_stopped, args=(executor, stop), daemon=True)
-    spinner.start()
+    spin = BackgroundSpin(node, stop)
     start = time.monotonic()
     code = 0
     try:
@@ -167,10 +163,7 @@ def run(config_path: Path | None, duration: float | None) -> int:
     finally:
         stop.set()
         codes = [stop_process(p) for p in processes]
-        spinner.join(timeout=2.0)
-        executor.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown()
+        spin.close()
     print('control_demo: stopped (' + ', '.join(
         f'{name} exit {c}' for (name, _), c in zip(_node_args(params), codes, strict=True))
         + ')', flush=True)

@@ -306,10 +306,7 @@ def run_demo(setup: DemoSetup) -> int:
     rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node('twin_monitor')
     monitor = Monitor(node, setup.spine, setup.n_strings)
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    spinner = threading.Thread(target=spin_until_stopped, args=(executor, stop), daemon=True)
-    spinner.start()
+    spin = BackgroundSpin(node, stop)
     start = time.monotonic()
     code = 0
     try:
@@ -331,13 +328,29 @@ def run_demo(setup: DemoSetup) -> int:
     finally:
         stop.set()
         codes = [stop_process(p) for p in processes]
-        spinner.join(timeout=2.0)
-        executor.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown()
+        spin.close()
     print(f'twin_demo: stopped ({stiffness} exit {codes[0]}, sim_node exit {codes[1]})',
           flush=True)
     return code or int(any(codes))
+
+
+class BackgroundSpin:
+    """A demo's monitor node spun on a thread of its own until ``stop`` is set; :meth:`close`
+    ends the thread, the executor, the node and rclpy."""
+
+    def __init__(self, node: Any, stop: threading.Event) -> None:
+        self.node = node
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(node)
+        self.thread = threading.Thread(target=spin_until_stopped, args=(self.executor, stop),
+                                       daemon=True)
+        self.thread.start()
+
+    def close(self) -> None:
+        self.thread.join(timeout=2.0)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown()
 
 
 def spin_until_stopped(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
