@@ -1351,6 +1351,60 @@ def _chain_missing_message(null: FloatArray, n: int, inputs: str, rank: int) -> 
             f'tip pose, or the tip load (tip_wrench)')
 
 
+def estimate_chain_state(chain: JointChain,
+                         joint_measurements: Sequence[Measurements | None],
+                         tip_pose: ArrayLike | None = None,
+                         tip_pose_covariance: ArrayLike | None = None,
+                         tip_wrench: ArrayLike | None = None,
+                         tip_wrench_covariance: ArrayLike | None = None,
+                         gravity: ArrayLike | None = None, *,
+                         rest_lengths: Any = None,
+                         initial_screws: ArrayLike | None = None,
+                         initial_tip_wrench: ArrayLike | None = None,
+                         tolerance: float = DECREMENT_TOLERANCE,
+                         max_iterations: int = MAX_ITERATIONS,
+                         rank_tolerance: float = RANK_TOLERANCE,
+                         stiffness_std: bool = True,
+                         consistency_probability: float = CONSISTENCY_PROBABILITY,
+                         reject_outliers: bool = True) -> ChainEstimate:
+    """Every joint's screw, the tip load, the tip pose and the exact tip stiffness of a spine,
+    each with its covariance.
+
+    ``joint_measurements``: one :class:`Measurements` (or None) per joint with its strings'
+    tensions / lengths and optionally the joint's own pose (of {2}_i in {1}_i). The load is the
+    spine's: ``tip_wrench`` (6,) in the base about its origin with ``tip_wrench_covariance``, or
+    None for an unknown tip load, shared by every joint's equilibrium (which is what makes a few
+    load cells per vertebra enough). The equilibria ``F_i + Ad_{P_i}^T B_i = 0`` are exact
+    constraints (null-space Gauss-Newton), so 6 unknowns remain whatever N: the tip load (or
+    the configuration it implies). ``tip_pose`` (the tool frame in the base, (4, 4) or 7
+    values) with ``tip_pose_covariance`` (6, 6, PoseWithCovariance convention). ``gravity``
+    (3,) for the link weights (default ``chain.gravity``). ``initial_screws`` (N, 6) and
+    ``initial_tip_wrench`` warm-start (default: the unloaded screws and the known load or
+    zero). Trust as :func:`estimate_joint_state`'s: impossible readings left out, a lost warm
+    start restarted cold, contradicted readings left out while redundancy remains.
+    """
+    inputs = _chain_inputs(chain, joint_measurements, tip_pose, tip_pose_covariance, tip_wrench,
+                           tip_wrench_covariance, gravity, rest_lengths, initial_screws,
+                           initial_tip_wrench, consistency_probability)
+    dropped = inputs.dropped
+    measured = _measured_dof(inputs.preps, inputs.tip)
+    if measured < 6:
+        return _failed_chain(
+            f'{inputs.text}: {measured} measured degrees of freedom cannot determine the 6 '
+            'unknowns left by the equilibria (the tip load). Add string tensions or lengths, a '
+            'pose, or the tip load (tip_wrench)', chain.n_joints, measured, dropped, False,
+            measured, math.inf)
+    fitter = _ChainFitter(chain, inputs, tolerance, max_iterations, rank_tolerance,
+                          consistency_probability)
+    fit, restarted = fitter.tracked(inputs.preps, inputs.tip, inputs.z0,
+                                    initial_screws is not None)
+    if reject_outliers:
+        fit, restarted = _reject_contradicted(fit, restarted, dropped, consistency_probability,
+                                              fitter.readings, fitter.refit_without)
+    return _chain_estimate(chain, inputs, fit, restarted, dropped, stiffness_std,
+                           consistency_probability)
+
+
 def _measured_dof(preps: list[PreparedMeasurements | None], tip: frozenset[str]) -> int:
     """The degrees of freedom measured by the joints' readings ``preps`` and the tip's ``tip``."""
     return sum(p.dof for p in preps if p is not None) + 6 * len(tip)
@@ -1496,19 +1550,18 @@ class _ChainFit(_Fit):
         return _measured_dof(self.preps, self.tip) - 6
 
 
+@dataclass
 class _ChainFitter:
     """A spine's fits with one set of inputs and solver settings: :meth:`fit` from a start,
     :meth:`tracked` (restarted cold when a warm start lost track), :meth:`readings` (the
     named rows of a fit's residual) and :meth:`refit_without` a reading."""
 
-    def __init__(self, chain: JointChain, inputs: _ChainInputs, tolerance: float,
-                 max_iterations: int, rank_tolerance: float, probability: float) -> None:
-        self.chain = chain
-        self.inputs = inputs
-        self.tolerance = tolerance
-        self.max_iterations = max_iterations
-        self.rank_tolerance = rank_tolerance
-        self.probability = probability
+    chain: JointChain
+    inputs: _ChainInputs
+    tolerance: float
+    max_iterations: int
+    rank_tolerance: float
+    probability: float
 
     def fit(self, preps: list[PreparedMeasurements | None], tip: frozenset[str],
             z0: FloatArray) -> _ChainFit:
@@ -1622,60 +1675,6 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
                          state, fit.consistent(probability), measured - 6,
                          tuple(name for name, _ in dropped),
                          tuple(f'{name}: {why}' for name, why in dropped), restarted)
-
-
-def estimate_chain_state(chain: JointChain,
-                         joint_measurements: Sequence[Measurements | None],
-                         tip_pose: ArrayLike | None = None,
-                         tip_pose_covariance: ArrayLike | None = None,
-                         tip_wrench: ArrayLike | None = None,
-                         tip_wrench_covariance: ArrayLike | None = None,
-                         gravity: ArrayLike | None = None, *,
-                         rest_lengths: Any = None,
-                         initial_screws: ArrayLike | None = None,
-                         initial_tip_wrench: ArrayLike | None = None,
-                         tolerance: float = DECREMENT_TOLERANCE,
-                         max_iterations: int = MAX_ITERATIONS,
-                         rank_tolerance: float = RANK_TOLERANCE,
-                         stiffness_std: bool = True,
-                         consistency_probability: float = CONSISTENCY_PROBABILITY,
-                         reject_outliers: bool = True) -> ChainEstimate:
-    """Every joint's screw, the tip load, the tip pose and the exact tip stiffness of a spine,
-    each with its covariance.
-
-    ``joint_measurements``: one :class:`Measurements` (or None) per joint with its strings'
-    tensions / lengths and optionally the joint's own pose (of {2}_i in {1}_i). The load is the
-    spine's: ``tip_wrench`` (6,) in the base about its origin with ``tip_wrench_covariance``, or
-    None for an unknown tip load, shared by every joint's equilibrium (which is what makes a few
-    load cells per vertebra enough). The equilibria ``F_i + Ad_{P_i}^T B_i = 0`` are exact
-    constraints (null-space Gauss-Newton), so 6 unknowns remain whatever N: the tip load (or
-    the configuration it implies). ``tip_pose`` (the tool frame in the base, (4, 4) or 7
-    values) with ``tip_pose_covariance`` (6, 6, PoseWithCovariance convention). ``gravity``
-    (3,) for the link weights (default ``chain.gravity``). ``initial_screws`` (N, 6) and
-    ``initial_tip_wrench`` warm-start (default: the unloaded screws and the known load or
-    zero). Trust as :func:`estimate_joint_state`'s: impossible readings left out, a lost warm
-    start restarted cold, contradicted readings left out while redundancy remains.
-    """
-    inputs = _chain_inputs(chain, joint_measurements, tip_pose, tip_pose_covariance, tip_wrench,
-                           tip_wrench_covariance, gravity, rest_lengths, initial_screws,
-                           initial_tip_wrench, consistency_probability)
-    dropped = inputs.dropped
-    measured = _measured_dof(inputs.preps, inputs.tip)
-    if measured < 6:
-        return _failed_chain(
-            f'{inputs.text}: {measured} measured degrees of freedom cannot determine the 6 '
-            'unknowns left by the equilibria (the tip load). Add string tensions or lengths, a '
-            'pose, or the tip load (tip_wrench)', chain.n_joints, measured, dropped, False,
-            measured, math.inf)
-    fitter = _ChainFitter(chain, inputs, tolerance, max_iterations, rank_tolerance,
-                          consistency_probability)
-    fit, restarted = fitter.tracked(inputs.preps, inputs.tip, inputs.z0,
-                                    initial_screws is not None)
-    if reject_outliers:
-        fit, restarted = _reject_contradicted(fit, restarted, dropped, consistency_probability,
-                                              fitter.readings, fitter.refit_without)
-    return _chain_estimate(chain, inputs, fit, restarted, dropped, stiffness_std,
-                           consistency_probability)
 
 
 def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,
