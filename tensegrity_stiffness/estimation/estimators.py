@@ -42,9 +42,9 @@ import copy
 import functools
 import math
 import weakref
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -853,8 +853,42 @@ def suspect_reading(r: FloatArray, J: FloatArray, C: FloatArray,
                   f'{statistic:.4g} (normalized residual z = {z:.3g})')
 
 
+class _Fit:
+    """What the trust rules ask of a fit, a joint's (:class:`_JointFit`) or a spine's
+    (:class:`_ChainFit`): its whitened residual ``r``, Jacobian ``J`` and covariance ``C``, chi2
+    and redundancy, and whether it converged with full rank."""
+
+    r: FloatArray
+    J: FloatArray
+    C: FloatArray
+    converged: bool
+    rank: int
+
+    @property
+    def chi2(self) -> float:
+        raise NotImplementedError
+
+    @property
+    def redundancy(self) -> int:
+        raise NotImplementedError
+
+    @property
+    def ok(self) -> bool:
+        return self.converged and self.rank == 6 and math.isfinite(self.chi2)
+
+    def consistent(self, probability: float) -> bool | None:
+        return _consistent(self.chi2, self.redundancy, probability)
+
+    def on_track(self, probability: float) -> bool:
+        """Whether the fit succeeded and passes the chi-square test (or has no redundancy)."""
+        return self.ok and self.consistent(probability) is not False
+
+
+_F = TypeVar('_F', bound=_Fit)
+
+
 @dataclass
-class _JointFit:
+class _JointFit(_Fit):
     """One Gauss-Newton fit of a joint's readings and its information."""
 
     problem: _JointProblem
@@ -879,13 +913,6 @@ class _JointFit:
     def redundancy(self) -> int:
         return self.problem.prep.dof - 6
 
-    @property
-    def ok(self) -> bool:
-        return self.converged and self.rank == 6 and math.isfinite(self.chi2)
-
-    def consistent(self, probability: float) -> bool | None:
-        return _consistent(self.chi2, self.redundancy, probability)
-
 
 def _fit_joint(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
                x0: FloatArray, tolerance: float, max_iterations: int, rank_tolerance: float
@@ -906,7 +933,7 @@ def _fit_joint(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
     return _JointFit(problem, x, r, J, state, kin, iterations, converged, why, C, s, rank, cond)
 
 
-def _better(cold: _JointFit, warm: _JointFit) -> bool:
+def _better(cold: _Fit, warm: _Fit) -> bool:
     """Whether the cold start's fit beats a warm start's (it succeeded where the warm one did
     not, or reached a lower chi2)."""
     return cold.ok and (not warm.ok or cold.chi2 < warm.chi2)
@@ -926,7 +953,7 @@ def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray
             fit = _fit_joint(model, prep, rest, warm, *options)
         except _InitialPointError:
             fit = None
-        if fit is not None and fit.ok and fit.consistent(probability) is not False:
+        if fit is not None and fit.on_track(probability):
             return fit, False
         try:
             cold = _fit_joint(model, prep, rest, cold_start, *options)
@@ -942,6 +969,41 @@ def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray
         return _fit_joint(model, prep, rest, cold_start, *options), False
     except _InitialPointError as exc:
         raise ValueError(f'initial_screw: {exc}') from None
+
+
+def _joint_refit_without(model: JointModel, rest: FloatArray, probability: float,
+                         options: tuple[float, int, float], fit: _JointFit, name: str
+                         ) -> tuple[_JointFit, bool] | None:
+    """The joint's readings of ``fit`` without the reading ``name``, fitted again from the fit's
+    estimate (:func:`_tracked_fit`); None when no start can be evaluated."""
+    reduced = fit.problem.prep.without([name], model.string_names)
+    try:
+        return _tracked_fit(model, reduced, rest, fit.x, probability, options)
+    except ValueError:
+        return None
+
+
+def _reject_contradicted(fit: _F, restarted: bool, dropped: list[tuple[str, str]],
+                         probability: float,
+                         readings: Callable[[_F], list[tuple[str, NDArray[np.intp], int]]],
+                         refit_without: Callable[[_F, str], tuple[_F, bool] | None]
+                         ) -> tuple[_F, bool]:
+    """Data snooping (docs/estimation.md#trust): while ``fit`` succeeds but fails the chi-square
+    test at ``probability`` with redundancy left, the reading the others contradict
+    (:func:`suspect_reading` over ``readings(fit)``) is left out, appended to ``dropped``, and
+    the rest fitted again by ``refit_without(fit, name)`` (its fit and whether it restarted
+    cold; None when it cannot). Stops when no reading stands out or the refit fails. Returns
+    the last fit and whether any fit restarted cold (or ``restarted``)."""
+    while fit.ok and fit.redundancy > 0 and fit.consistent(probability) is False:
+        suspect = suspect_reading(fit.r, fit.J, fit.C, readings(fit), fit.redundancy)
+        if suspect is None:
+            break
+        refit = refit_without(fit, suspect[0])
+        if refit is None or not refit[0].ok:
+            break
+        fit, restarted = refit[0], restarted or refit[1]
+        dropped.append(suspect)
+    return fit, restarted
 
 
 def estimate_joint_state(model: JointModel, measurements: Measurements | PreparedMeasurements,
@@ -988,21 +1050,13 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     options = (tolerance, max_iterations, rank_tolerance)
     warm = None if initial_screw is None else _initial_screw(model, prep, rest, initial_screw)
     fit, restarted = _tracked_fit(model, prep, rest, warm, consistency_probability, options)
-    while (reject_outliers and fit.ok and fit.redundancy > 0
-           and fit.consistent(consistency_probability) is False):
-        suspect = suspect_reading(fit.r, fit.J, fit.C, prep.readings(names), fit.redundancy)
-        if suspect is None:
-            break
-        reduced = prep.without([suspect[0]], names)
-        try:
-            refit, again = _tracked_fit(model, reduced, rest, fit.x, consistency_probability,
-                                        options)
-        except ValueError:
-            break
-        if not refit.ok:
-            break
-        prep, fit, restarted = reduced, refit, restarted or again
-        dropped.append(suspect)
+    if reject_outliers:
+        fit, restarted = _reject_contradicted(
+            fit, restarted, dropped, consistency_probability,
+            lambda current: current.problem.prep.readings(names),
+            functools.partial(_joint_refit_without, model, rest, consistency_probability,
+                              options))
+        prep = fit.problem.prep
     if fit.rank < 6:
         rank, cond, s, message = _observability(fit.problem, fit.J, fit.state, fit.kin,
                                                 rank_tolerance)
@@ -1329,6 +1383,62 @@ def estimate_chain_state(chain: JointChain,
     zero). Trust as :func:`estimate_joint_state`'s: impossible readings left out, a lost warm
     start restarted cold, contradicted readings left out while redundancy remains.
     """
+    inputs = _chain_inputs(chain, joint_measurements, tip_pose, tip_pose_covariance, tip_wrench,
+                           tip_wrench_covariance, gravity, rest_lengths, initial_screws,
+                           initial_tip_wrench, consistency_probability)
+    dropped = inputs.dropped
+    measured = _measured_dof(inputs.preps, inputs.tip)
+    if measured < 6:
+        return _failed_chain(
+            f'{inputs.text}: {measured} measured degrees of freedom cannot determine the 6 '
+            'unknowns left by the equilibria (the tip load). Add string tensions or lengths, a '
+            'pose, or the tip load (tip_wrench)', chain.n_joints, measured, dropped, False,
+            measured, math.inf)
+    fitter = _ChainFitter(chain, inputs, tolerance, max_iterations, rank_tolerance,
+                          consistency_probability)
+    fit, restarted = fitter.tracked(inputs.preps, inputs.tip, inputs.z0,
+                                    initial_screws is not None)
+    if reject_outliers:
+        fit, restarted = _reject_contradicted(fit, restarted, dropped, consistency_probability,
+                                              fitter.readings, fitter.refit_without)
+    return _chain_estimate(chain, inputs, fit, restarted, dropped, stiffness_std,
+                           consistency_probability)
+
+
+def _measured_dof(preps: list[PreparedMeasurements | None], tip: frozenset[str]) -> int:
+    """The degrees of freedom measured by the joints' readings ``preps`` and the tip's ``tip``."""
+    return sum(p.dof for p in preps if p is not None) + 6 * len(tip)
+
+
+@dataclass
+class _ChainInputs:
+    """The checked inputs of :func:`estimate_chain_state`: each joint's prepared readings
+    (impossible ones left out, named in ``dropped``), the gravity, the rest lengths, the tip's
+    readings with their whiteners, the starting point ``z0 = [xi_1 .. xi_N, W]`` and ``text``
+    naming the inputs for messages."""
+
+    preps: list[PreparedMeasurements | None]
+    dropped: list[tuple[str, str]]
+    gravity: FloatArray
+    rest: list[FloatArray | None]
+    tip_pose: FloatArray | None
+    tip_pose_whitener: FloatArray | None
+    tip_wrench: FloatArray | None
+    tip_wrench_whitener: FloatArray | None
+    z0: FloatArray
+    text: str
+
+    @property
+    def tip(self) -> frozenset[str]:
+        """The tip's readings present (``pose``, ``wrench``)."""
+        return frozenset(name for name, value in (('pose', self.tip_pose),
+                                                  ('wrench', self.tip_wrench))
+                         if value is not None)
+
+
+def _chain_preps(chain: JointChain, joint_measurements: Sequence[Measurements | None]
+                 ) -> list[PreparedMeasurements | None]:
+    """Each joint's readings prepared (None: none); ValueError naming the joint's entry."""
     n = chain.n_joints
     if len(joint_measurements) != n:
         raise ValueError(f'joint_measurements must hold one entry per joint ({n}), '
@@ -1346,9 +1456,13 @@ def estimate_chain_state(chain: JointChain,
             preps.append(m.prepared(model.n_strings))
         except ValueError as exc:
             raise ValueError(f'joint_measurements[{i}].{exc}') from None
-    consistency_threshold(1, consistency_probability)  # checks the probability
-    g = chain.resolved_gravity(gravity)
-    rest = chain.rest_lengths_per_joint(rest_lengths)
+    return preps
+
+
+def _drop_impossible(chain: JointChain, preps: list[PreparedMeasurements | None],
+                     rest: list[FloatArray | None]) -> list[tuple[str, str]]:
+    """Leaves the impossible readings out of ``preps`` (in place); returns them as
+    (``joint <i> <reading>``, why)."""
     dropped: list[tuple[str, str]] = []
     for i, (model, p) in enumerate(zip(chain.joints, preps, strict=True)):
         if p is not None:
@@ -1356,6 +1470,22 @@ def estimate_chain_state(chain: JointChain,
             if bad:
                 preps[i] = p.without([name for name, _ in bad], model.string_names)
                 dropped += [(f'joint {i + 1} {name}', why) for name, why in bad]
+    return dropped
+
+
+def _chain_inputs(chain: JointChain, joint_measurements: Sequence[Measurements | None],
+                  tip_pose: ArrayLike | None, tip_pose_covariance: ArrayLike | None,
+                  tip_wrench: ArrayLike | None, tip_wrench_covariance: ArrayLike | None,
+                  gravity: ArrayLike | None, rest_lengths: Any,
+                  initial_screws: ArrayLike | None, initial_tip_wrench: ArrayLike | None,
+                  consistency_probability: float) -> _ChainInputs:
+    """The arguments of :func:`estimate_chain_state` checked (ValueError naming the argument)
+    and prepared, impossible readings left out."""
+    preps = _chain_preps(chain, joint_measurements)
+    consistency_threshold(1, consistency_probability)  # checks the probability
+    g = chain.resolved_gravity(gravity)
+    rest = chain.rest_lengths_per_joint(rest_lengths)
+    dropped = _drop_impossible(chain, preps, rest)
     pose_T = pose_whitener = None
     if tip_pose is not None:
         pose_T = rigid_transform(tip_pose, 'tip_pose')
@@ -1380,110 +1510,153 @@ def estimate_chain_state(chain: JointChain,
     if pose_T is not None:
         names.append('a tip pose')
     names.append('a known tip load' if W_m is not None else 'unknown tip load')
-    inputs = '; '.join(names)
-    size = 6 * n + 6
+    return _ChainInputs(preps, dropped, g, rest, pose_T, pose_whitener, W_m, W_whitener,
+                        np.concatenate([x0.reshape(-1), W0]), '; '.join(names))
 
-    #: The tip's readings present (left out ones are taken away).
-    tip = frozenset(name for name, value in (('pose', pose_T), ('wrench', W_m))
-                    if value is not None)
 
-    def measured_dof(preps: list[PreparedMeasurements | None], tip: frozenset[str]) -> int:
-        return sum(p.dof for p in preps if p is not None) + 6 * len(tip)
+@dataclass
+class _ChainFit(_Fit):
+    """One constrained fit of a spine's readings (``preps`` of the joints, ``tip`` of the tip)
+    and its information (``C``, ``rank``, ``cond``, the null directions ``null``) when it
+    reached the equilibria (``ev`` not None)."""
 
-    measured = measured_dof(preps, tip)
+    problem: _ChainProblem
+    preps: list[PreparedMeasurements | None]
+    tip: frozenset[str]
+    z: FloatArray
+    ev: Any
+    iterations: int
+    converged: bool
+    why: str
+    rank: int = 0
+    cond: float = math.inf
+    C: FloatArray = field(default_factory=lambda: _nan(0, 0))
+    null: FloatArray = field(default_factory=lambda: _nan(0, 0))
 
-    def failed(msg: str, observable: bool, rank: int, cond: float, iterations: int = 0
-               ) -> ChainEstimate:
-        return ChainEstimate(False, msg, _nan(n, 6), _nan(6 * n, 6 * n), _nan(n, 6, 6),
-                             _nan(6), _nan(6, 6), _nan(4, 4), _nan(6, 6), _nan(6, 6),
-                             _nan(6, 6), math.nan, measured - 6, observable, rank, cond,
-                             iterations, None, None, measured - 6,
-                             tuple(name for name, _ in dropped),
-                             tuple(f'{name}: {why}' for name, why in dropped))
+    @property
+    def r(self) -> FloatArray:  # type: ignore[override]
+        return self.ev[0]
 
-    if measured < 6:
-        return failed(f'{inputs}: {measured} measured degrees of freedom cannot determine the 6 '
-                      'unknowns left by the equilibria (the tip load). Add string tensions or '
-                      'lengths, a pose, or the tip load (tip_wrench)', False, measured, math.inf)
+    @property
+    def J(self) -> FloatArray:  # type: ignore[override]
+        return self.ev[1]
 
-    def fit(preps: list[PreparedMeasurements | None], tip: frozenset[str], z0: FloatArray
-            ) -> dict[str, Any]:
-        problem = _ChainProblem(chain, preps, rest, g, pose_T if 'pose' in tip else None,
-                                pose_whitener, W_m if 'wrench' in tip else None, W_whitener)
+    @property
+    def chi2(self) -> float:
+        return math.inf if self.ev is None else float(self.ev[0] @ self.ev[0])
+
+    @property
+    def redundancy(self) -> int:
+        return _measured_dof(self.preps, self.tip) - 6
+
+
+@dataclass
+class _ChainFitter:
+    """A spine's fits with one set of inputs and solver settings: :meth:`fit` from a start,
+    :meth:`tracked` (restarted cold when a warm start lost track), :meth:`readings` (the
+    named rows of a fit's residual) and :meth:`refit_without` a reading."""
+
+    chain: JointChain
+    inputs: _ChainInputs
+    tolerance: float
+    max_iterations: int
+    rank_tolerance: float
+    probability: float
+
+    def fit(self, preps: list[PreparedMeasurements | None], tip: frozenset[str],
+            z0: FloatArray) -> _ChainFit:
+        """The readings ``preps`` and ``tip`` fitted from ``z0``
+        (:func:`_constrained_gauss_newton`)."""
+        inputs = self.inputs
+        problem = _ChainProblem(self.chain, preps, inputs.rest, inputs.gravity,
+                                inputs.tip_pose if 'pose' in tip else None,
+                                inputs.tip_pose_whitener,
+                                inputs.tip_wrench if 'wrench' in tip else None,
+                                inputs.tip_wrench_whitener)
         z, ev, iterations, converged, why = _constrained_gauss_newton(
-            problem, z0, max_iterations, tolerance)
-        out = dict(problem=problem, preps=preps, tip=tip, z=z, ev=ev, iterations=iterations,
-                   converged=converged, why=why, rank=0, cond=math.inf, chi2=math.inf,
-                   redundancy=measured_dof(preps, tip) - 6, ok=False)
+            problem, z0, self.max_iterations, self.tolerance)
+        out = _ChainFit(problem, preps, tip, z, ev, iterations, converged, why)
         if ev is not None:
-            r, J, _, Jc, _ = ev
-            C, rank, cond, null = _chain_information(problem, J, Jc, rank_tolerance)
-            out.update(C=C, rank=rank, cond=cond, null=null, chi2=float(r @ r))
-            out['ok'] = converged and rank == 6 and math.isfinite(out['chi2'])
-        out['consistent'] = _consistent(out['chi2'], out['redundancy'],
-                                        consistency_probability)
+            out.C, out.rank, out.cond, out.null = _chain_information(problem, ev[1], ev[3],
+                                                                     self.rank_tolerance)
         return out
 
-    def tracked(preps: list[PreparedMeasurements | None], tip: frozenset[str], z0: FloatArray,
-                warm: bool) -> tuple[dict[str, Any], bool]:
-        first = fit(preps, tip, z0)
-        if not warm or (first['ok'] and first['consistent'] is not False):
+    def tracked(self, preps: list[PreparedMeasurements | None], tip: frozenset[str],
+                z0: FloatArray, warm: bool) -> tuple[_ChainFit, bool]:
+        """The fit from ``z0`` and whether it was restarted: a ``warm`` start that fails or is
+        inconsistent is fitted again from the cold start (the unloaded screws, the known tip
+        load or zero), kept when better."""
+        first = self.fit(preps, tip, z0)
+        if not warm or first.on_track(self.probability):
             return first, False
-        W_cold = W_m.copy() if 'wrench' in tip else np.zeros(6)
-        cold = fit(preps, tip,
-                   np.concatenate([chain.unloaded_screws(rest).reshape(-1), W_cold]))
-        return (cold, True) if cold['ok'] and (
-            not first['ok'] or cold['chi2'] < first['chi2']) else (first, False)
+        inputs = self.inputs
+        W_cold = inputs.tip_wrench.copy() if 'wrench' in tip else np.zeros(6)
+        cold = self.fit(preps, tip, np.concatenate(
+            [self.chain.unloaded_screws(inputs.rest).reshape(-1), W_cold]))
+        return (cold, True) if _better(cold, first) else (first, False)
 
-    def readings(preps: list[PreparedMeasurements | None], tip: frozenset[str]
-                 ) -> list[tuple[str, NDArray[np.intp], int]]:
+    def readings(self, fit: _ChainFit) -> list[tuple[str, NDArray[np.intp], int]]:
+        """The readings of ``fit`` (name, rows of the residual, degrees of freedom): each
+        joint's as ``joint <i> <reading>``, then the tip's ``pose`` and ``wrench``."""
         out: list[tuple[str, NDArray[np.intp], int]] = []
         row = 0
-        for i, (model, p) in enumerate(zip(chain.joints, preps, strict=True)):
+        for i, (model, p) in enumerate(zip(self.chain.joints, fit.preps, strict=True)):
             if p is None or not p.rows:
                 continue
             out += [(f'joint {i + 1} {name}', rows + row, dof)
                     for name, rows, dof in p.readings(model.string_names)]
             row += p.rows
         for name in ('pose', 'wrench'):
-            if name in tip:
+            if name in fit.tip:
                 out.append((name, np.arange(row, row + 6), 6))
                 row += 6
         return out
 
-    z0 = np.concatenate([x0.reshape(-1), W0])
-    result, restarted = tracked(preps, tip, z0, initial_screws is not None)
-    while (reject_outliers and result['ok'] and result['redundancy'] > 0
-           and result['consistent'] is False):
-        r, J = result['ev'][:2]
-        suspect = suspect_reading(r, J, result['C'], readings(result['preps'], result['tip']),
-                                  result['redundancy'])
-        if suspect is None:
-            break
-        reduced, kept = list(result['preps']), result['tip']
-        if suspect[0] in kept:  # the tip pose, or the tip load (which becomes unknown)
-            kept = kept - {suspect[0]}
+    def refit_without(self, fit: _ChainFit, name: str) -> tuple[_ChainFit, bool]:
+        """The readings of ``fit`` without ``name`` (of :meth:`readings`) fitted again from
+        its estimate (a warm start): the tip pose, the tip load (which becomes unknown) or a
+        joint's reading."""
+        reduced, kept = list(fit.preps), fit.tip
+        if name in kept:
+            kept = kept - {name}
         else:
-            joint, _, name = suspect[0].partition(' ')[2].partition(' ')
+            joint, _, reading = name.partition(' ')[2].partition(' ')
             i = int(joint) - 1
-            reduced[i] = reduced[i].without([name], chain.joints[i].string_names)
-        refit, again = tracked(reduced, kept, result['z'], True)
-        if not refit['ok']:
-            break
-        result, restarted = refit, restarted or again
-        dropped.append(suspect)
-    preps = result['preps']
-    measured = measured_dof(preps, result['tip'])
-    z, ev, iterations = result['z'], result['ev'], result['iterations']
+            reduced[i] = reduced[i].without([reading], self.chain.joints[i].string_names)
+        return self.tracked(reduced, kept, fit.z, True)
+
+
+def _failed_chain(message: str, n: int, measured: int, dropped: Sequence[tuple[str, str]],
+                  observable: bool, rank: int, cond: float, iterations: int = 0
+                  ) -> ChainEstimate:
+    return ChainEstimate(False, message, _nan(n, 6), _nan(6 * n, 6 * n), _nan(n, 6, 6),
+                         _nan(6), _nan(6, 6), _nan(4, 4), _nan(6, 6), _nan(6, 6),
+                         _nan(6, 6), math.nan, measured - 6, observable, rank, cond,
+                         iterations, None, None, measured - 6,
+                         tuple(name for name, _ in dropped),
+                         tuple(f'{name}: {why}' for name, why in dropped))
+
+
+def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, restarted: bool,
+                    dropped: Sequence[tuple[str, str]], stiffness_std: bool,
+                    probability: float) -> ChainEstimate:
+    """The :class:`ChainEstimate` of the last fit: a failure naming what is missing or why it
+    did not converge, else the screws, the tip load, pose and stiffness with covariances."""
+    n = chain.n_joints
+    measured = _measured_dof(fit.preps, fit.tip)
+    z, ev, iterations = fit.z, fit.ev, fit.iterations
     if ev is None:
-        return failed(f'{inputs}: {result["why"]}', True, 0, math.inf, iterations)
+        return _failed_chain(f'{inputs.text}: {fit.why}', n, measured, dropped, True, 0,
+                             math.inf, iterations)
     r, _, _, _, state = ev
-    C, rank, cond = result['C'], result['rank'], result['cond']
+    C, rank, cond = fit.C, fit.rank, fit.cond
     if rank < 6:
-        return failed(_chain_missing_message(result['null'], n, inputs, rank), False, rank,
-                      cond, iterations)
-    if not result['converged']:
-        return failed(f'{inputs}: {result["why"]}', True, rank, cond, iterations)
+        return _failed_chain(_chain_missing_message(fit.null, n, inputs.text, rank), n,
+                             measured, dropped, False, rank, cond, iterations)
+    if not fit.converged:
+        return _failed_chain(f'{inputs.text}: {fit.why}', n, measured, dropped, True, rank,
+                             cond, iterations)
+    g, rest = inputs.gravity, inputs.rest
     xi = z[:6 * n].reshape(n, 6)
     W = z[6 * n:]
     joint_cov = np.empty((n, 6, 6))
@@ -1491,7 +1664,7 @@ def estimate_chain_state(chain: JointChain,
         P = sm.pose_jacobian(xi[i])
         joint_cov[i] = P @ C[6 * i:6 * i + 6, 6 * i:6 * i + 6] @ P.T
     T_tip = state.tip_transform
-    M = np.zeros((6, size))
+    M = np.zeros((6, 6 * n + 6))
     M[:, :6 * n] = _tip_pose_jacobian(chain, xi, T_tip)
     tip_cov = M @ C @ M.T
     K_tip = chain.tip_stiffness_from_state(state, W, g)
@@ -1499,7 +1672,7 @@ def estimate_chain_state(chain: JointChain,
     return ChainEstimate(True, 'ok', xi.copy(), C[:6 * n, :6 * n], joint_cov, W.copy(),
                          C[6 * n:, 6 * n:], T_tip.copy(), 0.5 * (tip_cov + tip_cov.T), K_tip,
                          K_tip_std, float(r @ r), measured - 6, True, rank, cond, iterations,
-                         state, result['consistent'], measured - 6,
+                         state, fit.consistent(probability), measured - 6,
                          tuple(name for name, _ in dropped),
                          tuple(f'{name}: {why}' for name, why in dropped), restarted)
 

@@ -34,6 +34,7 @@ a batch (the fallback and the reference the tests hold the kernel to, 1e-13).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, fields
@@ -129,6 +130,83 @@ def _check_single_screw(xi: FloatArray) -> None:
     if not math.isfinite(sum(values)):
         as_screws(xi)
     math.sqrt(values[0] ** 2 + values[1] ** 2 + values[2] ** 2)
+
+
+def _config_value(section: Mapping[str, Any], key: str, default: Any = None) -> Any:
+    """``section[key]`` (None counts as missing), else ``default``; without a default a missing
+    key is a ValueError naming ``joint.<key>``."""
+    if key in section and section[key] is not None:
+        return section[key]
+    if default is None:
+        raise ValueError(f'joint.{key} is missing')
+    return default
+
+
+def _config_points(key: str, value: Any) -> FloatArray:
+    """The (k, 3) points of the flat xyz list ``joint.<key>``."""
+    arr = finite_array(f'joint.{key}', value).ravel()
+    if arr.size == 0 or arr.size % 3:
+        raise ValueError(f'joint.{key} must be a flat list of x, y, z triples, '
+                         f'got {arr.size} values')
+    return arr.reshape(-1, 3)
+
+
+def _config_nodes(section: Mapping[str, Any]
+                  ) -> tuple[FloatArray, list[str], FloatArray | None, list[str]]:
+    """Link 1's nodes and names, link 2's (None: the same points) and names of a ``joint``
+    config section (names default to the indices, link 2's to link 1's when it has its
+    points)."""
+    p1 = _config_points('link1_nodes', _config_value(section, 'link1_nodes'))
+    names1 = [str(x) for x in _config_value(section, 'node_names', [])] or [
+        str(i) for i in range(p1.shape[0])]
+    if len(names1) != p1.shape[0]:
+        raise ValueError(f'joint.node_names has {len(names1)} names for {p1.shape[0]} nodes')
+    raw2 = _config_value(section, 'link2_nodes', [])
+    p2 = _config_points('link2_nodes', raw2) if len(raw2) else None
+    names2 = [str(x) for x in _config_value(section, 'link2_node_names', [])]
+    if p2 is None:
+        names2 = names2 or names1
+        n2 = p1.shape[0]
+    else:
+        names2 = names2 or [str(i) for i in range(p2.shape[0])]
+        n2 = p2.shape[0]
+    if len(names2) != n2:
+        raise ValueError(f'joint.link2_node_names has {len(names2)} names for {n2} nodes')
+    return p1, names1, p2, names2
+
+
+def _config_connections(section: Mapping[str, Any], names1: list[str], names2: list[str]
+                        ) -> NDArray[np.int_]:
+    """The strings' (n, 2) node indices on link 1 and link 2 from ``string_link1_nodes`` and
+    ``string_link2_nodes`` (node names)."""
+    ends1 = [str(x) for x in _config_value(section, 'string_link1_nodes')]
+    ends2 = [str(x) for x in _config_value(section, 'string_link2_nodes')]
+    if len(ends1) != len(ends2) or not ends1:
+        raise ValueError('joint.string_link1_nodes and joint.string_link2_nodes must be '
+                         f'non-empty and of equal length, got {len(ends1)} and {len(ends2)}')
+    try:
+        return np.array([[names1.index(a), names2.index(b)]
+                         for a, b in zip(ends1, ends2, strict=True)])
+    except ValueError:
+        unknown = sorted({a for a in ends1 if a not in names1}
+                         | {b for b in ends2 if b not in names2})
+        raise ValueError(f'joint.string_link1_nodes / string_link2_nodes name unknown '
+                         f'nodes {unknown}') from None
+
+
+def _config_per_string(key: str, value: Any, n: int, allow_empty: bool = False
+                       ) -> FloatArray | None:
+    """``n`` values of ``key`` (one for all is repeated); None for an empty one when
+    ``allow_empty``."""
+    arr = np.asarray(value, dtype=np.float64).ravel()
+    if arr.size == 0 and allow_empty:
+        return None
+    if arr.size == 1:
+        arr = np.full(n, arr[0])
+    if arr.size != n:
+        raise ValueError(f'{key} must have {n} values (one per string), '
+                         f'got {arr.size}')
+    return arr
 
 
 class JointModel:
@@ -266,74 +344,23 @@ class JointModel:
         one; :func:`~tensegrity_stiffness.mechanics.unloaded.resolve_initial_screw`). Errors
         name the offending key.
         """
-        def get(key: str, default: Any = None, required: bool = True) -> Any:
-            if key in section and section[key] is not None:
-                return section[key]
-            if required and default is None:
-                raise ValueError(f'joint.{key} is missing')
-            return default
-
-        def nodes(key: str, value: Any) -> FloatArray:
-            arr = finite_array(f'joint.{key}', value).ravel()
-            if arr.size == 0 or arr.size % 3:
-                raise ValueError(f'joint.{key} must be a flat list of x, y, z triples, '
-                                 f'got {arr.size} values')
-            return arr.reshape(-1, 3)
-
-        p1 = nodes('link1_nodes', get('link1_nodes'))
-        names1 = [str(x) for x in get('node_names', [], required=False)] or [
-            str(i) for i in range(p1.shape[0])]
-        if len(names1) != p1.shape[0]:
-            raise ValueError(f'joint.node_names has {len(names1)} names for {p1.shape[0]} nodes')
-        raw2 = get('link2_nodes', [], required=False)
-        p2 = nodes('link2_nodes', raw2) if len(raw2) else None
-        names2 = [str(x) for x in get('link2_node_names', [], required=False)]
-        if p2 is None:
-            names2 = names2 or names1
-            n2 = p1.shape[0]
-        else:
-            names2 = names2 or [str(i) for i in range(p2.shape[0])]
-            n2 = p2.shape[0]
-        if len(names2) != n2:
-            raise ValueError(f'joint.link2_node_names has {len(names2)} names for {n2} nodes')
-        ends1 = [str(x) for x in get('string_link1_nodes')]
-        ends2 = [str(x) for x in get('string_link2_nodes')]
-        if len(ends1) != len(ends2) or not ends1:
-            raise ValueError('joint.string_link1_nodes and joint.string_link2_nodes must be '
-                             f'non-empty and of equal length, got {len(ends1)} and {len(ends2)}')
-        try:
-            conn = np.array([[names1.index(a), names2.index(b)] for a, b in zip(ends1, ends2,
-                                                                                 strict=True)])
-        except ValueError:
-            unknown = sorted({a for a in ends1 if a not in names1}
-                             | {b for b in ends2 if b not in names2})
-            raise ValueError(f'joint.string_link1_nodes / string_link2_nodes name unknown '
-                             f'nodes {unknown}') from None
-        n = len(ends1)
-
-        def per_string(key: str, value: Any, allow_empty: bool = False) -> FloatArray | None:
-            arr = np.asarray(value, dtype=np.float64).ravel()
-            if arr.size == 0 and allow_empty:
-                return None
-            if arr.size == 1:
-                arr = np.full(n, arr[0])
-            if arr.size != n:
-                raise ValueError(f'{key} must have {n} values (one per string), '
-                                 f'got {arr.size}')
-            return arr
-
-        raw_x0 = np.asarray(get('initial_screw', [], required=False), dtype=np.float64).ravel()
+        p1, names1, p2, names2 = _config_nodes(section)
+        conn = _config_connections(section, names1, names2)
+        n = len(conn)
+        get = functools.partial(_config_value, section)
+        raw_x0 = np.asarray(get('initial_screw', []), dtype=np.float64).ravel()
         # The values are checked once, by the constructor; its errors name the argument, which
         # is the config key.
         try:
-            model = cls(p1, conn, per_string('stiffness', get('stiffness')),
-                       per_string('rest_lengths', get('rest_lengths')), link2_nodes=p2,
-                       max_lengths=per_string('max_lengths', get('max_lengths', [],
-                                                                 required=False), True),
-                       force_law=str(get('force_law', 'hooke', required=False)),
+            model = cls(p1, conn, _config_per_string('stiffness', get('stiffness'), n),
+                       _config_per_string('rest_lengths', get('rest_lengths'), n),
+                       link2_nodes=p2,
+                       max_lengths=_config_per_string('max_lengths', get('max_lengths', []), n,
+                                                      allow_empty=True),
+                       force_law=str(get('force_law', 'hooke')),
                        node_names=names1, link2_node_names=names2,
-                       string_names=[str(x) for x in get('string_names', [], required=False)]
-                       or None, initial_screw=raw_x0 if raw_x0.size else None)
+                       string_names=[str(x) for x in get('string_names', [])] or None,
+                       initial_screw=raw_x0 if raw_x0.size else None)
         except ValueError as exc:
             raise ValueError(f'joint.{exc}') from None
         # The one rule for a missing or non-equilibrium initial_screw (mechanics.unloaded).

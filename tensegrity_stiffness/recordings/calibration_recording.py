@@ -341,67 +341,105 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
         raise RecordingError(f'{path}: not a readable rosbag2: {exc}') from None
     deserialize = jazzy_typestore().deserialize_cdr
     try:
-        present = {c.topic: c.msgtype for c in reader.connections}
-        expected = {'pose': POSE_TYPES, 'rest_lengths': (ARRAY_TYPE,),
-                    'tensions': (ARRAY_TYPE,), 'wrench': (WRENCH_TYPE,),
-                    'lengths': (ARRAY_TYPE,)}
-        use: dict[str, str] = {}
-        absent: dict[str, str] = {}
-        for signal, topic in wanted.items():
-            if topic is None:
-                continue
-            if topic not in present:
-                if signal in required or signal == 'rest_lengths':
-                    have = ', '.join(f'{t} ({m})' for t, m in sorted(present.items())) or 'none'
-                    raise RecordingError(f'{path}: no {signal} topic {topic} in the bag; its '
-                                         f'topics: {have}')
-                absent[signal] = topic
-                continue
-            if present[topic] not in expected[signal]:
-                raise RecordingError(f'{path}: topic {topic} has type {present[topic]}, '
-                                     f'expected {" or ".join(expected[signal])} for {signal}')
-            use[signal] = topic
-        if not {'pose', 'tensions', 'wrench', 'lengths'} & set(use):
-            raise RecordingError(f'{path}: none of the pose, tensions, wrench topics '
-                                 f'({wanted["pose"]}, {wanted["tensions"]}, '
-                                 f'{wanted["wrench"]}) is in the bag: nothing to fit to')
-        signal_of = {topic: signal for signal, topic in use.items()}
-        connections = [c for c in reader.connections if c.topic in signal_of]
-        total = sum(c.msgcount for c in connections)
-        series: dict[str, list[tuple[float, Any]]] = {s: [] for s in use}
-        skipped = 0
-        for done, (connection, log_time, raw) in enumerate(
-                reader.messages(connections=connections), start=1):
-            signal = signal_of[connection.topic]
-            try:
-                msg = deserialize(raw, connection.msgtype)
-                t = _stamp_seconds(msg, log_time)
-                if signal == 'pose':
-                    value = pose_message_to_transform(
-                        msg.pose.pose if connection.msgtype == POSE_TYPES[1] else msg.pose)
-                elif signal == 'wrench':
-                    value = _wrench_of(msg)
-                elif signal == 'rest_lengths':
-                    value = multiarray_to_array(msg, n_strings)
-                    if np.any(value <= 0.0):
-                        raise ValueError('rest lengths must be > 0')
-                else:  # NaN: not measured, so the payload with NaN kept
-                    value = measured_array(multiarray_payload(
-                        msg, max(n_strings, DEFAULT_MAX_LENGTH)), n_strings, signal,
-                        require_any=False)
-            except Exception:  # rosbags raises several types on corrupt CDR
-                skipped += 1
-                continue
-            series[signal].append((t, value))
-            if progress is not None and not done % 1000:
-                progress(done, total)
-        if progress is not None:
-            progress(total, total)
+        use, absent = _bag_topics(path, {c.topic: c.msgtype for c in reader.connections},
+                                  wanted, required)
+        series, skipped = _read_series(reader, deserialize, use, n_strings, progress)
     finally:
         reader.close()
+    return _bag_recording(path, series, use, absent, required, skipped, n_strings, max_age)
+
+
+#: The message types a signal's topic may have.
+_SIGNAL_TYPES = {'pose': POSE_TYPES, 'rest_lengths': (ARRAY_TYPE,), 'tensions': (ARRAY_TYPE,),
+                 'wrench': (WRENCH_TYPE,), 'lengths': (ARRAY_TYPE,)}
+
+
+def _needed(signal: str, required: Sequence[str]) -> bool:
+    """Whether a bag without ``signal`` is refused (the rest lengths always are needed)."""
+    return signal in required or signal == 'rest_lengths'
+
+
+def _bag_topics(path: Path, present: dict[str, str], wanted: dict[str, str | None],
+                required: Sequence[str]) -> tuple[dict[str, str], dict[str, str]]:
+    """The topics to read per signal (``wanted`` among the bag's ``present`` topic: type) and
+    the absent ones; :class:`RecordingError` for a missing needed topic, a topic of the wrong
+    type, or none to fit to."""
+    use: dict[str, str] = {}
+    absent: dict[str, str] = {}
+    for signal, topic in wanted.items():
+        if topic is None:
+            continue
+        if topic not in present:
+            if _needed(signal, required):
+                have = ', '.join(f'{t} ({m})' for t, m in sorted(present.items())) or 'none'
+                raise RecordingError(f'{path}: no {signal} topic {topic} in the bag; its '
+                                     f'topics: {have}')
+            absent[signal] = topic
+            continue
+        if present[topic] not in _SIGNAL_TYPES[signal]:
+            raise RecordingError(f'{path}: topic {topic} has type {present[topic]}, '
+                                 f'expected {" or ".join(_SIGNAL_TYPES[signal])} for {signal}')
+        use[signal] = topic
+    if not {'pose', 'tensions', 'wrench', 'lengths'} & set(use):
+        raise RecordingError(f'{path}: none of the pose, tensions, wrench topics '
+                             f'({wanted["pose"]}, {wanted["tensions"]}, '
+                             f'{wanted["wrench"]}) is in the bag: nothing to fit to')
+    return use, absent
+
+
+def _message_value(signal: str, msg: Any, msgtype: str, n_strings: int) -> Any:
+    """The value of a ``signal``'s message (ValueError when it has the wrong size or, for rest
+    lengths, is not positive)."""
+    if signal == 'pose':
+        return pose_message_to_transform(msg.pose.pose if msgtype == POSE_TYPES[1] else msg.pose)
+    if signal == 'wrench':
+        return _wrench_of(msg)
+    if signal == 'rest_lengths':
+        value = multiarray_to_array(msg, n_strings)
+        if np.any(value <= 0.0):
+            raise ValueError('rest lengths must be > 0')
+        return value
+    # NaN: not measured, so the payload with NaN kept
+    return measured_array(multiarray_payload(msg, max(n_strings, DEFAULT_MAX_LENGTH)),
+                          n_strings, signal, require_any=False)
+
+
+def _read_series(reader: Any, deserialize: Callable[[bytes, str], Any], use: dict[str, str],
+                 n_strings: int, progress: Callable[[int, int], None] | None
+                 ) -> tuple[dict[str, list[tuple[float, Any]]], int]:
+    """Every message of the ``use`` topics as (time, value) per signal, and how many could not
+    be decoded or had the wrong size (skipped); ``progress(done, total)`` every 1000."""
+    signal_of = {topic: signal for signal, topic in use.items()}
+    connections = [c for c in reader.connections if c.topic in signal_of]
+    total = sum(c.msgcount for c in connections)
+    series: dict[str, list[tuple[float, Any]]] = {s: [] for s in use}
+    skipped = 0
+    for done, (connection, log_time, raw) in enumerate(
+            reader.messages(connections=connections), start=1):
+        signal = signal_of[connection.topic]
+        try:
+            msg = deserialize(raw, connection.msgtype)
+            t = _stamp_seconds(msg, log_time)
+            value = _message_value(signal, msg, connection.msgtype, n_strings)
+        except Exception:  # rosbags raises several types on corrupt CDR
+            skipped += 1
+            continue
+        series[signal].append((t, value))
+        if progress is not None and not done % 1000:
+            progress(done, total)
+    if progress is not None:
+        progress(total, total)
+    return series, skipped
+
+
+def _bag_recording(path: Path, series: dict[str, list[tuple[float, Any]]], use: dict[str, str],
+                   absent: dict[str, str], required: Sequence[str], skipped: int,
+                   n_strings: int, max_age: float) -> Recording:
+    """The instants of the read ``series`` (:func:`_align`); a topic without a valid message is
+    absent, or a :class:`RecordingError` when it is needed."""
     for signal, items in series.items():
         if not items:  # the topic is there, without a (valid) message
-            if signal in required or signal == 'rest_lengths':
+            if _needed(signal, required):
                 raise RecordingError(f'{path}: no valid message on the {signal} topic '
                                      f'{use[signal]} in the bag'
                                      + (f' ({skipped} bad messages skipped)' if skipped else ''))
