@@ -110,8 +110,8 @@ def calibrated_document(document: Any, result: CalibrationResult) -> Any:
 def header_lines(result: CalibrationResult, recording: str) -> list[str]:
     """Comment lines for the calibrated config: source, table, what is not identifiable."""
     lines = [f'Calibrated by tensegrity-stiffness calibrate from {recording}',
-             f'{len(result.screws)} samples, {len(result.outliers)} outliers and '
-             f'{len(result.near_slack)} near slack left out; '
+             f'{len(result.screws)} samples, {len(result.outliers)} outliers left out, '
+             f'{len(result.near_slack)} near slack kept; '
              f'chi2/dof {result.chi2 / max(result.dof, 1):.3f}',
              *table_lines(result)]
     if result.unidentifiable:
@@ -240,7 +240,7 @@ def run(recording_path: str, config_path: str | None, *, fmt: str | None,
                      + ' '.join(map(str, result.outliers)))
     if result.near_slack:
         lines.append(f'near slack ({len(result.near_slack)} samples with a string within '
-                     f'{SLACK_MARGIN:g} std of slack, left out): '
+                     f'{SLACK_MARGIN:g} std of slack, kept, held taut): '
                      + ' '.join(map(str, result.near_slack)))
     if result.unidentifiable:
         lines.append('not identifiable from this recording (held at nominal):')

@@ -63,9 +63,12 @@ Method
    sparse Jacobian (LSMR) reaches the same estimate (``bench/bench_calibration.py`` prints both:
    0.001 std apart, 2.3x the time at 1,000 samples); the elimination solves each step exactly
    and gives the information of step 2 and the covariance from the same blocks.
-   Then the samples with a string within :data:`SLACK_MARGIN` std of slack (:func:`_near_slack`:
-   the model is not smooth there, and a fit that disagrees with the truth on a string's slack
-   reports too small a std) are left out, and the fit is repeated (``near_slack``).
+   Then every string that is not clearly slack (its stretch ``l_j - l0_j`` above
+   ``-SLACK_MARGIN`` std) is held on its taut branch (:func:`_taut_branch`: eq. 8 continued
+   below ``l0``, smooth) and the fit is repeated until that set stops changing
+   (:func:`_hold_taut`): the model is not smooth at ``l = l0``, and a fit free to slacken a
+   string that is taut in truth leans on the lost information and reports too small a std.
+   The samples with a string within ``SLACK_MARGIN`` std of slack are counted (``near_slack``).
 4. Covariance ``V (V^T S V)^-1 V^T`` (``V`` the identifiable subspace, ``S`` at the estimate):
    the Gauss-Newton covariance, equal to the Cramer-Rao bound of the same data model at the
    truth (:func:`cramer_rao_std`).
@@ -77,7 +80,7 @@ import math
 import re
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -137,6 +140,9 @@ FIT_TOLERANCE = 1e-8
 ROBUST_TOLERANCE = 1e-6
 #: A sample with a string whose stretch is within this many std of 0 (slack) is left out.
 SLACK_MARGIN = 3.0
+#: Passes of "hold the strings not clearly slack on their taut branch, fit again" (until the
+#: held set stops changing).
+HOLD_PASSES = 4
 #: Levenberg-Marquardt iterations of one fit stage.
 MAX_ITERATIONS = 100
 #: A sample with a known load is at equilibrium when every component of ``F + W`` is below this
@@ -329,6 +335,42 @@ def _tension_rest_length_slopes(model: JointModel, state: JointState, rest: Floa
     return np.where(taut, -k / state.lengths, np.where(state.saturated, saturated_slope, 0.0))
 
 
+def _taut_branch(model: JointModel, state: JointState, xi: FloatArray, rest: FloatArray,
+                 held: NDArray[np.bool_]) -> tuple[JointState, FloatArray]:
+    """``state`` (N samples) with every string of ``held`` (N, n) that it finds slack continued
+    on its taut branch (eq. 8 without the clamp at zero: a slightly negative tension), and
+    ``d phi / d l`` (N, n) to match: the model of a fit that holds those strings taut, smooth
+    across ``l = l0``. Each continued string adds ``phi_j w_j`` to the wrench and
+    ``Z_j A_j [hat(q_j), -I] J`` to ``K`` (eq. 10, ``A_j = gamma_j s_j s_j^T + beta_j I``)."""
+    dphi = model.string_forces(state.lengths, rest)[1]
+    cont = held & state.slack & ~state.saturated
+    if not cont.any():
+        return state, dphi
+    i, j = np.nonzero(cont)
+    length, l0, k = state.lengths[i, j], rest[i, j], model.k[j]
+    if model.force_law == 'hooke':
+        phi, slope = k * (length - l0), k
+    else:  # 'paper'
+        phi, slope = k * (length - l0) / length, k * l0 / (length * length)
+    s = state.string_vectors[i, j]
+    p1 = model.link1_string_nodes[j]
+    beta = phi / length
+    gamma = (slope - beta) / (length * length)
+    A = gamma[:, None, None] * s[:, :, None] * s[:, None, :] + beta[:, None, None] * np.eye(3)
+    Z = np.concatenate([np.broadcast_to(np.eye(3), A.shape), hat3(p1)], axis=1)  # (m, 6, 3)
+    motion = np.concatenate([hat3(p1 - s), np.broadcast_to(-np.eye(3), A.shape)], axis=2)
+    K = Z @ A @ motion @ left_jacobian_se3(xi[i])
+    tensions, wrench, stiffness = state.tensions.copy(), state.wrench.copy(), \
+        state.stiffness.copy()
+    tensions[i, j] = phi
+    dphi = dphi.copy()
+    dphi[i, j] = slope
+    np.add.at(wrench, i, beta[:, None] * (Z @ s[..., None])[..., 0])
+    np.add.at(stiffness, i, K)
+    slack = state.slack & ~cont
+    return replace(state, tensions=tensions, slack=slack, wrench=wrench, stiffness=stiffness), dphi
+
+
 def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArray:
     """``w_j = [u_j; p1_j x u_j]`` (..., n, 6): the wrench of a unit tension in string j."""
     u = state.string_vectors / state.lengths[..., None]
@@ -385,6 +427,8 @@ class _Problem:
         # Scaled coordinates: k = k_nom (1 + STIFFNESS_UNIT z_k), d = OFFSET_UNIT z_d.
         self.unit = np.concatenate([STIFFNESS_UNIT * self.k_nominal, np.full(self.n, OFFSET_UNIT)])
         self._models: dict[bytes, JointModel] = {}
+        #: (N, n) strings held on their taut branch (:func:`_taut_branch`): none at first.
+        self.taut = np.zeros((data.n_samples, self.n), bool)
 
     def parameters(self, z: FloatArray) -> tuple[FloatArray, FloatArray]:
         """(k, d) of scaled coordinates z (2n,)."""
@@ -412,7 +456,7 @@ class _Problem:
         rest = data.rest + d
         if np.any(rest <= 0.0):
             raise ValueError('a rest length reached zero')
-        state = model.evaluate(xi, rest)
+        state, dphi_dl = _taut_branch(model, model.evaluate(xi, rest), xi, rest, self.taut)
         N = xi.shape[0]
         R = 12 + 2 * n
         raw = np.zeros((N, R))
@@ -447,7 +491,6 @@ class _Problem:
         jx[:, 6:12] = state.stiffness
         w = _string_wrench_directions(model, state)  # (N, n, 6)
         dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
-        dphi_dl = model.string_forces(state.lengths, rest)[1]  # as sensor_models does
         jx[:, 12:12 + n] = dphi_dl[..., None] * dl
         jx[:, 12 + n:] = dl
         scale = self.mask / self.std  # (N, R)
@@ -521,7 +564,8 @@ class _Problem:
         found = np.zeros(len(rows), bool)
         for _ in range(EQUILIBRIUM_ITERATIONS):
             try:
-                state = model.evaluate(xi, rest)
+                state = _taut_branch(model, model.evaluate(xi, rest), xi, rest,
+                                     self.taut[rows])[0]
             except ValueError:
                 return xi, np.zeros(len(rows), bool)
             error = state.wrench + loads
@@ -639,7 +683,8 @@ class CalibrationResult:
     eliminated, scaled coordinates), ``residual_rms_before`` / ``residual_rms_after`` per
     measurement kind (its unit, :data:`RESIDUAL_UNITS`; before: nominal parameters with each
     screw fitted), ``outliers`` the sample indices left out, ``near_slack`` the (inlier) samples
-    left out because a string was within :data:`SLACK_MARGIN` std of slack, ``screws`` (N, 6)
+    with a string within :data:`SLACK_MARGIN` std of slack at the first fit (kept; the strings
+    not clearly slack held on their taut branch), ``screws`` (N, 6)
     the fitted screws,
     ``chi2`` and ``dof`` of the final fit (``chi2 / dof`` near 1 when the noise model is right).
     """
@@ -1104,14 +1149,9 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         iterations += used
     near_slack = np.zeros(0, np.intp)
     if basis_full.shape[1] and converged:
-        # Samples with a string within SLACK_MARGIN std of slack: left out, and the fit again.
-        near_slack = _near_slack(problem, problem.evaluate(z, xi_fit).subset(inliers), columns,
-                                 ident.basis, P)
-        if near_slack.size:
-            rows[near_slack] = False
-            inliers = np.setdiff1d(inliers, near_slack)
-            z, xi_fit, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear', rows)
-            iterations += used
+        z, xi_fit, used, converged, near_slack = _hold_taut(problem, z, xi_fit, basis_full,
+                                                            rows, inliers, columns, ident.basis)
+        iterations += used
     success = True
     if not basis_full.shape[1]:
         success, message = False, ('no parameter is identifiable from these samples: all held '
@@ -1157,13 +1197,39 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         seconds=time.perf_counter() - started)
 
 
-def _near_slack(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
-                basis: FloatArray, n_parameters: int) -> NDArray[np.intp]:
-    """The samples of ``ev`` (a linear fit's inliers, with Jacobians) with a string whose
-    stretch ``l_j - l0_j`` is within :data:`SLACK_MARGIN` std of 0 (slack or taut is then
-    uncertain: the model is not smooth there and the covariance would not hold); none when
-    leaving them out would leave too few measurements. The std is linearized in the sample's
-    own unknown and the parameters with their joint covariance (Schur complement:
+def _hold_taut(problem: _Problem, z: FloatArray, xi: FloatArray, basis_full: FloatArray,
+               rows: NDArray[np.bool_], inliers: NDArray[np.intp], columns: NDArray[np.intp],
+               basis: FloatArray) -> tuple[FloatArray, FloatArray, int, bool, NDArray[np.intp]]:
+    """The fit again with every string of the inliers that is not clearly slack (stretch above
+    ``-SLACK_MARGIN`` std, :func:`_stretch_std`) held on its taut branch (:func:`_taut_branch`),
+    repeated until the held set stops changing (at most :data:`HOLD_PASSES`). Near ``l = l0``
+    the model is not smooth: a fit free to slacken a string that is taut in truth (its fitted
+    stretch a little below zero through the noise) loses that string's information there and
+    leans on it, and its error exceeds the covariance (docs/calibration.md, "Near a string's
+    slack boundary"). Returns (z, screws, iterations, converged, the samples with a string
+    within ``SLACK_MARGIN`` std of slack at the first fit)."""
+    stretch, std = _stretch_std(problem, problem.evaluate(z, xi).subset(inliers), columns, basis)
+    near = inliers[np.any(np.abs(stretch) < SLACK_MARGIN * std, axis=1)]
+    held = stretch > -SLACK_MARGIN * std
+    iterations, converged = 0, True
+    for _ in range(HOLD_PASSES):
+        problem.taut[inliers] = held
+        z, xi, used, converged = _solve(problem, z, basis_full, xi, 'linear', rows)
+        iterations += used
+        stretch, std = _stretch_std(problem, problem.evaluate(z, xi).subset(inliers), columns,
+                                    basis)
+        again = stretch > -SLACK_MARGIN * std
+        if not converged or np.array_equal(again, held):
+            break
+        held = again
+    return z, xi, iterations, converged, near
+
+
+def _stretch_std(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
+                 basis: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """(stretch ``l_j - l0_j``, its std) (N, n) of the samples of ``ev`` (a linear fit's
+    inliers, with Jacobians). The std is linearized in the sample's own unknown and the
+    parameters with their joint covariance (Schur complement:
     ``Cov u = A^+ + A^+ B C B^T A^+``, ``Cov(u, z) = -A^+ B C``; the screw
     ``d xi = G du + H dz``, ``G = -K^-1``, ``H = G dF/dz`` for a known load, else ``G = I``,
     ``H = 0``)."""
@@ -1193,13 +1259,9 @@ def _near_slack(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
             c = int(at[0])
             var[:, j] += OFFSET_UNIT * (OFFSET_UNIT * C[c, c]
                                         - 2.0 * np.einsum('na,na->n', L[:, j], cov_xz[:, :, c]))
-    std = np.sqrt(np.maximum(var, 0.0))
-    near = np.any(np.abs(ev.stretch) < SLACK_MARGIN * std, axis=1)
-    keep = ~near
-    if 6 * int(np.sum(~problem.exact[ev.index[keep]])) + n_parameters > \
-            int(problem.mask[ev.index[keep]].sum()):
-        return np.zeros(0, np.intp)
-    return ev.index[near]
+    return ev.stretch, np.sqrt(np.maximum(var, 0.0))
+
+
 
 
 def _only_scale_unidentifiable(ident: Identifiability, names: Sequence[str], name: str) -> bool:

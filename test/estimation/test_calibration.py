@@ -176,8 +176,7 @@ def test_poses_only_unloaded_fits_ratios_and_offsets_not_the_scale(truth):
     assert 0.7 < result.chi2 / result.dof < 1.3
     held = np.zeros((24, 1))
     held[:12, 0] = 1.0 / np.sqrt(12.0)
-    kept = np.setdiff1d(np.arange(200), result.near_slack)
-    bound = _exact_load_bound(model, k, d, states[kept], noise, held)
+    bound = _exact_load_bound(model, k, d, states[:200], noise, held)
     ratio = np.concatenate([ks, ds]) / bound
     assert np.all((ratio < MAX_CRB_FACTOR) & (ratio > 1 / MAX_CRB_FACTOR)), ratio
 
@@ -198,7 +197,7 @@ def test_precise_and_exact_loads_converge(truth, exact):
     result = cal.calibrate_joint(model, samples, noise=noise)
     assert result.success, result.message
     assert all(result.identifiable.values())
-    keep = np.setdiff1d(np.arange(200), result.outliers + result.near_slack)
+    keep = np.setdiff1d(np.arange(200), result.outliers)
     crb = cal.cramer_rao_std(model, k, d, states.screws[keep], [samples[i] for i in keep],
                              noise=noise)
     _check_against_truth(result, k, d, crb)
@@ -269,28 +268,30 @@ def test_reported_covariance_is_honest_over_seeded_trials():
 
 @pytest.mark.slow
 def test_covariance_honest_near_slack_boundaries_over_20_draws():
-    """Twin recordings as docs/calibration.md's table (rest lengths +-3 mm, loads 0.6 N and
-    0.01 N m: many samples with a string near slack; a fit's model and the truth disagreed on
-    whether a string was slack in about 3 string-samples per fit): the mean 24-parameter NEES
-    over 20 noise draws lies in the two-sided 95 % band of chi-square(24 x 20) / 20 (21.1-27.0),
-    the samples near slack left out and counted."""
+    """Twin recordings made as docs/calibration.md recommends (rest lengths +-3 mm, loads "as
+    large as the strings allow without going slack": every string taut, many near slack): the
+    mean 24-parameter NEES over 20 noise draws lies in the two-sided 95 % band of
+    chi-square(24 x 20) / 20 (21.1-27.0), the samples near slack kept and counted. Measured
+    24.8; 30.3 when the fit was free to slacken those strings (and left the samples near slack
+    out)."""
     from scipy.stats import chi2
 
     model = nominal_model()
-    k, d = true_parameters(model, 2)
-    states = configurations(model, k, d, 200, 2)
+    k, d = true_parameters(model, 3)
+    states = configurations(model, k, d, 200, 3, taut=True)
     truth = np.concatenate([k, d])
     trials = 20
-    nees, dropped = [], []
+    nees, near = [], []
     for trial in range(trials):
         samples = measure(model, states, 100 + trial, cal.CalibrationNoise())
         result = cal.calibrate_joint(model, samples, loss='linear')
+        assert result.success, result.message
         error = np.array([result.parameters[name] for name in result.names]) - truth
         nees.append(float(error @ np.linalg.solve(result.covariance, error)))
-        dropped.append(len(result.near_slack))
+        near.append(len(result.near_slack))
     low, high = chi2.ppf([0.025, 0.975], 24 * trials) / trials
     assert low <= np.mean(nees) <= high, (np.mean(nees), low, high)
-    assert 0 < min(dropped) and max(dropped) < 100, dropped
+    assert 0 < min(near) and max(near) < 150, near
 
 
 def test_bad_input_raises_value_error_naming_the_field(truth):
