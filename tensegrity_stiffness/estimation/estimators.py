@@ -140,6 +140,11 @@ MIN_LENGTH_SCALE = 1e-6
 #: other cannot be told apart (with a redundancy of 1 every reading's is the same): none is left
 #: out.
 AMBIGUITY = 0.02
+#: The most readings one estimate leaves out as contradicted. Left out only when the rest then
+#: passes the chi-square test: a set that stays inconsistent after as many (the joint moving,
+#: so that the static model fits no subset; a wrong model) keeps every reading and is reported
+#: inconsistent, instead of a fit to whichever readings happened to agree.
+MAX_CONTRADICTED = 2
 
 
 def consistency_threshold(redundancy: int, probability: float = CONSISTENCY_PROBABILITY
@@ -990,19 +995,25 @@ def _reject_contradicted(fit: _F, restarted: bool, dropped: list[tuple[str, str]
                          ) -> tuple[_F, bool]:
     """Data snooping (docs/estimation.md#trust): while ``fit`` succeeds but fails the chi-square
     test at ``probability`` with redundancy left, the reading the others contradict
-    (:func:`suspect_reading` over ``readings(fit)``) is left out, appended to ``dropped``, and
-    the rest fitted again by ``refit_without(fit, name)`` (its fit and whether it restarted
-    cold; None when it cannot). Stops when no reading stands out or the refit fails. Returns
-    the last fit and whether any fit restarted cold (or ``restarted``)."""
-    while fit.ok and fit.redundancy > 0 and fit.consistent(probability) is False:
-        suspect = suspect_reading(fit.r, fit.J, fit.C, readings(fit), fit.redundancy)
+    (:func:`suspect_reading` over ``readings(fit)``) is left out and the rest fitted again by
+    ``refit_without(fit, name)`` (its fit and whether it restarted cold; None when it cannot),
+    at most :data:`MAX_CONTRADICTED` times. The readings left out are kept out (appended to
+    ``dropped``) only when the last refit passes the test; otherwise ``fit`` stands with every
+    reading, inconsistent. Returns the fit and whether it restarted cold (or ``restarted``)."""
+    trial, trial_restarted, suspects = fit, restarted, []
+    while (len(suspects) < MAX_CONTRADICTED and trial.ok and trial.redundancy > 0
+           and trial.consistent(probability) is False):
+        suspect = suspect_reading(trial.r, trial.J, trial.C, readings(trial), trial.redundancy)
         if suspect is None:
             break
-        refit = refit_without(fit, suspect[0])
+        refit = refit_without(trial, suspect[0])
         if refit is None or not refit[0].ok:
             break
-        fit, restarted = refit[0], restarted or refit[1]
-        dropped.append(suspect)
+        trial, trial_restarted = refit[0], trial_restarted or refit[1]
+        suspects.append(suspect)
+    if suspects and trial.consistent(probability) is not False:
+        dropped.extend(suspects)
+        return trial, trial_restarted
     return fit, restarted
 
 
