@@ -951,8 +951,8 @@ def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray
     restarted: a warm start that cannot be evaluated, fails or is inconsistent has lost track
     and is fitted again from a cold start (:func:`_initial_screw` without it), whose fit is
     kept when better. Without ``warm``, the cold start's fit (ValueError when its starting
-    point cannot be evaluated)."""
-    cold_start = _initial_screw(model, prep, rest, None)
+    point cannot be evaluated). The cold start (with a known load, an equilibrium solve) is
+    computed only when it is used."""
     if warm is not None:
         try:
             fit = _fit_joint(model, prep, rest, warm, *options)
@@ -961,7 +961,8 @@ def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray
         if fit is not None and fit.on_track(probability):
             return fit, False
         try:
-            cold = _fit_joint(model, prep, rest, cold_start, *options)
+            cold = _fit_joint(model, prep, rest, _initial_screw(model, prep, rest, None),
+                              *options)
         except _InitialPointError:
             cold = None
         if fit is None:
@@ -971,7 +972,8 @@ def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray
             return cold, True
         return (cold, True) if cold is not None and _better(cold, fit) else (fit, False)
     try:
-        return _fit_joint(model, prep, rest, cold_start, *options), False
+        return _fit_joint(model, prep, rest, _initial_screw(model, prep, rest, None),
+                          *options), False
     except _InitialPointError as exc:
         raise ValueError(f'initial_screw: {exc}') from None
 
