@@ -3,6 +3,6 @@
 
 import sys
 
-from tensegrity_stiffness.geometry import screw as _module
+from tensegrity_stiffness.geometry import screw as moved
 
-sys.modules[__name__] = _module
+sys.modules[__name__] = moved
