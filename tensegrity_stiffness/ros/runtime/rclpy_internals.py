@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from rclpy.impl.implementation_singleton import rclpy_implementation as _implementation
+from rclpy.impl.implementation_singleton import rclpy_implementation
 from rclpy.parameter import Parameter
 
 
@@ -35,7 +35,7 @@ class SubscriptionWaitSet:
                  context: Any) -> None:
         self._subscriptions = subscriptions
         self._guards = guard_conditions
-        self._wait_set = _implementation.WaitSet(len(subscriptions), len(guard_conditions),
+        self._wait_set = rclpy_implementation.WaitSet(len(subscriptions), len(guard_conditions),
                                                  0, 0, 0, 0, context.handle)
 
     def wait(self, timeout_ns: int) -> list[Any]:
