@@ -167,13 +167,20 @@ def test_spine_bag_output_equals_the_running_spine_nodes_recorded_output(
     pose's stamp, and re-publishes of it); the node's time of computation elsewhere, the log
     time in the bag."""
     pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+    import collections
     import os
     import time
 
     from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
     from rclpy.serialization import deserialize_message, serialize_message
     from std_msgs.msg import Float64MultiArray
-    from support.ros_harness import LATCHED, NodeProcess, RosClient, unique_namespace
+    from support.ros_harness import (
+        LATCHED,
+        Inbox,
+        NodeProcess,
+        RosClient,
+        unique_namespace,
+    )
 
     ns = unique_namespace('bagspine')
     base = f'{ns}/spine_node'
@@ -191,7 +198,9 @@ def test_spine_bag_output_equals_the_running_spine_nodes_recorded_output(
         proc = NodeProcess(ns, REPO / 'config' / 'default_spine.yaml', executable='spine_node')
     ros = RosClient('bag_spine_test')
     try:
-        log_time = [0]
+        # Each topic's outputs come in the order of the answered inputs: each is written at the
+        # log time of the input it answers, then counted (the test waits on the counts).
+        answered_at = {name: collections.deque() for name in names}
         with Writer(recorded, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
             conns = {name: writer.add_connection(f'{base}/{name}', TYPES[name],
                                                  typestore=TYPESTORE) for name in names}
@@ -200,8 +209,10 @@ def test_spine_bag_output_equals_the_running_spine_nodes_recorded_output(
                 msg_type = rcl_out.get(name, Float64MultiArray)
 
                 def record(msg: Any, name: str = name) -> None:
-                    writer.write(conns[name], log_time[0], serialize_message(msg))
-                inboxes[name] = ros.subscribe(msg_type, f'{base}/{name}')
+                    writer.write(conns[name], answered_at[name].popleft(),
+                                 serialize_message(msg))
+                    inboxes[name](msg)
+                inboxes[name] = Inbox()
                 ros.subscribe_callback(msg_type, f'{base}/{name}', record)
             pubs = {'screws': ros.publisher(Float64MultiArray, f'{base}/screws'),
                     'poses': ros.publisher(PoseArray, f'{base}/poses'),
@@ -218,8 +229,10 @@ def test_spine_bag_output_equals_the_running_spine_nodes_recorded_output(
                 # Raw bytes and a wrong message type cannot be sent on the node's topics.
                 if isinstance(m.msg, bytes) or m.msgtype != TYPESTORE_TYPES[m.topic]:
                     continue
-                log_time[0] = m.t
                 raw = bytes(TYPESTORE.serialize_cdr(m.msg, m.msgtype))
+                if m.t in answered_times:
+                    for queue in answered_at.values():
+                        queue.append(m.t)
                 pubs[m.topic].publish(deserialize_message(raw, rcl_types[m.topic]))
                 if m.t in answered_times:
                     count += 1
