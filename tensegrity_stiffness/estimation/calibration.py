@@ -80,7 +80,7 @@ import math
 import re
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -377,34 +377,65 @@ def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArra
     return np.concatenate([u, np.cross(model.link1_string_nodes, u)], axis=-1)
 
 
+def _empty() -> FloatArray:
+    return np.empty(0)
+
+
+def _parameter_rows(n: int) -> slice:
+    """The residual rows that depend on the parameters: the wrench (6) and the tensions (n)."""
+    return slice(6, 12 + n)
+
+
 @dataclass
 class _Evaluation:
     """Whitened residuals (N, R) and their Jacobians w.r.t. the screws (N, R, 6) and the scaled
-    parameters (N, R, 2n) at one point (rows: pose 6, wrench 6, tensions n, lengths n)."""
+    parameters at one point (rows: pose 6, wrench 6, tensions n, lengths n). Only the wrench and
+    tension rows (:func:`_parameter_rows`) depend on the parameters: their Jacobian is kept for
+    those rows only (``parameter_rows`` (N, 6 + n, 2n); :attr:`jac_parameters` spreads it over
+    all rows)."""
 
     residuals: FloatArray
-    jac_screw: FloatArray
-    jac_parameters: FloatArray
     raw: FloatArray  # unwhitened residuals (N, R)
     wrench: FloatArray  # F(xi; theta) (N, 6), every sample
-    wrench_screw: FloatArray  # d F / d xi = K (N, 6, 6) (with the Jacobians)
-    wrench_parameters: FloatArray  # d F / d z (N, 6, 2n), scaled coordinates, unwhitened
     stretch: FloatArray  # l_j - l0_j (N, n): negative when slack
-    stretch_screw: FloatArray  # d l_j / d xi (N, n, 6) (with the Jacobians)
     index: NDArray[np.intp]  # the samples evaluated (N,)
+    # With the Jacobians (else empty):
+    jac_screw: FloatArray = field(default_factory=_empty)
+    wrench_screw: FloatArray = field(default_factory=_empty)  # d F / d xi = K (N, 6, 6)
+    # K^-1 (N, 6, 6) of the samples with a known load (:meth:`_Problem.normal_equations`), else 0
+    wrench_screw_inverse: FloatArray = field(default_factory=_empty)
+    stretch_screw: FloatArray = field(default_factory=_empty)  # d l_j / d xi (N, n, 6)
+    # With the parameter Jacobians (else empty):
+    parameter_rows: FloatArray = field(default_factory=_empty)  # (N, 6 + n, 2n) whitened
+    wrench_parameters: FloatArray = field(default_factory=_empty)  # d F / d z (N, 6, 2n)
 
     def subset(self, rows: NDArray[np.int64]) -> _Evaluation:
         """The evaluation of the samples ``rows`` only."""
         return _Evaluation(*(a[rows] if a.size else a for a in (
-            self.residuals, self.jac_screw, self.jac_parameters, self.raw, self.wrench,
-            self.wrench_screw, self.wrench_parameters, self.stretch, self.stretch_screw,
-            self.index)))
+            getattr(self, f.name) for f in fields(self))))
 
-    def replace(self, jac_screw: FloatArray, jac_parameters: FloatArray) -> _Evaluation:
-        """The same point with other Jacobians (another chart)."""
-        return _Evaluation(self.residuals, jac_screw, jac_parameters, self.raw, self.wrench,
-                           self.wrench_screw, self.wrench_parameters, self.stretch,
-                           self.stretch_screw, self.index)
+    @property
+    def jac_parameters(self) -> FloatArray:
+        """d r / d z (N, R, 2n) over all rows (zeros where no parameter acts)."""
+        N, R = self.residuals.shape
+        out = np.zeros((N, R, self.parameter_rows.shape[-1]))
+        out[:, _parameter_rows((R - 12) // 2)] = self.parameter_rows
+        return out
+
+
+@dataclass
+class _NormalEquations:
+    """The Gauss-Newton blocks of the (weighted) whitened problem in the coordinates of
+    :meth:`_Problem.normal_equations`: per sample ``A = Jx^T Jx`` (N, 6, 6),
+    ``B = Jx^T Jz`` (N, 6, 2n), ``gx = Jx^T r`` (N, 6); summed over the samples
+    ``C = sum Jz^T Jz`` (2n, 2n) and ``gp = sum Jz^T r`` (2n,) (``B``, ``C``, ``gp`` empty
+    without the parameter Jacobians)."""
+
+    A: FloatArray
+    B: FloatArray
+    C: FloatArray
+    gx: FloatArray
+    gp: FloatArray
 
 
 class _Problem:
@@ -475,11 +506,10 @@ class _Problem:
         raw[:, 12 + n:] = state.lengths - data.lengths
         raw = np.where(self.mask, raw, 0.0)
         residuals = raw / self.std
-        none = np.empty(0)
         stretch = state.lengths - rest
+        index = np.arange(N)
         if not jacobians:
-            return _Evaluation(residuals, none, none, raw, state.wrench, none, none, stretch,
-                               none, np.arange(N))
+            return _Evaluation(residuals, raw, state.wrench, stretch, index)
         J = left_jacobian_se3(xi)  # (N, 6, 6): twist [omega; v] = J dxi
         jx = np.zeros((N, R, 6))
         # Pose: d p = omega x p + v, d log(R R_m^T) = Jl^-1(phi) omega.
@@ -495,42 +525,81 @@ class _Problem:
         jx[:, 12 + n:] = dl
         scale = self.mask / self.std  # (N, R)
         jx *= scale[..., None]
-        if not parameter_jacobians:
-            return _Evaluation(residuals, jx, none, raw, state.wrench, state.stiffness, none,
-                               stretch, dl, np.arange(N))
-        dphi_dl0 = _tension_rest_length_slopes(model, state, rest)
-        jp = np.zeros((N, R, 2 * n))
-        dphi_dk = state.tensions / k
-        jp[:, 6:12, :n] = np.swapaxes(w * dphi_dk[..., None], -1, -2)
-        jp[:, 6:12, n:] = np.swapaxes(w * dphi_dl0[..., None], -1, -2)
+        K_inv = np.zeros((N, 6, 6))
+        if self.loaded.any():
+            K_inv[self.loaded] = np.linalg.inv(state.stiffness[self.loaded])
+        ev = _Evaluation(residuals, raw, state.wrench, stretch, index, jx, state.stiffness,
+                         K_inv, dl)
+        if parameter_jacobians:
+            ev.parameter_rows, ev.wrench_parameters = self._parameter_jacobians(
+                model, state, w, rest, scale)
+        return ev
+
+    def _parameter_jacobians(self, model: JointModel, state: JointState, w: FloatArray,
+                             rest: FloatArray, scale: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(whitened d r / d z of the rows :func:`_parameter_rows` (N, 6 + n, 2n), unwhitened
+        d F / d z (N, 6, 2n)) in scaled coordinates, for the string wrench directions ``w`` and
+        the row scales ``mask / std`` (N, R)."""
+        n = self.n
+        unit_k, unit_d = self.unit[:n], self.unit[n:]
+        dphi_dk = state.tensions / model.k * unit_k
+        dphi_dl0 = _tension_rest_length_slopes(model, state, rest) * unit_d
+        wrench_parameters = np.swapaxes(np.concatenate(
+            [w * dphi_dk[..., None], w * dphi_dl0[..., None]], axis=1), 1, 2)
+        jp = np.zeros((len(w), 6 + n, 2 * n))
+        jp[:, :6] = wrench_parameters * scale[:, 6:12, None]
         idx = np.arange(n)
-        jp[:, 12 + idx, idx] = dphi_dk
-        jp[:, 12 + idx, n + idx] = dphi_dl0
-        jp *= self.unit
-        wrench_parameters = jp[:, 6:12].copy()
-        jp *= scale[..., None]
-        return _Evaluation(residuals, jx, jp, raw, state.wrench, state.stiffness,
-                           wrench_parameters, stretch, dl, np.arange(N))
+        jp[:, 6 + idx, idx] = dphi_dk * scale[:, 12:12 + n]
+        jp[:, 6 + idx, n + idx] = dphi_dl0 * scale[:, 12:12 + n]
+        return jp, wrench_parameters
 
     # -------------------------------------------------------------- known loads
-    def load_chart(self, ev: _Evaluation) -> _Evaluation:
-        """``ev`` with the Jacobians of every sample with a known load taken w.r.t. its true
-        load ``W = -F(xi)`` instead of its screw (the screw is the equilibrium under ``W``:
-        ``d xi = -K^-1 (dW + dF/dz dz)``): ``Jx' = -Jx K^-1``, ``Jz' = Jz - Jx K^-1 dF/dz``.
-        An exact load is no unknown (``Jx' = 0``): the equilibrium is a constraint and the
-        parameters' Jacobian is that of the constrained model."""
-        rows = np.flatnonzero(self.loaded[ev.index])
-        if rows.size == 0:
-            return ev
-        jx, jp = ev.jac_screw.copy(), ev.jac_parameters
-        K_t = np.swapaxes(ev.wrench_screw[rows], -1, -2)
-        moved = -np.swapaxes(np.linalg.solve(K_t, np.swapaxes(jx[rows], -1, -2)), -1, -2)
-        jx[rows] = moved
+    def normal_equations(self, ev: _Evaluation, weights: FloatArray | None = None
+                         ) -> _NormalEquations:
+        """The Gauss-Newton blocks at ``ev`` (rows weighted by ``weights`` (N, R), else 1),
+        with every sample with a known load in the chart of its true load ``W = -F(xi)``
+        instead of its screw (the screw is the equilibrium under ``W``:
+        ``d xi = M (dW + dF/dz dz)``, ``M = -K^-1``): ``Jx' = Jx M``, ``Jz' = Jz + Jx H``,
+        ``H = M dF/dz``, taken on the blocks (``A' = M^T A M``, ``B' = M^T (B + A H)``,
+        ``C' = C + B^T H + H^T (B + A H)``, ``gx' = M^T gx``, ``gp' = gp + H^T gx``) rather than
+        on the (N, R, .) Jacobians. An exact load is no unknown (``Jx' = 0``): the equilibrium
+        is a constraint and the parameters' Jacobian is that of the constrained model."""
+        n2 = 2 * self.n
+        jx, jp, r = ev.jac_screw, ev.parameter_rows, ev.residuals
+        rows = _parameter_rows(self.n)
+        if weights is not None:
+            sw = np.sqrt(weights)
+            jx, r = jx * sw[..., None], r * sw
+            jp = jp * sw[:, rows, None] if jp.size else jp
+        jxt = np.swapaxes(jx, -1, -2)
+        A = jxt @ jx
+        gx = (jxt @ r[..., None])[..., 0]
+        B = C = gp = _empty()
         if jp.size:
-            jp = jp.copy()
-            jp[rows] += moved @ ev.wrench_parameters[rows]
-        jx[self.exact[ev.index]] = 0.0
-        return ev.replace(jx, jp)
+            B = jxt[:, :, rows] @ jp
+            flat = jp.reshape(-1, n2)
+            C = flat.T @ flat
+            gp = flat.T @ r[:, rows].reshape(-1)
+        loaded = np.flatnonzero(self.loaded[ev.index])
+        if loaded.size:
+            M = -ev.wrench_screw_inverse[loaded]
+            Mt = np.swapaxes(M, -1, -2)
+            A_l, gx_l = A[loaded], gx[loaded]
+            if jp.size:
+                H = M @ ev.wrench_parameters[loaded]  # d xi / d z under a fixed load
+                B_l = B[loaded]
+                moved = B_l + A_l @ H  # Jx^T Jz'
+                H_flat = H.reshape(-1, n2)
+                C += B_l.reshape(-1, n2).T @ H_flat + H_flat.T @ moved.reshape(-1, n2)
+                gp += H_flat.T @ gx_l.reshape(-1)
+                B[loaded] = Mt @ moved
+            A[loaded] = Mt @ A_l @ M
+            gx[loaded] = (Mt @ gx_l[..., None])[..., 0]
+            exact = self.exact[ev.index]
+            A[exact], gx[exact] = 0.0, 0.0
+            if jp.size:
+                B[exact] = 0.0
+        return _NormalEquations(A, B, C, gx, gp)
 
     def advance(self, z: FloatArray, xi: FloatArray, ev: _Evaluation, z_new: FloatArray,
                 step: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
@@ -548,7 +617,7 @@ class _Problem:
         change = target + ev.wrench[rows]
         if ev.wrench_parameters.size:  # parameters moved as well
             change = change + ev.wrench_parameters[rows] @ (z_new - z)
-        start = xi[rows] - np.linalg.solve(ev.wrench_screw[rows], change[..., None])[..., 0]
+        start = xi[rows] - (ev.wrench_screw_inverse[rows] @ change[..., None])[..., 0]
         xi_new[rows], found[rows] = self.settle(z_new, start, target, rows)
         return xi_new, found
 
@@ -590,18 +659,16 @@ class _Problem:
         ev = self.evaluate(z, xi, parameter_jacobians=False)
         cost = np.sum(ev.residuals ** 2, axis=1)
         for _ in range(iterations):
-            jx = self.load_chart(ev).jac_screw
-            A = np.swapaxes(jx, -1, -2) @ jx
-            g = np.einsum('nri,nr->ni', jx, ev.residuals)
-            step = -_solve_psd(A, g)
+            eq = self.normal_equations(ev)
+            step = -(_pinv_psd(eq.A) @ eq.gx[..., None])[..., 0]
             if np.max(np.abs(step)) < 1e-13:
                 break
             alpha = np.ones(len(xi))
             for _ in range(5):
                 trial, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
                 trial[~found] = xi[~found]
-                try:
-                    tev = self.evaluate(z, trial, jacobians=False)
+                try:  # with the screw Jacobians: the next iteration's evaluation
+                    tev = self.evaluate(z, trial, parameter_jacobians=False)
                 except ValueError:
                     alpha *= 0.5
                     continue
@@ -612,11 +679,11 @@ class _Problem:
                 alpha[worse] *= 0.5
             else:
                 alpha[worse] = 0.0
-            xi, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
-            if not found.all():
-                raise ValueError('no equilibrium under a sample\'s known load')
-            ev = self.evaluate(z, xi, parameter_jacobians=False)
-            cost = np.sum(ev.residuals ** 2, axis=1)
+                trial, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
+                if not found.all():
+                    raise ValueError('no equilibrium under a sample\'s known load')
+                tev = self.evaluate(z, trial, parameter_jacobians=False)
+            xi, ev, cost = trial, tev, np.sum(tev.residuals ** 2, axis=1)
         return xi
 
     def settle_exact(self, z: FloatArray, xi: FloatArray) -> FloatArray:
@@ -642,32 +709,30 @@ class _Problem:
         return xi
 
     # -------------------------------------------------------------- information
-    def information(self, ev: _Evaluation, columns: NDArray[np.int64],
-                    weights: FloatArray | None = None) -> FloatArray:
+    def information(self, ev: _Evaluation, columns: NDArray[np.int64]) -> FloatArray:
         """Parameters' information with the screws eliminated (Schur complement per sample),
         scaled coordinates, over ``columns`` of the parameter vector."""
-        ev = self.load_chart(ev)
-        jx = ev.jac_screw
-        jp = ev.jac_parameters[:, :, columns]
-        if weights is not None:
-            jx = jx * weights[..., None]
-            jp = jp * weights[..., None]
-        A = np.swapaxes(jx, -1, -2) @ jx
-        B = np.swapaxes(jx, -1, -2) @ jp
-        C = np.einsum('nri,nrj->ij', jp, jp)
-        return C - np.einsum('nia,nij->aj', B, _solve_psd(A, B))
+        return _schur(self.normal_equations(ev), columns)[0]
 
 
-def _solve_psd(A: FloatArray, b: FloatArray) -> FloatArray:
-    """``A^+ b`` for a batch of symmetric positive semi-definite (N, 6, 6) ``A`` (directions
-    with no information get none), ``b`` (N, 6) or (N, 6, m)."""
+def _schur(eq: _NormalEquations, columns: NDArray[np.int64]
+           ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(information ``S = C - sum B^T A^+ B`` over ``columns``, ``A^+`` (N, 6, 6),
+    ``A^+ B`` (N, 6, P)): the screws eliminated per sample."""
+    A_pinv = _pinv_psd(eq.A)
+    B = eq.B[:, :, columns]
+    AB = A_pinv @ B
+    P = columns.size
+    return eq.C[np.ix_(columns, columns)] - B.reshape(-1, P).T @ AB.reshape(-1, P), A_pinv, AB
+
+
+def _pinv_psd(A: FloatArray) -> FloatArray:
+    """``A^+`` of a batch of symmetric positive semi-definite (N, 6, 6) ``A`` (directions with
+    no information get none)."""
     lam, V = np.linalg.eigh(A)
     cut = RANK_TOLERANCE ** 2 * np.maximum(lam[:, -1:], 1e-300)
     inv = np.where(lam > cut, 1.0 / np.where(lam > cut, lam, 1.0), 0.0)
-    vec = b.ndim == 2
-    bb = b[..., None] if vec else b
-    out = V @ (inv[..., None] * (np.swapaxes(V, -1, -2) @ bb))
-    return out[..., 0] if vec else out
+    return (V * inv[:, None, :]) @ np.swapaxes(V, -1, -2)
 
 
 # ------------------------------------------------------------------------------ results
@@ -913,13 +978,14 @@ def _robust_weights(residuals: FloatArray, loss: str) -> tuple[FloatArray, Float
 
 
 def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray, loss: str,
-           rows: NDArray[np.bool_], max_iterations: int = MAX_ITERATIONS,
-           tolerance: float = FIT_TOLERANCE) -> tuple[FloatArray, FloatArray, int, bool]:
+           rows: NDArray[np.bool_], ev: _Evaluation | None = None,
+           max_iterations: int = MAX_ITERATIONS, tolerance: float = FIT_TOLERANCE
+           ) -> tuple[FloatArray, FloatArray, _Evaluation, int, bool]:
     """Levenberg-Marquardt over ``z = z0 + basis y`` and every sample's screw, with the screws
     eliminated per sample (Schur complement: one q x q system per iteration) and the robust
     ``loss`` by iteratively re-weighted least squares (a descent method for these concave
-    losses); only the residual rows ``rows`` (N, R) count. Returns (z, screws, iterations,
-    converged)."""
+    losses); only the residual rows ``rows`` (N, R) count; ``ev``: the evaluation at the start,
+    when known. Returns (z, screws, their evaluation, iterations, converged)."""
     q = basis.shape[1]
     z, xi = z0.copy(), xi0.copy()
     mask = rows.astype(np.float64)
@@ -928,31 +994,28 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
         rho, weight = _robust_weights(ev.residuals * mask, loss)
         return float(np.sum(rho * mask)), weight * mask
 
-    ev = problem.evaluate(z, xi)
+    if ev is None:
+        ev = problem.evaluate(z, xi)
     cost, weight = cost_of(ev)
     lam = 1e-3
     converged = False
     iterations = 0
     for iterations in range(1, max_iterations + 1):  # noqa: B007 (returned)
-        sw = np.sqrt(weight)
-        chart = problem.load_chart(ev)
-        jx = chart.jac_screw * sw[..., None]
-        jp = (chart.jac_parameters @ basis) * sw[..., None]
-        r = ev.residuals * sw
-        A = np.swapaxes(jx, -1, -2) @ jx
-        B = np.swapaxes(jx, -1, -2) @ jp
-        gx = np.einsum('nri,nr->ni', jx, r)
-        gp = np.einsum('nri,nr->i', jp, r)
-        C = np.einsum('nri,nrj->ij', jp, jp)
+        eq = problem.normal_equations(ev, weight)
+        A, gx = eq.A, eq.gx
+        B = eq.B @ basis  # (N, 6, q)
+        C = basis.T @ eq.C @ basis
+        gp = basis.T @ eq.gp
+        B_flat = B.reshape(6 * len(B), q)
         dA = np.diagonal(A, axis1=-2, axis2=-1)
         dC = np.diag(C).copy()
         accepted = False
         for _ in range(12):
-            Ad = A + lam * (dA[..., None] * np.eye(6) + 1e-12 * np.eye(6))
-            Ainv_B = np.linalg.solve(Ad, B) if q else np.zeros((len(xi), 6, 0))
-            Ainv_g = np.linalg.solve(Ad, gx[..., None])[..., 0]
-            S = C + lam * np.diag(dC + 1e-12) - np.einsum('nia,nib->ab', B, Ainv_B)
-            rhs = gp - np.einsum('nia,ni->a', B, Ainv_g)
+            A_inv = np.linalg.inv(A + lam * (dA[..., None] * np.eye(6) + 1e-12 * np.eye(6)))
+            Ainv_B = A_inv @ B
+            Ainv_g = (A_inv @ gx[..., None])[..., 0]
+            S = C + lam * np.diag(dC + 1e-12) - B_flat.T @ Ainv_B.reshape(B_flat.shape)
+            rhs = gp - B_flat.T @ Ainv_g.reshape(-1)
             dy = -np.linalg.solve(S, rhs) if q else np.zeros(0)
             dxi = -(Ainv_g + Ainv_B @ dy)
             z_trial = z + basis @ dy
@@ -979,7 +1042,7 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
         if decrease <= tolerance * max(cost, 1.0):
             converged = True
             break
-    return z, xi, iterations, converged
+    return z, xi, ev, iterations, converged
 
 
 def _checked_request(model: JointModel, samples: Sequence[CalibrationSample],
@@ -1019,13 +1082,12 @@ def _checked_request(model: JointModel, samples: Sequence[CalibrationSample],
     return kinds, noise, bounds, data, names, columns
 
 
-def _outliers(problem: _Problem, z: FloatArray, xi: FloatArray, loss: str, n_parameters: int
+def _outliers(problem: _Problem, ev: _Evaluation, loss: str, n_parameters: int
               ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """(outliers, inliers) sample indices at the robust estimate ``(z, xi)``: samples whose
-    whitened chi-square is improbable for their degrees of freedom (none for the linear loss);
-    ValueError when the inliers leave too few measurements."""
+    """(outliers, inliers) sample indices at the robust estimate (its evaluation ``ev``):
+    samples whose whitened chi-square is improbable for their degrees of freedom (none for the
+    linear loss); ValueError when the inliers leave too few measurements."""
     N = problem.mask.shape[0]
-    ev = problem.evaluate(z, xi, jacobians=False)
     sample_chi2 = np.sum(ev.residuals ** 2, axis=1)
     dof_i = problem.mask.sum(axis=1) - 6 * ~problem.exact
     limit = np.where(dof_i > 0, chdtri(np.maximum(dof_i, 1), OUTLIER_PROBABILITY), np.inf)
@@ -1131,26 +1193,27 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     rows = problem.mask.copy()
     iterations = 0
     converged = True
-    z, xi_fit = z_nominal, xi
+    z, xi_fit, ev_all = z_nominal, xi, before
     if basis_full.shape[1]:
         # A robust stage only finds the outliers (the final stage polishes): a looser tolerance.
-        z, xi_fit, used, converged = _solve(
-            problem, z_nominal, basis_full, xi, loss, rows,
+        z, xi_fit, ev_all, used, converged = _solve(
+            problem, z_nominal, basis_full, xi, loss, rows, before,
             tolerance=FIT_TOLERANCE if loss == 'linear' else ROBUST_TOLERANCE)
         iterations += used
     if progress:
         progress(2, stages)
-    outliers, inliers = _outliers(problem, z, xi_fit, loss, P)
+    outliers, inliers = _outliers(problem, ev_all, loss, P)
     message = 'converged'
     rows[outliers] = False
     if basis_full.shape[1] and loss != 'linear':
         # The final estimate: plain least squares on the inliers, from the robust solution.
-        z, xi_fit, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear', rows)
+        z, xi_fit, ev_all, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear',
+                                                    rows, ev_all)
         iterations += used
     near_slack = np.zeros(0, np.intp)
     if basis_full.shape[1] and converged:
-        z, xi_fit, used, converged, near_slack = _hold_taut(problem, z, xi_fit, basis_full,
-                                                            rows, inliers, columns, ident.basis)
+        z, xi_fit, ev_all, used, converged, near_slack = _hold_taut(
+            problem, z, xi_fit, ev_all, basis_full, rows, inliers, columns, ident.basis)
         iterations += used
     success = True
     if not basis_full.shape[1]:
@@ -1161,9 +1224,8 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     if progress:
         progress(3, stages)
 
-    # One evaluation at the estimate: the inliers' rows give the statistics, all rows the
+    # The evaluation at the estimate: the inliers' rows give the statistics, all rows the
     # residuals after (every sample's rows depend on its own screw only).
-    ev_all = problem.evaluate(z, xi_fit)
     ev = ev_all.subset(inliers)
     mask_in = problem.mask[inliers]
     rms_after = _rms_by_kind(ev.raw, mask_in, n)
@@ -1197,32 +1259,33 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         seconds=time.perf_counter() - started)
 
 
-def _hold_taut(problem: _Problem, z: FloatArray, xi: FloatArray, basis_full: FloatArray,
-               rows: NDArray[np.bool_], inliers: NDArray[np.intp], columns: NDArray[np.intp],
-               basis: FloatArray) -> tuple[FloatArray, FloatArray, int, bool, NDArray[np.intp]]:
+def _hold_taut(problem: _Problem, z: FloatArray, xi: FloatArray, ev: _Evaluation,
+               basis_full: FloatArray, rows: NDArray[np.bool_], inliers: NDArray[np.intp],
+               columns: NDArray[np.intp], basis: FloatArray
+               ) -> tuple[FloatArray, FloatArray, _Evaluation, int, bool, NDArray[np.intp]]:
     """The fit again with every string of the inliers that is not clearly slack (stretch above
     ``-SLACK_MARGIN`` std, :func:`_stretch_std`) held on its taut branch (:func:`_taut_branch`),
     repeated until the held set stops changing (at most :data:`HOLD_PASSES`). Near ``l = l0``
     the model is not smooth: a fit free to slacken a string that is taut in truth (its fitted
     stretch a little below zero through the noise) loses that string's information there and
     leans on it, and its error exceeds the covariance (docs/calibration.md, "Near a string's
-    slack boundary"). Returns (z, screws, iterations, converged, the samples with a string
-    within ``SLACK_MARGIN`` std of slack at the first fit)."""
-    stretch, std = _stretch_std(problem, problem.evaluate(z, xi).subset(inliers), columns, basis)
+    slack boundary"). ``ev``: the evaluation at ``(z, xi)``. Returns (z, screws, their
+    evaluation, iterations, converged, the samples with a string within ``SLACK_MARGIN`` std of
+    slack at the first fit)."""
+    stretch, std = _stretch_std(problem, ev.subset(inliers), columns, basis)
     near = inliers[np.any(np.abs(stretch) < SLACK_MARGIN * std, axis=1)]
     held = stretch > -SLACK_MARGIN * std
     iterations, converged = 0, True
     for _ in range(HOLD_PASSES):
         problem.taut[inliers] = held
-        z, xi, used, converged = _solve(problem, z, basis_full, xi, 'linear', rows)
+        z, xi, ev, used, converged = _solve(problem, z, basis_full, xi, 'linear', rows)
         iterations += used
-        stretch, std = _stretch_std(problem, problem.evaluate(z, xi).subset(inliers), columns,
-                                    basis)
+        stretch, std = _stretch_std(problem, ev.subset(inliers), columns, basis)
         again = stretch > -SLACK_MARGIN * std
         if not converged or np.array_equal(again, held):
             break
         held = again
-    return z, xi, iterations, converged, near
+    return z, xi, ev, iterations, converged, near
 
 
 def _stretch_std(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
@@ -1234,19 +1297,16 @@ def _stretch_std(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
     ``d xi = G du + H dz``, ``G = -K^-1``, ``H = G dF/dz`` for a known load, else ``G = I``,
     ``H = 0``)."""
     n = problem.n
-    C = _subspace_covariance(problem.information(ev, columns), basis)
-    chart = problem.load_chart(ev)
-    jx, jp = chart.jac_screw, chart.jac_parameters[:, :, columns]
-    A = np.swapaxes(jx, -1, -2) @ jx
-    AB = _solve_psd(A, np.swapaxes(jx, -1, -2) @ jp)  # (N, 6, P)
-    N = len(ev.index)
-    cov_u = _solve_psd(A, np.broadcast_to(np.eye(6), (N, 6, 6))) + AB @ C @ np.swapaxes(AB, 1, 2)
+    information, A_pinv, AB = _schur(problem.normal_equations(ev), columns)
+    C = _subspace_covariance(information, basis)
+    cov_u = A_pinv + AB @ C @ np.swapaxes(AB, 1, 2)
     cov_uz = -AB @ C
+    N = len(ev.index)
     G = np.broadcast_to(np.eye(6), (N, 6, 6)).copy()
     H = np.zeros((N, 6, columns.size))
     loaded = problem.loaded[ev.index]
     if loaded.any():
-        G[loaded] = -np.linalg.inv(ev.wrench_screw[loaded])
+        G[loaded] = -ev.wrench_screw_inverse[loaded]
         H[loaded] = G[loaded] @ ev.wrench_parameters[loaded][:, :, columns]
     Gt, Ht = np.swapaxes(G, 1, 2), np.swapaxes(H, 1, 2)
     cov_xi = G @ cov_u @ Gt + G @ cov_uz @ Ht + H @ np.swapaxes(cov_uz, 1, 2) @ Gt + H @ C @ Ht
