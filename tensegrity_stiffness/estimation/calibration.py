@@ -132,17 +132,23 @@ OUTLIER_PROBABILITY = 1e-4
 SCALE_TEST_PROBABILITY = 1e-3
 #: Robust losses of scipy.optimize.least_squares.
 LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
-#: Gauss-Newton iterations of the per-sample screw refinement.
+#: Gauss-Newton iterations of the per-sample screw refinement ...
 SCREW_ITERATIONS = 8
+#: ... which stops when no screw coordinate moves more than this (rad, m; far below any
+#: sensor's noise: the fit moves every screw again).
+SCREW_TOLERANCE = 1e-9
 #: The fit has converged when an iteration lowers the cost by less than this fraction.
 FIT_TOLERANCE = 1e-8
 #: ... and the robust stage (followed by the final plain least-squares stage).
-ROBUST_TOLERANCE = 1e-6
+ROBUST_TOLERANCE = 1e-4
 #: A sample with a string whose stretch is within this many std of 0 (slack) is left out.
 SLACK_MARGIN = 3.0
 #: Passes of "hold the strings not clearly slack on their taut branch, fit again" (until the
 #: held set stops changing).
 HOLD_PASSES = 4
+#: Rows of each product in a sum over the samples (:func:`_sum_of_products`): small enough that
+#: BLAS computes it on one thread.
+SUM_BLOCK_ROWS = 256
 #: Levenberg-Marquardt iterations of one fit stage.
 MAX_ITERATIONS = 100
 #: A sample with a known load is at equilibrium when every component of ``F + W`` is below this
@@ -564,7 +570,6 @@ class _Problem:
         ``C' = C + B^T H + H^T (B + A H)``, ``gx' = M^T gx``, ``gp' = gp + H^T gx``) rather than
         on the (N, R, .) Jacobians. An exact load is no unknown (``Jx' = 0``): the equilibrium
         is a constraint and the parameters' Jacobian is that of the constrained model."""
-        n2 = 2 * self.n
         jx, jp, r = ev.jac_screw, ev.parameter_rows, ev.residuals
         rows = _parameter_rows(self.n)
         if weights is not None:
@@ -577,9 +582,8 @@ class _Problem:
         B = C = gp = _empty()
         if jp.size:
             B = jxt[:, :, rows] @ jp
-            flat = jp.reshape(-1, n2)
-            C = flat.T @ flat
-            gp = flat.T @ r[:, rows].reshape(-1)
+            C = _sum_of_products(jp, jp)
+            gp = _sum_of_products(jp, r[:, rows, None])[:, 0]
         loaded = np.flatnonzero(self.loaded[ev.index])
         if loaded.size:
             M = -ev.wrench_screw_inverse[loaded]
@@ -589,9 +593,8 @@ class _Problem:
                 H = M @ ev.wrench_parameters[loaded]  # d xi / d z under a fixed load
                 B_l = B[loaded]
                 moved = B_l + A_l @ H  # Jx^T Jz'
-                H_flat = H.reshape(-1, n2)
-                C += B_l.reshape(-1, n2).T @ H_flat + H_flat.T @ moved.reshape(-1, n2)
-                gp += H_flat.T @ gx_l.reshape(-1)
+                C += _sum_of_products(B_l, H) + _sum_of_products(H, moved)
+                gp += _sum_of_products(H, gx_l[..., None])[:, 0]
                 B[loaded] = Mt @ moved
             A[loaded] = Mt @ A_l @ M
             gx[loaded] = (Mt @ gx_l[..., None])[..., 0]
@@ -661,7 +664,7 @@ class _Problem:
         for _ in range(iterations):
             eq = self.normal_equations(ev)
             step = -(_pinv_psd(eq.A) @ eq.gx[..., None])[..., 0]
-            if np.max(np.abs(step)) < 1e-13:
+            if np.max(np.abs(step)) < SCREW_TOLERANCE:
                 break
             alpha = np.ones(len(xi))
             for _ in range(5):
@@ -722,8 +725,22 @@ def _schur(eq: _NormalEquations, columns: NDArray[np.int64]
     A_pinv = _pinv_psd(eq.A)
     B = eq.B[:, :, columns]
     AB = A_pinv @ B
-    P = columns.size
-    return eq.C[np.ix_(columns, columns)] - B.reshape(-1, P).T @ AB.reshape(-1, P), A_pinv, AB
+    return eq.C[np.ix_(columns, columns)] - _sum_of_products(B, AB), A_pinv, AB
+
+
+def _sum_of_products(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``sum_i a_i^T b_i`` (p, q) of batches ``a`` (N, r, p) and ``b`` (N, r, q), as a stack of
+    products of :data:`SUM_BLOCK_ROWS` rows each: one 2-D product of all N r rows would be one
+    large BLAS call, which OpenBLAS spreads over threads, and on a shared machine the threads
+    cost more than they save (the whole calibration 2-3x slower than with one thread)."""
+    a2, b2 = a.reshape(-1, a.shape[-1]), b.reshape(-1, b.shape[-1])
+    full = len(a2) // SUM_BLOCK_ROWS * SUM_BLOCK_ROWS
+    out = a2[full:].T @ b2[full:]
+    if full:
+        blocks_a = a2[:full].reshape(-1, SUM_BLOCK_ROWS, a2.shape[-1])
+        blocks_b = b2[:full].reshape(-1, SUM_BLOCK_ROWS, b2.shape[-1])
+        out += (np.swapaxes(blocks_a, 1, 2) @ blocks_b).sum(axis=0)
+    return out
 
 
 def _pinv_psd(A: FloatArray) -> FloatArray:
@@ -1006,7 +1023,6 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
         B = eq.B @ basis  # (N, 6, q)
         C = basis.T @ eq.C @ basis
         gp = basis.T @ eq.gp
-        B_flat = B.reshape(6 * len(B), q)
         dA = np.diagonal(A, axis1=-2, axis2=-1)
         dC = np.diag(C).copy()
         accepted = False
@@ -1014,8 +1030,8 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
             A_inv = np.linalg.inv(A + lam * (dA[..., None] * np.eye(6) + 1e-12 * np.eye(6)))
             Ainv_B = A_inv @ B
             Ainv_g = (A_inv @ gx[..., None])[..., 0]
-            S = C + lam * np.diag(dC + 1e-12) - B_flat.T @ Ainv_B.reshape(B_flat.shape)
-            rhs = gp - B_flat.T @ Ainv_g.reshape(-1)
+            S = C + lam * np.diag(dC + 1e-12) - _sum_of_products(B, Ainv_B)
+            rhs = gp - _sum_of_products(B, Ainv_g[..., None])[:, 0]
             dy = -np.linalg.solve(S, rhs) if q else np.zeros(0)
             dxi = -(Ainv_g + Ainv_B @ dy)
             z_trial = z + basis @ dy
@@ -1205,15 +1221,13 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     outliers, inliers = _outliers(problem, ev_all, loss, P)
     message = 'converged'
     rows[outliers] = False
-    if basis_full.shape[1] and loss != 'linear':
-        # The final estimate: plain least squares on the inliers, from the robust solution.
-        z, xi_fit, ev_all, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear',
-                                                    rows, ev_all)
-        iterations += used
     near_slack = np.zeros(0, np.intp)
-    if basis_full.shape[1] and converged:
+    if basis_full.shape[1] and (converged or loss != 'linear'):
+        # The final estimate: plain least squares on the inliers (from the robust solution),
+        # the strings not clearly slack held on their taut branch.
         z, xi_fit, ev_all, used, converged, near_slack = _hold_taut(
-            problem, z, xi_fit, ev_all, basis_full, rows, inliers, columns, ident.basis)
+            problem, z, xi_fit, ev_all, basis_full, rows, inliers, columns, ident.basis,
+            refit=loss != 'linear')
         iterations += used
     success = True
     if not basis_full.shape[1]:
@@ -1261,30 +1275,35 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
 
 def _hold_taut(problem: _Problem, z: FloatArray, xi: FloatArray, ev: _Evaluation,
                basis_full: FloatArray, rows: NDArray[np.bool_], inliers: NDArray[np.intp],
-               columns: NDArray[np.intp], basis: FloatArray
+               columns: NDArray[np.intp], basis: FloatArray, refit: bool
                ) -> tuple[FloatArray, FloatArray, _Evaluation, int, bool, NDArray[np.intp]]:
-    """The fit again with every string of the inliers that is not clearly slack (stretch above
+    """The plain least-squares fit of the residual rows ``rows`` from ``(z, xi)`` (evaluated:
+    ``ev``) with every string of the inliers that is not clearly slack there (stretch above
     ``-SLACK_MARGIN`` std, :func:`_stretch_std`) held on its taut branch (:func:`_taut_branch`),
-    repeated until the held set stops changing (at most :data:`HOLD_PASSES`). Near ``l = l0``
-    the model is not smooth: a fit free to slacken a string that is taut in truth (its fitted
-    stretch a little below zero through the noise) loses that string's information there and
-    leans on it, and its error exceeds the covariance (docs/calibration.md, "Near a string's
-    slack boundary"). ``ev``: the evaluation at ``(z, xi)``. Returns (z, screws, their
-    evaluation, iterations, converged, the samples with a string within ``SLACK_MARGIN`` std of
-    slack at the first fit)."""
+    repeated until the held set stops changing the model (at most :data:`HOLD_PASSES` fits;
+    holding a string changes the model only where it is slack, so a change elsewhere needs no
+    fit). ``refit``: ``(z, xi)`` is no plain least-squares fit of ``rows`` yet (a robust one),
+    so the first fit is made whatever it holds. Near ``l = l0`` the model is not smooth: a fit
+    free to slacken a string that is taut in truth (its fitted stretch a little below zero
+    through the noise) loses that string's information there and leans on it, and its error
+    exceeds the covariance (docs/calibration.md, "Near a string's slack boundary"). Returns
+    (z, screws, their evaluation, iterations, converged, the samples with a string within
+    ``SLACK_MARGIN`` std of slack at ``(z, xi)``)."""
     stretch, std = _stretch_std(problem, ev.subset(inliers), columns, basis)
     near = inliers[np.any(np.abs(stretch) < SLACK_MARGIN * std, axis=1)]
-    held = stretch > -SLACK_MARGIN * std
     iterations, converged = 0, True
     for _ in range(HOLD_PASSES):
+        held = stretch > -SLACK_MARGIN * std
+        if not refit and not np.any((held != problem.taut[inliers]) & (stretch <= 0.0)):
+            break
+        refit = False
         problem.taut[inliers] = held
+        xi = problem.settle_exact(z, xi)  # the held strings move the equilibria
         z, xi, ev, used, converged = _solve(problem, z, basis_full, xi, 'linear', rows)
         iterations += used
-        stretch, std = _stretch_std(problem, ev.subset(inliers), columns, basis)
-        again = stretch > -SLACK_MARGIN * std
-        if not converged or np.array_equal(again, held):
+        if not converged:
             break
-        held = again
+        stretch, std = _stretch_std(problem, ev.subset(inliers), columns, basis)
     return z, xi, ev, iterations, converged, near
 
 
