@@ -584,8 +584,9 @@ class _Problem:
             B = jxt[:, :, rows] @ jp
             C = _sum_of_products(jp, jp)
             gp = _sum_of_products(jp, r[:, rows, None])[:, 0]
-        loaded = np.flatnonzero(self.loaded[ev.index])
-        if loaded.size:
+        loaded: Any = self.loaded[ev.index]
+        if loaded.any():
+            loaded = slice(None) if loaded.all() else np.flatnonzero(loaded)  # views: no copies
             M = -ev.wrench_screw_inverse[loaded]
             Mt = np.swapaxes(M, -1, -2)
             A_l, gx_l = A[loaded], gx[loaded]
@@ -599,9 +600,10 @@ class _Problem:
             A[loaded] = Mt @ A_l @ M
             gx[loaded] = (Mt @ gx_l[..., None])[..., 0]
             exact = self.exact[ev.index]
-            A[exact], gx[exact] = 0.0, 0.0
-            if jp.size:
-                B[exact] = 0.0
+            if exact.any():
+                A[exact], gx[exact] = 0.0, 0.0
+                if jp.size:
+                    B[exact] = 0.0
         return _NormalEquations(A, B, C, gx, gp)
 
     def advance(self, z: FloatArray, xi: FloatArray, ev: _Evaluation, z_new: FloatArray,
@@ -627,29 +629,33 @@ class _Problem:
     def settle(self, z: FloatArray, xi: FloatArray, loads: FloatArray, rows: NDArray[np.intp]
                ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Screws of the samples ``rows`` at equilibrium under ``loads`` (``F(xi; z) + W = 0``
-        within :data:`EQUILIBRIUM_TOLERANCE`) by Newton's method from ``xi``. Returns (screws,
-        found)."""
+        within :data:`EQUILIBRIUM_TOLERANCE`) by Newton's method from ``xi``, each iteration on
+        the samples not at equilibrium yet. Returns (screws, found)."""
         k, d = self.parameters(z)
         model = self._model(k)
         rest = self.data.rest[rows] + d
         xi = xi.copy()
         found = np.zeros(len(rows), bool)
+        todo = np.arange(len(rows))
         for _ in range(EQUILIBRIUM_ITERATIONS):
+            at = xi[todo]
             try:
-                state = _taut_branch(model, model.evaluate(xi, rest), xi, rest,
-                                     self.taut[rows])[0]
+                state = _taut_branch(model, model.evaluate(at, rest[todo]), at, rest[todo],
+                                     self.taut[rows[todo]])[0]
             except ValueError:
                 return xi, np.zeros(len(rows), bool)
-            error = state.wrench + loads
-            found = np.max(np.abs(error), axis=1) <= EQUILIBRIUM_TOLERANCE
-            if found.all():
+            error = state.wrench + loads[todo]
+            done = np.max(np.abs(error), axis=1) <= EQUILIBRIUM_TOLERANCE
+            found[todo[done]] = True
+            if done.all():
                 break
             try:
-                step = np.linalg.solve(state.stiffness, error[..., None])[..., 0]
+                step = np.linalg.solve(state.stiffness[~done], error[~done, :, None])[..., 0]
             except np.linalg.LinAlgError:
                 return xi, np.zeros(len(rows), bool)
-            xi = np.where(found[:, None], xi, xi - step)
-            if not np.isfinite(xi).all():
+            todo = todo[~done]
+            xi[todo] = at[~done] - step
+            if not np.isfinite(xi[todo]).all():
                 return xi, np.zeros(len(rows), bool)
         return xi, found
 
@@ -1214,7 +1220,7 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         # A robust stage only finds the outliers (the final stage polishes): a looser tolerance.
         z, xi_fit, ev_all, used, converged = _solve(
             problem, z_nominal, basis_full, xi, loss, rows, before,
-            tolerance=FIT_TOLERANCE if loss == 'linear' else ROBUST_TOLERANCE)
+            tolerance=ROBUST_TOLERANCE)
         iterations += used
     if progress:
         progress(2, stages)
@@ -1222,12 +1228,12 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     message = 'converged'
     rows[outliers] = False
     near_slack = np.zeros(0, np.intp)
-    if basis_full.shape[1] and (converged or loss != 'linear'):
+    if basis_full.shape[1]:
         # The final estimate: plain least squares on the inliers (from the robust solution),
         # the strings not clearly slack held on their taut branch.
         z, xi_fit, ev_all, used, converged, near_slack = _hold_taut(
             problem, z, xi_fit, ev_all, basis_full, rows, inliers, columns, ident.basis,
-            refit=loss != 'linear')
+            refit=True)
         iterations += used
     success = True
     if not basis_full.shape[1]:
