@@ -136,7 +136,7 @@ LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
 SCREW_ITERATIONS = 8
 #: ... which stops when no screw coordinate moves more than this (rad, m; far below any
 #: sensor's noise: the fit moves every screw again).
-SCREW_TOLERANCE = 1e-9
+SCREW_TOLERANCE = 1e-6
 #: The fit has converged when an iteration lowers the cost by less than this fraction.
 FIT_TOLERANCE = 1e-8
 #: ... and the robust stage (followed by the final plain least-squares stage).
@@ -387,45 +387,51 @@ def _empty() -> FloatArray:
     return np.empty(0)
 
 
-def _parameter_rows(n: int) -> slice:
-    """The residual rows that depend on the parameters: the wrench (6) and the tensions (n)."""
-    return slice(6, 12 + n)
-
-
 @dataclass
 class _Evaluation:
-    """Whitened residuals (N, R) and their Jacobians w.r.t. the screws (N, R, 6) and the scaled
-    parameters at one point (rows: pose 6, wrench 6, tensions n, lengths n). Only the wrench and
-    tension rows (:func:`_parameter_rows`) depend on the parameters: their Jacobian is kept for
-    those rows only (``parameter_rows`` (N, 6 + n, 2n); :attr:`jac_parameters` spreads it over
-    all rows)."""
+    """Whitened residuals (N, R) and their Jacobians w.r.t. the screws and the scaled parameters
+    at one point (rows: pose 6, wrench 6, tensions n, lengths n). The Jacobians are kept for the
+    rows some sample measures only (``rows``, m of R: :attr:`_Problem.rows`), and the one w.r.t.
+    the parameters for those of them that depend on the parameters (the wrench and the
+    tensions: ``rows[parameter_block]``); :attr:`jac_screw` and :attr:`jac_parameters` spread
+    them over all R rows."""
 
     residuals: FloatArray
     raw: FloatArray  # unwhitened residuals (N, R)
     wrench: FloatArray  # F(xi; theta) (N, 6), every sample
     stretch: FloatArray  # l_j - l0_j (N, n): negative when slack
     index: NDArray[np.intp]  # the samples evaluated (N,)
+    rows: NDArray[np.intp]  # the residual rows of the Jacobians (m,)
+    parameter_block: slice  # the rows of ``rows`` that depend on the parameters
     # With the Jacobians (else empty):
-    jac_screw: FloatArray = field(default_factory=_empty)
+    screw_rows: FloatArray = field(default_factory=_empty)  # d r / d xi (N, m, 6) whitened
     wrench_screw: FloatArray = field(default_factory=_empty)  # d F / d xi = K (N, 6, 6)
     # K^-1 (N, 6, 6) of the samples with a known load (:meth:`_Problem.normal_equations`), else 0
     wrench_screw_inverse: FloatArray = field(default_factory=_empty)
     stretch_screw: FloatArray = field(default_factory=_empty)  # d l_j / d xi (N, n, 6)
     # With the parameter Jacobians (else empty):
-    parameter_rows: FloatArray = field(default_factory=_empty)  # (N, 6 + n, 2n) whitened
+    parameter_rows: FloatArray = field(default_factory=_empty)  # d r / d z (N, mp, 2n) whitened
     wrench_parameters: FloatArray = field(default_factory=_empty)  # d F / d z (N, 6, 2n)
 
-    def subset(self, rows: NDArray[np.int64]) -> _Evaluation:
-        """The evaluation of the samples ``rows`` only."""
-        return _Evaluation(*(a[rows] if a.size else a for a in (
-            getattr(self, f.name) for f in fields(self))))
+    def subset(self, samples: NDArray[np.int64]) -> _Evaluation:
+        """The evaluation of the samples ``samples`` only."""
+        per_sample = {f.name: getattr(self, f.name) for f in fields(self)
+                      if f.name not in ('rows', 'parameter_block')}
+        return replace(self, **{name: a if a.shape == (0,) else a[samples]  # (0,): not computed
+                                for name, a in per_sample.items()})
+
+    @property
+    def jac_screw(self) -> FloatArray:
+        """d r / d xi (N, R, 6) over all rows (zeros where no sample measures)."""
+        out = np.zeros(self.residuals.shape + (6,))
+        out[:, self.rows] = self.screw_rows
+        return out
 
     @property
     def jac_parameters(self) -> FloatArray:
         """d r / d z (N, R, 2n) over all rows (zeros where no parameter acts)."""
-        N, R = self.residuals.shape
-        out = np.zeros((N, R, self.parameter_rows.shape[-1]))
-        out[:, _parameter_rows((R - 12) // 2)] = self.parameter_rows
+        out = np.zeros(self.residuals.shape + self.parameter_rows.shape[-1:])
+        out[:, self.rows[self.parameter_block]] = self.parameter_rows
         return out
 
 
@@ -460,6 +466,10 @@ class _Problem:
         self.exact = data.has_wrench & (noise.exact_loads | np.all(data.wrench == 0.0, axis=1))
         self.mask = data.mask()
         self.mask[self.exact, 6:12] = False
+        #: The residual rows some sample measures: the Jacobians are kept for these only; the
+        #: block of them that depends on the parameters (the wrench and the tensions).
+        self.rows = np.flatnonzero(self.mask.any(axis=0))
+        self.parameter_block = slice(*np.searchsorted(self.rows, [6, 12 + self.n]))
         self.k_nominal = model.k.copy()
         # Scaled coordinates: k = k_nom (1 + STIFFNESS_UNIT z_k), d = OFFSET_UNIT z_d.
         self.unit = np.concatenate([STIFFNESS_UNIT * self.k_nominal, np.full(self.n, OFFSET_UNIT)])
@@ -513,29 +523,25 @@ class _Problem:
         raw = np.where(self.mask, raw, 0.0)
         residuals = raw / self.std
         stretch = state.lengths - rest
-        index = np.arange(N)
+        ev = _Evaluation(residuals, raw, state.wrench, stretch, np.arange(N), self.rows,
+                         self.parameter_block)
         if not jacobians:
-            return _Evaluation(residuals, raw, state.wrench, stretch, index)
+            return ev
         J = left_jacobian_se3(xi)  # (N, 6, 6): twist [omega; v] = J dxi
-        jx = np.zeros((N, R, 6))
         # Pose: d p = omega x p + v, d log(R R_m^T) = Jl^-1(phi) omega.
         jt = np.zeros((N, 6, 6))
         jt[:, :3, :3] = -hat3(p)
         jt[:, :3, 3:] = np.eye(3)
         jt[:, 3:, :3] = left_jacobian_so3_inverse(phi)
-        jx[:, :6] = jt @ J
-        jx[:, 6:12] = state.stiffness
         w = _string_wrench_directions(model, state)  # (N, n, 6)
         dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
-        jx[:, 12:12 + n] = dphi_dl[..., None] * dl
-        jx[:, 12 + n:] = dl
+        jx = np.concatenate([jt @ J, state.stiffness, dphi_dl[..., None] * dl, dl], axis=1)
         scale = self.mask / self.std  # (N, R)
-        jx *= scale[..., None]
-        K_inv = np.zeros((N, 6, 6))
+        ev.screw_rows = jx[:, self.rows] * scale[:, self.rows, None]
+        ev.wrench_screw, ev.stretch_screw = state.stiffness, dl
+        ev.wrench_screw_inverse = np.zeros((N, 6, 6))
         if self.loaded.any():
-            K_inv[self.loaded] = np.linalg.inv(state.stiffness[self.loaded])
-        ev = _Evaluation(residuals, raw, state.wrench, stretch, index, jx, state.stiffness,
-                         K_inv, dl)
+            ev.wrench_screw_inverse[self.loaded] = np.linalg.inv(state.stiffness[self.loaded])
         if parameter_jacobians:
             ev.parameter_rows, ev.wrench_parameters = self._parameter_jacobians(
                 model, state, w, rest, scale)
@@ -543,20 +549,24 @@ class _Problem:
 
     def _parameter_jacobians(self, model: JointModel, state: JointState, w: FloatArray,
                              rest: FloatArray, scale: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """(whitened d r / d z of the rows :func:`_parameter_rows` (N, 6 + n, 2n), unwhitened
-        d F / d z (N, 6, 2n)) in scaled coordinates, for the string wrench directions ``w`` and
-        the row scales ``mask / std`` (N, R)."""
+        """(whitened d r / d z (N, mp, 2n) of the rows that depend on the parameters and some
+        sample measures (``rows[parameter_block]``: wrench, tensions), unwhitened d F / d z
+        (N, 6, 2n)) in scaled coordinates, for the string wrench directions ``w`` and the row
+        scales ``mask / std`` (N, R)."""
         n = self.n
         unit_k, unit_d = self.unit[:n], self.unit[n:]
         dphi_dk = state.tensions / model.k * unit_k
         dphi_dl0 = _tension_rest_length_slopes(model, state, rest) * unit_d
         wrench_parameters = np.swapaxes(np.concatenate(
             [w * dphi_dk[..., None], w * dphi_dl0[..., None]], axis=1), 1, 2)
-        jp = np.zeros((len(w), 6 + n, 2 * n))
-        jp[:, :6] = wrench_parameters * scale[:, 6:12, None]
-        idx = np.arange(n)
-        jp[:, 6 + idx, idx] = dphi_dk * scale[:, 12:12 + n]
-        jp[:, 6 + idx, n + idx] = dphi_dl0 * scale[:, 12:12 + n]
+        rows = self.rows[self.parameter_block]
+        jp = np.zeros((len(w), rows.size, 2 * n))
+        wrench = np.flatnonzero(rows < 12)  # wrench rows 6-11, then tension rows 12 + j
+        jp[:, wrench] = wrench_parameters[:, rows[wrench] - 6] * scale[:, rows[wrench], None]
+        at = np.flatnonzero(rows >= 12)
+        j = rows[at] - 12
+        jp[:, at, j] = dphi_dk[:, j] * scale[:, rows[at]]
+        jp[:, at, n + j] = dphi_dl0[:, j] * scale[:, rows[at]]
         return jp, wrench_parameters
 
     # -------------------------------------------------------------- known loads
@@ -570,27 +580,28 @@ class _Problem:
         ``C' = C + B^T H + H^T (B + A H)``, ``gx' = M^T gx``, ``gp' = gp + H^T gx``) rather than
         on the (N, R, .) Jacobians. An exact load is no unknown (``Jx' = 0``): the equilibrium
         is a constraint and the parameters' Jacobian is that of the constrained model."""
-        jx, jp, r = ev.jac_screw, ev.parameter_rows, ev.residuals
-        rows = _parameter_rows(self.n)
+        jx, jp, r = ev.screw_rows, ev.parameter_rows, ev.residuals[:, ev.rows]
+        block = ev.parameter_block
         if weights is not None:
-            sw = np.sqrt(weights)
+            sw = np.sqrt(weights[:, ev.rows])
             jx, r = jx * sw[..., None], r * sw
-            jp = jp * sw[:, rows, None] if jp.size else jp
+            jp = jp * sw[:, block, None]
         jxt = np.swapaxes(jx, -1, -2)
         A = jxt @ jx
         gx = (jxt @ r[..., None])[..., 0]
+        parameters = ev.wrench_parameters.size > 0
         B = C = gp = _empty()
-        if jp.size:
-            B = jxt[:, :, rows] @ jp
+        if parameters:
+            B = jxt[:, :, block] @ jp
             C = _sum_of_products(jp, jp)
-            gp = _sum_of_products(jp, r[:, rows, None])[:, 0]
+            gp = _sum_of_products(jp, r[:, block, None])[:, 0]
         loaded: Any = self.loaded[ev.index]
         if loaded.any():
             loaded = slice(None) if loaded.all() else np.flatnonzero(loaded)  # views: no copies
             M = -ev.wrench_screw_inverse[loaded]
             Mt = np.swapaxes(M, -1, -2)
             A_l, gx_l = A[loaded], gx[loaded]
-            if jp.size:
+            if parameters:
                 H = M @ ev.wrench_parameters[loaded]  # d xi / d z under a fixed load
                 B_l = B[loaded]
                 moved = B_l + A_l @ H  # Jx^T Jz'
@@ -602,7 +613,7 @@ class _Problem:
             exact = self.exact[ev.index]
             if exact.any():
                 A[exact], gx[exact] = 0.0, 0.0
-                if jp.size:
+                if parameters:
                     B[exact] = 0.0
         return _NormalEquations(A, B, C, gx, gp)
 
