@@ -134,8 +134,8 @@ SCALE_TEST_PROBABILITY = 1e-3
 LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
 #: Gauss-Newton iterations of the per-sample screw refinement ...
 SCREW_ITERATIONS = 8
-#: ... which stops when no screw coordinate moves more than this (rad, m; far below any
-#: sensor's noise: the fit moves every screw again).
+#: ... in which a sample stops when its step moves no screw coordinate more than this (rad,
+#: m; far below any sensor's noise: the fit moves every screw again).
 SCREW_TOLERANCE = 1e-6
 #: The fit has converged when an iteration lowers the cost by less than this fraction.
 FIT_TOLERANCE = 1e-8
@@ -492,38 +492,42 @@ class _Problem:
         return found
 
     def evaluate(self, z: FloatArray, xi: FloatArray, jacobians: bool = True,
-                 parameter_jacobians: bool = True) -> _Evaluation:
-        """Residuals at (z, xi); with ``jacobians`` their Jacobian w.r.t. the screws, and with
-        ``parameter_jacobians`` as well the one w.r.t. the parameters."""
+                 parameter_jacobians: bool = True,
+                 samples: NDArray[np.intp] | None = None) -> _Evaluation:
+        """Residuals at (z, xi) of the samples ``samples`` (default all; ``xi`` theirs); with
+        ``jacobians`` their Jacobian w.r.t. the screws, and with ``parameter_jacobians`` as well
+        the one w.r.t. the parameters."""
         n, data = self.n, self.data
+        index = np.arange(len(xi)) if samples is None else samples
         k, d = self.parameters(z)
         if np.any(k <= 0.0):
             raise ValueError('a stiffness reached zero')
         model = self._model(k)
-        rest = data.rest + d
+        rest = data.rest[index] + d
         if np.any(rest <= 0.0):
             raise ValueError('a rest length reached zero')
-        state, dphi_dl = _taut_branch(model, model.evaluate(xi, rest), xi, rest, self.taut)
+        state, dphi_dl = _taut_branch(model, model.evaluate(xi, rest), xi, rest,
+                                      self.taut[index])
         N = xi.shape[0]
-        R = 12 + 2 * n
-        raw = np.zeros((N, R))
+        raw = np.zeros((N, 12 + 2 * n))
         T = state.transform
         p = T[:, :3, 3]
-        Rm = data.poses[:, :3, :3]
-        has_pose = data.has_pose
+        poses = data.poses[index]
+        has_pose = data.has_pose[index]
         phi = np.zeros((N, 3))
         if has_pose.any():
-            raw[has_pose, :3] = p[has_pose] - data.poses[has_pose, :3, 3]
+            raw[has_pose, :3] = p[has_pose] - poses[has_pose, :3, 3]
             phi[has_pose] = log_so3_batch(
-                T[has_pose, :3, :3] @ np.swapaxes(Rm[has_pose], -1, -2))
+                T[has_pose, :3, :3] @ np.swapaxes(poses[has_pose, :3, :3], -1, -2))
             raw[:, 3:6] = phi
-        raw[:, 6:12] = state.wrench + data.wrench
-        raw[:, 12:12 + n] = state.tensions - data.tensions
-        raw[:, 12 + n:] = state.lengths - data.lengths
-        raw = np.where(self.mask, raw, 0.0)
+        raw[:, 6:12] = state.wrench + data.wrench[index]
+        raw[:, 12:12 + n] = state.tensions - data.tensions[index]
+        raw[:, 12 + n:] = state.lengths - data.lengths[index]
+        mask = self.mask[index]
+        raw = np.where(mask, raw, 0.0)
         residuals = raw / self.std
         stretch = state.lengths - rest
-        ev = _Evaluation(residuals, raw, state.wrench, stretch, np.arange(N), self.rows,
+        ev = _Evaluation(residuals, raw, state.wrench, stretch, index, self.rows,
                          self.parameter_block)
         if not jacobians:
             return ev
@@ -536,12 +540,13 @@ class _Problem:
         w = _string_wrench_directions(model, state)  # (N, n, 6)
         dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
         jx = np.concatenate([jt @ J, state.stiffness, dphi_dl[..., None] * dl, dl], axis=1)
-        scale = self.mask / self.std  # (N, R)
+        scale = mask / self.std  # (N, R)
         ev.screw_rows = jx[:, self.rows] * scale[:, self.rows, None]
         ev.wrench_screw, ev.stretch_screw = state.stiffness, dl
         ev.wrench_screw_inverse = np.zeros((N, 6, 6))
-        if self.loaded.any():
-            ev.wrench_screw_inverse[self.loaded] = np.linalg.inv(state.stiffness[self.loaded])
+        loaded = self.loaded[index]
+        if loaded.any():
+            ev.wrench_screw_inverse[loaded] = np.linalg.inv(state.stiffness[loaded])
         if parameter_jacobians:
             ev.parameter_rows, ev.wrench_parameters = self._parameter_jacobians(
                 model, state, w, rest, scale)
@@ -619,22 +624,24 @@ class _Problem:
 
     def advance(self, z: FloatArray, xi: FloatArray, ev: _Evaluation, z_new: FloatArray,
                 step: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """The screws after a step from ``(z, xi)`` (evaluated: ``ev``) to ``z_new``
-        with ``step`` (N, 6) in :meth:`load_chart`'s coordinates: ``xi + step`` without a known
-        load; else the equilibrium at ``z_new`` under the true load ``-F(xi) + step`` (an exact
-        load: the load itself), by Newton from the linear prediction. Returns (screws, found)."""
+        """The screws after a step from ``(z, xi)`` (evaluated: ``ev``, of its samples) to
+        ``z_new`` with ``step`` (N, 6) in :meth:`normal_equations`' coordinates: ``xi + step``
+        without a known load; else the equilibrium at ``z_new`` under the true load
+        ``-F(xi) + step`` (an exact load: the load itself), by Newton from the linear
+        prediction. Returns (screws, found)."""
         xi_new = xi + step
-        rows = np.flatnonzero(self.loaded)
+        rows = np.flatnonzero(self.loaded[ev.index])
         found = np.ones(len(xi), bool)
         if rows.size == 0:
             return xi_new, found
-        target = np.where(self.exact[rows, None], self.data.wrench[rows],
+        samples = ev.index[rows]
+        target = np.where(self.exact[samples, None], self.data.wrench[samples],
                           -ev.wrench[rows] + step[rows])
         change = target + ev.wrench[rows]
         if ev.wrench_parameters.size:  # parameters moved as well
             change = change + ev.wrench_parameters[rows] @ (z_new - z)
         start = xi[rows] - (ev.wrench_screw_inverse[rows] @ change[..., None])[..., 0]
-        xi_new[rows], found[rows] = self.settle(z_new, start, target, rows)
+        xi_new[rows], found[rows] = self.settle(z_new, start, target, samples)
         return xi_new, found
 
     def settle(self, z: FloatArray, xi: FloatArray, loads: FloatArray, rows: NDArray[np.intp]
@@ -674,21 +681,27 @@ class _Problem:
     def refine_screws(self, z: FloatArray, xi: FloatArray,
                       iterations: int = SCREW_ITERATIONS) -> FloatArray:
         """Every sample's screw by Gauss-Newton with the parameters fixed (batched; a step that
-        raises a sample's cost is halved up to 4 times, else that sample keeps its screw)."""
+        raises a sample's cost is halved up to 4 times, else that sample keeps its screw; a
+        sample stops when its step is below :data:`SCREW_TOLERANCE`)."""
         xi = self.settle_exact(z, xi)
         ev = self.evaluate(z, xi, parameter_jacobians=False)
         cost = np.sum(ev.residuals ** 2, axis=1)
         for _ in range(iterations):
             eq = self.normal_equations(ev)
             step = -(_pinv_psd(eq.A) @ eq.gx[..., None])[..., 0]
-            if np.max(np.abs(step)) < SCREW_TOLERANCE:
+            moving = np.max(np.abs(step), axis=1) >= SCREW_TOLERANCE
+            if not moving.any():
                 break
-            alpha = np.ones(len(xi))
+            # Only the samples still moving iterate on.
+            ev, step, cost = ev.subset(np.flatnonzero(moving)), step[moving], cost[moving]
+            samples = ev.index
+            start = xi[samples]
+            alpha = np.ones(len(samples))
             for _ in range(5):
-                trial, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
-                trial[~found] = xi[~found]
+                trial, found = self.advance(z, start, ev, z, alpha[:, None] * step)
+                trial[~found] = start[~found]
                 try:  # with the screw Jacobians: the next iteration's evaluation
-                    tev = self.evaluate(z, trial, parameter_jacobians=False)
+                    tev = self.evaluate(z, trial, parameter_jacobians=False, samples=samples)
                 except ValueError:
                     alpha *= 0.5
                     continue
@@ -699,11 +712,11 @@ class _Problem:
                 alpha[worse] *= 0.5
             else:
                 alpha[worse] = 0.0
-                trial, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
+                trial, found = self.advance(z, start, ev, z, alpha[:, None] * step)
                 if not found.all():
                     raise ValueError('no equilibrium under a sample\'s known load')
-                tev = self.evaluate(z, trial, parameter_jacobians=False)
-            xi, ev, cost = trial, tev, np.sum(tev.residuals ** 2, axis=1)
+                tev = self.evaluate(z, trial, parameter_jacobians=False, samples=samples)
+            xi[samples], ev, cost = trial, tev, np.sum(tev.residuals ** 2, axis=1)
         return xi
 
     def settle_exact(self, z: FloatArray, xi: FloatArray) -> FloatArray:
