@@ -149,6 +149,11 @@ HOLD_PASSES = 4
 #: Rows of each product in a sum over the samples (:func:`_sum_of_products`): small enough that
 #: BLAS computes it on one thread.
 SUM_BLOCK_ROWS = 256
+#: Levenberg-Marquardt damping at the start of a fit from the nominal parameters ...
+DAMPING = 1e-3
+#: ... and of a refit from a fit's solution (the taut-branch passes: near their solution, the
+#: steps are nearly Gauss-Newton's).
+WARM_DAMPING = 1e-5
 #: Levenberg-Marquardt iterations of one fit stage.
 MAX_ITERATIONS = 100
 #: A sample with a known load is at equilibrium when every component of ``F + W`` is below this
@@ -1026,13 +1031,14 @@ def _robust_weights(residuals: FloatArray, loss: str) -> tuple[FloatArray, Float
 
 def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray, loss: str,
            rows: NDArray[np.bool_], ev: _Evaluation | None = None,
-           max_iterations: int = MAX_ITERATIONS, tolerance: float = FIT_TOLERANCE
-           ) -> tuple[FloatArray, FloatArray, _Evaluation, int, bool]:
+           max_iterations: int = MAX_ITERATIONS, tolerance: float = FIT_TOLERANCE,
+           damping: float = DAMPING) -> tuple[FloatArray, FloatArray, _Evaluation, int, bool]:
     """Levenberg-Marquardt over ``z = z0 + basis y`` and every sample's screw, with the screws
     eliminated per sample (Schur complement: one q x q system per iteration) and the robust
     ``loss`` by iteratively re-weighted least squares (a descent method for these concave
     losses); only the residual rows ``rows`` (N, R) count; ``ev``: the evaluation at the start,
-    when known. Returns (z, screws, their evaluation, iterations, converged)."""
+    when known; ``damping``: the initial Levenberg-Marquardt damping. Returns (z, screws, their
+    evaluation, iterations, converged)."""
     q = basis.shape[1]
     z, xi = z0.copy(), xi0.copy()
     mask = rows.astype(np.float64)
@@ -1044,7 +1050,7 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
     if ev is None:
         ev = problem.evaluate(z, xi)
     cost, weight = cost_of(ev)
-    lam = 1e-3
+    lam = damping
     converged = False
     iterations = 0
     for iterations in range(1, max_iterations + 1):  # noqa: B007 (returned)
@@ -1329,7 +1335,8 @@ def _hold_taut(problem: _Problem, z: FloatArray, xi: FloatArray, ev: _Evaluation
         refit = False
         problem.taut[inliers] = held
         xi = problem.settle_exact(z, xi)  # the held strings move the equilibria
-        z, xi, ev, used, converged = _solve(problem, z, basis_full, xi, 'linear', rows)
+        z, xi, ev, used, converged = _solve(problem, z, basis_full, xi, 'linear', rows,
+                                            damping=WARM_DAMPING)
         iterations += used
         if not converged:
             break
@@ -1344,12 +1351,11 @@ def _stretch_std(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
     parameters with their joint covariance (Schur complement:
     ``Cov u = A^+ + A^+ B C B^T A^+``, ``Cov(u, z) = -A^+ B C``; the screw
     ``d xi = G du + H dz``, ``G = -K^-1``, ``H = G dF/dz`` for a known load, else ``G = I``,
-    ``H = 0``)."""
+    ``H = 0``): ``Cov xi = G A^+ G^T + D C D^T``, ``Cov(xi, z) = -D C`` with
+    ``D = G A^+ B - H``."""
     n = problem.n
     information, A_pinv, AB = _schur(problem.normal_equations(ev), columns)
     C = _subspace_covariance(information, basis)
-    cov_u = A_pinv + AB @ C @ np.swapaxes(AB, 1, 2)
-    cov_uz = -AB @ C
     N = len(ev.index)
     G = np.broadcast_to(np.eye(6), (N, 6, 6)).copy()
     H = np.zeros((N, 6, columns.size))
@@ -1357,20 +1363,17 @@ def _stretch_std(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
     if loaded.any():
         G[loaded] = -ev.wrench_screw_inverse[loaded]
         H[loaded] = G[loaded] @ ev.wrench_parameters[loaded][:, :, columns]
-    Gt, Ht = np.swapaxes(G, 1, 2), np.swapaxes(H, 1, 2)
-    cov_xi = G @ cov_u @ Gt + G @ cov_uz @ Ht + H @ np.swapaxes(cov_uz, 1, 2) @ Gt + H @ C @ Ht
-    cov_xz = G @ cov_uz + H @ C  # (N, 6, P)
     L = ev.stretch_screw  # (N, n, 6)
-    var = np.einsum('nja,nab,njb->nj', L, cov_xi, L)
+    LG = L @ G
+    LD = L @ (G @ AB - H)  # (N, n, P)
+    LDC = LD @ C
+    var = np.sum((LG @ A_pinv) * LG, axis=-1) + np.sum(LDC * LD, axis=-1)
     for j in range(n):  # the offset d_j = OFFSET_UNIT z_{n+j} when fitted
         at = np.flatnonzero(columns == n + j)
         if at.size:
             c = int(at[0])
-            var[:, j] += OFFSET_UNIT * (OFFSET_UNIT * C[c, c]
-                                        - 2.0 * np.einsum('na,na->n', L[:, j], cov_xz[:, :, c]))
+            var[:, j] += OFFSET_UNIT * (OFFSET_UNIT * C[c, c] + 2.0 * LDC[:, j, c])
     return ev.stretch, np.sqrt(np.maximum(var, 0.0))
-
-
 
 
 def _only_scale_unidentifiable(ident: Identifiability, names: Sequence[str], name: str) -> bool:
