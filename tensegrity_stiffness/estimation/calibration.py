@@ -419,7 +419,9 @@ class _Evaluation:
     wrench_parameters: FloatArray = field(default_factory=_empty)  # d F / d z (N, 6, 2n)
 
     def subset(self, samples: NDArray[np.int64]) -> _Evaluation:
-        """The evaluation of the samples ``samples`` only."""
+        """The evaluation of the samples ``samples`` (positions in this one) only."""
+        if np.array_equal(samples, np.arange(len(self.index))):
+            return self
         per_sample = {f.name: getattr(self, f.name) for f in fields(self)
                       if f.name not in ('rows', 'parameter_block')}
         return replace(self, **{name: a if a.shape == (0,) else a[samples]  # (0,): not computed
