@@ -15,11 +15,11 @@ measurement gives whitened residuals (measurement noise std ``sigma`` from
 * equilibrium with a measured external wrench ``W_m`` (force-torque sensor on link 2, in {1}
   about its origin; zeros for "unloaded"): ``(F(xi; theta) + W_m) / sigma`` (Monke & Vikas eq. 9
   for ``F``); no residual when the load is unknown. With a known load the sample's own unknown
-  is its true load ``W = -F(xi)`` instead of its screw (:meth:`_Problem.load_chart`: the screw
-  is the equilibrium under ``W``, solved by Newton after every step, :meth:`_Problem.advance`),
-  so that a precise reading converges; an **exact** load (zeros, or every known load when the
-  load noise is 0: :attr:`CalibrationNoise.exact_loads`) is no unknown: the equilibrium under it
-  is a constraint and its rows are no residuals;
+  is its true load ``W = -F(xi)`` instead of its screw (:meth:`_Problem.normal_equations`: the
+  screw is the equilibrium under ``W``, solved by Newton after every step,
+  :meth:`_Problem.advance`), so that a precise reading converges; an **exact** load (zeros,
+  or every known load when the load noise is 0: :attr:`CalibrationNoise.exact_loads`) is no
+  unknown: the equilibrium under it is a constraint and its rows are no residuals;
 * load cells: ``(phi_j(xi; theta) - t_j) / sigma`` for every measured string (eq. 8, the
   model's force law);
 * string lengths: ``(l_j(xi) - l_m) / sigma`` (eq. 7).
@@ -57,18 +57,20 @@ Method
    the screws eliminated per sample (one q x q system per iteration, q <= 24: the sparse
    structure "parameters + one screw per sample" solved exactly), with the robust ``loss`` (the
    losses of ``scipy.optimize.least_squares``, acting beyond :data:`ROBUST_SCALE` sigma) by
-   iteratively re-weighted least squares; samples whose whitened chi-square exceeds the
+   iteratively re-weighted least squares, to :data:`ROBUST_TOLERANCE` (it only finds the
+   outliers and the strings to hold); samples whose whitened chi-square exceeds the
    ``1 - OUTLIER_PROBABILITY`` quantile are outliers; a final plain least-squares fit on the
    inliers, warm-started, gives the estimate. ``scipy.optimize.least_squares`` with the same
    sparse Jacobian (LSMR) reaches the same estimate (``bench/bench_calibration.py`` prints both:
    0.001 std apart, 2.3x the time at 1,000 samples); the elimination solves each step exactly
    and gives the information of step 2 and the covariance from the same blocks.
-   Then every string that is not clearly slack (its stretch ``l_j - l0_j`` above
-   ``-SLACK_MARGIN`` std) is held on its taut branch (:func:`_taut_branch`: eq. 8 continued
-   below ``l0``, smooth) and the fit is repeated until that set stops changing
+   That final fit holds every string that is not clearly slack at the first fit (its stretch
+   ``l_j - l0_j`` above ``-SLACK_MARGIN`` std) on its taut branch (:func:`_taut_branch`: eq. 8
+   continued below ``l0``, smooth) and is repeated until that set stops changing the model
    (:func:`_hold_taut`): the model is not smooth at ``l = l0``, and a fit free to slacken a
    string that is taut in truth leans on the lost information and reports too small a std.
-   The samples with a string within ``SLACK_MARGIN`` std of slack are counted (``near_slack``).
+   The samples with a string within ``SLACK_MARGIN`` std of slack at the first fit are counted
+   (``near_slack``).
 4. Covariance ``V (V^T S V)^-1 V^T`` (``V`` the identifiable subspace, ``S`` at the estimate):
    the Gauss-Newton covariance, equal to the Cramer-Rao bound of the same data model at the
    truth (:func:`cramer_rao_std`).
