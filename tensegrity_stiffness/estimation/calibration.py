@@ -507,35 +507,37 @@ class _Problem:
         ``jacobians`` their Jacobian w.r.t. the screws, and with ``parameter_jacobians`` as well
         the one w.r.t. the parameters."""
         n, data = self.n, self.data
-        index = np.arange(len(xi)) if samples is None else samples
+        sel: Any = slice(None) if samples is None else samples  # all: views, no copies
         k, d = self.parameters(z)
         if np.any(k <= 0.0):
             raise ValueError('a stiffness reached zero')
         model = self._model(k)
-        rest = data.rest[index] + d
+        rest = data.rest[sel] + d
         if np.any(rest <= 0.0):
             raise ValueError('a rest length reached zero')
         state, dphi_dl = _taut_branch(model, model.evaluate(xi, rest), xi, rest,
-                                      self.taut[index])
+                                      self.taut[sel])
         N = xi.shape[0]
         raw = np.zeros((N, 12 + 2 * n))
         T = state.transform
         p = T[:, :3, 3]
-        poses = data.poses[index]
-        has_pose = data.has_pose[index]
+        poses = data.poses[sel]
+        has_pose = data.has_pose[sel]
+        posed: Any = slice(None) if has_pose.all() else has_pose
         phi = np.zeros((N, 3))
         if has_pose.any():
-            raw[has_pose, :3] = p[has_pose] - poses[has_pose, :3, 3]
-            phi[has_pose] = log_so3_batch(
-                T[has_pose, :3, :3] @ np.swapaxes(poses[has_pose, :3, :3], -1, -2))
+            raw[posed, :3] = p[posed] - poses[posed, :3, 3]
+            phi[posed] = log_so3_batch(
+                T[posed, :3, :3] @ np.swapaxes(poses[posed, :3, :3], -1, -2))
             raw[:, 3:6] = phi
-        raw[:, 6:12] = state.wrench + data.wrench[index]
-        raw[:, 12:12 + n] = state.tensions - data.tensions[index]
-        raw[:, 12 + n:] = state.lengths - data.lengths[index]
-        mask = self.mask[index]
+        raw[:, 6:12] = state.wrench + data.wrench[sel]
+        raw[:, 12:12 + n] = state.tensions - data.tensions[sel]
+        raw[:, 12 + n:] = state.lengths - data.lengths[sel]
+        mask = self.mask[sel]
         raw = np.where(mask, raw, 0.0)
         residuals = raw / self.std
         stretch = state.lengths - rest
+        index = np.arange(N) if samples is None else samples
         ev = _Evaluation(residuals, raw, state.wrench, stretch, index, self.rows,
                          self.parameter_block)
         if not jacobians:
@@ -552,10 +554,13 @@ class _Problem:
         scale = mask / self.std  # (N, R)
         ev.screw_rows = jx[:, self.rows] * scale[:, self.rows, None]
         ev.wrench_screw, ev.stretch_screw = state.stiffness, dl
-        ev.wrench_screw_inverse = np.zeros((N, 6, 6))
-        loaded = self.loaded[index]
-        if loaded.any():
-            ev.wrench_screw_inverse[loaded] = np.linalg.inv(state.stiffness[loaded])
+        loaded = self.loaded[sel]
+        if loaded.all():
+            ev.wrench_screw_inverse = np.linalg.inv(state.stiffness)
+        else:
+            ev.wrench_screw_inverse = np.zeros((N, 6, 6))
+            if loaded.any():
+                ev.wrench_screw_inverse[loaded] = np.linalg.inv(state.stiffness[loaded])
         if parameter_jacobians:
             ev.parameter_rows, ev.wrench_parameters = self._parameter_jacobians(
                 model, state, w, rest, scale)
