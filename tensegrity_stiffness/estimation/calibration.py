@@ -1365,13 +1365,9 @@ def _stretch_std(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
     n = problem.n
     information, A_pinv, AB = _schur(problem.normal_equations(ev), columns)
     C = _subspace_covariance(information, basis)
-    N = len(ev.index)
-    G = np.broadcast_to(np.eye(6), (N, 6, 6)).copy()
-    H = np.zeros((N, 6, columns.size))
-    loaded = problem.loaded[ev.index]
-    if loaded.any():
-        G[loaded] = -ev.wrench_screw_inverse[loaded]
-        H[loaded] = G[loaded] @ ev.wrench_parameters[loaded][:, :, columns]
+    loaded = problem.loaded[ev.index][:, None, None]
+    G = np.where(loaded, -ev.wrench_screw_inverse, np.eye(6))
+    H = np.where(loaded, G @ ev.wrench_parameters[:, :, columns], 0.0)
     L = ev.stretch_screw  # (N, n, 6)
     LG = L @ G
     LD = L @ (G @ AB - H)  # (N, n, P)
