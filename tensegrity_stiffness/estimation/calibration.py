@@ -424,10 +424,19 @@ class _Evaluation:
         """The evaluation of the samples ``samples`` (positions in this one) only."""
         if np.array_equal(samples, np.arange(len(self.index))):
             return self
-        per_sample = {f.name: getattr(self, f.name) for f in fields(self)
-                      if f.name not in ('rows', 'parameter_block')}
-        return replace(self, **{name: a if a.shape == (0,) else a[samples]  # (0,): not computed
-                                for name, a in per_sample.items()})
+        return replace(self, **{name: a[samples] for name, a in self._per_sample().items()})
+
+    def assign(self, samples: NDArray[np.int64], other: _Evaluation) -> None:
+        """Overwrite the samples ``samples`` (positions in this one) with ``other`` (their
+        evaluation)."""
+        for name, a in self._per_sample().items():
+            a[samples] = getattr(other, name)
+
+    def _per_sample(self) -> dict[str, FloatArray]:
+        """The arrays with one entry per sample (those computed: not (0,))."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name not in ('rows', 'parameter_block')
+                and getattr(self, f.name).shape != (0,)}
 
     @property
     def jac_screw(self) -> FloatArray:
@@ -694,9 +703,9 @@ class _Problem:
     # -------------------------------------------------------------- screws with fixed theta
     def refine_screws(self, z: FloatArray, xi: FloatArray,
                       iterations: int = SCREW_ITERATIONS) -> FloatArray:
-        """Every sample's screw by Gauss-Newton with the parameters fixed (batched; a step that
-        raises a sample's cost is halved up to 4 times, else that sample keeps its screw; a
-        sample stops when its step is below :data:`SCREW_TOLERANCE`)."""
+        """Every sample's screw by Gauss-Newton with the parameters fixed (batched, with
+        :meth:`_screw_line_search`; a sample stops when its step is below
+        :data:`SCREW_TOLERANCE`)."""
         xi = self.settle_exact(z, xi)
         ev = self.evaluate(z, xi, parameter_jacobians=False)
         cost = np.sum(ev.residuals ** 2, axis=1)
@@ -708,30 +717,46 @@ class _Problem:
                 break
             # Only the samples still moving iterate on.
             ev, step, cost = ev.subset(np.flatnonzero(moving)), step[moving], cost[moving]
-            samples = ev.index
-            start = xi[samples]
-            alpha = np.ones(len(samples))
-            for _ in range(5):
-                trial, found = self.advance(z, start, ev, z, alpha[:, None] * step)
-                trial[~found] = start[~found]
-                try:  # with the screw Jacobians: the next iteration's evaluation
-                    tev = self.evaluate(z, trial, parameter_jacobians=False, samples=samples)
-                except ValueError:
-                    alpha *= 0.5
-                    continue
-                tcost = np.sum(tev.residuals ** 2, axis=1)
-                worse = (tcost > cost * (1 + 1e-12) + 1e-300) | ~found
-                if not worse.any():
-                    break
-                alpha[worse] *= 0.5
-            else:
-                alpha[worse] = 0.0
-                trial, found = self.advance(z, start, ev, z, alpha[:, None] * step)
-                if not found.all():
-                    raise ValueError('no equilibrium under a sample\'s known load')
-                tev = self.evaluate(z, trial, parameter_jacobians=False, samples=samples)
-            xi[samples], ev, cost = trial, tev, np.sum(tev.residuals ** 2, axis=1)
+            xi[ev.index], ev = self._screw_line_search(z, xi[ev.index], ev, step, cost)
+            cost = np.sum(ev.residuals ** 2, axis=1)
         return xi
+
+    def _screw_line_search(self, z: FloatArray, xi: FloatArray, ev: _Evaluation,
+                           step: FloatArray, cost: FloatArray) -> tuple[FloatArray, _Evaluation]:
+        """The screws of the samples of ``ev`` (at ``xi``, their costs ``cost``) after the
+        Gauss-Newton ``step`` with the parameters ``z`` fixed, and their evaluation (with the
+        screw Jacobians: the next iteration's): a step that raises a sample's cost is halved
+        up to 4 times (only those samples are tried again), else that sample keeps its
+        screw."""
+        trial, tev = xi.copy(), None
+        alpha = np.ones(len(xi))
+        retry = np.arange(len(xi))
+        for _ in range(5):
+            tried = ev.subset(retry)
+            moved, found = self.advance(z, xi[retry], tried, z, alpha[retry, None] * step[retry])
+            moved[~found] = xi[retry][~found]
+            try:
+                moved_ev = self.evaluate(z, moved, parameter_jacobians=False,
+                                         samples=tried.index)
+            except ValueError:
+                alpha[retry] *= 0.5
+                continue
+            worse = ~found | (np.sum(moved_ev.residuals ** 2, axis=1)
+                              > cost[retry] * (1 + 1e-12) + 1e-300)
+            trial[retry] = moved
+            if tev is None:
+                tev = moved_ev
+            else:
+                tev.assign(retry, moved_ev)
+            if not worse.any():
+                return trial, tev
+            retry = retry[worse]
+            alpha[retry] *= 0.5
+        trial[retry] = xi[retry]  # still worse: the screw stays
+        if tev is None:
+            return trial, ev
+        tev.assign(retry, ev.subset(retry))
+        return trial, tev
 
     def settle_exact(self, z: FloatArray, xi: FloatArray) -> FloatArray:
         """``xi`` with every sample of an exact load at its equilibrium under it (Newton from
