@@ -61,9 +61,10 @@ Method
    outliers and the strings to hold); samples whose whitened chi-square exceeds the
    ``1 - OUTLIER_PROBABILITY`` quantile are outliers; a final plain least-squares fit on the
    inliers, warm-started, gives the estimate. ``scipy.optimize.least_squares`` with the same
-   sparse Jacobian (LSMR) reaches the same estimate (``bench/bench_calibration.py`` prints both:
-   0.001 std apart, 2.3x the time at 1,000 samples); the elimination solves each step exactly
-   and gives the information of step 2 and the covariance from the same blocks.
+   sparse Jacobian (LSMR) reaches the same plain least-squares estimate (0.001 std apart with no
+   string held; ``bench/bench_calibration.py`` prints both, the library's with the strings held
+   below: 0.5 std apart, scipy 2.8x the time at 1,000 samples); the elimination solves each step
+   exactly and gives the information of step 2 and the covariance from the same blocks.
    That final fit holds every string that is not clearly slack at the first fit (its stretch
    ``l_j - l0_j`` above ``-SLACK_MARGIN`` std) on its taut branch (:func:`_taut_branch`: eq. 8
    continued below ``l0``, smooth) and is repeated until that set stops changing the model
