@@ -58,19 +58,20 @@ Method
    structure "parameters + one screw per sample" solved exactly), with the robust ``loss`` (the
    losses of ``scipy.optimize.least_squares``, acting beyond :data:`ROBUST_SCALE` sigma) by
    iteratively re-weighted least squares, to :data:`ROBUST_TOLERANCE` (it only finds the
-   outliers and the strings to hold); samples whose whitened chi-square exceeds the
-   ``1 - OUTLIER_PROBABILITY`` quantile are outliers; a final plain least-squares fit on the
-   inliers, warm-started, gives the estimate. ``scipy.optimize.least_squares`` with the same
+   outliers); samples whose whitened chi-square exceeds the ``1 - OUTLIER_PROBABILITY``
+   quantile are outliers; a plain least-squares fit on the inliers, warm-started (the first fit
+   itself for the linear loss; to the same tolerance), finds the strings to hold, and a final
+   plain least-squares fit gives the estimate. ``scipy.optimize.least_squares`` with the same
    sparse Jacobian (LSMR) reaches the same plain least-squares estimate (0.001 std apart with no
    string held; ``bench/bench_calibration.py`` prints both, the library's with the strings held
    below: 0.5 std apart, scipy 2.8x the time at 1,000 samples); the elimination solves each step
    exactly and gives the information of step 2 and the covariance from the same blocks.
-   That final fit holds every string that is not clearly slack at the first fit (its stretch
+   That final fit holds every string that is not clearly slack at the plain fit (its stretch
    ``l_j - l0_j`` above ``-SLACK_MARGIN`` std) on its taut branch (:func:`_taut_branch`: eq. 8
    continued below ``l0``, smooth) and is repeated until that set stops changing the model
    (:func:`_hold_taut`): the model is not smooth at ``l = l0``, and a fit free to slacken a
    string that is taut in truth leans on the lost information and reports too small a std.
-   The samples with a string within ``SLACK_MARGIN`` std of slack at the first fit are counted
+   The samples with a string within ``SLACK_MARGIN`` std of slack at the plain fit are counted
    (``near_slack``).
 4. Covariance ``V (V^T S V)^-1 V^T`` (``V`` the identifiable subspace, ``S`` at the estimate):
    the Gauss-Newton covariance, equal to the Cramer-Rao bound of the same data model at the
@@ -142,7 +143,8 @@ SCREW_ITERATIONS = 8
 SCREW_TOLERANCE = 1e-6
 #: The fit has converged when an iteration lowers the cost by less than this fraction.
 FIT_TOLERANCE = 1e-8
-#: ... and the robust stage (followed by the final plain least-squares stage).
+#: ... and the fits before the final one (with the robust loss: it finds the outliers; the
+#: plain fit on the inliers: it finds the strings to hold; the final fit polishes).
 ROBUST_TOLERANCE = 1e-4
 #: A sample with a string whose stretch is within this many std of 0 (slack) is left out.
 SLACK_MARGIN = 3.0
@@ -392,6 +394,7 @@ def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArra
 
 
 def _empty() -> FloatArray:
+    """The placeholder (0,) of an array not computed."""
     return np.empty(0)
 
 
@@ -422,7 +425,8 @@ class _Evaluation:
     wrench_parameters: FloatArray = field(default_factory=_empty)  # d F / d z (N, 6, 2n)
 
     def subset(self, samples: NDArray[np.int64]) -> _Evaluation:
-        """The evaluation of the samples ``samples`` (positions in this one) only."""
+        """The evaluation of the samples ``samples`` (positions in this one) only (this one
+        itself when they are all of its samples)."""
         if np.array_equal(samples, np.arange(len(self.index))):
             return self
         return replace(self, **{name: a[samples] for name, a in self._per_sample().items()})
@@ -547,7 +551,7 @@ class _Problem:
         raw = np.where(mask, raw, 0.0)
         residuals = raw / self.std
         stretch = state.lengths - rest
-        index = np.arange(N) if samples is None else samples
+        index = np.arange(N) if samples is None else np.array(samples)
         ev = _Evaluation(residuals, raw, state.wrench, stretch, index, self.rows,
                          self.parameter_block)
         if not jacobians:
@@ -803,12 +807,14 @@ def _sum_of_products(a: FloatArray, b: FloatArray) -> FloatArray:
     products of :data:`SUM_BLOCK_ROWS` rows each: one 2-D product of all N r rows would be one
     large BLAS call, which OpenBLAS spreads over threads, and on a shared machine the threads
     cost more than they save (the whole calibration 2-3x slower than with one thread)."""
-    a2, b2 = a.reshape(-1, a.shape[-1]), b.reshape(-1, b.shape[-1])
-    full = len(a2) // SUM_BLOCK_ROWS * SUM_BLOCK_ROWS
+    rows = a.shape[0] * a.shape[1]
+    a2, b2 = a.reshape(rows, a.shape[-1]), b.reshape(rows, b.shape[-1])
+    blocks = rows // SUM_BLOCK_ROWS
+    full = blocks * SUM_BLOCK_ROWS
     out = a2[full:].T @ b2[full:]
-    if full:
-        blocks_a = a2[:full].reshape(-1, SUM_BLOCK_ROWS, a2.shape[-1])
-        blocks_b = b2[:full].reshape(-1, SUM_BLOCK_ROWS, b2.shape[-1])
+    if blocks:
+        blocks_a = a2[:full].reshape(blocks, SUM_BLOCK_ROWS, a2.shape[-1])
+        blocks_b = b2[:full].reshape(blocks, SUM_BLOCK_ROWS, b2.shape[-1])
         out += (np.swapaxes(blocks_a, 1, 2) @ blocks_b).sum(axis=0)
     return out
 
@@ -835,9 +841,9 @@ class CalibrationResult:
     eliminated, scaled coordinates), ``residual_rms_before`` / ``residual_rms_after`` per
     measurement kind (its unit, :data:`RESIDUAL_UNITS`; before: nominal parameters with each
     screw fitted), ``outliers`` the sample indices left out, ``near_slack`` the (inlier) samples
-    with a string within :data:`SLACK_MARGIN` std of slack at the first fit (kept; the strings
-    not clearly slack held on their taut branch), ``screws`` (N, 6)
-    the fitted screws,
+    with a string within :data:`SLACK_MARGIN` std of slack at the first plain least-squares
+    fit (kept; the strings not clearly slack held on their taut branch), ``screws`` (N, 6) the
+    fitted screws,
     ``chi2`` and ``dof`` of the final fit (``chi2 / dof`` near 1 when the noise model is right).
     """
 
@@ -1282,7 +1288,8 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     converged = True
     z, xi_fit, ev_all = z_nominal, xi, before
     if basis_full.shape[1]:
-        # A robust stage only finds the outliers (the final stage polishes): a looser tolerance.
+        # The first fit only finds the outliers (and for the linear loss the strings to hold;
+        # the final fit polishes): a looser tolerance.
         z, xi_fit, ev_all, used, converged = _solve(
             problem, z_nominal, basis_full, xi, loss, rows, before,
             tolerance=ROBUST_TOLERANCE)
@@ -1293,9 +1300,15 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     message = 'converged'
     rows[outliers] = False
     near_slack = np.zeros(0, np.intp)
+    if basis_full.shape[1] and loss != 'linear':
+        # Plain least squares on the inliers, from the robust solution: the strings to hold are
+        # found at a plain fit (loose: the final fit polishes).
+        z, xi_fit, ev_all, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear',
+                                                    rows, ev_all, tolerance=ROBUST_TOLERANCE)
+        iterations += used
     if basis_full.shape[1]:
-        # The final estimate: plain least squares on the inliers (from the robust solution),
-        # the strings not clearly slack held on their taut branch.
+        # The final estimate: plain least squares on the inliers, the strings not clearly
+        # slack held on their taut branch.
         z, xi_fit, ev_all, used, converged, near_slack = _hold_taut(
             problem, z, xi_fit, ev_all, basis_full, rows, inliers, columns, ident.basis,
             refit=True)
@@ -1353,8 +1366,8 @@ def _hold_taut(problem: _Problem, z: FloatArray, xi: FloatArray, ev: _Evaluation
     ``-SLACK_MARGIN`` std, :func:`_stretch_std`) held on its taut branch (:func:`_taut_branch`),
     repeated until the held set stops changing the model (at most :data:`HOLD_PASSES` fits;
     holding a string changes the model only where it is slack, so a change elsewhere needs no
-    fit). ``refit``: ``(z, xi)`` is no plain least-squares fit of ``rows`` yet (a robust one),
-    so the first fit is made whatever it holds. Near ``l = l0`` the model is not smooth: a fit
+    fit). ``refit``: ``(z, xi)`` is a loose fit only, so the first fit is made whatever it
+    holds. Near ``l = l0`` the model is not smooth: a fit
     free to slacken a string that is taut in truth (its fitted stretch a little below zero
     through the noise) loses that string's information there and leans on it, and its error
     exceeds the covariance (docs/calibration.md, "Near a string's slack boundary"). Returns
