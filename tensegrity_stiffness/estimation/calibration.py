@@ -15,11 +15,11 @@ measurement gives whitened residuals (measurement noise std ``sigma`` from
 * equilibrium with a measured external wrench ``W_m`` (force-torque sensor on link 2, in {1}
   about its origin; zeros for "unloaded"): ``(F(xi; theta) + W_m) / sigma`` (Monke & Vikas eq. 9
   for ``F``); no residual when the load is unknown. With a known load the sample's own unknown
-  is its true load ``W = -F(xi)`` instead of its screw (:meth:`_Problem.load_chart`: the screw
-  is the equilibrium under ``W``, solved by Newton after every step, :meth:`_Problem.advance`),
-  so that a precise reading converges; an **exact** load (zeros, or every known load when the
-  load noise is 0: :attr:`CalibrationNoise.exact_loads`) is no unknown: the equilibrium under it
-  is a constraint and its rows are no residuals;
+  is its true load ``W = -F(xi)`` instead of its screw (:meth:`_Problem.normal_equations`: the
+  screw is the equilibrium under ``W``, solved by Newton after every step,
+  :meth:`_Problem.advance`), so that a precise reading converges; an **exact** load (zeros,
+  or every known load when the load noise is 0: :attr:`CalibrationNoise.exact_loads`) is no
+  unknown: the equilibrium under it is a constraint and its rows are no residuals;
 * load cells: ``(phi_j(xi; theta) - t_j) / sigma`` for every measured string (eq. 8, the
   model's force law);
 * string lengths: ``(l_j(xi) - l_m) / sigma`` (eq. 7).
@@ -57,18 +57,22 @@ Method
    the screws eliminated per sample (one q x q system per iteration, q <= 24: the sparse
    structure "parameters + one screw per sample" solved exactly), with the robust ``loss`` (the
    losses of ``scipy.optimize.least_squares``, acting beyond :data:`ROBUST_SCALE` sigma) by
-   iteratively re-weighted least squares; samples whose whitened chi-square exceeds the
-   ``1 - OUTLIER_PROBABILITY`` quantile are outliers; a final plain least-squares fit on the
-   inliers, warm-started, gives the estimate. ``scipy.optimize.least_squares`` with the same
-   sparse Jacobian (LSMR) reaches the same estimate (``bench/bench_calibration.py`` prints both:
-   0.001 std apart, 2.3x the time at 1,000 samples); the elimination solves each step exactly
-   and gives the information of step 2 and the covariance from the same blocks.
-   Then every string that is not clearly slack (its stretch ``l_j - l0_j`` above
-   ``-SLACK_MARGIN`` std) is held on its taut branch (:func:`_taut_branch`: eq. 8 continued
-   below ``l0``, smooth) and the fit is repeated until that set stops changing
+   iteratively re-weighted least squares, to :data:`ROBUST_TOLERANCE` (it only finds the
+   outliers); samples whose whitened chi-square exceeds the ``1 - OUTLIER_PROBABILITY``
+   quantile are outliers; a plain least-squares fit on the inliers, warm-started (the first fit
+   itself for the linear loss; to the same tolerance), finds the strings to hold, and a final
+   plain least-squares fit gives the estimate. ``scipy.optimize.least_squares`` with the same
+   sparse Jacobian (LSMR) reaches the same plain least-squares estimate (0.001 std apart with no
+   string held; ``bench/bench_calibration.py`` prints both, the library's with the strings held
+   below: 0.5 std apart, scipy 2.8x the time at 1,000 samples); the elimination solves each step
+   exactly and gives the information of step 2 and the covariance from the same blocks.
+   That final fit holds every string that is not clearly slack at the plain fit (its stretch
+   ``l_j - l0_j`` above ``-SLACK_MARGIN`` std) on its taut branch (:func:`_taut_branch`: eq. 8
+   continued below ``l0``, smooth) and is repeated until that set stops changing the model
    (:func:`_hold_taut`): the model is not smooth at ``l = l0``, and a fit free to slacken a
    string that is taut in truth leans on the lost information and reports too small a std.
-   The samples with a string within ``SLACK_MARGIN`` std of slack are counted (``near_slack``).
+   The samples with a string within ``SLACK_MARGIN`` std of slack at the plain fit are counted
+   (``near_slack``).
 4. Covariance ``V (V^T S V)^-1 V^T`` (``V`` the identifiable subspace, ``S`` at the estimate):
    the Gauss-Newton covariance, equal to the Cramer-Rao bound of the same data model at the
    truth (:func:`cramer_rao_std`).
@@ -80,7 +84,7 @@ import math
 import re
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -132,17 +136,29 @@ OUTLIER_PROBABILITY = 1e-4
 SCALE_TEST_PROBABILITY = 1e-3
 #: Robust losses of scipy.optimize.least_squares.
 LOSSES = ('linear', 'soft_l1', 'huber', 'cauchy', 'arctan')
-#: Gauss-Newton iterations of the per-sample screw refinement.
+#: Gauss-Newton iterations of the per-sample screw refinement ...
 SCREW_ITERATIONS = 8
+#: ... in which a sample stops when its step moves no screw coordinate more than this (rad,
+#: m; far below any sensor's noise: the fit moves every screw again).
+SCREW_TOLERANCE = 1e-6
 #: The fit has converged when an iteration lowers the cost by less than this fraction.
 FIT_TOLERANCE = 1e-8
-#: ... and the robust stage (followed by the final plain least-squares stage).
-ROBUST_TOLERANCE = 1e-6
+#: ... and the fits before the final one (with the robust loss: it finds the outliers; the
+#: plain fit on the inliers: it finds the strings to hold; the final fit polishes).
+ROBUST_TOLERANCE = 1e-4
 #: A sample with a string whose stretch is within this many std of 0 (slack) is left out.
 SLACK_MARGIN = 3.0
 #: Passes of "hold the strings not clearly slack on their taut branch, fit again" (until the
 #: held set stops changing).
 HOLD_PASSES = 4
+#: Rows of each product in a sum over the samples (:func:`_sum_of_products`): small enough that
+#: BLAS computes it on one thread.
+SUM_BLOCK_ROWS = 256
+#: Levenberg-Marquardt damping at the start of a fit from the nominal parameters ...
+DAMPING = 1e-3
+#: ... and of a refit from a fit's solution (the taut-branch passes: near their solution, the
+#: steps are nearly Gauss-Newton's).
+WARM_DAMPING = 1e-5
 #: Levenberg-Marquardt iterations of one fit stage.
 MAX_ITERATIONS = 100
 #: A sample with a known load is at equilibrium when every component of ``F + W`` is below this
@@ -377,34 +393,84 @@ def _string_wrench_directions(model: JointModel, state: JointState) -> FloatArra
     return np.concatenate([u, np.cross(model.link1_string_nodes, u)], axis=-1)
 
 
+def _empty() -> FloatArray:
+    """The placeholder (0,) of an array not computed."""
+    return np.empty(0)
+
+
 @dataclass
 class _Evaluation:
-    """Whitened residuals (N, R) and their Jacobians w.r.t. the screws (N, R, 6) and the scaled
-    parameters (N, R, 2n) at one point (rows: pose 6, wrench 6, tensions n, lengths n)."""
+    """Whitened residuals (N, R) and their Jacobians w.r.t. the screws and the scaled parameters
+    at one point (rows: pose 6, wrench 6, tensions n, lengths n). The Jacobians are kept for the
+    rows some sample measures only (``rows``, m of R: :attr:`_Problem.rows`), and the one w.r.t.
+    the parameters for those of them that depend on the parameters (the wrench and the
+    tensions: ``rows[parameter_block]``); :attr:`jac_screw` and :attr:`jac_parameters` spread
+    them over all R rows."""
 
     residuals: FloatArray
-    jac_screw: FloatArray
-    jac_parameters: FloatArray
     raw: FloatArray  # unwhitened residuals (N, R)
     wrench: FloatArray  # F(xi; theta) (N, 6), every sample
-    wrench_screw: FloatArray  # d F / d xi = K (N, 6, 6) (with the Jacobians)
-    wrench_parameters: FloatArray  # d F / d z (N, 6, 2n), scaled coordinates, unwhitened
     stretch: FloatArray  # l_j - l0_j (N, n): negative when slack
-    stretch_screw: FloatArray  # d l_j / d xi (N, n, 6) (with the Jacobians)
     index: NDArray[np.intp]  # the samples evaluated (N,)
+    rows: NDArray[np.intp]  # the residual rows of the Jacobians (m,)
+    parameter_block: slice  # the rows of ``rows`` that depend on the parameters
+    # With the Jacobians (else empty):
+    screw_rows: FloatArray = field(default_factory=_empty)  # d r / d xi (N, m, 6) whitened
+    wrench_screw: FloatArray = field(default_factory=_empty)  # d F / d xi = K (N, 6, 6)
+    # K^-1 (N, 6, 6) of the samples with a known load (:meth:`_Problem.normal_equations`), else 0
+    wrench_screw_inverse: FloatArray = field(default_factory=_empty)
+    stretch_screw: FloatArray = field(default_factory=_empty)  # d l_j / d xi (N, n, 6)
+    # With the parameter Jacobians (else empty):
+    parameter_rows: FloatArray = field(default_factory=_empty)  # d r / d z (N, mp, 2n) whitened
+    wrench_parameters: FloatArray = field(default_factory=_empty)  # d F / d z (N, 6, 2n)
 
-    def subset(self, rows: NDArray[np.int64]) -> _Evaluation:
-        """The evaluation of the samples ``rows`` only."""
-        return _Evaluation(*(a[rows] if a.size else a for a in (
-            self.residuals, self.jac_screw, self.jac_parameters, self.raw, self.wrench,
-            self.wrench_screw, self.wrench_parameters, self.stretch, self.stretch_screw,
-            self.index)))
+    def subset(self, samples: NDArray[np.int64]) -> _Evaluation:
+        """The evaluation of the samples ``samples`` (positions in this one) only (this one
+        itself when they are all of its samples)."""
+        if np.array_equal(samples, np.arange(len(self.index))):
+            return self
+        return replace(self, **{name: a[samples] for name, a in self._per_sample().items()})
 
-    def replace(self, jac_screw: FloatArray, jac_parameters: FloatArray) -> _Evaluation:
-        """The same point with other Jacobians (another chart)."""
-        return _Evaluation(self.residuals, jac_screw, jac_parameters, self.raw, self.wrench,
-                           self.wrench_screw, self.wrench_parameters, self.stretch,
-                           self.stretch_screw, self.index)
+    def assign(self, samples: NDArray[np.int64], other: _Evaluation) -> None:
+        """Overwrite the samples ``samples`` (positions in this one) with ``other`` (their
+        evaluation)."""
+        for name, a in self._per_sample().items():
+            a[samples] = getattr(other, name)
+
+    def _per_sample(self) -> dict[str, FloatArray]:
+        """The arrays with one entry per sample (those computed: not (0,))."""
+        return {f.name: getattr(self, f.name) for f in fields(self)
+                if f.name not in ('rows', 'parameter_block')
+                and getattr(self, f.name).shape != (0,)}
+
+    @property
+    def jac_screw(self) -> FloatArray:
+        """d r / d xi (N, R, 6) over all rows (zeros where no sample measures)."""
+        out = np.zeros(self.residuals.shape + (6,))
+        out[:, self.rows] = self.screw_rows
+        return out
+
+    @property
+    def jac_parameters(self) -> FloatArray:
+        """d r / d z (N, R, 2n) over all rows (zeros where no parameter acts)."""
+        out = np.zeros(self.residuals.shape + self.parameter_rows.shape[-1:])
+        out[:, self.rows[self.parameter_block]] = self.parameter_rows
+        return out
+
+
+@dataclass
+class _NormalEquations:
+    """The Gauss-Newton blocks of the (weighted) whitened problem in the coordinates of
+    :meth:`_Problem.normal_equations`: per sample ``A = Jx^T Jx`` (N, 6, 6),
+    ``B = Jx^T Jz`` (N, 6, 2n), ``gx = Jx^T r`` (N, 6); summed over the samples
+    ``C = sum Jz^T Jz`` (2n, 2n) and ``gp = sum Jz^T r`` (2n,) (``B``, ``C``, ``gp`` empty
+    without the parameter Jacobians)."""
+
+    A: FloatArray
+    B: FloatArray
+    C: FloatArray
+    gx: FloatArray
+    gp: FloatArray
 
 
 class _Problem:
@@ -423,6 +489,10 @@ class _Problem:
         self.exact = data.has_wrench & (noise.exact_loads | np.all(data.wrench == 0.0, axis=1))
         self.mask = data.mask()
         self.mask[self.exact, 6:12] = False
+        #: The residual rows some sample measures: the Jacobians are kept for these only; the
+        #: block of them that depends on the parameters (the wrench and the tensions).
+        self.rows = np.flatnonzero(self.mask.any(axis=0))
+        self.parameter_block = slice(*np.searchsorted(self.rows, [6, 12 + self.n]))
         self.k_nominal = model.k.copy()
         # Scaled coordinates: k = k_nom (1 + STIFFNESS_UNIT z_k), d = OFFSET_UNIT z_d.
         self.unit = np.concatenate([STIFFNESS_UNIT * self.k_nominal, np.full(self.n, OFFSET_UNIT)])
@@ -445,179 +515,253 @@ class _Problem:
         return found
 
     def evaluate(self, z: FloatArray, xi: FloatArray, jacobians: bool = True,
-                 parameter_jacobians: bool = True) -> _Evaluation:
-        """Residuals at (z, xi); with ``jacobians`` their Jacobian w.r.t. the screws, and with
-        ``parameter_jacobians`` as well the one w.r.t. the parameters."""
+                 parameter_jacobians: bool = True,
+                 samples: NDArray[np.intp] | None = None) -> _Evaluation:
+        """Residuals at (z, xi) of the samples ``samples`` (default all; ``xi`` theirs); with
+        ``jacobians`` their Jacobian w.r.t. the screws, and with ``parameter_jacobians`` as well
+        the one w.r.t. the parameters."""
         n, data = self.n, self.data
+        sel: Any = slice(None) if samples is None else samples  # all: views, no copies
         k, d = self.parameters(z)
         if np.any(k <= 0.0):
             raise ValueError('a stiffness reached zero')
         model = self._model(k)
-        rest = data.rest + d
+        rest = data.rest[sel] + d
         if np.any(rest <= 0.0):
             raise ValueError('a rest length reached zero')
-        state, dphi_dl = _taut_branch(model, model.evaluate(xi, rest), xi, rest, self.taut)
+        state, dphi_dl = _taut_branch(model, model.evaluate(xi, rest), xi, rest,
+                                      self.taut[sel])
         N = xi.shape[0]
-        R = 12 + 2 * n
-        raw = np.zeros((N, R))
+        raw = np.zeros((N, 12 + 2 * n))
         T = state.transform
         p = T[:, :3, 3]
-        Rm = data.poses[:, :3, :3]
-        has_pose = data.has_pose
+        poses = data.poses[sel]
+        has_pose = data.has_pose[sel]
+        posed: Any = slice(None) if has_pose.all() else has_pose
         phi = np.zeros((N, 3))
         if has_pose.any():
-            raw[has_pose, :3] = p[has_pose] - data.poses[has_pose, :3, 3]
-            phi[has_pose] = log_so3_batch(
-                T[has_pose, :3, :3] @ np.swapaxes(Rm[has_pose], -1, -2))
+            raw[posed, :3] = p[posed] - poses[posed, :3, 3]
+            phi[posed] = log_so3_batch(
+                T[posed, :3, :3] @ np.swapaxes(poses[posed, :3, :3], -1, -2))
             raw[:, 3:6] = phi
-        raw[:, 6:12] = state.wrench + data.wrench
-        raw[:, 12:12 + n] = state.tensions - data.tensions
-        raw[:, 12 + n:] = state.lengths - data.lengths
-        raw = np.where(self.mask, raw, 0.0)
+        raw[:, 6:12] = state.wrench + data.wrench[sel]
+        raw[:, 12:12 + n] = state.tensions - data.tensions[sel]
+        raw[:, 12 + n:] = state.lengths - data.lengths[sel]
+        mask = self.mask[sel]
+        raw = np.where(mask, raw, 0.0)
         residuals = raw / self.std
-        none = np.empty(0)
         stretch = state.lengths - rest
+        index = np.arange(N) if samples is None else np.array(samples)
+        ev = _Evaluation(residuals, raw, state.wrench, stretch, index, self.rows,
+                         self.parameter_block)
         if not jacobians:
-            return _Evaluation(residuals, none, none, raw, state.wrench, none, none, stretch,
-                               none, np.arange(N))
+            return ev
         J = left_jacobian_se3(xi)  # (N, 6, 6): twist [omega; v] = J dxi
-        jx = np.zeros((N, R, 6))
         # Pose: d p = omega x p + v, d log(R R_m^T) = Jl^-1(phi) omega.
         jt = np.zeros((N, 6, 6))
         jt[:, :3, :3] = -hat3(p)
         jt[:, :3, 3:] = np.eye(3)
         jt[:, 3:, :3] = left_jacobian_so3_inverse(phi)
-        jx[:, :6] = jt @ J
-        jx[:, 6:12] = state.stiffness
         w = _string_wrench_directions(model, state)  # (N, n, 6)
         dl = -np.concatenate([w[..., 3:], w[..., :3]], axis=-1) @ J  # (N, n, 6)
-        jx[:, 12:12 + n] = dphi_dl[..., None] * dl
-        jx[:, 12 + n:] = dl
-        scale = self.mask / self.std  # (N, R)
-        jx *= scale[..., None]
-        if not parameter_jacobians:
-            return _Evaluation(residuals, jx, none, raw, state.wrench, state.stiffness, none,
-                               stretch, dl, np.arange(N))
-        dphi_dl0 = _tension_rest_length_slopes(model, state, rest)
-        jp = np.zeros((N, R, 2 * n))
-        dphi_dk = state.tensions / k
-        jp[:, 6:12, :n] = np.swapaxes(w * dphi_dk[..., None], -1, -2)
-        jp[:, 6:12, n:] = np.swapaxes(w * dphi_dl0[..., None], -1, -2)
-        idx = np.arange(n)
-        jp[:, 12 + idx, idx] = dphi_dk
-        jp[:, 12 + idx, n + idx] = dphi_dl0
-        jp *= self.unit
-        wrench_parameters = jp[:, 6:12].copy()
-        jp *= scale[..., None]
-        return _Evaluation(residuals, jx, jp, raw, state.wrench, state.stiffness,
-                           wrench_parameters, stretch, dl, np.arange(N))
+        jx = np.concatenate([jt @ J, state.stiffness, dphi_dl[..., None] * dl, dl], axis=1)
+        scale = mask / self.std  # (N, R)
+        ev.screw_rows = jx[:, self.rows] * scale[:, self.rows, None]
+        ev.wrench_screw, ev.stretch_screw = state.stiffness, dl
+        loaded = self.loaded[sel]
+        if loaded.all():
+            ev.wrench_screw_inverse = np.linalg.inv(state.stiffness)
+        else:
+            ev.wrench_screw_inverse = np.zeros((N, 6, 6))
+            if loaded.any():
+                ev.wrench_screw_inverse[loaded] = np.linalg.inv(state.stiffness[loaded])
+        if parameter_jacobians:
+            ev.parameter_rows, ev.wrench_parameters = self._parameter_jacobians(
+                model, state, w, rest, scale)
+        return ev
+
+    def _parameter_jacobians(self, model: JointModel, state: JointState, w: FloatArray,
+                             rest: FloatArray, scale: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """(whitened d r / d z (N, mp, 2n) of the rows that depend on the parameters and some
+        sample measures (``rows[parameter_block]``: wrench, tensions), unwhitened d F / d z
+        (N, 6, 2n)) in scaled coordinates, for the string wrench directions ``w`` and the row
+        scales ``mask / std`` (N, R)."""
+        n = self.n
+        unit_k, unit_d = self.unit[:n], self.unit[n:]
+        dphi_dk = state.tensions / model.k * unit_k
+        dphi_dl0 = _tension_rest_length_slopes(model, state, rest) * unit_d
+        wrench_parameters = np.swapaxes(np.concatenate(
+            [w * dphi_dk[..., None], w * dphi_dl0[..., None]], axis=1), 1, 2)
+        rows = self.rows[self.parameter_block]
+        jp = np.zeros((len(w), rows.size, 2 * n))
+        wrench = np.flatnonzero(rows < 12)  # wrench rows 6-11, then tension rows 12 + j
+        jp[:, wrench] = wrench_parameters[:, rows[wrench] - 6] * scale[:, rows[wrench], None]
+        at = np.flatnonzero(rows >= 12)
+        j = rows[at] - 12
+        jp[:, at, j] = dphi_dk[:, j] * scale[:, rows[at]]
+        jp[:, at, n + j] = dphi_dl0[:, j] * scale[:, rows[at]]
+        return jp, wrench_parameters
 
     # -------------------------------------------------------------- known loads
-    def load_chart(self, ev: _Evaluation) -> _Evaluation:
-        """``ev`` with the Jacobians of every sample with a known load taken w.r.t. its true
-        load ``W = -F(xi)`` instead of its screw (the screw is the equilibrium under ``W``:
-        ``d xi = -K^-1 (dW + dF/dz dz)``): ``Jx' = -Jx K^-1``, ``Jz' = Jz - Jx K^-1 dF/dz``.
-        An exact load is no unknown (``Jx' = 0``): the equilibrium is a constraint and the
-        parameters' Jacobian is that of the constrained model."""
-        rows = np.flatnonzero(self.loaded[ev.index])
-        if rows.size == 0:
-            return ev
-        jx, jp = ev.jac_screw.copy(), ev.jac_parameters
-        K_t = np.swapaxes(ev.wrench_screw[rows], -1, -2)
-        moved = -np.swapaxes(np.linalg.solve(K_t, np.swapaxes(jx[rows], -1, -2)), -1, -2)
-        jx[rows] = moved
-        if jp.size:
-            jp = jp.copy()
-            jp[rows] += moved @ ev.wrench_parameters[rows]
-        jx[self.exact[ev.index]] = 0.0
-        return ev.replace(jx, jp)
+    def normal_equations(self, ev: _Evaluation, weights: FloatArray | None = None
+                         ) -> _NormalEquations:
+        """The Gauss-Newton blocks at ``ev`` (rows weighted by ``weights`` (N, R), else 1),
+        with every sample with a known load in the chart of its true load ``W = -F(xi)``
+        instead of its screw (the screw is the equilibrium under ``W``:
+        ``d xi = M (dW + dF/dz dz)``, ``M = -K^-1``): ``Jx' = Jx M``, ``Jz' = Jz + Jx H``,
+        ``H = M dF/dz``, taken on the blocks (``A' = M^T A M``, ``B' = M^T (B + A H)``,
+        ``C' = C + B^T H + H^T (B + A H)``, ``gx' = M^T gx``, ``gp' = gp + H^T gx``) rather than
+        on the (N, R, .) Jacobians. An exact load is no unknown (``Jx' = 0``): the equilibrium
+        is a constraint and the parameters' Jacobian is that of the constrained model."""
+        jx, jp, r = ev.screw_rows, ev.parameter_rows, ev.residuals[:, ev.rows]
+        block = ev.parameter_block
+        if weights is not None:
+            sw = np.sqrt(weights[:, ev.rows])
+            jx, r = jx * sw[..., None], r * sw
+            jp = jp * sw[:, block, None]
+        jxt = np.swapaxes(jx, -1, -2)
+        A = jxt @ jx
+        gx = (jxt @ r[..., None])[..., 0]
+        parameters = ev.wrench_parameters.size > 0
+        B = C = gp = _empty()
+        if parameters:
+            B = jxt[:, :, block] @ jp
+            C = _sum_of_products(jp, jp)
+            gp = _sum_of_products(jp, r[:, block, None])[:, 0]
+        loaded: Any = self.loaded[ev.index]
+        if loaded.any():
+            loaded = slice(None) if loaded.all() else np.flatnonzero(loaded)  # views: no copies
+            M = -ev.wrench_screw_inverse[loaded]
+            Mt = np.swapaxes(M, -1, -2)
+            A_l, gx_l = A[loaded], gx[loaded]
+            if parameters:
+                H = M @ ev.wrench_parameters[loaded]  # d xi / d z under a fixed load
+                B_l = B[loaded]
+                moved = B_l + A_l @ H  # Jx^T Jz'
+                C += _sum_of_products(B_l, H) + _sum_of_products(H, moved)
+                gp += _sum_of_products(H, gx_l[..., None])[:, 0]
+                B[loaded] = Mt @ moved
+            A[loaded] = Mt @ A_l @ M
+            gx[loaded] = (Mt @ gx_l[..., None])[..., 0]
+            exact = self.exact[ev.index]
+            if exact.any():
+                A[exact], gx[exact] = 0.0, 0.0
+                if parameters:
+                    B[exact] = 0.0
+        return _NormalEquations(A, B, C, gx, gp)
 
     def advance(self, z: FloatArray, xi: FloatArray, ev: _Evaluation, z_new: FloatArray,
                 step: FloatArray) -> tuple[FloatArray, NDArray[np.bool_]]:
-        """The screws after a step from ``(z, xi)`` (evaluated: ``ev``) to ``z_new``
-        with ``step`` (N, 6) in :meth:`load_chart`'s coordinates: ``xi + step`` without a known
-        load; else the equilibrium at ``z_new`` under the true load ``-F(xi) + step`` (an exact
-        load: the load itself), by Newton from the linear prediction. Returns (screws, found)."""
+        """The screws after a step from ``(z, xi)`` (evaluated: ``ev``, of its samples) to
+        ``z_new`` with ``step`` (N, 6) in :meth:`normal_equations`' coordinates: ``xi + step``
+        without a known load; else the equilibrium at ``z_new`` under the true load
+        ``-F(xi) + step`` (an exact load: the load itself), by Newton from the linear
+        prediction. Returns (screws, found)."""
         xi_new = xi + step
-        rows = np.flatnonzero(self.loaded)
+        rows = np.flatnonzero(self.loaded[ev.index])
         found = np.ones(len(xi), bool)
         if rows.size == 0:
             return xi_new, found
-        target = np.where(self.exact[rows, None], self.data.wrench[rows],
+        samples = ev.index[rows]
+        target = np.where(self.exact[samples, None], self.data.wrench[samples],
                           -ev.wrench[rows] + step[rows])
         change = target + ev.wrench[rows]
         if ev.wrench_parameters.size:  # parameters moved as well
             change = change + ev.wrench_parameters[rows] @ (z_new - z)
-        start = xi[rows] - np.linalg.solve(ev.wrench_screw[rows], change[..., None])[..., 0]
-        xi_new[rows], found[rows] = self.settle(z_new, start, target, rows)
+        start = xi[rows] - (ev.wrench_screw_inverse[rows] @ change[..., None])[..., 0]
+        xi_new[rows], found[rows] = self.settle(z_new, start, target, samples)
         return xi_new, found
 
     def settle(self, z: FloatArray, xi: FloatArray, loads: FloatArray, rows: NDArray[np.intp]
                ) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Screws of the samples ``rows`` at equilibrium under ``loads`` (``F(xi; z) + W = 0``
-        within :data:`EQUILIBRIUM_TOLERANCE`) by Newton's method from ``xi``. Returns (screws,
-        found)."""
+        within :data:`EQUILIBRIUM_TOLERANCE`) by Newton's method from ``xi``, each iteration on
+        the samples not at equilibrium yet. Returns (screws, found)."""
         k, d = self.parameters(z)
         model = self._model(k)
         rest = self.data.rest[rows] + d
         xi = xi.copy()
         found = np.zeros(len(rows), bool)
+        todo = np.arange(len(rows))
         for _ in range(EQUILIBRIUM_ITERATIONS):
+            at = xi[todo]
             try:
-                state = _taut_branch(model, model.evaluate(xi, rest), xi, rest,
-                                     self.taut[rows])[0]
+                state = _taut_branch(model, model.evaluate(at, rest[todo]), at, rest[todo],
+                                     self.taut[rows[todo]])[0]
             except ValueError:
                 return xi, np.zeros(len(rows), bool)
-            error = state.wrench + loads
-            found = np.max(np.abs(error), axis=1) <= EQUILIBRIUM_TOLERANCE
-            if found.all():
+            error = state.wrench + loads[todo]
+            done = np.max(np.abs(error), axis=1) <= EQUILIBRIUM_TOLERANCE
+            found[todo[done]] = True
+            if done.all():
                 break
             try:
-                step = np.linalg.solve(state.stiffness, error[..., None])[..., 0]
+                step = np.linalg.solve(state.stiffness[~done], error[~done, :, None])[..., 0]
             except np.linalg.LinAlgError:
                 return xi, np.zeros(len(rows), bool)
-            xi = np.where(found[:, None], xi, xi - step)
-            if not np.isfinite(xi).all():
+            todo = todo[~done]
+            xi[todo] = at[~done] - step
+            if not np.isfinite(xi[todo]).all():
                 return xi, np.zeros(len(rows), bool)
         return xi, found
 
     # -------------------------------------------------------------- screws with fixed theta
     def refine_screws(self, z: FloatArray, xi: FloatArray,
                       iterations: int = SCREW_ITERATIONS) -> FloatArray:
-        """Every sample's screw by Gauss-Newton with the parameters fixed (batched; a step that
-        raises a sample's cost is halved up to 4 times, else that sample keeps its screw)."""
+        """Every sample's screw by Gauss-Newton with the parameters fixed (batched, with
+        :meth:`_screw_line_search`; a sample stops when its step is below
+        :data:`SCREW_TOLERANCE`)."""
         xi = self.settle_exact(z, xi)
         ev = self.evaluate(z, xi, parameter_jacobians=False)
         cost = np.sum(ev.residuals ** 2, axis=1)
         for _ in range(iterations):
-            jx = self.load_chart(ev).jac_screw
-            A = np.swapaxes(jx, -1, -2) @ jx
-            g = np.einsum('nri,nr->ni', jx, ev.residuals)
-            step = -_solve_psd(A, g)
-            if np.max(np.abs(step)) < 1e-13:
+            eq = self.normal_equations(ev)
+            step = -(_pinv_psd(eq.A) @ eq.gx[..., None])[..., 0]
+            moving = np.max(np.abs(step), axis=1) >= SCREW_TOLERANCE
+            if not moving.any():
                 break
-            alpha = np.ones(len(xi))
-            for _ in range(5):
-                trial, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
-                trial[~found] = xi[~found]
-                try:
-                    tev = self.evaluate(z, trial, jacobians=False)
-                except ValueError:
-                    alpha *= 0.5
-                    continue
-                tcost = np.sum(tev.residuals ** 2, axis=1)
-                worse = (tcost > cost * (1 + 1e-12) + 1e-300) | ~found
-                if not worse.any():
-                    break
-                alpha[worse] *= 0.5
-            else:
-                alpha[worse] = 0.0
-            xi, found = self.advance(z, xi, ev, z, alpha[:, None] * step)
-            if not found.all():
-                raise ValueError('no equilibrium under a sample\'s known load')
-            ev = self.evaluate(z, xi, parameter_jacobians=False)
+            # Only the samples still moving iterate on.
+            ev, step, cost = ev.subset(np.flatnonzero(moving)), step[moving], cost[moving]
+            xi[ev.index], ev = self._screw_line_search(z, xi[ev.index], ev, step, cost)
             cost = np.sum(ev.residuals ** 2, axis=1)
         return xi
+
+    def _screw_line_search(self, z: FloatArray, xi: FloatArray, ev: _Evaluation,
+                           step: FloatArray, cost: FloatArray) -> tuple[FloatArray, _Evaluation]:
+        """The screws of the samples of ``ev`` (at ``xi``, their costs ``cost``) after the
+        Gauss-Newton ``step`` with the parameters ``z`` fixed, and their evaluation (with the
+        screw Jacobians: the next iteration's): a step that raises a sample's cost is halved
+        up to 4 times (only those samples are tried again), else that sample keeps its
+        screw."""
+        trial, tev = xi.copy(), None
+        alpha = np.ones(len(xi))
+        retry = np.arange(len(xi))
+        for _ in range(5):
+            tried = ev.subset(retry)
+            moved, found = self.advance(z, xi[retry], tried, z, alpha[retry, None] * step[retry])
+            moved[~found] = xi[retry][~found]
+            try:
+                moved_ev = self.evaluate(z, moved, parameter_jacobians=False,
+                                         samples=tried.index)
+            except ValueError:
+                alpha[retry] *= 0.5
+                continue
+            worse = ~found | (np.sum(moved_ev.residuals ** 2, axis=1)
+                              > cost[retry] * (1 + 1e-12) + 1e-300)
+            trial[retry] = moved
+            if tev is None:
+                tev = moved_ev
+            else:
+                tev.assign(retry, moved_ev)
+            if not worse.any():
+                return trial, tev
+            retry = retry[worse]
+            alpha[retry] *= 0.5
+        trial[retry] = xi[retry]  # still worse: the screw stays
+        if tev is None:
+            return trial, ev
+        tev.assign(retry, ev.subset(retry))
+        return trial, tev
 
     def settle_exact(self, z: FloatArray, xi: FloatArray) -> FloatArray:
         """``xi`` with every sample of an exact load at its equilibrium under it (Newton from
@@ -642,32 +786,46 @@ class _Problem:
         return xi
 
     # -------------------------------------------------------------- information
-    def information(self, ev: _Evaluation, columns: NDArray[np.int64],
-                    weights: FloatArray | None = None) -> FloatArray:
+    def information(self, ev: _Evaluation, columns: NDArray[np.int64]) -> FloatArray:
         """Parameters' information with the screws eliminated (Schur complement per sample),
         scaled coordinates, over ``columns`` of the parameter vector."""
-        ev = self.load_chart(ev)
-        jx = ev.jac_screw
-        jp = ev.jac_parameters[:, :, columns]
-        if weights is not None:
-            jx = jx * weights[..., None]
-            jp = jp * weights[..., None]
-        A = np.swapaxes(jx, -1, -2) @ jx
-        B = np.swapaxes(jx, -1, -2) @ jp
-        C = np.einsum('nri,nrj->ij', jp, jp)
-        return C - np.einsum('nia,nij->aj', B, _solve_psd(A, B))
+        return _schur(self.normal_equations(ev), columns)[0]
 
 
-def _solve_psd(A: FloatArray, b: FloatArray) -> FloatArray:
-    """``A^+ b`` for a batch of symmetric positive semi-definite (N, 6, 6) ``A`` (directions
-    with no information get none), ``b`` (N, 6) or (N, 6, m)."""
+def _schur(eq: _NormalEquations, columns: NDArray[np.int64]
+           ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """(information ``S = C - sum B^T A^+ B`` over ``columns``, ``A^+`` (N, 6, 6),
+    ``A^+ B`` (N, 6, P)): the screws eliminated per sample."""
+    A_pinv = _pinv_psd(eq.A)
+    B = eq.B[:, :, columns]
+    AB = A_pinv @ B
+    return eq.C[np.ix_(columns, columns)] - _sum_of_products(B, AB), A_pinv, AB
+
+
+def _sum_of_products(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``sum_i a_i^T b_i`` (p, q) of batches ``a`` (N, r, p) and ``b`` (N, r, q), as a stack of
+    products of :data:`SUM_BLOCK_ROWS` rows each: one 2-D product of all N r rows would be one
+    large BLAS call, which OpenBLAS spreads over threads, and on a shared machine the threads
+    cost more than they save (the whole calibration 2-3x slower than with one thread)."""
+    rows = a.shape[0] * a.shape[1]
+    a2, b2 = a.reshape(rows, a.shape[-1]), b.reshape(rows, b.shape[-1])
+    blocks = rows // SUM_BLOCK_ROWS
+    full = blocks * SUM_BLOCK_ROWS
+    out = a2[full:].T @ b2[full:]
+    if blocks:
+        blocks_a = a2[:full].reshape(blocks, SUM_BLOCK_ROWS, a2.shape[-1])
+        blocks_b = b2[:full].reshape(blocks, SUM_BLOCK_ROWS, b2.shape[-1])
+        out += (np.swapaxes(blocks_a, 1, 2) @ blocks_b).sum(axis=0)
+    return out
+
+
+def _pinv_psd(A: FloatArray) -> FloatArray:
+    """``A^+`` of a batch of symmetric positive semi-definite (N, 6, 6) ``A`` (directions with
+    no information get none)."""
     lam, V = np.linalg.eigh(A)
     cut = RANK_TOLERANCE ** 2 * np.maximum(lam[:, -1:], 1e-300)
     inv = np.where(lam > cut, 1.0 / np.where(lam > cut, lam, 1.0), 0.0)
-    vec = b.ndim == 2
-    bb = b[..., None] if vec else b
-    out = V @ (inv[..., None] * (np.swapaxes(V, -1, -2) @ bb))
-    return out[..., 0] if vec else out
+    return (V * inv[:, None, :]) @ np.swapaxes(V, -1, -2)
 
 
 # ------------------------------------------------------------------------------ results
@@ -683,9 +841,9 @@ class CalibrationResult:
     eliminated, scaled coordinates), ``residual_rms_before`` / ``residual_rms_after`` per
     measurement kind (its unit, :data:`RESIDUAL_UNITS`; before: nominal parameters with each
     screw fitted), ``outliers`` the sample indices left out, ``near_slack`` the (inlier) samples
-    with a string within :data:`SLACK_MARGIN` std of slack at the first fit (kept; the strings
-    not clearly slack held on their taut branch), ``screws`` (N, 6)
-    the fitted screws,
+    with a string within :data:`SLACK_MARGIN` std of slack at the first plain least-squares
+    fit (kept; the strings not clearly slack held on their taut branch), ``screws`` (N, 6) the
+    fitted screws,
     ``chi2`` and ``dof`` of the final fit (``chi2 / dof`` near 1 when the noise model is right).
     """
 
@@ -913,13 +1071,15 @@ def _robust_weights(residuals: FloatArray, loss: str) -> tuple[FloatArray, Float
 
 
 def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray, loss: str,
-           rows: NDArray[np.bool_], max_iterations: int = MAX_ITERATIONS,
-           tolerance: float = FIT_TOLERANCE) -> tuple[FloatArray, FloatArray, int, bool]:
+           rows: NDArray[np.bool_], ev: _Evaluation | None = None,
+           max_iterations: int = MAX_ITERATIONS, tolerance: float = FIT_TOLERANCE,
+           damping: float = DAMPING) -> tuple[FloatArray, FloatArray, _Evaluation, int, bool]:
     """Levenberg-Marquardt over ``z = z0 + basis y`` and every sample's screw, with the screws
     eliminated per sample (Schur complement: one q x q system per iteration) and the robust
     ``loss`` by iteratively re-weighted least squares (a descent method for these concave
-    losses); only the residual rows ``rows`` (N, R) count. Returns (z, screws, iterations,
-    converged)."""
+    losses); only the residual rows ``rows`` (N, R) count; ``ev``: the evaluation at the start,
+    when known; ``damping``: the initial Levenberg-Marquardt damping. Returns (z, screws, their
+    evaluation, iterations, converged)."""
     q = basis.shape[1]
     z, xi = z0.copy(), xi0.copy()
     mask = rows.astype(np.float64)
@@ -928,31 +1088,27 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
         rho, weight = _robust_weights(ev.residuals * mask, loss)
         return float(np.sum(rho * mask)), weight * mask
 
-    ev = problem.evaluate(z, xi)
+    if ev is None:
+        ev = problem.evaluate(z, xi)
     cost, weight = cost_of(ev)
-    lam = 1e-3
+    lam = damping
     converged = False
     iterations = 0
     for iterations in range(1, max_iterations + 1):  # noqa: B007 (returned)
-        sw = np.sqrt(weight)
-        chart = problem.load_chart(ev)
-        jx = chart.jac_screw * sw[..., None]
-        jp = (chart.jac_parameters @ basis) * sw[..., None]
-        r = ev.residuals * sw
-        A = np.swapaxes(jx, -1, -2) @ jx
-        B = np.swapaxes(jx, -1, -2) @ jp
-        gx = np.einsum('nri,nr->ni', jx, r)
-        gp = np.einsum('nri,nr->i', jp, r)
-        C = np.einsum('nri,nrj->ij', jp, jp)
+        eq = problem.normal_equations(ev, weight)
+        A, gx = eq.A, eq.gx
+        B = eq.B @ basis  # (N, 6, q)
+        C = basis.T @ eq.C @ basis
+        gp = basis.T @ eq.gp
         dA = np.diagonal(A, axis1=-2, axis2=-1)
         dC = np.diag(C).copy()
         accepted = False
         for _ in range(12):
-            Ad = A + lam * (dA[..., None] * np.eye(6) + 1e-12 * np.eye(6))
-            Ainv_B = np.linalg.solve(Ad, B) if q else np.zeros((len(xi), 6, 0))
-            Ainv_g = np.linalg.solve(Ad, gx[..., None])[..., 0]
-            S = C + lam * np.diag(dC + 1e-12) - np.einsum('nia,nib->ab', B, Ainv_B)
-            rhs = gp - np.einsum('nia,ni->a', B, Ainv_g)
+            A_inv = np.linalg.inv(A + lam * (dA[..., None] * np.eye(6) + 1e-12 * np.eye(6)))
+            Ainv_B = A_inv @ B
+            Ainv_g = (A_inv @ gx[..., None])[..., 0]
+            S = C + lam * np.diag(dC + 1e-12) - _sum_of_products(B, Ainv_B)
+            rhs = gp - _sum_of_products(B, Ainv_g[..., None])[:, 0]
             dy = -np.linalg.solve(S, rhs) if q else np.zeros(0)
             dxi = -(Ainv_g + Ainv_B @ dy)
             z_trial = z + basis @ dy
@@ -979,7 +1135,7 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
         if decrease <= tolerance * max(cost, 1.0):
             converged = True
             break
-    return z, xi, iterations, converged
+    return z, xi, ev, iterations, converged
 
 
 def _checked_request(model: JointModel, samples: Sequence[CalibrationSample],
@@ -1019,13 +1175,12 @@ def _checked_request(model: JointModel, samples: Sequence[CalibrationSample],
     return kinds, noise, bounds, data, names, columns
 
 
-def _outliers(problem: _Problem, z: FloatArray, xi: FloatArray, loss: str, n_parameters: int
+def _outliers(problem: _Problem, ev: _Evaluation, loss: str, n_parameters: int
               ) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """(outliers, inliers) sample indices at the robust estimate ``(z, xi)``: samples whose
-    whitened chi-square is improbable for their degrees of freedom (none for the linear loss);
-    ValueError when the inliers leave too few measurements."""
+    """(outliers, inliers) sample indices at the robust estimate (its evaluation ``ev``):
+    samples whose whitened chi-square is improbable for their degrees of freedom (none for the
+    linear loss); ValueError when the inliers leave too few measurements."""
     N = problem.mask.shape[0]
-    ev = problem.evaluate(z, xi, jacobians=False)
     sample_chi2 = np.sum(ev.residuals ** 2, axis=1)
     dof_i = problem.mask.sum(axis=1) - 6 * ~problem.exact
     limit = np.where(dof_i > 0, chdtri(np.maximum(dof_i, 1), OUTLIER_PROBABILITY), np.inf)
@@ -1131,26 +1286,32 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     rows = problem.mask.copy()
     iterations = 0
     converged = True
-    z, xi_fit = z_nominal, xi
+    z, xi_fit, ev_all = z_nominal, xi, before
     if basis_full.shape[1]:
-        # A robust stage only finds the outliers (the final stage polishes): a looser tolerance.
-        z, xi_fit, used, converged = _solve(
-            problem, z_nominal, basis_full, xi, loss, rows,
-            tolerance=FIT_TOLERANCE if loss == 'linear' else ROBUST_TOLERANCE)
+        # The first fit only finds the outliers (and for the linear loss the strings to hold;
+        # the final fit polishes): a looser tolerance.
+        z, xi_fit, ev_all, used, converged = _solve(
+            problem, z_nominal, basis_full, xi, loss, rows, before,
+            tolerance=ROBUST_TOLERANCE)
         iterations += used
     if progress:
         progress(2, stages)
-    outliers, inliers = _outliers(problem, z, xi_fit, loss, P)
+    outliers, inliers = _outliers(problem, ev_all, loss, P)
     message = 'converged'
     rows[outliers] = False
-    if basis_full.shape[1] and loss != 'linear':
-        # The final estimate: plain least squares on the inliers, from the robust solution.
-        z, xi_fit, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear', rows)
-        iterations += used
     near_slack = np.zeros(0, np.intp)
-    if basis_full.shape[1] and converged:
-        z, xi_fit, used, converged, near_slack = _hold_taut(problem, z, xi_fit, basis_full,
-                                                            rows, inliers, columns, ident.basis)
+    if basis_full.shape[1] and loss != 'linear':
+        # Plain least squares on the inliers, from the robust solution: the strings to hold are
+        # found at a plain fit (loose: the final fit polishes).
+        z, xi_fit, ev_all, used, converged = _solve(problem, z, basis_full, xi_fit, 'linear',
+                                                    rows, ev_all, tolerance=ROBUST_TOLERANCE)
+        iterations += used
+    if basis_full.shape[1]:
+        # The final estimate: plain least squares on the inliers, the strings not clearly
+        # slack held on their taut branch.
+        z, xi_fit, ev_all, used, converged, near_slack = _hold_taut(
+            problem, z, xi_fit, ev_all, basis_full, rows, inliers, columns, ident.basis,
+            refit=True)
         iterations += used
     success = True
     if not basis_full.shape[1]:
@@ -1161,9 +1322,8 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
     if progress:
         progress(3, stages)
 
-    # One evaluation at the estimate: the inliers' rows give the statistics, all rows the
+    # The evaluation at the estimate: the inliers' rows give the statistics, all rows the
     # residuals after (every sample's rows depend on its own screw only).
-    ev_all = problem.evaluate(z, xi_fit)
     ev = ev_all.subset(inliers)
     mask_in = problem.mask[inliers]
     rms_after = _rms_by_kind(ev.raw, mask_in, n)
@@ -1197,32 +1357,39 @@ def calibrate_joint(model: JointModel, samples: Sequence[CalibrationSample],
         seconds=time.perf_counter() - started)
 
 
-def _hold_taut(problem: _Problem, z: FloatArray, xi: FloatArray, basis_full: FloatArray,
-               rows: NDArray[np.bool_], inliers: NDArray[np.intp], columns: NDArray[np.intp],
-               basis: FloatArray) -> tuple[FloatArray, FloatArray, int, bool, NDArray[np.intp]]:
-    """The fit again with every string of the inliers that is not clearly slack (stretch above
+def _hold_taut(problem: _Problem, z: FloatArray, xi: FloatArray, ev: _Evaluation,
+               basis_full: FloatArray, rows: NDArray[np.bool_], inliers: NDArray[np.intp],
+               columns: NDArray[np.intp], basis: FloatArray, refit: bool
+               ) -> tuple[FloatArray, FloatArray, _Evaluation, int, bool, NDArray[np.intp]]:
+    """The plain least-squares fit of the residual rows ``rows`` from ``(z, xi)`` (evaluated:
+    ``ev``) with every string of the inliers that is not clearly slack there (stretch above
     ``-SLACK_MARGIN`` std, :func:`_stretch_std`) held on its taut branch (:func:`_taut_branch`),
-    repeated until the held set stops changing (at most :data:`HOLD_PASSES`). Near ``l = l0``
-    the model is not smooth: a fit free to slacken a string that is taut in truth (its fitted
-    stretch a little below zero through the noise) loses that string's information there and
-    leans on it, and its error exceeds the covariance (docs/calibration.md, "Near a string's
-    slack boundary"). Returns (z, screws, iterations, converged, the samples with a string
-    within ``SLACK_MARGIN`` std of slack at the first fit)."""
-    stretch, std = _stretch_std(problem, problem.evaluate(z, xi).subset(inliers), columns, basis)
+    repeated until the held set stops changing the model (at most :data:`HOLD_PASSES` fits;
+    holding a string changes the model only where it is slack, so a change elsewhere needs no
+    fit). ``refit``: ``(z, xi)`` is a loose fit only, so the first fit is made whatever it
+    holds. Near ``l = l0`` the model is not smooth: a fit
+    free to slacken a string that is taut in truth (its fitted stretch a little below zero
+    through the noise) loses that string's information there and leans on it, and its error
+    exceeds the covariance (docs/calibration.md, "Near a string's slack boundary"). Returns
+    (z, screws, their evaluation, iterations, converged, the samples with a string within
+    ``SLACK_MARGIN`` std of slack at ``(z, xi)``)."""
+    stretch, std = _stretch_std(problem, ev.subset(inliers), columns, basis)
     near = inliers[np.any(np.abs(stretch) < SLACK_MARGIN * std, axis=1)]
-    held = stretch > -SLACK_MARGIN * std
     iterations, converged = 0, True
     for _ in range(HOLD_PASSES):
-        problem.taut[inliers] = held
-        z, xi, used, converged = _solve(problem, z, basis_full, xi, 'linear', rows)
-        iterations += used
-        stretch, std = _stretch_std(problem, problem.evaluate(z, xi).subset(inliers), columns,
-                                    basis)
-        again = stretch > -SLACK_MARGIN * std
-        if not converged or np.array_equal(again, held):
+        held = stretch > -SLACK_MARGIN * std
+        if not refit and not np.any((held != problem.taut[inliers]) & (stretch <= 0.0)):
             break
-        held = again
-    return z, xi, iterations, converged, near
+        refit = False
+        problem.taut[inliers] = held
+        xi = problem.settle_exact(z, xi)  # the held strings move the equilibria
+        z, xi, ev, used, converged = _solve(problem, z, basis_full, xi, 'linear', rows,
+                                            damping=WARM_DAMPING)
+        iterations += used
+        if not converged:
+            break
+        stretch, std = _stretch_std(problem, ev.subset(inliers), columns, basis)
+    return z, xi, ev, iterations, converged, near
 
 
 def _stretch_std(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
@@ -1232,36 +1399,25 @@ def _stretch_std(problem: _Problem, ev: _Evaluation, columns: NDArray[np.intp],
     parameters with their joint covariance (Schur complement:
     ``Cov u = A^+ + A^+ B C B^T A^+``, ``Cov(u, z) = -A^+ B C``; the screw
     ``d xi = G du + H dz``, ``G = -K^-1``, ``H = G dF/dz`` for a known load, else ``G = I``,
-    ``H = 0``)."""
+    ``H = 0``): ``Cov xi = G A^+ G^T + D C D^T``, ``Cov(xi, z) = -D C`` with
+    ``D = G A^+ B - H``."""
     n = problem.n
-    C = _subspace_covariance(problem.information(ev, columns), basis)
-    chart = problem.load_chart(ev)
-    jx, jp = chart.jac_screw, chart.jac_parameters[:, :, columns]
-    A = np.swapaxes(jx, -1, -2) @ jx
-    AB = _solve_psd(A, np.swapaxes(jx, -1, -2) @ jp)  # (N, 6, P)
-    N = len(ev.index)
-    cov_u = _solve_psd(A, np.broadcast_to(np.eye(6), (N, 6, 6))) + AB @ C @ np.swapaxes(AB, 1, 2)
-    cov_uz = -AB @ C
-    G = np.broadcast_to(np.eye(6), (N, 6, 6)).copy()
-    H = np.zeros((N, 6, columns.size))
-    loaded = problem.loaded[ev.index]
-    if loaded.any():
-        G[loaded] = -np.linalg.inv(ev.wrench_screw[loaded])
-        H[loaded] = G[loaded] @ ev.wrench_parameters[loaded][:, :, columns]
-    Gt, Ht = np.swapaxes(G, 1, 2), np.swapaxes(H, 1, 2)
-    cov_xi = G @ cov_u @ Gt + G @ cov_uz @ Ht + H @ np.swapaxes(cov_uz, 1, 2) @ Gt + H @ C @ Ht
-    cov_xz = G @ cov_uz + H @ C  # (N, 6, P)
+    information, A_pinv, AB = _schur(problem.normal_equations(ev), columns)
+    C = _subspace_covariance(information, basis)
+    loaded = problem.loaded[ev.index][:, None, None]
+    G = np.where(loaded, -ev.wrench_screw_inverse, np.eye(6))
+    H = np.where(loaded, G @ ev.wrench_parameters[:, :, columns], 0.0)
     L = ev.stretch_screw  # (N, n, 6)
-    var = np.einsum('nja,nab,njb->nj', L, cov_xi, L)
+    LG = L @ G
+    LD = L @ (G @ AB - H)  # (N, n, P)
+    LDC = LD @ C
+    var = np.sum((LG @ A_pinv) * LG, axis=-1) + np.sum(LDC * LD, axis=-1)
     for j in range(n):  # the offset d_j = OFFSET_UNIT z_{n+j} when fitted
         at = np.flatnonzero(columns == n + j)
         if at.size:
             c = int(at[0])
-            var[:, j] += OFFSET_UNIT * (OFFSET_UNIT * C[c, c]
-                                        - 2.0 * np.einsum('na,na->n', L[:, j], cov_xz[:, :, c]))
+            var[:, j] += OFFSET_UNIT * (OFFSET_UNIT * C[c, c] + 2.0 * LDC[:, j, c])
     return ev.stretch, np.sqrt(np.maximum(var, 0.0))
-
-
 
 
 def _only_scale_unidentifiable(ident: Identifiability, names: Sequence[str], name: str) -> bool:
