@@ -164,17 +164,9 @@ def _chi2_quantile(dof: int, probability: float) -> float:
     return float(chdtri(dof, probability))
 
 
-def _consistent(chi2: float, redundancy: int, probability: float) -> bool | None:
-    """The chi-square test of a whitened residual: None without redundancy (nothing checks the
-    readings)."""
-    if redundancy <= 0:
-        return None
-    return bool(chi2 <= consistency_threshold(redundancy, probability))
-
-
 def _length_scale(rest: FloatArray) -> float:
     """The mean rest length (m), at least :data:`MIN_LENGTH_SCALE`."""
-    return max(float(rest.sum()) / rest.size, MIN_LENGTH_SCALE)
+    return max(float(np.add.reduce(rest)) / rest.size, MIN_LENGTH_SCALE)  # sum(), less wrapping
 
 
 # ---------------------------------------------------------------------------------- inputs
@@ -296,23 +288,77 @@ class Measurements:
         return PreparedMeasurements(self, n_strings)
 
 
-_STRING_LIMITS: weakref.WeakKeyDictionary[JointModel, tuple[FloatArray, FloatArray,
-                                                             FloatArray]] = \
+@dataclass
+class _StringLimits:
+    """A joint's string limits at rest lengths ``rest``: ``lmax`` the maximum lengths and
+    ``top`` the tensions there (the most each string can carry), (n,), inf without a maximum
+    length; ``ranges`` the physical ranges of readings already asked for (:meth:`range`)."""
+
+    rest: FloatArray
+    lmax: FloatArray
+    top: FloatArray
+    ranges: dict[tuple[str, bytes, bytes], tuple[FloatArray, FloatArray, FloatArray]] = field(
+        default_factory=dict)
+
+    def range(self, label: str, index: NDArray[np.intp], weight: FloatArray
+              ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """(physical limit, low, high) of the possible ``label`` (``tension`` or ``length``)
+        readings of the strings ``index`` with weights ``weight`` (1/std): the limit is ``top``
+        or ``lmax`` of those strings, the bounds :data:`IMPOSSIBLE_STD` std outside the range.
+        A tracker's readings share their strings and stds: a few are kept."""
+        key = (label, index.tobytes(), weight.tobytes())
+        known = self.ranges.get(key)
+        if known is not None:
+            return known
+        std = 1.0 / weight
+        bound = (self.top if label == 'tension' else self.lmax)[index]
+        low = -IMPOSSIBLE_STD * std if label == 'tension' else np.zeros(index.size)
+        high = np.where(np.isfinite(bound), bound + IMPOSSIBLE_STD * std,
+                        IMPOSSIBLE_STD ** 6 * std)
+        if len(self.ranges) >= _RANGES_KEPT:
+            self.ranges.pop(next(iter(self.ranges)))
+        self.ranges[key] = bound, low, high
+        return bound, low, high
+
+
+_RANGES_KEPT = 16
+_STRING_LIMITS: weakref.WeakKeyDictionary[JointModel, _StringLimits] = \
     weakref.WeakKeyDictionary()
 
 
-def _string_limits(model: JointModel, rest: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """(maximum lengths, the tensions there: the most each string can carry) (n,) at rest
-    lengths ``rest`` (inf without a maximum length); the last per model is kept."""
+def _string_limits(model: JointModel, rest: FloatArray) -> _StringLimits:
+    """The string limits of ``model`` at rest lengths ``rest``; the last per model is kept."""
     cached = _STRING_LIMITS.get(model)
-    if cached is not None and (rest is cached[0] or np.array_equal(rest, cached[0])):
-        return cached[1], cached[2]
+    if cached is not None and (rest is cached.rest or np.array_equal(rest, cached.rest)):
+        return cached
     lmax = rest + model.max_stretch
     limited = np.isfinite(lmax)
     top = np.where(limited, model.string_forces(np.where(limited, lmax, rest), rest)[0],
                    np.inf)
-    _STRING_LIMITS[model] = (rest if rest is model.rest_lengths else rest.copy(), lmax, top)
-    return lmax, top
+    # the model's own rest lengths are kept by identity (never mutated), others copied
+    limits = _StringLimits(rest if rest is model.rest_lengths else rest.copy(), lmax, top)
+    _STRING_LIMITS[model] = limits
+    return limits
+
+
+def _impossible_reasons(label: str, values: FloatArray, low: FloatArray, bound: FloatArray,
+                        bad: NDArray[np.intp]) -> list[tuple[int, str]]:
+    """(position, why) of each impossible ``label`` reading ``values[bad]`` (below ``low``, or
+    above its physical limit ``bound`` by more than :data:`IMPOSSIBLE_STD` std)."""
+    unit = 'N' if label == 'tension' else 'm'
+    out = []
+    for k in bad.tolist():
+        value, limit = float(values[k]), float(bound[k])
+        if value < low[k]:
+            why = f'{value:.6g} {unit} is below {low[k]:.3g} {unit}'
+        elif math.isfinite(limit):
+            what = (f'the most the string can carry ({limit:.4g} N)' if
+                    label == 'tension' else f'its maximum length ({limit:.4g} m)')
+            why = f'{value:.6g} {unit} exceeds {what} by more than {IMPOSSIBLE_STD:g} std'
+        else:
+            why = f'{value:.6g} {unit} is more than {IMPOSSIBLE_STD ** 6:g} std'
+        out.append((k, f'impossible: {why}'))
+    return out
 
 
 #: :meth:`PreparedMeasurements.describe`'s texts by sensor pattern (a tracker's pattern rarely
@@ -403,34 +449,25 @@ class PreparedMeasurements:
 
     def impossible(self, model: JointModel, rest: FloatArray) -> list[tuple[str, str]]:
         """The string readings outside their physical range (:data:`IMPOSSIBLE_STD`): (name,
-        why) each, in the names of :meth:`readings`."""
+        why) each, in the names of :meth:`readings` (one comparison per kind of reading
+        against its cached range; the reasons are written for the impossible ones alone)."""
         out: list[tuple[str, str]] = []
-        names = model.string_names
         if not (self.tension_index.size or self.length_index.size):
             return out
-        lmax, top = _string_limits(model, rest)
-        wild = IMPOSSIBLE_STD ** 6
-        for label, unit, index, values, weight, upper in (
-                ('tension', 'N', self.tension_index, self.tensions, self.tension_weight, top),
-                ('length', 'm', self.length_index, self.lengths, self.length_weight, lmax)):
+        limits = _string_limits(model, rest)
+        for label, index, values, weight in (
+                ('tension', self.tension_index, self.tensions, self.tension_weight),
+                ('length', self.length_index, self.lengths, self.length_weight)):
             if not index.size:
                 continue
-            std = 1.0 / weight
-            bound = upper[index]
-            low = -IMPOSSIBLE_STD * std if label == 'tension' else np.zeros(index.size)
-            high = np.where(np.isfinite(bound), bound + IMPOSSIBLE_STD * std, wild * std)
-            bad = np.flatnonzero((values < low) | (values > high))  # one test per estimate
-            for k in bad.tolist():
-                value, limit = float(values[k]), float(bound[k])
-                if value < low[k]:
-                    why = f'{value:.6g} {unit} is below {low[k]:.3g} {unit}'
-                elif math.isfinite(limit):
-                    what = (f'the most the string can carry ({limit:.4g} N)' if
-                            label == 'tension' else f'its maximum length ({limit:.4g} m)')
-                    why = f'{value:.6g} {unit} exceeds {what} by more than {IMPOSSIBLE_STD:g} std'
-                else:
-                    why = f'{value:.6g} {unit} is more than {wild:g} std'
-                out.append((f'{label}[{names[int(index[k])]}]', f'impossible: {why}'))
+            bound, low, high = limits.range(label, index, weight)
+            outside = values < low
+            outside |= values > high
+            if not np.count_nonzero(outside):
+                continue
+            out += [(f'{label}[{model.string_names[int(index[k])]}]', why)
+                    for k, why in _impossible_reasons(label, values, low, bound,
+                                                      np.flatnonzero(outside))]
         return out
 
     @property
@@ -516,7 +553,17 @@ class JointEstimate:
 
 
 def _nan(*shape: int) -> FloatArray:
-    return np.full(shape, np.nan)
+    out = np.empty(shape)
+    out.fill(np.nan)
+    return out
+
+
+def _outlier_fields(dropped: Sequence[tuple[str, str]]
+                    ) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """An estimate's ``outliers`` and ``outlier_reasons`` from the (name, why) left out."""
+    if not dropped:
+        return (), ()
+    return tuple(name for name, _ in dropped), tuple(f'{name}: {why}' for name, why in dropped)
 
 
 class _JointProblem:
@@ -678,9 +725,10 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
     the optimum costs one evaluation with the Jacobian and one without, and the covariance is
     linearised at the last point where the Jacobian was evaluated (within ``tolerance`` of the
     optimum in units of its own std). The damping scales the normal matrix's diagonal
-    (Marquardt); it is zero while steps reduce the cost. Returns (x, (r, J, state,
-    kinematics) with J of the linearisation point and r, state and the kinematics of x (None
-    when ``evaluate`` gave none there), iterations, converged, message).
+    (Marquardt); it is zero while steps reduce the cost. Returns (x, (r, J, A, state,
+    kinematics) with J of the linearisation point and ``A = J^T J`` its normal matrix, r, state
+    and the kinematics of x (None when ``evaluate`` gave none there), iterations, converged,
+    message).
     """
     x = x0.copy()
     try:
@@ -694,16 +742,16 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
         g = J.T @ r
         full_step = _normal_solve(A, g)
         if full_step is None:
-            return x, (r, J, state, kin), it - 1, False, 'singular normal matrix'
+            return x, (r, J, A, state, kin), it - 1, False, 'singular normal matrix'
         if float(-g @ full_step) < tolerance:
-            return x, (r, J, state, kin), it - 1, True, ''
+            return x, (r, J, A, state, kin), it - 1, True, ''
         while True:
             if damping == 0.0:
                 step = full_step
             else:
                 step = _normal_solve(A + damping * np.diag(np.diag(A)), g)
                 if step is None:
-                    return x, (r, J, state, kin), it, False, 'singular normal matrix'
+                    return x, (r, J, A, state, kin), it, False, 'singular normal matrix'
             trial = x + _clip(step, length_scale)
             try:
                 trial_r, _, trial_state, trial_kin = evaluate(trial, False)
@@ -715,20 +763,20 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
                     stalled = cost - trial_cost <= STALL_TOLERANCE * max(cost, 1.0)
                     x, r, state, kin, cost = trial, trial_r, trial_state, trial_kin, trial_cost
                     if stalled:  # creeping along a kink (a string at its slack boundary)
-                        return x, (r, J, state, kin), it, True, ''
+                        return x, (r, J, A, state, kin), it, True, ''
                     damping = 0.0 if damping <= INITIAL_DAMPING else damping / DAMPING_GROWTH
                     break
             damping = INITIAL_DAMPING if damping == 0.0 else damping * DAMPING_GROWTH
             if damping > MAX_DAMPING:
                 # Not even a short gradient step lowers the cost: a minimum, where the cost has
                 # a kink (a string at its slack or saturation boundary) or is flat to rounding.
-                return x, (r, J, state, kin), it, True, ''
+                return x, (r, J, A, state, kin), it, True, ''
         chord_g = J.T @ r
         chord = _normal_solve(A, chord_g)
         if chord is not None and float(-chord_g @ chord) < tolerance:
-            return x, (r, J, state, kin), it, True, ''
+            return x, (r, J, A, state, kin), it, True, ''
         r, J, state, kin = evaluate(x)
-    return x, (r, J, state, kin), max_iterations, False, (
+    return x, (r, J, J.T @ J, state, kin), max_iterations, False, (
         f'not converged in {max_iterations} iterations')
 
 
@@ -795,15 +843,14 @@ def _failed_joint(message: str, prep: PreparedMeasurements | None, names: Sequen
                          0 if prep is None else prep.dof - 6, observable, rank, cond,
                          iterations, '' if prep is None else prep.describe(names),
                          np.empty(0) if s is None else s, None,
-                         0 if prep is None else prep.dof - 6, tuple(n for n, _ in dropped),
-                         tuple(f'{n}: {why}' for n, why in dropped))
+                         0 if prep is None else prep.dof - 6, *_outlier_fields(dropped))
 
 
 def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
                    initial_screw: ArrayLike | None) -> FloatArray:
     if initial_screw is not None:
         x0 = np.array(initial_screw, dtype=np.float64)
-        if x0.shape != (6,) or not math.isfinite(x0.sum()):
+        if x0.shape != (6,) or not math.isfinite(sum(x0.tolist())):  # NaN or inf in x0
             x0 = as_screws(x0, 'initial_screw')  # names the problem
             raise ValueError(f'initial_screw must have shape (6,), got {x0.shape}')
         check_in_chart(x0, 'initial_screw')
@@ -861,17 +908,15 @@ def suspect_reading(r: FloatArray, J: FloatArray, C: FloatArray,
 class _Fit:
     """What the trust rules ask of a fit, a joint's (:class:`_JointFit`) or a spine's
     (:class:`_ChainFit`): its whitened residual ``r``, Jacobian ``J`` and covariance ``C``, chi2
-    and redundancy, and whether it converged with full rank."""
+    (``r^T r``, inf when the fit has no residual) and redundancy, and whether it converged with
+    full rank."""
 
     r: FloatArray
     J: FloatArray
     C: FloatArray
+    chi2: float
     converged: bool
     rank: int
-
-    @property
-    def chi2(self) -> float:
-        raise NotImplementedError
 
     @property
     def redundancy(self) -> int:
@@ -882,7 +927,12 @@ class _Fit:
         return self.converged and self.rank == 6 and math.isfinite(self.chi2)
 
     def consistent(self, probability: float) -> bool | None:
-        return _consistent(self.chi2, self.redundancy, probability)
+        """The chi-square test at ``probability`` (checked by the public functions); None
+        without redundancy."""
+        redundancy = self.redundancy
+        if redundancy <= 0:
+            return None
+        return self.chi2 <= _chi2_quantile(redundancy, probability)
 
     def on_track(self, probability: float) -> bool:
         """Whether the fit succeeded and passes the chi-square test (or has no redundancy)."""
@@ -894,7 +944,8 @@ _F = TypeVar('_F', bound=_Fit)
 
 @dataclass
 class _JointFit(_Fit):
-    """One Gauss-Newton fit of a joint's readings and its information."""
+    """One Gauss-Newton fit of a joint's readings and its information (``chi2`` computed
+    once: the trust rules ask for it several times)."""
 
     problem: _JointProblem
     x: FloatArray
@@ -909,10 +960,7 @@ class _JointFit(_Fit):
     s: FloatArray
     rank: int
     cond: float
-
-    @property
-    def chi2(self) -> float:
-        return float(self.r @ self.r)
+    chi2: float
 
     @property
     def redundancy(self) -> int:
@@ -927,15 +975,16 @@ def _fit_joint(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
     problem = _JointProblem(model, prep, rest)
     x, ev, iterations, converged, why = _gauss_newton(
         problem.evaluate, x0, problem.length_scale, max_iterations, tolerance)
-    r, J, state, kin = ev
+    r, J, A, state, kin = ev
     if kin is None:  # the kinematics at the estimate x (J: at the linearisation)
         kin = ScrewKinematics(x)
-    C, s = _information(J, problem.length_scale)
+    C, s = _information(A, problem.length_scale)
     values = s.tolist()  # descending
     largest, smallest = values[0], values[-1]
     rank = sum(1 for v in values if v > rank_tolerance * largest) if largest > 0 else 0
     cond = largest / smallest if smallest > 0 else math.inf
-    return _JointFit(problem, x, r, J, state, kin, iterations, converged, why, C, s, rank, cond)
+    return _JointFit(problem, x, r, J, state, kin, iterations, converged, why, C, s, rank, cond,
+                     float(r @ r))
 
 
 def _better(cold: _Fit, warm: _Fit) -> bool:
@@ -1063,13 +1112,15 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     options = (tolerance, max_iterations, rank_tolerance)
     warm = None if initial_screw is None else _initial_screw(model, prep, rest, initial_screw)
     fit, restarted = _tracked_fit(model, prep, rest, warm, consistency_probability, options)
-    if reject_outliers:
+    consistent = fit.consistent(consistency_probability)
+    if reject_outliers and consistent is False:  # the search runs on an inconsistent fit alone
         fit, restarted = _reject_contradicted(
             fit, restarted, dropped, consistency_probability,
             lambda current: current.problem.prep.readings(names),
             functools.partial(_joint_refit_without, model, rest, consistency_probability,
                               options))
         prep = fit.problem.prep
+        consistent = fit.consistent(consistency_probability)
     if fit.rank < 6:
         rank, cond, s, message = _observability(fit.problem, fit.J, fit.state, fit.kin,
                                                 rank_tolerance)
@@ -1087,17 +1138,16 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     return JointEstimate(True, 'ok', x, state.transform.copy(), 0.5 * (pose_cov + pose_cov.T), C,
                          -state.wrench, K @ C @ K.T, state, Kc_std, fit.chi2, prep.dof - 6,
                          True, fit.rank, fit.cond, fit.iterations, prep.describe(names), fit.s,
-                         fit.consistent(consistency_probability), prep.dof - 6,
-                         tuple(n for n, _ in dropped),
-                         tuple(f'{n}: {why}' for n, why in dropped), restarted)
+                         consistent, prep.dof - 6, *_outlier_fields(dropped), restarted)
 
 
-def _information(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatArray]:
-    """Covariance ``(J^T J)^-1`` (6, 6) (NaN when singular) and the singular values (6,) of
-    the whitened Jacobian with its translation columns scaled by ``length_scale`` (one
-    symmetric eigendecomposition of the scaled normal matrix)."""
+def _information(A: FloatArray, length_scale: float) -> tuple[FloatArray, FloatArray]:
+    """Covariance ``A^-1`` (6, 6) (NaN when singular) of the normal matrix ``A = J^T J`` of
+    the whitened Jacobian ``J`` and the singular values (6,) of ``J`` with its translation
+    columns scaled by ``length_scale`` (one symmetric eigendecomposition of the scaled normal
+    matrix)."""
     outer = _column_scales(length_scale)
-    w, V, info = lapack.dsyevd(J.T @ J * outer)  # ascending eigenvalues (LAPACK)
+    w, V, info = lapack.dsyevd(A * outer)  # ascending eigenvalues (LAPACK)
     if info != 0:
         raise np.linalg.LinAlgError('eigendecomposition of the normal matrix failed')
     w, V = w[::-1], V[:, ::-1]
@@ -1646,8 +1696,7 @@ def _failed_chain(message: str, n: int, measured: int, dropped: Sequence[tuple[s
                          _nan(6), _nan(6, 6), _nan(4, 4), _nan(6, 6), _nan(6, 6),
                          _nan(6, 6), math.nan, measured - 6, observable, rank, cond,
                          iterations, None, None, measured - 6,
-                         tuple(name for name, _ in dropped),
-                         tuple(f'{name}: {why}' for name, why in dropped))
+                         *_outlier_fields(dropped))
 
 
 def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, restarted: bool,
@@ -1686,8 +1735,7 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
                          C[6 * n:, 6 * n:], T_tip.copy(), 0.5 * (tip_cov + tip_cov.T), K_tip,
                          K_tip_std, float(r @ r), measured - 6, True, rank, cond, iterations,
                          state, fit.consistent(probability), measured - 6,
-                         tuple(name for name, _ in dropped),
-                         tuple(f'{name}: {why}' for name, why in dropped), restarted)
+                         *_outlier_fields(dropped), restarted)
 
 
 def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,
