@@ -360,6 +360,12 @@ def test_no_torn_state_under_parameter_changes_at_1khz(stream_node, model, recor
     ros.wait_for_subscribers(pub)
     for name in inboxes:
         ros.wait_for_publishers(f'{base}/{name}')
+    # Every output answers before the stream (the node's publishers may not have matched these
+    # subscriptions yet: a first output would be lost), then the counts start from zero.
+    answer_every_output(lambda: pub.publish(Float64MultiArray(data=model.initial_screw.tolist())),
+                        lambda: {name: len(inbox) for name, inbox in inboxes.items()})
+    for inbox in inboxes.values():
+        inbox.clear()
     rng = np.random.default_rng(11)
     screws = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3,
                                               size=(TORN_MAX_SCREWS, 6))
