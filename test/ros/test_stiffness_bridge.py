@@ -146,9 +146,10 @@ class World:
 
     def parameters(self, node: str, names: list[str]) -> list:
         client = self.ros.client(GetParameters, f'{node}/get_parameters')
-        answer = self.ros.call(client, GetParameters.Request(names=names))
-        self.ros.node.destroy_client(client)
-        return answer.values
+        try:
+            return self.ros.call(client, GetParameters.Request(names=names)).values
+        finally:
+            self.ros.node.destroy_client(client)
 
     def bridge_status(self, namespace: str, predicate=lambda s: True, timeout: float = 30.0):
         name = f'{namespace}/stiffness_bridge: controller stiffness'
@@ -224,16 +225,23 @@ def expected(K: np.ndarray, **kwargs) -> np.ndarray:
 def wait_values(world: World, node: str, names: list[str], target: np.ndarray,
                 timeout: float = 30.0, resend=None) -> np.ndarray:
     """Poll the stand-in's parameters until they equal ``target`` (rtol 1e-9), calling
-    ``resend()`` before each poll."""
+    ``resend()`` before each poll. A poll that gets no answer polls again: for a stand-in
+    stopped and started again under the same name the graph can still show the stopped one's
+    service, and a request sent before the new one's service has matched the client is lost."""
     deadline = time.monotonic() + timeout
+    got = None
     while True:
         if resend is not None:
             resend()
-        values = world.parameters(node, names)
-        got = np.array(values[0].double_array_value if len(names) == 1 else
-                       [v.double_value for v in values])
-        if got.shape == target.shape and np.allclose(got, target, rtol=1e-9, atol=0):
-            return got
+        try:
+            values = world.parameters(node, names)
+        except TimeoutError:
+            values = None
+        if values is not None:
+            got = np.array(values[0].double_array_value if len(names) == 1 else
+                           [v.double_value for v in values])
+            if got.shape == target.shape and np.allclose(got, target, rtol=1e-9, atol=0):
+                return got
         if time.monotonic() > deadline:
             raise AssertionError(f'{node} holds {got}, expected {target}')
         time.sleep(0.1)
