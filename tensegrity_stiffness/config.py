@@ -12,9 +12,11 @@ does), under the Python prefix (``pip install .``) or next to the source tree.
 
 from __future__ import annotations
 
+import difflib
 import os
 import sys
-from collections.abc import Mapping
+import warnings
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +27,14 @@ DEFAULT_JOINT_CONFIG = 'default_joint.yaml'
 EXAMPLES = 'examples'
 #: Key under which a ROS parameter file holds a node's parameters.
 ROS_PARAMETERS = 'ros__parameters'
+#: The largest config file a reader takes, bytes: a 100-string joint or a 100-joint spine is
+#: well under 100 kB, so a larger file is a mistake (and would take unbounded time to read).
+MAX_CONFIG_BYTES = 1 << 20
+
+
+class UnknownKeyWarning(UserWarning):
+    """A key of a config section that no reader knows, read with ``strict=False`` (a file
+    shared with other tools): the key is ignored."""
 
 
 def packaged_config_path(name: str = DEFAULT_JOINT_CONFIG) -> Path:
@@ -50,17 +60,57 @@ def example_config_path(name: str) -> Path:
 
 
 def load_yaml(path: str | Path) -> Any:
-    """Read a YAML file (PyYAML), with a clear error for a missing or malformed file."""
+    """Read a YAML file (PyYAML), with a clear error for a missing, malformed, too large
+    (:data:`MAX_CONFIG_BYTES`) or too deeply nested file."""
     import yaml
 
     path = Path(path)
     try:
+        size = path.stat().st_size
+        if size > MAX_CONFIG_BYTES:
+            raise ValueError(f'config {path} has {size} bytes, more than the {MAX_CONFIG_BYTES} '
+                             'a config may have (MAX_CONFIG_BYTES)')
         with path.open(encoding='utf-8') as handle:
             return yaml.safe_load(handle)
     except OSError as exc:
         raise ValueError(f'cannot read config {path}: {exc.strerror}') from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f'config {path} is not UTF-8 text: {exc.reason} at byte '
+                         f'{exc.start}') from None
+    except RecursionError:
+        raise ValueError(f'config {path} is nested too deeply to read') from None
     except yaml.YAMLError as exc:
         raise ValueError(f'config {path} is not valid YAML: {exc}') from None
+
+
+def unknown_key_messages(mapping: Mapping[str, Any], known: Iterable[str], where: str
+                         ) -> list[str]:
+    """One message per key of ``mapping`` (the section ``where``) that is not in ``known``:
+    ``joint.stifness: unknown key (did you mean joint.stiffness?)``: the one format of every
+    reader (library, command line, bag, nodes)."""
+    known = list(known)
+    lines = []
+    for key in mapping:
+        if key in known:
+            continue
+        close = difflib.get_close_matches(str(key), known, n=1, cutoff=0.6)
+        hint = f' (did you mean {where}.{close[0]}?)' if close else ''
+        lines.append(f'{where}.{key}: unknown key{hint}')
+    return lines
+
+
+def check_keys(mapping: Mapping[str, Any], known: Iterable[str], where: str,
+               strict: bool = True) -> None:
+    """Refuse (ValueError) the unknown keys of ``mapping`` (:func:`unknown_key_messages`), or,
+    with ``strict=False`` (a file shared with other tools), warn (:class:`UnknownKeyWarning`)
+    and go on."""
+    lines = unknown_key_messages(mapping, known, where)
+    if not lines:
+        return
+    if strict:
+        raise ValueError('; '.join(lines))
+    for line in lines:
+        warnings.warn(f'{line}: ignored', UnknownKeyWarning, stacklevel=3)
 
 
 def write_yaml(path: str | Path, document: Any, header: list[str] | tuple[str, ...] = ()

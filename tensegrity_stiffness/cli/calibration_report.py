@@ -51,9 +51,11 @@ DISPLAY_UNITS = {'position': (1e3, 'mm'), 'rotation': (180.0 / math.pi, 'deg'),
 def load_recording(path: str | Path, n_strings: int, fmt: str | None = None,
                    topics: Mapping[str, str | None] | None = None,
                    required: Sequence[str] = (), max_age: float = 0.1,
-                   progress: Callable[[int, int], None] | None = None) -> Recording:
+                   progress: Callable[[int, int], None] | None = None,
+                   allow_damaged: bool = False) -> Recording:
     """A bag (folder, .mcap or .db3) or CSV file as a :class:`Recording` (``fmt`` 'bag' or
-    'csv'; default from the path: ``.csv`` is CSV)."""
+    'csv'; default from the path: ``.csv`` is CSV); a damaged bag is refused unless
+    ``allow_damaged``."""
     path = Path(path)
     if fmt is None:
         fmt = 'csv' if path.suffix.lower() == '.csv' else 'bag'
@@ -62,7 +64,7 @@ def load_recording(path: str | Path, n_strings: int, fmt: str | None = None,
     if fmt != 'bag':
         raise ValueError(f"--format must be bag or csv, got '{fmt}'")
     return read_bag(path, n_strings, dict(topics or {}), required=required, max_age=max_age,
-                    progress=progress)
+                    progress=progress, allow_damaged=allow_damaged)
 
 
 def pick_samples(recording: Recording, **rule: float) -> tuple[list[int], list[Any]]:
@@ -205,7 +207,8 @@ def run(recording_path: str, config_path: str | None, *, fmt: str | None,
         topics: Mapping[str, str | None], required: Sequence[str], fit: Sequence[str],
         noise: Mapping[str, float], loss: str, rule: Mapping[str, float], max_age: float,
         out: str | None, plot: str | None,
-        progress: Callable[[str], Callable[[int, int], None]] | None = None
+        progress: Callable[[str], Callable[[int, int], None]] | None = None,
+        allow_damaged: bool = False
         ) -> tuple[CalibrationResult, dict[str, Any], list[str]]:
     """The whole command: read, pick, fit, write. Returns (result, report, text lines)."""
     path = Path(config_path) if config_path else config.packaged_config_path()
@@ -216,7 +219,7 @@ def run(recording_path: str, config_path: str | None, *, fmt: str | None,
         raise ValueError(f'config {path}: {exc}') from None
     reading = progress('read') if progress else None
     recording = load_recording(recording_path, model.n_strings, fmt, topics, required,
-                               max_age, reading)
+                               max_age, reading, allow_damaged)
     indices, samples = pick_samples(recording, **rule)
     fitting = progress('fit') if progress else None
     try:

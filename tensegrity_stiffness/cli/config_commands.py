@@ -25,6 +25,8 @@ from tensegrity_stiffness.cli.common import (
     yes,
 )
 from tensegrity_stiffness.mechanics import templates
+from tensegrity_stiffness.mechanics.chain import MAX_JOINTS
+from tensegrity_stiffness.mechanics.joint import MAX_STRINGS
 
 
 def _choices(args: argparse.Namespace) -> templates.JointChoices:
@@ -106,8 +108,9 @@ def add_new_config_parser(sub: Any) -> None:
                                    'nodes with an apex on a mast). docs/your_joint.md.')
     p.add_argument('--template', choices=templates.TEMPLATES, default='vertebra',
                    help='the joint template (default: vertebra)')
-    p.add_argument('--strings', type=positive_int, default=8, metavar='N',
-                   help='ring: number of strings (even, >= 6; default 8)')
+    p.add_argument('--strings', type=positive_int, metavar='N',
+                   help=f'ring: number of strings (even, 6 to {MAX_STRINGS}; default '
+                        f'{templates.DEFAULT_RING_STRINGS})')
     p.add_argument('--radius', type=parse_number, metavar='M',
                    help='node radius, m (vertebra: of nodes A and D, default 0.030162; ring: '
                         f'of the ring, default {templates.DEFAULT_RING_RADIUS})')
@@ -136,7 +139,8 @@ def add_new_config_parser(sub: Any) -> None:
                    help="link 2's inertia about its centre of mass, kg m^2 (3 principal moments "
                         'or 9 values)')
     p.add_argument('--spine', type=positive_int, metavar='N',
-                   help='write a spine of N joints of this one, stacked upright (chain section)')
+                   help=f'write a spine of N joints (at most {MAX_JOINTS}) of this one, stacked '
+                        'upright (chain section)')
     p.add_argument('--spacing', type=parse_number, metavar='M',
                    help="spine: distance between vertebrae along the template's axis, m "
                         '(default: the unloaded height, the vertebra: 0.040003 scaled)')

@@ -43,6 +43,8 @@ import warnings
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import numpy as np
+
 from tensegrity_stiffness.cli import (
     config_commands,
     dynamics_commands,
@@ -120,7 +122,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = warnings.showwarning
     warnings.showwarning = _warning_line(previous)
     try:
-        return _run(args)
+        # An absurd number (1e308) overflows to inf in a norm or a product before a check
+        # refuses it by name: the error line says it, numpy's RuntimeWarning would only add
+        # noise before it.
+        with np.errstate(over='ignore'):
+            return _run(args)
     finally:
         warnings.showwarning = previous
 

@@ -20,6 +20,14 @@ from tensegrity_stiffness.cli.common import (
 from tensegrity_stiffness.cli.progress import ProgressBar
 
 
+def add_allow_damaged(p: argparse.ArgumentParser) -> None:
+    """``--allow-damaged``: go on with what a recording that stops being readable part way
+    holds (default: exit 2 saying how much was read)."""
+    p.add_argument('--allow-damaged', action='store_true',
+                   help='a recording whose storage stops being readable part way: go on with '
+                        'the messages read before (default: exit 2 saying how many were read)')
+
+
 def _cmd_bag(args: argparse.Namespace) -> int:
     from tensegrity_stiffness.recordings import bag
 
@@ -28,7 +36,8 @@ def _cmd_bag(args: argparse.Namespace) -> int:
         summary = bag.process_bag(
             args.input, args.out, config_path=args.config, namespace=args.namespace,
             storage=args.storage, csv_path=args.csv, topics=args.topics,
-            overwrite=args.overwrite, node=args.node, progress=progress)
+            overwrite=args.overwrite, node=args.node, progress=progress,
+            allow_damaged=args.allow_damaged)
     except ImportError as exc:  # rosbags not installed
         raise ValueError(f'the bag command needs rosbags ({exc})') from None
     finally:
@@ -40,6 +49,9 @@ def _cmd_bag(args: argparse.Namespace) -> int:
     inputs = ', '.join(f'{n} {k}' for k, n in report['inputs'].items())
     answered = ', '.join(f'{n} {k}' for k, n in report['answered'].items())
     print(f"read {report['input']}: {inputs}")
+    if report['damage']:
+        print(f"{report['input']}: damaged: {report['messages_read']} of "
+              f"{report['messages_total']} messages read ({report['damage']})")
     print(f"answered {report['answers']} inputs ({answered}) in {report['seconds']:.2f} s"
           + (f" ({report['inputs_per_second']:.0f} inputs/s)"
              if report['inputs_per_second'] else ''))
@@ -81,7 +93,8 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
             fit=args.fit, noise=dict(args.noise or []), loss=args.loss,
             rule={'window': args.window, 'max_speed': args.max_speed,
                   'max_angular_speed': args.max_angular_speed},
-            max_age=args.max_age, out=args.out, plot=args.plot, progress=progress)
+            max_age=args.max_age, out=args.out, plot=args.plot, progress=progress,
+            allow_damaged=args.allow_damaged)
     except ImportError as exc:  # rosbags not installed
         raise ValueError(f'reading a bag needs rosbags ({exc})') from None
     finally:
@@ -137,6 +150,7 @@ def add_bag_parser(sub: Any) -> None:
     p.add_argument('--topics', nargs='+', metavar='TOPIC',
                    help='outputs to write (default all: wrench stiffness cartesian_stiffness '
                         'string_tensions stiffness_interpretation)')
+    add_allow_damaged(p)
     p.add_argument('--overwrite', action='store_true',
                    help='replace OUTPUT (a rosbag2) and FILE if they exist')
     add_json(p)
@@ -195,6 +209,7 @@ def add_calibrate_parser(sub: Any) -> None:
     p.add_argument('--max-age', type=parse_number, default=0.1, metavar='S',
                    help='tensions and wrench older than this at a pose are not used '
                         '(default 0.1 s)')
+    add_allow_damaged(p)
     p.add_argument('--out', metavar='YAML', help='write the calibrated config here')
     p.add_argument('--plot', metavar='PNG', help='write the residual plot here (matplotlib)')
     add_json(p)

@@ -92,13 +92,20 @@ from tensegrity_stiffness.mechanics.equilibrium import (
     is_stable,
     solve_equilibrium,
 )
-from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.joint import JOINT_SECTION_KEYS, JointModel
 from tensegrity_stiffness.mechanics.newton import damped_newton, solve_deadline
 
 FloatArray = NDArray[np.float64]
 
 #: Packaged spine configuration (5 default vertebrae, stacked).
 DEFAULT_SPINE_CONFIG = 'default_spine.yaml'
+#: The most joints a spine may have (the nodes' ``chain.n_joints`` range, ``new-config
+#: --spine``): the work per evaluation grows with N^2.
+MAX_JOINTS = 100
+#: The keys of a config's ``chain`` section (:meth:`JointChain.from_dict`; ``link_inertias``
+#: read by :func:`~tensegrity_stiffness.mechanics.dynamics.chain_inertias_from_config`).
+CHAIN_KEYS = ('n_joints', 'link_offsets', 'tool', 'link_masses', 'link_coms', 'gravity',
+              'link_inertias')
 #: Swap of the 3-blocks: [omega; v] <-> [v; omega].
 _SWAP = np.array([3, 4, 5, 0, 1, 2])
 
@@ -227,28 +234,34 @@ class JointChain:
         return len(self.joints)
 
     @classmethod
-    def from_dict(cls, document: Mapping[str, Any]) -> JointChain:
+    def from_dict(cls, document: Mapping[str, Any], strict: bool = True) -> JointChain:
         """Build from a config document (a ROS parameter file or a plain mapping): see
         ``config/default_spine.yaml``. Sections: ``joint`` (the vertebra, keys of
         ``default_joint.yaml``), optional ``joint_<i>`` (i = 1..N: keys that override ``joint``
         for joint i), ``chain`` (``n_joints``; ``link_offsets`` flat [x y z qx qy qz qw] per
         offset: N-1 of them, or one for all, or empty = identity; ``tool`` [x y z qx qy qz qw];
         ``link_masses`` N values or one for all (kg); ``link_coms`` flat [x y z] per link or
-        one for all; ``gravity`` [3]), optional ``frames`` (``base``, ``tool``)."""
+        one for all; ``gravity`` [3]), optional ``frames`` (``base``, ``tool``). Unknown keys of
+        ``joint``, ``joint_<i>`` and ``chain`` are refused with the nearest name (``strict=False``:
+        warned about)."""
         vertebra = dict(config.section(document, 'joint'))
         chain = config.section(document, 'chain')
+        config.check_keys(chain, CHAIN_KEYS, 'chain', strict)
         frames = config.section(document, 'frames', required=False)
         raw_n = chain.get('n_joints')
-        if isinstance(raw_n, bool) or not isinstance(raw_n, (int, np.integer)) or raw_n < 1:
-            raise ValueError(f'chain.n_joints must be an integer >= 1, got {raw_n!r}')
+        if (isinstance(raw_n, bool) or not isinstance(raw_n, (int, np.integer))
+                or not 1 <= raw_n <= MAX_JOINTS):
+            raise ValueError(f'chain.n_joints must be an integer in [1, {MAX_JOINTS}] '
+                             f'(MAX_JOINTS), got {raw_n!r}')
         n = int(raw_n)
-        base_model = JointModel.from_dict(vertebra)
+        base_model = JointModel.from_dict(vertebra, strict)
         joints = []
         for i in range(1, n + 1):
             override = config.section(document, f'joint_{i}', required=False)
             if override:
+                config.check_keys(override, JOINT_SECTION_KEYS, f'joint_{i}', strict)
                 try:
-                    joints.append(JointModel.from_dict({**vertebra, **override}))
+                    joints.append(JointModel.from_dict({**vertebra, **override}, strict))
                 except ValueError as exc:
                     raise ValueError(f'joint_{i}: {exc}') from None
             else:

@@ -1019,8 +1019,17 @@ def modes_from_config(config_path: Any = None, spine: bool = False,
     path = Path(config_path) if config_path else config.packaged_config_path(name)
     document = config.load_yaml(path)
     if spine:
+        from tensegrity_stiffness.mechanics.chain import solve_chain_equilibrium
+
         cd = ChainDynamics.from_config(document, string_damping)
-        modes = cd.modes(cd.chain.unloaded_screws())
+        # The spine's rest pose carries its links' weights (chain.link_masses, chain.gravity):
+        # the equilibrium under no tip load, started from each joint's unloaded screw.
+        res = solve_chain_equilibrium(cd.chain, np.zeros(6),
+                                      initial_screws=cd.chain.unloaded_screws())
+        if not res.success:
+            raise ValueError(f'config {path}: no equilibrium of the spine under its links\' '
+                             f'weights ({res.message})')
+        modes = cd.modes(res.screws)
         return cd, modes, modes_report(modes, cd.inertias, None)
     jd = JointDynamics.from_config(document, string_damping)
     res = solve_equilibrium(jd.model, np.zeros(6))

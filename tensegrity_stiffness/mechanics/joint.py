@@ -59,6 +59,19 @@ from tensegrity_stiffness.mechanics import kernel
 FloatArray = NDArray[np.float64]
 
 FORCE_LAWS = ('hooke', 'paper')
+#: The most strings a joint may have: the joints of the tensegrity literature have 6 to a few
+#: dozen; past this a config is a mistake (and an evaluation's time and memory grow with it).
+MAX_STRINGS = 1000
+#: The keys of a config's ``joint`` section that :meth:`JointModel.from_dict` reads.
+JOINT_KEYS = ('node_names', 'link1_nodes', 'link2_nodes', 'link2_node_names', 'string_names',
+              'string_link1_nodes', 'string_link2_nodes', 'stiffness', 'rest_lengths',
+              'max_lengths', 'force_law', 'initial_screw')
+#: Every key a ``joint`` section may hold: :data:`JOINT_KEYS`, link 2's inertia (read by
+#: :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`) and the encoders' offsets (read
+#: by the nodes and the calibration). Any other key is a mistake (a typo would otherwise leave
+#: a value out and compute another joint's stiffness): refused with the nearest name.
+JOINT_SECTION_KEYS = JOINT_KEYS + ('link2_mass', 'link2_com', 'link2_inertia',
+                                   'rest_length_offsets')
 #: Strings shorter than this (m) have no defined direction: evaluation raises ValueError.
 MIN_STRING_LENGTH = 1e-12
 #: Screws per chunk of the numpy evaluation of a batch (bounds its temporaries to a few MB).
@@ -161,6 +174,7 @@ def _config_nodes(section: Mapping[str, Any]
         str(i) for i in range(p1.shape[0])]
     if len(names1) != p1.shape[0]:
         raise ValueError(f'joint.node_names has {len(names1)} names for {p1.shape[0]} nodes')
+    _refuse_duplicates('joint.node_names', names1)
     raw2 = _config_value(section, 'link2_nodes', [])
     p2 = _config_points('link2_nodes', raw2) if len(raw2) else None
     names2 = [str(x) for x in _config_value(section, 'link2_node_names', [])]
@@ -172,6 +186,8 @@ def _config_nodes(section: Mapping[str, Any]
         n2 = p2.shape[0]
     if len(names2) != n2:
         raise ValueError(f'joint.link2_node_names has {len(names2)} names for {n2} nodes')
+    if p2 is not None:
+        _refuse_duplicates('joint.link2_node_names', names2)
     return p1, names1, p2, names2
 
 
@@ -204,9 +220,17 @@ def _config_per_string(key: str, value: Any, n: int, allow_empty: bool = False
     if arr.size == 1:
         arr = np.full(n, arr[0])
     if arr.size != n:
-        raise ValueError(f'{key} must have {n} values (one per string), '
+        raise ValueError(f'joint.{key} must have {n} values (one per string), '
                          f'got {arr.size}')
     return arr
+
+
+def _refuse_duplicates(key: str, names: Sequence[str]) -> None:
+    """ValueError naming the names given more than once in ``key``."""
+    seen: set[str] = set()
+    repeated = sorted({name for name in names if name in seen or seen.add(name)})
+    if repeated:
+        raise ValueError(f'{key} must be unique, got {repeated} more than once')
 
 
 class JointModel:
@@ -259,6 +283,9 @@ class JointModel:
         if not np.issubdtype(conn.dtype, np.integer):
             raise ValueError(f'connections must be integer node indices, got dtype {conn.dtype}')
         n = conn.shape[0]
+        if n > MAX_STRINGS:
+            raise ValueError(f'connections: {n} strings, more than the {MAX_STRINGS} a joint may '
+                             'have (MAX_STRINGS)')
         if conn[:, 0].min() < 0 or conn[:, 0].max() >= p1.shape[0]:
             raise ValueError(f'connections[:, 0] must index link1_nodes (0..{p1.shape[0] - 1})')
         if conn[:, 1].min() < 0 or conn[:, 1].max() >= p2.shape[0]:
@@ -294,6 +321,10 @@ class JointModel:
             f'{self.node_names[a]}-{self.link2_node_names[b]}' for a, b in self.connections]
         if len(self.string_names) != n:
             raise ValueError(f'string_names must have {n} entries, got {len(self.string_names)}')
+        for key, names in (('node_names', self.node_names),
+                           ('link2_node_names', self.link2_node_names),
+                           ('string_names', self.string_names)):
+            _refuse_duplicates(key, names)
         x0 = np.zeros(6) if initial_screw is None else as_screws(initial_screw, 'initial_screw')
         if x0.shape != (6,) or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
             raise ValueError('initial_screw must have 6 values with |omega| < 2 pi')
@@ -332,7 +363,7 @@ class JointModel:
         return self.connections.shape[0]
 
     @classmethod
-    def from_dict(cls, section: Mapping[str, Any]) -> JointModel:
+    def from_dict(cls, section: Mapping[str, Any], strict: bool = True) -> JointModel:
         """Build from the ``joint`` section of a config (see ``config/default_joint.yaml``).
 
         Keys: ``node_names`` (list), ``link1_nodes`` (flat xyz list, m), ``link2_nodes`` (flat,
@@ -342,25 +373,29 @@ class JointModel:
         ``force_law``, ``initial_screw`` (the unloaded equilibrium: solved when missing, a
         :class:`~tensegrity_stiffness.mechanics.unloaded.InitialScrewWarning` when it is not
         one; :func:`~tensegrity_stiffness.mechanics.unloaded.resolve_initial_screw`). Errors
-        name the offending key.
+        name the offending key. A key outside :data:`JOINT_SECTION_KEYS` is refused with the
+        nearest name (``strict=False``: warned about and ignored, for a file shared with other
+        tools).
         """
+        config.check_keys(section, JOINT_SECTION_KEYS, 'joint', strict)
         p1, names1, p2, names2 = _config_nodes(section)
         conn = _config_connections(section, names1, names2)
         n = len(conn)
         get = functools.partial(_config_value, section)
         raw_x0 = np.asarray(get('initial_screw', []), dtype=np.float64).ravel()
+        stiffness = _config_per_string('stiffness', get('stiffness'), n)
+        rest = _config_per_string('rest_lengths', get('rest_lengths'), n)
+        max_lengths = _config_per_string('max_lengths', get('max_lengths', []), n,
+                                         allow_empty=True)
+        force_law = str(get('force_law', 'hooke'))
+        string_names = [str(x) for x in get('string_names', [])] or None
         # The values are checked once, by the constructor; its errors name the argument, which
         # is the config key.
         try:
-            model = cls(p1, conn, _config_per_string('stiffness', get('stiffness'), n),
-                       _config_per_string('rest_lengths', get('rest_lengths'), n),
-                       link2_nodes=p2,
-                       max_lengths=_config_per_string('max_lengths', get('max_lengths', []), n,
-                                                      allow_empty=True),
-                       force_law=str(get('force_law', 'hooke')),
-                       node_names=names1, link2_node_names=names2,
-                       string_names=[str(x) for x in get('string_names', [])] or None,
-                       initial_screw=raw_x0 if raw_x0.size else None)
+            model = cls(p1, conn, stiffness, rest, link2_nodes=p2, max_lengths=max_lengths,
+                        force_law=force_law, node_names=names1, link2_node_names=names2,
+                        string_names=string_names,
+                        initial_screw=raw_x0 if raw_x0.size else None)
         except ValueError as exc:
             raise ValueError(f'joint.{exc}') from None
         # The one rule for a missing or non-equilibrium initial_screw (mechanics.unloaded).

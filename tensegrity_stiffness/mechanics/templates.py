@@ -42,10 +42,10 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3
-from tensegrity_stiffness.mechanics.chain import JointChain
-from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS, JointDynamics
+from tensegrity_stiffness.mechanics.chain import MAX_JOINTS, JointChain
+from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS, JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium, stability_margin
-from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.joint import MAX_STRINGS, JointModel
 from tensegrity_stiffness.mechanics.unloaded import (
     InitialScrewWarning,
     check_initial_screw,
@@ -81,6 +81,10 @@ DEFAULT_MAX_STRETCH = 0.02
 #: Default pretension (N) of the ring template's apex strings.
 DEFAULT_PRETENSION = 1.0
 DEFAULT_RING_RADIUS = 0.03
+#: The ring template's default number of strings.
+DEFAULT_RING_STRINGS = 8
+#: The choices that only the ring template takes (a vertebra refuses them).
+RING_ONLY_CHOICES = ('n_strings', 'height', 'gap')
 DEFAULT_GRAVITY = 9.81
 
 
@@ -91,7 +95,8 @@ class JointChoices:
     ``radius`` m; ``stiffness`` N/m (one or one per string); ``pretension`` N or
     ``rest_lengths`` m (one or one per string, not both); ``max_stretch`` m; ``link2_mass`` kg,
     ``link2_com`` [x y z] m in {2}, ``link2_inertia`` 3 or 9 values kg m^2 (empty: the default
-    rule of docs/dynamics.md); ring only: ``n_strings``, ``height`` (mast, m), ``gap`` (m)."""
+    rule of docs/dynamics.md); ring only (:data:`RING_ONLY_CHOICES`; the vertebra refuses them):
+    ``n_strings`` (default :data:`DEFAULT_RING_STRINGS`), ``height`` (mast, m), ``gap`` (m)."""
 
     template: str = 'vertebra'
     radius: float | None = None
@@ -102,7 +107,7 @@ class JointChoices:
     link2_mass: float = DEFAULT_LINK_MASS
     link2_com: Sequence[float] = (0.0, 0.0, 0.0)
     link2_inertia: Sequence[float] = field(default_factory=list)
-    n_strings: int = 8
+    n_strings: int | None = None
     height: float | None = None
     gap: float | None = None
 
@@ -144,9 +149,10 @@ def _vertebra(choices: JointChoices) -> _Layout:
 
 
 def _ring(choices: JointChoices) -> _Layout:
-    n = int(choices.n_strings)
-    if n < 6 or n % 2:
-        raise ValueError(f'n_strings must be even and >= 6 for the ring template, got {n}')
+    n = int(_or(choices.n_strings, DEFAULT_RING_STRINGS))
+    if n < 6 or n % 2 or n > MAX_STRINGS:
+        raise ValueError(f'n_strings must be even, >= 6 and <= {MAX_STRINGS} (MAX_STRINGS) for '
+                         f'the ring template, got {n}')
     m = n // 2
     radius = _positive('radius', _or(choices.radius, DEFAULT_RING_RADIUS))
     height = _positive('height', _or(choices.height, radius))
@@ -190,6 +196,16 @@ def starter_joint(choices: JointChoices) -> tuple[dict[str, Any], JointModel, Fl
         raise ValueError(f'template must be one of {TEMPLATES}, got {choices.template!r}')
     if choices.pretension is not None and choices.rest_lengths is not None:
         raise ValueError('give a pretension or rest_lengths, not both')
+    if choices.template != 'ring':
+        given = [name for name in RING_ONLY_CHOICES if getattr(choices, name) is not None]
+        if given:
+            raise ValueError(f'{", ".join(given)}: only the ring template takes '
+                             f'{"these" if len(given) > 1 else "this"}, not '
+                             f'{choices.template!r}')
+    # Refused here what the dynamics (check-config, modes, the twin) would refuse in the file.
+    LinkInertia.from_config({'link2_mass': choices.link2_mass,
+                             'link2_com': list(choices.link2_com),
+                             'link2_inertia': list(choices.link2_inertia)})
     layout = _vertebra(choices) if choices.template == 'vertebra' else _ring(choices)
     n = len(layout.strings)
     k = _per_string('stiffness', choices.stiffness, n)
@@ -209,6 +225,16 @@ def starter_joint(choices: JointChoices) -> tuple[dict[str, Any], JointModel, Fl
     if np.any(rest <= 0.0):
         raise ValueError('the pretension leaves no positive rest length (lower it or raise '
                          'the stiffness)')
+    carried = k * max_stretch
+    design_tensions = k * (lengths - rest)
+    over = np.flatnonzero(design_tensions >= carried * (1.0 - 1e-9))
+    if over.size:
+        j = int(over[0])
+        raise ValueError(
+            f'string {layout.strings[j][0]}: a design tension of {design_tensions[j]:.4g} N '
+            f'needs a stretch of {design_tensions[j] / k[j]:.4g} m, at or above its maximum '
+            f'stretch {max_stretch:g} m (it can carry at most {carried[j]:.4g} N): lower the '
+            'pretension or raise the max stretch or the stiffness')
     model = JointModel(layout.nodes, ends, k, rest, max_lengths=rest + max_stretch,
                        node_names=layout.names, string_names=[s[0] for s in layout.strings],
                        initial_screw=layout.design_screw)
@@ -217,6 +243,11 @@ def starter_joint(choices: JointChoices) -> tuple[dict[str, Any], JointModel, Fl
         raise ValueError(f'the starter joint has no stable unloaded equilibrium: '
                          f'{result.message}')
     model.initial_screw = result.screw
+    saturated = [layout.strings[j][0] for j in np.flatnonzero(result.state.saturated)]
+    if saturated:
+        raise ValueError(f'strings at their maximum length at the unloaded equilibrium: '
+                         f'{saturated} (raise the max stretch, or lower the rest lengths\' '
+                         'difference from the design lengths)')
     section = {
         'node_names': layout.names,
         'link1_nodes': _floats(layout.nodes),
@@ -261,8 +292,8 @@ def chain_section(joint: dict[str, Any], axis: ArrayLike, spacing: float, n_join
     with ``initial_screw``) stacked ``spacing`` (m) apart along ``axis`` of the base, upright
     (:func:`stacking_offset`), the tool at the origin of {2}_N turned upright, gravity along
     -axis."""
-    if int(n_joints) < 1:
-        raise ValueError(f'n_joints must be >= 1, got {n_joints}')
+    if not 1 <= int(n_joints) <= MAX_JOINTS:
+        raise ValueError(f'n_joints must be in [1, {MAX_JOINTS}] (MAX_JOINTS), got {n_joints}')
     axis = np.asarray(axis, dtype=np.float64)
     screw = np.asarray(joint['initial_screw'], dtype=np.float64)
     tool = np.eye(4)
@@ -336,7 +367,9 @@ def check_config(document: Any) -> dict[str, Any]:
             problems.append('the unloaded equilibrium is not stable (K_c is not positive '
                             'definite)')
         if report['saturated']:
-            notes.append(f"strings at their maximum length: {report['saturated']}")
+            problems.append(f"strings at their maximum length at the unloaded equilibrium: "
+                            f"{report['saturated']} (they carry no more tension when "
+                            'stretched: raise joint.max_lengths or lower the pretension)')
         if report['slack']:
             notes.append(f"slack strings: {report['slack']}")
     if result.success:

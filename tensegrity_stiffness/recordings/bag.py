@@ -128,6 +128,50 @@ class BagError(ValueError):
     """A problem with the command's files or options (the CLI's exit 2, one line)."""
 
 
+class DamagedBagError(BagError):
+    """A recording whose storage stops being readable part way (flipped bytes, a truncated
+    file): what was read is said; the reader that raises it takes ``allow_damaged`` to go on
+    with what was read."""
+
+
+@dataclass
+class MessageReading:
+    """The messages of a rosbag2 reader with damage caught: :meth:`messages` yields
+    ``reader.messages(connections=...)`` until the storage ends or stops being readable, then
+    ``damage`` says why (empty: read to the end) and ``read`` how many of ``total`` came."""
+
+    total: int
+    read: int = 0
+    damage: str = ''
+
+    def messages(self, reader: Any, connections: Sequence[Any]) -> Iterable[Any]:
+        """``(connection, log_time, raw)`` of ``connections`` in log-time order."""
+        stream = iter(reader.messages(connections=connections))
+        while True:
+            try:
+                item = next(stream)
+            except StopIteration:
+                return
+            except Exception as exc:  # rosbags raises many types on corrupt storage
+                self.damage = f'{type(exc).__name__}: {exc}'
+                return
+            self.read += 1
+            yield item
+
+    def check(self, source: Any, allow_damaged: bool) -> None:
+        """:class:`DamagedBagError` saying how much was read, unless ``allow_damaged`` or the
+        storage was read to its end."""
+        if self.damage and not allow_damaged:
+            raise DamagedBagError(f'{source}: {self.summary()}; nothing kept (allow damaged '
+                                  'input to go on with what was read: --allow-damaged)')
+
+    def summary(self) -> str:
+        """``damaged: 271 of 600 messages read (OverflowError: ...)``, or empty when whole."""
+        if not self.damage:
+            return ''
+        return f'damaged: {self.read} of {self.total} messages read ({self.damage})'
+
+
 # ------------------------------------------------------------------------------ configuration
 def node_settings(path: str | Path | None = None) -> JointNodeSettings:
     """The settings ``stiffness_node`` runs with for ``--params-file path`` (model, frames,
@@ -816,6 +860,11 @@ class BagSummary:
     rejected: dict[str, int] = field(default_factory=dict)
     rejection_examples: dict[str, str] = field(default_factory=dict)
     seconds: float = 0.0
+    #: Messages of the input topics in the bag's index, read, and why the rest was unreadable
+    #: (empty: read whole; :class:`MessageReading`).
+    messages_total: int = 0
+    messages_read: int = 0
+    damage: str = ''
 
     @property
     def answers(self) -> int:
@@ -833,6 +882,8 @@ class BagSummary:
             'rejection_examples': dict(sorted(self.rejection_examples.items())),
             'seconds': self.seconds,
             'inputs_per_second': inputs / self.seconds if self.seconds > 0 else None,
+            'messages_total': self.messages_total, 'messages_read': self.messages_read,
+            'damage': self.damage,
         }
 
 
@@ -860,7 +911,7 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
                 csv_path: str | Path | None = None, topics: Sequence[str] | None = None,
                 overwrite: bool = False, node: str = 'stiffness',
                 progress: Callable[[int, int], None] | None = None,
-                chunk_size: int = CHUNK_SIZE) -> BagSummary:
+                chunk_size: int = CHUNK_SIZE, allow_damaged: bool = False) -> BagSummary:
     """Read the node's inputs from the rosbag2 ``input_path`` and write what the node would
     publish to the rosbag2 ``output_path`` (and ``csv_path``); see the module docstring.
 
@@ -901,13 +952,21 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     finally:
         reader.close()
     summary.seconds = time.perf_counter() - started
+    if summary.damage and not allow_damaged:
+        _remove_outputs(out, csv_file)
+    reading = MessageReading(summary.messages_total, summary.messages_read, summary.damage)
+    reading.check(src, allow_damaged)
     if summary.answers == 0:
-        shutil.rmtree(out, ignore_errors=True)
-        if csv_file is not None:
-            csv_file.unlink(missing_ok=True)
+        _remove_outputs(out, csv_file)
         bad = ', '.join(f'{k} {v}' for k, v in sorted(summary.rejected.items())) or 'no inputs'
         raise BagError(f'{src}: no input could be answered ({bad}); nothing written')
     return summary
+
+
+def _remove_outputs(out: Path, csv_file: Path | None) -> None:
+    shutil.rmtree(out, ignore_errors=True)
+    if csv_file is not None:
+        csv_file.unlink(missing_ok=True)
 
 
 @dataclass(frozen=True)
@@ -967,8 +1026,8 @@ def _process(reader: Any, job: _Job, progress: Callable[[int, int], None] | None
             emit = _and_csv(emit, csv_sink, kind.csv_rows)
         processor = kind.processor(job.settings, emit, typestore, job.chunk_size)
         with single_threaded_blas() if kind.batched else nullcontext():
-            inputs = _read(reader, connections, wanted, processor,
-                           1023 if kind.batched else 0, progress)
+            inputs, reading = _read(reader, connections, wanted, processor,
+                                    1023 if kind.batched else 0, progress)
     finally:
         writer.close()
         if csv_sink is not None:
@@ -978,6 +1037,8 @@ def _process(reader: Any, job: _Job, progress: Callable[[int, int], None] | None
     summary.written = {f'{prefix}/{name}': summary.answers for name in job.outputs}
     summary.rejected = dict(processor.rejected)
     summary.rejection_examples = dict(processor.examples)
+    summary.messages_total, summary.messages_read = reading.total, reading.read
+    summary.damage = reading.damage
     return summary
 
 
@@ -993,22 +1054,24 @@ def _and_csv(write: Callable[[Any], None], sink: _CsvSink,
 
 def _read(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, str]],
           processor: Processor, clock_mask: int,
-          progress: Callable[[int, int], None] | None) -> Counter[str]:
+          progress: Callable[[int, int], None] | None
+          ) -> tuple[Counter[str], MessageReading]:
     """The read loop of :func:`process_bag`: each message of ``connections`` (log-time order)
     of its expected type to the processor's handler of its input (serialized to a raw
     handler, else deserialized), one of another type rejected; ``progress`` reported at most
     every :data:`PROGRESS_PERIOD` (the clock read when ``done & clock_mask`` is 0). The inputs
-    read, by name."""
+    read, by name, and the :class:`MessageReading` (how much of the storage was readable)."""
     handlers, raw_handlers = processor.handlers(), processor.raw_handlers()
     routes = {topic: (name, msgtype, raw_handlers.get(name))
               for topic, (name, msgtype) in wanted.items()}
     total = sum(c.msgcount for c in connections)
+    reading = MessageReading(total)
     inputs: Counter[str] = Counter()
     next_report = time.perf_counter() + PROGRESS_PERIOD
     done = 0
     # rosbags yields each storage file in log-time order; the files of a split bag follow
     # each other in time.
-    for connection, log_time, raw in reader.messages(connections=connections):
+    for connection, log_time, raw in reading.messages(reader, connections):
         done += 1
         name, msgtype, raw_handler = routes[connection.topic]
         inputs[name] += 1
@@ -1027,4 +1090,4 @@ def _read(reader: Any, connections: list[Any], wanted: Mapping[str, tuple[str, s
     processor.finish()
     if progress is not None:
         progress(done, total)
-    return inputs
+    return inputs, reading

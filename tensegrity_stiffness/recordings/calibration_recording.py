@@ -63,6 +63,8 @@ from tensegrity_stiffness.nodes.messages import (
     pose_message_to_transform,
     stamp_nanoseconds_or,
 )
+from tensegrity_stiffness.recordings.bag import MessageReading, jazzy_typestore
+from tensegrity_stiffness.recordings.bag import check_input as check_bag_input
 
 FloatArray = NDArray[np.float64]
 
@@ -312,7 +314,8 @@ def _wrench_of(msg: Any) -> FloatArray:
 
 def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | None = None,
              required: Sequence[str] = (), max_age: float = 0.1,
-             progress: Callable[[int, int], None] | None = None) -> Recording:
+             progress: Callable[[int, int], None] | None = None,
+             allow_damaged: bool = False) -> Recording:
     """A :class:`Recording` from a rosbag2 (mcap or sqlite3) folder or file: one instant per
     pose message (else per tensions, wrench or lengths message), with the rest lengths in
     force then and the latest tensions, wrench and lengths no older than ``max_age`` s.
@@ -322,13 +325,13 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
     (default :data:`DEFAULT_TOPICS`; None leaves a signal out); ``required``: the signals whose
     topic must be in the bag (else :class:`RecordingError` naming it); the rest lengths always
     are. Messages that cannot be decoded or have the wrong size are skipped and counted
-    (``recording.source`` says how many).
+    (``recording.source`` says how many). A bag whose storage stops being readable part way
+    raises :class:`~tensegrity_stiffness.recordings.bag.DamagedBagError` saying how much was
+    read, unless ``allow_damaged`` (then ``recording.source`` says it).
     """
     from rosbags.rosbag2 import Reader
     from rosbags.rosbag2.errors import ReaderError
 
-    from tensegrity_stiffness.recordings.bag import check_input as check_bag_input
-    from tensegrity_stiffness.recordings.bag import jazzy_typestore
 
     path = Path(path)
     check_bag_input(path)
@@ -343,10 +346,12 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
     try:
         use, absent = _bag_topics(path, {c.topic: c.msgtype for c in reader.connections},
                                   wanted, required)
-        series, skipped = _read_series(reader, deserialize, use, n_strings, progress)
+        series, skipped, reading = _read_series(reader, deserialize, use, n_strings, progress)
     finally:
         reader.close()
-    return _bag_recording(path, series, use, absent, required, skipped, n_strings, max_age)
+    reading.check(path, allow_damaged)
+    return _bag_recording(path, series, use, absent, required, skipped, n_strings, max_age,
+                          reading.summary())
 
 
 #: The message types a signal's topic may have.
@@ -406,16 +411,18 @@ def _message_value(signal: str, msg: Any, msgtype: str, n_strings: int) -> Any:
 
 def _read_series(reader: Any, deserialize: Callable[[bytes, str], Any], use: dict[str, str],
                  n_strings: int, progress: Callable[[int, int], None] | None
-                 ) -> tuple[dict[str, list[tuple[float, Any]]], int]:
-    """Every message of the ``use`` topics as (time, value) per signal, and how many could not
-    be decoded or had the wrong size (skipped); ``progress(done, total)`` every 1000."""
+                 ) -> tuple[dict[str, list[tuple[float, Any]]], int, MessageReading]:
+    """Every message of the ``use`` topics as (time, value) per signal, how many could not
+    be decoded or had the wrong size (skipped), and how much of the storage was readable;
+    ``progress(done, total)`` every 1000."""
     signal_of = {topic: signal for signal, topic in use.items()}
     connections = [c for c in reader.connections if c.topic in signal_of]
     total = sum(c.msgcount for c in connections)
+    reading = MessageReading(total)
     series: dict[str, list[tuple[float, Any]]] = {s: [] for s in use}
     skipped = 0
     for done, (connection, log_time, raw) in enumerate(
-            reader.messages(connections=connections), start=1):
+            reading.messages(reader, connections), start=1):
         signal = signal_of[connection.topic]
         try:
             msg = deserialize(raw, connection.msgtype)
@@ -429,12 +436,12 @@ def _read_series(reader: Any, deserialize: Callable[[bytes, str], Any], use: dic
             progress(done, total)
     if progress is not None:
         progress(total, total)
-    return series, skipped
+    return series, skipped, reading
 
 
 def _bag_recording(path: Path, series: dict[str, list[tuple[float, Any]]], use: dict[str, str],
                    absent: dict[str, str], required: Sequence[str], skipped: int,
-                   n_strings: int, max_age: float) -> Recording:
+                   n_strings: int, max_age: float, damage: str = '') -> Recording:
     """The instants of the read ``series`` (:func:`_align`); a topic without a valid message is
     absent, or a :class:`RecordingError` when it is needed."""
     for signal, items in series.items():
@@ -446,7 +453,8 @@ def _bag_recording(path: Path, series: dict[str, list[tuple[float, Any]]], use: 
             absent[signal] = use[signal]
     recording = _align(series, n_strings, max_age,
                        f'{path} ({", ".join(f"{s} {len(v)}" for s, v in series.items())}'
-                       + (f', {skipped} bad messages skipped' if skipped else '') + ')')
+                       + (f', {skipped} bad messages skipped' if skipped else '')
+                       + (f', {damage}' if damage else '') + ')')
     recording.absent = absent
     return recording
 
