@@ -24,6 +24,13 @@ from tensegrity_stiffness.cli.common import (
     vector,
     yes,
 )
+from tensegrity_stiffness.cli.sensor_sets import (
+    SENSORS,
+    estimator_settings,
+    parse_sensor_set,
+    report_line,
+    sensor_set_report,
+)
 from tensegrity_stiffness.mechanics import templates
 from tensegrity_stiffness.mechanics.chain import MAX_JOINTS
 from tensegrity_stiffness.mechanics.joint import MAX_STRINGS
@@ -84,12 +91,19 @@ def _cmd_check_config(args: argparse.Namespace) -> int:
     if (args.file is None) == (args.example is None):
         raise ValueError('give a config FILE or --example NAME (one of them)')
     path = Path(args.file) if args.file else config.example_config_path(args.example)
+    sensor_sets = [parse_sensor_set(text) for text in args.sensors or []]
     report = templates.check_config(config.load_yaml(path))
     report['config'] = str(path)
+    if sensor_sets and report['converged']:
+        settings = estimator_settings(path)
+        report['sensor_sets'] = [sensor_set_report(settings, report['screw'], sensors)
+                                 for sensors in sensor_sets]
     if args.json:
         print_json(report)
     else:
         _print_check(path, report)
+        for item in report.get('sensor_sets', []):
+            print(report_line(item))
     if report['problems']:
         for problem in report['problems']:
             print(f'{PROG}: error: {problem}', file=sys.stderr)
@@ -161,6 +175,11 @@ def add_check_config_parser(sub: Any) -> None:
     p.add_argument('--example', metavar='NAME',
                    help='a packaged example of config/examples instead of FILE (its path is '
                         'printed), e.g. ring8_joint.yaml')
+    p.add_argument('--sensors', nargs='+', metavar='SET',
+                   help='also report what each sensor set determines at the unloaded '
+                        f'equilibrium; a set is comma-separated from {", ".join(SENSORS)} '
+                        '(e.g. --sensors tensions tensions,imu lengths); stds and the load mode '
+                        "from the config's estimator_node parameters (sensors.*)")
     add_json(p)
     p.set_defaults(handler=_cmd_check_config)
 

@@ -107,6 +107,12 @@ MAX_ITERATIONS = 30
 #: Singular values of the scaled whitened Jacobian below this fraction of the largest count as
 #: zero (an unobservable direction).
 RANK_TOLERANCE = 1e-9
+#: A singular value of the scaled whitened Jacobian below this fraction of the largest makes
+#: the normal matrix numerically singular (condition number above 1e14): a fit that stops on
+#: it names that direction as undetermined.
+NEAR_SINGULAR_TOLERANCE = 1e-7
+#: Why a Gauss-Newton fit stopped when its normal matrix could not be solved.
+SINGULAR_NORMAL_MATRIX = 'singular normal matrix'
 #: Damping factor of the first rejected step and the factor it grows by.
 INITIAL_DAMPING = 1e-4
 DAMPING_GROWTH = 10.0
@@ -742,7 +748,7 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
         g = J.T @ r
         full_step = _normal_solve(A, g)
         if full_step is None:
-            return x, (r, J, A, state, kin), it - 1, False, 'singular normal matrix'
+            return x, (r, J, A, state, kin), it - 1, False, SINGULAR_NORMAL_MATRIX
         if float(-g @ full_step) < tolerance:
             return x, (r, J, A, state, kin), it - 1, True, ''
         while True:
@@ -751,7 +757,7 @@ def _gauss_newton(evaluate: Any, x0: FloatArray, length_scale: float, max_iterat
             else:
                 step = _normal_solve(A + damping * np.diag(np.diag(A)), g)
                 if step is None:
-                    return x, (r, J, A, state, kin), it, False, 'singular normal matrix'
+                    return x, (r, J, A, state, kin), it, False, SINGULAR_NORMAL_MATRIX
             trial = x + _clip(step, length_scale)
             try:
                 trial_r, _, trial_state, trial_kin = evaluate(trial, False)
@@ -1127,6 +1133,15 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
         return _failed_joint(message, prep, names, False, rank, cond, fit.iterations, s,
                              dropped)
     if not fit.converged:
+        if fit.why == SINGULAR_NORMAL_MATRIX:
+            # Rank 6 at RANK_TOLERANCE, but too weakly determined to solve for: named as the
+            # unobservable sets are (a ring joint's spin about its axis from its lengths).
+            rank, cond, s, message = _observability(
+                fit.problem, fit.J, fit.state, fit.kin,
+                max(rank_tolerance, NEAR_SINGULAR_TOLERANCE))
+            if message:
+                return _failed_joint(message, prep, names, False, rank, cond, fit.iterations,
+                                     s, dropped)
         return _failed_joint(f'{prep.describe(names)}: {fit.why}', prep, names, True, fit.rank,
                              fit.cond, fit.iterations, fit.s, dropped)
     x, C, state = fit.x, fit.C, fit.state
@@ -1354,7 +1369,7 @@ def _constrained_gauss_newton(problem: _ChainProblem, z0: FloatArray, max_iterat
         try:
             full = -np.linalg.solve(A, g)
         except np.linalg.LinAlgError:
-            return z, (r, J, c, Jc, state), it - 1, False, 'singular normal matrix'
+            return z, (r, J, c, Jc, state), it - 1, False, SINGULAR_NORMAL_MATRIX
         if float(-g @ full) < tolerance:
             return z, (r, J, c, Jc, state), it - 1, True, ''
         while True:
