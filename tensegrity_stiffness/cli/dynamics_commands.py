@@ -9,6 +9,7 @@ import sys
 from typing import Any
 
 from tensegrity_stiffness.cli.common import EXIT_OK, PROG, add_json, parse_number, print_json
+from tensegrity_stiffness.mechanics.dynamics import DEFAULT_STRING_DAMPING
 
 
 def _cmd_modes(args: argparse.Namespace) -> int:
@@ -48,7 +49,8 @@ def add_modes_parser(sub: Any) -> None:
     p.add_argument('--spine', action='store_true', help='the spine (a chain config)')
     p.add_argument('--string-damping', type=parse_number, metavar='C',
                    help="damping of every string (N s/m; default: the config's "
-                        'dynamics.string_damping, else 0)')
+                        "dynamics.string_damping, else the twin's "
+                        f'{DEFAULT_STRING_DAMPING:g})')
     p.add_argument('--plot', metavar='PNG', help='write the mode shapes here (matplotlib)')
     add_json(p)
     p.set_defaults(handler=_cmd_modes)

@@ -63,6 +63,14 @@ def _label(modes: JointModes, k: int) -> str:
             f'zeta = {0.0 if abs(zeta) < ZETA_ZERO else zeta:.3g}')
 
 
+def vertical_axis(lower: ArrayLike, upper: ArrayLike) -> str:
+    """The axis ('x', 'y' or 'z') drawn up: the one along which the ``upper`` points (link 2's
+    nodes, a spine's tip) stand farthest from the ``lower`` ones (link 1's, the base), so a
+    +z ring joint stands upright as the +y vertebra does."""
+    rise = np.mean(np.atleast_2d(upper), axis=0) - np.mean(np.atleast_2d(lower), axis=0)
+    return 'xyz'[int(np.argmax(np.abs(rise)))]
+
+
 def _scale(points: np.ndarray, displaced: np.ndarray) -> float:
     """Factor that makes the largest node displacement DISPLACEMENT_FRACTION of the span."""
     span = float(np.ptp(points, axis=0).max())
@@ -88,6 +96,7 @@ def plot_joint_modes(model: JointModel, modes: JointModes, path: str | Path, *,
     p1 = model.link1_nodes * MM
     rest = model.link2_nodes_in_link1(_transform(xi)) * MM
     rows, cols = _grid(len(modes.frequencies))
+    up = vertical_axis(p1, rest)
     for k in range(len(modes.frequencies)):
         shape = modes.shapes[k].real
         probe = model.link2_nodes_in_link1(_transform(xi + 1e-4 * shape)) * MM
@@ -104,7 +113,7 @@ def plot_joint_modes(model: JointModel, modes: JointModes, path: str | Path, *,
             ax.scatter(*nodes.T, color=colour, marker=marker, s=18, alpha=alpha,
                        depthshade=False)
         _equal_axes(ax, np.vstack([p1, rest, moved]))
-        ax.view_init(elev=elevation, azim=azimuth, vertical_axis='y')
+        ax.view_init(elev=elevation, azim=azimuth, vertical_axis=up)
         ax.set_title(_label(modes, k), fontsize=9)
     fig.suptitle(title or ('joint modes at xi = [' + ' '.join(f'{v:.3g}' for v in xi) +
                            ']; grey: equilibrium, green: displaced along the mode'
@@ -152,6 +161,7 @@ def plot_spine_modes(chain: JointChain, modes: JointModes, path: str | Path, *,
     rest_all = np.vstack([p for _, p in rest])
     colours = plt.get_cmap('tab10')
     rows, cols = _grid(count)
+    up = vertical_axis(rest[0][1], rest[-1][1])
     for k in range(count):
         shape = modes.shapes[k].real.reshape(chain.n_joints, 6)
         probe = np.vstack([p for _, p in _spine_points(chain, xi + 1e-4 * shape)])
@@ -164,7 +174,7 @@ def plot_spine_modes(chain: JointChain, modes: JointModes, path: str | Path, *,
             ax.plot(*p.T, color=colour, linewidth=2.5)
             ax.scatter(*p.T, color=colour, s=8, depthshade=False)
         _equal_axes(ax, np.vstack([rest_all] + [p for _, p in moved]))
-        ax.view_init(elev=elevation, azim=azimuth, vertical_axis='y')
+        ax.view_init(elev=elevation, azim=azimuth, vertical_axis=up)
         ax.set_title(_label(modes, k), fontsize=9)
     fig.suptitle(title or (f'spine of {chain.n_joints} joints: {count} slowest modes; grey: '
                            'equilibrium' + ('' if modes.stable else ' (UNSTABLE)')),

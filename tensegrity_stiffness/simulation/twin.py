@@ -59,6 +59,7 @@ from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
     DEFAULT_LINK_MASS,
+    DEFAULT_STRING_DAMPING,
     LinkInertia,
     default_inertia_moments,
 )
@@ -98,9 +99,9 @@ MAX_LENGTH_MODES = ('limit', 'ignore')
 INTEGRATORS = ('implicitfast', 'implicit', 'Euler')
 #: Default time step (s): 1 kHz.
 DEFAULT_TIMESTEP = 1e-3
-#: Default damping of every string (N s/m): settles the default joint (10 g links) in about
-#: 0.3 s of simulated time, near critical damping of its stiffest and softest modes.
-DEFAULT_TENDON_DAMPING = 0.5
+#: Default damping of every string (N s/m): the dynamics' one value
+#: (:data:`~tensegrity_stiffness.mechanics.dynamics.DEFAULT_STRING_DAMPING`).
+DEFAULT_TENDON_DAMPING = DEFAULT_STRING_DAMPING
 #: Default damping of each free-joint dof of every link (N s/m, N m s/rad): a small damping
 #: against the world that damps the spine's slow bending mode (about 4 rad/s with 10 g links),
 #: which the strings' damping barely reaches; negligible against the joint's own modes.
