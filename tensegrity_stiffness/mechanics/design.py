@@ -71,6 +71,7 @@ from tensegrity_stiffness.geometry.components import TWIST_NAMES
 from tensegrity_stiffness.geometry.quaternion import quaternion_to_rotation
 from tensegrity_stiffness.geometry.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape, finite_scalar
+from tensegrity_stiffness.mechanics import plausibility
 from tensegrity_stiffness.mechanics.active_set import (  # noqa: F401 (re-exported)
     ACTIVE_SET_TOLERANCE,
     MAX_ACTIVE_SET_ITERATIONS,
@@ -400,12 +401,17 @@ def design_rest_lengths(
     to the middle of the limits; ``length_scale`` L (m) of ``S = diag(1, 1, 1, 1/L, 1/L, 1/L)``
     (default: the largest distance of a link-1 node from the origin of {1}). The math is in the
     module docstring. Infeasible requests return ``success=False`` with the constraint that
-    fails; bad input raises ValueError naming the field.
+    fails; bad input raises ValueError naming the field, and so do a screw, a load or a target
+    outside the joint's range (:mod:`~tensegrity_stiffness.mechanics.plausibility`: a target
+    must be symmetric positive semidefinite and within what the strings can give).
     """
     xi, W, t_min, t_max, L = _validate(model, screw, external_wrench, tension_min, tension_max,
                                        length_scale)
-    target = None if target_stiffness is None else finite_array_of_shape(
-        'target_stiffness', target_stiffness, (6, 6))
+    # Finite but absurd requests are refused by name (mechanics.plausibility).
+    plausibility.check_screw(model, xi)
+    plausibility.check_wrench(model, W)
+    target = None if target_stiffness is None else plausibility.check_target_stiffness(
+        model, target_stiffness, length_scale=L, wrench=W)
     pose, S, A, b, lo, hi = _constraints(model, xi, W, t_min, t_max, L)
     n = model.n_strings
     if np.any(hi <= lo):

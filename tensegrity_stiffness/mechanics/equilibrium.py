@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
 from tensegrity_stiffness.geometry.screw import CHART_LIMIT, as_screws, log_se3
+from tensegrity_stiffness.mechanics import plausibility
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
 from tensegrity_stiffness.mechanics.newton import damped_newton, solve_deadline
 
@@ -165,14 +166,19 @@ def solve_equilibrium(
     solve, except the first :data:`MIN_NEWTON_ITERATIONS` Newton steps. ``newton_only``: at most
     ``max_iterations`` damped Newton steps, without the trust-region fallback and the
     continuation (a cheap first try, e.g. a node's before it asks its worker). Bad input raises
-    ValueError; failure to converge returns ``success=False`` with a reason (no exception).
+    ValueError, and so do a load and rest lengths outside the joint's range
+    (:mod:`~tensegrity_stiffness.mechanics.plausibility`); failure to converge returns
+    ``success=False`` with a reason (no exception).
     """
     W = np.asarray(external_wrench, dtype=np.float64)
     if W.shape != (6,):
         raise ValueError(f'external_wrench must have shape (6,), got {W.shape}')
     if not np.all(np.isfinite(W)):
         raise ValueError(f'external_wrench must be finite, got {W}')
-    rest = model.validate_rest_lengths(rest_lengths, batched=False)
+    # Finite but absurd inputs are refused by name before any work (mechanics.plausibility).
+    rest = (model.rest_lengths if rest_lengths is None
+            else plausibility.check_rest_lengths(model, rest_lengths))
+    plausibility.check_wrench(model, W, rest_lengths=rest)
     x0 = as_screws(model.initial_screw if initial_screw is None else initial_screw,
                    'initial_screw')
     if x0.shape != (6,):

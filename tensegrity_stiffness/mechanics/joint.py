@@ -233,6 +233,27 @@ def _refuse_duplicates(key: str, names: Sequence[str]) -> None:
         raise ValueError(f'{key} must be unique, got {repeated} more than once')
 
 
+def _names(node_names: Sequence[str] | None, link2_node_names: Sequence[str] | None,
+           string_names: Sequence[str] | None, n1: int, n2: int | None,
+           connections: NDArray[np.intp]) -> tuple[list[str], list[str], list[str]]:
+    """The node names of link 1 (default the indices), of link 2 (default link 1's when it has
+    link 1's points, ``n2`` None, else the indices) and the string names (default
+    ``<node>-<node>``); names given must be unique (generated ones are only labels)."""
+    names1 = list(node_names) if node_names is not None else [str(i) for i in range(n1)]
+    names2 = list(link2_node_names) if link2_node_names is not None else (
+        names1 if n2 is None else [str(i) for i in range(n2)])
+    strings = list(string_names) if string_names is not None else [
+        f'{names1[a]}-{names2[b]}' for a, b in connections]
+    if len(strings) != len(connections):
+        raise ValueError(f'string_names must have {len(connections)} entries, got '
+                         f'{len(strings)}')
+    for key, names in (('node_names', node_names), ('link2_node_names', link2_node_names),
+                       ('string_names', string_names)):
+        if names is not None:
+            _refuse_duplicates(key, [str(name) for name in names])
+    return names1, names2, strings
+
+
 class JointModel:
     """A six-DOF tensegrity joint: node sets, strings and their elastic law.
 
@@ -313,18 +334,9 @@ class JointModel:
                 raise ValueError(f'max_lengths must exceed rest_lengths (strings {bad.tolist()})')
         self.max_lengths = lmax
         self.max_stretch = lmax - self.rest_lengths
-        self.node_names = list(node_names) if node_names is not None else [
-            str(i) for i in range(p1.shape[0])]
-        self.link2_node_names = list(link2_node_names) if link2_node_names is not None else (
-            self.node_names if link2_nodes is None else [str(i) for i in range(p2.shape[0])])
-        self.string_names = list(string_names) if string_names is not None else [
-            f'{self.node_names[a]}-{self.link2_node_names[b]}' for a, b in self.connections]
-        if len(self.string_names) != n:
-            raise ValueError(f'string_names must have {n} entries, got {len(self.string_names)}')
-        for key, names in (('node_names', self.node_names),
-                           ('link2_node_names', self.link2_node_names),
-                           ('string_names', self.string_names)):
-            _refuse_duplicates(key, names)
+        self.node_names, self.link2_node_names, self.string_names = _names(
+            node_names, link2_node_names, string_names, p1.shape[0],
+            None if link2_nodes is None else p2.shape[0], self.connections)
         x0 = np.zeros(6) if initial_screw is None else as_screws(initial_screw, 'initial_screw')
         if x0.shape != (6,) or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
             raise ValueError('initial_screw must have 6 values with |omega| < 2 pi')

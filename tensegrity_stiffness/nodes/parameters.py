@@ -29,6 +29,7 @@ from tensegrity_stiffness.mechanics import templates
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
     DEFAULT_LINK_MASS,
+    DEFAULT_STRING_DAMPING,
     ChainDynamics,
     JointDynamics,
     LinkInertia,
@@ -241,8 +242,9 @@ JOINT_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = LINK2_PARAMETERS + (
     ParameterSpec('dynamics.enabled', 'bool', False,
                   'publish ~/natural_frequencies of every input (the modes of the joint held '
                   'at its pose by the load that balances it there)', read_only=True),
-    ParameterSpec('dynamics.string_damping', 'double', 0.0,
-                  'damping of every string along its length, N s/m', range=(0.0, 1e9)),
+    ParameterSpec('dynamics.string_damping', 'double', DEFAULT_STRING_DAMPING,
+                  "damping of every string along its length, N s/m (default: the twin's)",
+                  range=(0.0, 1e9)),
 )
 
 STIFFNESS_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
@@ -648,7 +650,9 @@ SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('sim.max_length', 'string', 'limit',
                   "strings past their maximum length: 'limit' an inextensible stop, 'ignore' "
                   "Hooke's law goes on", read_only=True, choices=('limit', 'ignore')),
-    ParameterSpec('sim.tendon_damping', 'double', 0.5, 'damping of every string, N s/m',
+    ParameterSpec('sim.tendon_damping', 'double', DEFAULT_STRING_DAMPING,
+                  'damping of every string, N s/m (the dynamics\' dynamics.string_damping '
+                  'default: one value)',
                   read_only=True, range=(0.0, 1e6)),
     ParameterSpec('sim.joint_damping', 'double', 1e-3,
                   'damping of each free-joint dof of every link against the world, N s/m and '
