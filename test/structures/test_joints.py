@@ -1,0 +1,75 @@
+"""The joint and the spine through Structure equal today's results to 1e-12: the wrench and
+K_c of a joint, every joint's wrench and the tip stiffness of a spine, their equilibria."""
+
+import numpy as np
+import pytest
+from support.joint_compare import random_model
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.geometry.screw import exp_se3
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.structures.joints import structure_from_chain
+from tensegrity_stiffness.structures.structure import Structure
+
+RTOL = 1e-12
+
+
+def default_joint() -> JointModel:
+    return JointModel.from_yaml(config.packaged_config_path())
+
+
+def default_spine() -> JointChain:
+    return JointChain.from_yaml(config.packaged_config_path('default_spine.yaml'))
+
+
+def assert_close(new, old, name, rtol=RTOL):
+    scale = max(np.max(np.abs(old)), 1e-300)
+    np.testing.assert_allclose(new, old, rtol=0, atol=rtol * scale, err_msg=name)
+
+
+def joint_cases():
+    rng = np.random.default_rng(11)
+    models = [default_joint(), random_model(rng), random_model(rng, 'paper')]
+    for model in models:
+        x0 = model.initial_screw
+        yield model, x0
+        for _ in range(3):
+            yield model, x0 + rng.normal(scale=0.05, size=6)
+
+
+@pytest.mark.parametrize('use_kernel', [False, True])
+def test_a_joint_through_structure_has_its_wrench_and_cartesian_stiffness(use_kernel):
+    for model, xi in joint_cases():
+        structure = Structure.from_joint(model, use_kernel=use_kernel)
+        T = np.array([np.eye(4), exp_se3(xi)])
+        state = structure.evaluate(T)
+        ref = model.evaluate(xi)
+        arm = 1.0 + np.max(np.linalg.norm(model.link1_nodes, axis=1))
+        scale = np.sum(np.abs(ref.tensions)) * arm
+        assert np.max(np.abs(state.wrenches[1] - ref.wrench)) <= RTOL * scale
+        assert_close(state.stiffness[6:, 6:], ref.cartesian_stiffness, 'K_c')
+        np.testing.assert_allclose(state.tensions, ref.tensions, rtol=0,
+                                   atol=RTOL * ref.tensions.max())
+        np.testing.assert_array_equal(state.slack, ref.slack)
+        np.testing.assert_array_equal(state.saturated, ref.saturated)
+
+
+def test_a_spine_through_structure_has_every_joint_s_wrench():
+    chain = default_spine()
+    rng = np.random.default_rng(4)
+    xi = chain.unloaded_screws() + rng.normal(scale=0.02, size=(chain.n_joints, 6))
+    structure = structure_from_chain(chain, xi, use_kernel=False)
+    state = structure.evaluate()
+    ref = chain.evaluate(xi)
+    # Joint i's wrench on link i in {1}_i is Ad_{P_i}^T of the strings' wrench about the base
+    # origin; the structure's wrench on link i adds joint i+1's strings (on its link 1).
+    from tensegrity_stiffness.geometry.transforms import adjoint
+
+    Ad = adjoint(ref.joint_frames)
+    base = np.linalg.solve(np.swapaxes(Ad, 1, 2), ref.wrenches[:, :, None])[:, :, 0]
+    expected = base.copy()
+    expected[:-1] -= base[1:]
+    scale = np.sum(np.abs(ref.tensions))
+    assert np.max(np.abs(state.wrenches[1:] - expected)) <= RTOL * scale
+    np.testing.assert_allclose(state.poses[1:], ref.link_transforms, rtol=0, atol=1e-14)
