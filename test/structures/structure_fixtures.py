@@ -1,14 +1,14 @@
-"""Shared structures of the structure tests: the packaged 3-prism and 6-bar, a regular p-prism
-of any p, a mixed structure (a general body, bars, world nodes, limits) and seeded perturbations
-of poses."""
+"""Shared structures of the structure tests: the 3-prism and the 6-bar of this folder, a
+regular p-prism of any p, a mixed structure (a general body, bars, world nodes, limits) and
+seeded perturbations of poses."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
-from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.structures.structure import Structure, twist_exp
 
@@ -16,9 +16,13 @@ PRISM3 = 'prism3_structure.yaml'
 SIXBAR = 'sixbar_structure.yaml'
 
 
+#: The folder of this file, which holds the example structures.
+HERE = Path(__file__).resolve().parent
+
+
 def example(name: str, **kwargs) -> Structure:
-    """A packaged example structure."""
-    return Structure.from_yaml(config.example_config_path(name), **kwargs)
+    """An example structure of this folder."""
+    return Structure.from_yaml(HERE / name, **kwargs)
 
 
 def bar_pose(p: np.ndarray, q: np.ndarray) -> list[float]:
