@@ -112,7 +112,9 @@ class StructureEquilibrium:
     of the residuals; ``stable`` and ``stability_margin`` (smallest eigenvalue of the reduced
     tangent stiffness over its largest); ``tangent_stiffness`` (6N, 6N) ``K_total`` (strings,
     weights, contact forces); ``gauge`` (6N, m) the gauge twists at the solution (module
-    docstring); ``sliding``: the names of the sliding contacts."""
+    docstring); ``sliding``: the names of the sliding contacts; ``constraints`` (c, 6N) the
+    contacts' kinematic constraints on the twists (3 rows per sticking node, the normal row per
+    sliding node)."""
 
     success: bool
     message: str
@@ -126,6 +128,7 @@ class StructureEquilibrium:
     tangent_stiffness: FloatArray | None = field(default=None, repr=False)
     gauge: FloatArray | None = field(default=None, repr=False)
     sliding: tuple[str, ...] = ()
+    constraints: FloatArray | None = field(default=None, repr=False)
 
 
 def structure_loads(structure: Structure, loads: Any) -> FloatArray:
@@ -149,13 +152,13 @@ def structure_loads(structure: Structure, loads: Any) -> FloatArray:
     return arr.copy()
 
 
-def gauge_kind(structure: Structure, contacts: list[Contact]) -> str | None:
+def gauge_kind(structure: Structure, has_contacts: bool) -> str | None:
     """Which motions besides the bars' spins are a gauge: ``'rigid'`` (no fixed body, no world
     node, no contact), ``'plane'`` (no fixed body or world node, contacts on a frictionless
     ground) or None."""
     if structure.fixed.any() or structure.world_nodes:
         return None
-    if not contacts:
+    if not has_contacts:
         return 'rigid'
     if structure.ground is not None and structure.ground.friction == 0.0:
         return 'plane'
@@ -181,7 +184,7 @@ def gauge_twists(structure: Structure, T: FloatArray, contacts: list[Contact]) -
         col[6 * i:6 * i + 3] = np.cross(T[i, :3, 3], e)
         col[6 * i + 3:6 * i + 6] = e
         columns.append(col)
-    kind = gauge_kind(structure, contacts)
+    kind = gauge_kind(structure, bool(contacts))
     motions: list[FloatArray] = []
     if kind == 'rigid':
         motions = list(np.eye(6))
@@ -209,7 +212,7 @@ def gauge_conditions(structure: Structure, T: FloatArray, contacts: list[Contact
             row = np.zeros(6 * n)
             row[6 * i + 3:6 * i + 6] = T[i, :3, 2]
             rows.append(row)
-    kind = gauge_kind(structure, contacts)
+    kind = gauge_kind(structure, bool(contacts))
     if kind is not None:
         x = structure.node_positions(T)
         nodes = np.flatnonzero(structure.node_bodies >= 0)
@@ -580,9 +583,9 @@ def _result(problem: _Problem, x: FloatArray, norm: float, iterations: int, succ
     K = problem.total_stiffness(context)
     gauge = gauge_twists(s, T, problem.contacts)
     margin = -math.inf
+    constraints = problem.constraint_rows(context[3])
     if success:
-        margin = reduced_stability_margin(K, problem.constraint_rows(context[3]), gauge,
-                                          s.fixed)
+        margin = reduced_stability_margin(K, constraints, gauge, s.fixed)
         slack = int(np.count_nonzero(state.slack))
         if slack:
             message += f' ({slack} slack strings)'
@@ -590,7 +593,7 @@ def _result(problem: _Problem, x: FloatArray, norm: float, iterations: int, succ
             message += '; equilibrium is not stable'
     return StructureEquilibrium(success, message, T, state, success and
                                 margin > STABILITY_TOLERANCE, contacts, norm, iterations,
-                                margin, K, gauge, sliding)
+                                margin, K, gauge, sliding, constraints)
 
 
 def tangent_basis(constraints: FloatArray, gauge: FloatArray, fixed: NDArray[np.bool_]
