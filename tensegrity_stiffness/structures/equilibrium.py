@@ -67,6 +67,7 @@ from tensegrity_stiffness.mechanics.newton import damped_newton, solve_deadline
 from tensegrity_stiffness.structures.structure import (
     Structure,
     StructureState,
+    cross3,
     geometric_block,
 )
 
@@ -181,7 +182,7 @@ def gauge_twists(structure: Structure, T: FloatArray, contacts: list[Contact]) -
             continue
         e = T[i, :3, 2]
         col = np.zeros(6 * n)
-        col[6 * i:6 * i + 3] = np.cross(T[i, :3, 3], e)
+        col[6 * i:6 * i + 3] = cross3(T[i, :3, 3], e)
         col[6 * i + 3:6 * i + 6] = e
         columns.append(col)
     kind = gauge_kind(structure, bool(contacts))
@@ -266,11 +267,20 @@ class _Problem:
         """The poses ``exp(hat(xi_i)) P_i`` of the increments ``xi_i`` ([omega; v], a spatial
         twist's screw) from the reference poses ``P_i``: a rigid motion of the reference moves
         the increments linearly (by its adjoint)."""
+        return self.kinematics(x)[0]
+
+    def kinematics(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The poses (:meth:`transforms`) and ``Pi J(xi_i)`` (nf, 6, 6), the map from the
+        increments' changes to the spatial twists ``[dv; dw]`` (one screw at a time: the
+        scalar path of :class:`~tensegrity_stiffness.geometry.screw.ScrewKinematics` is faster
+        than its batch at a structure's few bodies)."""
         T = self.reference.copy()
-        if self.nf:
-            T[self.free] = exp_se3(x[:6 * self.nf].reshape(self.nf, 6)) @ self.reference[
-                self.free]
-        return T
+        PJ = np.empty((self.nf, 6, 6))
+        for k, i in enumerate(self.free):
+            kin = ScrewKinematics(x[6 * k:6 * k + 6])
+            T[i] = kin.T @ self.reference[i]
+            PJ[k] = kin.J[_SWAP]
+        return T, PJ
 
     def moment_rows(self, size: int) -> FloatArray:
         """``D`` (size, size): the residual wrench of body i about its reference centre,
@@ -309,7 +319,7 @@ class _Problem:
     # -------------------------------------------------------------- equations
     def evaluate(self, x: FloatArray, tangent: bool = True) -> tuple[FloatArray, Any] | None:
         """(residuals, context) at ``x``, or None where a string has zero length."""
-        T = self.transforms(x)
+        T, PJ = self.kinematics(x)
         try:
             state = self.s.evaluate_transforms(T, self.rest)
         except ValueError:
@@ -321,19 +331,19 @@ class _Problem:
         g = []
         for c, p, f in zip(self.contacts, points, forces, strict=True):
             W[c.body, :3] += f
-            W[c.body, 3:] += np.cross(p, f)
+            W[c.body, 3:] += cross3(p, f)
             g.append(self.scale * (p - c.anchor) if c.mode == STICK
                      else self.sliding_rows(c, p, f))
         W = W[self.free]
-        W[:, 3:] -= np.cross(self.centres[self.free], W[:, :3])
+        W[:, 3:] -= cross3(self.centres[self.free], W[:, :3])
         r = np.concatenate([W.ravel(), *g])
         if not np.all(np.isfinite(r)):
             return None
-        return r, (T, state, Kg, points, forces)
+        return r, (T, state, Kg, points, forces, PJ)
 
     def total_stiffness(self, context: Any) -> FloatArray:
         """``K_total`` (6N, 6N): strings, weights and the contact forces' ``E`` blocks."""
-        _, state, Kg, points, forces = context
+        _, state, Kg, points, forces, _ = context
         K = state.stiffness + Kg
         for c, p, f in zip(self.contacts, points, forces, strict=True):
             b = slice(6 * c.body, 6 * c.body + 6)
@@ -393,7 +403,7 @@ class _Problem:
                 A[b:b + 6, k:k + 3] = np.vstack([np.eye(3), hat3(p)])
                 A[k:k + 3, b:b + 6] = dx
         # Columns: delta_i = Pi J(xi_i) dxi_i.
-        PJ = ScrewKinematics(x[:6 * nf].reshape(nf, 6)).J[:, _SWAP]
+        PJ = context[5]
         A[:, :6 * nf] = np.einsum('ajb,jbc->ajc', A[:, :6 * nf].reshape(size, nf, 6),
                                   PJ).reshape(size, 6 * nf)
         D = self.moment_rows(size)
@@ -418,7 +428,7 @@ class _Problem:
         reference centre by more than MAX_TRANSLATION_STEP mean rest lengths."""
         xi = step[:6 * self.nf].reshape(self.nf, 6)
         rot = np.linalg.norm(xi[:, :3], axis=1).max(initial=0.0) / MAX_ROTATION_STEP
-        moved = xi[:, 3:] + np.cross(xi[:, :3], self.centres[self.free])
+        moved = xi[:, 3:] + cross3(xi[:, :3], self.centres[self.free])
         tra = np.linalg.norm(moved, axis=1).max(initial=0.0) / (MAX_TRANSLATION_STEP *
                                                                  self.length)
         return step / max(rot, tra, 1.0)
