@@ -542,6 +542,12 @@ def solve_structure_equilibrium(structure: Structure, loads: Any = None,
     T0 = structure.transforms(start)
     deadline = solve_deadline(tolerance, max_iterations, time_budget)
     T0, contacts = _initial_contacts(structure, T0)
+    held = structure.fixed.any() or bool(structure.world_nodes) or bool(contacts)
+    if not held and structure.gravity is not None and np.any(
+            [b.mass > 0.0 for b in structure.bodies]) and np.any(structure.gravity != 0.0):
+        return StructureEquilibrium(False, 'no equilibrium: the structure falls (gravity and '
+                                    'no ground under it, no fixed body, no world node)', T0,
+                                    None, False, {}, math.inf, 0)
     try:
         structure.evaluate_transforms(T0, rest, wrench_only=True)
     except ValueError as exc:

@@ -207,3 +207,24 @@ def test_bad_loads_are_named():
         solve_structure_equilibrium(structure, loads={'x_up': [1, 2]})
     with pytest.raises(ValueError, match=r'loads must have shape \(6, 6\)'):
         solve_structure_equilibrium(structure, loads=np.zeros((5, 6)))
+
+
+def test_a_free_structure_under_gravity_without_ground_falls():
+    document = copy.deepcopy(example(SIXBAR).to_dict())
+    document['structure']['gravity'] = [0.0, 0.0, -9.81]
+    result = solve_structure_equilibrium(Structure.from_dict(document))
+    assert not result.success
+    assert 'the structure falls' in result.message
+
+
+def test_a_ground_above_a_node_lifts_it():
+    """A start with a node below the ground: that node is a contact at its projection and the
+    structure is pushed out (no node below the ground at the solution)."""
+    structure, start = on_the_ground(0.8)
+    dropped = start.copy()
+    dropped[:, 2, 3] -= structure.node_positions(start)[:, 2].min() + 0.002
+    result = solve_structure_equilibrium(structure, start=dropped)
+    assert result.success, result.message
+    heights = np.array([x[2] for x in result.state.node_positions.values()])
+    assert heights.min() > -1e-12
+    assert_balanced(structure, result)
