@@ -39,7 +39,10 @@ the same twists paired with the wrenches), so every step has no gauge component 
 returns the equilibrium nearest the start in that sense. Stability is judged on the tangent space
 that removes the gauge and the contact constraints: the symmetric part of ``B^T K_total B``
 positive definite, ``B`` a basis of the free twists with no gauge component that keep the
-sticking nodes in place and the sliding ones on the ground.
+contacts in place (with friction: a small disturbance meets static friction, also at a contact
+that slid to the edge of its cone) or on the ground (frictionless). A structure balanced on an
+edge or a node is such an equilibrium too, and reported not stable: the solver does not roll it
+over to a face.
 """
 
 from __future__ import annotations
@@ -114,8 +117,8 @@ class StructureEquilibrium:
     tangent stiffness over its largest); ``tangent_stiffness`` (6N, 6N) ``K_total`` (strings,
     weights, contact forces); ``gauge`` (6N, m) the gauge twists at the solution (module
     docstring); ``sliding``: the names of the sliding contacts; ``constraints`` (c, 6N) the
-    contacts' kinematic constraints on the twists (3 rows per sticking node, the normal row per
-    sliding node)."""
+    contacts' constraints on small motions (3 rows per contact with friction, the normal row on
+    a frictionless ground)."""
 
     success: bool
     message: str
@@ -351,15 +354,17 @@ class _Problem:
         return K
 
     def constraint_rows(self, points: FloatArray) -> FloatArray:
-        """The kinematic constraints' d/d(delta) (c, 6N), ``dx = Z(x)^T delta``: 3 rows of a
-        sticking node, the normal row of a sliding one."""
+        """The contacts' constraints on small motions about the equilibrium, d/d(delta)
+        (c, 6N) with ``dx = Z(x)^T delta``: on a ground with friction 3 rows per contact (a
+        small disturbance meets static friction, also at a contact that slid to the edge of its
+        cone), on a frictionless ground the normal row."""
         n = self.s.n_bodies
         rows = []
         for c, p in zip(self.contacts, points, strict=True):
             ZT = np.hstack([np.eye(3), -hat3(p)])
             row = np.zeros((3, 6 * n))
             row[:, 6 * c.body:6 * c.body + 6] = ZT
-            rows.append(row if c.mode == STICK else self.normal @ row[None])
+            rows.append(row if self.friction > 0.0 else self.normal @ row[None])
         return np.vstack(rows) if rows else np.zeros((0, 6 * n))
 
     def contact_blocks(self, c: Contact, p: FloatArray, f: FloatArray

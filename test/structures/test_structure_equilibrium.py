@@ -162,7 +162,7 @@ def test_on_the_ground_the_forces_stay_in_the_friction_cone(friction):
 def test_a_slippery_ground_lets_the_contacts_slide_at_the_cone():
     structure, start = on_the_ground(0.001)
     result = solve_structure_equilibrium(structure, start=start)
-    assert result.success, result.message
+    assert result.success and result.stable, result.message
     assert sorted(result.sliding) == ['x_up.b', 'y_front.b', 'z_left.b']
     x0 = structure.node_positions(start)
     for name, f in result.contacts.items():
@@ -227,4 +227,25 @@ def test_a_ground_above_a_node_lifts_it():
     assert result.success, result.message
     heights = np.array([x[2] for x in result.state.node_positions.values()])
     assert heights.min() > -1e-12
+    assert_balanced(structure, result)
+
+
+def test_an_oversized_prism_on_the_ground_slides_inwards_to_the_cone():
+    """A 3-prism whose strings are all 10 % short stands on its bottom nodes: it contracts, the
+    bottom nodes slide inwards until the ground's outward friction is at the cone."""
+    document = prism_document(3)
+    document['structure']['gravity'] = [0.0, 0.0, -9.81]
+    document['structure']['ground'] = {'friction': 0.5}
+    structure = Structure.from_dict(document)
+    result = solve_structure_equilibrium(structure)
+    assert result.success and result.stable, result.message
+    assert sorted(result.sliding) == ['bar0.a', 'bar1.a', 'bar2.a']
+    x0 = structure.node_positions(structure.start_poses())
+    for name, f in result.contacts.items():
+        np.testing.assert_allclose(f[2], 3 * 0.05 * 9.81 / 3, rtol=1e-9)
+        np.testing.assert_allclose(np.linalg.norm(f[:2]), 0.5 * f[2], rtol=1e-9)
+        start = x0[structure.node_index(name), :2]
+        now = result.state.node_positions[name][:2]
+        assert np.linalg.norm(now) < np.linalg.norm(start)  # inwards
+        assert f[:2] @ now > 0  # pushed outwards
     assert_balanced(structure, result)
