@@ -249,3 +249,52 @@ def test_an_oversized_prism_on_the_ground_slides_inwards_to_the_cone():
         assert np.linalg.norm(now) < np.linalg.norm(start)  # inwards
         assert f[:2] @ now > 0  # pushed outwards
     assert_balanced(structure, result)
+
+
+def six_bar_on_ground(friction=0.8):
+    document = copy.deepcopy(example(SIXBAR).to_dict())
+    document['structure']['gravity'] = [0.0, 0.0, -9.81]
+    document['structure']['ground'] = {'friction': friction}
+    return Structure.from_dict(document)
+
+
+def assert_resting(structure, result):
+    """Stable on three contacts that carry the weight, the centre of mass above their
+    triangle, no node below the ground, every body balanced."""
+    assert result.success and result.stable, result.message
+    assert len(result.contacts) == 3
+    heights = np.array([x[2] for x in result.state.node_positions.values()])
+    assert heights.min() > -1e-12
+    assert_balanced(structure, result)
+    masses = np.array([b.mass for b in structure.bodies])
+    centre = masses @ result.poses[:, :3, 3] / masses.sum()
+    corners = np.array([result.state.node_positions[k][:2] for k in result.contacts])
+    # Barycentric coordinates of the centre's projection: all positive inside.
+    A = np.vstack([corners.T, np.ones(3)])
+    weights = np.linalg.solve(A, np.r_[centre[:2], 1.0])
+    assert np.all(weights > 0), weights
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_a_six_bar_set_down_in_any_orientation_tips_onto_a_face(seed):
+    """Placed anywhere (even through the ground), the free 6-bar under gravity is moved onto the
+    ground, tipped over its node and edge by its weight, and comes to rest on three nodes."""
+    structure = six_bar_on_ground()
+    rng = np.random.default_rng(seed)
+    G = twist_exp(np.r_[0.0, 0.0, 0.0, rng.uniform(-math.pi, math.pi, 3)])
+    start = np.array([G @ P for P in structure.start_poses()])
+    assert_resting(structure, solve_structure_equilibrium(structure, start=start))
+
+
+def test_a_six_bar_balanced_on_an_edge_is_rolled_over():
+    """The symmetric start stands on the edge z_left.a - z_right.a, balanced: the solver finds
+    it not stable and rolls it onto the nearer face; without rolling it reports the balance."""
+    structure = six_bar_on_ground()
+    balanced = solve_structure_equilibrium(structure, roll=False)
+    assert balanced.success and not balanced.stable
+    assert sorted(balanced.contacts) == ['z_left.a', 'z_right.a']
+    assert 'not stable' in balanced.message
+    rolled = solve_structure_equilibrium(structure)
+    assert 'rolled over once' in rolled.message
+    assert_resting(structure, rolled)
+    assert {'z_left.a', 'z_right.a'} < set(rolled.contacts)
