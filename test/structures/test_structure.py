@@ -206,7 +206,8 @@ def test_copies_with_new_rest_lengths_or_poses():
     np.testing.assert_array_equal(longer.rest_lengths, rest)
     np.testing.assert_array_equal(longer.max_stretch, structure.max_stretch)
     T = perturbed(structure.start_poses(), np.random.default_rng(0))
-    np.testing.assert_array_equal(longer.evaluate(T).tensions, structure.evaluate(T, rest).tensions)
+    np.testing.assert_array_equal(longer.evaluate(T).tensions,
+                                  structure.evaluate(T, rest).tensions)
     moved = structure.with_poses(T)
     np.testing.assert_allclose(moved.start_poses(), T, atol=1e-15)
     assert_same_document(numpy_structure(moved.to_dict()).to_dict(), moved.to_dict())
