@@ -143,7 +143,8 @@ class StructureEquilibrium:
 
 def structure_loads(structure: Structure, loads: Any) -> FloatArray:
     """External wrenches (N, 6) ``[f; m]`` (world, about its origin, constant) from None, a
-    mapping {body name: (6,)} or an (N, 6) array; ValueError naming the entry."""
+    mapping {body name: (6,)} or an (N, 6) array; ValueError naming the entry. A load on a fixed
+    body goes into its reaction (no equation)."""
     n = structure.n_bodies
     out = np.zeros((n, 6))
     if loads is None:

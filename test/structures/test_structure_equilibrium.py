@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from structure_fixtures import SIXBAR, example, perturbed, prism_document
+from structure_fixtures import SIXBAR, example, mixed_document, perturbed, prism_document
 
 from tensegrity_stiffness.geometry.screw import exp_so3
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
@@ -298,3 +298,21 @@ def test_a_six_bar_balanced_on_an_edge_is_rolled_over():
     assert 'rolled over once' in rolled.message
     assert_resting(structure, rolled)
     assert {'z_left.a', 'z_right.a'} < set(rolled.contacts)
+
+
+def test_rest_lengths_time_budget_and_a_structure_of_fixed_bodies():
+    structure = example(SIXBAR)
+    shorter = solve_structure_equilibrium(structure, rest_lengths=structure.rest_lengths * 0.8)
+    assert shorter.success
+    stretch = shorter.state.lengths - 0.8 * structure.rest_lengths
+    np.testing.assert_allclose(shorter.state.tensions, structure.k * stretch)
+    start = perturbed(structure.start_poses(), np.random.default_rng(0), 0.05)
+    spent = solve_structure_equilibrium(structure, start=start, time_budget=0.0)
+    assert not spent.success and 'time budget exhausted' in spent.message
+    document = copy.deepcopy(mixed_document())
+    for body in document['structure']['bodies']:
+        body['fixed'] = True
+    held = Structure.from_dict(document)
+    result = solve_structure_equilibrium(held)
+    assert result.success and result.stable
+    np.testing.assert_array_equal(result.poses, held.start_poses())
