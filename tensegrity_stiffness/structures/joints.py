@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.dynamics import LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.structures.elements import Body, StringSpec
 from tensegrity_stiffness.structures.structure import Structure
@@ -32,7 +33,9 @@ JOINT_BODIES = ('link1', 'link2')
 
 
 def _joint_strings(model: JointModel, lower: str, upper: str, lower_prefix: str = '',
-                   upper_prefix: str = '', name_prefix: str = '') -> list[StringSpec]:
+                   upper_prefix: str = '', name_prefix: str = '', damping: ArrayLike = 0.0
+                   ) -> list[StringSpec]:
+    c = np.broadcast_to(np.asarray(damping, dtype=np.float64), (model.n_strings,))
     out = []
     for j, (a, b) in enumerate(model.connections):
         lmax = float(model.max_lengths[j])
@@ -40,7 +43,7 @@ def _joint_strings(model: JointModel, lower: str, upper: str, lower_prefix: str 
                               f'{lower}.{lower_prefix}{model.node_names[a]}',
                               f'{upper}.{upper_prefix}{model.link2_node_names[b]}',
                               float(model.k[j]), float(model.rest_lengths[j]),
-                              lmax if math.isfinite(lmax) else math.inf))
+                              lmax if math.isfinite(lmax) else math.inf, float(c[j])))
     return out
 
 
@@ -51,18 +54,25 @@ def _check_names(names: list[str], where: str) -> None:
                          'and not empty)')
 
 
-def structure_from_joint(model: JointModel, pose: ArrayLike | None = None, mass: float = 0.0,
+def structure_from_joint(model: JointModel, pose: ArrayLike | None = None,
+                         inertia: LinkInertia | None = None, string_damping: ArrayLike = 0.0,
                          use_kernel: bool = True) -> Structure:
     """The joint as a structure (module docstring); ``pose`` of ``link2`` (default
-    ``exp(hat(initial_screw))``), ``mass`` of each link (default massless: the joint has no
-    weights)."""
+    ``exp(hat(initial_screw))``); ``inertia``: link 2's mass properties (default massless: the
+    joint has no weights; give the dynamics' :class:`~tensegrity_stiffness.mechanics.dynamics.
+    LinkInertia` for its modes); ``string_damping`` (N s/m, one for all or one per string)."""
     _check_names(list(model.node_names) + list(model.link2_node_names), 'joint')
     T = exp_se3(model.initial_screw) if pose is None else pose
     link1 = Body.rigid(JOINT_BODIES[0], dict(zip(model.node_names, model.link1_nodes,
-                                                 strict=True)), mass=mass, fixed=True)
-    link2 = Body.rigid(JOINT_BODIES[1], dict(zip(model.link2_node_names, model.link2_nodes,
-                                                 strict=True)), pose=T, mass=mass)
-    return Structure([link1, link2], _joint_strings(model, *JOINT_BODIES),
+                                                 strict=True)), mass=0.0, fixed=True)
+    nodes2 = dict(zip(model.link2_node_names, model.link2_nodes, strict=True))
+    if inertia is None:
+        link2 = Body.rigid(JOINT_BODIES[1], nodes2, pose=T, mass=0.0)
+    else:
+        link2 = Body.rigid(JOINT_BODIES[1], nodes2, pose=T, mass=inertia.mass,
+                           com=inertia.com, inertia=inertia.inertia_matrix(model.link2_nodes))
+    return Structure([link1, link2], _joint_strings(model, *JOINT_BODIES,
+                                                    damping=string_damping),
                      force_law=model.force_law, use_kernel=use_kernel)
 
 
