@@ -16,6 +16,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -82,10 +83,21 @@ def link_name(k: int) -> str:
 
 
 def structure_from_chain(chain: JointChain, screws: ArrayLike | None = None,
-                         use_kernel: bool = True) -> Structure:
+                         inertias: Sequence[LinkInertia] | None = None,
+                         string_damping: ArrayLike = 0.0, use_kernel: bool = True
+                         ) -> Structure:
     """The spine as a structure (module docstring), its links at the frames ``L_k`` of
-    ``screws`` (default the joints' unloaded screws)."""
+    ``screws`` (default the joints' unloaded screws); ``inertias``: one
+    :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` per moving link for its mass
+    properties (default: the chain's masses and centres of mass, massless links massless; an
+    inertia of None is the default of the joint's link-2 nodes, as the dynamics'). Gravity is
+    the chain's when it has weights (a chain without link masses has none, as its statics);
+    the bodies weigh their masses, so inertias with other masses than a weighted chain's
+    ``link_masses`` are refused. ``string_damping`` (N s/m) for all."""
     n = chain.n_joints
+    if inertias is not None and (len(inertias) != n or not all(
+            isinstance(i, LinkInertia) for i in inertias)):
+        raise ValueError(f'inertias must be {n} LinkInertia (one per link)')
     xi = chain.unloaded_screws() if screws is None else chain.validated_screws(screws)
     L = chain.link_transforms(xi)
     bodies = []
@@ -106,6 +118,11 @@ def structure_from_chain(chain: JointChain, screws: ArrayLike | None = None,
                           zip(model.node_names, moved, strict=True)})
         if k == 0:
             bodies.append(Body.rigid(link_name(0), nodes, mass=0.0, fixed=True))
+        elif inertias is not None:
+            li = inertias[k - 1]
+            bodies.append(Body.rigid(link_name(k), nodes, pose=L[k - 1], mass=li.mass,
+                                     com=li.com, inertia=li.inertia_matrix(
+                                         chain.joints[k - 1].link2_nodes)))
         else:
             m = float(chain.link_masses[k - 1])
             bodies.append(Body.rigid(link_name(k), nodes, pose=L[k - 1], mass=m,
@@ -113,8 +130,12 @@ def structure_from_chain(chain: JointChain, screws: ArrayLike | None = None,
                                      inertia=None if m > 0.0 else (0.0, 0.0, 0.0)))
     for k in range(1, n + 1):
         strings += _joint_strings(chain.joints[k - 1], link_name(k - 1), link_name(k),
-                                  f'j{k}_', f'j{k}_', f'j{k}_')
-    g = chain.gravity
+                                  f'j{k}_', f'j{k}_', f'j{k}_', string_damping)
+    g = chain.gravity if chain.has_weights(chain.gravity) else np.zeros(3)
+    if inertias is not None and np.any(g != 0.0) and not np.allclose(
+            [li.mass for li in inertias], chain.link_masses, rtol=1e-15, atol=0.0):
+        raise ValueError("inertias: a structure's bodies weigh their mass, and the chain's "
+                         'weights are of other masses (its link_masses)')
     return Structure(bodies, strings, gravity=g.copy() if np.any(g != 0.0) else None,
                      use_kernel=use_kernel, force_law=_one_law(chain))
 

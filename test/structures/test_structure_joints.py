@@ -143,3 +143,22 @@ def test_a_joint_s_modes_through_structure_are_the_joint_dynamics(damping):
     np.testing.assert_allclose(modes.frequencies, ref.frequencies, rtol=1e-8)
     if damping:
         np.testing.assert_allclose(modes.damping_ratios, ref.damping_ratios, rtol=1e-6)
+
+
+@pytest.mark.parametrize('damping', [0.0, 0.05])
+def test_a_spine_s_modes_through_structure_are_the_chain_dynamics(damping):
+    from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, twin_link_inertias
+    from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
+    from tensegrity_stiffness.structures.modes import structure_modes
+
+    chain = default_spine()
+    inertias = twin_link_inertias(chain)
+    ref = ChainDynamics(chain, inertias, damping).modes(chain.unloaded_screws())
+    structure = structure_from_chain(chain, inertias=inertias, string_damping=damping)
+    result = solve_structure_equilibrium(structure, tolerance=1e-12)
+    assert result.success, result.message
+    modes = structure_modes(structure, result)
+    assert modes.zero_modes == ()
+    np.testing.assert_allclose(modes.frequencies, ref.frequencies, rtol=1e-7)
+    if damping:
+        np.testing.assert_allclose(modes.damping_ratios, ref.damping_ratios, rtol=1e-6)
