@@ -3,11 +3,13 @@ Coulomb friction; their stability on the tangent space without the gauge (docs/s
 
 Unknowns and residuals
 ----------------------
-Each free body's pose is ``T_i = exp(hat(xi_i))`` (screw coordinates as the joint's, re-charted
-as the spine's when ``|omega|`` nears 2 pi); the residual of body ``i`` is the sum of the wrenches
-on it (world frame, about its origin, ``[f; m]``): strings, its weight ``[m g; c x m g]``, the
-external load (constant) and its contact forces ``[lambda; x_c x lambda]``. Fixed bodies stay at
-their poses (their residual is a reaction). A node on the ground is
+Each free body's pose is an increment from its start, ``T_i = exp(hat(xi_i)) P_i`` (screw
+coordinates as the joint's, re-charted as the spine's when ``|omega|`` nears 2 pi; a rigid
+motion of the start moves the increments linearly); the residual of body ``i`` is the sum of the
+wrenches on it: strings, its weight ``[m g; c x m g]``, the external load (constant, world frame
+about its origin) and its contact forces ``[lambda; x_c x lambda]``, its moment taken about the
+body's start position so that the norm Newton minimises does not depend on the world frame.
+Fixed bodies stay at their poses (their residual is a reaction). A node on the ground is
 
 * **sticking**: pinned at its anchor ``a_c`` (where it touched), ``x_c = a_c`` (3 equations,
   the force ``lambda_c`` (3) unknown): the tangential forces of a statically indeterminate
@@ -18,17 +20,18 @@ their poses (their residual is a reaction). A node on the ground is
   at ``mu = 0`` every contact slides with no tangential force.
 
 Newton (:func:`~tensegrity_stiffness.mechanics.newton.damped_newton`) solves the square system
-with its exact Jacobian: ``-K_total`` (the strings' :attr:`~.structure.StructureState.stiffness`,
-the weights' and the contact forces' ``E(f, x)`` blocks) times ``Pi J(xi_i)`` per body, the
-contact columns ``Z(x_c)`` and the constraint rows ``Z(x_c)^T``. Around it, an active set on the
-contacts: from the start (a free structure under gravity is first translated along the normal
-so that its lowest node is on the ground, then tipped over by its weight about one or two
-contacts until it stands on three: :func:`tipped_onto_the_ground`), nodes on the ground stick;
-then, one change at a
-time until none is due, a contact with a pulling normal force is released, the deepest node
-below the ground becomes a sticking contact at its projection, and a sticking contact whose force
-left the cone slides (its anchor moved by :data:`SLIP_START` mean rest lengths along its
-tangential force, so that it starts slipping against it).
+with its exact Jacobian (:meth:`_Problem.residual_jacobian`): ``-K_total`` (the strings'
+:attr:`~.structure.StructureState.stiffness`, the weights' and the contact forces' ``E(f, x)``
+blocks) times ``Pi J(xi_i)`` per body, the contact columns ``Z(x_c)``, the constraint rows
+``Z(x_c)^T`` and the sliding law's derivatives. Around it, an active set on the contacts: a free
+structure under gravity is first translated along the normal so that its lowest node is on the
+ground, then tipped over by its weight as a rigid body about one or two contacts until it stands
+on three (:func:`tipped_onto_the_ground`); nodes on the ground stick; then, one change at a time
+until none is due, a contact with a pulling normal force is released, the deepest node below the
+ground becomes a sticking contact at its projection, and a sticking contact whose force left the
+cone slides (its anchor moved by :data:`SLIP_START` mean rest lengths along its tangential
+force, so that it starts slipping against it; once solved, its law is taken again from where it
+touched).
 
 The gauge
 ---------
@@ -36,15 +39,17 @@ Motions that change no residual are not determined by the equilibrium: each bar'
 own axis (its nodes lie on the axis, so no string or contact force has a moment about it), the six
 rigid motions of a structure with no fixed body, no world node and no contact, and, on a
 frictionless ground, the motions in the ground plane (two translations and the turn about the
-normal). Newton's matrix is bordered with them (``A + s N_l N_r^T``: the left null vectors are
-the same twists paired with the wrenches), so every step has no gauge component and the solver
-returns the equilibrium nearest the start in that sense. Stability is judged on the tangent space
-that removes the gauge and the contact constraints: the symmetric part of ``B^T K_total B``
-positive definite, ``B`` a basis of the free twists with no gauge component that keep the
-contacts in place (with friction: a small disturbance meets static friction, also at a contact
-that slid to the edge of its cone) or on the ground (frictionless). A structure balanced, not
-stable, on a node or an edge of two is rolled over it (:func:`rolled_over`: the way of its
-unstable mode that reaches the ground first) until another node touches, and solved again.
+normal). Newton's matrix is bordered with them, ``A + s N_l M``: ``N_l`` the gauge twists
+(:func:`gauge_twists`, which the residual wrenches do no work on) and ``M`` the gauge conditions
+(:func:`gauge_conditions`: no spin of a bar about its axis, no mean displacement and no mean turn
+of the nodes about their centroid), so every step has no gauge component and the solver returns
+the equilibrium nearest the start in that sense. Stability is judged on the tangent space that
+removes the gauge and the contact constraints: the symmetric part of ``B^T K_total B`` positive
+definite, ``B`` a basis of the free twists with no gauge component that keep the contacts in
+place (with friction: a small disturbance meets static friction, also at a contact that slid to
+the edge of its cone) or on the ground (frictionless). A structure balanced, not stable, on a
+node or an edge of two is rolled over it (:func:`rolled_over`: the way of its unstable mode that
+reaches the ground first) until another node touches, and solved again.
 """
 
 from __future__ import annotations
