@@ -51,8 +51,9 @@ BODY_KEYS = ('name', 'type', 'length', 'radius', 'nodes', 'pose', 'mass', 'com',
              'fixed')
 STRING_KEYS = ('name', 'from', 'to', 'stiffness', 'rest_length', 'max_length', 'damping')
 GROUND_KEYS = ('normal', 'height', 'friction')
-#: Similarity (difflib ratio) above which an unknown key is told its nearest known name.
-NEAREST_NAME_CUTOFF = 0.6
+#: Similarity (difflib ratio) above which an unknown key is told its nearest known name (the
+#: nodes' unknown-parameter warnings use the same cutoff).
+NEAREST_NAME_CUTOFF = 0.75
 
 
 class StructureConfigWarning(UserWarning):
