@@ -111,6 +111,9 @@ class Body:
             raise ValueError('nodes must be a non-empty mapping {name: [x, y, z]}')
         points = {}
         for key, value in nodes.items():
+            if not str(key) or '.' in str(key):
+                raise ValueError(f'nodes: a node name must be non-empty and without ".", got '
+                                 f'{key!r}')
             p = finite_array(f'nodes.{key}', value).ravel()
             if p.shape != (3,):
                 raise ValueError(f'nodes.{key} must be 3 values [x, y, z], got {p.size}')

@@ -83,6 +83,8 @@ def test_a_ros_parameter_file_layout_is_read():
     (lambda s: s.update({'ground': {'normal': [0, 0, 0]}}), 'structure.ground.normal'),
     (lambda s: s['strings'][4].update({'from': 'world.w9'}),
      "structure.strings[4].from: no world node 'w9'"),
+    (lambda s: s['bodies'][0]['nodes'].update({'A.1': [0, 0, 0]}),
+     'structure.bodies[0].nodes: a node name must be non-empty and without "."'),
 ])
 def test_errors_name_the_entry(edit, message):
     document = copy.deepcopy(mixed_document())
