@@ -80,6 +80,28 @@ BATCH_CHUNK = 1024
 NUMERICAL_STEP = 1e-6
 
 
+def string_forces(lengths: FloatArray, rest: FloatArray, k: FloatArray,
+                  max_stretch: FloatArray, force_law: str
+                  ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
+    """The strings' force law (eq. 8, corrected; module docstring), the one home of it for the
+    joint and the structures (:mod:`tensegrity_stiffness.structures`): tension phi (N),
+    d phi / d l (N/m), slack and saturated masks of strings of ``lengths`` with rest lengths
+    ``rest``, stiffness ``k`` and maximum stretch ``max_stretch`` (inf: none) under
+    ``force_law`` (one of :data:`FORCE_LAWS`)."""
+    lmax = rest + max_stretch
+    slack = lengths <= rest
+    saturated = lengths >= lmax
+    taut = ~(slack | saturated)
+    clipped = np.minimum(np.maximum(lengths, rest), lmax)
+    if force_law == 'hooke':
+        phi = k * (clipped - rest)
+        dphi = k * taut
+    else:  # 'paper': tension k (l - l0) / l, constant beyond lmax
+        phi = k * (clipped - rest) / clipped
+        dphi = (k * rest / (clipped * clipped)) * taut
+    return phi, dphi, slack, saturated
+
+
 @dataclass(slots=True)
 class JointState:
     """Everything the joint model computes at one screw (or a batch, leading axis N).
@@ -454,19 +476,9 @@ class JointModel:
     # ------------------------------------------------------------------ core evaluation
     def string_forces(self, lengths: FloatArray, rest: FloatArray
                        ) -> tuple[FloatArray, FloatArray, NDArray[np.bool_], NDArray[np.bool_]]:
-        """Tension phi (N), d phi / d l (N/m), slack and saturated masks (eq. 8, corrected)."""
-        lmax = rest + self.max_stretch
-        slack = lengths <= rest
-        saturated = lengths >= lmax
-        taut = ~(slack | saturated)
-        clipped = np.minimum(np.maximum(lengths, rest), lmax)
-        if self.force_law == 'hooke':
-            phi = self.k * (clipped - rest)
-            dphi = self.k * taut
-        else:  # 'paper': tension k (l - l0) / l, constant beyond lmax
-            phi = self.k * (clipped - rest) / clipped
-            dphi = (self.k * rest / (clipped * clipped)) * taut
-        return phi, dphi, slack, saturated
+        """Tension phi (N), d phi / d l (N/m), slack and saturated masks (eq. 8, corrected):
+        :func:`string_forces` with this model's strings."""
+        return string_forces(lengths, rest, self.k, self.max_stretch, self.force_law)
 
     def evaluate(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None) -> JointState:
         """All quantities at screw ``xi`` (6,) or a batch (N, 6); rest lengths (n,) or (N, n)."""

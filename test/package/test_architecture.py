@@ -19,7 +19,7 @@ class Layer:
     ``alias``: the documented import paths at the top level, which only re-export."""
 
     name: str
-    rank: int
+    rank: float
     packages: tuple[str, ...]
     alias: bool = False
 
@@ -29,6 +29,9 @@ LAYERS = (
     Layer('config', 0, (T + 'config',)),
     Layer('geometry', 0, (T + 'geometry',)),
     Layer('mechanics', 1, (T + 'mechanics',)),
+    # Between mechanics and the rank-2 concerns, which will build on it (a structure twin, a
+    # structure estimator).
+    Layer('structures', 1.5, (T + 'structures',)),
     Layer('estimation', 2, (T + 'estimation',)),
     Layer('simulation', 2, (T + 'simulation',)),
     Layer('control', 2, (T + 'control',)),
