@@ -1,0 +1,322 @@
+"""Form-finding of bar-and-string structures (docs/structures.md, "Form-finding").
+
+* **Force density method** (Schek 1974, "The force density method for form finding and
+  computation of general networks", Comput. Methods Appl. Mech. Eng. 3): with force densities
+  ``q`` the nodal equilibrium is linear, ``Omega X = 0`` on the free nodes (``Omega`` the stress
+  matrix of :mod:`.analysis`). With supports: ``Omega_ff X_f = -Omega_fs X_s``, one solution.
+  Without (a free-standing tensegrity): the positions lie in the null space of ``Omega``, which
+  must hold a 3D configuration (nullity >= 4: ones and three coordinates), known only up to an
+  affine map. The **gauge**: with a ``start``, its columns projected onto that null space (the
+  configuration nearest the start in least squares, centroid kept); without, the null space's
+  orthonormal basis orthogonal to the ones (centroid at the origin, unit-norm coordinate
+  columns). For a symmetric start the projection keeps the symmetry: the regular p-prism comes
+  out at the twist ``90 - 180/p`` from a start at any twist.
+* **Kinematic form-finding** (Pellegrino 1986; Tibert & Pellegrino 2003, "Review of form-finding
+  methods for tensegrity structures", Int. J. Space Struct. 18, Section 2.2, the non-linear
+  optimisation): the chosen bars lengthened, kept equal, to their maximum with every string's
+  length fixed (and the other bars'), by SLSQP from a start; the rigid motion fixed by the
+  linear gauge ``sum (x_i - x0_i) = 0``, ``sum x0_i x x_i = 0`` (no translation, no
+  infinitesimal rotation from the start) when nothing is fixed. At the maximum the framework
+  has a self-stress (the constraints' multipliers): for unit strings the p-prism's bar is
+  ``sqrt(1 + 1/sin(pi/p))`` (p = 3: 1.4679, Tibert & Pellegrino's triangular prism).
+* **Rest-length design for a target shape**: at the given node positions, member forces
+  ``t`` with ``A t = f`` (the bars' weights, half at each end, when the structure has gravity)
+  closest to the middle of the strings' tension band (the bars' forces weighted
+  :data:`BAR_FORCE_WEIGHT`) with every
+  string inside ``[t_min, t_max]``: a QP solved by the library's active-set iteration
+  (:func:`~tensegrity_stiffness.mechanics.active_set.active_set`) from a feasible start (a linear
+  programme that maximises the smallest margin to the band). The rest lengths follow from the
+  strings' force law (:func:`~tensegrity_stiffness.mechanics.design.rest_from_tensions`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linprog, minimize
+
+from tensegrity_stiffness.mechanics.active_set import active_set, kkt_system
+from tensegrity_stiffness.mechanics.design import rest_from_tensions
+from tensegrity_stiffness.structures.analysis import (
+    EIGENVALUE_RTOL,
+    Framework,
+    analyse_framework,
+    equilibrium_matrix,
+    framework_of,
+    free_coordinates,
+    stress_matrix,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: SLSQP's tolerance and iteration limit of the kinematic form-finding.
+KINEMATIC_TOLERANCE = 1e-12
+KINEMATIC_MAX_ITERATIONS = 500
+#: Constraint violation (relative to the lengths) above which a kinematic search failed.
+KINEMATIC_FEASIBILITY = 1e-8
+#: Weight of the bar forces against the strings' in the design's objective (small: the bars
+#: carry what the strings' tensions need, the objective is the strings').
+BAR_FORCE_WEIGHT = 1e-6
+#: Residual ``|A t - f|`` (relative to the largest force) above which a design failed.
+DESIGN_RESIDUAL_RTOL = 1e-9
+
+
+@dataclass
+class FormFindingResult:
+    """``positions`` (n, 3) of ``framework``'s nodes (``framework`` carries them, with forces
+    where the method gives them); ``success`` and ``message``; method-specific numbers in
+    ``info`` (force density: ``nullity``, ``residual``; kinematic: ``bar_length``,
+    ``iterations``, ``violation``)."""
+
+    framework: Framework
+    success: bool
+    message: str
+    info: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def positions(self) -> FloatArray:
+        """(n, 3) the node positions found."""
+        return self.framework.positions
+
+
+def force_density_form(framework: Framework, densities: ArrayLike,
+                       start: ArrayLike | None = None,
+                       eigenvalue_rtol: float = EIGENVALUE_RTOL) -> FormFindingResult:
+    """Node positions of ``framework``'s topology at force ``densities`` (b,) (module
+    docstring): supports (``framework.fixed``) stay at ``framework.positions``; free frameworks
+    take the affine gauge of ``start`` (n, 3) (None: the null-space basis). ValueError when
+    the densities admit no configuration (``Omega_ff`` singular with supports, nullity < 4
+    without). The result's framework carries the member forces ``q l``."""
+    fw = framework
+    q = np.asarray(densities, dtype=np.float64).reshape(-1)
+    b, n = fw.members.shape[0], fw.positions.shape[0]
+    if q.shape != (b,) or not np.all(np.isfinite(q)):
+        raise ValueError(f'densities must be {b} finite force densities (one per member)')
+    Omega = stress_matrix(n, fw.members, q)
+    free = ~fw.fixed
+    if fw.fixed.any():
+        Off = Omega[np.ix_(free, free)]
+        eig = np.linalg.eigvalsh(Off)
+        if np.min(np.abs(eig)) <= eigenvalue_rtol * np.max(np.abs(eig)):
+            raise ValueError('force densities: Omega on the free nodes is singular (a free node '
+                             'or group of nodes is not held by the densities)')
+        X = fw.positions.copy()
+        X[free] = np.linalg.solve(Off, -Omega[np.ix_(free, fw.fixed)] @ X[fw.fixed])
+        nullity = 0
+    else:
+        eig, V = np.linalg.eigh(Omega)
+        zero = eigenvalue_rtol * max(float(np.max(np.abs(eig))), 1e-300)
+        null = V[:, np.abs(eig) <= zero]
+        nullity = null.shape[1]
+        if nullity < 4:
+            raise ValueError(f'force densities: the stress matrix has nullity {nullity} < 4, so '
+                             'no 3D configuration is in equilibrium with them (Omega X = 0 '
+                             'holds only for the ones)')
+        ones = np.ones((n, 1)) / np.sqrt(n)
+        basis = null - ones @ (ones.T @ null)
+        U, s, _ = np.linalg.svd(basis, full_matrices=False)
+        basis = U[:, s > 1e-8]  # the null space orthogonal to the ones
+        if start is None:
+            if basis.shape[1] != 3:
+                raise ValueError(f'force densities: nullity {nullity} admits configurations of '
+                                 f'{basis.shape[1]} dimensions; give a start to choose one')
+            X = basis.copy()
+        else:
+            X0 = np.asarray(start, dtype=np.float64)
+            if X0.shape != (n, 3) or not np.all(np.isfinite(X0)):
+                raise ValueError(f'start must be finite with shape ({n}, 3), got {X0.shape}')
+            c = X0.mean(axis=0)
+            X = c + basis @ (basis.T @ (X0 - c))
+            if np.linalg.matrix_rank(X - X.mean(axis=0), tol=1e-9 * np.abs(X0 - c).max()) < 3:
+                raise ValueError('force densities: the start projects onto a flat configuration; '
+                                 'give a start closer to the expected shape')
+    out = fw.with_positions(X)
+    out = out.with_forces(q * out.lengths)
+    residual = float(np.abs((Omega @ X)[free]).max())
+    return FormFindingResult(out, True, f'force density method: nullity {nullity}',
+                             {'nullity': nullity, 'residual': residual})
+
+
+def kinematic_form(framework: Framework, lengthen: Sequence[str] | None = None,
+                   string_lengths: ArrayLike | None = None,
+                   tolerance: float = KINEMATIC_TOLERANCE,
+                   max_iterations: int = KINEMATIC_MAX_ITERATIONS) -> FormFindingResult:
+    """Kinematic form-finding (module docstring) from ``framework.positions``: the bars named
+    in ``lengthen`` (None: every bar) lengthened together to their largest common length with
+    the strings at ``string_lengths`` (b_strings,) (None: their lengths at the start) and the
+    other bars at their start lengths. The result carries the self-stress found there (scaled
+    to a largest string tension of 1), when there is one."""
+    fw = framework
+    lengths0 = fw.lengths
+    bars = np.flatnonzero(fw.is_bar)
+    names = [fw.member_names[k] for k in bars]
+    chosen = bars if lengthen is None else []
+    if lengthen is not None:
+        for name in lengthen:
+            if name not in names:
+                raise ValueError(f'lengthen: no bar {name!r} (bars: {", ".join(names)})')
+            chosen.append(bars[names.index(name)])
+    chosen = np.asarray(chosen, dtype=np.intp)
+    if chosen.size == 0:
+        raise ValueError('lengthen: no bar to lengthen')
+    strings = np.flatnonzero(~fw.is_bar)
+    target = lengths0.copy()
+    if string_lengths is not None:
+        L = np.asarray(string_lengths, dtype=np.float64).reshape(-1)
+        if L.shape != (strings.size,) or np.any(~np.isfinite(L)) or np.any(L <= 0.0):
+            raise ValueError(f'string_lengths must be {strings.size} positive lengths')
+        target[strings] = L
+    held = np.setdiff1d(np.arange(fw.members.shape[0]), chosen)
+    lead, others = chosen[0], chosen[1:]
+    rows = free_coordinates(fw.fixed)
+    X0 = fw.positions
+    i, j = fw.members.T
+
+    def positions(x: FloatArray) -> FloatArray:
+        X = X0.copy().reshape(-1)
+        X[rows] = x
+        return X.reshape(-1, 3)
+
+    def squared(x: FloatArray) -> FloatArray:
+        X = positions(x)
+        d = X[i] - X[j]
+        return np.sum(d * d, axis=1)
+
+    def squared_jacobian(x: FloatArray) -> FloatArray:
+        X = positions(x)
+        return 2.0 * (equilibrium_matrix(X, fw.members) * np.sqrt(squared(x))).T[:, rows]
+
+    def equalities(x: FloatArray) -> FloatArray:
+        s = squared(x)
+        return np.concatenate([s[held] - target[held] ** 2, s[others] - s[lead]])
+
+    def equalities_jacobian(x: FloatArray) -> FloatArray:
+        J = squared_jacobian(x)
+        return np.vstack([J[held], J[others] - J[lead]])
+
+    constraints = [{'type': 'eq', 'fun': equalities, 'jac': equalities_jacobian}]
+    if not fw.fixed.any():  # the gauge: no translation, no rotation from the start
+        n = X0.shape[0]
+        G = np.zeros((6, 3 * n))
+        for c in range(3):
+            G[c, c::3] = 1.0
+        for k in range(n):
+            a = X0[k]
+            G[3:, 3 * k:3 * k + 3] = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]],
+                                               [-a[1], a[0], 0.0]])
+        g0 = G @ X0.reshape(-1)
+        constraints.append({'type': 'eq', 'fun': lambda x: G @ x - g0, 'jac': lambda x: G})
+    scale = float(lengths0[lead] ** 2)
+    res = minimize(lambda x: -squared(x)[lead] / scale, X0.reshape(-1)[rows],
+                   jac=lambda x: -squared_jacobian(x)[lead] / scale, method='SLSQP',
+                   constraints=constraints,
+                   options={'ftol': tolerance, 'maxiter': max_iterations})
+    X = positions(res.x)
+    out = fw.with_positions(X)
+    violation = float(np.abs(out.lengths[held] - target[held]).max() / target.max())
+    spread = float(np.ptp(out.lengths[chosen]) / target.max()) if chosen.size > 1 else 0.0
+    ok = bool(res.success) and max(violation, spread) <= KINEMATIC_FEASIBILITY
+    analysis = analyse_framework(out)
+    if analysis.self_stresses >= 1:
+        t = analysis.self_stress_basis[:, 0]
+        if t[strings].sum() < 0.0:
+            t = -t
+        out = out.with_forces(t / np.abs(t[strings]).max())
+    info = {'bar_length': float(out.lengths[lead]), 'iterations': int(res.nit),
+            'violation': max(violation, spread), 'self_stresses': analysis.self_stresses}
+    message = (f'kinematic form-finding: bars {float(out.lengths[lead]):.9g} m '
+               f'({res.message})')
+    return FormFindingResult(out, ok, message, info)
+
+
+@dataclass
+class ShapeDesign:
+    """A rest-length design at a target shape: ``rest_lengths`` (n_strings,), ``tensions``
+    (n_strings,), ``bar_forces`` (n_bars,) compression positive, ``residual`` ``|A t - f|`` (N),
+    ``success`` and ``message``."""
+
+    rest_lengths: FloatArray
+    tensions: FloatArray
+    bar_forces: FloatArray
+    residual: float
+    success: bool
+    message: str
+
+
+def _bar_weights(structure: Any, framework: Framework) -> FloatArray:
+    """(3n,) the bars' weights, half at each end (zero without gravity)."""
+    f = np.zeros(3 * framework.positions.shape[0])
+    if structure.gravity is None:
+        return f
+    for i in structure.bar_indices:
+        body = structure.bodies[int(i)]
+        for end in ('a', 'b'):
+            k = structure.node_index(f'{body.name}.{end}')
+            f[3 * k:3 * k + 3] += 0.5 * body.mass * structure.gravity
+    return f
+
+
+def design_rest_lengths_for_shape(structure: Any, poses: ArrayLike | None = None,
+                                  t_min: float = 1.0, t_max: float = 100.0) -> ShapeDesign:
+    """Rest lengths that hold ``structure`` at ``poses`` (None: its start) with every string
+    tension in ``[t_min, t_max]`` (N), the tensions closest to ``(t_min + t_max) / 2`` (module
+    docstring). Bodies as in :func:`~.analysis.framework_of` (bars; fixed bodies and world
+    nodes are supports). ``success`` False with the reason when no such tensions exist."""
+    if not (0.0 < t_min < t_max and np.isfinite(t_max)):
+        raise ValueError(f'tension band must have 0 < t_min < t_max < inf, got [{t_min}, '
+                         f'{t_max}]')
+    fw = framework_of(structure, poses)
+    rows = free_coordinates(fw.fixed)
+    A = equilibrium_matrix(fw.positions, fw.members)[rows]
+    # A t = f, f the external load on the free nodes: the bars' weights where supports carry
+    # them; a free structure's prestress alone (its weight goes to the ground, not designed).
+    f = _bar_weights(structure, fw)[rows] if fw.fixed.any() else np.zeros(rows.size)
+    b = fw.members.shape[0]
+    is_bar = fw.is_bar
+    big = 1e3 * t_max * max(1.0, b)
+    lo = np.where(is_bar, -big, t_min)
+    hi = np.where(is_bar, 0.0, t_max)
+    # Feasible start: maximise the smallest margin m of the strings inside the band.
+    c = np.zeros(b + 1)
+    c[-1] = -1.0
+    s_idx = np.flatnonzero(~is_bar)
+    G = np.zeros((2 * s_idx.size, b + 1))
+    G[np.arange(s_idx.size), s_idx] = -1.0
+    G[s_idx.size + np.arange(s_idx.size), s_idx] = 1.0
+    G[:, -1] = 1.0
+    h = np.concatenate([-lo[s_idx], hi[s_idx]])
+    lp = linprog(c, A_ub=G, b_ub=h, A_eq=np.hstack([A, np.zeros((A.shape[0], 1))]), b_eq=f,
+                 bounds=[(lo[k], hi[k]) for k in range(b)] + [(None, None)], method='highs')
+    n_s, n_b = int(s_idx.size), int(is_bar.sum())
+    if lp.status != 0 or lp.x[-1] < 0.0:
+        return ShapeDesign(np.full(n_s, np.nan), np.full(n_s, np.nan), np.full(n_b, np.nan),
+                           np.nan, False, 'no member forces hold this shape with every string '
+                           f'tension in [{t_min:g}, {t_max:g}] N (the equilibrium matrix has '
+                           f'{b - np.linalg.matrix_rank(A)} self-stresses)')
+    t0 = lp.x[:b]
+    P = np.diag(np.where(is_bar, BAR_FORCE_WEIGHT, 1.0))
+    ref = np.where(is_bar, 0.0, 0.5 * (t_min + t_max))
+
+    def face(t: FloatArray, free: Any, nu: FloatArray) -> tuple[FloatArray, FloatArray]:
+        K, rhs = kkt_system(P, ref, A, f, t, free)
+        sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
+        nf = int(np.sum(free))
+        return sol[:nf], sol[nf:]
+
+    qp = active_set(P, ref, A, lo, hi, t0, face)
+    t = qp.t
+    residual = float(np.linalg.norm(A @ t - f))
+    tensions, bar_forces = t[~is_bar], -t[is_bar]
+    lengths = fw.lengths[~is_bar]
+    rest = rest_from_tensions(structure, lengths, tensions)
+    ok = qp.converged and residual <= DESIGN_RESIDUAL_RTOL * max(1.0, float(np.abs(t).max()))
+    ok = ok and bool(np.all(rest > 0.0))
+    message = (f'tensions {tensions.min():.6g}..{tensions.max():.6g} N in the band '
+               f'[{t_min:g}, {t_max:g}] N' if ok else
+               'the design did not converge or needs a rest length <= 0 (stiffen the strings '
+               'or lower the band)')
+    return ShapeDesign(rest, tensions, bar_forces, residual, ok, message)
