@@ -141,6 +141,37 @@ def force_density_form(framework: Framework, densities: ArrayLike,
                              {'nullity': nullity, 'residual': residual})
 
 
+def rigid_gauge(start: FloatArray) -> FloatArray:
+    """(6, 3n) ``G`` of the linear gauge ``G x = G x0``: no translation of the centroid,
+    ``sum x0_i x x_i = 0`` (no infinitesimal rotation) from the (n, 3) ``start``."""
+    n = start.shape[0]
+    G = np.zeros((6, 3 * n))
+    for c in range(3):
+        G[c, c::3] = 1.0
+    for k, a in enumerate(start):
+        G[3:, 3 * k:3 * k + 3] = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]],
+                                           [-a[1], a[0], 0.0]])
+    return G
+
+
+def bar_members(framework: Framework, names: Sequence[str] | None) -> NDArray[np.intp]:
+    """Member indices of the bars ``names`` (None: every bar); ValueError naming a missing
+    one."""
+    bars = np.flatnonzero(framework.is_bar)
+    known = [framework.member_names[k] for k in bars]
+    if names is None:
+        chosen = list(bars)
+    else:
+        chosen = []
+        for name in names:
+            if name not in known:
+                raise ValueError(f'lengthen: no bar {name!r} (bars: {", ".join(known)})')
+            chosen.append(bars[known.index(name)])
+    if not chosen:
+        raise ValueError('lengthen: no bar to lengthen')
+    return np.asarray(chosen, dtype=np.intp)
+
+
 def kinematic_form(framework: Framework, lengthen: Sequence[str] | None = None,
                    string_lengths: ArrayLike | None = None,
                    tolerance: float = KINEMATIC_TOLERANCE,
@@ -152,17 +183,7 @@ def kinematic_form(framework: Framework, lengthen: Sequence[str] | None = None,
     to a largest string tension of 1), when there is one."""
     fw = framework
     lengths0 = fw.lengths
-    bars = np.flatnonzero(fw.is_bar)
-    names = [fw.member_names[k] for k in bars]
-    chosen = bars if lengthen is None else []
-    if lengthen is not None:
-        for name in lengthen:
-            if name not in names:
-                raise ValueError(f'lengthen: no bar {name!r} (bars: {", ".join(names)})')
-            chosen.append(bars[names.index(name)])
-    chosen = np.asarray(chosen, dtype=np.intp)
-    if chosen.size == 0:
-        raise ValueError('lengthen: no bar to lengthen')
+    chosen = bar_members(fw, lengthen)
     strings = np.flatnonzero(~fw.is_bar)
     target = lengths0.copy()
     if string_lengths is not None:
@@ -200,14 +221,7 @@ def kinematic_form(framework: Framework, lengthen: Sequence[str] | None = None,
 
     constraints = [{'type': 'eq', 'fun': equalities, 'jac': equalities_jacobian}]
     if not fw.fixed.any():  # the gauge: no translation, no rotation from the start
-        n = X0.shape[0]
-        G = np.zeros((6, 3 * n))
-        for c in range(3):
-            G[c, c::3] = 1.0
-        for k in range(n):
-            a = X0[k]
-            G[3:, 3 * k:3 * k + 3] = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]],
-                                               [-a[1], a[0], 0.0]])
+        G = rigid_gauge(X0)
         g0 = G @ X0.reshape(-1)
         constraints.append({'type': 'eq', 'fun': lambda x: G @ x - g0, 'jac': lambda x: G})
     scale = float(lengths0[lead] ** 2)
