@@ -251,6 +251,13 @@ class Structure:
         return len(self.strings)
 
     @property
+    def compiled_kernel(self) -> Any:
+        """The compiled kernel's handle of this structure
+        (:class:`~tensegrity_stiffness.structures.kernel.StructureKernel`), None on the numpy
+        path."""
+        return self._kernel
+
+    @property
     def uses_kernel(self) -> bool:
         """True when evaluations run in the compiled kernel."""
         return self._kernel is not None
