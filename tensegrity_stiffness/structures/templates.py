@@ -2,6 +2,9 @@
 spine``; docs/structures.md, "Templates"): the regular p-prism, the 6-bar expanded octahedron,
 and a structure from a joint or a spine config.
 
+Each template is a function of its choices that returns the document
+(:func:`prism_document`, :func:`six_bar_document`, :func:`config_structure_document`).
+
 * **Regular p-prism** (:func:`prism_layout`): ``p`` bars between two regular p-gons of
   ``radius`` at heights 0 and ``height``, the top one turned by the twist ``alpha`` about +z.
   Nodes ``b<i>`` (bottom, angle ``2 pi i / p``) and ``t<i>`` (top, ``2 pi i / p + alpha``);
@@ -15,6 +18,15 @@ and a structure from a joint or a spine config.
   ``<bar>.a``/``.b``: bar ``x1`` joins ``(-L/2, 0, +L/4)`` to ``(+L/2, 0, +L/4)``, ``x2`` the
   same at ``z = -L/4``; ``y1``/``y2`` at ``x = +-L/4`` along y; ``z1``/``z2`` at ``y = +-L/4``
   along z.
+
+* **A joint or a spine config** (:func:`config_structure_document`): the joint's two links
+  (``link1`` fixed) or the spine's links (``link0`` the base, fixed) as bodies, through
+  :meth:`~tensegrity_stiffness.structures.structure.Structure.from_joint` /
+  :meth:`~tensegrity_stiffness.structures.structure.Structure.from_chain` at the config's
+  ``initial_screw`` (screws).
+
+With ``ground``, the structure gets gravity (-z) and the ground plane through its lowest nodes;
+the prism stands on its bottom polygon, the six-bar on a triangle of strings.
 
 A layout becomes a structure document (:func:`structure_document_of_layout`): each bar a body of
 the schema at the pose that puts its ``a``/``b`` on the layout's nodes, the tensions those of the
@@ -39,11 +51,12 @@ from tensegrity_stiffness.geometry.quaternion import (
     rotation_to_quaternion,
 )
 from tensegrity_stiffness.mechanics.design import rest_from_tensions
+from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS
 from tensegrity_stiffness.structures.analysis import Framework, analyse_framework
 
 FloatArray = NDArray[np.float64]
 
-TEMPLATES = ('prism', 'six-bar', 'joint', 'spine')
+TEMPLATES = ('prism', 'six-bar', 'from-config')
 #: Defaults of the bar templates: node radius (m), string stiffness (N/m), the largest string
 #: tension (N), the bars' mass (kg).
 DEFAULT_RADIUS = 0.1
@@ -311,3 +324,43 @@ def face_down(layout: Layout, face: Sequence[int] | None = None) -> Layout:
     Y = X @ R  # rows R' x
     Y[:, 2] -= Y[list(face), 2].mean()
     return Layout(layout.node_names, Y, layout.bars, layout.strings)
+
+
+def prism_document(p: int, radius: float = DEFAULT_RADIUS, height: float | None = None,
+                   twist: float | None = None, **kwargs: Any) -> dict[str, Any]:
+    """The regular p-prism template (module docstring): the rest lengths of the equilibrium
+    prism of ``radius`` and ``height`` (m); a ``twist`` (rad) other than the equilibrium's
+    writes the bars' start poses at that twist (the solvers turn it back).
+    ``kwargs``: :func:`structure_document_of_layout`'s."""
+    layout = prism_layout(p, radius, height)
+    start = None if twist is None else prism_layout(p, radius, height, twist)
+    return structure_document_of_layout(layout, start=start, **kwargs)
+
+
+def six_bar_document(bar_length: float = DEFAULT_BAR_LENGTH, ground: bool = False,
+                     **kwargs: Any) -> dict[str, Any]:
+    """The expanded octahedron template (module docstring) with bars of ``bar_length`` (m),
+    on a triangle of strings with ``ground``. ``kwargs``: :func:`structure_document_of_layout`'s.
+    """
+    layout = six_bar_layout(bar_length)
+    if ground:
+        layout = face_down(layout)
+    return structure_document_of_layout(layout, ground=ground, **kwargs)
+
+
+def config_structure_document(document: Any, link_mass: float = DEFAULT_LINK_MASS
+                              ) -> dict[str, Any]:
+    """The structure of a joint or a spine config document (module docstring): a spine when
+    the document has a ``chain`` section (its links' masses), a joint otherwise (each link of
+    ``link_mass``, kg, default the twin's, so that the modes have masses)."""
+    from tensegrity_stiffness import config
+    from tensegrity_stiffness.mechanics.chain import JointChain
+    from tensegrity_stiffness.mechanics.joint import JointModel
+    from tensegrity_stiffness.structures.structure import Structure
+
+    if isinstance(config.parameters(document).get('chain'), dict):
+        structure = Structure.from_chain(JointChain.from_dict(document))
+    else:
+        structure = Structure.from_joint(JointModel.from_dict(config.section(document, 'joint')),
+                                         mass=link_mass)
+    return structure.to_dict()
