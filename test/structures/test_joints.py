@@ -73,3 +73,53 @@ def test_a_spine_through_structure_has_every_joint_s_wrench():
     scale = np.sum(np.abs(ref.tensions))
     assert np.max(np.abs(state.wrenches[1:] - expected)) <= RTOL * scale
     np.testing.assert_allclose(state.poses[1:], ref.link_transforms, rtol=0, atol=1e-14)
+
+
+def test_a_joint_s_equilibrium_through_structure_is_the_joint_s():
+    from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
+    from tensegrity_stiffness.structures.equilibrium import (
+        body_stiffness,
+        solve_structure_equilibrium,
+    )
+
+    model = default_joint()
+    structure = Structure.from_joint(model)
+    for W in (np.zeros(6), np.array([0.3, -0.2, 0.5, 0.004, 0.002, -0.003])):
+        ref = solve_equilibrium(model, W, tolerance=1e-13)
+        assert ref.success
+        got = solve_structure_equilibrium(structure, loads={'link2': W}, tolerance=1e-13)
+        assert got.success, got.message
+        np.testing.assert_allclose(got.poses[1], exp_se3(ref.screw), rtol=0, atol=1e-12)
+        assert got.stable == ref.stable
+        # The stiffness a wrench on link 2 meets is K_c, at the joint's own solution exactly.
+        at_ref = Structure.from_joint(model, pose=exp_se3(ref.screw)).evaluate()
+        K = body_stiffness(at_ref.stiffness, structure.fixed, 1)
+        assert_close(K, ref.cartesian_stiffness, 'K_c')
+
+
+def test_a_spine_s_equilibrium_and_tip_stiffness_through_structure_are_the_spine_s():
+    from tensegrity_stiffness.mechanics.chain import solve_chain_equilibrium
+    from tensegrity_stiffness.structures.equilibrium import (
+        body_stiffness,
+        solve_structure_equilibrium,
+    )
+
+    chain = default_spine()
+    chain = JointChain(chain.joints, chain.link_offsets, chain.tool,
+                       link_masses=np.full(chain.n_joints, 0.02),
+                       link_coms=np.tile([0.0, 0.0, 0.005], (chain.n_joints, 1)),
+                       gravity=[0.0, -9.81, 0.0])
+    W = np.array([0.1, 0.05, -0.2, 0.002, -0.001, 0.003])
+    ref = solve_chain_equilibrium(chain, W, tolerance=1e-13)
+    assert ref.success, ref.message
+    structure = structure_from_chain(chain)
+    tip = structure.body_names[-1]
+    got = solve_structure_equilibrium(structure, loads={tip: W}, tolerance=1e-12)
+    assert got.success, got.message
+    np.testing.assert_allclose(got.poses[1:], ref.state.link_transforms, rtol=0, atol=1e-11)
+    assert got.stable == ref.stable
+    # The tip stiffness at the spine's own solution, exactly.
+    at_ref = structure_from_chain(chain, ref.screws)
+    T = at_ref.start_poses()
+    K = at_ref.evaluate(T).stiffness + at_ref.gravity_wrenches(T)[1]
+    assert_close(body_stiffness(K, at_ref.fixed, chain.n_joints), ref.tip_stiffness, 'K_tip')
