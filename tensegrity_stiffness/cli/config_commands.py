@@ -2,8 +2,9 @@
 unloaded equilibrium solved and written as ``initial_screw``;
 :mod:`tensegrity_stiffness.mechanics.templates`; or a structure: the p-prism, the six-bar, a
 joint or spine config as a structure, :mod:`tensegrity_stiffness.structures.templates`) and
-``check-config`` (a config's unloaded equilibrium, stability, slack and saturated strings, modes and whether its ``initial_screw`` is
-an equilibrium; :func:`~tensegrity_stiffness.mechanics.templates.check_config`)."""
+``check-config`` (a config's unloaded equilibrium, stability, slack and saturated strings, modes
+and whether its ``initial_screw`` is an equilibrium;
+:func:`~tensegrity_stiffness.mechanics.templates.check_config`)."""
 
 from __future__ import annotations
 

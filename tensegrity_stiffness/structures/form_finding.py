@@ -113,9 +113,11 @@ def force_density_form(framework: Framework, densities: ArrayLike,
         null = V[:, np.abs(eig) <= zero]
         nullity = null.shape[1]
         if nullity < 4:
+            smallest = ', '.join(f'{v:.3g}' for v in np.sort(np.abs(eig))[:4])
             raise ValueError(f'force densities: the stress matrix has nullity {nullity} < 4, so '
-                             'no 3D configuration is in equilibrium with them (Omega X = 0 '
-                             'holds only for the ones)')
+                             'no 3D configuration is in equilibrium with them (its smallest '
+                             f'|eigenvalues| {smallest}; densities rounded? give them exactly, '
+                             'e.g. 3**0.5)')
         ones = np.ones((n, 1)) / np.sqrt(n)
         basis = null - ones @ (ones.T @ null)
         U, s, _ = np.linalg.svd(basis, full_matrices=False)

@@ -247,19 +247,31 @@ def structure_document_of_layout(layout: Layout, stiffness: ArrayLike = DEFAULT_
                                  pretension: float = DEFAULT_PRETENSION,
                                  bar_mass: float = DEFAULT_BAR_MASS, force_law: str = 'hooke',
                                  ground: bool = False, max_stretch: float | None = None,
-                                 start: Layout | None = None) -> dict[str, Any]:
+                                 start: Layout | None = None,
+                                 tensions: ArrayLike | None = None) -> dict[str, Any]:
     """The ``{'structure': ...}`` document of ``layout`` (module docstring): rest lengths that
     make the layout an equilibrium at ``pretension`` (N, the largest string tension), strings
     of ``stiffness`` (N/m, one or one per string), bars of ``bar_mass`` (kg). ``max_stretch``
     (m): each string's maximum length minus its length at the layout (None: no maximum).
     ``start``: the same topology at other node positions, written as the bodies' poses (the
-    solvers' start). ``ground``: gravity (-z) and the ground plane under the lowest node."""
+    solvers' start). ``ground``: gravity (-z) and the ground plane under the lowest node.
+    ``tensions``: the member forces (strings, then bars: :meth:`Layout.framework`'s order) in
+    equilibrium at the layout, scaled to the pretension (None: the layout's one self-stress).
+    ``bar_mass``: one mass or one per bar."""
     pretension = _check_positive('pretension', pretension)
     if force_law not in ('hooke', 'paper'):
         raise ValueError(f"force_law must be 'hooke' or 'paper', got {force_law!r}")
     n_s = len(layout.strings)
     k = _per_string('stiffness', stiffness, n_s)
-    t = self_stress_tensions(layout, pretension)
+    if tensions is None:
+        t = self_stress_tensions(layout, pretension)
+    else:
+        t = np.asarray(tensions, dtype=np.float64).reshape(-1)
+        if t.shape != (n_s + len(layout.bars),) or np.any(t[:n_s] <= 0.0):
+            raise ValueError(f'tensions must be {n_s + len(layout.bars)} member forces with '
+                             'every string pulling')
+        t = t * (pretension / t[:n_s].max())
+    masses = np.broadcast_to(np.asarray(bar_mass, dtype=np.float64), (len(layout.bars),))
     fw = layout.framework()
     lengths = fw.lengths[:n_s]
     rest = rest_lengths_for(lengths, t[:n_s], k, force_law)
@@ -273,10 +285,10 @@ def structure_document_of_layout(layout: Layout, stiffness: ArrayLike = DEFAULT_
     where = layout if start is None else start
     X = where.positions
     bodies = []
-    for name, (i, j) in layout.bars.items():
+    for m, (name, (i, j)) in zip(masses, layout.bars.items(), strict=True):
         length, pose = bar_pose(X[i], X[j])
         bodies.append({'name': name, 'type': 'bar', 'length': length, 'pose': pose,
-                       'mass': float(bar_mass)})
+                       'mass': float(m)})
     node_ref = {}
     for name, (i, j) in layout.bars.items():
         node_ref[i], node_ref[j] = f'{name}.a', f'{name}.b'
@@ -364,3 +376,24 @@ def config_structure_document(document: Any, link_mass: float = DEFAULT_LINK_MAS
         structure = Structure.from_joint(JointModel.from_dict(config.section(document, 'joint')),
                                          mass=link_mass)
     return structure.to_dict()
+
+
+def layout_of(structure: Any, positions: ArrayLike | None = None) -> Layout:
+    """The layout of a free structure of bars (its node names ``bar.a``/``bar.b``, its strings
+    and bars) at ``positions`` (n, 3) (None: its start); ValueError for fixed bodies, world
+    nodes or general bodies (a layout has bars and strings only)."""
+    for body in structure.bodies:
+        if body.fixed or body.kind != 'bar':
+            raise ValueError(f"bodies: '{body.name}' is {'fixed' if body.fixed else 'not a bar'}"
+                             '; form-finding writes free structures of bars')
+    if structure.world_nodes:
+        raise ValueError('world_nodes: form-finding writes free structures of bars (no '
+                         'anchors)')
+    X = (structure.node_positions(structure.transforms()) if positions is None
+         else np.asarray(positions, dtype=np.float64))
+    bars = {name: (structure.node_index(f'{name}.a'), structure.node_index(f'{name}.b'))
+            for name in structure.bar_names}
+    strings = {name: (int(i), int(j))
+               for name, (i, j) in zip(structure.string_names, structure.string_nodes,
+                                       strict=True)}
+    return Layout(tuple(structure.node_names), X, bars, strings)

@@ -1,0 +1,136 @@
+"""Service-shaped reports of a structure: plain dicts of counts, flags, numbers and names (JSON-
+and message-ready) for ``tensegrity-stiffness structure check`` and a later ROS service
+(docs/structures.md, "Command line").
+
+* :func:`analysis_fields`: the pin-jointed analysis (:mod:`.analysis`) as fields.
+* :func:`check_structure`: the equilibrium with the file's gravity and ground
+  (:func:`~tensegrity_stiffness.structures.equilibrium.solve_structure_equilibrium`), its
+  stability, the tensions, slack and saturated strings, the bar forces, the contact forces, the
+  analysis (structures of bars; fixed bodies and world nodes as supports) at the prestressed
+  equilibrium (the one without gravity, ground and loads, whose member forces are a
+  self-stress: Connelly's and Pellegrino's tests are about it) and ``problems`` (why the
+  structure is not sound; empty: sound) and ``notes``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from tensegrity_stiffness.mechanics.templates import pose_vector
+from tensegrity_stiffness.structures.analysis import Analysis, analyse
+from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
+
+#: The smallest stress-matrix eigenvalues reported (the nullity's and the next).
+REPORTED_EIGENVALUES = 6
+
+
+def analysis_fields(analysis: Analysis) -> dict[str, Any]:
+    """The analysis as plain fields: ``self_stresses``, ``mechanisms``, ``rigid_motions``,
+    ``rank``, and with member forces ``force_densities`` {member: N/m}, the smallest
+    ``stress_eigenvalues``, ``stress_nullity``, ``stress_psd``, ``stress_residual`` (N),
+    ``strings_pull``, ``prestress_stiffness`` (N/m), ``prestress_stable``, ``super_stable``
+    (None with supports), ``conic_at_infinity``."""
+    a = analysis
+    out: dict[str, Any] = {
+        'n_nodes': len(a.framework.node_names), 'n_members': int(a.framework.members.shape[0]),
+        'n_supports': int(a.framework.fixed.sum()), 'rank': a.rank,
+        'self_stresses': a.self_stresses, 'mechanisms': a.mechanisms,
+        'rigid_motions': a.rigid_motions}
+    if a.force_densities is None:
+        return out
+    eig = a.stress_eigenvalues
+    out.update(force_densities=a.force_density_map(),
+               stress_eigenvalues=[float(v) for v in eig[:REPORTED_EIGENVALUES]],
+               stress_nullity=a.stress_nullity, stress_psd=a.stress_psd,
+               stress_residual=a.residual, strings_pull=a.strings_pull,
+               prestress_stiffness=[float(v) for v in a.prestress_stiffness],
+               prestress_stable=a.prestress_stable, super_stable=a.super_stable,
+               conic_at_infinity=a.conic_at_infinity)
+    return out
+
+
+def without_loads(structure: Any) -> Any:
+    """``structure`` without its gravity and ground (the same bodies, poses and strings)."""
+    document = structure.to_dict()
+    section = document['structure']
+    section.pop('gravity', None)
+    section.pop('ground', None)
+    return type(structure).from_dict(document)
+
+
+def _prestress_analysis(structure: Any, eq: Any, loads: Any, notes: list[str]
+                        ) -> dict[str, Any] | None:
+    """The analysis fields at the prestressed equilibrium: ``eq``'s poses without gravity,
+    ground and loads; otherwise the equilibrium of the structure without them (from ``eq``'s
+    poses), so that the member forces are a self-stress."""
+    if structure.gravity is None and structure.ground is None and loads is None:
+        return None if eq.state is None else analysis_fields(analyse(structure, eq.poses))
+    free = without_loads(structure)
+    unloaded = solve_structure_equilibrium(free, None, eq.poses if eq.success else None)
+    if not unloaded.success:
+        notes.append(f'no prestressed equilibrium without gravity and ground: '
+                     f'{unloaded.message}')
+        return None
+    notes.append('analysis at the prestressed equilibrium without gravity, ground and loads')
+    return analysis_fields(analyse(free, unloaded.poses))
+
+
+def _names(names: list[str], mask: Any) -> list[str]:
+    return [names[j] for j in np.flatnonzero(mask)]
+
+
+def check_structure(structure: Any, loads: Any = None, start: ArrayLike | None = None
+                    ) -> dict[str, Any]:
+    """The check of ``structure`` (module docstring) under ``loads`` (as the equilibrium's)
+    from ``start`` (None: its poses). Keys: ``n_bodies``, ``n_bars``, ``n_strings``,
+    ``gravity``, ``ground``, ``equilibrium`` {``success``, ``message``, ``residual``,
+    ``iterations``, ``stable``, ``stability_margin``, ``poses`` (N x [x y z qx qy qz qw])},
+    ``tensions`` {string: N}, ``slack``, ``saturated`` (names), ``bar_forces`` {bar: N,
+    compression positive}, ``contacts`` {node: [fx fy fz]}, ``sliding`` (nodes), ``analysis``
+    (:func:`analysis_fields`, or None with the reason in ``notes``), ``problems``, ``notes``,
+    ``sound``."""
+    s = structure
+    problems: list[str] = []
+    notes: list[str] = []
+    eq = solve_structure_equilibrium(s, loads, start)
+    report: dict[str, Any] = {
+        'n_bodies': s.n_bodies, 'n_bars': len(s.bar_names), 'n_strings': s.n_strings,
+        'bodies': list(s.body_names),
+        'gravity': None if s.gravity is None else [float(v) for v in s.gravity],
+        'ground': s.ground is not None,
+        'equilibrium': {'success': eq.success, 'message': eq.message,
+                        'residual': eq.residual, 'iterations': eq.iterations,
+                        'stable': eq.stable, 'stability_margin': eq.stability_margin,
+                        'poses': [pose_vector(T) for T in eq.poses]}}
+    if not eq.success:
+        problems.append(f'no equilibrium: {eq.message}')
+    elif not eq.stable:
+        problems.append('the equilibrium is not stable (the stiffness on the tangent space '
+                        f'without the gauge is not positive definite; margin '
+                        f'{eq.stability_margin:.3g})')
+    state = eq.state
+    if state is not None:
+        report.update(
+            tensions=dict(zip(s.string_names, map(float, state.tensions), strict=True)),
+            lengths=dict(zip(s.string_names, map(float, state.lengths), strict=True)),
+            slack=_names(s.string_names, state.slack),
+            saturated=_names(s.string_names, state.saturated),
+            bar_forces=dict(zip(s.bar_names, map(float, state.bar_forces), strict=True)))
+        if report['slack']:
+            notes.append(f"slack strings: {', '.join(report['slack'])}")
+        if report['saturated']:
+            notes.append(f"strings at their maximum length: {', '.join(report['saturated'])}")
+    report['contacts'] = {name: [float(v) for v in f] for name, f in eq.contacts.items()}
+    report['sliding'] = list(eq.sliding)
+    report['analysis'] = None
+    try:
+        report['analysis'] = _prestress_analysis(s, eq, loads, notes)
+    except ValueError as exc:
+        notes.append(f'no pin-jointed analysis: {exc}')
+    report['problems'] = problems
+    report['notes'] = notes
+    report['sound'] = not problems
+    return report
