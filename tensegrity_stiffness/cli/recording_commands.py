@@ -95,9 +95,15 @@ def _cmd_calibrate(args: argparse.Namespace) -> int:
 
 
 def _cmd_export_mjcf(args: argparse.Namespace) -> int:
-    from tensegrity_stiffness.simulation.twin import export_mjcf
+    if args.structure:
+        from tensegrity_stiffness.structures.mjcf import structure_mjcf
+        from tensegrity_stiffness.structures.structure import Structure
 
-    text = export_mjcf(args.config, spine=args.spine, max_length=args.max_length)
+        text = structure_mjcf(Structure.from_yaml(args.structure))
+    else:
+        from tensegrity_stiffness.simulation.twin import export_mjcf
+
+        text = export_mjcf(args.config, spine=args.spine, max_length=args.max_length)
     if args.out:
         Path(args.out).write_text(text)
         print(f'{PROG}: wrote {args.out}; view it with: python -m mujoco.viewer --mjcf '
@@ -210,6 +216,8 @@ def add_export_mjcf_parser(sub: Any) -> None:
     p.add_argument('--config', metavar='YAML', help='config file (default: the packaged '
                    'default_joint.yaml, or default_spine.yaml with --spine)')
     p.add_argument('--spine', action='store_true', help='the spine (a chain config)')
+    p.add_argument('--structure', metavar='YAML', help='a structure file (docs/structures.md): '
+                   'its bodies, strings and ground instead of the joint or the spine')
     p.add_argument('--out', metavar='FILE.xml', help='output file (default: standard output)')
     p.add_argument('--max-length', choices=('limit', 'ignore'), default='limit',
                    help="strings past lmax: 'limit' an inextensible stop (default), 'ignore' "

@@ -67,6 +67,7 @@ from tensegrity_stiffness.mechanics.newton import damped_newton, solve_deadline
 from tensegrity_stiffness.structures.structure import (
     Structure,
     StructureState,
+    cross3,
     geometric_block,
 )
 
@@ -112,7 +113,9 @@ class StructureEquilibrium:
     of the residuals; ``stable`` and ``stability_margin`` (smallest eigenvalue of the reduced
     tangent stiffness over its largest); ``tangent_stiffness`` (6N, 6N) ``K_total`` (strings,
     weights, contact forces); ``gauge`` (6N, m) the gauge twists at the solution (module
-    docstring); ``sliding``: the names of the sliding contacts."""
+    docstring); ``sliding``: the names of the sliding contacts; ``constraints`` (c, 6N) the
+    contacts' kinematic constraints on the twists (3 rows per sticking node, the normal row per
+    sliding node)."""
 
     success: bool
     message: str
@@ -126,6 +129,7 @@ class StructureEquilibrium:
     tangent_stiffness: FloatArray | None = field(default=None, repr=False)
     gauge: FloatArray | None = field(default=None, repr=False)
     sliding: tuple[str, ...] = ()
+    constraints: FloatArray | None = field(default=None, repr=False)
 
 
 def structure_loads(structure: Structure, loads: Any) -> FloatArray:
@@ -149,13 +153,13 @@ def structure_loads(structure: Structure, loads: Any) -> FloatArray:
     return arr.copy()
 
 
-def gauge_kind(structure: Structure, contacts: list[Contact]) -> str | None:
+def gauge_kind(structure: Structure, has_contacts: bool) -> str | None:
     """Which motions besides the bars' spins are a gauge: ``'rigid'`` (no fixed body, no world
     node, no contact), ``'plane'`` (no fixed body or world node, contacts on a frictionless
     ground) or None."""
     if structure.fixed.any() or structure.world_nodes:
         return None
-    if not contacts:
+    if not has_contacts:
         return 'rigid'
     if structure.ground is not None and structure.ground.friction == 0.0:
         return 'plane'
@@ -178,10 +182,10 @@ def gauge_twists(structure: Structure, T: FloatArray, contacts: list[Contact]) -
             continue
         e = T[i, :3, 2]
         col = np.zeros(6 * n)
-        col[6 * i:6 * i + 3] = np.cross(T[i, :3, 3], e)
+        col[6 * i:6 * i + 3] = cross3(T[i, :3, 3], e)
         col[6 * i + 3:6 * i + 6] = e
         columns.append(col)
-    kind = gauge_kind(structure, contacts)
+    kind = gauge_kind(structure, bool(contacts))
     motions: list[FloatArray] = []
     if kind == 'rigid':
         motions = list(np.eye(6))
@@ -209,7 +213,7 @@ def gauge_conditions(structure: Structure, T: FloatArray, contacts: list[Contact
             row = np.zeros(6 * n)
             row[6 * i + 3:6 * i + 6] = T[i, :3, 2]
             rows.append(row)
-    kind = gauge_kind(structure, contacts)
+    kind = gauge_kind(structure, bool(contacts))
     if kind is not None:
         x = structure.node_positions(T)
         nodes = np.flatnonzero(structure.node_bodies >= 0)
@@ -263,11 +267,20 @@ class _Problem:
         """The poses ``exp(hat(xi_i)) P_i`` of the increments ``xi_i`` ([omega; v], a spatial
         twist's screw) from the reference poses ``P_i``: a rigid motion of the reference moves
         the increments linearly (by its adjoint)."""
+        return self.kinematics(x)[0]
+
+    def kinematics(self, x: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The poses (:meth:`transforms`) and ``Pi J(xi_i)`` (nf, 6, 6), the map from the
+        increments' changes to the spatial twists ``[dv; dw]`` (one screw at a time: the
+        scalar path of :class:`~tensegrity_stiffness.geometry.screw.ScrewKinematics` is faster
+        than its batch at a structure's few bodies)."""
         T = self.reference.copy()
-        if self.nf:
-            T[self.free] = exp_se3(x[:6 * self.nf].reshape(self.nf, 6)) @ self.reference[
-                self.free]
-        return T
+        PJ = np.empty((self.nf, 6, 6))
+        for k, i in enumerate(self.free):
+            kin = ScrewKinematics(x[6 * k:6 * k + 6])
+            T[i] = kin.T @ self.reference[i]
+            PJ[k] = kin.J[_SWAP]
+        return T, PJ
 
     def moment_rows(self, size: int) -> FloatArray:
         """``D`` (size, size): the residual wrench of body i about its reference centre,
@@ -306,7 +319,7 @@ class _Problem:
     # -------------------------------------------------------------- equations
     def evaluate(self, x: FloatArray, tangent: bool = True) -> tuple[FloatArray, Any] | None:
         """(residuals, context) at ``x``, or None where a string has zero length."""
-        T = self.transforms(x)
+        T, PJ = self.kinematics(x)
         try:
             state = self.s.evaluate_transforms(T, self.rest)
         except ValueError:
@@ -318,19 +331,19 @@ class _Problem:
         g = []
         for c, p, f in zip(self.contacts, points, forces, strict=True):
             W[c.body, :3] += f
-            W[c.body, 3:] += np.cross(p, f)
+            W[c.body, 3:] += cross3(p, f)
             g.append(self.scale * (p - c.anchor) if c.mode == STICK
                      else self.sliding_rows(c, p, f))
         W = W[self.free]
-        W[:, 3:] -= np.cross(self.centres[self.free], W[:, :3])
+        W[:, 3:] -= cross3(self.centres[self.free], W[:, :3])
         r = np.concatenate([W.ravel(), *g])
         if not np.all(np.isfinite(r)):
             return None
-        return r, (T, state, Kg, points, forces)
+        return r, (T, state, Kg, points, forces, PJ)
 
     def total_stiffness(self, context: Any) -> FloatArray:
         """``K_total`` (6N, 6N): strings, weights and the contact forces' ``E`` blocks."""
-        _, state, Kg, points, forces = context
+        _, state, Kg, points, forces, _ = context
         K = state.stiffness + Kg
         for c, p, f in zip(self.contacts, points, forces, strict=True):
             b = slice(6 * c.body, 6 * c.body + 6)
@@ -390,7 +403,7 @@ class _Problem:
                 A[b:b + 6, k:k + 3] = np.vstack([np.eye(3), hat3(p)])
                 A[k:k + 3, b:b + 6] = dx
         # Columns: delta_i = Pi J(xi_i) dxi_i.
-        PJ = ScrewKinematics(x[:6 * nf].reshape(nf, 6)).J[:, _SWAP]
+        PJ = context[5]
         A[:, :6 * nf] = np.einsum('ajb,jbc->ajc', A[:, :6 * nf].reshape(size, nf, 6),
                                   PJ).reshape(size, 6 * nf)
         D = self.moment_rows(size)
@@ -415,7 +428,7 @@ class _Problem:
         reference centre by more than MAX_TRANSLATION_STEP mean rest lengths."""
         xi = step[:6 * self.nf].reshape(self.nf, 6)
         rot = np.linalg.norm(xi[:, :3], axis=1).max(initial=0.0) / MAX_ROTATION_STEP
-        moved = xi[:, 3:] + np.cross(xi[:, :3], self.centres[self.free])
+        moved = xi[:, 3:] + cross3(xi[:, :3], self.centres[self.free])
         tra = np.linalg.norm(moved, axis=1).max(initial=0.0) / (MAX_TRANSLATION_STEP *
                                                                  self.length)
         return step / max(rot, tra, 1.0)
@@ -580,9 +593,9 @@ def _result(problem: _Problem, x: FloatArray, norm: float, iterations: int, succ
     K = problem.total_stiffness(context)
     gauge = gauge_twists(s, T, problem.contacts)
     margin = -math.inf
+    constraints = problem.constraint_rows(context[3])
     if success:
-        margin = reduced_stability_margin(K, problem.constraint_rows(context[3]), gauge,
-                                          s.fixed)
+        margin = reduced_stability_margin(K, constraints, gauge, s.fixed)
         slack = int(np.count_nonzero(state.slack))
         if slack:
             message += f' ({slack} slack strings)'
@@ -590,7 +603,7 @@ def _result(problem: _Problem, x: FloatArray, norm: float, iterations: int, succ
             message += '; equilibrium is not stable'
     return StructureEquilibrium(success, message, T, state, success and
                                 margin > STABILITY_TOLERANCE, contacts, norm, iterations,
-                                margin, K, gauge, sliding)
+                                margin, K, gauge, sliding, constraints)
 
 
 def tangent_basis(constraints: FloatArray, gauge: FloatArray, fixed: NDArray[np.bool_]
