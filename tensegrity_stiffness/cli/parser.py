@@ -27,7 +27,7 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
 * ``check-config`` a config's unloaded equilibrium, stability, strings, modes and whether its
   ``initial_screw`` is an equilibrium (exit 0 sound, 2 with the reason)
 * ``structure``    any structure of bodies and strings: ``check``, ``equilibrium``,
-  ``form-find``, ``plot`` (:mod:`tensegrity_stiffness.cli.structure_commands`)
+  ``form-find``, ``modes``, ``plot`` (:mod:`tensegrity_stiffness.cli.structure_commands`)
 * ``modes``        natural frequencies, damping ratios and mode shapes at the unloaded
   equilibrium (:mod:`tensegrity_stiffness.mechanics.dynamics`; ``--plot`` draws them)
 

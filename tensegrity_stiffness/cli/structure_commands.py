@@ -8,6 +8,8 @@
   MZ``): poses, tensions, contacts; ``--out`` writes the file with the bodies at it.
 * ``structure form-find FILE --method force-density | kinematic | design`` the forms of
   :mod:`~tensegrity_stiffness.structures.form_finding`, written with ``--out``.
+* ``structure modes FILE`` the natural frequencies, damping ratios and the named zero modes
+  at the equilibrium (:func:`~tensegrity_stiffness.structures.modes.structure_modes`).
 * ``structure plot FILE`` the 3D figure (:mod:`.structure_plots`) at the equilibrium or the
   start.
 """
@@ -38,6 +40,7 @@ from tensegrity_stiffness.mechanics.templates import pose_vector
 from tensegrity_stiffness.structures import form_finding, templates
 from tensegrity_stiffness.structures.analysis import framework_of
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
+from tensegrity_stiffness.structures.modes import structure_modes
 from tensegrity_stiffness.structures.report import check_structure
 from tensegrity_stiffness.structures.structure import Structure
 
@@ -254,6 +257,30 @@ def _cmd_form_find(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_modes(args: argparse.Namespace) -> int:
+    path = _structure_path(args)
+    structure = Structure.from_yaml(path)
+    eq = solve_structure_equilibrium(structure)
+    if not eq.success:
+        print(f'{PROG}: error: no equilibrium: {eq.message}', file=sys.stderr)
+        return EXIT_NO_SOLUTION
+    modes = structure_modes(structure, eq)
+    out = {'file': str(path), 'frequencies_hz': modes.frequencies,
+           'damping_ratios': modes.damping_ratios, 'zero_modes': list(modes.zero_modes),
+           'counts': modes.counts, 'stable': modes.stable}
+    if args.json:
+        print_json(out)
+        return EXIT_OK
+    print(f'modes of {path} at its equilibrium ({eq.message}); stable {yes(modes.stable)}')
+    print(f'  {len(modes.frequencies)} modes with stiffness, frequencies (Hz): '
+          f'{vector(modes.frequencies)}')
+    if np.any(modes.damping_ratios):
+        print(f'  damping ratios: {vector(modes.damping_ratios)}')
+    counts = ', '.join(f'{v} {k}' for k, v in modes.counts.items())
+    print(f'  {len(modes.zero_modes)} zero modes ({counts})')
+    return EXIT_OK
+
+
 def _plot_equilibrium(structure: Structure, png: str, eq: Any) -> None:
     from tensegrity_stiffness.cli.structure_plots import plot_structure
 
@@ -299,7 +326,7 @@ def _add_file(p: argparse.ArgumentParser) -> None:
 def add_structure_parser(sub: Any) -> None:
     """``structure`` and its subcommands."""
     p = sub.add_parser('structure', help='any structure of bodies and strings: check, '
-                                         'equilibrium, form-find, plot',
+                                         'equilibrium, form-find, modes, plot',
                        description='Structures of rigid bodies and strings (docs/structures.md)'
                                    ': check a file, its equilibrium, form-finding, a 3D '
                                    'figure.')
@@ -350,6 +377,14 @@ def add_structure_parser(sub: Any) -> None:
     f.add_argument('--out', metavar='FILE', help='write the form-found structure')
     add_json(f)
     f.set_defaults(handler=_cmd_form_find)
+    m = cmds.add_parser('modes', help='frequencies and the named zero modes',
+                        description='Natural frequencies (Hz), damping ratios and the zero '
+                                    'modes (rigid or plane motions, bar spins, mechanisms) at '
+                                    'the equilibrium with the file\'s gravity and ground. Exit '
+                                    '1 when no equilibrium is found.')
+    _add_file(m)
+    add_json(m)
+    m.set_defaults(handler=_cmd_modes)
     g = cmds.add_parser('plot', help='the 3D figure',
                         description='Bodies, strings coloured by tension, contact forces, at '
                                     'the equilibrium (or --start).')

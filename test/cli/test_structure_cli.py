@@ -155,3 +155,16 @@ def test_the_3d_figure(capsys, tmp_path):
     assert main(['structure', 'check', '--example', 'three_bar.yaml', '--plot',
                  str(check_png)]) == 0
     assert check_png.stat().st_size > 10_000
+
+
+@pytest.mark.parametrize('p', (3, 4))
+def test_modes_of_a_free_prism_name_its_zero_modes(capsys, tmp_path, p):
+    """Free-floating: 6 rigid motions and a spin per bar; the pin-jointed framework's 2p - 5
+    mechanisms are stiffened by the prestress, so they are modes with a frequency."""
+    path = write_prism(tmp_path, **{'--bars': p})
+    report = run_json(capsys, 'structure', 'modes', str(path))
+    assert report['counts'] == {'rigid': 6, 'spins': p, 'mechanisms': 0}
+    assert len(report['frequencies_hz']) == 6 * p - 6 - p
+    assert report['stable'] and min(report['frequencies_hz']) > 0.0
+    code, out, _ = run(capsys, 'structure', 'modes', str(path))
+    assert code == 0 and f'(6 rigid, {p} spins, 0 mechanisms)' in out
