@@ -215,7 +215,8 @@ class Analysis:
     Counts: ``rank`` of the equilibrium matrix, ``self_stresses`` s, ``mechanisms`` m (rigid
     motions removed), ``rigid_motions`` (those the supports leave). ``self_stress_basis``
     (b, s) orthonormal; ``mechanism_basis`` (D, m) orthonormal on the free coordinates,
-    orthogonal to the rigid motions. With member forces: ``force_densities`` (b,),
+    orthogonal to the rigid motions. With member forces: ``force_densities`` {member: q}
+    (N/m, bars negative) and ``density_vector`` (b,) the same in member order,
     ``stress_matrix`` (n, n) and its ascending ``stress_eigenvalues``, ``stress_nullity``,
     ``stress_psd``, ``residual`` ``|A t|`` on the free nodes (N; zero for a self-stress),
     ``strings_pull`` (every string tension >= 0 and bar force <= 0), ``prestress_stiffness``
@@ -230,7 +231,7 @@ class Analysis:
     rigid_motions: int
     self_stress_basis: FloatArray
     mechanism_basis: FloatArray
-    force_densities: FloatArray | None = None
+    density_vector: FloatArray | None = None
     stress_matrix: FloatArray | None = None
     stress_eigenvalues: FloatArray | None = None
     stress_nullity: int | None = None
@@ -242,11 +243,12 @@ class Analysis:
     super_stable: bool | None = None
     conic_at_infinity: bool | None = None
 
-    def force_density_map(self) -> dict[str, float]:
-        """{member name: force density (N/m)} (empty without forces)."""
-        if self.force_densities is None:
-            return {}
-        return dict(zip(self.framework.member_names, map(float, self.force_densities),
+    @property
+    def force_densities(self) -> dict[str, float] | None:
+        """{member name: force density t / l (N/m)}, bars negative (None without forces)."""
+        if self.density_vector is None:
+            return None
+        return dict(zip(self.framework.member_names, map(float, self.density_vector),
                         strict=True))
 
 
@@ -278,7 +280,7 @@ def analyse_framework(framework: Framework, rtol: float = RANK_RTOL,
     Omega = stress_matrix(X.shape[0], members, q)
     eig = np.linalg.eigvalsh(Omega)
     zero = _zero_tolerance(eig, eigenvalue_rtol)
-    out.force_densities = q
+    out.density_vector = q
     out.stress_matrix = Omega
     out.stress_eigenvalues = eig
     out.stress_nullity = int(np.sum(np.abs(eig) <= zero))

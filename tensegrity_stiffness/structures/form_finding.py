@@ -19,14 +19,16 @@
   infinitesimal rotation from the start) when nothing is fixed. At the maximum the framework
   has a self-stress (the constraints' multipliers): for unit strings the p-prism's bar is
   ``sqrt(1 + 1/sin(pi/p))`` (p = 3: 1.4679, Tibert & Pellegrino's triangular prism).
-* **Rest-length design for a target shape**: at the given node positions, member forces
-  ``t`` with ``A t = f`` (the bars' weights, half at each end, when the structure has gravity)
-  closest to the middle of the strings' tension band (the bars' forces weighted
-  :data:`BAR_FORCE_WEIGHT`) with every
+* **Rest-length design for a target shape**: at the given poses, string tensions ``t`` with
+  every free body's wrench balance ``G t = -W`` (:func:`string_wrench_matrix`; ``W`` the
+  weights when a fixed body or a world node carries them, zero for a free structure: its
+  self-stress), bodies of any kind, closest to the middle of the tension band with every
   string inside ``[t_min, t_max]``: a QP solved by the library's active-set iteration
   (:func:`~tensegrity_stiffness.mechanics.active_set.active_set`) from a feasible start (a linear
-  programme that maximises the smallest margin to the band). The rest lengths follow from the
-  strings' force law (:func:`~tensegrity_stiffness.mechanics.design.rest_from_tensions`).
+  programme that maximises the smallest margin to the band). For bars this is the nodal
+  equilibrium with the bars' forces eliminated (a bar's balance makes them axial). The rest
+  lengths follow from the strings' force law
+  (:func:`~tensegrity_stiffness.mechanics.design.rest_from_tensions`).
 """
 
 from __future__ import annotations
@@ -40,13 +42,12 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linprog, minimize
 
 from tensegrity_stiffness.mechanics.active_set import active_set, kkt_system
-from tensegrity_stiffness.mechanics.design import rest_from_tensions
+from tensegrity_stiffness.mechanics.design import BOUND_MARGIN, rest_from_tensions
 from tensegrity_stiffness.structures.analysis import (
     EIGENVALUE_RTOL,
     Framework,
     analyse_framework,
     equilibrium_matrix,
-    framework_of,
     free_coordinates,
     stress_matrix,
 )
@@ -58,9 +59,6 @@ KINEMATIC_TOLERANCE = 1e-12
 KINEMATIC_MAX_ITERATIONS = 500
 #: Constraint violation (relative to the lengths) above which a kinematic search failed.
 KINEMATIC_FEASIBILITY = 1e-8
-#: Weight of the bar forces against the strings' in the design's objective (small: the bars
-#: carry what the strings' tensions need, the objective is the strings').
-BAR_FORCE_WEIGHT = 1e-6
 #: Residual ``|A t - f|`` (relative to the largest force) above which a design failed.
 DESIGN_RESIDUAL_RTOL = 1e-9
 
@@ -263,76 +261,103 @@ class ShapeDesign:
     message: str
 
 
-def _bar_weights(structure: Any, framework: Framework) -> FloatArray:
-    """(3n,) the bars' weights, half at each end (zero without gravity)."""
-    f = np.zeros(3 * framework.positions.shape[0])
-    if structure.gravity is None:
-        return f
-    for i in structure.bar_indices:
-        body = structure.bodies[int(i)]
-        for end in ('a', 'b'):
-            k = structure.node_index(f'{body.name}.{end}')
-            f[3 * k:3 * k + 3] += 0.5 * body.mass * structure.gravity
-    return f
+def string_wrench_matrix(structure: Any, T: FloatArray) -> FloatArray:
+    """(6N, n) ``G``: column ``k`` the wrenches ``[f; x x f]`` (world, about its origin) on
+    the bodies of a unit tension in string ``k`` at the (N, 4, 4) poses ``T``; the strings'
+    wrenches are ``G t`` (the rows of the world's nodes dropped)."""
+    X = structure.node_positions(T)
+    a, b = structure.string_nodes.T
+    d = X[b] - X[a]
+    u = d / np.linalg.norm(d, axis=1)[:, None]
+    G = np.zeros((6 * structure.n_bodies, structure.n_strings))
+    cols = np.arange(structure.n_strings)
+    for ends, sign in ((a, 1.0), (b, -1.0)):
+        bodies = structure.node_bodies[ends]
+        f = sign * u
+        m = np.cross(X[ends], f)
+        on = bodies >= 0
+        for c in range(3):
+            G[6 * bodies[on] + c, cols[on]] += f[on, c]
+            G[6 * bodies[on] + 3 + c, cols[on]] += m[on, c]
+    return G
+
+
+def tension_caps(structure: Any, lengths: FloatArray) -> FloatArray:
+    """(n,) the largest tension each string can hold at ``lengths`` with a positive rest
+    length and below its maximum length (``lmax - l0`` kept, as the joint's design keeps it):
+    ``hooke`` ``min(k l, k m)``, ``paper`` ``min(k, k m / l)``, less :data:`~tensegrity_stiffness.
+    mechanics.design.BOUND_MARGIN`` of it."""
+    k, m = structure.k, structure.max_stretch
+    if structure.force_law == 'hooke':
+        cap = np.minimum(k * lengths, k * m)
+    else:
+        cap = np.minimum(k, k * m / lengths)
+    return (1.0 - BOUND_MARGIN) * cap
 
 
 def design_rest_lengths_for_shape(structure: Any, poses: ArrayLike | None = None,
                                   t_min: float = 1.0, t_max: float = 100.0) -> ShapeDesign:
     """Rest lengths that hold ``structure`` at ``poses`` (None: its start) with every string
-    tension in ``[t_min, t_max]`` (N), the tensions closest to ``(t_min + t_max) / 2`` (module
-    docstring). Bodies as in :func:`~.analysis.framework_of` (bars; fixed bodies and world
-    nodes are supports). ``success`` False with the reason when no such tensions exist."""
+    tension in ``[t_min, t_max]`` (N) and below its cap (:func:`tension_caps`), the tensions
+    closest to ``(t_min + t_max) / 2`` (module docstring): each free body's wrench balance
+    ``G_i t = -W_i`` (:func:`string_wrench_matrix`; ``W`` the weights when a fixed body or a
+    world node carries them, zero otherwise), bodies of any kind. ``success`` False with the
+    reason when no such tensions exist; a ground's contacts are not designed (a structure on
+    the ground gets its prestress alone)."""
     if not (0.0 < t_min < t_max and np.isfinite(t_max)):
         raise ValueError(f'tension band must have 0 < t_min < t_max < inf, got [{t_min}, '
                          f'{t_max}]')
-    fw = framework_of(structure, poses)
-    rows = free_coordinates(fw.fixed)
-    A = equilibrium_matrix(fw.positions, fw.members)[rows]
-    # A t = f, f the external load on the free nodes: the bars' weights where supports carry
-    # them; a free structure's prestress alone (its weight goes to the ground, not designed).
-    f = _bar_weights(structure, fw)[rows] if fw.fixed.any() else np.zeros(rows.size)
-    b = fw.members.shape[0]
-    is_bar = fw.is_bar
-    big = 1e3 * t_max * max(1.0, b)
-    lo = np.where(is_bar, -big, t_min)
-    hi = np.where(is_bar, 0.0, t_max)
-    # Feasible start: maximise the smallest margin m of the strings inside the band.
-    c = np.zeros(b + 1)
+    s = structure
+    T = s.transforms(poses)
+    free = np.flatnonzero(~s.fixed)
+    rows = (6 * free[:, None] + np.arange(6)).reshape(-1)
+    A = string_wrench_matrix(s, T)[rows]
+    supported = bool(s.fixed.any() or s.world_nodes)
+    f = -s.gravity_wrenches(T)[0].reshape(-1)[rows] if supported else np.zeros(rows.size)
+    n = s.n_strings
+    lengths = s.evaluate(T).lengths
+    lo, hi = np.full(n, float(t_min)), np.minimum(float(t_max), tension_caps(s, lengths))
+    if np.any(hi <= lo):
+        j = int(np.argmin(hi - lo))
+        nan = np.full(n, np.nan)
+        return ShapeDesign(nan, nan, np.full(len(s.bar_names), np.nan), np.nan, False,
+                           f'string {s.string_names[j]} cannot carry t_min = {t_min:g} N '
+                           f'(at most {hi[j]:.6g} N: a positive rest length and its maximum '
+                           'length)')
+    # Feasible start: maximise the smallest margin m of the tensions inside the band.
+    c = np.zeros(n + 1)
     c[-1] = -1.0
-    s_idx = np.flatnonzero(~is_bar)
-    G = np.zeros((2 * s_idx.size, b + 1))
-    G[np.arange(s_idx.size), s_idx] = -1.0
-    G[s_idx.size + np.arange(s_idx.size), s_idx] = 1.0
+    G = np.zeros((2 * n, n + 1))
+    G[np.arange(n), np.arange(n)] = -1.0
+    G[n + np.arange(n), np.arange(n)] = 1.0
     G[:, -1] = 1.0
-    h = np.concatenate([-lo[s_idx], hi[s_idx]])
-    lp = linprog(c, A_ub=G, b_ub=h, A_eq=np.hstack([A, np.zeros((A.shape[0], 1))]), b_eq=f,
-                 bounds=[(lo[k], hi[k]) for k in range(b)] + [(None, None)], method='highs')
-    n_s, n_b = int(s_idx.size), int(is_bar.sum())
+    lp = linprog(c, A_ub=G, b_ub=np.concatenate([-lo, hi]),
+                 A_eq=np.hstack([A, np.zeros((A.shape[0], 1))]), b_eq=f,
+                 bounds=list(zip(lo, hi, strict=True)) + [(None, None)], method='highs')
     if lp.status != 0 or lp.x[-1] < 0.0:
-        return ShapeDesign(np.full(n_s, np.nan), np.full(n_s, np.nan), np.full(n_b, np.nan),
-                           np.nan, False, 'no member forces hold this shape with every string '
-                           f'tension in [{t_min:g}, {t_max:g}] N (the equilibrium matrix has '
-                           f'{b - np.linalg.matrix_rank(A)} self-stresses)')
-    t0 = lp.x[:b]
-    P = np.diag(np.where(is_bar, BAR_FORCE_WEIGHT, 1.0))
-    ref = np.where(is_bar, 0.0, 0.5 * (t_min + t_max))
+        nan = np.full(n, np.nan)
+        return ShapeDesign(nan, nan, np.full(len(s.bar_names), np.nan), np.nan, False,
+                           f'no string tensions hold this shape inside [{t_min:g}, '
+                           f'{t_max:g}] N (the bodies\' balance leaves '
+                           f'{n - np.linalg.matrix_rank(A)} self-stresses)')
+    P = np.eye(n)
+    ref = np.full(n, 0.5 * (t_min + t_max))
 
-    def face(t: FloatArray, free: Any, nu: FloatArray) -> tuple[FloatArray, FloatArray]:
-        K, rhs = kkt_system(P, ref, A, f, t, free)
+    def face(t: FloatArray, free_set: Any, nu: FloatArray) -> tuple[FloatArray, FloatArray]:
+        K, rhs = kkt_system(P, ref, A, f, t, free_set)
         sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
-        nf = int(np.sum(free))
+        nf = int(np.sum(free_set))
         return sol[:nf], sol[nf:]
 
-    qp = active_set(P, ref, A, lo, hi, t0, face)
+    qp = active_set(P, ref, A, lo, hi, lp.x[:n], face)
     t = qp.t
     residual = float(np.linalg.norm(A @ t - f))
-    tensions, bar_forces = t[~is_bar], -t[is_bar]
-    lengths = fw.lengths[~is_bar]
-    rest = rest_from_tensions(structure, lengths, tensions)
-    ok = qp.converged and residual <= DESIGN_RESIDUAL_RTOL * max(1.0, float(np.abs(t).max()))
-    ok = ok and bool(np.all(rest > 0.0))
-    message = (f'tensions {tensions.min():.6g}..{tensions.max():.6g} N in the band '
-               f'[{t_min:g}, {t_max:g}] N' if ok else
-               'the design did not converge or needs a rest length <= 0 (stiffen the strings '
-               'or lower the band)')
-    return ShapeDesign(rest, tensions, bar_forces, residual, ok, message)
+    rest = rest_from_tensions(s, lengths, t)
+    state = s.evaluate(T, rest_lengths=rest) if np.all(rest > 0.0) else None
+    ok = (qp.converged and state is not None
+          and residual <= DESIGN_RESIDUAL_RTOL * max(1.0, float(np.abs(t).max())))
+    bar_forces = state.bar_forces if state is not None else np.full(len(s.bar_names), np.nan)
+    message = (f'tensions {t.min():.6g}..{t.max():.6g} N in the band [{t_min:g}, {t_max:g}] N'
+               if ok else 'the design did not converge or needs a rest length <= 0 (stiffen '
+               'the strings or lower the band)')
+    return ShapeDesign(rest, t, bar_forces, residual, ok, message)

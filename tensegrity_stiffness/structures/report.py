@@ -39,10 +39,10 @@ def analysis_fields(analysis: Analysis) -> dict[str, Any]:
         'n_supports': int(a.framework.fixed.sum()), 'rank': a.rank,
         'self_stresses': a.self_stresses, 'mechanisms': a.mechanisms,
         'rigid_motions': a.rigid_motions}
-    if a.force_densities is None:
+    if a.density_vector is None:
         return out
     eig = a.stress_eigenvalues
-    out.update(force_densities=a.force_density_map(),
+    out.update(force_densities=a.force_densities,
                stress_eigenvalues=[float(v) for v in eig[:REPORTED_EIGENVALUES]],
                stress_nullity=a.stress_nullity, stress_psd=a.stress_psd,
                stress_residual=a.residual, strings_pull=a.strings_pull,

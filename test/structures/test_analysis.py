@@ -41,7 +41,7 @@ def test_p_prism_counts_force_densities_and_super_stability(p):
     # (p bars, 3p strings) gives m = 2p - 5 for the one self-stress.
     assert (a.self_stresses, a.mechanisms, a.rigid_motions) == (1, 2 * p - 5, 6)
     assert a.rank == 4 * p - 1
-    q = a.force_density_map()
+    q = a.force_densities
     ring, vertical, bar = templates.prism_force_densities(p)
     scale = q['bottom_0'] / ring
     for i in range(p):
@@ -106,7 +106,7 @@ def test_six_bar_geometry_counts_and_force_densities():
     a = analyse(s)
     # j = 12, b = 30: m - s = 36 - 30 - 6 = 0, with one self-stress and one mechanism.
     assert (a.self_stresses, a.mechanisms) == (1, 1)
-    q = a.force_densities
+    q = a.density_vector
     np.testing.assert_allclose(q[n_s:] / q[:n_s].mean(), -1.5, rtol=1e-12)
     np.testing.assert_allclose(q[:n_s], q[0], rtol=1e-12)
     assert a.super_stable and a.prestress_stable and a.stress_nullity == 4

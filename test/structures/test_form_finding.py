@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from structure_fixtures import mixed_document, perturbed
 
 from tensegrity_stiffness.structures import templates
 from tensegrity_stiffness.structures.analysis import Framework, analyse_framework, stress_matrix
@@ -15,6 +16,7 @@ from tensegrity_stiffness.structures.form_finding import (
     design_rest_lengths_for_shape,
     force_density_form,
     kinematic_form,
+    string_wrench_matrix,
 )
 from tensegrity_stiffness.structures.structure import Structure
 
@@ -165,7 +167,7 @@ def test_a_band_the_self_stress_cannot_fit_is_reported():
     structure = Structure.from_dict(templates.structure_document_of_layout(
         templates.prism_layout(3, 0.1, 0.2)))
     design = design_rest_lengths_for_shape(structure, t_min=2.0, t_max=3.0)
-    assert not design.success and 'no member forces hold this shape' in design.message
+    assert not design.success and 'no string tensions hold this shape' in design.message
     with pytest.raises(ValueError, match='tension band'):
         design_rest_lengths_for_shape(structure, t_min=3.0, t_max=2.0)
 
@@ -189,3 +191,36 @@ def test_design_carries_the_weight_of_a_hung_bar():
     assert design.success, design.message
     np.testing.assert_allclose(design.tensions, 0.5 * m * g, rtol=1e-12)
     np.testing.assert_allclose(design.bar_forces, 0.0, atol=1e-12)
+
+
+def test_the_string_wrench_matrix_gives_the_evaluated_wrenches():
+    structure = Structure.from_dict(mixed_document())
+    T = perturbed(structure.start_poses(), np.random.default_rng(5))
+    state = structure.evaluate(T)
+    G = string_wrench_matrix(structure, T)
+    np.testing.assert_allclose(G @ state.tensions, state.wrenches.reshape(-1), atol=1e-12)
+
+
+def test_design_holds_the_joint_s_link_under_its_weight():
+    """A general body: the default joint's link 2 (12 strings, link 1 fixed) given a mass and
+    gravity, at its unloaded pose: the designed rest lengths hold it with its weight."""
+    from support import REPO
+
+    from tensegrity_stiffness.mechanics.joint import JointModel
+
+    model = JointModel.from_yaml(REPO / 'config' / 'default_joint.yaml')
+    document = Structure.from_joint(model, mass=0.05).to_dict()
+    document['structure']['gravity'] = [0.0, -9.81, 0.0]
+    structure = Structure.from_dict(document)
+    design = design_rest_lengths_for_shape(structure, t_min=0.2, t_max=3.0)
+    assert design.success, design.message
+    T = structure.start_poses()
+    state = structure.evaluate(T, rest_lengths=design.rest_lengths)
+    weights = structure.gravity_wrenches(T)[0]
+    np.testing.assert_allclose((state.wrenches + weights)[1], 0.0, atol=1e-12)
+    assert np.all(state.tensions >= 0.2 - 1e-12) and np.all(state.tensions <= 3.0 + 1e-12)
+    assert abs(weights[1, 1]) == pytest.approx(0.05 * 9.81)
+    # Its strings stretch at most 0.02 m at 77 N/m (lmax - l0 kept): 1.54 N is their cap.
+    assert np.all(state.tensions <= 77.0 * 0.02) and not state.saturated.any()
+    short = design_rest_lengths_for_shape(structure, t_min=2.0, t_max=3.0)
+    assert not short.success and 'cannot carry t_min = 2 N' in short.message
