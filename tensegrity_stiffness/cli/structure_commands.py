@@ -86,6 +86,11 @@ def _print_check(path: Path, r: dict[str, Any]) -> None:
     for node, force in r['contacts'].items():
         slide = ' (sliding)' if node in r['sliding'] else ''
         print(f'  contact {node}: {vector(force)} N{slide}')
+    b = r['body_counts']
+    if b is not None:
+        print(f"bodies: {b['self_stresses']} string self-stress(es), {b['mechanisms']} "
+              f"mechanism(s) ({b['rigid_motions']} rigid motions and {b['spins']} bar spins "
+              'removed)')
     a = r['analysis']
     if a is not None:
         print(f"analysis: {a['self_stresses']} self-stress(es), {a['mechanisms']} mechanism(s) "

@@ -22,6 +22,12 @@ compression).
   stress, on the free coordinates, is positive definite on the internal mechanisms (the
   mechanisms orthogonal to the rigid motions): every mechanism is stiffened by the prestress.
   (The product-force test of Pellegrino & Calladine is this test for one mechanism.)
+* **Bodies of any kind** (:func:`body_counts`): the same counts on the rigid-body model,
+  the equilibrium matrix the (6F, n) wrenches of unit string tensions on the F free bodies
+  (:func:`~tensegrity_stiffness.structures.form_finding.string_wrench_matrix`): ``s = n - r``
+  string self-stresses, ``m = 6F - r - g`` mechanisms with ``g`` the gauge motions (the rigid
+  motions when nothing holds the structure, and each free bar's spin about its axis). For bars
+  it equals the pin-jointed count (a bar's balance makes its force axial).
 * **Super stability** (Connelly 1982; Zhang & Ohsaki 2007, "Stability conditions for
   tensegrity structures", Int. J. Solids Struct. 44): for a free framework in 3D whose strings
   pull and bars push, ``Omega`` positive semi-definite with nullity ``d + 1 = 4``, and the
@@ -340,3 +346,49 @@ def analyse(structure: Any, poses: ArrayLike | None = None) -> Analysis:
     force densities, stress matrix, prestress and super stability of the structure's
     pin-jointed framework at ``poses`` (None: its start)."""
     return analyse_framework(framework_of(structure, poses))
+
+
+@dataclass(frozen=True)
+class BodyCounts:
+    """:func:`body_counts`: ``rank`` of the bodies' equilibrium matrix, ``self_stresses``,
+    ``mechanisms``, ``rigid_motions`` (6 or 0) and ``spins`` (free bars) removed."""
+
+    rank: int
+    self_stresses: int
+    mechanisms: int
+    rigid_motions: int
+    spins: int
+
+
+def body_counts(structure: Any, poses: ArrayLike | None = None,
+                rtol: float = RANK_RTOL) -> BodyCounts:
+    """Self-stresses and mechanisms of ``structure``'s rigid-body model at ``poses`` (None:
+    its start; module docstring), for bodies of any kind."""
+    from tensegrity_stiffness.structures.form_finding import string_wrench_matrix
+
+    T = structure.transforms(poses)
+    free = np.flatnonzero(~structure.fixed)
+    rows = (6 * free[:, None] + np.arange(6)).reshape(-1)
+    G = string_wrench_matrix(structure, T)[rows]
+    _, rank = null_space(G.T, rtol) if G.size else (None, 0)
+    held = bool(structure.fixed.any() or structure.world_nodes)
+    gauge = []
+    if not held:
+        for c in range(6):  # a twist [v at the origin; omega] of every free body
+            twist = np.zeros(6)
+            twist[c] = 1.0
+            gauge.append(np.tile(twist, free.size))
+    spins = 0
+    for i in structure.bar_indices:
+        k = int(np.searchsorted(free, i))
+        if k < free.size and free[k] == i:
+            Ti = T[int(i)]
+            axis, centre = Ti[:3, 2], Ti[:3, 3]
+            twist = np.zeros(6 * free.size)
+            twist[6 * k:6 * k + 3] = np.cross(centre, axis)  # v at the origin of a spin
+            twist[6 * k + 3:6 * k + 6] = axis
+            gauge.append(twist)
+            spins += 1
+    g = int(np.linalg.matrix_rank(np.array(gauge))) if gauge else 0
+    n = structure.n_strings
+    return BodyCounts(rank, n - rank, 6 * free.size - rank - g, 0 if held else 6, spins)

@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from tensegrity_stiffness.mechanics.templates import pose_vector
-from tensegrity_stiffness.structures.analysis import Analysis, analyse
+from tensegrity_stiffness.structures.analysis import Analysis, analyse, body_counts
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
 
 #: The smallest stress-matrix eigenvalues reported (the nullity's and the next).
@@ -61,21 +61,37 @@ def without_loads(structure: Any) -> Any:
     return type(structure).from_dict(document)
 
 
-def _prestress_analysis(structure: Any, eq: Any, loads: Any, notes: list[str]
-                        ) -> dict[str, Any] | None:
-    """The analysis fields at the prestressed equilibrium: ``eq``'s poses without gravity,
-    ground and loads; otherwise the equilibrium of the structure without them (from ``eq``'s
-    poses), so that the member forces are a self-stress."""
+def prestressed_poses(structure: Any, eq: Any, loads: Any) -> tuple[Any, Any, str | None]:
+    """The structure without gravity, ground and loads and its equilibrium poses (``eq``'s
+    own when it has none of them; else solved from ``eq``'s poses), or None with the reason."""
     if structure.gravity is None and structure.ground is None and loads is None:
-        return None if eq.state is None else analysis_fields(analyse(structure, eq.poses))
+        return (structure, eq.poses, None) if eq.success else (None, None, eq.message)
     free = without_loads(structure)
     unloaded = solve_structure_equilibrium(free, None, eq.poses if eq.success else None)
     if not unloaded.success:
-        notes.append(f'no prestressed equilibrium without gravity and ground: '
-                     f'{unloaded.message}')
-        return None
-    notes.append('analysis at the prestressed equilibrium without gravity, ground and loads')
-    return analysis_fields(analyse(free, unloaded.poses))
+        return None, None, unloaded.message
+    return free, unloaded.poses, None
+
+
+def _prestress_fields(report: dict[str, Any], structure: Any, eq: Any, loads: Any,
+                      notes: list[str]) -> None:
+    """``body_counts`` and ``analysis`` at the prestressed equilibrium (module docstring)."""
+    report['body_counts'] = report['analysis'] = None
+    free, poses, reason = prestressed_poses(structure, eq, loads)
+    if free is None:
+        notes.append(f'no prestressed equilibrium to analyse: {reason}')
+        return
+    counts = body_counts(free, poses)
+    report['body_counts'] = {'rank': counts.rank, 'self_stresses': counts.self_stresses,
+                             'mechanisms': counts.mechanisms,
+                             'rigid_motions': counts.rigid_motions, 'spins': counts.spins}
+    try:
+        report['analysis'] = analysis_fields(analyse(free, poses))
+    except ValueError as exc:
+        notes.append(f'no pin-jointed analysis: {exc}')
+    if free is not structure:
+        notes.append('body counts and analysis at the prestressed equilibrium without gravity, '
+                     'ground and loads')
 
 
 def _names(names: list[str], mask: Any) -> list[str]:
@@ -89,9 +105,10 @@ def check_structure(structure: Any, loads: Any = None, start: ArrayLike | None =
     ``gravity``, ``ground``, ``equilibrium`` {``success``, ``message``, ``residual``,
     ``iterations``, ``stable``, ``stability_margin``, ``poses`` (N x [x y z qx qy qz qw])},
     ``tensions`` {string: N}, ``slack``, ``saturated`` (names), ``bar_forces`` {bar: N,
-    compression positive}, ``contacts`` {node: [fx fy fz]}, ``sliding`` (nodes), ``analysis``
-    (:func:`analysis_fields`, or None with the reason in ``notes``), ``problems``, ``notes``,
-    ``sound``."""
+    compression positive}, ``contacts`` {node: [fx fy fz]}, ``sliding`` (nodes),
+    ``body_counts`` (:func:`~.analysis.body_counts`: any bodies) and ``analysis``
+    (:func:`analysis_fields`) at the prestressed equilibrium (None with the reason in
+    ``notes``), ``problems``, ``notes``, ``sound``."""
     s = structure
     problems: list[str] = []
     notes: list[str] = []
@@ -125,11 +142,7 @@ def check_structure(structure: Any, loads: Any = None, start: ArrayLike | None =
             notes.append(f"strings at their maximum length: {', '.join(report['saturated'])}")
     report['contacts'] = {name: [float(v) for v in f] for name, f in eq.contacts.items()}
     report['sliding'] = list(eq.sliding)
-    report['analysis'] = None
-    try:
-        report['analysis'] = _prestress_analysis(s, eq, loads, notes)
-    except ValueError as exc:
-        notes.append(f'no pin-jointed analysis: {exc}')
+    _prestress_fields(report, s, eq, loads, notes)
     report['problems'] = problems
     report['notes'] = notes
     report['sound'] = not problems

@@ -168,3 +168,20 @@ def test_modes_of_a_free_prism_name_its_zero_modes(capsys, tmp_path, p):
     assert report['stable'] and min(report['frequencies_hz']) > 0.0
     code, out, _ = run(capsys, 'structure', 'modes', str(path))
     assert code == 0 and f'(6 rigid, {p} spins, 0 mechanisms)' in out
+
+
+def test_a_joint_config_as_a_structure_checks_sound(capsys, tmp_path):
+    from support import REPO
+
+    path = tmp_path / 'joint_structure.yaml'
+    assert main(['new-config', '--template', 'from-config', '--config',
+                 str(REPO / 'config' / 'default_joint.yaml'), '--out', str(path)]) == 0
+    capsys.readouterr()
+    report = run_json(capsys, 'structure', 'check', str(path))
+    assert report['sound'] and report['equilibrium']['iterations'] == 0  # written at it
+    assert report['body_counts'] == {'rank': 6, 'self_stresses': 6, 'mechanisms': 0,
+                                     'rigid_motions': 0, 'spins': 0}
+    assert report['analysis'] is None
+    assert any("'link2' is a free body of 4 nodes" in note for note in report['notes'])
+    code, _, err = run(capsys, 'new-config', '--template', 'from-config')
+    assert code == EXIT_BAD_INPUT and 'needs --config FILE' in err

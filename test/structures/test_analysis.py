@@ -15,6 +15,7 @@ from tensegrity_stiffness.structures.analysis import (
     Framework,
     analyse,
     analyse_framework,
+    body_counts,
     directions_on_conic_at_infinity,
     equilibrium_matrix,
     remaining_rigid_motions,
@@ -206,3 +207,30 @@ def test_bad_frameworks_name_the_field():
         Framework.build(('a', 'b'), np.zeros((2, 3)), [(0, 1)], ('m',), [False])
     with pytest.raises(ValueError, match='forces'):
         Framework.build(('a', 'b'), np.eye(3)[:2], [(0, 1)], ('m',), [False], forces=[1, 2])
+
+
+@pytest.mark.parametrize('p', PRISMS)
+def test_body_counts_equal_the_pin_jointed_counts_for_bars(p):
+    """The rigid-body model with the bar spins and rigid motions removed counts what the
+    pin-jointed framework counts (a bar's balance makes its force axial)."""
+    s = prism_structure(p)
+    counts = body_counts(s)
+    a = analyse(s)
+    assert (counts.self_stresses, counts.mechanisms) == (a.self_stresses, a.mechanisms)
+    assert (counts.rigid_motions, counts.spins) == (6, p)
+    six = Structure.from_dict(templates.six_bar_document())
+    assert (body_counts(six).self_stresses, body_counts(six).mechanisms) == (1, 1)
+
+
+def test_body_counts_of_the_joint():
+    """The default joint: link 2 on 12 strings, its 6 equations of full rank: 6 self-stresses
+    of the strings, no mechanism, nothing to remove (link 1 is fixed)."""
+    from support import REPO
+
+    from tensegrity_stiffness import config
+
+    document = config.load_yaml(REPO / 'config' / 'default_joint.yaml')
+    s = Structure.from_dict(templates.config_structure_document(document))
+    counts = body_counts(s)
+    assert (counts.rank, counts.self_stresses, counts.mechanisms) == (6, 6, 0)
+    assert (counts.rigid_motions, counts.spins) == (0, 0)
