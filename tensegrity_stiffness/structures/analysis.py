@@ -24,7 +24,7 @@ compression).
   (The product-force test of Pellegrino & Calladine is this test for one mechanism.)
 * **Bodies of any kind** (:func:`body_counts`): the same counts on the rigid-body model,
   the equilibrium matrix the (6F, n) wrenches of unit string tensions on the F free bodies
-  (:func:`~tensegrity_stiffness.structures.form_finding.string_wrench_matrix`): ``s = n - r``
+  (:func:`string_wrench_matrix`): ``s = n - r``
   string self-stresses, ``m = 6F - r - g`` mechanisms with ``g`` the gauge motions (the rigid
   motions when nothing holds the structure, and each free bar's spin about its axis). For bars
   it equals the pin-jointed count (a bar's balance makes its force axial).
@@ -348,6 +348,27 @@ def analyse(structure: Any, poses: ArrayLike | None = None) -> Analysis:
     return analyse_framework(framework_of(structure, poses))
 
 
+def string_wrench_matrix(structure: Any, T: FloatArray) -> FloatArray:
+    """(6N, n) ``G``: column ``k`` the wrenches ``[f; x x f]`` (world, about its origin) on
+    the bodies of a unit tension in string ``k`` at the (N, 4, 4) poses ``T``; the strings'
+    wrenches are ``G t`` (the rows of the world's nodes dropped)."""
+    X = structure.node_positions(T)
+    a, b = structure.string_nodes.T
+    d = X[b] - X[a]
+    u = d / np.linalg.norm(d, axis=1)[:, None]
+    G = np.zeros((6 * structure.n_bodies, structure.n_strings))
+    cols = np.arange(structure.n_strings)
+    for ends, sign in ((a, 1.0), (b, -1.0)):
+        bodies = structure.node_bodies[ends]
+        f = sign * u
+        m = np.cross(X[ends], f)
+        on = bodies >= 0
+        for c in range(3):
+            G[6 * bodies[on] + c, cols[on]] += f[on, c]
+            G[6 * bodies[on] + 3 + c, cols[on]] += m[on, c]
+    return G
+
+
 @dataclass(frozen=True)
 class BodyCounts:
     """:func:`body_counts`: ``rank`` of the bodies' equilibrium matrix, ``self_stresses``,
@@ -364,8 +385,6 @@ def body_counts(structure: Any, poses: ArrayLike | None = None,
                 rtol: float = RANK_RTOL) -> BodyCounts:
     """Self-stresses and mechanisms of ``structure``'s rigid-body model at ``poses`` (None:
     its start; module docstring), for bodies of any kind."""
-    from tensegrity_stiffness.structures.form_finding import string_wrench_matrix
-
     T = structure.transforms(poses)
     free = np.flatnonzero(~structure.fixed)
     rows = (6 * free[:, None] + np.arange(6)).reshape(-1)

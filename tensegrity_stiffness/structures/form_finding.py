@@ -20,9 +20,9 @@
   has a self-stress (the constraints' multipliers): for unit strings the p-prism's bar is
   ``sqrt(1 + 1/sin(pi/p))`` (p = 3: 1.4679, Tibert & Pellegrino's triangular prism).
 * **Rest-length design for a target shape**: at the given poses, string tensions ``t`` with
-  every free body's wrench balance ``G t = -W`` (:func:`string_wrench_matrix`; ``W`` the
-  weights when a fixed body or a world node carries them, zero for a free structure: its
-  self-stress), bodies of any kind, closest to the middle of the tension band with every
+  every free body's wrench balance ``G t = -W`` (:func:`~.analysis.string_wrench_matrix`;
+  ``W`` the weights when a fixed body or a world node carries them, zero for a free
+  structure: its self-stress), bodies of any kind, closest to the middle of the tension band with every
   string inside ``[t_min, t_max]``: a QP solved by the library's active-set iteration
   (:func:`~tensegrity_stiffness.mechanics.active_set.active_set`) from a feasible start (a linear
   programme that maximises the smallest margin to the band). For bars this is the nodal
@@ -50,6 +50,7 @@ from tensegrity_stiffness.structures.analysis import (
     equilibrium_matrix,
     free_coordinates,
     stress_matrix,
+    string_wrench_matrix,
 )
 
 FloatArray = NDArray[np.float64]
@@ -261,27 +262,6 @@ class ShapeDesign:
     message: str
 
 
-def string_wrench_matrix(structure: Any, T: FloatArray) -> FloatArray:
-    """(6N, n) ``G``: column ``k`` the wrenches ``[f; x x f]`` (world, about its origin) on
-    the bodies of a unit tension in string ``k`` at the (N, 4, 4) poses ``T``; the strings'
-    wrenches are ``G t`` (the rows of the world's nodes dropped)."""
-    X = structure.node_positions(T)
-    a, b = structure.string_nodes.T
-    d = X[b] - X[a]
-    u = d / np.linalg.norm(d, axis=1)[:, None]
-    G = np.zeros((6 * structure.n_bodies, structure.n_strings))
-    cols = np.arange(structure.n_strings)
-    for ends, sign in ((a, 1.0), (b, -1.0)):
-        bodies = structure.node_bodies[ends]
-        f = sign * u
-        m = np.cross(X[ends], f)
-        on = bodies >= 0
-        for c in range(3):
-            G[6 * bodies[on] + c, cols[on]] += f[on, c]
-            G[6 * bodies[on] + 3 + c, cols[on]] += m[on, c]
-    return G
-
-
 def tension_caps(structure: Any, lengths: FloatArray) -> FloatArray:
     """(n,) the largest tension each string can hold at ``lengths`` with a positive rest
     length and below its maximum length (``lmax - l0`` kept, as the joint's design keeps it):
@@ -300,10 +280,10 @@ def design_rest_lengths_for_shape(structure: Any, poses: ArrayLike | None = None
     """Rest lengths that hold ``structure`` at ``poses`` (None: its start) with every string
     tension in ``[t_min, t_max]`` (N) and below its cap (:func:`tension_caps`), the tensions
     closest to ``(t_min + t_max) / 2`` (module docstring): each free body's wrench balance
-    ``G_i t = -W_i`` (:func:`string_wrench_matrix`; ``W`` the weights when a fixed body or a
-    world node carries them, zero otherwise), bodies of any kind. ``success`` False with the
-    reason when no such tensions exist; a ground's contacts are not designed (a structure on
-    the ground gets its prestress alone)."""
+    ``G_i t = -W_i`` (:func:`~.analysis.string_wrench_matrix`; ``W`` the weights when a
+    fixed body or a world node carries them, zero otherwise), bodies of any kind.
+    ``success`` False with the reason when no such tensions exist; a ground's contacts are
+    not designed (a structure on the ground gets its prestress alone)."""
     if not (0.0 < t_min < t_max and np.isfinite(t_max)):
         raise ValueError(f'tension band must have 0 < t_min < t_max < inf, got [{t_min}, '
                          f'{t_max}]')
