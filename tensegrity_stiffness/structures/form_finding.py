@@ -22,8 +22,8 @@
 * **Rest-length design for a target shape**: at the given poses, string tensions ``t`` with
   every free body's wrench balance ``G t = -W`` (:func:`~.analysis.string_wrench_matrix`;
   ``W`` the weights when a fixed body or a world node carries them, zero for a free
-  structure: its self-stress), bodies of any kind, closest to the middle of the tension band with every
-  string inside ``[t_min, t_max]``: a QP solved by the library's active-set iteration
+  structure: its self-stress), bodies of any kind, closest to the middle of the tension band
+  with every string inside ``[t_min, t_max]``: a QP solved by the library's active-set iteration
   (:func:`~tensegrity_stiffness.mechanics.active_set.active_set`) from a feasible start (a linear
   programme that maximises the smallest margin to the band). For bars this is the nodal
   equilibrium with the bars' forces eliminated (a bar's balance makes them axial). The rest
