@@ -86,6 +86,9 @@ def _print_check(path: Path, r: dict[str, Any]) -> None:
     for node, force in r['contacts'].items():
         slide = ' (sliding)' if node in r['sliding'] else ''
         print(f'  contact {node}: {vector(force)} N{slide}')
+    if r['modes'] is not None:
+        counts = ', '.join(f'{v} {k}' for k, v in r['modes']['counts'].items())
+        print(f"modes (Hz): {vector(r['modes']['frequencies_hz'])}; zero modes: {counts}")
     b = r['body_counts']
     if b is not None:
         print(f"bodies: {b['self_stresses']} string self-stress(es), {b['mechanisms']} "

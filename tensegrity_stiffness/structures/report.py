@@ -5,11 +5,11 @@ and message-ready) for ``tensegrity-stiffness structure check`` and a later ROS 
 * :func:`analysis_fields`: the pin-jointed analysis (:mod:`.analysis`) as fields.
 * :func:`check_structure`: the equilibrium with the file's gravity and ground
   (:func:`~tensegrity_stiffness.structures.equilibrium.solve_structure_equilibrium`), its
-  stability, the tensions, slack and saturated strings, the bar forces, the contact forces, the
-  analysis (structures of bars; fixed bodies and world nodes as supports) at the prestressed
-  equilibrium (the one without gravity, ground and loads, whose member forces are a
-  self-stress: Connelly's and Pellegrino's tests are about it) and ``problems`` (why the
-  structure is not sound; empty: sound) and ``notes``.
+  stability, the tensions, slack and saturated strings, the bar forces, the contact forces and
+  the modes there; the body counts and the pin-jointed analysis (structures of bars; fixed
+  bodies and world nodes as supports) at the prestressed equilibrium (the one without gravity,
+  ground and loads, whose member forces are a self-stress: Connelly's and Pellegrino's tests
+  are about it); ``problems`` (why the structure is not sound; empty: sound) and ``notes``.
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike
 from tensegrity_stiffness.mechanics.templates import pose_vector
 from tensegrity_stiffness.structures.analysis import Analysis, analyse, body_counts
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
+from tensegrity_stiffness.structures.modes import structure_modes
 
 #: The smallest stress-matrix eigenvalues reported (the nullity's and the next).
 REPORTED_EIGENVALUES = 6
@@ -106,6 +107,8 @@ def check_structure(structure: Any, loads: Any = None, start: ArrayLike | None =
     ``iterations``, ``stable``, ``stability_margin``, ``poses`` (N x [x y z qx qy qz qw])},
     ``tensions`` {string: N}, ``slack``, ``saturated`` (names), ``bar_forces`` {bar: N,
     compression positive}, ``contacts`` {node: [fx fy fz]}, ``sliding`` (nodes),
+    ``modes`` {``frequencies_hz``, ``zero_modes``, ``counts``, ``stable``} at the equilibrium
+    (:func:`~.modes.structure_modes`; None with the reason in ``notes``),
     ``body_counts`` (:func:`~.analysis.body_counts`: any bodies) and ``analysis``
     (:func:`analysis_fields`) at the prestressed equilibrium (None with the reason in
     ``notes``), ``problems``, ``notes``, ``sound``."""
@@ -142,6 +145,16 @@ def check_structure(structure: Any, loads: Any = None, start: ArrayLike | None =
             notes.append(f"strings at their maximum length: {', '.join(report['saturated'])}")
     report['contacts'] = {name: [float(v) for v in f] for name, f in eq.contacts.items()}
     report['sliding'] = list(eq.sliding)
+    report['modes'] = None
+    if eq.success:
+        try:
+            modes = structure_modes(s, eq)
+        except ValueError as exc:
+            notes.append(f'no modes: {exc}')
+        else:
+            report['modes'] = {'frequencies_hz': [float(v) for v in modes.frequencies],
+                               'zero_modes': list(modes.zero_modes), 'counts': modes.counts,
+                               'stable': modes.stable}
     _prestress_fields(report, s, eq, loads, notes)
     report['problems'] = problems
     report['notes'] = notes

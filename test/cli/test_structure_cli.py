@@ -55,6 +55,10 @@ def test_check_the_worked_examples_in_a_subprocess_outside_the_repository(tmp_pa
         a = report['analysis']
         assert (a['self_stresses'], a['mechanisms']) == (1, 1)
         assert a['super_stable'] and a['prestress_stable']
+        # Three sticking contacts (9 constraints) and a spin per bar leave 6N - 9 - N modes.
+        n = report['n_bars']
+        assert report['modes']['counts']['spins'] == n
+        assert len(report['modes']['frequencies_hz']) == 6 * n - 9 - n
 
 
 def test_check_table_and_json_agree(capsys, tmp_path):
