@@ -28,7 +28,9 @@
   programme that maximises the smallest margin to the band). For bars this is the nodal
   equilibrium with the bars' forces eliminated (a bar's balance makes them axial). The rest
   lengths follow from the strings' force law
-  (:func:`~tensegrity_stiffness.mechanics.design.rest_from_tensions`).
+  (:func:`~tensegrity_stiffness.mechanics.design.rest_from_tensions`). Where the structure
+  has the joint's form (one fixed body at the origin, one free body: :func:`joint_model_of`),
+  :func:`design_joint_stiffness` runs the joint's design with its stiffness objective.
 """
 
 from __future__ import annotations
@@ -341,3 +343,53 @@ def design_rest_lengths_for_shape(structure: Any, poses: ArrayLike | None = None
                if ok else 'the design did not converge or needs a rest length <= 0 (stiffen '
                'the strings or lower the band)')
     return ShapeDesign(rest, t, bar_forces, residual, ok, message)
+
+
+def joint_model_of(structure: Any) -> tuple[Any, FloatArray]:
+    """A structure of two bodies, one fixed at the world origin (identity pose) and one free,
+    joined only by strings, as the joint (:class:`~tensegrity_stiffness.mechanics.joint.
+    JointModel`: link 1 the fixed body, link 2 the free one) and the screw of the free body's
+    pose: the structure's form where the joint's stiffness design applies (ValueError
+    naming what does not fit)."""
+    from tensegrity_stiffness.geometry.screw import log_se3
+    from tensegrity_stiffness.mechanics.joint import JointModel
+
+    s = structure
+    if s.n_bodies != 2 or int(s.fixed.sum()) != 1 or s.world_nodes:
+        raise ValueError('the joint design applies to two bodies, one fixed and one free, '
+                         'without world nodes')
+    base, free = (0, 1) if s.fixed[0] else (1, 0)
+    if not np.allclose(s.bodies[base].pose, np.eye(4), rtol=0.0, atol=1e-12):
+        raise ValueError(f"the joint design needs the fixed body '{s.body_names[base]}' at the "
+                         'world origin (identity pose)')
+    nodes1, nodes2 = s.bodies[base].node_names, s.bodies[free].node_names
+    connections = []
+    for name, (a, b) in zip(s.string_names, s.string_bodies, strict=True):
+        if {int(a), int(b)} != {base, free}:
+            raise ValueError(f'strings: {name} does not join the fixed body to the free one')
+    for spec, (a, _) in zip(s.strings, s.string_bodies, strict=True):
+        start, end = spec.start.split('.', 1)[1], spec.end.split('.', 1)[1]
+        if int(a) != base:
+            start, end = end, start
+        connections.append((nodes1.index(start), nodes2.index(end)))
+    model = JointModel(s.bodies[base].node_array, connections, s.k, s.rest_lengths,
+                       link2_nodes=s.bodies[free].node_array, max_lengths=s.max_lengths,
+                       force_law=s.force_law, node_names=nodes1, link2_node_names=nodes2,
+                       string_names=s.string_names)
+    return model, log_se3(s.bodies[free].pose)
+
+
+def design_joint_stiffness(structure: Any, target_stiffness: ArrayLike, t_min: float = 1.0,
+                           t_max: float = 100.0) -> Any:
+    """The joint's stiffness design (:func:`~tensegrity_stiffness.mechanics.design.
+    design_rest_lengths`: rest lengths holding the pose with tensions in the band and ``K_c``
+    closest to ``target_stiffness``) for a structure of the joint's form
+    (:func:`joint_model_of`), under the free body's weight when the structure has gravity.
+    Returns the joint design's :class:`~tensegrity_stiffness.mechanics.design.DesignResult`
+    (rest lengths in the structure's string order)."""
+    from tensegrity_stiffness.mechanics.design import design_rest_lengths
+
+    model, screw = joint_model_of(structure)
+    free = int(np.flatnonzero(~structure.fixed)[0])
+    weight = structure.gravity_wrenches(structure.start_poses())[0][free]
+    return design_rest_lengths(model, screw, weight, t_min, t_max, target_stiffness)

@@ -224,3 +224,35 @@ def test_design_holds_the_joint_s_link_under_its_weight():
     assert np.all(state.tensions <= 77.0 * 0.02) and not state.saturated.any()
     short = design_rest_lengths_for_shape(structure, t_min=2.0, t_max=3.0)
     assert not short.success and 'cannot carry t_min = 2 N' in short.message
+
+
+def test_the_joint_design_with_a_stiffness_objective_through_the_structure():
+    """A structure of the joint's form runs the joint's own design: the same rest lengths as
+    mechanics.design on the config's model, and under the link's weight the designed rest
+    lengths hold the structure with K_c near the target."""
+    from support import REPO
+
+    from tensegrity_stiffness.mechanics.design import design_rest_lengths
+    from tensegrity_stiffness.mechanics.joint import JointModel
+    from tensegrity_stiffness.structures.form_finding import design_joint_stiffness
+
+    model = JointModel.from_yaml(REPO / 'config' / 'default_joint.yaml')
+    target = model.evaluate(model.initial_screw).cartesian_stiffness
+    structure = Structure.from_joint(model, mass=0.05)
+    ours = design_joint_stiffness(structure, target, t_min=0.05, t_max=1.5)
+    direct = design_rest_lengths(model, model.initial_screw, None, 0.05, 1.5, target)
+    assert ours.success and direct.success
+    assert ours.stiffness_error < 1e-12  # the config's own K_c is reachable exactly
+    np.testing.assert_allclose(ours.rest_lengths, direct.rest_lengths, rtol=1e-12)
+    document = structure.to_dict()
+    document['structure']['gravity'] = [0.0, -9.81, 0.0]
+    heavy = Structure.from_dict(document)
+    design = design_joint_stiffness(heavy, target, t_min=0.05, t_max=1.5)
+    assert design.success, design.message
+    T = heavy.start_poses()
+    state = heavy.evaluate(T, rest_lengths=design.rest_lengths)
+    np.testing.assert_allclose((state.wrenches + heavy.gravity_wrenches(T)[0])[1], 0.0,
+                               atol=1e-10)
+    assert design.stiffness_error < 0.05  # measured 0.025 under 0.05 kg
+    with pytest.raises(ValueError, match='two bodies, one fixed and one free'):
+        design_joint_stiffness(Structure.from_dict(templates.prism_document(3)), target)
