@@ -189,3 +189,22 @@ def test_a_joint_config_as_a_structure_checks_sound(capsys, tmp_path):
     assert any("'link2' is a free body of 4 nodes" in note for note in report['notes'])
     code, _, err = run(capsys, 'new-config', '--template', 'from-config')
     assert code == EXIT_BAD_INPUT and 'needs --config FILE' in err
+
+
+def test_the_command_line_page_s_structure_commands_run(capsys, tmp_path, monkeypatch):
+    """docs/command_line.md's structure block, as printed, from a scratch folder."""
+    import re
+    import shlex
+
+    from support import REPO
+
+    text = (REPO / 'docs' / 'command_line.md').read_text(encoding='utf-8')
+    block = next(b for b in re.findall(r'```bash\n(.*?)```', text, re.S)
+                 if 'structure check' in b)
+    monkeypatch.chdir(tmp_path)
+    for line in block.splitlines():
+        argv = shlex.split(line)[1:]
+        code = main(argv)
+        _, err = capsys.readouterr()
+        assert code == 0, (argv, err)
+    assert (tmp_path / 'designed.yaml').is_file()
