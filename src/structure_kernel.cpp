@@ -38,6 +38,8 @@ int64_t tsk_structure_evaluate(int64_t n_bodies, int64_t n_strings, const int64_
 namespace {
 
 constexpr int64_t kMaxCount = int64_t(1) << 20;
+// At most this many bodies: the stiffness alone is 36 N^2 doubles (300 MB at 1024).
+constexpr int64_t kMaxBodies = 1024;
 
 // out (6x3) = M (6x3) hat(x).
 void times_hat(const double M[6][3], const double* x, double out[6][3]) {
@@ -117,7 +119,7 @@ void add_wrench(double* W, int64_t body, double sign, const double* f, const dou
 }  // namespace
 
 int64_t tsk_structure_size(int64_t n_bodies, int64_t n_strings) {
-  if (n_bodies < 1 || n_strings < 1 || n_bodies > 4096 || n_strings > kMaxCount) {
+  if (n_bodies < 1 || n_strings < 1 || n_bodies > kMaxBodies || n_strings > kMaxCount) {
     return TSK_ERROR_COUNT;
   }
   return 5 * n_strings + 6 * n_bodies + 36 * n_bodies * n_bodies + (2 * n_strings + 7) / 8;

@@ -21,8 +21,10 @@ Newton (:func:`~tensegrity_stiffness.mechanics.newton.damped_newton`) solves the
 with its exact Jacobian: ``-K_total`` (the strings' :attr:`~.structure.StructureState.stiffness`,
 the weights' and the contact forces' ``E(f, x)`` blocks) times ``Pi J(xi_i)`` per body, the
 contact columns ``Z(x_c)`` and the constraint rows ``Z(x_c)^T``. Around it, an active set on the
-contacts: from the start (with gravity towards a ground that no node touches, the structure is
-first translated along the normal onto it), nodes on the ground stick; then, one change at a
+contacts: from the start (a free structure under gravity is first translated along the normal
+so that its lowest node is on the ground, then tipped over by its weight about one or two
+contacts until it stands on three: :func:`tipped_onto_the_ground`), nodes on the ground stick;
+then, one change at a
 time until none is due, a contact with a pulling normal force is released, the deepest node
 below the ground becomes a sticking contact at its projection, and a sticking contact whose force
 left the cone slides (its anchor moved by :data:`SLIP_START` mean rest lengths along its
@@ -39,7 +41,10 @@ the same twists paired with the wrenches), so every step has no gauge component 
 returns the equilibrium nearest the start in that sense. Stability is judged on the tangent space
 that removes the gauge and the contact constraints: the symmetric part of ``B^T K_total B``
 positive definite, ``B`` a basis of the free twists with no gauge component that keep the
-sticking nodes in place and the sliding ones on the ground.
+contacts in place (with friction: a small disturbance meets static friction, also at a contact
+that slid to the edge of its cone) or on the ground (frictionless). A structure balanced, not
+stable, on a node or an edge of two is rolled over it (:func:`rolled_over`: the way of its
+unstable mode that reaches the ground first) until another node touches, and solved again.
 """
 
 from __future__ import annotations
@@ -47,14 +52,14 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.geometry.screw import ScrewKinematics, exp_se3, hat3, log_se3
+from tensegrity_stiffness.geometry.screw import ScrewKinematics, exp_se3, exp_so3, hat3, log_se3
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.equilibrium import (
     MAX_NEWTON_ITERATIONS,
@@ -85,6 +90,10 @@ MAX_CONTACT_UPDATES = 60
 CONE_TOLERANCE = 1e-9
 #: The first slip of a contact that starts sliding, in mean rest lengths.
 SLIP_START = 1e-6
+#: Roll-overs of a structure balanced on a node or an edge before the solver returns it.
+MAX_ROLLS = 4
+#: Steps of the scan for the angle of a roll-over (then bisection).
+ROLL_SCAN = 180
 #: Swap of the 3-blocks: [omega; v] <-> [v; omega].
 _SWAP = np.array([3, 4, 5, 0, 1, 2])
 STICK, SLIDE = 'stick', 'slide'
@@ -114,8 +123,8 @@ class StructureEquilibrium:
     tangent stiffness over its largest); ``tangent_stiffness`` (6N, 6N) ``K_total`` (strings,
     weights, contact forces); ``gauge`` (6N, m) the gauge twists at the solution (module
     docstring); ``sliding``: the names of the sliding contacts; ``constraints`` (c, 6N) the
-    contacts' kinematic constraints on the twists (3 rows per sticking node, the normal row per
-    sliding node)."""
+    contacts' constraints on small motions (3 rows per contact with friction, the normal row on
+    a frictionless ground)."""
 
     success: bool
     message: str
@@ -351,15 +360,17 @@ class _Problem:
         return K
 
     def constraint_rows(self, points: FloatArray) -> FloatArray:
-        """The kinematic constraints' d/d(delta) (c, 6N), ``dx = Z(x)^T delta``: 3 rows of a
-        sticking node, the normal row of a sliding one."""
+        """The contacts' constraints on small motions about the equilibrium, d/d(delta)
+        (c, 6N) with ``dx = Z(x)^T delta``: on a ground with friction 3 rows per contact (a
+        small disturbance meets static friction, also at a contact that slid to the edge of its
+        cone), on a frictionless ground the normal row."""
         n = self.s.n_bodies
         rows = []
         for c, p in zip(self.contacts, points, strict=True):
             ZT = np.hstack([np.eye(3), -hat3(p)])
             row = np.zeros((3, 6 * n))
             row[:, 6 * c.body:6 * c.body + 6] = ZT
-            rows.append(row if c.mode == STICK else self.normal @ row[None])
+            rows.append(row if self.friction > 0.0 else self.normal @ row[None])
         return np.vstack(rows) if rows else np.zeros((0, 6 * n))
 
     def contact_blocks(self, c: Contact, p: FloatArray, f: FloatArray
@@ -446,9 +457,9 @@ class _Problem:
 
 # ---------------------------------------------------------------------------- contact set
 def _initial_contacts(structure: Structure, T: FloatArray) -> tuple[FloatArray, list[Contact]]:
-    """The start on the ground: with gravity towards a ground that no node touches (and
-    nothing anchored), the free bodies translated along the normal onto it; the nodes on the
-    ground stick at their projections."""
+    """The start on the ground: a free structure (nothing anchored) under gravity towards the
+    ground translated along the normal so that its lowest node is on it (down onto it, or up
+    out of it); the nodes on or below the ground stick at their projections."""
     ground = structure.ground
     if ground is None:
         return T, []
@@ -459,7 +470,7 @@ def _initial_contacts(structure: Structure, T: FloatArray) -> tuple[FloatArray, 
     anchored = structure.fixed.any() or bool(structure.world_nodes)
     g = structure.gravity
     if (not anchored and g is not None and g @ ground.normal < 0.0 and movable.any()
-            and heights[movable].min() > CONTACT_DISTANCE):
+            and abs(heights[movable].min()) > CONTACT_DISTANCE):
         drop = heights[movable].min()
         T = T.copy()
         T[~structure.fixed, :3, 3] -= drop * ground.normal
@@ -531,25 +542,59 @@ def solve_structure_equilibrium(structure: Structure, loads: Any = None,
                                 rest_lengths: ArrayLike | None = None,
                                 tolerance: float = STRUCTURE_TOLERANCE,
                                 max_iterations: int = MAX_NEWTON_ITERATIONS,
-                                time_budget: float | None = None) -> StructureEquilibrium:
+                                time_budget: float | None = None,
+                                roll: bool = True) -> StructureEquilibrium:
     """The equilibrium of ``structure`` under ``loads`` (None, {body: (6,)} or (N, 6): constant
     wrenches ``[f; m]`` in the world about its origin), its gravity and its ground, from
     ``start`` ((N, 4, 4) or (N, 7); default the config's poses), with ``rest_lengths`` (n,)
-    (module docstring). Bad input raises ValueError naming it; an equilibrium that is not found
-    returns ``success=False`` with the reason."""
+    (module docstring). ``roll``: a structure found balanced, not stable, on one or two ground
+    contacts is rolled over (:func:`rolled_over`) and solved again, up to :data:`MAX_ROLLS`
+    times. Bad input raises ValueError naming it; an equilibrium that is not found returns
+    ``success=False`` with the reason."""
     W = structure_loads(structure, loads)
     rest = structure.validate_rest_lengths(rest_lengths)
     T0 = structure.transforms(start)
     deadline = solve_deadline(tolerance, max_iterations, time_budget)
     T0, contacts = _initial_contacts(structure, T0)
+    held = structure.fixed.any() or bool(structure.world_nodes) or bool(contacts)
+    if not held and structure.gravity is not None and np.any(
+            [b.mass > 0.0 for b in structure.bodies]) and np.any(structure.gravity != 0.0):
+        return StructureEquilibrium(False, 'no equilibrium: the structure falls (gravity and '
+                                    'no ground under it, no fixed body, no world node)', T0,
+                                    None, False, {}, math.inf, 0)
     try:
         structure.evaluate_transforms(T0, rest, wrench_only=True)
     except ValueError as exc:
         return StructureEquilibrium(False, f'start is not admissible: {exc}', T0, None, False,
                                     {}, math.inf, 0)
+    iterations, rolls = 0, 0
+    if roll:
+        T0, contacts = tipped_onto_the_ground(structure, T0, contacts)
+    while True:
+        result = _settle(structure, W, rest, T0, contacts, tolerance, max_iterations, deadline,
+                         iterations)
+        iterations = result.iterations
+        if not (roll and result.success and not result.stable and rolls < MAX_ROLLS):
+            break
+        T1 = rolled_over(structure, result)
+        if T1 is None:
+            break
+        rolls += 1
+        T0, contacts = _initial_contacts(structure, T1)
+    if rolls:
+        result = replace(result, message=result.message + ' (rolled over ' + (
+            'once)' if rolls == 1 else f'{rolls} times)'))
+    return result
+
+
+def _settle(structure: Structure, W: FloatArray, rest: FloatArray, T0: FloatArray,
+            contacts: list[Contact], tolerance: float, max_iterations: int, deadline: float,
+            iterations: int) -> StructureEquilibrium:
+    """Newton and the contact set's changes from ``T0`` with ``contacts`` (module docstring);
+    ``iterations`` so far."""
     problem = _Problem(structure, W, rest, T0, contacts)
     x = problem.start(_contact_guess(contacts, [], [], problem.normal))
-    iterations, norm, changes = 0, math.inf, []
+    norm, changes = math.inf, []
     for _ in range(MAX_CONTACT_UPDATES):
         x, norm, used = damped_newton(x, problem.evaluate, problem.jacobian, problem.clip,
                                       problem.rechart, tolerance, max_iterations, deadline)
@@ -573,6 +618,121 @@ def solve_structure_equilibrium(structure: Structure, loads: Any = None,
                        f'{reason}: residual {norm:.3e} after {iterations} iterations')
     return _result(problem, x, norm, iterations, True, 'converged' + (
         f' ({len(changes)} contact changes)' if changes else ''))
+
+
+def _roll_angle(structure: Structure, x: FloatArray, movable: NDArray[np.bool_],
+                pivot: FloatArray, axis: FloatArray) -> float:
+    """The smallest angle in (0, pi] by which turning the movable nodes ``x`` about the line
+    (``pivot``, unit ``axis``) brings one of them onto the ground (inf: none). With Rodrigues'
+    formula a node's height is ``h0 + b sin t + c (1 - cos t)``: scanned, then bisected."""
+    ground = structure.ground
+    r = x[movable] - pivot
+    K = hat3(axis)
+    n = ground.normal
+    h0 = r @ n + pivot @ n - ground.height
+    b = (r @ K.T) @ n
+    c = (r @ (K @ K).T) @ n
+
+    def lowest(angle: float) -> float:
+        return float(np.min(h0 + b * math.sin(angle) + c * (1.0 - math.cos(angle))))
+
+    angles = np.linspace(0.0, math.pi, ROLL_SCAN + 1)[1:]
+    heights = (h0[None] + np.sin(angles)[:, None] * b[None]
+               + (1.0 - np.cos(angles))[:, None] * c[None]).min(axis=1)
+    below = np.flatnonzero(heights < 0.0)
+    if not below.size:
+        return math.inf
+    hi = float(angles[below[0]])
+    lo = hi - math.pi / ROLL_SCAN
+    for _ in range(60):  # bisection to rounding
+        mid = 0.5 * (lo + hi)
+        lo, hi = (lo, mid) if lowest(mid) < 0.0 else (mid, hi)
+    return lo
+
+
+def _turned(structure: Structure, T: FloatArray, pivot: FloatArray, axis: FloatArray,
+            angle: float) -> FloatArray:
+    """The free bodies of ``T`` turned rigidly by ``angle`` about the line (pivot, axis)."""
+    G = np.eye(4)
+    G[:3, :3] = exp_so3(axis * angle)
+    G[:3, 3] = pivot - G[:3, :3] @ pivot
+    return np.array([P if fixed else G @ P for P, fixed in zip(T, structure.fixed,
+                                                                strict=True)])
+
+
+def tipped_onto_the_ground(structure: Structure, T: FloatArray, contacts: list[Contact]
+                           ) -> tuple[FloatArray, list[Contact]]:
+    """A rigid structure resting on one ground contact or two tipped over by its weight: turned
+    about that node (about the axis of the weight's moment) or that edge (the way the weight
+    turns it) until another node touches, until it stands on three (or the weight has no moment
+    about its contacts); the poses and the new contacts. Free structures under gravity only
+    (no fixed body, no world node)."""
+    ground, g = structure.ground, structure.gravity
+    if ground is None or g is None or structure.fixed.any() or structure.world_nodes:
+        return T, contacts
+    masses = np.array([b.mass for b in structure.bodies])
+    weight = masses.sum() * g
+    for _ in range(2 * MAX_ROLLS):
+        if not 1 <= len(contacts) <= 2:
+            break
+        coms = np.einsum('nij,nj->ni', T[:, :3, :3], np.array([b.com for b in structure.bodies]))
+        centre = (masses @ (coms + T[:, :3, 3])) / masses.sum()
+        x = structure.node_positions(T)
+        nodes = [c.node for c in contacts]
+        pivot = x[nodes[0]]
+        moment = np.cross(centre - pivot, weight)
+        if len(nodes) == 2:
+            edge = x[nodes[1]] - pivot
+            edge /= np.linalg.norm(edge)
+            moment = (moment @ edge) * edge
+        size = float(np.linalg.norm(moment))
+        if size <= 1e-12 * float(np.linalg.norm(weight)) * float(np.linalg.norm(centre - pivot)):
+            break
+        movable = structure.node_bodies >= 0
+        movable[nodes] = False
+        angle = _roll_angle(structure, x, movable, pivot, moment / size)
+        if not math.isfinite(angle):
+            break
+        T, contacts = _initial_contacts(structure, _turned(structure, T, pivot, moment / size,
+                                                           angle))
+    return T, contacts
+
+
+def rolled_over(structure: Structure, result: StructureEquilibrium) -> FloatArray | None:
+    """The poses of a structure balanced (not stable) on one ground contact or an edge of two,
+    turned rigidly about that node (about the horizontal axis of its unstable mode's turn) or
+    that edge, the way that reaches the ground first, until another node touches it; None when
+    that does not apply (no ground or gravity, three or more contacts, a fixed body or world
+    node, no node to touch)."""
+    ground = structure.ground
+    names = list(result.contacts)
+    if (ground is None or structure.gravity is None or not 1 <= len(names) <= 2
+            or structure.fixed.any() or structure.world_nodes):
+        return None
+    T = result.poses
+    x = structure.node_positions(T)
+    contact_nodes = [structure.node_index(name) for name in names]
+    pivot = x[contact_nodes].mean(axis=0)
+    movable = structure.node_bodies >= 0
+    movable[contact_nodes] = False
+    if len(names) == 2:
+        axis = x[contact_nodes[1]] - x[contact_nodes[0]]
+    else:
+        B = tangent_basis(result.constraints, result.gauge, structure.fixed)
+        H = B.T @ result.tangent_stiffness @ B
+        mode = B @ np.linalg.eigh(0.5 * (H + H.T))[1][:, 0]
+        turn = mode.reshape(-1, 6)[:, 3:].mean(axis=0)  # the bodies' mean angular part
+        axis = turn - (turn @ ground.normal) * ground.normal
+    size = float(np.linalg.norm(axis))
+    if size == 0.0:
+        return None
+    axis = axis / size
+    options = [(_roll_angle(structure, x, movable, pivot, sign * axis), sign)
+               for sign in (1.0, -1.0)]
+    angle, sign = min(options)
+    if not math.isfinite(angle):
+        return None
+    return _turned(structure, T, pivot, sign * axis, angle)
 
 
 def _result(problem: _Problem, x: FloatArray, norm: float, iterations: int, success: bool,

@@ -11,8 +11,8 @@ coordinates, the stacked spatial twists ``delta`` ([dv; dw] in the world) of the
   :attr:`~tensegrity_stiffness.structures.equilibrium.StructureEquilibrium.tangent_stiffness`).
 * String damping ``C = L^T diag(c) L`` with ``L = dl/d(delta)`` (n, 6N), a force ``-c_j dl_j/dt``
   along every string, slack or taut, as MuJoCo's tendon damping and the joint's dynamics.
-* Coordinates: the twists ``delta = B y`` that keep the fixed bodies fixed, the sticking nodes
-  in place and the sliding ones on the ground (``B`` orthonormal); the linear model is
+* Coordinates: the twists ``delta = B y`` that keep the fixed bodies fixed and the contacts
+  in place (on a frictionless ground: on the ground; ``B`` orthonormal); the linear model is
   ``M_r y_ddot + C_r y_dot + K_r y = B^T w`` (``w`` (6N,) external wrenches), i.e. the state
   matrix ``A = [[0, I], [-M_r^-1 K_r, -M_r^-1 C_r]]`` and input ``[0; M_r^-1 B^T]``.
 * Modes: the eigenvalues ``mu`` of ``M_r^-1 K_r`` (``omega^2``); ``|mu|`` at most

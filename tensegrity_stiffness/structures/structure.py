@@ -252,6 +252,22 @@ class Structure:
 
         return structure_from_chain(chain, screws, **kwargs)
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled without the compiled kernel's handle (a structure sent to another process
+        binds that process's library again, or takes the numpy path without one)."""
+        state = self.__dict__.copy()
+        state['_kernel'] = self._kernel is not None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        wanted = state.pop('_kernel')
+        self.__dict__.update(state)
+        self._kernel = None
+        if wanted:
+            from tensegrity_stiffness.structures.kernel import structure_kernel
+
+            self._kernel = structure_kernel(self)
+
     # ------------------------------------------------------------------ accessors
     @property
     def n_bodies(self) -> int:

@@ -186,3 +186,14 @@ def test_bad_poses_are_refused():
     bad[2, :3, :3] *= 2
     with pytest.raises(ValueError, match=r'poses\[2\] \(y_front\)'):
         six.evaluate(bad)
+
+
+def test_a_structure_pickles_with_its_kernel_bound_again():
+    import pickle
+
+    for use_kernel in (True, False):
+        six = example(SIXBAR, use_kernel=use_kernel)
+        copy_ = pickle.loads(pickle.dumps(six))
+        assert copy_.uses_kernel == six.uses_kernel
+        T = perturbed(six.start_poses(), np.random.default_rng(1))
+        np.testing.assert_array_equal(copy_.evaluate(T).stiffness, six.evaluate(T).stiffness)

@@ -5,8 +5,8 @@ dropped onto a ground with friction), and the model is what the structure says."
 import numpy as np
 import pytest
 from structure_fixtures import SIXBAR, example, mixed_document
-from test_equilibrium import on_the_ground
-from test_modes import hanging_bar
+from test_structure_equilibrium import on_the_ground
+from test_structure_modes import hanging_bar
 
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
 from tensegrity_stiffness.structures.mjcf import StructureMjcfOptions, structure_mjcf

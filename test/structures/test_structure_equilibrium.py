@@ -162,7 +162,7 @@ def test_on_the_ground_the_forces_stay_in_the_friction_cone(friction):
 def test_a_slippery_ground_lets_the_contacts_slide_at_the_cone():
     structure, start = on_the_ground(0.001)
     result = solve_structure_equilibrium(structure, start=start)
-    assert result.success, result.message
+    assert result.success and result.stable, result.message
     assert sorted(result.sliding) == ['x_up.b', 'y_front.b', 'z_left.b']
     x0 = structure.node_positions(start)
     for name, f in result.contacts.items():
@@ -207,3 +207,94 @@ def test_bad_loads_are_named():
         solve_structure_equilibrium(structure, loads={'x_up': [1, 2]})
     with pytest.raises(ValueError, match=r'loads must have shape \(6, 6\)'):
         solve_structure_equilibrium(structure, loads=np.zeros((5, 6)))
+
+
+def test_a_free_structure_under_gravity_without_ground_falls():
+    document = copy.deepcopy(example(SIXBAR).to_dict())
+    document['structure']['gravity'] = [0.0, 0.0, -9.81]
+    result = solve_structure_equilibrium(Structure.from_dict(document))
+    assert not result.success
+    assert 'the structure falls' in result.message
+
+
+def test_a_ground_above_a_node_lifts_it():
+    """A start with a node below the ground: that node is a contact at its projection and the
+    structure is pushed out (no node below the ground at the solution)."""
+    structure, start = on_the_ground(0.8)
+    dropped = start.copy()
+    dropped[:, 2, 3] -= structure.node_positions(start)[:, 2].min() + 0.002
+    result = solve_structure_equilibrium(structure, start=dropped)
+    assert result.success, result.message
+    heights = np.array([x[2] for x in result.state.node_positions.values()])
+    assert heights.min() > -1e-12
+    assert_balanced(structure, result)
+
+
+def test_an_oversized_prism_on_the_ground_slides_inwards_to_the_cone():
+    """A 3-prism whose strings are all 10 % short stands on its bottom nodes: it contracts, the
+    bottom nodes slide inwards until the ground's outward friction is at the cone."""
+    document = prism_document(3)
+    document['structure']['gravity'] = [0.0, 0.0, -9.81]
+    document['structure']['ground'] = {'friction': 0.5}
+    structure = Structure.from_dict(document)
+    result = solve_structure_equilibrium(structure)
+    assert result.success and result.stable, result.message
+    assert sorted(result.sliding) == ['bar0.a', 'bar1.a', 'bar2.a']
+    x0 = structure.node_positions(structure.start_poses())
+    for name, f in result.contacts.items():
+        np.testing.assert_allclose(f[2], 3 * 0.05 * 9.81 / 3, rtol=1e-9)
+        np.testing.assert_allclose(np.linalg.norm(f[:2]), 0.5 * f[2], rtol=1e-9)
+        start = x0[structure.node_index(name), :2]
+        now = result.state.node_positions[name][:2]
+        assert np.linalg.norm(now) < np.linalg.norm(start)  # inwards
+        assert f[:2] @ now > 0  # pushed outwards
+    assert_balanced(structure, result)
+
+
+def six_bar_on_ground(friction=0.8):
+    document = copy.deepcopy(example(SIXBAR).to_dict())
+    document['structure']['gravity'] = [0.0, 0.0, -9.81]
+    document['structure']['ground'] = {'friction': friction}
+    return Structure.from_dict(document)
+
+
+def assert_resting(structure, result):
+    """Stable on three contacts that carry the weight, the centre of mass above their
+    triangle, no node below the ground, every body balanced."""
+    assert result.success and result.stable, result.message
+    assert len(result.contacts) == 3
+    heights = np.array([x[2] for x in result.state.node_positions.values()])
+    assert heights.min() > -1e-12
+    assert_balanced(structure, result)
+    masses = np.array([b.mass for b in structure.bodies])
+    centre = masses @ result.poses[:, :3, 3] / masses.sum()
+    corners = np.array([result.state.node_positions[k][:2] for k in result.contacts])
+    # Barycentric coordinates of the centre's projection: all positive inside.
+    A = np.vstack([corners.T, np.ones(3)])
+    weights = np.linalg.solve(A, np.r_[centre[:2], 1.0])
+    assert np.all(weights > 0), weights
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_a_six_bar_set_down_in_any_orientation_tips_onto_a_face(seed):
+    """Placed anywhere (even through the ground), the free 6-bar under gravity is moved onto the
+    ground, tipped over its node and edge by its weight, and comes to rest on three nodes."""
+    structure = six_bar_on_ground()
+    rng = np.random.default_rng(seed)
+    G = twist_exp(np.r_[0.0, 0.0, 0.0, rng.uniform(-math.pi, math.pi, 3)])
+    start = np.array([G @ P for P in structure.start_poses()])
+    assert_resting(structure, solve_structure_equilibrium(structure, start=start))
+
+
+def test_a_six_bar_balanced_on_an_edge_is_rolled_over():
+    """The symmetric start stands on the edge z_left.a - z_right.a, balanced: the solver finds
+    it not stable and rolls it onto the nearer face; without rolling it reports the balance."""
+    structure = six_bar_on_ground()
+    balanced = solve_structure_equilibrium(structure, roll=False)
+    assert balanced.success and not balanced.stable
+    assert sorted(balanced.contacts) == ['z_left.a', 'z_right.a']
+    assert 'not stable' in balanced.message
+    rolled = solve_structure_equilibrium(structure)
+    assert 'rolled over once' in rolled.message
+    assert_resting(structure, rolled)
+    assert {'z_left.a', 'z_right.a'} < set(rolled.contacts)
