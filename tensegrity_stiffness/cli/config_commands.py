@@ -41,6 +41,28 @@ def _choices(args: argparse.Namespace) -> templates.JointChoices:
     return templates.JointChoices(template=args.template, n_strings=args.strings, **given)
 
 
+#: The options each kind of template takes (the others are refused when given).
+JOINT_OPTIONS = ('radius', 'height', 'gap', 'stiffness', 'pretension', 'rest_lengths',
+                 'max_stretch', 'link2_mass', 'link2_com', 'link2_inertia', 'spine', 'spacing')
+STRUCTURE_OPTIONS = {
+    'prism': ('bars', 'radius', 'height', 'twist', 'stiffness', 'pretension', 'bar_mass',
+              'force_law', 'ground', 'max_stretch'),
+    'six-bar': ('bar_length', 'stiffness', 'pretension', 'bar_mass', 'force_law', 'ground',
+                'max_stretch'),
+    'from-config': ('config',),
+}
+
+
+def _refuse_foreign_options(args: argparse.Namespace) -> None:
+    """ValueError naming an option given that the chosen template does not take."""
+    every = set(JOINT_OPTIONS).union(*STRUCTURE_OPTIONS.values())
+    takes = STRUCTURE_OPTIONS.get(args.template, JOINT_OPTIONS)
+    for name in sorted(every - set(takes)):
+        if getattr(args, name) not in (None, False):
+            raise ValueError(f"--{name.replace('_', '-')} does not apply to --template "
+                             f'{args.template}')
+
+
 def _structure_document(args: argparse.Namespace) -> tuple[dict[str, Any], str]:
     """The structure template's document and its header's first line."""
     if args.template == 'from-config':
@@ -49,7 +71,7 @@ def _structure_document(args: argparse.Namespace) -> tuple[dict[str, Any], str]:
                              'config)')
         document = structure_templates.config_structure_document(config.load_yaml(args.config))
         return document, f'the structure of {args.config}'
-    options: dict[str, Any] = {'ground': args.ground, 'force_law': args.force_law}
+    options: dict[str, Any] = {'ground': args.ground, 'force_law': args.force_law or 'hooke'}
     for name in ('stiffness', 'pretension', 'bar_mass', 'max_stretch'):
         if getattr(args, name) is not None:
             options[name] = getattr(args, name)
@@ -57,8 +79,9 @@ def _structure_document(args: argparse.Namespace) -> tuple[dict[str, Any], str]:
         for name in ('radius', 'height', 'twist'):
             if getattr(args, name) is not None:
                 options[name] = getattr(args, name)
-        return (structure_templates.prism_document(args.bars, **options),
-                f'a regular {args.bars}-prism')
+        bars = args.bars or structure_templates.DEFAULT_PRISM_BARS
+        return structure_templates.prism_document(bars, **options), f'a regular {bars}-prism'
+
     if args.bar_length is not None:
         options['bar_length'] = args.bar_length
     return structure_templates.six_bar_document(**options), 'the 6-bar expanded octahedron'
@@ -79,6 +102,7 @@ def _cmd_new_structure(args: argparse.Namespace) -> int:
 
 
 def _cmd_new_config(args: argparse.Namespace) -> int:
+    _refuse_foreign_options(args)
     if args.template in structure_templates.TEMPLATES:
         return _cmd_new_structure(args)
     document = templates.starter_config(_choices(args), args.spine or 0, args.spacing)
@@ -192,8 +216,9 @@ def add_new_config_parser(sub: Any) -> None:
                    help="spine: distance between vertebrae along the template's axis, m "
                         '(default: the unloaded height, the vertebra: 0.040003 scaled)')
     structure = p.add_argument_group('structure templates (prism, six-bar, from-config)')
-    structure.add_argument('--bars', type=positive_int, default=3, metavar='P',
-                           help='prism: number of bars p (>= 3; default 3)')
+    structure.add_argument('--bars', type=positive_int, metavar='P',
+                           help='prism: number of bars p (>= 3; default '
+                                f'{structure_templates.DEFAULT_PRISM_BARS})')
     structure.add_argument('--twist', type=parse_number, metavar='RAD',
                            help='prism: the start twist of the top polygon, rad (default: the '
                                 'equilibrium pi/2 - pi/p; the rest lengths are always those '
@@ -204,7 +229,7 @@ def add_new_config_parser(sub: Any) -> None:
     structure.add_argument('--bar-mass', type=parse_number, metavar='KG',
                            help=f'mass of each bar, kg (default '
                                 f'{structure_templates.DEFAULT_BAR_MASS:g})')
-    structure.add_argument('--force-law', choices=('hooke', 'paper'), default='hooke',
+    structure.add_argument('--force-law', choices=('hooke', 'paper'),
                            help="the strings' force law (default hooke)")
     structure.add_argument('--ground', action='store_true',
                            help='add gravity (-z) and the ground under the structure')

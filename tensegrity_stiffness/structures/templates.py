@@ -63,6 +63,8 @@ DEFAULT_RADIUS = 0.1
 DEFAULT_STIFFNESS = 500.0
 DEFAULT_PRETENSION = 5.0
 DEFAULT_BAR_MASS = 0.1
+#: The prism template's default number of bars.
+DEFAULT_PRISM_BARS = 3
 #: The six-bar's default bar length (m).
 DEFAULT_BAR_LENGTH = 0.3
 #: Gravity written with ``ground`` (m/s^2, -z).

@@ -208,3 +208,15 @@ def test_the_command_line_page_s_structure_commands_run(capsys, tmp_path, monkey
         _, err = capsys.readouterr()
         assert code == 0, (argv, err)
     assert (tmp_path / 'designed.yaml').is_file()
+
+
+@pytest.mark.parametrize('argv, message', [
+    (['--template', 'prism', '--rest-lengths', '0.1'], '--rest-lengths does not apply'),
+    (['--template', 'six-bar', '--radius', '0.1'], '--radius does not apply'),
+    (['--template', 'ring', '--bars', '4'], '--bars does not apply'),
+    (['--template', 'vertebra', '--ground'], '--ground does not apply'),
+    (['--template', 'prism', '--bars', '2'], 'bars must be an integer >= 3'),
+])
+def test_new_config_refuses_options_its_template_does_not_take(capsys, argv, message):
+    code, _, err = run(capsys, 'new-config', *argv)
+    assert code == EXIT_BAD_INPUT and message in err
