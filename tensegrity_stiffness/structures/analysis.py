@@ -10,9 +10,10 @@ compression).
   member ``(i, j)`` holding ``(x_i - x_j) / l_k`` at node ``i`` and ``(x_j - x_i) / l_k`` at node
   ``j`` (rows of the free nodes only); its transpose is the compatibility matrix (``e = A' d``).
   With ``r = rank A`` (the SVD), ``b`` members and ``D`` free coordinates: ``s = b - r``
-  self-stresses and ``m = D - r - R`` mechanisms, ``R`` the rigid motions the supports leave
-  (6 for a free framework in general position: the count ``m - s = 3j - b - 6`` of
-  Pellegrino & Calladine).
+  self-stresses and ``m = D - r - R`` mechanisms, ``R`` the rigid motions of a free framework
+  (6 in general position, 5 for collinear nodes: the count ``m - s = 3j - b - 6`` of
+  Pellegrino & Calladine); with supports ``R = 0`` (``m - s = 3j - c - b``, ``c`` the fixed
+  coordinates): a motion of the whole that the supports allow is a mechanism.
 * **Force densities** ``q_k = t_k / l_k`` (Schek 1974), bars negative; the **stress matrix**
   ``Omega`` (nodes x nodes): ``Omega_ij = -q_k`` for member ``k = (i, j)``,
   ``Omega_ii = sum_k q_k`` over the members at ``i`` (Connelly 1982). A self-stress has
@@ -219,7 +220,8 @@ class Analysis:
     """What :func:`analyse_framework` finds (module docstring).
 
     Counts: ``rank`` of the equilibrium matrix, ``self_stresses`` s, ``mechanisms`` m (rigid
-    motions removed), ``rigid_motions`` (those the supports leave). ``self_stress_basis``
+    motions removed), ``rigid_motions`` (removed: those of a free framework, none with
+    supports). ``self_stress_basis``
     (b, s) orthonormal; ``mechanism_basis`` (D, m) orthonormal on the free coordinates,
     orthogonal to the rigid motions. With member forces: ``force_densities`` {member: q}
     (N/m, bars negative) and ``density_vector`` (b,) the same in member order,
@@ -272,7 +274,10 @@ def analyse_framework(framework: Framework, rtol: float = RANK_RTOL,
     A = equilibrium_matrix(X, members)[rows]
     stresses, rank = null_space(A, rtol)
     kinematic, _ = null_space(A.T, rtol)  # inextensional displacements (D, D - r)
-    rigid = remaining_rigid_motions(X, fw.fixed)
+    # Rigid motions are the gauge of a free framework only: with supports, a motion of the
+    # whole that leaves them in place (a swing about two anchors) is a mechanism.
+    rigid = (np.zeros((rows.size, 0)) if fw.fixed.any()
+             else remaining_rigid_motions(X, fw.fixed))
     # Internal mechanisms: the inextensional motions orthogonal to the rigid ones.
     internal = kinematic - rigid @ (rigid.T @ kinematic)
     mechanism_basis = column_space(internal, rtol) if internal.size else internal

@@ -194,7 +194,9 @@ def kinematic_form(framework: Framework, lengthen: Sequence[str] | None = None,
         if L.shape != (strings.size,) or np.any(~np.isfinite(L)) or np.any(L <= 0.0):
             raise ValueError(f'string_lengths must be {strings.size} positive lengths')
         target[strings] = L
-    held = np.setdiff1d(np.arange(fw.members.shape[0]), chosen)
+    # Members between two supports keep their lengths by themselves: no constraint.
+    between_supports = np.flatnonzero(fw.fixed[fw.members].all(axis=1))
+    held = np.setdiff1d(np.arange(fw.members.shape[0]), np.union1d(chosen, between_supports))
     lead, others = chosen[0], chosen[1:]
     rows = free_coordinates(fw.fixed)
     X0 = fw.positions

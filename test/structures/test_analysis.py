@@ -234,3 +234,25 @@ def test_body_counts_of_the_joint():
     counts = body_counts(s)
     assert (counts.rank, counts.self_stresses, counts.mechanisms) == (6, 6, 0)
     assert (counts.rigid_motions, counts.spins) == (0, 0)
+
+
+def test_a_bar_hung_from_world_anchors_has_supports_and_stiffened_swings():
+    """World nodes are supports: the bar's two free ends (6 coordinates) on two strings and the
+    bar (rank 3): no self-stress, 3 mechanisms (the swings), each stiffened by the strings'
+    tension t / l (the pendulum's restoring stiffness; the swing of the whole about the
+    anchors' line counts: with supports no rigid motion is removed)."""
+    doc = {'structure': {
+        'gravity': [0.0, 0.0, -9.81],
+        'bodies': [{'name': 'bar', 'type': 'bar', 'length': 0.2, 'mass': 0.4,
+                    'pose': [0.0, 0.0, 0.0, 0.0, math.sqrt(0.5), 0.0, math.sqrt(0.5)]}],
+        'world_nodes': {'w0': [-0.1, 0.0, 0.3], 'w1': [0.1, 0.0, 0.3]},
+        'strings': [{'name': 's0', 'from': 'world.w0', 'to': 'bar.a', 'stiffness': 100.0,
+                     'rest_length': 0.28},
+                    {'name': 's1', 'from': 'world.w1', 'to': 'bar.b', 'stiffness': 100.0,
+                     'rest_length': 0.28}]}}
+    a = analyse(Structure.from_dict(doc))
+    assert (a.self_stresses, a.mechanisms, a.rigid_motions) == (0, 3, 0)
+    assert a.framework.fixed.tolist() == [False, False, True, True]
+    assert a.super_stable is None and a.strings_pull and a.prestress_stable
+    t = 100.0 * (0.3 - 0.28)
+    np.testing.assert_allclose(a.prestress_stiffness.min(), t / 0.3, rtol=1e-12)

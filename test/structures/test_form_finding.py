@@ -256,3 +256,19 @@ def test_the_joint_design_with_a_stiffness_objective_through_the_structure():
     assert design.stiffness_error < 0.05  # measured 0.025 under 0.05 kg
     with pytest.raises(ValueError, match='two bodies, one fixed and one free'):
         design_joint_stiffness(Structure.from_dict(templates.prism_document(3)), target)
+
+
+def test_kinematic_form_finding_with_the_bottom_fixed():
+    """Supports instead of the gauge: the unit-string 3-prism with its bottom triangle held
+    reaches the same bar, 1.4679."""
+    p = 3
+    side = 2.0 * math.sin(math.pi / p)
+    start = templates.prism_layout(p, 1.0 / side, 1.0, twist=templates.prism_twist(p) + 0.3)
+    fw = start.framework()
+    held = Framework.build(fw.node_names, fw.positions, fw.members.tolist(), fw.member_names,
+                           fw.is_bar.tolist(), [True] * p + [False] * p)
+    result = kinematic_form(held, string_lengths=np.ones(3 * p))
+    assert result.success, result.message
+    assert result.info['bar_length'] == pytest.approx(math.sqrt(1.0 + 2.0 / math.sqrt(3.0)),
+                                                      rel=KINEMATIC_LENGTH_RTOL)
+    np.testing.assert_array_equal(result.positions[:p], fw.positions[:p])
