@@ -319,6 +319,20 @@ def analyse_framework(framework: Framework, rtol: float = RANK_RTOL,
     return out
 
 
+def product_forces(analysis: Analysis) -> FloatArray:
+    """(D, m) the product forces ``K_G M`` of the self-stress and each mechanism (Pellegrino &
+    Calladine 1986, Section 5): the loads that the stress exerts when the framework moves along
+    a mechanism. A mechanism is first-order stiffened when its product forces are not in the
+    column space of the equilibrium matrix (the bar and string forces cannot balance them);
+    ``M' K_G M`` is their component along the mechanisms (the prestress stiffness)."""
+    a = analysis
+    if a.stress_matrix is None:
+        raise ValueError('product forces need member forces (a framework with forces)')
+    rows = free_coordinates(a.framework.fixed)
+    KG = np.kron(a.stress_matrix, np.eye(3))[np.ix_(rows, rows)]
+    return KG @ a.mechanism_basis
+
+
 def framework_of(structure: Any, poses: ArrayLike | None = None) -> Framework:
     """The pin-jointed framework of a :class:`~tensegrity_stiffness.structures.structure.
     Structure` at ``poses`` (None: its start), with the member forces of its evaluation

@@ -18,6 +18,8 @@ from tensegrity_stiffness.structures.analysis import (
     body_counts,
     directions_on_conic_at_infinity,
     equilibrium_matrix,
+    free_coordinates,
+    product_forces,
     remaining_rigid_motions,
     stress_matrix,
 )
@@ -256,3 +258,20 @@ def test_a_bar_hung_from_world_anchors_has_supports_and_stiffened_swings():
     assert a.super_stable is None and a.strings_pull and a.prestress_stable
     t = 100.0 * (0.3 - 0.28)
     np.testing.assert_allclose(a.prestress_stiffness.min(), t / 0.3, rtol=1e-12)
+
+
+@pytest.mark.parametrize('p', PRISMS)
+def test_product_forces_of_the_prism_mechanisms_are_not_balanced(p):
+    """Pellegrino & Calladine's test: the product forces of the self-stress and each mechanism
+    lie outside the column space of A (no member forces balance them), so every mechanism is
+    first-order stiffened; their components along the mechanisms are the prestress stiffness."""
+    a = analyse(prism_structure(p))
+    P = product_forces(a)
+    fw = a.framework
+    A = equilibrium_matrix(fw.positions, fw.members)[free_coordinates(fw.fixed)]
+    balanced = A @ np.linalg.lstsq(A, P, rcond=None)[0]
+    outside = np.linalg.norm(P - balanced, axis=0)
+    assert np.all(outside > 1e-3 * np.linalg.norm(P, axis=0))
+    Q = a.mechanism_basis.T @ P
+    np.testing.assert_allclose(np.linalg.eigvalsh(0.5 * (Q + Q.T)), a.prestress_stiffness,
+                               rtol=1e-10, atol=1e-12)
