@@ -275,3 +275,25 @@ def test_product_forces_of_the_prism_mechanisms_are_not_balanced(p):
     Q = a.mechanism_basis.T @ P
     np.testing.assert_allclose(np.linalg.eigvalsh(0.5 * (Q + Q.T)), a.prestress_stiffness,
                                rtol=1e-10, atol=1e-12)
+
+
+def test_a_flat_braced_square_is_prestress_stable_but_not_super_stable_in_space():
+    """A square of strings braced by two crossing bars (in one plane): one self-stress (sides
+    t, diagonals -sqrt(2) t: the bars push), the stress matrix PSD with nullity d + 1 = 3 of
+    a planar framework, not the 4 that super stability asks in 3D; its one mechanism out of
+    the plane (z alternating around the square) is stiffened by the prestress."""
+    X = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    members = [(0, 1), (1, 2), (2, 3), (3, 0), (0, 2), (1, 3)]
+    fw = Framework.build(('a', 'b', 'c', 'd'), X, members,
+                         ('s0', 's1', 's2', 's3', 'bar0', 'bar1'), [False] * 4 + [True] * 2)
+    a0 = analyse_framework(fw)
+    assert (a0.self_stresses, a0.mechanisms, a0.rigid_motions) == (1, 1, 6)
+    t = a0.self_stress_basis[:, 0]
+    t = t / t[0]
+    np.testing.assert_allclose(t, [1, 1, 1, 1, -math.sqrt(2), -math.sqrt(2)], rtol=1e-12)
+    a = analyse_framework(fw.with_forces(t))
+    assert a.strings_pull and a.stress_psd and a.stress_nullity == 3
+    assert a.prestress_stable and not a.super_stable
+    z = a.mechanism_basis[2::3, 0]  # out of the plane, alternating
+    np.testing.assert_allclose(np.abs(z), 0.5, rtol=1e-12)
+    assert z[0] * z[1] < 0 and z[0] * z[2] > 0
