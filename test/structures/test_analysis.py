@@ -297,3 +297,30 @@ def test_a_flat_braced_square_is_prestress_stable_but_not_super_stable_in_space(
     z = a.mechanism_basis[2::3, 0]  # out of the plane, alternating
     np.testing.assert_allclose(np.abs(z), 0.5, rtol=1e-12)
     assert z[0] * z[1] < 0 and z[0] * z[2] > 0
+
+
+def test_the_cuiksuite_prism_has_its_published_spring_ratio():
+    """Logan-Shi/CuikSuite, examples/Tensegrity/Formfinding/definePrism.m: a 3-prism's node
+    coordinates (15 digits) and, as its strings are zero-rest-length springs (t = k l, so k is
+    the force density), stiffnesses 0.175494628703572 (polygons) and 0.303965613370022
+    (verticals). At those nodes our one self-stress has that ratio (sqrt 3) and the bars -sqrt 3.
+    """
+    X = np.array([[0.0, 0.0, 0.0], [0.965925826289067, 0.258819045102519, 1.064882435607910],
+                  [0.896575472168053, 0.0, 0.0],
+                  [0.189468690981504, 0.707106781186546, 1.064882435607910],
+                  [0.448287736084027, 0.776457135307562, 0.0],
+                  [0.189468690981504, -0.189468690981508, 1.064882435607910]])
+    strings = [(1, 3), (3, 5), (1, 5), (2, 4), (4, 6), (2, 6), (1, 6), (2, 3), (4, 5)]
+    bars = [(1, 2), (3, 4), (5, 6)]
+    members = [(i - 1, j - 1) for i, j in strings + bars]
+    fw = Framework.build(tuple(f'n{k}' for k in range(1, 7)), X, members,
+                         tuple(f'm{k}' for k in range(12)), [False] * 9 + [True] * 3)
+    a = analyse_framework(fw)
+    assert (a.self_stresses, a.mechanisms) == (1, 1)
+    q = a.self_stress_basis[:, 0] / fw.lengths
+    q /= q[0]
+    ratio = 0.303965613370022 / 0.175494628703572
+    np.testing.assert_allclose(q[:6], 1.0, rtol=1e-9)
+    np.testing.assert_allclose(q[6:9], ratio, rtol=1e-9)
+    np.testing.assert_allclose(q[9:], -ratio, rtol=1e-9)
+    assert ratio == pytest.approx(math.sqrt(3.0), rel=1e-13)
