@@ -1,8 +1,9 @@
 """The 3D figure of a structure (``tensegrity-stiffness structure plot``, ``structure check
---plot``): bars as thick dark segments, general bodies as the polyline through their nodes,
-strings coloured by tension (slack ones dashed grey, saturated ones thick), world nodes as
-squares, contact forces as arrows at the nodes on the ground, and the ground as a grey patch;
-z up, equal scale on the three axes (mm). Built as the joint's figure of :mod:`.plots`."""
+--plot``): bars as thick dark segments, general bodies as the polyline through their nodes
+(fixed ones blue), strings coloured by tension (slack ones dashed grey, saturated ones thick),
+world nodes as squares, contact forces as arrows at the nodes on the ground, and the ground as
+a grey outline; z up, equal scale on the three axes (mm). Built as the joint's figure of
+:mod:`.plots`."""
 
 from __future__ import annotations
 
@@ -81,8 +82,9 @@ def plot_structure(structure: Any, state: Any, path: str | Path, *,
         if body.kind == 'bar':
             ax.plot(*nodes.T, color=BAR_COLOUR, linewidth=5.0, solid_capstyle='round')
         else:
-            ax.plot(*nodes.T, color=BODY_COLOUR, linewidth=4.0, alpha=0.5)
-            ax.scatter(*nodes.T, color=BODY_COLOUR, s=30, depthshade=False)
+            colour = WORLD_COLOUR if body.fixed else BODY_COLOUR
+            ax.plot(*nodes.T, color=colour, linewidth=4.0, alpha=0.5)
+            ax.scatter(*nodes.T, color=colour, s=30, depthshade=False)
         ax.text(*nodes.mean(axis=0), f' {body.name}', fontsize=7, color=BAR_COLOUR)
     world = X[s.node_bodies < 0]
     if world.size:
@@ -107,8 +109,13 @@ def plot_structure(structure: Any, state: Any, path: str | Path, *,
     _axes_box(ax, X, elevation, azimuth)
     fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), ax=ax, shrink=0.6, pad=0.08,
                  label='string tension (N)')
-    handles = [Line2D([], [], color=BAR_COLOUR, linewidth=5.0, label='bar'),
-               Line2D([], [], color=cmap(0.7), linewidth=1.8, label='taut string'),
+    kinds = {('bar' if b.kind == 'bar' else 'fixed body' if b.fixed else 'body')
+             for b in s.bodies}
+    handles = [Line2D([], [], color=colour, linewidth=width, label=label)
+               for label, colour, width in (('bar', BAR_COLOUR, 5.0), ('body', BODY_COLOUR, 4.0),
+                                            ('fixed body', WORLD_COLOUR, 4.0))
+               if label in kinds]
+    handles += [Line2D([], [], color=cmap(0.7), linewidth=1.8, label='taut string'),
                Line2D([], [], color='0.55', linestyle='--',
                       label=f'slack string ({int(state.slack.sum())})')]
     if contacts:
