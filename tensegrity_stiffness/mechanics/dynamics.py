@@ -410,6 +410,16 @@ def _modes(A: FloatArray, twist_map: FloatArray, screw: FloatArray, damped: bool
                       stable, screw)
 
 
+def state_matrix_modes(A: FloatArray, twist_map: FloatArray, state: FloatArray,
+                       damped: bool) -> JointModes:
+    """The modes of a linear model's state matrix ``A`` (2m, 2m) = ``[[0, I], [., .]]`` by
+    the method of :meth:`JointDynamics.modes` (one per conjugate pair, ascending; an overdamped
+    pair of real eigenvalues as one mode), ``twist_map`` (6k, m) taking the coordinates to
+    twists, ``state`` stored as :attr:`JointModes.screw`: public for the structures' modes
+    (:mod:`tensegrity_stiffness.structures.modes`)."""
+    return _modes(A, twist_map, state, damped)
+
+
 def _undamped_modes(A21: FloatArray, twist_map: FloatArray, screw: FloatArray) -> JointModes:
     """Modes without damping from the half-size problem: ``A`` has the eigenvalues
     ``+-sqrt(mu)`` with ``mu`` those of ``A21`` (same shapes), so a 6x6 (6N x 6N) eigenproblem

@@ -143,7 +143,8 @@ class StructureEquilibrium:
 
 def structure_loads(structure: Structure, loads: Any) -> FloatArray:
     """External wrenches (N, 6) ``[f; m]`` (world, about its origin, constant) from None, a
-    mapping {body name: (6,)} or an (N, 6) array; ValueError naming the entry."""
+    mapping {body name: (6,)} or an (N, 6) array; ValueError naming the entry. A load on a fixed
+    body goes into its reaction (no equation)."""
     n = structure.n_bodies
     out = np.zeros((n, 6))
     if loads is None:
@@ -394,10 +395,11 @@ class _Problem:
                 dx[1:] = mu * (f @ n) * (self.plane @ du)
         return dx, dforce
 
-    def jacobian(self, x: FloatArray, context: Any) -> FloatArray:
-        """The bordered Jacobian in the unknowns (module docstring)."""
-        T, points = context[0], context[3]
-        nf, s = self.nf, self.s
+    def residual_jacobian(self, x: FloatArray, context: Any) -> FloatArray:
+        """d(residuals)/d(unknowns) at ``x`` (``context`` from :meth:`evaluate`), exact: the
+        tests hold it to central differences of :meth:`evaluate`."""
+        points = context[3]
+        nf = self.nf
         cols = (6 * self.free[:, None] + np.arange(6)).ravel()
         K = self.total_stiffness(context)
         size = 6 * nf + self.n_forces
@@ -417,8 +419,15 @@ class _Problem:
         PJ = context[5]
         A[:, :6 * nf] = np.einsum('ajb,jbc->ajc', A[:, :6 * nf].reshape(size, nf, 6),
                                   PJ).reshape(size, 6 * nf)
+        return self.moment_rows(size) @ A
+
+    def jacobian(self, x: FloatArray, context: Any) -> FloatArray:
+        """:meth:`residual_jacobian` bordered with the gauge (module docstring)."""
+        A = self.residual_jacobian(x, context)
+        T, PJ, s, nf = context[0], context[5], self.s, self.nf
+        size = A.shape[0]
+        cols = (6 * self.free[:, None] + np.arange(6)).ravel()
         D = self.moment_rows(size)
-        A = D @ A
         N = gauge_twists(s, T, self.contacts)[cols]
         if N.shape[1]:
             # Bordered: left null vectors (the gauge twists paired with the residual wrenches,

@@ -20,12 +20,14 @@ coordinates, the stacked spatial twists ``delta`` ([dv; dw] in the world) of the
   motions and the frictionless ground's plane motions (the gauge of
   :func:`~tensegrity_stiffness.structures.equilibrium.gauge_twists`), each free bar's spin about
   its axis, and the rest, mechanisms (motions that change no string length to first order and
-  that no prestress stiffens). Damping ratios from the eigenvalues of ``A`` with damping.
+  that no prestress stiffens). The other modes, in the zero modes' M-orthogonal complement,
+  by the dynamics' method (:func:`~tensegrity_stiffness.mechanics.dynamics.state_matrix_modes`:
+  one mode per conjugate pair of the state matrix, natural frequency ``|lambda| / 2 pi``,
+  damping ratio ``-Re lambda / |lambda|``), so that a joint's modes are its dynamics' exactly.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +35,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from tensegrity_stiffness.geometry.transforms import adjoint
+from tensegrity_stiffness.mechanics.dynamics import state_matrix_modes
 from tensegrity_stiffness.structures.equilibrium import StructureEquilibrium, gauge_kind
 from tensegrity_stiffness.structures.structure import Structure
 
@@ -154,40 +157,26 @@ def structure_modes(structure: Structure, result: StructureEquilibrium) -> Struc
     d = basis.shape[1]
     MK = np.linalg.solve(M, K)
     MC = np.linalg.solve(M, C)
-    mu, vectors = np.linalg.eig(MK)
+    mu = np.linalg.eigvals(MK)
     top = float(np.max(np.abs(mu), initial=0.0))
-    is_zero = np.abs(mu) <= ZERO_MODE_TOLERANCE * max(top, 1e-300)
+    n_zero = int(np.count_nonzero(np.abs(mu) <= ZERO_MODE_TOLERANCE * max(top, 1e-300)))
     # The zero space from the singular vectors of K_r (robust where eig's vectors of a
-    # degenerate zero eigenvalue are not).
-    vt = np.linalg.svd(K)[2]
-    zero = vt[d - int(np.count_nonzero(is_zero)):].T
+    # degenerate zero eigenvalue are not), the rest in its M-orthogonal complement Q.
+    zero = np.linalg.svd(K)[2][d - n_zero:].T
     names, zero_shapes, counts = _named_zero_modes(structure, result, basis, zero)
-    keep = np.flatnonzero(~is_zero)
-    omega2 = mu[keep].real
-    order = keep[np.argsort(omega2)]
-    omega2 = mu[order].real
-    shapes = (basis @ vectors[:, order].real).T
-    shapes /= np.maximum(np.linalg.norm(shapes, axis=1, keepdims=True), 1e-300)
+    Q = scipy.linalg.null_space(zero.T @ M) if n_zero else np.eye(d)
+    m = Q.shape[1]
+    Mq, Kq, Cq = (Q.T @ X @ Q for X in (M, K, C))
+    Aq = np.block([[np.zeros((m, m)), np.eye(m)],
+                   [-np.linalg.solve(Mq, Kq), -np.linalg.solve(Mq, Cq)]])
+    damped = bool(np.any(structure.damping > 0.0))
+    modes = state_matrix_modes(Aq, basis @ Q, T, damped) if m else None
     A = np.block([[np.zeros((d, d)), np.eye(d)], [-MK, -MC]])
     B_in = np.vstack([np.zeros((d, basis.shape[0])), np.linalg.solve(M, basis.T)])
-    omega = np.sqrt(np.abs(omega2))
-    zeta = np.zeros_like(omega)
-    stable = bool(np.all(omega2 > 0.0) and np.all(np.abs(mu[order].imag) <=
-                                                   1e-9 * np.abs(mu[order])))
-    if np.any(structure.damping > 0.0):
-        lam = np.linalg.eigvals(A)
-        stable = stable and bool(np.all(lam.real <= 1e-9 * np.abs(lam).max()))
-        zeta = _damping_ratios(lam, omega)
-    return StructureModes(omega / (2.0 * math.pi), zeta, shapes, tuple(names), zero_shapes,
-                          counts, stable, A, B_in, basis)
-
-
-def _damping_ratios(lam: NDArray, omega: FloatArray) -> FloatArray:
-    """For each undamped frequency ``omega`` the damping ratio of the eigenvalue of ``A`` whose
-    modulus is nearest to it (``-Re lambda / |lambda|``)."""
-    candidates = lam[np.abs(lam) > 0.0]
-    out = np.empty_like(omega)
-    for k, w in enumerate(omega):
-        j = int(np.argmin(np.abs(np.abs(candidates) - w)))
-        out[k] = -candidates[j].real / abs(candidates[j])
-    return out
+    if modes is None:
+        return StructureModes(np.zeros(0), np.zeros(0), np.zeros((0, basis.shape[0])),
+                              tuple(names), zero_shapes, counts, True, A, B_in, basis)
+    shapes = modes.twists / np.maximum(np.linalg.norm(modes.twists, axis=1, keepdims=True),
+                                       1e-300)
+    return StructureModes(modes.frequencies, modes.damping_ratios, shapes, tuple(names),
+                          zero_shapes, counts, modes.stable, A, B_in, basis)

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -140,6 +140,16 @@ class Structure:
     ground : :class:`~tensegrity_stiffness.structures.elements.Ground` or None.
     force_law : ``'hooke'`` or ``'paper'`` (the joint's).
     use_kernel : evaluate in the compiled kernel when it is built (default).
+
+    Attributes (arrays in the orders of the config)
+    ----------
+    body_names, node_names (``body.node``, the world's last), string_names, bar_names;
+    node_bodies (n_nodes,) the body of each node (-1: the world), node_points (n_nodes, 3) in
+    its body's frame (in the world for world nodes); string_nodes (n, 2) and string_bodies
+    (n, 2) the ``from`` / ``to`` node and body of each string, string_points (n, 2, 3) their
+    points in their bodies' frames; k, rest_lengths, max_lengths, max_stretch, damping (n,);
+    fixed (N,) bool; bar_indices (n_bars,) the bars' body indices and bar_nodes (n_bars, 2) the
+    node indices of their ends ``a``, ``b``.
     """
 
     def __init__(self, bodies: Sequence[Body], strings: Sequence[StringSpec],
@@ -200,7 +210,7 @@ class Structure:
         self.bar_indices = np.array([i for i, b in enumerate(self.bodies) if b.kind == BAR],
                                     dtype=np.intp)
         self.bar_names = [self.body_names[i] for i in self.bar_indices]
-        self._bar_nodes = np.array([[self._node_index[f'{self.body_names[i]}.{k}']
+        self.bar_nodes = np.array([[self._node_index[f'{self.body_names[i]}.{k}']
                                      for k in ('a', 'b')] for i in self.bar_indices],
                                    dtype=np.intp).reshape(-1, 2)
         # The world as body N (identity pose) in the numpy path.
@@ -267,6 +277,24 @@ class Structure:
             from tensegrity_stiffness.structures.kernel import structure_kernel
 
             self._kernel = structure_kernel(self)
+
+    def with_rest_lengths(self, rest_lengths: ArrayLike) -> Structure:
+        """A copy with new rest lengths (n,) (each string keeps its maximum stretch)."""
+        rest = self.validate_rest_lengths(rest_lengths)
+        strings = [replace(s, rest_length=float(r), max_length=float(r + stretch))
+                   for s, r, stretch in zip(self.strings, rest, self.max_stretch, strict=True)]
+        return self._copy(self.bodies, strings)
+
+    def with_poses(self, poses: ArrayLike) -> Structure:
+        """A copy whose bodies start at ``poses`` ((N, 4, 4) or (N, 7)): e.g. an equilibrium,
+        to write as a config with :meth:`to_dict`."""
+        T = self.transforms(poses)
+        return self._copy([replace(b, pose=P) for b, P in zip(self.bodies, T, strict=True)],
+                          self.strings)
+
+    def _copy(self, bodies: list[Body], strings: list[StringSpec]) -> Structure:
+        return Structure(bodies, strings, self.world_nodes, self.gravity, self.ground,
+                         self.force_law, use_kernel=self.uses_kernel)
 
     # ------------------------------------------------------------------ accessors
     @property
@@ -413,7 +441,7 @@ class Structure:
         x = self.node_positions(T)
         F = self._incidence @ f
         if self.bar_indices.size:
-            a, b = self._bar_nodes[:, 0], self._bar_nodes[:, 1]
+            a, b = self.bar_nodes[:, 0], self.bar_nodes[:, 1]
             e = x[a] - x[b]
             e /= np.linalg.norm(e, axis=1, keepdims=True)
             bars = 0.5 * np.sum((F[b] - F[a]) * e, axis=1)

@@ -197,3 +197,37 @@ def test_a_structure_pickles_with_its_kernel_bound_again():
         assert copy_.uses_kernel == six.uses_kernel
         T = perturbed(six.start_poses(), np.random.default_rng(1))
         np.testing.assert_array_equal(copy_.evaluate(T).stiffness, six.evaluate(T).stiffness)
+
+
+def test_copies_with_new_rest_lengths_or_poses():
+    structure = numpy_structure(mixed_document())
+    rest = structure.rest_lengths * 1.1
+    longer = structure.with_rest_lengths(rest)
+    np.testing.assert_array_equal(longer.rest_lengths, rest)
+    np.testing.assert_array_equal(longer.max_stretch, structure.max_stretch)
+    T = perturbed(structure.start_poses(), np.random.default_rng(0))
+    np.testing.assert_array_equal(longer.evaluate(T).tensions,
+                                  structure.evaluate(T, rest).tensions)
+    moved = structure.with_poses(T)
+    np.testing.assert_allclose(moved.start_poses(), T, atol=1e-15)
+    assert_same_document(numpy_structure(moved.to_dict()).to_dict(), moved.to_dict())
+
+
+def test_the_weights_stiffness_matches_central_differences():
+    from tensegrity_stiffness.structures.structure import twist_exp
+
+    structure = numpy_structure(mixed_document())
+    T = perturbed(structure.start_poses(), np.random.default_rng(2), 0.2)
+    K = structure.gravity_wrenches(T)[1]
+    step = 1e-6
+    numeric = np.zeros_like(K)
+    for i in range(structure.n_bodies):
+        for k in range(6):
+            delta = np.zeros(6)
+            delta[k] = step
+            plus, minus = T.copy(), T.copy()
+            plus[i] = twist_exp(delta) @ T[i]
+            minus[i] = twist_exp(-delta) @ T[i]
+            numeric[:, 6 * i + k] = -(structure.gravity_wrenches(plus)[0]
+                                      - structure.gravity_wrenches(minus)[0]).ravel() / (2 * step)
+    np.testing.assert_allclose(K, numeric, rtol=0, atol=1e-8 * np.max(np.abs(K)))

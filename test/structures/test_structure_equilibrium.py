@@ -10,7 +10,7 @@ import math
 
 import numpy as np
 import pytest
-from structure_fixtures import SIXBAR, example, perturbed, prism_document
+from structure_fixtures import SIXBAR, example, mixed_document, perturbed, prism_document
 
 from tensegrity_stiffness.geometry.screw import exp_so3
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
@@ -298,3 +298,52 @@ def test_a_six_bar_balanced_on_an_edge_is_rolled_over():
     assert 'rolled over once' in rolled.message
     assert_resting(structure, rolled)
     assert {'z_left.a', 'z_right.a'} < set(rolled.contacts)
+
+
+def test_rest_lengths_time_budget_and_a_structure_of_fixed_bodies():
+    structure = example(SIXBAR)
+    shorter = solve_structure_equilibrium(structure, rest_lengths=structure.rest_lengths * 0.8)
+    assert shorter.success
+    stretch = shorter.state.lengths - 0.8 * structure.rest_lengths
+    np.testing.assert_allclose(shorter.state.tensions, structure.k * stretch)
+    start = perturbed(structure.start_poses(), np.random.default_rng(0), 0.05)
+    spent = solve_structure_equilibrium(structure, start=start, time_budget=0.0)
+    assert not spent.success and 'time budget exhausted' in spent.message
+    document = copy.deepcopy(mixed_document())
+    for body in document['structure']['bodies']:
+        body['fixed'] = True
+    held = Structure.from_dict(document)
+    result = solve_structure_equilibrium(held)
+    assert result.success and result.stable
+    np.testing.assert_array_equal(result.poses, held.start_poses())
+
+
+@pytest.mark.parametrize('mode', ['stick', 'slide', 'frictionless'])
+def test_the_newton_jacobian_matches_central_differences(mode):
+    """The exact Jacobian of the equilibrium equations (strings, weights, contact forces and
+    their moment arms, the sticking and the sliding law, the increments' Pi J) against central
+    differences of the residuals, away from an equilibrium."""
+    from tensegrity_stiffness.structures.equilibrium import SLIDE, Contact, _Problem
+
+    structure, start = on_the_ground(0.0 if mode == 'frictionless' else 0.3)
+    start[:, 2, 3] -= structure.node_positions(start)[:, 2].min()
+    x0 = structure.node_positions(start)
+    contacts = []
+    for name in ('x_up.b', 'y_front.b', 'z_left.b'):
+        j = structure.node_index(name)
+        anchor = x0[j] + np.array([0.01, -0.02, 0.0])  # slipped from where it touched
+        contacts.append(Contact(j, int(structure.node_bodies[j]), anchor,
+                                'stick' if mode == 'stick' else SLIDE))
+    rng = np.random.default_rng(3)
+    loads = rng.normal(scale=0.3, size=(structure.n_bodies, 6))
+    problem = _Problem(structure, loads, structure.rest_lengths, start, contacts)
+    x = np.concatenate([rng.normal(scale=0.02, size=6 * structure.n_bodies),
+                        rng.normal(scale=0.5, size=9) + np.tile([0, 0, 2.0], 3)])
+    A = problem.residual_jacobian(x, problem.evaluate(x)[1])
+    step = 1e-6
+    numeric = np.empty_like(A)
+    for k in range(x.size):
+        e = np.zeros(x.size)
+        e[k] = step
+        numeric[:, k] = (problem.evaluate(x + e)[0] - problem.evaluate(x - e)[0]) / (2 * step)
+    np.testing.assert_allclose(A, numeric, rtol=0, atol=1e-6 * np.max(np.abs(A)))

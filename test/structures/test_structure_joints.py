@@ -123,3 +123,42 @@ def test_a_spine_s_equilibrium_and_tip_stiffness_through_structure_are_the_spine
     T = at_ref.start_poses()
     K = at_ref.evaluate(T).stiffness + at_ref.gravity_wrenches(T)[1]
     assert_close(body_stiffness(K, at_ref.fixed, chain.n_joints), ref.tip_stiffness, 'K_tip')
+
+
+@pytest.mark.parametrize('damping', [0.0, 0.05])
+def test_a_joint_s_modes_through_structure_are_the_joint_dynamics(damping):
+    """The structure's modes (twists, its own mass matrix and damping) and the joint's
+    dynamics (screw coordinates, Euler-Lagrange) give the same frequencies and damping ratios
+    at the unloaded equilibrium."""
+    from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
+    from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
+    from tensegrity_stiffness.structures.modes import structure_modes
+
+    model = default_joint()
+    inertia = LinkInertia(0.02, (0.001, -0.002, 0.003), (2e-6, 3e-6, 4e-6))
+    ref = JointDynamics(model, inertia, string_damping=damping).modes(model.initial_screw)
+    structure = Structure.from_joint(model, inertia=inertia, string_damping=damping)
+    modes = structure_modes(structure, solve_structure_equilibrium(structure, tolerance=1e-13))
+    assert modes.zero_modes == ()
+    np.testing.assert_allclose(modes.frequencies, ref.frequencies, rtol=1e-8)
+    if damping:
+        np.testing.assert_allclose(modes.damping_ratios, ref.damping_ratios, rtol=1e-6)
+
+
+@pytest.mark.parametrize('damping', [0.0, 0.05])
+def test_a_spine_s_modes_through_structure_are_the_chain_dynamics(damping):
+    from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, twin_link_inertias
+    from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
+    from tensegrity_stiffness.structures.modes import structure_modes
+
+    chain = default_spine()
+    inertias = twin_link_inertias(chain)
+    ref = ChainDynamics(chain, inertias, damping).modes(chain.unloaded_screws())
+    structure = structure_from_chain(chain, inertias=inertias, string_damping=damping)
+    result = solve_structure_equilibrium(structure, tolerance=1e-12)
+    assert result.success, result.message
+    modes = structure_modes(structure, result)
+    assert modes.zero_modes == ()
+    np.testing.assert_allclose(modes.frequencies, ref.frequencies, rtol=1e-7)
+    if damping:
+        np.testing.assert_allclose(modes.damping_ratios, ref.damping_ratios, rtol=1e-6)

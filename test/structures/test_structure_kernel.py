@@ -1,6 +1,14 @@
 """The structures' compiled kernel (src/structure_kernel.cpp) equals the numpy reference to
 1e-12 (every output, the regions exactly), refuses bad arguments, and reads only arrays that
-live until it returns (the poisoned-call proof of test/kernel/test_kernel_boundary.py)."""
+live until it returns (the poisoned-call proof of test/kernel/test_kernel_boundary.py, and
+AddressSanitizer on the kernel compiled with it: slow)."""
+
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -111,3 +119,51 @@ def test_only_live_arrays_reach_the_kernel(monkeypatch):
     rest[:, 0] = structure.rest_lengths * 0.95
     state = structure.evaluate_transforms(strided_T[..., 0], rest[:, 0])
     assert_same(state, reference.evaluate_transforms(T, rest[:, 0].copy()), 'poisoned')
+
+
+ASAN_SCRIPT = textwrap.dedent('''
+    import numpy as np
+    from tensegrity_stiffness.structures.elements import Body, StringSpec
+    from tensegrity_stiffness.structures.structure import Structure
+    rng = np.random.default_rng(44)
+    # 24 bodies (poses of 3 KB) and 240 strings (rest lengths of 1.9 KB): numpy frees such
+    # buffers to malloc, where AddressSanitizer sees a read after the free.
+    bodies = [Body.rigid(f'b{i}', {'p': rng.normal(size=3) * 0.05,
+                                   'q': rng.normal(size=3) * 0.05},
+                         pose=[*rng.normal(size=3), 0.0, 0.0, 0.0, 1.0]) for i in range(24)]
+    strings = [StringSpec(f's{j}', f'b{j % 24}.p', f'b{(j * 7 + 1) % 24}.q', 50.0, 0.2)
+               for j in range(240)]
+    structure = Structure(bodies, strings)
+    assert structure.uses_kernel
+    T = structure.start_poses()
+    strided_T = np.repeat(T[..., None], 2, axis=-1)[..., 1]
+    rests = np.full((240, 2), 0.2)
+    state = structure.evaluate_transforms(strided_T, rests[:, 1])
+    assert np.isfinite(state.stiffness).all()
+    print('ok')
+''')
+
+
+@pytest.mark.slow
+def test_addresssanitizer_finds_no_use_after_free_in_the_structure_kernel(tmp_path):
+    if shutil.which('g++') is None:
+        pytest.skip('no g++')
+    done = subprocess.run(['g++', '-print-file-name=libasan.so'], capture_output=True,
+                          text=True, check=False)
+    libasan = done.stdout.strip()
+    if done.returncode != 0 or not os.path.isabs(libasan):
+        pytest.skip('g++ has no libasan')
+    root = Path(__file__).resolve().parents[2]
+    sources = sorted((root / 'src').glob('*_kernel.cpp'))
+    library = tmp_path / joint_kernel.LIBRARY_NAME
+    subprocess.run(['g++', '-std=c++17', '-O1', '-g', '-fsanitize=address',
+                    '-fno-omit-frame-pointer', '-ffp-contract=off', '-shared', '-fPIC',
+                    f'-I{root / "include"}', *map(str, sources), '-o', str(library)],
+                   check=True, timeout=300)
+    env = dict(os.environ, LD_PRELOAD=libasan, ASAN_OPTIONS='detect_leaks=0',
+               TENSEGRITY_STIFFNESS_KERNEL=str(library))
+    done = subprocess.run([sys.executable, '-c', ASAN_SCRIPT], env=env, capture_output=True,
+                          text=True, timeout=120, check=False)
+    report = done.stderr[-3000:]
+    assert 'AddressSanitizer' not in done.stderr, report
+    assert done.returncode == 0 and done.stdout.strip() == 'ok', report
