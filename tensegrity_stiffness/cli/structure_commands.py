@@ -45,6 +45,8 @@ from tensegrity_stiffness.structures.report import check_structure
 from tensegrity_stiffness.structures.structure import Structure
 
 METHODS = ('force-density', 'kinematic', 'design')
+#: Damping ratios up to this are rounding of an undamped structure's (not printed).
+DAMPING_RATIO_ZERO = 1e-12
 
 
 def _structure_path(args: argparse.Namespace) -> Path:
@@ -282,7 +284,7 @@ def _cmd_modes(args: argparse.Namespace) -> int:
     print(f'modes of {path} at its equilibrium ({eq.message}); stable {yes(modes.stable)}')
     print(f'  {len(modes.frequencies)} modes with stiffness, frequencies (Hz): '
           f'{vector(modes.frequencies)}')
-    if np.any(modes.damping_ratios):
+    if np.max(np.abs(modes.damping_ratios), initial=0.0) > DAMPING_RATIO_ZERO:
         print(f'  damping ratios: {vector(modes.damping_ratios)}')
     counts = ', '.join(f'{v} {k}' for k, v in modes.counts.items())
     print(f'  {len(modes.zero_modes)} zero modes ({counts})')

@@ -51,7 +51,6 @@ from tensegrity_stiffness.geometry.quaternion import (
     rotation_to_quaternion,
 )
 from tensegrity_stiffness.mechanics.design import rest_from_tensions
-from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS
 from tensegrity_stiffness.structures.analysis import Framework, analyse_framework
 
 FloatArray = NDArray[np.float64]
@@ -362,21 +361,28 @@ def six_bar_document(bar_length: float = DEFAULT_BAR_LENGTH, ground: bool = Fals
     return structure_document_of_layout(layout, ground=ground, **kwargs)
 
 
-def config_structure_document(document: Any, link_mass: float = DEFAULT_LINK_MASS
-                              ) -> dict[str, Any]:
+def config_structure_document(document: Any) -> dict[str, Any]:
     """The structure of a joint or a spine config document (module docstring): a spine when
-    the document has a ``chain`` section (its links' masses), a joint otherwise (each link of
-    ``link_mass``, kg, default the twin's, so that the modes have masses)."""
+    the document has a ``chain`` section, a joint otherwise, with the config's dynamics (the
+    links' inertias, the strings' damping: :meth:`~tensegrity_stiffness.mechanics.dynamics.
+    JointDynamics.from_config`, :meth:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics.
+    from_config`) so that the modes have masses."""
     from tensegrity_stiffness import config
-    from tensegrity_stiffness.mechanics.chain import JointChain
-    from tensegrity_stiffness.mechanics.joint import JointModel
+    from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, JointDynamics
     from tensegrity_stiffness.structures.structure import Structure
 
     if isinstance(config.parameters(document).get('chain'), dict):
-        structure = Structure.from_chain(JointChain.from_dict(document))
+        dynamics = ChainDynamics.from_config(document)
+        damping = dynamics.string_damping
+        if any(not np.array_equal(c, damping[0]) for c in damping):
+            raise ValueError('dynamics.string_damping: a structure of a spine takes one damping '
+                             'for every joint')
+        structure = Structure.from_chain(dynamics.chain, inertias=dynamics.inertias,
+                                         string_damping=damping[0])
     else:
-        structure = Structure.from_joint(JointModel.from_dict(config.section(document, 'joint')),
-                                         mass=link_mass)
+        joint = JointDynamics.from_config(document)
+        structure = Structure.from_joint(joint.model, inertia=joint.inertia,
+                                         string_damping=joint.string_damping)
     return structure.to_dict()
 
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from structure_fixtures import mixed_document, perturbed
 
+from tensegrity_stiffness.mechanics.dynamics import LinkInertia
 from tensegrity_stiffness.structures import templates
 from tensegrity_stiffness.structures.analysis import Framework, analyse_framework, stress_matrix
 from tensegrity_stiffness.structures.form_finding import (
@@ -209,7 +210,7 @@ def test_design_holds_the_joint_s_link_under_its_weight():
     from tensegrity_stiffness.mechanics.joint import JointModel
 
     model = JointModel.from_yaml(REPO / 'config' / 'default_joint.yaml')
-    document = Structure.from_joint(model, mass=0.05).to_dict()
+    document = Structure.from_joint(model, inertia=LinkInertia(mass=0.05)).to_dict()
     document['structure']['gravity'] = [0.0, -9.81, 0.0]
     structure = Structure.from_dict(document)
     design = design_rest_lengths_for_shape(structure, t_min=0.2, t_max=3.0)
@@ -238,7 +239,7 @@ def test_the_joint_design_with_a_stiffness_objective_through_the_structure():
 
     model = JointModel.from_yaml(REPO / 'config' / 'default_joint.yaml')
     target = model.evaluate(model.initial_screw).cartesian_stiffness
-    structure = Structure.from_joint(model, mass=0.05)
+    structure = Structure.from_joint(model, inertia=LinkInertia(mass=0.05))
     ours = design_joint_stiffness(structure, target, t_min=0.05, t_max=1.5)
     direct = design_rest_lengths(model, model.initial_screw, None, 0.05, 1.5, target)
     assert ours.success and direct.success
