@@ -101,3 +101,18 @@ def test_the_worked_examples_are_what_new_config_writes(name, tmp_path, capsys):
     structure = Structure.from_yaml(EXAMPLES / name)
     assert structure.ground is not None and structure.gravity is not None
     assert yaml.safe_load(out.read_text())['structure']['force_law'] == 'hooke'
+
+
+def test_the_joint_structure_template_has_the_joint_s_modes():
+    """from-config writes the config's link inertia: the structure's modes at its equilibrium
+    are the joint dynamics' at the unloaded screw."""
+    from tensegrity_stiffness.mechanics.dynamics import JointDynamics
+    from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
+    from tensegrity_stiffness.structures.modes import structure_modes
+
+    document = config.load_yaml(REPO / 'config' / 'default_joint.yaml')
+    structure = Structure.from_dict(templates.config_structure_document(document))
+    ours = structure_modes(structure, solve_structure_equilibrium(structure))
+    dynamics = JointDynamics.from_config(document)
+    theirs = dynamics.modes(dynamics.model.initial_screw)
+    np.testing.assert_allclose(ours.frequencies, theirs.frequencies, rtol=1e-9)
