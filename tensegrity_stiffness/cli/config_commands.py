@@ -1,8 +1,10 @@
 """The config commands: ``new-config`` (a starter joint or spine config from a template, with its
 unloaded equilibrium solved and written as ``initial_screw``;
-:mod:`tensegrity_stiffness.mechanics.templates`) and ``check-config`` (a config's unloaded
-equilibrium, stability, slack and saturated strings, modes and whether its ``initial_screw`` is
-an equilibrium; :func:`~tensegrity_stiffness.mechanics.templates.check_config`)."""
+:mod:`tensegrity_stiffness.mechanics.templates`; or a structure: the p-prism, the six-bar, a
+joint or spine config as a structure, :mod:`tensegrity_stiffness.structures.templates`) and
+``check-config`` (a config's unloaded equilibrium, stability, slack and saturated strings, modes
+and whether its ``initial_screw`` is an equilibrium;
+:func:`~tensegrity_stiffness.mechanics.templates.check_config`)."""
 
 from __future__ import annotations
 
@@ -34,6 +36,7 @@ from tensegrity_stiffness.cli.sensor_sets import (
 from tensegrity_stiffness.mechanics import templates
 from tensegrity_stiffness.mechanics.chain import MAX_JOINTS
 from tensegrity_stiffness.mechanics.joint import MAX_STRINGS
+from tensegrity_stiffness.structures import templates as structure_templates
 
 
 def _choices(args: argparse.Namespace) -> templates.JointChoices:
@@ -47,7 +50,70 @@ def _choices(args: argparse.Namespace) -> templates.JointChoices:
     return templates.JointChoices(template=args.template, n_strings=args.strings, **given)
 
 
+#: The options each kind of template takes (the others are refused when given).
+JOINT_OPTIONS = ('radius', 'height', 'gap', 'stiffness', 'pretension', 'rest_lengths',
+                 'max_stretch', 'link2_mass', 'link2_com', 'link2_inertia', 'spine', 'spacing')
+STRUCTURE_OPTIONS = {
+    'prism': ('bars', 'radius', 'height', 'twist', 'stiffness', 'pretension', 'bar_mass',
+              'force_law', 'ground', 'max_stretch'),
+    'six-bar': ('bar_length', 'stiffness', 'pretension', 'bar_mass', 'force_law', 'ground',
+                'max_stretch'),
+    'from-config': ('config',),
+}
+
+
+def _refuse_foreign_options(args: argparse.Namespace) -> None:
+    """ValueError naming an option given that the chosen template does not take."""
+    every = set(JOINT_OPTIONS).union(*STRUCTURE_OPTIONS.values())
+    takes = STRUCTURE_OPTIONS.get(args.template, JOINT_OPTIONS)
+    for name in sorted(every - set(takes)):
+        if getattr(args, name) not in (None, False):
+            raise ValueError(f"--{name.replace('_', '-')} does not apply to --template "
+                             f'{args.template}')
+
+
+def _structure_document(args: argparse.Namespace) -> tuple[dict[str, Any], str]:
+    """The structure template's document and its header's first line."""
+    if args.template == 'from-config':
+        if args.config is None:
+            raise ValueError('--template from-config needs --config FILE (a joint or spine '
+                             'config)')
+        document = structure_templates.config_structure_document(config.load_yaml(args.config))
+        return document, f'the structure of {args.config}'
+    options: dict[str, Any] = {'ground': args.ground, 'force_law': args.force_law or 'hooke'}
+    for name in ('stiffness', 'pretension', 'bar_mass', 'max_stretch'):
+        if getattr(args, name) is not None:
+            options[name] = getattr(args, name)
+    if args.template == 'prism':
+        for name in ('radius', 'height', 'twist'):
+            if getattr(args, name) is not None:
+                options[name] = getattr(args, name)
+        bars = args.bars or structure_templates.DEFAULT_PRISM_BARS
+        return structure_templates.prism_document(bars, **options), f'a regular {bars}-prism'
+
+    if args.bar_length is not None:
+        options['bar_length'] = args.bar_length
+    return structure_templates.six_bar_document(**options), 'the 6-bar expanded octahedron'
+
+
+def _cmd_new_structure(args: argparse.Namespace) -> int:
+    document, what = _structure_document(args)
+    made = ('the links at the config\'s screws' if args.template == 'from-config' else
+            'rest lengths: an exact equilibrium at the pretension')
+    header = [f'Structure written by {PROG} new-config --template {args.template}: {what}.',
+              f'docs/structures.md; {made}.', f'Check it with: {PROG} structure check FILE']
+    if args.out:
+        path = config.write_yaml(args.out, document, header)
+        print(f'{PROG}: wrote {path}', file=sys.stderr)
+    else:
+        sys.stdout.write(config.yaml_text(document, header))
+    return EXIT_OK
+
+
 def _cmd_new_config(args: argparse.Namespace) -> int:
+    _refuse_foreign_options(args)
+    if args.template in structure_templates.TEMPLATES:
+        return _cmd_new_structure(args)
     document = templates.starter_config(_choices(args), args.spine or 0, args.spacing)
     joint = config.parameters(document)['joint']
     header = [f'Starter config written by {PROG} new-config (template {args.template}).',
@@ -119,17 +185,23 @@ def add_new_config_parser(sub: Any) -> None:
                                    'equilibrium solved and written as joint.initial_screw. '
                                    'Templates: vertebra (the default sub-vertebra, scaled to '
                                    '--radius), ring (--strings strings between two rings of '
-                                   'nodes with an apex on a mast). docs/your_joint.md.')
-    p.add_argument('--template', choices=templates.TEMPLATES, default='vertebra',
-                   help='the joint template (default: vertebra)')
+                                   'nodes with an apex on a mast). docs/your_joint.md. '
+                                   'Structures (docs/structures.md): prism (--bars p, a '
+                                   'regular p-prism), six-bar (the expanded octahedron), '
+                                   'from-config (--config: a joint or spine config as a '
+                                   'structure).')
+    p.add_argument('--template', choices=templates.TEMPLATES + structure_templates.TEMPLATES,
+                   default='vertebra', help='the template (default: vertebra)')
     p.add_argument('--strings', type=positive_int, metavar='N',
                    help=f'ring: number of strings (even, 6 to {MAX_STRINGS}; default '
                         f'{templates.DEFAULT_RING_STRINGS})')
     p.add_argument('--radius', type=parse_number, metavar='M',
                    help='node radius, m (vertebra: of nodes A and D, default 0.030162; ring: '
-                        f'of the ring, default {templates.DEFAULT_RING_RADIUS})')
+                        f'of the ring, default {templates.DEFAULT_RING_RADIUS}; prism: of its '
+                        f'polygons, default {structure_templates.DEFAULT_RADIUS})')
     p.add_argument('--height', type=parse_number, metavar='M',
-                   help='ring: mast height of the apex, m (default: the radius)')
+                   help='ring: mast height of the apex, m (default: the radius); prism: '
+                        'height, m (default: twice the radius)')
     p.add_argument('--gap', type=parse_number, metavar='M',
                    help='ring: design height of link 2 over link 1, m (default: half the mast)')
     p.add_argument('--stiffness', type=parse_number, nargs='+', metavar='K',
@@ -139,12 +211,15 @@ def add_new_config_parser(sub: Any) -> None:
     tension.add_argument('--pretension', type=parse_number, metavar='N',
                          help='string tension at the design pose, N (ring: of the apex '
                               f'strings, default {templates.DEFAULT_PRETENSION:g}; vertebra: of '
-                              'every string); sets the rest lengths')
+                              'every string; prism, six-bar: the largest string tension, '
+                              f'default {structure_templates.DEFAULT_PRETENSION:g}); sets the '
+                              'rest lengths')
     tension.add_argument('--rest-lengths', type=parse_number, nargs='+', metavar='L0',
                          help='rest lengths, m (one for all or one per string)')
     p.add_argument('--max-stretch', type=parse_number, metavar='M',
                    help=f'maximum length minus rest length, m (default '
-                        f'{templates.DEFAULT_MAX_STRETCH:g})')
+                        f'{templates.DEFAULT_MAX_STRETCH:g}; prism, six-bar: maximum length '
+                        'minus the length, default none)')
     p.add_argument('--link2-mass', type=parse_number, metavar='KG',
                    help="link 2's mass, kg (dynamics and the twin)")
     p.add_argument('--link2-com', type=parse_number, nargs=3, metavar=('X', 'Y', 'Z'),
@@ -158,6 +233,26 @@ def add_new_config_parser(sub: Any) -> None:
     p.add_argument('--spacing', type=parse_number, metavar='M',
                    help="spine: distance between vertebrae along the template's axis, m "
                         '(default: the unloaded height, the vertebra: 0.040003 scaled)')
+    structure = p.add_argument_group('structure templates (prism, six-bar, from-config)')
+    structure.add_argument('--bars', type=positive_int, metavar='P',
+                           help='prism: number of bars p (>= 3; default '
+                                f'{structure_templates.DEFAULT_PRISM_BARS})')
+    structure.add_argument('--twist', type=parse_number, metavar='RAD',
+                           help='prism: the start twist of the top polygon, rad (default: the '
+                                'equilibrium pi/2 - pi/p; the rest lengths are always those '
+                                'of the equilibrium prism)')
+    structure.add_argument('--bar-length', type=parse_number, metavar='M',
+                           help='six-bar: bar length, m (default '
+                                f'{structure_templates.DEFAULT_BAR_LENGTH:g})')
+    structure.add_argument('--bar-mass', type=parse_number, metavar='KG',
+                           help=f'mass of each bar, kg (default '
+                                f'{structure_templates.DEFAULT_BAR_MASS:g})')
+    structure.add_argument('--force-law', choices=('hooke', 'paper'),
+                           help="the strings' force law (default hooke)")
+    structure.add_argument('--ground', action='store_true',
+                           help='add gravity (-z) and the ground under the structure')
+    structure.add_argument('--config', metavar='FILE',
+                           help='from-config: the joint or spine config')
     p.add_argument('--out', metavar='FILE', help='write here (default: stdout)')
     p.set_defaults(handler=_cmd_new_config)
 

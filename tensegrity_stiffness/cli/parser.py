@@ -26,6 +26,8 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
   written as ``initial_screw`` (:mod:`tensegrity_stiffness.mechanics.templates`)
 * ``check-config`` a config's unloaded equilibrium, stability, strings, modes and whether its
   ``initial_screw`` is an equilibrium (exit 0 sound, 2 with the reason)
+* ``structure``    any structure of bodies and strings: ``check``, ``equilibrium``,
+  ``form-find``, ``modes``, ``plot`` (:mod:`tensegrity_stiffness.cli.structure_commands`)
 * ``modes``        natural frequencies, damping ratios and mode shapes at the unloaded
   equilibrium (:mod:`tensegrity_stiffness.mechanics.dynamics`; ``--plot`` draws them)
 
@@ -54,6 +56,7 @@ from tensegrity_stiffness.cli import (
     record_command,
     recording_commands,
     spine_commands,
+    structure_commands,
 )
 from tensegrity_stiffness.cli.common import (
     EXIT_BAD_INPUT,
@@ -82,6 +85,7 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     dynamics_commands.add_modes_parser,
     config_commands.add_new_config_parser,
     config_commands.add_check_config_parser,
+    structure_commands.add_structure_parser,
 )
 
 
