@@ -141,6 +141,50 @@ build_hash="$( {
     | LC_ALL=C sort
 } | sha)"
 
+# tf2_msgs (the /tf message) is not on PyPI: where nothing provides it, build it from its
+# definition (cmake/tf2_msgs/) into install/tf2_msgs, beside the package, so that every node
+# publishes its frames (a stock ROS install keeps its own).
+TF2_DEFINITION="cmake/tf2_msgs"
+TF2_PREFIX="install/tf2_msgs"
+build_tf2_msgs() {
+  if (
+    export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+    unset PYTHONPATH
+    "$VENV/bin/python" -c 'import tf2_msgs.msg' 2>/dev/null
+  ); then
+    log "tf2_msgs: provided by the environment"
+    return 0
+  fi
+  local ws="build/tf2_msgs_ws" out="log/setup_env_tf2_msgs_build.txt"
+  rm -rf "$ws"
+  mkdir -p "$ws/src/tf2_msgs/msg"
+  cp "$TF2_DEFINITION/msg/TFMessage.msg" "$ws/src/tf2_msgs/msg/"
+  cp "$TF2_DEFINITION/package.xml.in" "$ws/src/tf2_msgs/package.xml"
+  sed "s|@FIXES@|$REPO/cmake/include_directory_fixes.cmake|" "$TF2_DEFINITION/CMakeLists.txt.in" \
+    >"$ws/src/tf2_msgs/CMakeLists.txt"
+  log "colcon build tf2_msgs from its definition ($TF2_DEFINITION) into $TF2_PREFIX"
+  (
+    export VIRTUAL_ENV="$VENV"
+    export PATH="$VENV/bin:$PATH"
+    export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+    export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+    unset PYTHONPATH
+    colcon build --base-paths "$ws/src" --build-base "$ws/build" --install-base install \
+      --event-handlers console_cohesion+ status- \
+      --cmake-args -DBUILD_TESTING=OFF \
+      "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
+      >"$out" 2>&1
+  ) || {
+    cat "$out" >&2
+    log "colcon build of tf2_msgs FAILED (output above)"
+    exit 1
+  }
+  if [[ ! -f "$TF2_PREFIX/share/tf2_msgs/msg/TFMessage.msg" ]]; then
+    log "the tf2_msgs build did not produce $TF2_PREFIX/share/tf2_msgs/msg/TFMessage.msg"
+    exit 1
+  fi
+}
+
 EXE="install/tensegrity_stiffness/lib/tensegrity_stiffness/stiffness_node"
 BUILD_ORIGIN="$VENV one-package"
 KERNEL_LIB="install/tensegrity_stiffness/lib/libtensegrity_stiffness_kernel.so"
@@ -195,6 +239,7 @@ else
     log "colcon build did not produce $KERNEL_GTEST (the kernel's gtest, BUILD_TESTING=ON)"
     exit 1
   fi
+  build_tf2_msgs
   printf '%s\n' "$build_hash" >"$BUILD_STAMP"
   log "colcon build done"
 fi

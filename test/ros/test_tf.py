@@ -1,14 +1,15 @@
-"""The nodes' frames on ``/tf`` and ``/tf_static`` (``tf.enabled``): built against a stand-in
-``tf2_msgs`` (``support/tf2_standin.py``: ``TFMessage.msg`` built in the test's workspace with
-cmake and g++, as the package's own interfaces are; ``tf2_msgs`` is not on PyPI), then
-``support/tf_check.py`` runs in a process that imports it: ``stiffness_node``, ``spine_node``,
+"""The nodes' frames on ``/tf`` and ``/tf_static`` (``tf.enabled``): ``tf2_msgs`` is not on
+PyPI, so the package's setup builds it from its definition (``cmake/tf2_msgs/``, into
+``install/tf2_msgs``; ``support/tf2_standin.py`` builds the same in the test's workspace where
+neither the setup nor a ROS install provides it), then ``support/tf_check.py`` runs in a process
+that imports it: ``stiffness_node``, ``spine_node``,
 ``estimator_node`` and ``sim_node`` (joint and spine) broadcast frames whose poses are the
 library's to 1e-12, the spine's tool frame is latched on ``/tf_static``, and ``tf.enabled: false``
-stops the broadcast at run time. Without ``tf2_msgs`` (every other test here) the nodes run as
-before."""
+stops the broadcast at run time (the frames go out only while someone subscribes)."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -19,19 +20,27 @@ from support import REPO
 
 pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
 
-from support.tf2_standin import build_tf2_msgs, environment_with
+from support.tf2_standin import build_tf2_msgs, environment_with, installed
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 
 @pytest.fixture(scope='module')
-def tf2_msgs_prefix(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return build_tf2_msgs(tmp_path_factory.mktemp('tf2_ws'))
+def tf2_msgs_prefix(tmp_path_factory: pytest.TempPathFactory) -> Path | None:
+    """None where this process imports tf2_msgs (the setup's, or a ROS install's), else the
+    prefix of one built from the same definition in a workspace of the test's."""
+    return None if installed() else build_tf2_msgs(tmp_path_factory.mktemp('tf2_ws'))
 
 
-def test_tf_frames_are_the_library_poses(tf2_msgs_prefix: Path) -> None:
-    env = environment_with(tf2_msgs_prefix)
-    env['PYTHONPATH'] = f'{REPO / "test"}:{env["PYTHONPATH"]}'
+def test_the_setup_provides_tf2_msgs() -> None:
+    """Every node publishes its frames in the package's own setup (scripts/setup_env.sh builds
+    tf2_msgs from cmake/tf2_msgs/ where no ROS install has it)."""
+    assert installed(), 'tf2_msgs is not importable: run bash scripts/setup_env.sh'
+
+
+def test_tf_frames_are_the_library_poses(tf2_msgs_prefix: Path | None) -> None:
+    env = dict(os.environ) if tf2_msgs_prefix is None else environment_with(tf2_msgs_prefix)
+    env['PYTHONPATH'] = f'{REPO / "test"}:{env.get("PYTHONPATH", "")}'
     ran = subprocess.run([sys.executable, str(REPO / 'test' / 'support' / 'tf_check.py')],
                          env=env, capture_output=True, text=True, timeout=600)
     output = ran.stdout + ran.stderr

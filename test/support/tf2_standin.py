@@ -1,8 +1,9 @@
-"""A stand-in for the ``tf2_msgs`` interface package, which is not on PyPI: the package's one
-message the nodes use, ``tf2_msgs/msg/TFMessage`` (``geometry_msgs/TransformStamped[]
-transforms``, as in ros2/geometry2's ``tf2_msgs/msg/TFMessage.msg``), built in a test's workspace
-with the machine's cmake and g++ by colcon, as ``scripts/setup_env.sh`` builds the package's own
-interfaces (rosidl from the pinned wheels, the wheels' missing include directories dropped by
+"""``tf2_msgs`` for the tests, which is not on PyPI: the package's setup builds the one message
+the nodes use, ``tf2_msgs/msg/TFMessage`` (``geometry_msgs/TransformStamped[] transforms``, as in
+ros2/geometry2's ``tf2_msgs/msg/TFMessage.msg``), from ``cmake/tf2_msgs/`` into
+``install/tf2_msgs`` (:func:`installed`); :func:`build_tf2_msgs` builds the same definition in a
+test's workspace with the machine's cmake and g++ by colcon where neither that nor a ROS install
+is there, as ``scripts/setup_env.sh`` builds the package's own interfaces (rosidl from the pinned wheels, the wheels' missing include directories dropped by
 ``cmake/include_directory_fixes.cmake``). A stock ROS install brings the real package; the nodes
 import ``tf2_msgs.msg.TFMessage`` either way, as the controller stand-ins
 (``controller_standins.py``) stand in for real controllers.
@@ -23,35 +24,22 @@ from pathlib import Path
 from support import REPO
 
 PACKAGE = 'tf2_msgs'
-#: ros2/geometry2, tf2_msgs/msg/TFMessage.msg.
-TF_MESSAGE = 'geometry_msgs/TransformStamped[] transforms\n'
-PACKAGE_XML = """<?xml version="1.0"?>
-<package format="3">
-  <name>tf2_msgs</name>
-  <version>0.36.0</version>
-  <description>Test stand-in of tf2_msgs: TFMessage only.</description>
-  <maintainer email="nobody@example.invalid">nobody</maintainer>
-  <license>BSD-3-Clause</license>
-  <buildtool_depend>ament_cmake</buildtool_depend>
-  <buildtool_depend>rosidl_default_generators</buildtool_depend>
-  <depend>geometry_msgs</depend>
-  <exec_depend>rosidl_default_runtime</exec_depend>
-  <member_of_group>rosidl_interface_packages</member_of_group>
-  <export><build_type>ament_cmake</build_type></export>
-</package>
-"""
-CMAKE_LISTS = f"""cmake_minimum_required(VERSION 3.20)
-project(tf2_msgs)
-find_package(ament_cmake REQUIRED)
-find_package(rosidl_default_generators REQUIRED)
-find_package(geometry_msgs REQUIRED)
-include("{REPO / 'cmake' / 'include_directory_fixes.cmake'}")
-tsk_drop_missing_include_dirs()
-rosidl_generate_interfaces(${{PROJECT_NAME}} "msg/TFMessage.msg" DEPENDENCIES geometry_msgs)
-tsk_drop_missing_include_dirs()
-ament_export_dependencies(rosidl_default_runtime)
-ament_package()
-"""
+#: The definition the package's setup builds (scripts/setup_env.sh): one home for both.
+DEFINITION = REPO / 'cmake' / 'tf2_msgs'
+TF_MESSAGE = (DEFINITION / 'msg' / 'TFMessage.msg').read_text()
+PACKAGE_XML = (DEFINITION / 'package.xml.in').read_text()
+CMAKE_LISTS = (DEFINITION / 'CMakeLists.txt.in').read_text().replace(
+    '@FIXES@', str(REPO / 'cmake' / 'include_directory_fixes.cmake'))
+
+
+def installed() -> bool:
+    """Whether this process imports ``tf2_msgs`` (a stock ROS install, or the package's setup,
+    which builds it from :data:`DEFINITION` into ``install/tf2_msgs``)."""
+    try:
+        import tf2_msgs.msg  # noqa: F401
+    except ImportError:
+        return False
+    return True
 
 
 def build_tf2_msgs(workspace: Path) -> Path:
