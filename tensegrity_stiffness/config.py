@@ -37,16 +37,22 @@ class UnknownKeyWarning(UserWarning):
     shared with other tools): the key is ignored."""
 
 
-def packaged_config_path(name: str = DEFAULT_JOINT_CONFIG) -> Path:
-    """``config/<name>`` of the installed package (``<prefix>/share/tensegrity_stiffness/config``
-    of the first ``AMENT_PREFIX_PATH`` entry that has it, then of the Python prefix of a
-    ``pip install``), else of the source tree."""
+def packaged_path(relative: str) -> Path:
+    """``<relative>`` (e.g. ``rviz/tensegrity.rviz``) of the installed package's share folder
+    (``<prefix>/share/tensegrity_stiffness`` of the first ``AMENT_PREFIX_PATH`` entry that has
+    it, then of the Python prefix of a ``pip install``), else of the source tree."""
     prefixes = os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) + [sys.prefix]
     for prefix in filter(None, prefixes):
-        path = Path(prefix) / 'share' / PACKAGE / 'config' / name
+        path = Path(prefix) / 'share' / PACKAGE / relative
         if path.is_file():
             return path
-    return Path(__file__).resolve().parents[1] / 'config' / name
+    return Path(__file__).resolve().parents[1] / relative
+
+
+def packaged_config_path(name: str = DEFAULT_JOINT_CONFIG) -> Path:
+    """``config/<name>`` of the installed package, else of the source tree
+    (:func:`packaged_path`)."""
+    return packaged_path(f'config/{name}')
 
 
 def example_config_path(name: str) -> Path:

@@ -28,6 +28,8 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
   ``initial_screw`` is an equilibrium (exit 0 sound, 2 with the reason)
 * ``structure``    any structure of bodies and strings: ``check``, ``equilibrium``,
   ``form-find``, ``modes``, ``plot`` (:mod:`tensegrity_stiffness.cli.structure_commands`)
+* ``viewers``      the RViz configuration and Foxglove layout of a config in a namespace
+  (:mod:`.viewer_commands`)
 * ``modes``        natural frequencies, damping ratios and mode shapes at the unloaded
   equilibrium (:mod:`tensegrity_stiffness.mechanics.dynamics`; ``--plot`` draws them)
 
@@ -57,6 +59,7 @@ from tensegrity_stiffness.cli import (
     recording_commands,
     spine_commands,
     structure_commands,
+    viewer_commands,
 )
 from tensegrity_stiffness.cli.common import (
     EXIT_BAD_INPUT,
@@ -86,6 +89,7 @@ COMMANDS: tuple[Callable[[Any], None], ...] = (
     config_commands.add_new_config_parser,
     config_commands.add_check_config_parser,
     structure_commands.add_structure_parser,
+    viewer_commands.add_viewers_parser,
 )
 
 

@@ -3,7 +3,8 @@ the nodes use, ``tf2_msgs/msg/TFMessage`` (``geometry_msgs/TransformStamped[] tr
 ros2/geometry2's ``tf2_msgs/msg/TFMessage.msg``), from ``cmake/tf2_msgs/`` into
 ``install/tf2_msgs`` (:func:`installed`); :func:`build_tf2_msgs` builds the same definition in a
 test's workspace with the machine's cmake and g++ by colcon where neither that nor a ROS install
-is there, as ``scripts/setup_env.sh`` builds the package's own interfaces (rosidl from the pinned wheels, the wheels' missing include directories dropped by
+is there, as ``scripts/setup_env.sh`` builds the package's own interfaces (rosidl from the
+pinned wheels, the wheels' missing include directories dropped by
 ``cmake/include_directory_fixes.cmake``). A stock ROS install brings the real package; the nodes
 import ``tf2_msgs.msg.TFMessage`` either way, as the controller stand-ins
 (``controller_standins.py``) stand in for real controllers.
