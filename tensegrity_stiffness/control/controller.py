@@ -409,15 +409,15 @@ def _multipliers(P: FloatArray, c: FloatArray, A: FloatArray, t: FloatArray, nu:
 
 
 def warm_face(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
-              hi: FloatArray, t_start: FloatArray, at_lo: BoolArray, at_hi: BoolArray
-              ) -> FloatArray | None:
+              hi: FloatArray, t_start: FloatArray, at_lo: BoolArray, at_hi: BoolArray,
+              use_kernel: bool = True) -> FloatArray | None:
     """Step 1 of :func:`solve_box_qp`: the optimum on the face of the working set ``at_lo`` /
     ``at_hi`` (disjoint; the other tensions from ``t_start``), clipped to the box, when it is
     the QP's optimum (inside the box to :data:`FACE_BOUND_SLACK`, ``A t = b`` to
     ``FEASIBILITY_TOLERANCE``, every bound multiplier >= ``-ACTIVE_SET_TOLERANCE * max(1, |P|,
-    |c|)``), else ``None``. In the compiled kernel (``tsk_qp_warm_face``) when it is loaded; a
-    singular face, and the numpy path, are :func:`warm_face_numpy`."""
-    library = kernel.library()
+    |c|)``), else ``None``. In the compiled kernel (``tsk_qp_warm_face``) when it is loaded and
+    ``use_kernel``; a singular face, and the numpy path, are :func:`warm_face_numpy`."""
+    library = kernel.library() if use_kernel else None
     if library is None:
         return warm_face_numpy(P, c, A, b, lo, hi, t_start, at_lo, at_hi)
     n, m = lo.size, b.size
@@ -461,7 +461,7 @@ def warm_face_numpy(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray,
 
 def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
                  hi: FloatArray, t_start: FloatArray, at_lo: BoolArray | None = None,
-                 at_hi: BoolArray | None = None) -> QPResult:
+                 at_hi: BoolArray | None = None, use_kernel: bool = True) -> QPResult:
     """``min 1/2 t'Pt - c't`` s.t. ``A t = b``, ``lo <= t <= hi`` (P positive semidefinite) by a
     primal active-set method, warm-started from ``t_start`` and the working set ``at_lo`` /
     ``at_hi`` of the last solve. First the start face alone (optimal in steady state:
@@ -469,12 +469,14 @@ def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo:
     feasible start: ``t_start`` projected onto ``A t = b`` over its free strings, or if that
     leaves the box, the box least squares ``min |A t - b|`` from it; then the active set.
     ``converged`` is False when no feasible point exists (residual above
-    :data:`FEASIBILITY_TOLERANCE`) or the iteration limit is hit."""
+    :data:`FEASIBILITY_TOLERANCE`) or the iteration limit is hit. ``use_kernel``: the first
+    step in the compiled kernel when it is loaded (the controllers pass their model's
+    ``uses_kernel``)."""
     n = lo.size
     wl = np.zeros(n, bool) if at_lo is None else at_lo.copy()
     wh = np.zeros(n, bool) if at_hi is None else (at_hi & ~wl)
     # 1. The last face.
-    optimum = warm_face(P, c, A, b, lo, hi, t_start, wl, wh)
+    optimum = warm_face(P, c, A, b, lo, hi, t_start, wl, wh, use_kernel)
     if optimum is not None:
         return QPResult(optimum, wl, wh, 1, True, True)
     # 2. A feasible start.
@@ -777,7 +779,8 @@ class StiffnessController(_PoseFeedback):
         if isinstance(pr, str):
             return self._hold(T_d, error, pr)
         P, c = _objective(pr.terms, target, self._S, pr.middle)
-        sol = solve_box_qp(P, c, pr.A, pr.b, pr.lo, pr.hi, pr.start, self._at_lo, self._at_hi)
+        sol = solve_box_qp(P, c, pr.A, pr.b, pr.lo, pr.hi, pr.start, self._at_lo, self._at_hi,
+                           self.model.uses_kernel)
         if not sol.converged:
             return self._hold(T_d, error, _failure(pr.A, pr.b, sol))
         return self._apply(dt, target, T_d, z, error, pr.terms, sol)
@@ -990,7 +993,8 @@ class ChainStiffnessController(_PoseFeedback):
         hi = np.concatenate([p.hi for p in prs])
         at_lo = np.concatenate([ctl._at_lo for ctl in self.joints])
         at_hi = np.concatenate([ctl._at_hi for ctl in self.joints])
-        sol = solve_box_qp(P, c, A, b, lo, hi, t_all, at_lo, at_hi)
+        sol = solve_box_qp(P, c, A, b, lo, hi, t_all, at_lo, at_hi,
+                           self.joints[0].model.uses_kernel)
         if not sol.converged:
             text = _failure(A, b, sol)
             return [ctl._hold(x, np.zeros(6), text) for ctl, x in zip(self.joints, xi,
