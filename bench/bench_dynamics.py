@@ -126,8 +126,8 @@ def compare_part(model: JointModel, xi: np.ndarray, repeat: int, number: int,
             ('linearize, damped', DAMPING, 'linearize', None)):
         fns = []
         for _, m, cls in columns:
-            dyn = cls(m, string_damping=damping)
-            fns.append(lambda fn=getattr(dyn, call): fn(xi))
+            method = getattr(cls(m, string_damping=damping), call)
+            fns.append(lambda fn=method: fn(xi))
         times = side_by_side(fns, repeat, number)
         ratio = f'   {times[0] / times[2]:17.2f}' if previous else ''
         goal = '' if target is None else (f'   <= {target:g} us '
