@@ -1,11 +1,13 @@
 """An earlier checkout of this package imported beside it, so that a bench times the two in one
 process, in alternation (``bench_dynamics.py --previous DIR``, ``bench_control.py --previous
 DIR``). Make the checkout with ``git archive <commit> | tar -x -C DIR``; its compiled kernel is
-built here from DIR's sources with CMakeLists.txt's flags.
+built here from DIR's sources with CMakeLists.txt's flags. Run as a script
+(``python3 bench/previous_checkout.py DIR [OUT]``) it builds that kernel and prints its path.
 """
 
 from __future__ import annotations
 
+import argparse
 import importlib
 import os
 import subprocess
@@ -59,3 +61,21 @@ def import_modules(root: Path, names: list[str], library: Path) -> dict[str, Mod
         else:
             os.environ[KERNEL_ENV] = setting
     return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description='Build the compiled kernel of an earlier '
+                                     'checkout (its src/*.cpp) and print the library path.')
+    parser.add_argument('checkout', type=Path, help='the checkout (git archive C | tar -x -C DIR)')
+    parser.add_argument('out', type=Path, nargs='?', help='folder for the library (default: a '
+                        'new temporary one)')
+    args = parser.parse_args()
+    if args.out is None:
+        import tempfile
+        args.out = Path(tempfile.mkdtemp())
+    args.out.mkdir(parents=True, exist_ok=True)
+    print(build_kernel(args.checkout.resolve(), args.out))
+
+
+if __name__ == '__main__':
+    main()
