@@ -724,4 +724,24 @@ int64_t tsk_joint_pose_terms(const tsk_joint_model* model, double* buf, int64_t 
   }
 }
 
+int64_t tsk_joint_transform(const tsk_joint_model* model, double* buf, int64_t buf_len) {
+  try {
+    const int64_t checked = check_model(model);
+    if (checked != TSK_OK) {
+      return checked;
+    }
+    if (buf == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (buf_len < 22) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    double G[3][3], Q[3][3];
+    kinematics(*model, buf, buf + 6, G, Q);
+    return TSK_OK;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
+}
+
 }  // extern "C"

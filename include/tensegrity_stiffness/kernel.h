@@ -25,8 +25,8 @@ extern "C" {
 
 /* Version of this ABI: bumped with every change below (1: the series tables set through a
  * global tsk_set_series, positive return values as screw indices; 2: without
- * tsk_joint_measure_packed; 3: without tsk_joint_linear_model, tsk_joint_pose_terms and
- * tsk_qp_warm_face). */
+ * tsk_joint_measure_packed; 3: without tsk_joint_linear_model, tsk_joint_pose_terms,
+ * tsk_qp_warm_face and tsk_joint_transform). */
 #define TSK_ABI_VERSION 4
 
 /* Status codes. */
@@ -130,6 +130,11 @@ int64_t tsk_joint_linear_size(int64_t n_strings);
 int64_t tsk_joint_linear_model(const tsk_joint_model* model, const double* inertia,
                                const double* damping, double equilibrium_tolerance, double* buf,
                                int64_t buf_len, double* lin, int64_t lin_len);
+
+/* T = exp(hat(xi)) (eq. 2) of one screw with the model's series tables: buf (buf_len >= 22)
+ * holds xi (6) on entry and T (16, row-major 4 x 4) after it; the same formulas as the
+ * evaluation's (and geometry/screw.py's exp_se3). */
+int64_t tsk_joint_transform(const tsk_joint_model* model, double* buf, int64_t buf_len);
 
 /* Doubles of the pose-terms buffer for n strings: the input T (16, row-major 4 x 4 pose of
  * link 2 in {1}), then the string lengths (n), B (6 x n, row-major: column j the wrench [f; m]

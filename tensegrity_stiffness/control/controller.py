@@ -599,13 +599,19 @@ def _clamp_integral(z: FloatArray, limit: tuple[float, float]) -> FloatArray:
     return out
 
 
-def _measured(pose: ArrayLike | None, screw: ArrayLike | None) -> FloatArray | None:
+def _exp(kn: kernel.JointKernel | None, xi: FloatArray) -> FloatArray:
+    """``exp_se3`` of one finite screw, in the compiled kernel when there is one."""
+    return exp_se3(xi) if kn is None else kn.exp_se3(xi)
+
+
+def _measured(pose: ArrayLike | None, screw: ArrayLike | None,
+              kn: kernel.JointKernel | None = None) -> FloatArray | None:
     if pose is not None and screw is not None:
         raise ValueError('pose: give at most one of pose and screw')
     if pose is not None:
         return rigid_transform(pose, 'pose', POSE_ROTATION_TOLERANCE)
     if screw is not None:
-        return exp_se3(_screw(screw, 'screw'))
+        return _exp(kn, _screw(screw, 'screw'))
     return None
 
 
@@ -657,6 +663,8 @@ class _PoseFeedback:
     integral_gain: float
     integral_limit: tuple[float, float]
     _z: FloatArray
+    #: The compiled kernel of the exp maps of the feedback (a joint model's), or None.
+    _exp_kernel: kernel.JointKernel | None = None
 
     def _feedback(self, dt: float, target: ControlTarget, pose: ArrayLike | None,
                   screw: ArrayLike | None, wrench_name: str, wrench: ArrayLike | None
@@ -668,7 +676,7 @@ class _PoseFeedback:
         dt = _check_dt(dt)
         if not isinstance(target, ControlTarget):
             raise ValueError('target must be a ControlTarget')
-        measured = _measured(pose, screw)
+        measured = _measured(pose, screw, self._exp_kernel)
         W = np.zeros(6) if wrench is None else finite_array_of_shape(wrench_name, wrench, (6,))
         if measured is not None:
             e, error = _pose_error(target.transform, measured)
@@ -700,6 +708,7 @@ class StiffnessController(_PoseFeedback):
             raise ValueError('limits must be an ActuatorLimits')
         self.model = model
         self.limits = limits
+        self._exp_kernel = model.compiled_kernel
         n = model.n_strings
         (self._rest_min, self._rest_max, self._rate, self._t_min,
          self._t_max) = limits.for_strings(n)
@@ -749,7 +758,7 @@ class StiffnessController(_PoseFeedback):
         Bad input raises ValueError naming it and leaves the state unchanged."""
         dt, W, e, error, z = self._feedback(dt, target, pose, screw, 'external_wrench',
                                             external_wrench)
-        T_d = exp_se3(z + self.proportional_gain * e) @ target.transform
+        T_d = _exp(self._exp_kernel, z + self.proportional_gain * e) @ target.transform
         return self._tick(dt, target, T_d, W, z, error)
 
     def _problem(self, T_d: FloatArray, W: FloatArray) -> _JointProblem | str:

@@ -518,11 +518,8 @@ class JointDynamics:
         self._p1_zxy = np.ascontiguousarray(self._p1[:, [2, 0, 1]])
         self._yzx = np.array([1, 2, 0])
         self._zxy = np.array([2, 0, 1])
-        # The compiled linear model (tsk_joint_linear_model) reads these two arrays: they live
-        # as long as this object (None: the numpy path, or no damping).
+        # The compiled linear model (tsk_joint_linear_model), None on the numpy path.
         self._kernel = model.compiled_kernel
-        self._kernel_inertia = np.array(self.spatial_inertia, dtype=np.float64, order='C')
-        self._kernel_damping = self._string_damping.copy() if self._damped else None
 
     @classmethod
     def from_config(cls, document: Any, string_damping: ArrayLike | None = None
@@ -715,15 +712,17 @@ class JointDynamics:
         numpy path then raises the error that names it)."""
         kn = self._kernel
         # One buffer: the packed evaluation (inputs xi, rest lengths), then the linear model's
-        # (input W); C reads nothing else but the two arrays this object owns.
+        # (input W); besides it C reads the inertia and the damping, bound to names here (they
+        # outlive the call).
         buf = np.empty(kn.size + kn.linear_size)
         lin = kn.size
         buf[:kn.rest] = x
         buf[kn.rest:kn.transform] = rest
         buf[lin:lin + 6] = W
         start = kernel.address(buf)
-        damping = self._kernel_damping
-        status = kn.linear_model(kn.model, kernel.address(self._kernel_inertia),
+        inertia = np.ascontiguousarray(self.spatial_inertia, dtype=np.float64)
+        damping = np.ascontiguousarray(self._string_damping) if self._damped else None
+        status = kn.linear_model(kn.model, kernel.address(inertia),
                                  None if damping is None else kernel.address(damping),
                                  EQUILIBRIUM_TOLERANCE, start, kn.size, start + 8 * lin,
                                  kn.linear_size)

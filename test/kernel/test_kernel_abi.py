@@ -207,6 +207,25 @@ def test_the_linear_model_and_pose_terms_refuse_bad_arguments():
             terms(model, T)
 
 
+def test_the_transform_is_exp_se3_and_refuses_bad_arguments():
+    """tsk_joint_transform (JointKernel.exp_se3) equals geometry.screw.exp_se3 at angles from 0
+    over the series threshold to pi; it checks its pointers and buffer before writing."""
+    model = JointModel.from_yaml(CONFIG)
+    kn = model.compiled_kernel
+    rng = np.random.default_rng(5)
+    for theta in (0.0, 1e-9, 1e-4, screw.SERIES_THRESHOLD * (1 - 1e-9), screw.SERIES_THRESHOLD,
+                  screw.SERIES_THRESHOLD * (1 + 1e-9), 0.7, 2.0, np.pi - 1e-9, np.pi):
+        u = rng.normal(size=3)
+        xi = np.r_[theta * u / np.linalg.norm(u), rng.normal(scale=0.05, size=3)]
+        np.testing.assert_allclose(kn.exp_se3(xi), screw.exp_se3(xi), rtol=0.0, atol=1e-15)
+    buf = np.full(22, 7.0)
+    library = kernel.library()
+    assert library.transform(kn.model, kernel.address(buf), 21) == -3
+    assert library.transform(kn.model, None, 22) == -1
+    assert library.transform(None, kernel.address(buf), 22) == -1
+    assert (buf == 7.0).all()
+
+
 def test_the_warm_face_refuses_bad_arguments():
     library = kernel.library()
     n, m = 3, 1

@@ -40,7 +40,7 @@ pytestmark = pytest.mark.skipif(not kernel.available(), reason=kernel.status())
 POISON_BYTES = 1016
 #: The entry points of the library that take addresses.
 ENTRY_POINTS = ('evaluate', 'evaluate_packed', 'chain_frames', 'chain_tip', 'linear_model',
-                'pose_terms', 'qp_warm_face')
+                'pose_terms', 'qp_warm_face', 'transform')
 
 
 def _poisoned(call):
@@ -125,8 +125,8 @@ def test_a_strided_tip_wrench_outlives_the_call(poisoned_library):
 
 def test_the_linear_model_and_pose_terms_outlive_the_call(poisoned_library):
     """tsk_joint_linear_model (strided rest lengths and a strided load: copied into its
-    buffers; the inertia and damping arrays the dynamics own) and tsk_joint_pose_terms (a
-    strided pose) under the poisoned calls equal the numpy path."""
+    buffers; strided string damping, copied for C) and tsk_joint_pose_terms (a strided pose)
+    under the poisoned calls equal the numpy path."""
     from tensegrity_stiffness.control.controller import pose_terms_at, pose_terms_numpy
     from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
 
@@ -142,13 +142,17 @@ def test_the_linear_model_and_pose_terms_outlive_the_call(poisoned_library):
         W = loads[:, 1]
         assert not rest.flags.c_contiguous and not W.flags.c_contiguous
         inertia = LinkInertia(0.02, (0.001, 0.0, -0.002), (2e-6, 3e-6, 4e-6))
-        damping = rng.uniform(0.1, 0.5, 12)
+        damping = rng.uniform(0.1, 0.5, (12, 2))[:, 1]  # strided: copied for C
+        assert not damping.flags.c_contiguous
         fast, slow = JointDynamics(model, inertia, damping), JointDynamics(plain, inertia, damping)
         for new, old in zip(fast.linearize(xi, rest, W), slow.linearize(xi, rest, W),
                             strict=True):
             assert np.isfinite(new).all()
             np.testing.assert_allclose(new, old, rtol=0.0, atol=1e-12 * np.abs(old).max())
         T = np.asfortranarray(model.evaluate(xi).transform)  # copied into the kernel's buffer
+        screws = np.repeat(xi[:, None], 2, axis=1)
+        np.testing.assert_allclose(model.compiled_kernel.exp_se3(screws[:, 1]), T, rtol=0.0,
+                                   atol=1e-15)  # a strided screw, copied into its buffer
         new, old = pose_terms_at(model, T), pose_terms_numpy(model, T)
         for name in ('lengths', 'B', 'K0', 'M', 'cap'):
             np.testing.assert_allclose(getattr(new, name), getattr(old, name), rtol=0.0,

@@ -614,3 +614,18 @@ TEST(QpKernel, WarmFaceOptimalRejectedAndSingular) {
             TSK_ERROR_BUFFER_SIZE);
   EXPECT_EQ(tsk_qp_face_size(0, 1), TSK_ERROR_COUNT);
 }
+
+// exp of a pure translation is [I, v]; of a rotation by pi / 2 about z, that rotation.
+TEST(JointKernel, TransformOfATranslationAndAQuarterTurn) {
+  Joint joint({0.1, 0.0, 0.1}, {0.1, 0.0, 0.0}, {100.0}, {kInf}, TSK_LAW_HOOKE);
+  std::vector<double> buf = {0.0, 0.0, 0.0, 0.01, -0.02, 0.03};
+  buf.resize(22, 7.0);
+  ASSERT_EQ(tsk_joint_transform(&joint.model, buf.data(), 22), TSK_OK);
+  expect_near(buf.data() + 6, {1, 0, 0, 0.01, 0, 1, 0, -0.02, 0, 0, 1, 0.03, 0, 0, 0, 1}, 0.0,
+              "T");
+  buf = {0.0, 0.0, M_PI / 2, 0.0, 0.0, 0.0};
+  buf.resize(22, 7.0);
+  ASSERT_EQ(tsk_joint_transform(&joint.model, buf.data(), 22), TSK_OK);
+  expect_near(buf.data() + 6, {0, -1, 0, 0, 1, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}, 1e-15, "T");
+  EXPECT_EQ(tsk_joint_transform(&joint.model, buf.data(), 21), TSK_ERROR_BUFFER_SIZE);
+}
