@@ -898,6 +898,7 @@ class ChainStiffnessController(_PoseFeedback):
             raise ValueError('chain must be a JointChain')
         N = chain.n_joints
         self.chain = chain
+        self._exp_kernel = chain.joints[0].compiled_kernel
         per_limits = [limits] * N if isinstance(limits, ActuatorLimits) else list(limits)
         if len(per_limits) != N:
             raise ValueError(f'limits must be one ActuatorLimits or one per joint ({N})')
@@ -1025,7 +1026,7 @@ class ChainStiffnessController(_PoseFeedback):
         (base, about the tip link's origin; default 0); ``gravity`` as the chain's."""
         dt, W, _, error, z = self._feedback(dt, target, tip_pose, None, 'tip_wrench',
                                             tip_wrench)
-        xi = self._screws_for(exp_se3(z) @ target.transform)
+        xi = self._screws_for(_exp(self._exp_kernel, z) @ target.transform)
         chain = self.chain
         state = chain.evaluate(xi)
         loads = chain.residuals(xi, W, gravity) - state.wrenches
