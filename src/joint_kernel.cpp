@@ -8,6 +8,10 @@
 //   A_j = df/ds = gamma s s^T + beta I,  beta = phi / l,  gamma = (phi' - beta) / l^2,
 //   H_D = sum [A; P A],  H_G = sum [A hat(q); P A hat(q)]  (P = hat(p1_j), q_j = T p2_j),
 //   K = [H_G G - H_D Q, -H_D G],  K_c = [H_D, -H_G].
+// Built on the same evaluation: the linear model of link 2's dynamics at an equilibrium
+// (dynamics.py, JointDynamics._blocks: M = J_b^T G J_b, the blocks J_l^T Pi K, -L^T C L,
+// J_l^T Pi dF/dl0, J_l^T Pi and M^-1 of them), the stiffness controller's pose terms
+// (control/controller.py, pose_terms_numpy) and exp(hat(xi)) alone.
 // The numpy implementation in joint.py stays the reference and the fallback; the tests hold this
 // kernel to it (test/test_joint_kernel.py); test/test_kernel_math.cpp to closed forms. The C ABI
 // is declared in include/tensegrity_stiffness/kernel.h (loaded with ctypes: no Python headers).
