@@ -1,16 +1,20 @@
 """Timing of the stiffness controller's tick (``tensegrity_stiffness.control.controller``).
 
-Run by hand: ``python3 bench/bench_control.py [--ticks N]``. For the default joint, side by side
-in the same run: ``StiffnessController.update`` per 500 Hz tick (warm-started: the QP's active
-set and tensions carried from the last tick) and a full ``design_rest_lengths`` per tick (cold,
-what a controller without warm start would pay), in three regimes: holding a pose with a noisy
-measurement, following a moving target (a 1 Hz circle of 1 mm and 0.02 rad), and the same with
-a target K_c. Then the same tick on a paced clock at 500 Hz and 1 kHz (``--paced``, as the node's
-timer runs it): tick time and missed ticks, against a full design per tick. Also the spine
-controller's tick (5 joints). Part ``--loop``: the whole loop
-across processes (sim_node -> estimator_node with 12 load cells + IMU -> stiffness_controller ->
-sim_node, started as test/test_control_node.py does; needs ``source scripts/env.sh``) at 500 Hz
-and 1 kHz: the controller's ticks, missed ticks, tick time and the latency from the twin's
+Run by hand: ``python3 bench/bench_control.py [--ticks N] [--previous DIR]``. For the default
+joint, side by side in the same run (interleaved tick by tick): ``StiffnessController.update``
+per 500 Hz tick alone (warm-started: the QP's active set and tensions carried from the last
+tick; targets and measurements made before the clock starts) with the compiled kernel (pose
+terms, warm QP face), on the numpy path (``use_kernel=False``), of an earlier checkout with
+``--previous DIR`` (``git archive <commit> | tar -x -C DIR``), and a full
+``design_rest_lengths`` per tick (cold, what a controller without warm start would pay), in
+three regimes: holding a pose with a noisy measurement, following a moving target (a 1 Hz
+circle of 1 mm and 0.02 rad), and the same with a target K_c. Then the same tick on a paced
+clock at 500 Hz and 1 kHz (``--paced``, as the node's timer runs it): tick time and missed
+ticks, against a full design per tick. Also the spine controller's tick (5 joints). Part
+``--loop``: the whole loop across processes (sim_node -> estimator_node with 12 load cells +
+IMU -> stiffness_controller -> sim_node, started as test/test_control_node.py does; needs
+``source scripts/env.sh``) at 500 Hz and 1 kHz: the controller's ticks, missed ticks, tick time
+and the latency from the twin's
 reading (the stamp the estimate carries) to the command it causes (median, p99; goal median
 <= 3 ms), and the ticks that used a state older than one period, from its /diagnostics. Numbers
 only, no assertions; the issue's goal for the joint tick is <= 200 us (median).
@@ -27,8 +31,12 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from previous_checkout import build_kernel, import_modules
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.control import controller as controller_module
 from tensegrity_stiffness.control.controller import (
     ActuatorLimits,
     ChainStiffnessController,
@@ -59,48 +67,93 @@ def timed(fn: Callable[[int], object], ticks: int) -> np.ndarray:
     return out
 
 
-def joint_part(ticks: int) -> None:
+def timed_side_by_side(fns: list[Callable[[int], object]], ticks: int) -> list[np.ndarray]:
+    """Per-tick times (us) of each of ``fns``, tick k of every one run one after the other
+    (interleaved, so that the machine's load falls on all alike)."""
+    for fn in fns:
+        fn(0)
+    out = [np.empty(ticks) for _ in fns]
+    for k in range(ticks):
+        for fn, times in zip(fns, out, strict=True):
+            t0 = time.perf_counter()
+            fn(k)
+            times[k] = (time.perf_counter() - t0) * 1e6
+    return out
+
+
+def joint_part(ticks: int, previous: dict | None) -> None:
+    """update() alone (targets and measurements made before the clock starts), interleaved:
+    this checkout with the compiled kernel (pose terms and the warm QP face), the same on the
+    numpy path (a model with use_kernel=False), the previous checkout (``--previous``), and a
+    full design per tick."""
     model = JointModel.from_yaml(config.packaged_config_path())
+    plain = JointModel(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+                       link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+                       force_law=model.force_law, initial_screw=model.initial_screw,
+                       use_kernel=False)
     lim = ActuatorLimits(0.5 * model.rest_lengths, 1.2 * model.rest_lengths, 0.05)
     rng = np.random.default_rng(0)
     xi0 = model.initial_screw
     K = design_rest_lengths(model, xi0, np.zeros(6), 0.5, 1.5).cartesian_stiffness
+    sides = [('update(), kernel', controller_module, model),
+             ('update(), numpy path', controller_module, plain)]
+    if previous is not None:
+        prev_model = previous['tensegrity_stiffness.mechanics.joint'].JointModel(
+            model.link1_nodes, model.connections, model.k, model.rest_lengths,
+            link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+            force_law=model.force_law, initial_screw=model.initial_screw)
+        sides.append(('update(), previous', previous['tensegrity_stiffness.control.controller'],
+                      prev_model))
+        print(f'previous: {previous["root"]}, {previous["kernel"].status()}')
 
-    def target_at(k: int, moving: bool, stiffness: bool) -> ControlTarget:
+    def offset(k: int, moving: bool) -> np.ndarray:
         phase = 2 * np.pi * k * DT
-        d = (np.array([0.02 * np.cos(phase), 0.02 * np.sin(phase), 0, 1e-3 * np.sin(phase),
-                       1e-3 * np.cos(phase), 0]) if moving else np.zeros(6))
-        return ControlTarget(screw=xi0 + d, cartesian_stiffness=K if stiffness else None)
+        return (np.array([0.02 * np.cos(phase), 0.02 * np.sin(phase), 0, 1e-3 * np.sin(phase),
+                          1e-3 * np.cos(phase), 0]) if moving else np.zeros(6))
 
-    print(f'joint (default config), {ticks} ticks of {DT * 1e3:g} ms each, goal median <= '
-          f'{TICK_TARGET_US:g} us for update()')
+    print(f'joint (default config), {ticks} ticks of {DT * 1e3:g} ms each, update() alone, '
+          f'interleaved; goal median <= {TICK_TARGET_US:g} us')
     for label, moving, stiffness in (('hold a pose', False, False),
                                      ('moving target', True, False),
                                      ('moving target + K_c*', True, True)):
-        ctl = StiffnessController(model, lim, model.rest_lengths)
-        for k in range(500):  # reach the steady state / the orbit first
-            tgt = target_at(k, moving, stiffness)
-            ctl.update(DT, tgt, screw=tgt.screw + rng.normal(0, NOISE, 6))
-        warm = [0]
+        screws = [xi0 + offset(k, moving) for k in range(ticks + 501)]
+        noise = [rng.normal(0, NOISE, 6) for _ in screws]
+        fns, counters = [], []
+        for _, module, m in sides:
+            targets = [module.ControlTarget(screw=x, cartesian_stiffness=K if stiffness
+                                            else None) for x in screws]
+            limits = module.ActuatorLimits(lim.rest_length_min, lim.rest_length_max,
+                                           lim.max_rate)
+            ctl = module.StiffnessController(m, limits, m.rest_lengths)
+            for k in range(500):  # reach the steady state / the orbit first
+                ctl.update(DT, targets[k], screw=screws[k] + noise[k])
+            warm = [0]
 
-        def tick(k: int, ctl: StiffnessController = ctl, moving: bool = moving,
-                 stiffness: bool = stiffness, warm: list[int] = warm) -> None:
-            tgt = target_at(k + 500, moving, stiffness)
-            cmd = ctl.update(DT, tgt, screw=tgt.screw + rng.normal(0, NOISE, 6))
-            warm[0] += cmd.warm
+            def tick(k: int, ctl=ctl, targets=targets, warm: list[int] = warm,
+                     screws: list = screws, noise: list = noise) -> None:
+                cmd = ctl.update(DT, targets[k + 500], screw=screws[k + 500] + noise[k + 500])
+                warm[0] += cmd.warm
 
-        def design(k: int, moving: bool = moving, stiffness: bool = stiffness) -> None:
-            tgt = target_at(k + 500, moving, stiffness)
+            fns.append(tick)
+            counters.append(warm)
+        design_targets = [ControlTarget(screw=x, cartesian_stiffness=K if stiffness else None)
+                          for x in screws]
+
+        def design(k: int, design_targets: list = design_targets) -> None:
+            tgt = design_targets[k + 500]
             design_rest_lengths(model, tgt.screw, np.zeros(6),
                                 target_stiffness=tgt.cartesian_stiffness)
 
-        a = timed(tick, ticks)
-        b = timed(design, ticks)
-        med = np.median(a)
+        times = timed_side_by_side([*fns, design], ticks)
+        first = np.median(times[0])
         print(f' {label}:')
-        print(f'  update() warm-started      {stats(a)}   ({warm[0] / (ticks + 1):.0%} ticks '
-              f'optimal on the last face; goal {"met" if med <= TICK_TARGET_US else "NOT met"})')
-        print(f'  design_rest_lengths (cold) {stats(b)}   ({np.median(b) / med:.1f}x)')
+        for (name, _, _), t, warm in zip(sides, times, counters, strict=False):
+            goal = (f'; goal {"met" if np.median(t) <= TICK_TARGET_US else "NOT met"}'
+                    if name.endswith('kernel') else f'; kernel {first / np.median(t):.2f}x')
+            print(f'  {name:27s}{stats(t)}   ({warm[0] / (ticks + 1):.0%} ticks optimal on the '
+                  f'last face{goal})')
+        print(f'  {"design_rest_lengths (cold)":27s}{stats(times[-1])}   '
+              f'(kernel update {first / np.median(times[-1]):.2f}x)')
 
 
 def paced(fn: Callable[[int], object], rate: float, seconds: float) -> tuple[np.ndarray, int]:
@@ -248,8 +301,19 @@ def main() -> None:
                         '(0: skip)')
     parser.add_argument('--publish-every', type=int, default=1,
                         help="the twin's sim.publish_every in the loop (1: readings at 1 kHz)")
+    parser.add_argument('--previous', type=Path, metavar='DIR',
+                        help='also time the joint tick of an earlier checkout (git archive C | '
+                        'tar -x -C DIR; its kernel compiled from its sources)')
     args = parser.parse_args()
-    joint_part(args.ticks)
+    previous = None
+    if args.previous is not None:
+        import tempfile
+        root = args.previous.resolve()
+        library = build_kernel(root, Path(tempfile.mkdtemp()))
+        previous = import_modules(root, ['tensegrity_stiffness.control.controller',
+                                         'tensegrity_stiffness.mechanics.joint'], library)
+        previous['root'] = root
+    joint_part(args.ticks, previous)
     if args.paced > 0.0:
         paced_part(args.paced)
     spine_part(args.ticks)

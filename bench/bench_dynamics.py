@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Dynamics benchmark (issue 28), run by hand: ``python3 bench/bench_dynamics.py [--quick]``.
+"""Dynamics benchmark (issues 28, 37), run by hand:
+``python3 bench/bench_dynamics.py [--quick] [--previous DIR]``.
 
 Prints, measured side by side in one run on the default joint and the default 5-joint spine
 (twin default inertia, string damping 0.5 N s/m):
@@ -10,10 +11,12 @@ Prints, measured side by side in one run on the default joint and the default 5-
 * against them, a central-difference linear model from the same run (12 + 12 + n + 6 pairs of
   ``acceleration`` calls) and its eigen-decomposition;
 * the spine's ``mass_matrix``, ``modes`` and its central-difference linear model.
-Targets (issue 28): joint mass matrix <= 20 us, joint modes <= 100 us. Everything is numpy:
-the mass matrix is one closed-form ScrewKinematics (plain floats) and two 6x6 products, and
-``modes`` is dominated by LAPACK's 12x12 eigen-decomposition and the joint's evaluation (itself
-in the compiled kernel when built), which a C twin of this module would not make faster.
+Then, side by side in alternation, the joint's ``modes`` (damped, undamped) and ``linearize``
+with the compiled linear model (``tsk_joint_linear_model``), on the numpy path (the same model
+with ``use_kernel=False``) and, with ``--previous DIR``, of an earlier checkout (``git archive
+<commit> | tar -x -C DIR``; its kernel compiled from DIR's sources), with the ratios.
+Targets: joint mass matrix <= 20 us (issue 28), joint modes <= 100 us damped and undamped
+(issues 28, 37).
 """
 
 from __future__ import annotations
@@ -27,6 +30,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from previous_checkout import build_kernel, import_modules  # noqa: E402
 
 from tensegrity_stiffness.mechanics import kernel  # noqa: E402
 from tensegrity_stiffness.mechanics.chain import JointChain  # noqa: E402
@@ -89,11 +94,67 @@ def numerical_chain_model(dyn: ChainDynamics, xi: np.ndarray) -> np.ndarray:
     return A
 
 
+def numpy_model(model: JointModel, joint_module=None) -> JointModel:
+    """``model`` on the numpy path (``use_kernel=False``)."""
+    cls = JointModel if joint_module is None else joint_module.JointModel
+    return cls(model.link1_nodes, model.connections, model.k, model.rest_lengths,
+               link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+               force_law=model.force_law, initial_screw=model.initial_screw, use_kernel=False)
+
+
+def compare_part(model: JointModel, xi: np.ndarray, repeat: int, number: int,
+                 previous: dict | None) -> None:
+    """modes (damped, undamped) and linearize: kernel, numpy path, previous checkout."""
+    plain = numpy_model(model)
+    columns = [('kernel', model, JointDynamics), ('numpy path', plain, JointDynamics)]
+    if previous is not None:
+        prev_dynamics = previous['tensegrity_stiffness.mechanics.dynamics']
+        prev_joint = previous['tensegrity_stiffness.mechanics.joint']
+        prev_model = prev_joint.JointModel(
+            model.link1_nodes, model.connections, model.k, model.rest_lengths,
+            link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+            force_law=model.force_law, initial_screw=model.initial_screw)
+        columns.append(('previous', prev_model, prev_dynamics.JointDynamics))
+    print('\nside by side (alternated, best mean per call, us):')
+    if previous is not None:
+        print(f'  previous: {previous["root"]}, {previous["kernel"].status()}')
+    print(f'  {"call":30s}' + ''.join(f'{name:>13s}' for name, _, _ in columns)
+          + ('   kernel / previous' if previous else '') + '   target')
+    for label, damping, call, target in (
+            ('modes, damped (0.5 N s/m)', DAMPING, 'modes', 100.0),
+            ('modes, undamped', 0.0, 'modes', 100.0),
+            ('linearize, damped', DAMPING, 'linearize', None)):
+        fns = []
+        for _, m, cls in columns:
+            method = getattr(cls(m, string_damping=damping), call)
+            fns.append(lambda fn=method: fn(xi))
+        times = side_by_side(fns, repeat, number)
+        ratio = f'   {times[0] / times[2]:17.2f}' if previous else ''
+        goal = '' if target is None else (f'   <= {target:g} us '
+                                           f'{"met" if times[0] <= target else "NOT met"}')
+        print(f'  {label:30s}' + ''.join(f'{t:13.1f}' for t in times) + ratio + goal)
+
+
+def load_previous(root: Path, out_dir: Path) -> dict:
+    """The dynamics and joint modules of the checkout ``root`` with its own kernel."""
+    library = build_kernel(root, out_dir)
+    modules = import_modules(root, ['tensegrity_stiffness.mechanics.dynamics',
+                                    'tensegrity_stiffness.mechanics.joint'], library)
+    modules['root'] = root
+    return modules
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='fewer repetitions')
+    parser.add_argument('--previous', type=Path, metavar='DIR',
+                        help='also time an earlier checkout (git archive C | tar -x -C DIR)')
     args = parser.parse_args()
     repeat, number = (3, 200) if args.quick else (7, 2000)
+    previous = None
+    if args.previous is not None:
+        import tempfile
+        previous = load_previous(args.previous.resolve(), Path(tempfile.mkdtemp()))
     model = JointModel.from_yaml(ROOT / 'config' / 'default_joint.yaml')
     xi = solve_equilibrium(model, np.zeros(6)).screw
     off = xi + np.array([0.04, -0.03, 0.02, 0.001, 0.002, -0.001])
@@ -132,6 +193,7 @@ def main() -> None:
     eig12, eig6 = side_by_side([lambda: np.linalg.eig(A), lambda: np.linalg.eig(A[:6, :6])],
                                repeat, number)
     print(f'  {"(numpy eig alone: 12x12 / 6x6)":36s} {eig12:9.1f} us / {eig6:.1f} us')
+    compare_part(model, xi, max(repeat, 5) * 3, max(number // 20, 20), previous)
 
     chain = JointChain.from_yaml(ROOT / 'config' / 'default_spine.yaml')
     screws = chain.unloaded_screws()

@@ -14,6 +14,8 @@
 
 #include "tensegrity_stiffness/kernel.h"
 
+#include "dense_solve.hpp"
+
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -21,6 +23,7 @@
 
 namespace {
 
+using tensegrity_stiffness::detail::solve_in_place;
 using Mat6 = double[6][6];
 
 // out = a b for 4x4 row-major rigid transforms.
@@ -106,58 +109,6 @@ void at_b_c(const Mat6 A, const Mat6 B, const Mat6 C, Mat6 out) {
       out[i][j] = acc;
     }
   }
-}
-
-// Solves A X = B in place (A: m x m row-major, B: m x r row-major) by Gaussian elimination with
-// partial pivoting (as LAPACK's dgesv); false when a pivot is exactly zero (singular).
-bool solve_in_place(double* A, double* B, int64_t m, int64_t r) {
-  for (int64_t c = 0; c < m; ++c) {
-    int64_t pivot = c;
-    double best = std::fabs(A[c * m + c]);
-    for (int64_t i = c + 1; i < m; ++i) {
-      const double v = std::fabs(A[i * m + c]);
-      if (v > best) {
-        best = v;
-        pivot = i;
-      }
-    }
-    if (best == 0.0) {
-      return false;
-    }
-    if (pivot != c) {
-      for (int64_t j = 0; j < m; ++j) {
-        std::swap(A[c * m + j], A[pivot * m + j]);
-      }
-      for (int64_t j = 0; j < r; ++j) {
-        std::swap(B[c * r + j], B[pivot * r + j]);
-      }
-    }
-    const double d = A[c * m + c];
-    for (int64_t i = c + 1; i < m; ++i) {
-      const double f = A[i * m + c] / d;
-      if (f == 0.0) {
-        continue;
-      }
-      A[i * m + c] = 0.0;
-      for (int64_t j = c + 1; j < m; ++j) {
-        A[i * m + j] -= f * A[c * m + j];
-      }
-      for (int64_t j = 0; j < r; ++j) {
-        B[i * r + j] -= f * B[c * r + j];
-      }
-    }
-  }
-  for (int64_t c = m - 1; c >= 0; --c) {
-    const double d = A[c * m + c];
-    for (int64_t j = 0; j < r; ++j) {
-      double acc = B[c * r + j];
-      for (int64_t k = c + 1; k < m; ++k) {
-        acc -= A[c * m + k] * B[k * r + j];
-      }
-      B[c * r + j] = acc / d;
-    }
-  }
-  return true;
 }
 
 // K = C^-1 into K_base and Ad_tip^T K Ad_tip into K_tool (either may be null): TSK_OK, or

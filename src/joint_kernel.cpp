@@ -8,17 +8,25 @@
 //   A_j = df/ds = gamma s s^T + beta I,  beta = phi / l,  gamma = (phi' - beta) / l^2,
 //   H_D = sum [A; P A],  H_G = sum [A hat(q); P A hat(q)]  (P = hat(p1_j), q_j = T p2_j),
 //   K = [H_G G - H_D Q, -H_D G],  K_c = [H_D, -H_G].
+// Built on the same evaluation: the linear model of link 2's dynamics at an equilibrium
+// (dynamics.py, JointDynamics._blocks: M = J_b^T G J_b, the blocks J_l^T Pi K, -L^T C L,
+// J_l^T Pi dF/dl0, J_l^T Pi and M^-1 of them), the stiffness controller's pose terms
+// (control/controller.py, pose_terms_numpy) and exp(hat(xi)) alone.
 // The numpy implementation in joint.py stays the reference and the fallback; the tests hold this
 // kernel to it (test/test_joint_kernel.py); test/test_kernel_math.cpp to closed forms. The C ABI
 // is declared in include/tensegrity_stiffness/kernel.h (loaded with ctypes: no Python headers).
 
 #include "tensegrity_stiffness/kernel.h"
 
+#include "dense_solve.hpp"
+
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 
 namespace {
+
+using tensegrity_stiffness::detail::solve_in_place;
 
 struct Coefficients {
   double a, b, c, b1, c1;
@@ -110,6 +118,23 @@ void kinematics(const tsk_joint_model& model, const double* xi, double* T, doubl
     Q[2][j] = d[2][j] - ty * G[0][j] + tx * G[1][j];
   }
 }
+
+// J = [[G, 0], [Q, G]] (6x6 row-major) of one screw (the SE(3) left Jacobian, eqs. 14-18).
+void left_jacobian(const tsk_joint_model& model, const double* xi, double J[6][6]) {
+  double T[16], G[3][3], Q[3][3];
+  kinematics(model, xi, T, G, Q);
+  for (int i = 0; i < 3; ++i) {
+    for (int c = 0; c < 3; ++c) {
+      J[i][c] = G[i][c];
+      J[i][c + 3] = 0.0;
+      J[i + 3][c] = Q[i][c];
+      J[i + 3][c + 3] = G[i][c];
+    }
+  }
+}
+
+// Index of the swap Pi of the 3-blocks ([f; m] <-> [m; f]).
+inline int swap_block(int i) { return i < 3 ? i + 3 : i - 3; }
 
 // One screw: returns false when a string is shorter than min_string_length.
 bool evaluate_one(const tsk_joint_model& model, const double* x, const double* r, int64_t mode, double* T,
@@ -468,6 +493,255 @@ int64_t tsk_joint_measure_packed(const tsk_joint_model* model, int64_t mode, dou
         dphi[6 * j + 3 + c] = d * trans;
       }
     }
+    return TSK_OK;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
+}
+
+int64_t tsk_joint_linear_size(int64_t n_strings) {
+  if (n_strings < 1 || n_strings > kMaxCount) {
+    return TSK_ERROR_COUNT;
+  }
+  return 6 + 6 + 36 + 36 + 12 * (18 + n_strings) + 1;
+}
+
+int64_t tsk_joint_linear_model(const tsk_joint_model* model, const double* inertia,
+                               const double* damping, double equilibrium_tolerance, double* buf,
+                               int64_t buf_len, double* lin, int64_t lin_len) {
+  try {
+    // Every check before anything is written (the evaluation checks buf).
+    const int64_t checked = check_model(model);
+    if (checked != TSK_OK) {
+      return checked;
+    }
+    if (inertia == nullptr || lin == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (!(equilibrium_tolerance >= 0.0)) {
+      return TSK_ERROR_ARGUMENT;
+    }
+    const int64_t n = model->n_strings;
+    if (lin_len < tsk_joint_linear_size(n)) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    const int64_t status = tsk_joint_evaluate_packed(model, TSK_MODE_STIFFNESS, buf, buf_len);
+    if (status != TSK_OK) {
+      return status;
+    }
+    const double* xi = buf;
+    const double* rest = buf + 6;
+    const double* s = buf + 6 + n + 16;
+    const double* lengths = s + 3 * n;
+    const double* phi = lengths + n;
+    const double* wrench = phi + n;
+    const double* K = wrench + 6;
+    const double* W = lin;
+    double* net = lin + 6;
+    double* Jl_out = net + 6;
+    double* M_out = Jl_out + 36;
+    const int64_t width = 18 + n;
+    double* R = M_out + 36;
+    double* S = R + 6 * width;
+    double* flag = S + 6 * width;
+    // J_l = J(xi), J_b = J(-xi); M = J_b^T G J_b.
+    double J[6][6], Jb[6][6];
+    left_jacobian(*model, xi, J);
+    const double minus[6] = {-xi[0], -xi[1], -xi[2], -xi[3], -xi[4], -xi[5]};
+    left_jacobian(*model, minus, Jb);
+    double GJ[6][6];
+    for (int i = 0; i < 6; ++i) {
+      for (int c = 0; c < 6; ++c) {
+        double acc = 0.0;
+        for (int e = 0; e < 6; ++e) {
+          acc += inertia[6 * i + e] * Jb[e][c];
+        }
+        GJ[i][c] = acc;
+      }
+    }
+    double M[36];
+    for (int i = 0; i < 6; ++i) {
+      for (int c = 0; c < 6; ++c) {
+        double acc = 0.0;
+        for (int e = 0; e < 6; ++e) {
+          acc += Jb[e][i] * GJ[e][c];
+        }
+        M[6 * i + c] = acc;
+        M_out[6 * i + c] = acc;
+        Jl_out[6 * i + c] = J[i][c];
+      }
+    }
+    // F + W and the equilibrium test of dynamics.py (|F + W| <= tol max(max tension, 1e-300)).
+    double top = 0.0, largest = 0.0;
+    for (int64_t j = 0; j < n; ++j) {
+      top = std::fmax(top, phi[j]);
+    }
+    for (int i = 0; i < 6; ++i) {
+      net[i] = wrench[i] + W[i];
+      largest = std::fmax(largest, std::fabs(net[i]));
+    }
+    *flag = largest > equilibrium_tolerance * std::fmax(top, 1e-300) ? 0.0 : 1.0;
+    // R = [J_l^T Pi K | -L^T C L | J_l^T Pi dF/dl0 | J_l^T Pi], (J_l^T Pi)_ic = J_l[Pi c][i].
+    for (int i = 0; i < 6; ++i) {
+      double* row = R + width * i;
+      for (int c = 0; c < 6; ++c) {
+        double acc = 0.0;
+        for (int e = 0; e < 6; ++e) {
+          acc += J[swap_block(e)][i] * K[6 * e + c];
+        }
+        row[c] = acc;
+        row[6 + c] = 0.0;
+        row[12 + n + c] = J[swap_block(c)][i];
+      }
+    }
+    for (int64_t j = 0; j < n; ++j) {
+      // The unit wrench w = [p1 x u; u] ([m; f]) and L_j = -w^T J_l.
+      const double l = lengths[j];
+      const double u[3] = {s[3 * j] / l, s[3 * j + 1] / l, s[3 * j + 2] / l};
+      const double* a1 = model->p1 + 3 * j;
+      const double w[6] = {a1[1] * u[2] - a1[2] * u[1], a1[2] * u[0] - a1[0] * u[2],
+                           a1[0] * u[1] - a1[1] * u[0], u[0], u[1], u[2]};
+      // d tension / d l0: Hooke -k (taut); paper -k / l (taut), -k s / lmax^2 (saturated).
+      const double r0 = rest[j];
+      const double lmax = r0 + model->max_stretch[j];
+      const bool slack = l <= r0, saturated = l >= lmax;
+      const double kj = model->k[j];
+      double dt = 0.0;
+      if (!(slack || saturated)) {
+        dt = model->law == TSK_LAW_HOOKE ? -kj : -kj / l;
+      } else if (saturated && model->law == TSK_LAW_PAPER) {
+        dt = -kj * model->max_stretch[j] / (lmax * lmax);
+      }
+      double L[6];
+      for (int c = 0; c < 6; ++c) {
+        double acc = 0.0, dl0 = 0.0;
+        for (int e = 0; e < 6; ++e) {
+          acc += w[e] * J[e][c];
+          dl0 += J[e][c] * (w[e] * dt);
+        }
+        L[c] = -acc;
+        R[width * c + 12 + j] = dl0;
+      }
+      const double cj = damping == nullptr ? 0.0 : damping[j];
+      if (cj != 0.0) {
+        for (int a = 0; a < 6; ++a) {
+          const double ca = L[a] * cj;
+          for (int b = 0; b < 6; ++b) {
+            R[width * a + 6 + b] -= ca * L[b];
+          }
+        }
+      }
+    }
+    // S = M^-1 R (one solve for all blocks).
+    for (int64_t i = 0; i < 6 * width; ++i) {
+      S[i] = R[i];
+    }
+    if (!solve_in_place(M, S, 6, width)) {
+      return TSK_ERROR_SINGULAR_SYSTEM;
+    }
+    return TSK_OK;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
+}
+
+int64_t tsk_joint_pose_terms_size(int64_t n_strings) {
+  if (n_strings < 1 || n_strings > kMaxCount) {
+    return TSK_ERROR_COUNT;
+  }
+  return 16 + 43 * n_strings + 36;
+}
+
+int64_t tsk_joint_pose_terms(const tsk_joint_model* model, double* buf, int64_t buf_len) {
+  try {
+    const int64_t checked = check_model(model);
+    if (checked != TSK_OK) {
+      return checked;
+    }
+    if (buf == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    const int64_t n = model->n_strings;
+    if (buf_len < tsk_joint_pose_terms_size(n)) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    const double* T = buf;
+    double* lengths = buf + 16;
+    double* B = lengths + n;
+    double* K0 = B + 6 * n;
+    double* Mj = K0 + 36;
+    double K0_acc[36] = {0.0};
+    for (int64_t j = 0; j < n; ++j) {
+      const double* p = model->p1 + 3 * j;
+      const double* b2 = model->p2 + 3 * j;
+      double q[3], sv[3];
+      for (int i = 0; i < 3; ++i) {
+        q[i] = b2[0] * T[4 * i] + b2[1] * T[4 * i + 1] + b2[2] * T[4 * i + 2] + T[4 * i + 3];
+        sv[i] = p[i] - q[i];
+      }
+      const double l = std::sqrt(sv[0] * sv[0] + sv[1] * sv[1] + sv[2] * sv[2]);
+      if (l < model->min_string_length) {
+        return TSK_ERROR_ZERO_LENGTH;
+      }
+      lengths[j] = l;
+      const double u[3] = {sv[0] / l, sv[1] / l, sv[2] / l};
+      // X = [u; p1 x u] ([f; m]): the wrench per unit tension, column j of B.
+      const double X[6] = {u[0], u[1], u[2], p[1] * u[2] - p[2] * u[1],
+                           p[2] * u[0] - p[0] * u[2], p[0] * u[1] - p[1] * u[0]};
+      const double kj = model->k[j];
+      const double a = model->law == TSK_LAW_HOOKE ? kj : kj / l;
+      const double bj = model->law == TSK_LAW_HOOKE ? 0.0 : -1.0 / l;
+      const double coef = bj - 1.0 / l;
+      // ZE = [[I, -hat(q)], [hat(p), -hat(p) hat(q)]] with hat(p) hat(q) = q p^T - (p . q) I:
+      // -hat(p) hat(q) has -q_r p_c off the diagonal and p . q - p_r q_r on it.
+      double ZE[6][6];
+      for (int r = 0; r < 3; ++r) {
+        for (int c = 0; c < 3; ++c) {
+          ZE[r][c] = r == c ? 1.0 : 0.0;
+          ZE[r + 3][c + 3] = -(q[r] * p[c]);
+        }
+        const int r1 = (r + 1) % 3, r2 = (r + 2) % 3;
+        ZE[r + 3][r + 3] = p[r1] * q[r1] + p[r2] * q[r2];
+      }
+      ZE[0][3] = 0.0, ZE[0][4] = q[2], ZE[0][5] = -q[1];
+      ZE[1][3] = -q[2], ZE[1][4] = 0.0, ZE[1][5] = q[0];
+      ZE[2][3] = q[1], ZE[2][4] = -q[0], ZE[2][5] = 0.0;
+      ZE[3][0] = 0.0, ZE[3][1] = -p[2], ZE[3][2] = p[1];
+      ZE[4][0] = p[2], ZE[4][1] = 0.0, ZE[4][2] = -p[0];
+      ZE[5][0] = -p[1], ZE[5][1] = p[0], ZE[5][2] = 0.0;
+      double* Mrow = Mj + 36 * j;
+      for (int r = 0; r < 6; ++r) {
+        B[n * r + j] = X[r];
+        for (int c = 0; c < 6; ++c) {
+          const double xx = X[r] * X[c];
+          K0_acc[6 * r + c] += a * xx;
+          Mrow[6 * r + c] = coef * xx + ZE[r][c] / l;
+        }
+      }
+    }
+    for (int i = 0; i < 36; ++i) {
+      K0[i] = K0_acc[i];
+    }
+    return TSK_OK;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
+}
+
+int64_t tsk_joint_transform(const tsk_joint_model* model, double* buf, int64_t buf_len) {
+  try {
+    const int64_t checked = check_model(model);
+    if (checked != TSK_OK) {
+      return checked;
+    }
+    if (buf == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (buf_len < 22) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    double G[3][3], Q[3][3];
+    kinematics(*model, buf, buf + 6, G, Q);
     return TSK_OK;
   } catch (...) {
     return TSK_ERROR_INTERNAL;

@@ -25,8 +25,9 @@ extern "C" {
 
 /* Version of this ABI: bumped with every change below (1: the series tables set through a
  * global tsk_set_series, positive return values as screw indices; 2: without
- * tsk_joint_measure_packed). */
-#define TSK_ABI_VERSION 3
+ * tsk_joint_measure_packed; 3: without tsk_joint_linear_model, tsk_joint_pose_terms,
+ * tsk_qp_warm_face and tsk_joint_transform). */
+#define TSK_ABI_VERSION 4
 
 /* Status codes. */
 #define TSK_OK 0
@@ -36,7 +37,8 @@ extern "C" {
                                               lengths are neither n nor n x n_screws */
 #define TSK_ERROR_ARGUMENT (-4)            /* an unknown mode, force law or output selection */
 #define TSK_ERROR_ZERO_LENGTH (-5)         /* a string shorter than min_string_length */
-#define TSK_ERROR_SINGULAR_SYSTEM (-6)     /* tsk_chain_tip: the 6N x 6N system is singular */
+#define TSK_ERROR_SINGULAR_SYSTEM (-6)     /* tsk_chain_tip: the 6N x 6N system is singular;
+                                              tsk_joint_linear_model: the mass matrix is */
 #define TSK_ERROR_SINGULAR_COMPLIANCE (-7) /* tsk_chain_tip: the tip compliance is singular */
 #define TSK_ERROR_INTERNAL (-8)            /* a C++ exception, caught at the boundary */
 
@@ -51,6 +53,13 @@ extern "C" {
 
 /* Rows of the series table: the Taylor coefficients of a, b, c, b1, c1 (screw.py). */
 #define TSK_SERIES_ROWS 5
+
+/* Outcomes of tsk_qp_warm_face (a value in its buffer): the face is optimal; it is not (the
+ * solution leaves the box or A t = b, or a multiplier is negative); its KKT system is singular
+ * or solved inaccurately (the caller's least squares decides). */
+#define TSK_FACE_OPTIMAL 0
+#define TSK_FACE_REJECTED 1
+#define TSK_FACE_SINGULAR 2
 
 /* Outputs of tsk_chain_tip besides the tip wrench (a bit mask). */
 #define TSK_TIP_BASE 1
@@ -101,6 +110,62 @@ int64_t tsk_joint_measure_size(int64_t n_strings);
  * sensor_models.string_predictions_unchecked (and pose_jacobian). */
 int64_t tsk_joint_measure_packed(const tsk_joint_model* model, int64_t mode, double* buf,
                                  int64_t buf_len, double* meas, int64_t meas_len);
+
+/* Doubles of the linear-model buffer of one screw for n strings (tsk_joint_linear_model): the
+ * input W (6), then F + W (6), J_l (36), M = J_b^T G J_b (36), the right-hand sides
+ * R = [J_l^T Pi K | -L^T C L | J_l^T Pi dF/dl0 | J_l^T Pi] (6 x (18 + n), row-major), M^-1 R
+ * (the same shape) and the equilibrium flag (1). */
+int64_t tsk_joint_linear_size(int64_t n_strings);
+
+/* The linear model of link 2's dynamics at one screw with zero velocity (dynamics.py,
+ * JointDynamics.linearize at an equilibrium): tsk_joint_evaluate_packed (same buf; K without
+ * K_c), then in lin (lin_len >= tsk_joint_linear_size(n); it holds the external wrench W, [f; m]
+ * in {1}, on entry) the blocks above, with J_b = J_l(-xi), G = inertia (6 x 6 spatial inertia
+ * about {2}'s origin, twists [w; v]), Pi the swap of the 3-blocks, L = dl/dxi (n x 6), C =
+ * diag(damping) (n values N s/m, or null: no damping, that block 0) and dF/dl0 the rest-length
+ * derivative of the wrench. The flag is 1 when |F + W|_max <= equilibrium_tolerance
+ * max(max tension, 1e-300) (the blocks are then the linear model; elsewhere the derivatives of
+ * J and M, not computed here, add to the first block), else 0. Errors: those of the
+ * evaluation, TSK_ERROR_ARGUMENT for a negative or NaN tolerance, TSK_ERROR_SINGULAR_SYSTEM. */
+int64_t tsk_joint_linear_model(const tsk_joint_model* model, const double* inertia,
+                               const double* damping, double equilibrium_tolerance, double* buf,
+                               int64_t buf_len, double* lin, int64_t lin_len);
+
+/* T = exp(hat(xi)) (eq. 2) of one screw with the model's series tables: buf (buf_len >= 22)
+ * holds xi (6) on entry and T (16, row-major 4 x 4) after it; the same formulas as the
+ * evaluation's (and geometry/screw.py's exp_se3). */
+int64_t tsk_joint_transform(const tsk_joint_model* model, double* buf, int64_t buf_len);
+
+/* Doubles of the pose-terms buffer for n strings: the input T (16, row-major 4 x 4 pose of
+ * link 2 in {1}), then the string lengths (n), B (6 x n, row-major: column j the wrench [f; m]
+ * of string j per unit tension), K0 (36) and M (n x 36) with K_c(t) = K0 + sum_j t_j M_j. */
+int64_t tsk_joint_pose_terms_size(int64_t n_strings);
+
+/* What stays fixed at a pose for the tension QP of the stiffness controller (control/
+ * controller.py, pose_terms_at; eqs. 7-11), into buf (buf_len >= tsk_joint_pose_terms_size(n);
+ * it holds T on entry). TSK_ERROR_ZERO_LENGTH (outputs partly written) for a string shorter
+ * than min_string_length. */
+int64_t tsk_joint_pose_terms(const tsk_joint_model* model, double* buf, int64_t buf_len);
+
+/* Doubles of the warm-face buffer of a QP with n variables and m equalities: the inputs P
+ * (n x n), c (n), A (m x n), b (m), lo (n), hi (n), the start t0 (n), the working set at_lo (n)
+ * and at_hi (n) as 0 / 1 (at most one set per variable), then the outputs t (n), nu (m) and the
+ * outcome (1, a TSK_FACE_* value). */
+int64_t tsk_qp_face_size(int64_t n, int64_t m);
+
+/* Step 1 of the stiffness controller's warm-started QP (control/controller.py, solve_box_qp):
+ * min 1/2 t'Pt - c't s.t. A t = b, lo <= t <= hi on the face of the working set. t starts at
+ * lo / hi on the working set, t0 elsewhere; the free entries and nu solve the face's KKT system
+ * [[P_FF, A_F'], [A_F, 0]] [t_F; nu] = [c_F - P_FX t_X; b - A_X t_X]. TSK_FACE_SINGULAR when
+ * that system is singular or its residual exceeds residual_tolerance (1 + |rhs|_max);
+ * TSK_FACE_OPTIMAL (t clipped to the box) when lo - s <= t <= hi + s (s = bound_slack
+ * max(1, |hi - lo|)), |A t - b|_2 <= feasibility_tolerance and every multiplier of the working
+ * set is >= -multiplier_tolerance max(1, |P|_max, |c|_max); else TSK_FACE_REJECTED (also with no
+ * free variable). Errors: null buf, counts (n < 1, m < 0), a short buffer, a negative or NaN
+ * tolerance (TSK_ERROR_ARGUMENT). */
+int64_t tsk_qp_warm_face(int64_t n, int64_t m, double feasibility_tolerance,
+                         double multiplier_tolerance, double residual_tolerance,
+                         double bound_slack, double* buf, int64_t buf_len);
 
 /* Doubles of the output buffer of a batch: blocks of all screws one after the other, T 16N,
  * s 3nN, lengths nN, tensions nN, wrench 6N, K 36N, K_c 36N, then slack nN and saturated nN as

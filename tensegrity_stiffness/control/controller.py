@@ -62,6 +62,7 @@ from tensegrity_stiffness.geometry.validation import (
     finite_array_of_shape,
     finite_scalar,
 )
+from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.active_set import (
     ACTIVE_SET_TOLERANCE,
     MAX_ACTIVE_SET_ITERATIONS,
@@ -78,7 +79,7 @@ from tensegrity_stiffness.mechanics.design import (
     relative_stiffness_error,
     rest_from_tensions,
 )
-from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.joint import MIN_STRING_LENGTH, JointModel
 
 __all__ = [
     'ACTIVE_SET_TOLERANCE',
@@ -87,6 +88,8 @@ __all__ = [
     'DEFAULT_INTEGRAL_GAIN',
     'DEFAULT_INTEGRAL_LIMIT',
     'DEFAULT_PROPORTIONAL_GAIN',
+    'FACE_BOUND_SLACK',
+    'FACE_RESIDUAL_TOLERANCE',
     'FEASIBILITY_TOLERANCE',
     'MAX_ACTIVE_SET_ITERATIONS',
     'POSE_ROTATION_TOLERANCE',
@@ -105,10 +108,13 @@ __all__ = [
     'adjoint_twist',
     'pose_terms',
     'pose_terms_at',
+    'pose_terms_numpy',
     'relative_stiffness_error',
     'rest_from_tensions',
     'solve_box_qp',
     'tension_bounds',
+    'warm_face',
+    'warm_face_numpy',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -281,12 +287,34 @@ def pose_terms(model: JointModel, screw: ArrayLike) -> PoseTerms:
 
 
 def pose_terms_at(model: JointModel, T: FloatArray) -> PoseTerms:
-    """:class:`PoseTerms` at the pose ``T`` (4, 4) of link 2 in {1} (no log map needed)."""
+    """:class:`PoseTerms` at the pose ``T`` (4, 4) of link 2 in {1} (no log map needed): in the
+    compiled kernel (``tsk_joint_pose_terms``) when the model has it, else in numpy
+    (:func:`pose_terms_numpy`, the reference)."""
+    kn = model.compiled_kernel
+    if kn is None:
+        return pose_terms_numpy(model, T)
+    buf = np.empty(kn.pose_terms_size)
+    buf[:16] = T.reshape(16)
+    status = kn.pose_terms(kn.model, kernel.address(buf), kn.pose_terms_size)
+    if status != kernel.OK:
+        if status != kernel.ERROR_ZERO_LENGTH:
+            kernel.check(status, 'tsk_joint_pose_terms')
+        raise ValueError('screw: a string has zero length at this screw')
+    n = kn.n
+    lengths = buf[kn.pose_lengths:kn.pose_B]
+    return PoseTerms(lengths, buf[kn.pose_B:kn.pose_K0].reshape(6, n),
+                     buf[kn.pose_K0:kn.pose_M].reshape(6, 6),
+                     buf[kn.pose_M:kn.pose_terms_size].reshape(n, 6, 6),
+                     _tension_caps(model, lengths))
+
+
+def pose_terms_numpy(model: JointModel, T: FloatArray) -> PoseTerms:
+    """:func:`pose_terms_at` in numpy: the reference of the compiled kernel and its fallback."""
     p1 = model.link1_nodes[model.connections[:, 0]]
     q = model.link2_nodes[model.connections[:, 1]] @ T[:3, :3].T + T[:3, 3]
     s = p1 - q
     lengths = np.sqrt(np.einsum('ij,ij->i', s, s))
-    if lengths.min() < 1e-12:
+    if lengths.min() < MIN_STRING_LENGTH:
         raise ValueError('screw: a string has zero length at this screw')
     u = s / lengths[:, None]
     X = np.empty((lengths.size, 6))
@@ -301,18 +329,26 @@ def pose_terms_at(model: JointModel, T: FloatArray) -> PoseTerms:
     ZE[:, :3, 3:] = -hq
     ZE[:, 3:, :3] = hp
     ZE[:, 3:, 3:] = -hp @ hq
-    k, m = model.k, model.max_stretch
+    k = model.k
     if model.force_law == 'hooke':
         a, b = k, np.zeros(n)
-        positive, below_max = k * lengths, k * m
     else:
         a, b = k / lengths, -1.0 / lengths
-        positive, below_max = k.copy(), k * m / lengths
     XX = X[:, :, None] * X[:, None, :]
     K0 = np.einsum('j,jab->ab', a, XX)
     M = (b - 1.0 / lengths)[:, None, None] * XX + ZE / lengths[:, None, None]
-    cap = (1.0 - BOUND_MARGIN) * np.minimum(positive, below_max)
-    return PoseTerms(lengths, X.T.copy(), K0, M, cap)
+    return PoseTerms(lengths, X.T.copy(), K0, M, _tension_caps(model, lengths))
+
+
+def _tension_caps(model: JointModel, lengths: FloatArray) -> FloatArray:
+    """:attr:`PoseTerms.cap`: the tensions of a zero rest length and of the maximum stretch
+    (eq. 8), the smaller, shrunk by ``BOUND_MARGIN``."""
+    k, m = model.k, model.max_stretch
+    if model.force_law == 'hooke':
+        positive, below_max = k * lengths, k * m
+    else:
+        positive, below_max = k, k * m / lengths
+    return (1.0 - BOUND_MARGIN) * np.minimum(positive, below_max)
 
 
 def tension_bounds(model: JointModel, lengths: FloatArray, rest_min: FloatArray,
@@ -341,6 +377,13 @@ class QPResult:
     warm: bool
 
 
+#: A face's KKT solution counts as accurate when its residual is at most this times
+#: ``1 + |rhs|`` (else the least squares of the face decides).
+FACE_RESIDUAL_TOLERANCE = 1e-10
+#: The start face's optimum may leave the box by this times ``max(1, hi - lo)`` (then clipped).
+FACE_BOUND_SLACK = 1e-12
+
+
 def _face(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, t: FloatArray,
           free: BoolArray) -> tuple[FloatArray, FloatArray]:
     """Minimiser of ``1/2 t'Pt - c't`` on the face (fixed variables at ``t``) with ``A t = b``:
@@ -350,7 +393,8 @@ def _face(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, t: FloatAr
     try:
         sol = np.linalg.solve(K, rhs)
         # NaN fails the comparison too; a near-singular face gives a large residual
-        if not float(np.abs(K @ sol - rhs).max()) <= 1e-10 * (1.0 + float(np.abs(rhs).max())):
+        if not float(np.abs(K @ sol - rhs).max()) <= FACE_RESIDUAL_TOLERANCE * (
+                1.0 + float(np.abs(rhs).max())):
             raise np.linalg.LinAlgError
     except np.linalg.LinAlgError:
         sol = np.linalg.lstsq(K, rhs, rcond=None)[0]
@@ -364,33 +408,77 @@ def _multipliers(P: FloatArray, c: FloatArray, A: FloatArray, t: FloatArray, nu:
     return np.where(at_lo, grad, np.where(at_hi, -grad, 0.0))
 
 
+def warm_face(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
+              hi: FloatArray, t_start: FloatArray, at_lo: BoolArray, at_hi: BoolArray,
+              use_kernel: bool = True) -> FloatArray | None:
+    """Step 1 of :func:`solve_box_qp`: the optimum on the face of the working set ``at_lo`` /
+    ``at_hi`` (disjoint; the other tensions from ``t_start``), clipped to the box, when it is
+    the QP's optimum (inside the box to :data:`FACE_BOUND_SLACK`, ``A t = b`` to
+    ``FEASIBILITY_TOLERANCE``, every bound multiplier >= ``-ACTIVE_SET_TOLERANCE * max(1, |P|,
+    |c|)``), else ``None``. In the compiled kernel (``tsk_qp_warm_face``) when it is loaded and
+    ``use_kernel``; a singular face, and the numpy path, are :func:`warm_face_numpy`."""
+    library = kernel.library() if use_kernel else None
+    if library is None:
+        return warm_face_numpy(P, c, A, b, lo, hi, t_start, at_lo, at_hi)
+    n, m = lo.size, b.size
+    # One buffer (inputs copied into it, outputs after them): C reads no other memory.
+    out = n * n + m * n + 6 * n + m
+    buf = np.concatenate([P.reshape(-1), c, A.reshape(-1), b, lo, hi, t_start, at_lo, at_hi,
+                          np.empty(n + m + 1)])
+    size = buf.size
+    kernel.check(library.qp_warm_face(n, m, FEASIBILITY_TOLERANCE, ACTIVE_SET_TOLERANCE,
+                                      FACE_RESIDUAL_TOLERANCE, FACE_BOUND_SLACK,
+                                      kernel.address(buf), size), 'tsk_qp_warm_face')
+    outcome = buf[size - 1]
+    if outcome == kernel.FACE_OPTIMAL:
+        return buf[out:out + n]
+    if outcome == kernel.FACE_REJECTED:
+        return None
+    return warm_face_numpy(P, c, A, b, lo, hi, t_start, at_lo, at_hi)
+
+
+def warm_face_numpy(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray,
+                    lo: FloatArray, hi: FloatArray, t_start: FloatArray, at_lo: BoolArray,
+                    at_hi: BoolArray) -> FloatArray | None:
+    """:func:`warm_face` in numpy (its reference; least squares on a singular face)."""
+    t = np.where(at_lo, lo, np.where(at_hi, hi, t_start))
+    free = ~(at_lo | at_hi)
+    if not free.any():
+        return None
+    tf, nu = _face(P, c, A, b, t, free)
+    trial = t.copy()
+    trial[free] = tf
+    span = FACE_BOUND_SLACK * np.maximum(1.0, np.abs(hi - lo))
+    if not (np.all(trial >= lo - span) and np.all(trial <= hi + span)
+            and np.linalg.norm(A @ trial - b) <= FEASIBILITY_TOLERANCE):
+        return None
+    mu = _multipliers(P, c, A, trial, nu, at_lo, at_hi)
+    scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
+    if mu.min() >= -ACTIVE_SET_TOLERANCE * scale:
+        return np.clip(trial, lo, hi)
+    return None
+
+
 def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
                  hi: FloatArray, t_start: FloatArray, at_lo: BoolArray | None = None,
-                 at_hi: BoolArray | None = None) -> QPResult:
+                 at_hi: BoolArray | None = None, use_kernel: bool = True) -> QPResult:
     """``min 1/2 t'Pt - c't`` s.t. ``A t = b``, ``lo <= t <= hi`` (P positive semidefinite) by a
     primal active-set method, warm-started from ``t_start`` and the working set ``at_lo`` /
-    ``at_hi`` of the last solve. First the start face alone (optimal in steady state); then a
+    ``at_hi`` of the last solve. First the start face alone (optimal in steady state:
+    :func:`warm_face`); then a
     feasible start: ``t_start`` projected onto ``A t = b`` over its free strings, or if that
     leaves the box, the box least squares ``min |A t - b|`` from it; then the active set.
     ``converged`` is False when no feasible point exists (residual above
-    :data:`FEASIBILITY_TOLERANCE`) or the iteration limit is hit."""
+    :data:`FEASIBILITY_TOLERANCE`) or the iteration limit is hit. ``use_kernel``: the first
+    step in the compiled kernel when it is loaded (the controllers pass their model's
+    ``uses_kernel``)."""
     n = lo.size
     wl = np.zeros(n, bool) if at_lo is None else at_lo.copy()
     wh = np.zeros(n, bool) if at_hi is None else (at_hi & ~wl)
     # 1. The last face.
-    t = np.where(wl, lo, np.where(wh, hi, t_start))
-    free = ~(wl | wh)
-    if free.sum() >= 1:
-        tf, nu = _face(P, c, A, b, t, free)
-        trial = t.copy()
-        trial[free] = tf
-        span = 1e-12 * np.maximum(1.0, np.abs(hi - lo))
-        if (np.all(trial >= lo - span) and np.all(trial <= hi + span)
-                and np.linalg.norm(A @ trial - b) <= FEASIBILITY_TOLERANCE):
-            mu = _multipliers(P, c, A, trial, nu, wl, wh)
-            scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
-            if mu.min() >= -ACTIVE_SET_TOLERANCE * scale:
-                return QPResult(np.clip(trial, lo, hi), wl, wh, 1, True, True)
+    optimum = warm_face(P, c, A, b, lo, hi, t_start, wl, wh, use_kernel)
+    if optimum is not None:
+        return QPResult(optimum, wl, wh, 1, True, True)
     # 2. A feasible start.
     t = np.clip(t_start, lo, hi)
     r = b - A @ t
@@ -511,13 +599,19 @@ def _clamp_integral(z: FloatArray, limit: tuple[float, float]) -> FloatArray:
     return out
 
 
-def _measured(pose: ArrayLike | None, screw: ArrayLike | None) -> FloatArray | None:
+def _exp(kn: kernel.JointKernel | None, xi: FloatArray) -> FloatArray:
+    """``exp_se3`` of one finite screw, in the compiled kernel when there is one."""
+    return exp_se3(xi) if kn is None else kn.exp_se3(xi)
+
+
+def _measured(pose: ArrayLike | None, screw: ArrayLike | None,
+              kn: kernel.JointKernel | None = None) -> FloatArray | None:
     if pose is not None and screw is not None:
         raise ValueError('pose: give at most one of pose and screw')
     if pose is not None:
         return rigid_transform(pose, 'pose', POSE_ROTATION_TOLERANCE)
     if screw is not None:
-        return exp_se3(_screw(screw, 'screw'))
+        return _exp(kn, _screw(screw, 'screw'))
     return None
 
 
@@ -569,6 +663,8 @@ class _PoseFeedback:
     integral_gain: float
     integral_limit: tuple[float, float]
     _z: FloatArray
+    #: The compiled kernel of the exp maps of the feedback (a joint model's), or None.
+    _exp_kernel: kernel.JointKernel | None = None
 
     def _feedback(self, dt: float, target: ControlTarget, pose: ArrayLike | None,
                   screw: ArrayLike | None, wrench_name: str, wrench: ArrayLike | None
@@ -580,7 +676,7 @@ class _PoseFeedback:
         dt = _check_dt(dt)
         if not isinstance(target, ControlTarget):
             raise ValueError('target must be a ControlTarget')
-        measured = _measured(pose, screw)
+        measured = _measured(pose, screw, self._exp_kernel)
         W = np.zeros(6) if wrench is None else finite_array_of_shape(wrench_name, wrench, (6,))
         if measured is not None:
             e, error = _pose_error(target.transform, measured)
@@ -612,6 +708,7 @@ class StiffnessController(_PoseFeedback):
             raise ValueError('limits must be an ActuatorLimits')
         self.model = model
         self.limits = limits
+        self._exp_kernel = model.compiled_kernel
         n = model.n_strings
         (self._rest_min, self._rest_max, self._rate, self._t_min,
          self._t_max) = limits.for_strings(n)
@@ -661,7 +758,7 @@ class StiffnessController(_PoseFeedback):
         Bad input raises ValueError naming it and leaves the state unchanged."""
         dt, W, e, error, z = self._feedback(dt, target, pose, screw, 'external_wrench',
                                             external_wrench)
-        T_d = exp_se3(z + self.proportional_gain * e) @ target.transform
+        T_d = _exp(self._exp_kernel, z + self.proportional_gain * e) @ target.transform
         return self._tick(dt, target, T_d, W, z, error)
 
     def _problem(self, T_d: FloatArray, W: FloatArray) -> _JointProblem | str:
@@ -691,7 +788,8 @@ class StiffnessController(_PoseFeedback):
         if isinstance(pr, str):
             return self._hold(T_d, error, pr)
         P, c = _objective(pr.terms, target, self._S, pr.middle)
-        sol = solve_box_qp(P, c, pr.A, pr.b, pr.lo, pr.hi, pr.start, self._at_lo, self._at_hi)
+        sol = solve_box_qp(P, c, pr.A, pr.b, pr.lo, pr.hi, pr.start, self._at_lo, self._at_hi,
+                           self.model.uses_kernel)
         if not sol.converged:
             return self._hold(T_d, error, _failure(pr.A, pr.b, sol))
         return self._apply(dt, target, T_d, z, error, pr.terms, sol)
@@ -800,6 +898,7 @@ class ChainStiffnessController(_PoseFeedback):
             raise ValueError('chain must be a JointChain')
         N = chain.n_joints
         self.chain = chain
+        self._exp_kernel = chain.joints[0].compiled_kernel
         per_limits = [limits] * N if isinstance(limits, ActuatorLimits) else list(limits)
         if len(per_limits) != N:
             raise ValueError(f'limits must be one ActuatorLimits or one per joint ({N})')
@@ -904,7 +1003,8 @@ class ChainStiffnessController(_PoseFeedback):
         hi = np.concatenate([p.hi for p in prs])
         at_lo = np.concatenate([ctl._at_lo for ctl in self.joints])
         at_hi = np.concatenate([ctl._at_hi for ctl in self.joints])
-        sol = solve_box_qp(P, c, A, b, lo, hi, t_all, at_lo, at_hi)
+        sol = solve_box_qp(P, c, A, b, lo, hi, t_all, at_lo, at_hi,
+                           self.joints[0].model.uses_kernel)
         if not sol.converged:
             text = _failure(A, b, sol)
             return [ctl._hold(x, np.zeros(6), text) for ctl, x in zip(self.joints, xi,
@@ -926,7 +1026,7 @@ class ChainStiffnessController(_PoseFeedback):
         (base, about the tip link's origin; default 0); ``gravity`` as the chain's."""
         dt, W, _, error, z = self._feedback(dt, target, tip_pose, None, 'tip_wrench',
                                             tip_wrench)
-        xi = self._screws_for(exp_se3(z) @ target.transform)
+        xi = self._screws_for(_exp(self._exp_kernel, z) @ target.transform)
         chain = self.chain
         state = chain.evaluate(xi)
         loads = chain.residuals(xi, W, gravity) - state.wrenches

@@ -60,12 +60,14 @@ from typing import Any
 import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
+from scipy.linalg.lapack import dgeev
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.components import SCREW_NAMES
 from tensegrity_stiffness.geometry.screw import ScrewKinematics, check_in_chart, hat, hat3, vee
 from tensegrity_stiffness.geometry.transforms import adjoint
 from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
+from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
 
@@ -380,42 +382,84 @@ class JointModes:
     screw: FloatArray
 
 
+def _dgeev(A: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """LAPACK's ``dgeev`` of a real square ``A`` (through ``scipy.linalg.lapack``, the routine
+    ``np.linalg.eig`` calls, without numpy's per-call wrapping, which costs as much as the
+    decomposition at 6x6): the real and imaginary parts of the eigenvalues and the right
+    eigenvectors in LAPACK's real storage (a complex pair, ``Im > 0`` first, as its real and
+    imaginary parts in two columns). LinAlgError as numpy's for a matrix that is not finite or
+    does not converge."""
+    if not np.isfinite(A).all():
+        raise np.linalg.LinAlgError('Array must not contain infs or NaNs')
+    wr, wi, _, vr, info = dgeev(A, compute_vl=0)
+    if info != 0:
+        raise np.linalg.LinAlgError('Eigenvalues did not converge')
+    return wr, wi, vr
+
+
+def _eigenvectors(vr: FloatArray, wi: FloatArray, columns: NDArray[np.intp]) -> ComplexArray:
+    """Columns ``columns`` of the complex eigenvector matrix ``np.linalg.eig`` returns, from
+    :func:`_dgeev`'s real storage."""
+    out = vr[:, columns].astype(complex)
+    first, second = wi[columns] > 0.0, wi[columns] < 0.0
+    if first.any():
+        out[:, first] += 1j * vr[:, columns[first] + 1]
+    if second.any():
+        out[:, second] = vr[:, columns[second] - 1] - 1j * vr[:, columns[second]]
+    return out
+
+
+def _eig(A: FloatArray) -> tuple[NDArray[Any], NDArray[Any]]:
+    """``np.linalg.eig(A)`` of a real square ``A`` from :func:`_dgeev`: the eigenvalues (real
+    when every one is) and the right eigenvectors as columns (unit norm)."""
+    wr, wi, vr = _dgeev(A)
+    if not wi.any():
+        return wr, vr
+    return wr + 1j * wi, _eigenvectors(vr, wi, np.arange(wr.size))
+
+
 def _modes(A: FloatArray, twist_map: FloatArray, screw: FloatArray, damped: bool) -> JointModes:
     n = A.shape[0] // 2
-    lam, vec = np.linalg.eig(A)
+    wr, wi, vr = _dgeev(A)
+    lam = wr + 1j * wi
     scale = np.abs(lam)
-    real = np.abs(lam.imag) <= REAL_TOLERANCE * np.maximum(scale, 1e-300)
-    upper = np.flatnonzero(~real & (lam.imag > 0.0))
+    real = np.abs(wi) <= REAL_TOLERANCE * np.maximum(scale, 1e-300)
+    upper = np.flatnonzero(~real & (wi > 0.0))
     w = scale[upper]
-    zeta = -lam.real[upper] / w
+    zeta = -wr[upper] / w
     chosen = lam[upper]
-    shapes = vec[:n, upper].T
+    # The first of each complex pair: its eigenvector is columns j + i (j + 1).
+    shapes = (vr[:n, upper] + 1j * vr[:n, upper + 1]).T
     if upper.size < n:
         # Real eigenvalues: overdamped (or unstable) pairs, by ascending |lambda|.
         reals = np.flatnonzero(real)
         order = reals[np.argsort(scale[reals])]
         a, b = order[0::2], order[1::2]
-        l1, l2 = lam.real[a], lam.real[b]
-        wr = np.sqrt(np.abs(l1 * l2))
+        l1, l2 = wr[a], wr[b]
+        wo = np.sqrt(np.abs(l1 * l2))
         with np.errstate(divide='ignore', invalid='ignore'):
-            zr = np.where(wr > 0.0, -(l1 + l2) / (2.0 * wr), np.inf)
-        w, zeta = np.r_[w, wr], np.r_[zeta, zr]
+            zr = np.where(wo > 0.0, -(l1 + l2) / (2.0 * wo), np.inf)
+        w, zeta = np.r_[w, wo], np.r_[zeta, zr]
         chosen = np.r_[chosen, l1.astype(complex)]
-        shapes = np.vstack([shapes, vec[:n, a].T])
+        shapes = np.vstack([shapes, _eigenvectors(vr, wi, a)[:n].T])
     order = np.argsort(w, kind='stable')[:n]
     w, zeta, chosen, shapes = w[order], zeta[order], chosen[order], shapes[order]
-    shapes = shapes / np.linalg.norm(shapes, axis=1, keepdims=True)
-    big = shapes[np.arange(shapes.shape[0]), np.argmax(np.abs(shapes), axis=1)]
-    shapes = shapes * (np.abs(big) / big)[:, None]
+    # Unit norm, largest component real and positive (one scaling of each row).
+    size = np.abs(shapes)
+    rows = np.arange(order.size)
+    largest = size.argmax(axis=1)
+    scaling = size[rows, largest] / (shapes[rows, largest] *
+                                     np.sqrt(np.einsum('ij,ij->i', size, size)))
+    shapes = shapes * scaling[:, None]
     if damped:
         # No eigenvalue grows beyond rounding, none is zero: a mode the strings' damping does
         # not reach (a ring joint's spin about its axis, whose strings keep their lengths to
         # first order) rings on, Re = 0 to rounding, and is not an instability.
-        stable = bool(np.all(lam.real <= REAL_TOLERANCE * scale) and np.all(scale > 0.0))
+        stable = bool(np.all(wr <= REAL_TOLERANCE * scale) and np.all(scale > 0.0))
     else:
         # Undamped: stable when every eigenvalue is +-i w with w > 0 (a constant wrench is not
         # conservative on SE(3), so a loaded joint can also flutter: Re > 0 in a complex pair).
-        stable = bool(np.all(np.abs(lam.real) <= REAL_TOLERANCE * scale) and np.all(scale > 0.0))
+        stable = bool(np.all(np.abs(wr) <= REAL_TOLERANCE * scale) and np.all(scale > 0.0))
     return JointModes(w / (2.0 * math.pi), zeta, chosen, shapes, (twist_map @ shapes.T).real.T,
                       stable, screw)
 
@@ -434,7 +478,7 @@ def _undamped_modes(A21: FloatArray, twist_map: FloatArray, screw: FloatArray) -
     """Modes without damping from the half-size problem: ``A`` has the eigenvalues
     ``+-sqrt(mu)`` with ``mu`` those of ``A21`` (same shapes), so a 6x6 (6N x 6N) eigenproblem
     replaces the 12x12 one. (Kept lean: this is the node's per-input path.)"""
-    mu, vec = np.linalg.eig(A21)
+    mu, vec = _eig(A21)
     lam = 1j * np.sqrt(-mu + 0j)  # the root with Im >= 0: i w for mu = -w^2
     w = np.abs(lam)
     order = np.argsort(w)
@@ -494,6 +538,8 @@ class JointDynamics:
         self._p1_zxy = np.ascontiguousarray(self._p1[:, [2, 0, 1]])
         self._yzx = np.array([1, 2, 0])
         self._zxy = np.array([2, 0, 1])
+        # The compiled linear model (tsk_joint_linear_model), None on the numpy path.
+        self._kernel = model.compiled_kernel
 
     @classmethod
     def from_config(cls, document: Any, string_damping: ArrayLike | None = None
@@ -608,8 +654,9 @@ class JointDynamics:
             dt = np.where(taut, -model.k, 0.0)
         else:  # 'paper': k (l - l0) / l, constant k s / (l0 + s) past lmax (stretch s kept)
             lmax = rest + model.max_stretch
-            dt = np.where(taut, -model.k / state.lengths,
-                          np.where(sat, -model.k * model.max_stretch / lmax ** 2, 0.0))
+            with np.errstate(invalid='ignore'):  # inf / inf for strings without a limit
+                dt = np.where(taut, -model.k / state.lengths,
+                              np.where(sat, -model.k * model.max_stretch / lmax ** 2, 0.0))
         if unit is None:
             unit = self._unit_wrenches(state.string_vectors, state.lengths)
         return (unit * dt[:, None]).T
@@ -636,7 +683,13 @@ class JointDynamics:
     def _blocks(self, x: FloatArray, rest: FloatArray, W: FloatArray, inputs: bool
                 ) -> tuple[FloatArray, FloatArray, FloatArray | None, FloatArray]:
         """``M^-1 dQ/dxi``, ``-M^-1 L^T C L``, ``M^-1 [dQ/dl0, dQ/dW]`` (or None) and ``J_l``:
-        one linear solve for all of them."""
+        one linear solve for all of them; at an equilibrium in the compiled kernel when it is
+        loaded (:meth:`_blocks_in_kernel`), else (and off equilibrium) here in numpy, the
+        reference."""
+        if self._kernel is not None:
+            blocks = self._blocks_in_kernel(x, rest, W)
+            if blocks is not None:
+                return blocks[0], blocks[1], blocks[2] if inputs else None, blocks[3]
         state = self.model.evaluate(x, rest)
         Jl = ScrewKinematics(x).J
         Jb = ScrewKinematics(-x).J
@@ -670,6 +723,38 @@ class JointDynamics:
         ddot = solved[:, 6:12] if damped else np.zeros((6, 6))
         k = 12 if damped else 6
         return dxi, ddot, (solved[:, k:k + n + 6] if inputs else None), Jl
+
+    def _blocks_in_kernel(self, x: FloatArray, rest: FloatArray, W: FloatArray
+                          ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
+        """:meth:`_blocks` (with the inputs' block) in one call of ``tsk_joint_linear_model``
+        (validated ``x``, ``rest``, ``W``): views into its buffer, or ``None`` off an equilibrium
+        (the derivatives of ``J`` and ``M`` are numpy's) or when a string has zero length (the
+        numpy path then raises the error that names it)."""
+        kn = self._kernel
+        # One buffer: the packed evaluation (inputs xi, rest lengths), then the linear model's
+        # (input W); besides it C reads the inertia and the damping, bound to names here (they
+        # outlive the call).
+        buf = np.empty(kn.size + kn.linear_size)
+        lin = kn.size
+        buf[:kn.rest] = x
+        buf[kn.rest:kn.transform] = rest
+        buf[lin:lin + 6] = W
+        start = kernel.address(buf)
+        inertia = np.ascontiguousarray(self.spatial_inertia, dtype=np.float64)
+        damping = np.ascontiguousarray(self._string_damping) if self._damped else None
+        status = kn.linear_model(kn.model, kernel.address(inertia),
+                                 None if damping is None else kernel.address(damping),
+                                 EQUILIBRIUM_TOLERANCE, start, kn.size, start + 8 * lin,
+                                 kn.linear_size)
+        if status != kernel.OK:
+            if status == kernel.ERROR_ZERO_LENGTH:
+                return None
+            kernel.check(status, 'tsk_joint_linear_model')
+        if buf[lin + kn.linear_flag] == 0.0:
+            return None
+        solved = buf[lin + kn.linear_solved:lin + kn.linear_flag].reshape(6, kn.linear_width)
+        Jl = buf[lin + kn.linear_jacobian:lin + kn.linear_mass].reshape(6, 6)
+        return solved[:, :6], solved[:, 6:12], solved[:, 12:], Jl
 
     def modes(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None,
               external_wrench: ArrayLike | None = None) -> JointModes:

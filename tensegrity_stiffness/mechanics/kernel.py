@@ -43,14 +43,17 @@ OFF_VALUES = ('off', '0', 'no', 'false', 'numpy')
 # The mirror of include/tensegrity_stiffness/kernel.h (test/kernel/test_kernel_abi.py holds it
 # to the library: version, struct layout, buffer sizes, status codes).
 #: ABI version this module speaks (``TSK_ABI_VERSION``, ``tsk_abi_version()``).
-ABI_VERSION = 3
+ABI_VERSION = 4
 #: Status codes (``TSK_OK``, ``TSK_ERROR_*``): 0 success, negative errors.
 OK = 0
 ERRORS = {-1: 'NULL_POINTER', -2: 'COUNT', -3: 'BUFFER_SIZE', -4: 'ARGUMENT', -5: 'ZERO_LENGTH',
           -6: 'SINGULAR_SYSTEM', -7: 'SINGULAR_COMPLIANCE', -8: 'INTERNAL'}
 ERROR_ZERO_LENGTH, ERROR_SINGULAR_SYSTEM, ERROR_SINGULAR_COMPLIANCE = -5, -6, -7
+ERROR_NULL_POINTER, ERROR_COUNT, ERROR_BUFFER_SIZE, ERROR_ARGUMENT = -1, -2, -3, -4
 #: Modes of the joint evaluation (``TSK_MODE_*``): everything; K without K_c; the wrench alone.
 MODE_FULL, MODE_STIFFNESS, MODE_WRENCH = 0, 1, 2
+#: Outcomes of ``tsk_qp_warm_face`` (``TSK_FACE_*``): optimal, rejected, singular KKT system.
+FACE_OPTIMAL, FACE_REJECTED, FACE_SINGULAR = 0, 1, 2
 #: Outputs of ``tsk_chain_tip`` besides the tip wrench (``TSK_TIP_*``, a bit mask).
 TIP_BASE, TIP_TOOL = 1, 2
 #: Doubles of ``tsk_chain_tip``'s output buffer: tip wrench 6, K_tip base 36, tool 36.
@@ -167,6 +170,26 @@ class _Library:
         self.measure_packed = lib.tsk_joint_measure_packed
         self.measure_packed.restype = _I
         self.measure_packed.argtypes = [_P, _I, _P, _I, _P, _I]
+        for name in ('tsk_joint_linear_size', 'tsk_joint_pose_terms_size'):
+            getattr(lib, name).restype = _I
+            getattr(lib, name).argtypes = [_I]
+        self.linear_size = lib.tsk_joint_linear_size
+        self.pose_terms_size = lib.tsk_joint_pose_terms_size
+        self.linear_model = lib.tsk_joint_linear_model
+        self.linear_model.restype = _I
+        self.linear_model.argtypes = [_P, _P, _P, _D, _P, _I, _P, _I]
+        self.pose_terms = lib.tsk_joint_pose_terms
+        self.pose_terms.restype = _I
+        self.pose_terms.argtypes = [_P, _P, _I]
+        self.transform = lib.tsk_joint_transform
+        self.transform.restype = _I
+        self.transform.argtypes = [_P, _P, _I]
+        lib.tsk_qp_face_size.restype = _I
+        lib.tsk_qp_face_size.argtypes = [_I, _I]
+        self.qp_face_size = lib.tsk_qp_face_size
+        self.qp_warm_face = lib.tsk_qp_warm_face
+        self.qp_warm_face.restype = _I
+        self.qp_warm_face.argtypes = [_I, _I, _D, _D, _D, _D, _P, _I]
         self.chain_frames = lib.tsk_chain_frames
         self.chain_frames.restype = _I
         self.chain_frames.argtypes = [_I, _P, _P, _P, _P, _I]
@@ -230,6 +253,14 @@ class JointKernel:
     Jacobians to a second one (``measure_size`` doubles, offsets ``measure_*`` from its start):
     the SE(3) left Jacobian ``J`` (36), the pose Jacobian ``P`` (36), ``dl/dxi`` (6n),
     ``dphi/dxi`` (6n) and ``dphi/dl`` (n).
+
+    ``tsk_joint_linear_model`` evaluates it too and writes the linear model of the dynamics to a
+    second buffer (``linear_size`` doubles, offsets ``linear_*``): the external wrench (input,
+    6), ``F + W`` (6), ``J_l`` (36), ``M`` (36), the right-hand sides ``R`` (6 x
+    ``linear_width``), ``M^-1 R`` (the same) and the equilibrium flag (1).
+    ``tsk_joint_pose_terms`` fills a buffer of ``pose_terms_size`` doubles: the pose ``T`` (input,
+    16), then at offsets ``pose_*`` the lengths (n), ``B`` (6 x n), ``K0`` (36), ``M`` (n x 36).
+    :meth:`exp_se3` is ``tsk_joint_transform``.
     """
 
     def __init__(self, library: _Library, p1: NDArray, p2: NDArray, k: NDArray,
@@ -249,6 +280,9 @@ class JointKernel:
         self.evaluate = library.evaluate
         self.evaluate_packed = library.evaluate_packed
         self.measure_packed = library.measure_packed
+        self.linear_model = library.linear_model
+        self.pose_terms = library.pose_terms
+        self._transform = library.transform
         self.rest = 6
         self.transform = self.rest + n
         self.strings = self.transform + 16
@@ -264,6 +298,28 @@ class JointKernel:
         self.measure_tensions = 72 + 6 * n
         self.measure_slope = 72 + 12 * n
         self.measure_size = 72 + 13 * n
+        self.linear_width = 18 + n
+        self.linear_net = 6
+        self.linear_jacobian = 12
+        self.linear_mass = 48
+        self.linear_rhs = 84
+        self.linear_solved = 84 + 6 * self.linear_width
+        self.linear_flag = 84 + 12 * self.linear_width
+        self.linear_size = self.linear_flag + 1
+        self.pose_lengths = 16
+        self.pose_B = 16 + n
+        self.pose_K0 = 16 + 7 * n
+        self.pose_M = 52 + 7 * n
+        self.pose_terms_size = 52 + 43 * n
+
+    def exp_se3(self, xi: NDArray) -> NDArray:
+        """``T = exp(hat(xi))`` (4, 4) of one finite screw (6,) in the kernel
+        (``tsk_joint_transform``): the compiled twin of ``geometry.screw.exp_se3`` (the same
+        formulas and series tables), at a sixth of its cost."""
+        buf = np.empty(22)
+        buf[:6] = xi
+        check(self._transform(self.model, address(buf), 22), 'tsk_joint_transform')
+        return buf[6:].reshape(4, 4)
 
     def batch_layout(self, N: int) -> BatchLayout:
         """Offsets (in doubles) of the blocks of a batch's output buffer for ``N`` screws, in
@@ -283,6 +339,12 @@ class JointKernel:
         """Pickled as its constants (a model sent to the solver worker process): the receiving
         process binds them to its own library, or gets ``None`` (numpy) without one."""
         return joint_kernel, (*self._arrays, self.law, self.min_string_length)
+
+
+def qp_face_size(n: int, m: int) -> int:
+    """Doubles of ``tsk_qp_warm_face``'s buffer for ``n`` variables and ``m`` equalities (the
+    inputs P, c, A, b, lo, hi, t0, at_lo, at_hi, then t, nu and the outcome; ``kernel.h``)."""
+    return n * n + m * n + 7 * n + 2 * m + 1
 
 
 def defaults_header() -> str:

@@ -16,15 +16,24 @@ from tensegrity_stiffness.control.controller import (
     StiffnessController,
     adjoint_twist,
     pose_terms,
+    pose_terms_at,
+    pose_terms_numpy,
     relative_stiffness_error,
     rest_from_tensions,
     solve_box_qp,
     tension_bounds,
+    warm_face,
+    warm_face_numpy,
 )
 from tensegrity_stiffness.geometry.screw import exp_se3
+from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.design import design_rest_lengths, rest_length_sensitivity
 from tensegrity_stiffness.mechanics.joint import JointModel
+
+#: The compiled kernel against the numpy path (relative to each quantity's largest entry).
+KERNEL_TOLERANCE = 1e-12
+needs_kernel = pytest.mark.skipif(not kernel.available(), reason=kernel.status())
 
 DT = 0.002
 RATE = 0.05
@@ -134,6 +143,121 @@ def test_pose_terms_match_the_model(force_law: str) -> None:
         fd = (model.evaluate(xi, plus).cartesian_stiffness
               - model.evaluate(xi, minus).cartesian_stiffness) / (2 * FD_STEP)
         np.testing.assert_allclose(terms.M[j] * dt_dl0[j], fd, atol=1e-5 * np.abs(fd).max())
+
+
+@needs_kernel
+@pytest.mark.parametrize('force_law', ['hooke', 'paper'])
+def test_pose_terms_in_the_kernel_equal_the_numpy_path(force_law: str) -> None:
+    """tsk_joint_pose_terms against pose_terms_numpy at poses near and far from the start."""
+    model = joint(force_law)
+    assert model.uses_kernel
+    rng = np.random.default_rng(2)
+    for k in range(20):
+        xi = near_screw(model, rng) if k < 10 else np.r_[rng.normal(0, 1.0, 3),
+                                                         rng.normal(0, 0.02, 3)]
+        T = exp_se3(xi)
+        new, ref = pose_terms_at(model, T), pose_terms_numpy(model, T)
+        for name in ('lengths', 'B', 'K0', 'M', 'cap'):
+            a, b = getattr(new, name), getattr(ref, name)
+            assert a.shape == b.shape and a.dtype == b.dtype
+            np.testing.assert_allclose(a, b, rtol=0.0, atol=KERNEL_TOLERANCE * np.abs(b).max(),
+                                       err_msg=name)
+
+
+def random_face_qps(rng: np.random.Generator) -> list[tuple]:
+    """QPs of the controller's shape (n = 12, m = 6, P = G'G or I) with working sets of every
+    kind: optimal faces, faces whose optimum leaves the box or has a negative multiplier, no
+    free variable, an infeasible equality and a singular KKT system (two equal columns of A
+    and P)."""
+    cases = []
+    for k in range(60):
+        n, m = 12, 6
+        G = rng.normal(size=(36, n))
+        P = G.T @ G if k % 3 else np.eye(n)
+        c = rng.normal(size=n) * 5.0
+        A = rng.normal(size=(m, n))
+        lo, hi = rng.uniform(0.1, 0.4, n), rng.uniform(0.8, 1.5, n)
+        t0 = rng.uniform(lo, hi)
+        b = A @ t0
+        at_lo = rng.random(n) < 0.15 * (k % 4)
+        at_hi = ~at_lo & (rng.random(n) < 0.1 * (k % 3))
+        if k % 2 == 0:
+            # An optimal face: t0 on its bounds, c = P t0 + A' nu - grad with the bound
+            # multipliers positive (grad > 0 at lo, < 0 at hi).
+            t0 = np.where(at_lo, lo, np.where(at_hi, hi, t0))
+            b = A @ t0
+            grad = np.where(at_lo, 1.0, np.where(at_hi, -1.0, 0.0)) * rng.uniform(0.1, 1.0, n)
+            c = P @ t0 + A.T @ rng.normal(size=m) - grad
+        if k == 7:
+            at_lo[:] = True
+        if k == 8:
+            b = b + 10.0
+        if k == 9:
+            A[:, 1] = A[:, 0]
+            P[:, 1], P[1, :] = P[:, 0], P[0, :]
+        cases.append((P, c, A, b, lo, hi, t0, at_lo, at_hi))
+    return cases
+
+
+@needs_kernel
+def test_warm_face_in_the_kernel_equals_the_numpy_path() -> None:
+    """tsk_qp_warm_face decides as warm_face_numpy (optimal or not) and gives its tensions,
+    on random faces and on the controller's own QPs; every outcome occurs."""
+    rng = np.random.default_rng(3)
+    outcomes = set()
+    for case in random_face_qps(rng):
+        new, ref = warm_face(*case), warm_face_numpy(*case)
+        plain = warm_face(*case, use_kernel=False)
+        assert (plain is None) == (ref is None)
+        if ref is not None:
+            np.testing.assert_array_equal(plain, ref)
+        assert (new is None) == (ref is None)
+        outcomes.add(ref is None)
+        if ref is not None:
+            np.testing.assert_allclose(new, ref, rtol=0.0,
+                                       atol=KERNEL_TOLERANCE * np.abs(ref).max())
+    assert outcomes == {True, False}
+    model = joint()
+    K = design_rest_lengths(model, model.initial_screw, np.zeros(6), 0.5, 1.5
+                            ).cartesian_stiffness
+    warm = 0
+    for stiffness in (None, K, 3.0 * K):
+        ctl = StiffnessController(model, limits(model), model.rest_lengths)
+        for k in range(30):
+            xi = model.initial_screw + 1e-3 * np.sin(0.3 * k + np.arange(6))
+            cmd = ctl.update(DT, ControlTarget(screw=xi, cartesian_stiffness=stiffness),
+                             screw=xi)
+            warm += cmd.warm
+    assert warm > 60
+
+
+@needs_kernel
+def test_the_controller_with_the_kernel_equals_the_numpy_path() -> None:
+    """The same ticks (a moving target with and without K_c*, a measured pose) with the
+    compiled pose terms and warm face and without them give the same commands."""
+    model = joint()
+    K = design_rest_lengths(model, model.initial_screw, np.zeros(6), 0.5, 1.5
+                            ).cartesian_stiffness
+    runs = []
+    for use_kernel in (True, False):
+        m = model if use_kernel else JointModel(
+            model.link1_nodes, model.connections, model.k, model.rest_lengths,
+            link2_nodes=model.link2_nodes, max_lengths=model.max_lengths,
+            force_law=model.force_law, initial_screw=model.initial_screw, use_kernel=False)
+        ctl = StiffnessController(m, limits(m), m.rest_lengths)
+        out = []
+        for k in range(200):
+            d = np.array([0.02 * np.cos(0.03 * k), 0.02 * np.sin(0.03 * k), 0.0,
+                          1e-3 * np.sin(0.03 * k), 0.0, 0.0])
+            tgt = ControlTarget(screw=model.initial_screw + d,
+                                cartesian_stiffness=K if k >= 100 else None)
+            cmd = ctl.update(DT, tgt, screw=model.initial_screw + 0.9 * d)
+            out.append((cmd.rest_lengths, cmd.tensions, cmd.warm))
+        runs.append(out)
+    for (r1, t1, w1), (r2, t2, w2) in zip(*runs, strict=True):
+        np.testing.assert_allclose(r1, r2, rtol=0.0, atol=1e-12)
+        np.testing.assert_allclose(t1, t2, rtol=0.0, atol=1e-9)
+        assert w1 == w2
 
 
 @pytest.mark.parametrize('force_law', ['hooke', 'paper'])

@@ -82,8 +82,21 @@ def test_buffer_sizes_mirror_the_library():
         assert kn.measure_size == 72 + 13 * n == library.measure_size(n)
         assert (kn.measure_pose, kn.measure_lengths, kn.measure_tensions, kn.measure_slope) == (
             36, 72, 72 + 6 * n, 72 + 12 * n)
+        # the linear model: W 6, F + W 6, J_l 36, M 36, R and M^-1 R 6 (18 + n) each, the flag
+        assert kn.linear_size == 85 + 12 * (18 + n) == library.linear_size(n)
+        assert (kn.linear_net, kn.linear_jacobian, kn.linear_mass, kn.linear_rhs,
+                kn.linear_solved, kn.linear_flag) == (6, 12, 48, 84, 84 + 6 * (18 + n),
+                                                      84 + 12 * (18 + n))
+        # the pose terms: T 16, lengths n, B 6n, K0 36, M 36n
+        assert kn.pose_terms_size == 52 + 43 * n == library.pose_terms_size(n)
+        assert (kn.pose_lengths, kn.pose_B, kn.pose_K0, kn.pose_M) == (16, 16 + n, 16 + 7 * n,
+                                                                       52 + 7 * n)
     assert library.packed_size(0) == library.batch_size(3, 0) == -2  # TSK_ERROR_COUNT
     assert library.measure_size(0) == -2
+    assert library.linear_size(0) == library.pose_terms_size(0) == -2
+    for n, m in ((1, 0), (12, 6), (60, 30)):
+        assert kernel.qp_face_size(n, m) == library.qp_face_size(n, m)
+    assert library.qp_face_size(0, 6) == library.qp_face_size(3, -1) == -2
 
 
 def test_model_constants_come_from_their_python_home():
@@ -139,6 +152,101 @@ def test_the_library_refuses_bad_counts_and_short_buffers():
     with pytest.raises(kernel.KernelError, match=r'tsk_joint_evaluate returned -3 '
                                                  r'\(TSK_ERROR_BUFFER_SIZE\)'):
         kernel.check(-3, 'tsk_joint_evaluate')
+
+
+def test_the_linear_model_and_pose_terms_refuse_bad_arguments():
+    """tsk_joint_linear_model and tsk_joint_pose_terms check pointers, sizes and the tolerance
+    before writing anything; a zero-length string is TSK_ERROR_ZERO_LENGTH."""
+    model = JointModel.from_yaml(CONFIG)
+    kn = model.compiled_kernel
+    buf = np.zeros(kn.size)
+    buf[:kn.rest] = model.initial_screw
+    buf[kn.rest:kn.transform] = model.rest_lengths
+    inertia = np.eye(6) * 0.01
+    lin = np.zeros(kn.linear_size)
+    a = kernel.address
+    assert kn.linear_model(kn.model, a(inertia), None, 1e-9, a(buf), kn.size, a(lin),
+                           kn.linear_size) == kernel.OK
+    np.testing.assert_array_equal(lin[kn.linear_jacobian:kn.linear_mass].reshape(6, 6),
+                                  screw.ScrewKinematics(model.initial_screw).J)
+    assert lin[kn.linear_flag] in (0.0, 1.0)
+    short = np.full(kn.linear_size - 1, 7.0)
+    fresh = np.full(kn.size, 7.0)
+    for args, code in (((kn.model, None, None, 1e-9, a(fresh), kn.size, a(lin), kn.linear_size),
+                        -1),
+                       ((kn.model, a(inertia), None, 1e-9, a(fresh), kn.size, None, 0), -1),
+                       ((None, a(inertia), None, 1e-9, a(fresh), kn.size, a(lin),
+                         kn.linear_size), -1),
+                       ((kn.model, a(inertia), None, 1e-9, a(fresh), kn.size, a(short),
+                         short.size), -3),
+                       ((kn.model, a(inertia), None, -1.0, a(fresh), kn.size, a(lin),
+                         kn.linear_size), -4),
+                       ((kn.model, a(inertia), None, float('nan'), a(fresh), kn.size, a(lin),
+                         kn.linear_size), -4),
+                       ((kn.model, a(inertia), None, 1e-9, a(fresh), kn.size - 1, a(lin),
+                         kn.linear_size), -3)):
+        lin[:] = 7.0
+        assert kn.linear_model(*args) == code
+        assert (fresh == 7.0).all() and (short == 7.0).all() and (lin == 7.0).all()
+    assert kn.linear_model(kn.model, a(np.zeros((6, 6))), None, 1e-9, a(buf), kn.size, a(lin),
+                           kn.linear_size) == kernel.ERROR_SINGULAR_SYSTEM
+    pose = np.full(kn.pose_terms_size, 7.0)
+    assert kn.pose_terms(kn.model, a(pose), kn.pose_terms_size - 1) == -3
+    assert kn.pose_terms(kn.model, None, kn.pose_terms_size) == -1
+    assert kn.pose_terms(None, a(pose), kn.pose_terms_size) == -1
+    assert (pose == 7.0).all()
+    # A pose that puts a link-2 node on its link-1 end: a zero-length string.
+    p1, p2 = model.link1_string_nodes[0], model.link2_nodes[model.connections[0, 1]]
+    T = np.eye(4)
+    T[:3, 3] = p1 - p2
+    pose[:16] = T.ravel()
+    assert kn.pose_terms(kn.model, a(pose), kn.pose_terms_size) == kernel.ERROR_ZERO_LENGTH
+    from tensegrity_stiffness.control.controller import pose_terms_at, pose_terms_numpy
+    for terms in (pose_terms_at, pose_terms_numpy):
+        with pytest.raises(ValueError, match='zero length'):
+            terms(model, T)
+
+
+def test_the_transform_is_exp_se3_and_refuses_bad_arguments():
+    """tsk_joint_transform (JointKernel.exp_se3) equals geometry.screw.exp_se3 at angles from 0
+    over the series threshold to pi; it checks its pointers and buffer before writing."""
+    model = JointModel.from_yaml(CONFIG)
+    kn = model.compiled_kernel
+    rng = np.random.default_rng(5)
+    for theta in (0.0, 1e-9, 1e-4, screw.SERIES_THRESHOLD * (1 - 1e-9), screw.SERIES_THRESHOLD,
+                  screw.SERIES_THRESHOLD * (1 + 1e-9), 0.7, 2.0, np.pi - 1e-9, np.pi):
+        u = rng.normal(size=3)
+        xi = np.r_[theta * u / np.linalg.norm(u), rng.normal(scale=0.05, size=3)]
+        np.testing.assert_allclose(kn.exp_se3(xi), screw.exp_se3(xi), rtol=0.0, atol=1e-15)
+    buf = np.full(22, 7.0)
+    library = kernel.library()
+    assert library.transform(kn.model, kernel.address(buf), 21) == -3
+    assert library.transform(kn.model, None, 22) == -1
+    assert library.transform(None, kernel.address(buf), 22) == -1
+    assert (buf == 7.0).all()
+
+
+def test_the_warm_face_refuses_bad_arguments():
+    library = kernel.library()
+    n, m = 3, 1
+    size = kernel.qp_face_size(n, m)
+    buf = np.full(size, 7.0)
+    a = kernel.address(buf)
+    assert library.qp_warm_face(n, m, 1e-9, 1e-12, 1e-10, 1e-12, None, size) == -1
+    assert library.qp_warm_face(n, m, 1e-9, 1e-12, 1e-10, 1e-12, a, size - 1) == -3
+    assert library.qp_warm_face(0, m, 1e-9, 1e-12, 1e-10, 1e-12, a, size) == -2
+    for bad in (-1.0, float('nan')):
+        assert library.qp_warm_face(n, m, bad, 1e-12, 1e-10, 1e-12, a, size) == -4
+        assert library.qp_warm_face(n, m, 1e-9, 1e-12, 1e-10, bad, a, size) == -4
+    assert (buf == 7.0).all()  # nothing written
+    # min 1/2 |t|^2 - t'1 s.t. t_0 + t_1 + t_2 = 3 on [0, 2]^3: t = 1, optimal with nothing fixed.
+    P, c, A, b = np.eye(3), np.ones(3), np.ones((1, 3)), np.array([3.0])
+    buf = np.concatenate([P.ravel(), c, A.ravel(), b, np.zeros(3), np.full(3, 2.0),
+                          np.full(3, 0.5), np.zeros(3), np.zeros(3), np.zeros(n + m + 1)])
+    assert library.qp_warm_face(n, m, 1e-9, 1e-12, 1e-10, 1e-12, kernel.address(buf),
+                                size) == kernel.OK
+    assert buf[-1] == kernel.FACE_OPTIMAL
+    np.testing.assert_allclose(buf[-(n + m + 1):-1], [1.0, 1.0, 1.0, 0.0], atol=1e-15)
 
 
 def test_address_refuses_a_strided_read_only_array():

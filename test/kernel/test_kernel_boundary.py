@@ -39,7 +39,8 @@ pytestmark = pytest.mark.skipif(not kernel.available(), reason=kernel.status())
 #: go back to malloc, where the AddressSanitizer test sees them.
 POISON_BYTES = 1016
 #: The entry points of the library that take addresses.
-ENTRY_POINTS = ('evaluate', 'evaluate_packed', 'chain_frames', 'chain_tip')
+ENTRY_POINTS = ('evaluate', 'evaluate_packed', 'chain_frames', 'chain_tip', 'linear_model',
+                'pose_terms', 'qp_warm_face', 'transform')
 
 
 def _poisoned(call):
@@ -120,6 +121,62 @@ def test_a_strided_tip_wrench_outlives_the_call(poisoned_library):
         K_slow = slow.tip_stiffness(screws, tip_wrench=W, frame=frame)
         assert np.isfinite(K_fast).all()
         np.testing.assert_allclose(K_fast, K_slow, rtol=0.0, atol=1e-9 * np.abs(K_slow).max())
+
+
+def test_the_linear_model_and_pose_terms_outlive_the_call(poisoned_library):
+    """tsk_joint_linear_model (strided rest lengths and a strided load: copied into its
+    buffers; strided string damping, copied for C) and tsk_joint_pose_terms (a strided pose)
+    under the poisoned calls equal the numpy path."""
+    from tensegrity_stiffness.control.controller import pose_terms_at, pose_terms_numpy
+    from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
+
+    rng = np.random.default_rng(44)
+    for force_law in ('hooke', 'paper'):
+        model = random_model(rng, force_law, n=12)
+        plain = numpy_twin(model)
+        xi = np.r_[rng.normal(scale=0.3, size=3), rng.normal(scale=0.01, size=3)]
+        rests = np.repeat(model.evaluate(xi).lengths[:, None], 2, axis=1) * [1.0, 0.95]
+        rest = rests[:, 1]
+        loads = np.zeros((6, 2))
+        loads[:, 1] = -model.evaluate(xi, rest).wrench
+        W = loads[:, 1]
+        assert not rest.flags.c_contiguous and not W.flags.c_contiguous
+        inertia = LinkInertia(0.02, (0.001, 0.0, -0.002), (2e-6, 3e-6, 4e-6))
+        damping = rng.uniform(0.1, 0.5, (12, 2))[:, 1]  # strided: copied for C
+        assert not damping.flags.c_contiguous
+        fast, slow = JointDynamics(model, inertia, damping), JointDynamics(plain, inertia, damping)
+        for new, old in zip(fast.linearize(xi, rest, W), slow.linearize(xi, rest, W),
+                            strict=True):
+            assert np.isfinite(new).all()
+            np.testing.assert_allclose(new, old, rtol=0.0, atol=1e-12 * np.abs(old).max())
+        T = np.asfortranarray(model.evaluate(xi).transform)  # copied into the kernel's buffer
+        screws = np.repeat(xi[:, None], 2, axis=1)
+        np.testing.assert_allclose(model.compiled_kernel.exp_se3(screws[:, 1]), T, rtol=0.0,
+                                   atol=1e-15)  # a strided screw, copied into its buffer
+        new, old = pose_terms_at(model, T), pose_terms_numpy(model, T)
+        for name in ('lengths', 'B', 'K0', 'M', 'cap'):
+            np.testing.assert_allclose(getattr(new, name), getattr(old, name), rtol=0.0,
+                                       atol=1e-13 * np.abs(getattr(old, name)).max())
+
+
+def test_the_warm_face_outlives_the_call(poisoned_library):
+    """tsk_qp_warm_face with strided (copied) inputs under the poisoned calls equals the numpy
+    path."""
+    from tensegrity_stiffness.control.controller import warm_face, warm_face_numpy
+
+    rng = np.random.default_rng(45)
+    n, m = 12, 6
+    G = rng.normal(size=(36, n))
+    P = np.asfortranarray(G.T @ G)
+    A = np.asfortranarray(rng.normal(size=(m, n)))
+    lo, hi = rng.uniform(0.1, 0.4, (n, 2))[:, 0], rng.uniform(0.8, 1.5, (n, 2))[:, 1]
+    t0 = 0.5 * (lo + hi)
+    c, b = P @ t0 + A.T @ rng.normal(size=m), A @ t0
+    free = np.zeros(n, bool)
+    new = warm_face(P, c, A, b, lo, hi, t0, free, free)
+    old = warm_face_numpy(P, c, A, b, lo, hi, t0, free, free)
+    assert new is not None and old is not None
+    np.testing.assert_allclose(new, old, rtol=0.0, atol=1e-12)
 
 
 def _kernel_sources() -> list[Path]:

@@ -1,7 +1,8 @@
 // The kernel's math against closed forms worked out by hand (gtest through ament_cmake_gtest):
 // one string's wrench and stiffness in each region and force law, the rotation at 0, pi / 2, pi
-// and across the series threshold, the chain's frames and tip stiffness, and the ABI's checks of
-// counts, buffer sizes, modes and pointers. Run by ctest and by test/kernel/test_kernel_gtest.py.
+// and across the series threshold, the chain's frames and tip stiffness, the linear model of
+// link 2 and the controller's pose terms of one string, the warm QP face of a tiny QP, and the
+// ABI's checks of counts, buffer sizes, modes and pointers. Run by ctest and by test/kernel/test_kernel_gtest.py.
 
 #include <gtest/gtest.h>
 
@@ -484,3 +485,147 @@ TEST(ChainKernel, OneJointTipStiffnessIsItsCartesianStiffness) {
 }
 
 }  // namespace
+
+// The linear model of link 2 at xi = 0 (J_l = J_b = I) with one taut Hooke string a -> b held by
+// the load W = -F: M is the inertia, R = [Pi K | -c w w^T | -k w | Pi] with the unit wrench
+// w = [a x u; u] of the string (u = (0, 0, 1)), and M^-1 R = R / 2 for the inertia 2 I.
+TEST(JointKernel, LinearModelOfOneStringAtRestByHand) {
+  const double a[3] = {0.1, 0.0, 0.1}, b[3] = {0.1, 0.0, 0.0};
+  Joint joint({a[0], a[1], a[2]}, {b[0], b[1], b[2]}, {100.0}, {kInf}, TSK_LAW_HOOKE);
+  Packed out(1);
+  ASSERT_EQ(evaluate(joint, out, {0, 0, 0, 0, 0, 0}, {0.05}), TSK_OK);
+  std::vector<double> K(out.K(), out.K() + 36);
+  std::vector<double> lin(tsk_joint_linear_size(1), 0.0);
+  for (int i = 0; i < 6; ++i) {
+    lin[i] = -out.wrench()[i];
+  }
+  std::vector<double> inertia(36, 0.0);
+  for (int i = 0; i < 6; ++i) {
+    inertia[7 * i] = 2.0;
+  }
+  const double damping = 0.3;
+  ASSERT_EQ(tsk_joint_linear_model(&joint.model, inertia.data(), &damping, 1e-9, out.buf.data(),
+                                   static_cast<int64_t>(out.buf.size()), lin.data(),
+                                   static_cast<int64_t>(lin.size())),
+            TSK_OK);
+  const int width = 18 + 1;
+  const double* net = lin.data() + 6;
+  const double* J = net + 6;
+  const double* M = J + 36;
+  const double* R = M + 36;
+  const double* S = R + 6 * width;
+  EXPECT_EQ(S[6 * width], 1.0);  // an equilibrium
+  const double w[6] = {0.0, -0.1, 0.0, 0.0, 0.0, 1.0};
+  for (int i = 0; i < 6; ++i) {
+    EXPECT_NEAR(net[i], 0.0, 1e-15);
+    for (int c = 0; c < 6; ++c) {
+      EXPECT_EQ(J[6 * i + c], i == c ? 1.0 : 0.0);
+      EXPECT_EQ(M[6 * i + c], i == c ? 2.0 : 0.0);
+      const int swapped = i < 3 ? i + 3 : i - 3;
+      const double want[4] = {K[6 * swapped + c], -damping * w[i] * w[c], 0.0,
+                              swapped == c ? 1.0 : 0.0};
+      EXPECT_NEAR(R[width * i + c], want[0], 1e-12) << i << c;
+      EXPECT_NEAR(R[width * i + 6 + c], want[1], 1e-15) << i << c;
+      EXPECT_EQ(R[width * i + 13 + c], want[3]) << i << c;
+      for (int block = 0; block < 3; ++block) {
+        const int col = block == 0 ? c : (block == 1 ? 6 + c : 13 + c);
+        EXPECT_NEAR(S[width * i + col], 0.5 * R[width * i + col], 1e-12) << i << col;
+      }
+    }
+    EXPECT_NEAR(R[width * i + 12], -100.0 * w[i], 1e-12) << i;
+    EXPECT_NEAR(S[width * i + 12], -50.0 * w[i], 1e-12) << i;
+  }
+  // Without the load the state is no equilibrium (the flag), the blocks the same.
+  for (int i = 0; i < 6; ++i) {
+    lin[i] = 0.0;
+  }
+  ASSERT_EQ(tsk_joint_linear_model(&joint.model, inertia.data(), nullptr, 1e-9, out.buf.data(),
+                                   static_cast<int64_t>(out.buf.size()), lin.data(),
+                                   static_cast<int64_t>(lin.size())),
+            TSK_OK);
+  EXPECT_EQ(lin[84 + 12 * width], 0.0);
+  EXPECT_EQ(lin[84 + width + 7], 0.0);  // no damping: its block is 0 (-0.3 * 0.01 above)
+}
+
+// The pose terms at T = I of one Hooke string a -> b: l = 0.1, B = X = [u; a x u],
+// K0 = k X X^T and M = -X X^T / l + ZE / l with ZE = [[I, -hat(b)], [hat(a), -hat(a) hat(b)]].
+TEST(JointKernel, PoseTermsOfOneStringByHand) {
+  const double a[3] = {0.1, 0.0, 0.1}, b[3] = {0.1, 0.0, 0.0};
+  Joint joint({a[0], a[1], a[2]}, {b[0], b[1], b[2]}, {100.0}, {kInf}, TSK_LAW_HOOKE);
+  std::vector<double> buf(tsk_joint_pose_terms_size(1), 0.0);
+  for (int i = 0; i < 4; ++i) {
+    buf[5 * i] = 1.0;
+  }
+  ASSERT_EQ(tsk_joint_pose_terms(&joint.model, buf.data(), static_cast<int64_t>(buf.size())),
+            TSK_OK);
+  const double l = 0.1;
+  EXPECT_NEAR(buf[16], l, 1e-17);
+  const double X[6] = {0.0, 0.0, 1.0, 0.0, -0.1, 0.0};
+  // -hat(a) hat(b) = -(b a^T - (a . b) I), a . b = 0.01.
+  const double ab[3][3] = {{-(0.01 - 0.01), 0.0, -(0.01)}, {0.0, 0.01, 0.0}, {0.0, 0.0, 0.01}};
+  const double ZE[6][6] = {{1, 0, 0, 0, b[2], -b[1]},
+                           {0, 1, 0, -b[2], 0, b[0]},
+                           {0, 0, 1, b[1], -b[0], 0},
+                           {0, -a[2], a[1], ab[0][0], ab[0][1], ab[0][2]},
+                           {a[2], 0, -a[0], ab[1][0], ab[1][1], ab[1][2]},
+                           {-a[1], a[0], 0, ab[2][0], ab[2][1], ab[2][2]}};
+  for (int r = 0; r < 6; ++r) {
+    EXPECT_NEAR(buf[17 + r], X[r], 1e-16);
+    for (int c = 0; c < 6; ++c) {
+      EXPECT_NEAR(buf[23 + 6 * r + c], 100.0 * X[r] * X[c], 1e-13) << r << c;
+      EXPECT_NEAR(buf[59 + 6 * r + c], -X[r] * X[c] / l + ZE[r][c] / l, 1e-13) << r << c;
+    }
+  }
+}
+
+// min 1/2 |t|^2 - t'1 s.t. t_0 + t_1 + t_2 = 3 on a box: t = 1 (nu = 0) when the box holds it;
+// a box [0, 0.5]^3 rejects that face; P = 0 makes the face's KKT system singular.
+TEST(QpKernel, WarmFaceOptimalRejectedAndSingular) {
+  const int64_t n = 3, m = 1;
+  auto run = [&](double p, double high, double* t_out) {
+    std::vector<double> buf(tsk_qp_face_size(n, m), 0.0);
+    for (int i = 0; i < 3; ++i) {
+      buf[4 * i] = p;                 // P
+      buf[9 + i] = 1.0;               // c
+      buf[12 + i] = 1.0;              // A
+      buf[16 + i] = 0.0;              // lo
+      buf[19 + i] = high;             // hi
+      buf[22 + i] = 0.5 * high;       // t0
+    }
+    buf[15] = 3.0;                    // b
+    EXPECT_EQ(tsk_qp_warm_face(n, m, 1e-9, 1e-12, 1e-10, 1e-12, buf.data(),
+                               static_cast<int64_t>(buf.size())),
+              TSK_OK);
+    for (int i = 0; i < 3; ++i) {
+      t_out[i] = buf[31 + i];
+    }
+    return buf.back();
+  };
+  double t[3];
+  EXPECT_EQ(run(1.0, 2.0, t), TSK_FACE_OPTIMAL);
+  for (double v : t) {
+    EXPECT_NEAR(v, 1.0, 1e-15);
+  }
+  EXPECT_EQ(run(1.0, 0.5, t), TSK_FACE_REJECTED);
+  EXPECT_EQ(run(0.0, 2.0, t), TSK_FACE_SINGULAR);
+  std::vector<double> small(tsk_qp_face_size(n, m) - 1, 7.0);
+  EXPECT_EQ(tsk_qp_warm_face(n, m, 1e-9, 1e-12, 1e-10, 1e-12, small.data(),
+                             static_cast<int64_t>(small.size())),
+            TSK_ERROR_BUFFER_SIZE);
+  EXPECT_EQ(tsk_qp_face_size(0, 1), TSK_ERROR_COUNT);
+}
+
+// exp of a pure translation is [I, v]; of a rotation by pi / 2 about z, that rotation.
+TEST(JointKernel, TransformOfATranslationAndAQuarterTurn) {
+  Joint joint({0.1, 0.0, 0.1}, {0.1, 0.0, 0.0}, {100.0}, {kInf}, TSK_LAW_HOOKE);
+  std::vector<double> buf = {0.0, 0.0, 0.0, 0.01, -0.02, 0.03};
+  buf.resize(22, 7.0);
+  ASSERT_EQ(tsk_joint_transform(&joint.model, buf.data(), 22), TSK_OK);
+  expect_near(buf.data() + 6, {1, 0, 0, 0.01, 0, 1, 0, -0.02, 0, 0, 1, 0.03, 0, 0, 0, 1}, 0.0,
+              "T");
+  buf = {0.0, 0.0, M_PI / 2, 0.0, 0.0, 0.0};
+  buf.resize(22, 7.0);
+  ASSERT_EQ(tsk_joint_transform(&joint.model, buf.data(), 22), TSK_OK);
+  expect_near(buf.data() + 6, {0, -1, 0, 0, 1, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}, 1e-15, "T");
+  EXPECT_EQ(tsk_joint_transform(&joint.model, buf.data(), 21), TSK_ERROR_BUFFER_SIZE);
+}

@@ -715,3 +715,119 @@ def test_halving_the_mass_raises_every_frequency_by_sqrt2() -> None:
     heavy = JointDynamics(MODEL, LinkInertia(0.01)).modes(XI0).frequencies
     light = JointDynamics(MODEL, LinkInertia(0.005)).modes(XI0).frequencies
     np.testing.assert_allclose(light, math.sqrt(2.0) * heavy, rtol=1e-12)
+
+
+# ---------------------------------------------------------------------------- compiled kernel
+#: The compiled linear model against the numpy path, relative to each block's largest entry
+#: (both compute the same sums in another order: rounding, amplified by the 6x6 solve).
+KERNEL_TOLERANCE = 1e-12
+#: Mode shapes of the two paths (an eigenvector moves by rounding over the gap between
+#: eigenvalues: 1e-13 on the default joint, whose frequencies come in near pairs).
+SHAPE_TOLERANCE = 1e-9
+
+
+def numpy_twin(dyn: JointDynamics) -> JointDynamics:
+    """``dyn`` on the numpy path: the same model without the compiled kernel."""
+    m = dyn.model
+    model = JointModel(m.link1_nodes, m.connections, m.k, m.rest_lengths,
+                       link2_nodes=m.link2_nodes, max_lengths=m.max_lengths,
+                       force_law=m.force_law, initial_screw=m.initial_screw, use_kernel=False)
+    return JointDynamics(model, dyn.inertia, dyn.string_damping)
+
+
+def kernel_cases() -> list[tuple[JointDynamics, np.ndarray, np.ndarray, np.ndarray]]:
+    """(dynamics, screw, rest lengths, load) at equilibria: the default joint under the test
+    loads, damped, undamped and per string; random joints of both force laws (slack, taut and
+    saturated strings) at random poses held by their balancing load."""
+    from support.joint_compare import random_model
+
+    rng = np.random.default_rng(7)
+    cases = []
+    for damping in (0.0, 0.4, rng.uniform(0.0, 1.0, MODEL.n_strings)):
+        for W in LOADS:
+            xi = solve_equilibrium(MODEL, W).screw
+            cases.append((JointDynamics(MODEL, GENERAL, damping), xi, MODEL.rest_lengths, W))
+    for law in ('hooke', 'paper'):
+        k = 0
+        while k < 6:
+            model = random_model(rng, law)
+            xi = np.r_[rng.normal(scale=0.4, size=3), rng.normal(scale=0.02, size=3)]
+            lengths = model.evaluate(xi).lengths
+            rest = lengths * rng.uniform(0.8, 1.03, lengths.size)  # slack, taut, saturated
+            W = -model.evaluate(xi, rest).wrench
+            dyn = JointDynamics(model, None if k % 2 else GENERAL, 0.3 * (k % 3))
+            # Only joints without a mechanism (a zero eigenvalue, whose frequency rounding
+            # decides): the smallest |eigenvalue| of A21 well above the largest's rounding.
+            mu = np.abs(np.linalg.eigvals(numpy_twin(dyn).linearize(xi, rest, W)[0][6:, :6]))
+            if mu.min() >= 1e-6 * mu.max():
+                cases.append((dyn, xi, rest, W))
+                k += 1
+    return cases
+
+
+@pytest.mark.skipif(not MODEL.uses_kernel, reason='the compiled kernel is not loaded')
+def test_the_compiled_linear_model_equals_the_numpy_path(monkeypatch) -> None:
+    """linearize and modes with the kernel (tsk_joint_linear_model) equal the numpy path's;
+    every case goes through the kernel (counted), off an equilibrium the numpy path runs."""
+    from tensegrity_stiffness.mechanics import kernel
+
+    calls = []
+    library = kernel.library()
+    real = library.linear_model
+    monkeypatch.setattr(library, 'linear_model', lambda *a: calls.append(1) or real(*a))
+    saturated = 0
+    for dyn, xi, rest, W in kernel_cases():
+        dyn = JointDynamics(dyn.model.with_rest_lengths(dyn.model.rest_lengths), dyn.inertia,
+                            dyn.string_damping)  # a kernel bound to the counting call
+        ref = numpy_twin(dyn)
+        assert not ref.model.uses_kernel
+        saturated += int(dyn.model.evaluate(xi, rest).saturated.sum())
+        before = len(calls)
+        A, B = dyn.linearize(xi, rest, W)
+        assert len(calls) == before + 1
+        A0, B0 = ref.linearize(xi, rest, W)
+        n = dyn.model.n_strings
+        for new, old in ((A[6:, :6], A0[6:, :6]), (A[6:, 6:], A0[6:, 6:]), (B[6:, :n], B0[6:, :n]),
+                         (B[6:, n:], B0[6:, n:])):
+            np.testing.assert_allclose(new, old, rtol=0.0,
+                                       atol=KERNEL_TOLERANCE * np.abs(old).max())
+        np.testing.assert_array_equal(A[:6], A0[:6])
+        np.testing.assert_array_equal(B[:6], B0[:6])
+        modes, modes0 = dyn.modes(xi, rest, W), ref.modes(xi, rest, W)
+        assert modes.stable == modes0.stable
+        lam = np.abs(modes0.eigenvalues).max()
+        np.testing.assert_allclose(modes.eigenvalues, modes0.eigenvalues, rtol=0.0,
+                                   atol=KERNEL_TOLERANCE * lam)
+        np.testing.assert_allclose(modes.frequencies, modes0.frequencies, rtol=0.0,
+                                   atol=KERNEL_TOLERANCE * lam)
+        np.testing.assert_allclose(modes.shapes, modes0.shapes, rtol=0.0, atol=SHAPE_TOLERANCE)
+    assert saturated > 0  # the paper law's saturated branch of dF/dl0 was exercised
+    # Off an equilibrium the kernel's blocks are not used (the derivatives of J and M are numpy's).
+    dyn = JointDynamics(MODEL, GENERAL, 0.2)
+    off = XI0 + np.r_[0.04, -0.03, 0.02, 0.001, 0.002, -0.001]
+    for new, old in zip(dyn.linearize(off), numpy_twin(dyn).linearize(off), strict=True):
+        np.testing.assert_allclose(new, old, rtol=0.0, atol=KERNEL_TOLERANCE * np.abs(old).max())
+
+
+@pytest.mark.parametrize('damping', [0.0, 0.5, 40.0])
+@pytest.mark.parametrize('load', range(len(LOADS)))
+def test_modes_are_numpy_eig_of_the_linear_model(damping: float, load: int) -> None:
+    """The modes (LAPACK's dgeev through scipy) are the eigen-decomposition np.linalg.eig gives
+    of A: each eigenvalue one of numpy's, each shape numpy's eigenvector (top half, unit norm,
+    largest component real); 40 N s/m makes modes overdamped (real eigenvalues, the pairs of
+    the overdamped branch)."""
+    dyn = JointDynamics(MODEL, GENERAL, damping)
+    W = LOADS[load]
+    xi = solve_equilibrium(MODEL, W).screw
+    A, _ = dyn.linearize(xi, external_wrench=W)
+    modes = dyn.modes(xi, external_wrench=W)
+    lam, vec = np.linalg.eig(A)
+    if damping == 40.0:
+        overdamped = modes.eigenvalues.imag == 0.0
+        assert overdamped.sum() >= 5 and np.all(modes.damping_ratios[overdamped] > 1.0)
+    for k in range(6):
+        j = int(np.argmin(np.abs(lam - modes.eigenvalues[k])))
+        assert abs(lam[j] - modes.eigenvalues[k]) <= 1e-12 * np.abs(lam).max()
+        v = vec[:6, j] / np.linalg.norm(vec[:6, j])
+        big = v[np.argmax(np.abs(v))]
+        np.testing.assert_allclose(modes.shapes[k], v * abs(big) / big, atol=SHAPE_TOLERANCE)
