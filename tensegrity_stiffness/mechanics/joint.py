@@ -255,17 +255,28 @@ def _refuse_duplicates(key: str, names: Sequence[str]) -> None:
         raise ValueError(f'{key} must be unique, got {repeated} more than once')
 
 
+def _unique(names: list[str]) -> list[str]:
+    """``names`` with the second and later copies of a name numbered (``a``, ``a#2``, ...)."""
+    seen: dict[str, int] = {}
+    out = []
+    for name in names:
+        seen[name] = seen.get(name, 0) + 1
+        out.append(name if seen[name] == 1 else f'{name}#{seen[name]}')
+    return out
+
+
 def _names(node_names: Sequence[str] | None, link2_node_names: Sequence[str] | None,
            string_names: Sequence[str] | None, n1: int, n2: int | None,
            connections: NDArray[np.intp]) -> tuple[list[str], list[str], list[str]]:
     """The node names of link 1 (default the indices), of link 2 (default link 1's when it has
     link 1's points, ``n2`` None, else the indices) and the string names (default
-    ``<node>-<node>``); names given must be unique (generated ones are only labels)."""
+    ``<node>-<node>``, a repeated pair numbered ``<node>-<node>#2`` ...); names given must be
+    unique."""
     names1 = list(node_names) if node_names is not None else [str(i) for i in range(n1)]
     names2 = list(link2_node_names) if link2_node_names is not None else (
         names1 if n2 is None else [str(i) for i in range(n2)])
-    strings = list(string_names) if string_names is not None else [
-        f'{names1[a]}-{names2[b]}' for a, b in connections]
+    strings = list(string_names) if string_names is not None else _unique([
+        f'{names1[a]}-{names2[b]}' for a, b in connections])
     if len(strings) != len(connections):
         raise ValueError(f'string_names must have {len(connections)} entries, got '
                          f'{len(strings)}')
