@@ -134,8 +134,8 @@ class ProcessNoise:
     a density ``q`` adds a variance ``q^2 dt`` (docs/estimation.md#process-noise says how to
     choose them)."""
 
-    angular_acceleration: float = 30.0
-    linear_acceleration: float = 0.3
+    angular_acceleration: float = 6.0
+    linear_acceleration: float = 0.015
     force_rate: float = 0.5
     moment_rate: float = 0.01
 
