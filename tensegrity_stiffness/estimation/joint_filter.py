@@ -74,8 +74,6 @@ from tensegrity_stiffness.estimation.estimators import (
 from tensegrity_stiffness.geometry.screw import (
     ScrewKinematics,
     check_in_chart,
-    hat3,
-    left_jacobian_so3_inverse,
 )
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
@@ -162,15 +160,19 @@ class ProcessNoise:
 DEFAULT_PROCESS_NOISE = ProcessNoise()
 
 
+def _hat(a: FloatArray) -> FloatArray:
+    """``hat(a)`` (3, 3) of one 3-vector from plain floats (the filter's per-step path)."""
+    x, y, z = a.tolist()
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
 def _hat_pair(p: FloatArray) -> FloatArray:
     """``C(p) = [[hat(p_m), hat(p_f)], [hat(p_f), 0]]`` (6, 6) for a wrench ``p = [m; f]``:
     ``ad_V^T p = C(p) V`` for every twist ``V = [w; v]``."""
-    out = np.zeros((6, 6))
-    hm, hf = hat3(p[:3]), hat3(p[3:])
-    out[:3, :3] = hm
-    out[:3, 3:] = hf
-    out[3:, :3] = hf
-    return out
+    a, b, c, d, e, f = p.tolist()
+    return np.array([[0.0, -c, b, 0.0, -f, e], [c, 0.0, -a, f, 0.0, -d],
+                     [-b, a, 0.0, -e, d, 0.0], [0.0, -f, e, 0.0, 0.0, 0.0],
+                     [f, 0.0, -d, 0.0, 0.0, 0.0], [-e, d, 0.0, 0.0, 0.0, 0.0]])
 
 
 @dataclass(slots=True)
@@ -201,15 +203,18 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
     caller keeps it."""
     kin, state = prediction.kinematics, prediction.state
     T, Jl = kin.T, kin.J
-    R, p = T[:3, :3], T[:3, 3]
-    Ad = np.zeros((6, 6))  # Ad_T for twists [w; v]
+    R = T[:3, :3]
+    Ad = np.empty((6, 6))  # Ad_T for twists [w; v]
     Ad[:3, :3] = R
+    Ad[:3, 3:] = 0.0
     Ad[3:, 3:] = R
-    Ad[3:, :3] = hat3(p) @ R
-    # J_l^-1 = [[G^-1, 0], [-G^-1 Q G^-1, G^-1]]; J_b^-1 = J_l^-1 Ad_T (J_l = Ad_T J_b)
-    Gi = left_jacobian_so3_inverse(state.screw[:3])
-    Jl_inv = np.zeros((6, 6))
+    Ad[3:, :3] = _hat(T[:3, 3]) @ R
+    # J_l^-1 = [[G^-1, 0], [-G^-1 Q G^-1, G^-1]]; J_b^-1 = J_l^-1 Ad_T (J_l = Ad_T J_b); G^-1
+    # by LAPACK (5x faster here than the closed form on plain floats)
+    Gi = np.linalg.inv(kin.G)
+    Jl_inv = np.empty((6, 6))
     Jl_inv[:3, :3] = Gi
+    Jl_inv[:3, 3:] = 0.0
     Jl_inv[3:, 3:] = Gi
     Jl_inv[3:, :3] = -Gi @ kin.Q @ Gi
     Jb_inv = Jl_inv @ Ad
@@ -217,23 +222,21 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
     Ginv = np.linalg.inv(G) if inertia_inverse is None else inertia_inverse
     spatial = (state.wrench + load)[_SWAP]  # [m; f] in {1}
     AdT = Ad.T
-    body = AdT @ spatial
     GV = G @ twist
-    w, v = twist[:3], twist[3:]
-    adT = np.zeros((6, 6))  # ad_V^T = [[-hat(w), -hat(v)], [0, -hat(w)]]
-    hw, hv = hat3(w), hat3(v)
-    adT[:3, :3] = -hw
-    adT[:3, 3:] = -hv
-    adT[3:, 3:] = -hw
+    # ad_V^T = [[-hat(w), -hat(v)], [0, -hat(w)]]: -C(V) with its lower blocks replaced
+    adT = _hat_pair(twist)
+    np.negative(adT, out=adT)
+    adT[3:, :3] = 0.0
+    adT[3:, 3:] = adT[:3, :3]
     coriolis = _hat_pair(GV)  # ad_V^T G V = C(G V) V
-    total = coriolis @ twist + body
+    total = coriolis @ twist + AdT @ spatial
     d_twist = adT @ G + coriolis
     if dynamics.damped:
         A = prediction.length_jacobian @ Jb_inv  # dl/dV
         D = (A.T * dynamics.string_damping) @ A
         total -= D @ twist
         d_twist -= D
-    d_screw = AdT @ (prediction.state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
+    d_screw = AdT @ (state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
     return BodyDynamics(Jb_inv @ twist, Ginv @ total, Jb_inv, Ginv @ d_screw, Ginv @ d_twist,
                         Ginv @ AdT[:, _SWAP], prediction)
 
@@ -285,6 +288,7 @@ class JointFilter:
         self.reject_outliers = reject_outliers
         self.size = 18 if load == 'unknown' else 12
         self._inertia_inverse = np.linalg.inv(self.dynamics.spatial_inertia)
+        self._identity = np.eye(self.size)
         self._twist_q = process_noise.twist_density()
         self._load_q = process_noise.load_density()
         self.reset()
@@ -317,6 +321,7 @@ class JointFilter:
         :meth:`step` starts from the static estimator."""
         self._t: float | None = None
         self._inconsistent = 0
+        self._patterns: dict[tuple, tuple[list, int]] = {}
         self._suspected: set[str] = set()
         self._cache: tuple[Any, ...] | None = None
         self._x: FloatArray | None = None
@@ -539,19 +544,26 @@ class JointFilter:
     def _substep(self, h: float, rest: FloatArray, load: FloatArray) -> None:
         x, P = self._x, self._P
         cache = self._cache
+        A = np.zeros((12, 12))
+        f = np.empty(12)
         if cache is not None and cache[0] is x and np.array_equal(cache[1], rest) and \
                 (self.size == 18 or np.array_equal(cache[2], load)):
-            dyn = cache[3]
+            # the last update's linearisation (at its prior) carried to its posterior to first
+            # order: f(x + dx) = f(x) + A dx, one evaluation of the strings per step
+            dyn, dx = cache[3], cache[4]
         else:
-            dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
-        A = np.zeros((12, 12))
+            dyn, dx = self._linearize(x[:6], x[6:12], self._current_load(load), rest), None
         A[:6, 6:] = dyn.body_inverse
         A[6:, :6] = dyn.d_screw
         A[6:, 6:] = dyn.d_twist
+        f[:6] = dyn.screw_rate
+        f[6:] = dyn.twist_rate
+        if dx is not None:
+            f += A @ dx[:12]
+            if self.size == 18:
+                f[6:] += dyn.d_load @ dx[12:]
         rhs = np.empty((12, 13 + (6 if self.size == 18 else 0)))
-        rhs[:6, 0] = dyn.screw_rate
-        rhs[6:, 0] = dyn.twist_rate
-        rhs[:, 0] *= h
+        rhs[:, 0] = f * h
         half = 0.5 * h
         rhs[:, 1:13] = half * A
         rhs[np.arange(12), np.arange(1, 13)] += 1.0
@@ -561,7 +573,7 @@ class JointFilter:
         E = -half * A
         E[np.arange(12), np.arange(12)] += 1.0
         sol = np.linalg.solve(E, rhs)
-        Phi = np.eye(self.size)
+        Phi = self._identity.copy()
         Phi[:12, :12] = sol[:, 1:13]
         if self.size == 18:
             Phi[:12, 12:] = sol[:, 13:]
@@ -582,72 +594,91 @@ class JointFilter:
         self._x, self._P = xn, 0.5 * (Pn + Pn.T)
 
     # ------------------------------------------------------------------ update
+    def _readings(self, prep: PreparedMeasurements
+                  ) -> tuple[list[tuple[str, NDArray[np.intp], int]], int]:
+        """The readings of a sensor pattern (name, rows, dof) in row order and the row count
+        (kept per pattern: a tracker's pattern rarely changes)."""
+        key = (prep.tension_index.tobytes(), prep.length_index.tobytes(), prep.pose is not None,
+               prep.specific_force is not None, prep.gravity is not None,
+               prep.angular_velocity is not None, prep.wrench is not None and self.size == 18)
+        known = self._patterns.get(key)
+        if known is not None:
+            return known
+        names = self.model.string_names
+        out: list[tuple[str, NDArray[np.intp], int]] = []
+        row = 0
+        for label, index in (('tension', prep.tension_index), ('length', prep.length_index)):
+            for i in index.tolist():
+                out.append((f'{label}[{names[i]}]', np.array([row]), 1))
+                row += 1
+        for name, present, rows, dof in (('pose', key[2], 6, 6), ('imu', key[3], 3, 3),
+                                         ('gravity', key[4], 3, sm.GRAVITY_DOF),
+                                         ('gyro', key[5], 3, 3), ('wrench', key[6], 6, 6)):
+            if present:
+                out.append((name, np.arange(row, row + rows), dof))
+                row += rows
+        if len(self._patterns) >= 16:
+            self._patterns.pop(next(iter(self._patterns)))
+        self._patterns[key] = (out, row)
+        return out, row
+
     def _rows(self, prep: PreparedMeasurements, dyn: BodyDynamics
               ) -> tuple[FloatArray, FloatArray, list[tuple[str, NDArray[np.intp], int]]]:
         """(whitened residual h(x) - z, its Jacobian in the state, the readings (name, rows,
-        dof)) at the state the linearisation ``dyn`` was made at."""
-        names = self.model.string_names
+        dof)) at the state the linearisation ``dyn`` was made at (rows in the order of
+        :meth:`_readings`)."""
         size = self.size
         pred = dyn.prediction
         kin = pred.kinematics
         x = self._x
-        blocks_r: list[FloatArray] = []
-        blocks_H: list[FloatArray] = []
-        readings: list[tuple[str, NDArray[np.intp], int]] = []
+        readings, count = self._readings(prep)
+        r = np.empty(count)
+        H = np.zeros((count, size))
         row = 0
-
-        def add(name: str, r: FloatArray, H: FloatArray, dof: int) -> None:
-            nonlocal row
-            blocks_r.append(r)
-            blocks_H.append(H)
-            readings.append((name, np.arange(row, row + r.size), dof))
-            row += r.size
-
-        for label, index, values, weight, h, dh in (
-                ('tension', prep.tension_index, prep.tensions, prep.tension_weight,
-                 pred.tensions, pred.tension_jacobian),
-                ('length', prep.length_index, prep.lengths, prep.length_weight,
-                 pred.lengths, pred.length_jacobian)):
-            if not index.size:
-                continue
-            H = np.zeros((index.size, size))
-            H[:, :6] = dh[index] * weight[:, None]
-            r = (h[index] - values) * weight
-            for k, i in enumerate(index.tolist()):
-                add(f'{label}[{names[i]}]', r[k:k + 1], H[k:k + 1], 1)
+        for index, values, weight, h, dh in (
+                (prep.tension_index, prep.tensions, prep.tension_weight, pred.tensions,
+                 pred.tension_jacobian),
+                (prep.length_index, prep.lengths, prep.length_weight, pred.lengths,
+                 pred.length_jacobian)):
+            k = index.size
+            if k:
+                r[row:row + k] = (h[index] - values) * weight
+                H[row:row + k, :6] = dh[index] * weight[:, None]
+                row += k
         if prep.pose is not None:
             res, jac = sm.pose_residual_unchecked(kin.T, prep.pose, sm.pose_jacobian(x[:6], kin))
-            H = np.zeros((6, size))
-            H[:, :6] = prep.pose_whitener @ jac
-            add('pose', prep.pose_whitener @ res, H, 6)
+            r[row:row + 6] = prep.pose_whitener @ res
+            H[row:row + 6, :6] = prep.pose_whitener @ jac
+            row += 6
         if prep.gravity is not None or prep.specific_force is not None:
             sf = sm.predicted_specific_force(kin, x[6:12], dyn.twist_rate, self.gravity)
-            df = np.zeros((3, size))
-            rate = sf.twist_rate[:, 3:]  # df/d(dv/dt) = I
-            df[:, :6] = sf.screw + rate @ dyn.d_screw[3:]
-            df[:, 6:12] = sf.twist + rate @ dyn.d_twist[3:]
+            df = np.empty((3, size))
+            # df/d(dv/dt) = I: the dynamics' rows of dv/dt chained in
+            df[:, :6] = sf.screw + dyn.d_screw[3:]
+            df[:, 6:12] = sf.twist + dyn.d_twist[3:]
             if size == 18:
-                df[:, 12:] = rate @ dyn.d_load[3:]
+                df[:, 12:] = dyn.d_load[3:]
             if prep.specific_force is not None:
                 w = prep.specific_force_weight
-                add('imu', (sf.value - prep.specific_force) * w, df * w[:, None], 3)
+                r[row:row + 3] = (sf.value - prep.specific_force) * w
+                H[row:row + 3] = df * w[:, None]
+                row += 3
             if prep.gravity is not None:
                 u, du = sm.gravity_direction_jacobian(sf.value)
                 w = prep.gravity_weight
-                add('gravity', (u - prep.gravity) * w, (du @ df) * w[:, None], sm.GRAVITY_DOF)
+                r[row:row + 3] = (u - prep.gravity) * w
+                H[row:row + 3] = (du @ df) * w[:, None]
+                row += 3
         if prep.angular_velocity is not None:
-            value, dw = sm.predicted_angular_velocity(x[6:12])
             w = prep.angular_velocity_weight
-            H = np.zeros((3, size))
-            H[:, 6:12] = dw * w[:, None]
-            add('gyro', (value - prep.angular_velocity) * w, H, 3)
+            value, dw = sm.predicted_angular_velocity(x[6:12])
+            r[row:row + 3] = (value - prep.angular_velocity) * w
+            H[row:row + 3, 6:12] = dw * w[:, None]
+            row += 3
         if prep.wrench is not None and size == 18:
-            H = np.zeros((6, size))
-            H[:, 12:] = prep.wrench_whitener
-            add('wrench', prep.wrench_whitener @ (x[12:] - prep.wrench), H, 6)
-        if not blocks_r:
-            return np.empty(0), np.empty((0, size)), readings
-        return np.concatenate(blocks_r), np.vstack(blocks_H), readings
+            r[row:row + 6] = prep.wrench_whitener @ (x[12:] - prep.wrench)
+            H[row:row + 6, 12:] = prep.wrench_whitener
+        return r, H, readings
 
     def _update(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray
                 ) -> tuple[float, int, bool | None, list[tuple[str, str]]]:
@@ -656,7 +687,7 @@ class JointFilter:
         dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
         r, H, readings = self._rows(prep, dyn)
         if not r.size:
-            self._cache = (x, rest.copy(), load.copy(), dyn)
+            self._cache = (x, rest.copy(), load.copy(), dyn, np.zeros(self.size))
             return 0.0, 0, None, []
         nu = -r
         HP = H @ P
@@ -689,11 +720,11 @@ class JointFilter:
         dof = sum(d for _, _, d in readings)
         if not readings:
             self._suspected = {name for name, _ in suspects}
-            self._cache = (x, rest.copy(), load.copy(), dyn)
+            self._cache = (x, rest.copy(), load.copy(), dyn, np.zeros(self.size))
             return 0.0, 0, None, suspects
         threshold = consistency_threshold(dof, self.consistency_probability)
-        y = np.linalg.solve(S, nu)
-        nis = float(nu @ y)
+        sol = np.linalg.solve(S, np.column_stack([nu, HP]))
+        nis = float(nu @ sol[:, 0])
         consistent: bool | None = nis <= threshold
         self._inconsistent = 0 if consistent else self._inconsistent + 1
         if not consistent and self.reject_outliers:
@@ -703,15 +734,15 @@ class JointFilter:
                 suspects += snooped
         self._suspected = {name for name, _ in suspects}
         if not keep.all():
-            H, HP, nu = H[keep], HP[keep], nu[keep]
+            HP, nu = HP[keep], nu[keep]
             S = S[np.ix_(keep, keep)]
-        sol = np.linalg.solve(S, np.column_stack([nu, HP]))
+            sol = np.linalg.solve(S, np.column_stack([nu, HP]))
         dx = HP.T @ sol[:, 0]
         Pn = P - HP.T @ sol[:, 1:]
         xn = x + dx
         check_in_chart(xn[:6], 'screw')
         self._x, self._P = xn, 0.5 * (Pn + Pn.T)
-        self._cache = None
+        self._cache = (xn, rest.copy(), load.copy(), dyn, dx)
         return nis, dof, consistent, suspects
 
     def _snoop(self, S: FloatArray, nu: FloatArray,
@@ -806,22 +837,27 @@ class JointFilter:
                   outliers: tuple[str, ...] = (), reasons: tuple[str, ...] = ()
                   ) -> JointEstimate:
         x, P = self._x, self._P
-        dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
-        self._cache = (x, rest.copy(), load.copy(), dyn)
-        pred = dyn.prediction
-        state, kin = pred.state, pred.kinematics
         xi = x[:6]
+        cache = self._cache
+        if cache is not None and cache[0] is x:
+            # the strings at the estimate (one kernel call; the update linearised at its prior)
+            pred = sm.string_predictions_unchecked(self.model, xi, rest)
+            state, kin = pred.state, pred.kinematics
+        else:
+            dyn = self._linearize(xi, x[6:12], self._current_load(load), rest)
+            self._cache = (x, rest.copy(), load.copy(), dyn, np.zeros(self.size))
+            state, kin = dyn.prediction.state, dyn.prediction.kinematics
         C = P[:6, :6].copy()
         Pj = sm.pose_jacobian(xi, kin)
         pose_cov = Pj @ C @ Pj.T
         # twist [dp/dt; w_s] = [R v; R w]; first order in the screw through R (dtheta = G dxi)
-        R = kin.R
+        R = state.transform[:3, :3]
         w_s, v_s = R @ x[6:9], R @ x[9:12]
         Jt = np.zeros((6, 12))
         Jt[:3, 9:12] = R
         Jt[3:, 6:9] = R
-        Jt[:3, :6] = -hat3(v_s) @ Pj[3:]
-        Jt[3:, :6] = -hat3(w_s) @ Pj[3:]
+        Jt[:3, :6] = -_hat(v_s) @ Pj[3:]
+        Jt[3:, :6] = -_hat(w_s) @ Pj[3:]
         twist_cov = Jt @ P[:12, :12] @ Jt.T
         if self.size == 18:
             W, W_cov = x[12:].copy(), P[12:, 12:].copy()
@@ -831,12 +867,9 @@ class JointFilter:
                   if self.stiffness_std else np.full((6, 6), np.nan))
         names = tuple(n for n, _ in dropped) + tuple(outliers)
         why = tuple(f'{n}: {w}' for n, w in dropped) + tuple(reasons)
-        scale = np.array([1.0] * 3 + [max(float(np.mean(rest)), 1e-6)] * 3)
-        ev = np.linalg.eigvalsh(C / np.outer(scale, scale))
-        cond = math.sqrt(ev[-1] / ev[0]) if ev[0] > 0.0 else math.inf
         return JointEstimate(True, 'ok', xi.copy(), state.transform.copy(),
                              0.5 * (pose_cov + pose_cov.T), C, W, W_cov, state, Kc_std,
-                             float(nis), int(dof), True, 6, cond, 1,
+                             float(nis), int(dof), True, 6, math.nan, 1,
                              prep.describe(self.model.string_names), np.empty(0), consistent,
                              int(dof), names, why, restarted,
                              np.concatenate([v_s, w_s]), 0.5 * (twist_cov + twist_cov.T))

@@ -86,15 +86,14 @@ def nees(error: np.ndarray, covariance: np.ndarray) -> float:
 
 def drive(model, seed: int, duration: float, fault: str | None = None,
           fault_time: float = math.inf, cell: int = 0, filter_kwargs: dict | None = None,
-          joint_damping: float = 0.0) -> Run:
+          joint_damping: float | None = None) -> Run:
     """One seeded run of ``duration`` s on a fresh twin: rest lengths swept (each string its
     own frequency in :data:`SWEEP_BAND`, amplitude up to :data:`SWEEP_AMPLITUDE`, from the
     rest lengths at rest under the initial load), the load swinging; ``fault`` from
     ``fault_time`` on. Samples every :data:`SAMPLE_SPACING` s after :data:`BURN_IN`.
     ``joint_damping``: the twin's damping of link 2 against the world (N s/m, N m s/rad),
-    default 0: JointDynamics has none (the twin's default, 1e-3, is meant for a spine's slow
-    bending; on the joint's 10 g link it is an unmodelled angular deceleration of
-    1e-3 / I = 100 per second times the angular velocity)."""
+    default the twin's (1e-3; JointDynamics has none: a model error the process noise
+    covers)."""
     from tensegrity_stiffness.simulation.twin import (
         DEFAULT_TENDON_DAMPING,
         JointSimulation,
@@ -102,7 +101,8 @@ def drive(model, seed: int, duration: float, fault: str | None = None,
     )
 
     rng = np.random.default_rng(seed)
-    sim = JointSimulation(model, SimulationOptions(joint_damping=joint_damping))
+    sim = JointSimulation(model, None if joint_damping is None else
+                          SimulationOptions(joint_damping=joint_damping))
     rest0 = model.rest_lengths.copy()
     n = rest0.size
     freq = rng.uniform(*SWEEP_BAND, size=n)
