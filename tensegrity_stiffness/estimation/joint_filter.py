@@ -1,5 +1,5 @@
 """A recursive estimator of a moving joint: an extended Kalman filter on the joint's dynamics
-(no rclpy; docs/estimation.md#the-filter).
+(no rclpy; docs/estimation.md#the-filter-jointfilter).
 
 State ``x = [xi (6); V (6); W (6)]``: the screw ``xi`` of link 2 (the library's screw,
 ``T = exp(hat(xi))``), link 2's body twist ``V = [w; v]`` in {2} (``hat(V) = T^-1 dT/dt``) and,
@@ -236,9 +236,14 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
         D = (A.T * dynamics.string_damping) @ A
         total -= D @ twist
         d_twist -= D
-    d_screw = AdT @ (state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
-    return BodyDynamics(Jb_inv @ twist, Ginv @ total, Jb_inv, Ginv @ d_screw, Ginv @ d_twist,
-                        Ginv @ AdT[:, _SWAP], prediction)
+    stacked = np.empty((6, 19))  # one product with G^-1 for the rate and its Jacobians
+    stacked[:, 0] = total
+    stacked[:, 1:7] = AdT @ (state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
+    stacked[:, 7:13] = d_twist
+    stacked[:, 13:] = AdT[:, _SWAP]
+    out = Ginv @ stacked
+    return BodyDynamics(Jb_inv @ twist, out[:, 0], Jb_inv, out[:, 1:7], out[:, 7:13],
+                        out[:, 13:], prediction)
 
 
 class JointFilter:
