@@ -92,7 +92,10 @@ __all__ = [
     'BodyDynamics',
     'JointFilter',
     'ProcessNoise',
+    'UpdateResult',
     'body_dynamics',
+    'innovation_outliers',
+    'kalman_update',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -691,105 +694,16 @@ class JointFilter:
         x, P = self._x, self._P
         dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
         r, H, readings = self._rows(prep, dyn)
-        if not r.size:
-            self._cache = (x, rest.copy(), load.copy(), dyn, np.zeros(self.size))
-            return 0.0, 0, None, []
-        nu = -r
-        HP = H @ P
-        S = HP @ H.T
-        S[np.diag_indices_from(S)] += 1.0
-        keep = np.ones(r.size, dtype=bool)
-        suspects: list[tuple[str, str]] = []
-        if self._suspected and self.reject_outliers:
-            # a reading left out at the last update stays out while its own innovation fails
-            # its test (the prediction's uncertainty grows without it: a broken sensor would
-            # otherwise be absorbed by the load's random walk after a few steps)
-            for name, rows, rdof in readings:
-                if name not in self._suspected:
-                    continue
-                Sg = S[np.ix_(rows, rows)]
-                stat = float(nu[rows] @ np.linalg.solve(Sg, nu[rows]))
-                if stat > consistency_threshold(rdof, self.consistency_probability):
-                    keep[rows] = False
-                    suspects.append((name, f'still contradicted by the prediction: its '
-                                           f'normalized innovation is {stat:.4g} on {rdof} '
-                                           f'degrees of freedom'))
-            if suspects:
-                readings = [c for c in readings if keep[c[1][0]]]
-                H, HP, nu, r = H[keep], HP[keep], nu[keep], r[keep]
-                S = S[np.ix_(keep, keep)]
-                keep = np.ones(r.size, dtype=bool)
-                offset = np.cumsum(np.r_[0, [c[1].size for c in readings]])
-                readings = [(c[0], np.arange(offset[i], offset[i + 1]), c[2])
-                            for i, c in enumerate(readings)]
-        dof = sum(d for _, _, d in readings)
-        if not readings:
-            self._suspected = {name for name, _ in suspects}
-            self._cache = (x, rest.copy(), load.copy(), dyn, np.zeros(self.size))
-            return 0.0, 0, None, suspects
-        threshold = consistency_threshold(dof, self.consistency_probability)
-        sol = np.linalg.solve(S, np.column_stack([nu, HP]))
-        nis = float(nu @ sol[:, 0])
-        consistent: bool | None = nis <= threshold
-        self._inconsistent = 0 if consistent else self._inconsistent + 1
-        if not consistent and self.reject_outliers:
-            nis_kept, dof_kept, keep, snooped = self._snoop(S, nu, readings, nis, dof)
-            if snooped:
-                nis, dof, consistent = nis_kept, dof_kept, True
-                suspects += snooped
-        self._suspected = {name for name, _ in suspects}
-        if not keep.all():
-            HP, nu = HP[keep], nu[keep]
-            S = S[np.ix_(keep, keep)]
-            sol = np.linalg.solve(S, np.column_stack([nu, HP]))
-        dx = HP.T @ sol[:, 0]
-        Pn = P - HP.T @ sol[:, 1:]
-        xn = x + dx
+        out = kalman_update(P, r, H, readings, self._suspected, self.consistency_probability,
+                            self.reject_outliers)
+        self._suspected = {name for name, _ in out.left_out}
+        if out.raw_consistent is not None:
+            self._inconsistent = 0 if out.raw_consistent else self._inconsistent + 1
+        xn = x + out.correction
         check_in_chart(xn[:6], 'screw')
-        self._x, self._P = xn, 0.5 * (Pn + Pn.T)
-        self._cache = (xn, rest.copy(), load.copy(), dyn, dx)
-        return nis, dof, consistent, suspects
-
-    def _snoop(self, S: FloatArray, nu: FloatArray,
-               readings: list[tuple[str, NDArray[np.intp], int]], nis: float, dof: int
-               ) -> tuple[float, int, NDArray[np.bool_], list[tuple[str, str]]]:
-        """Leave out the reading whose innovation a broken sensor explains best, at most
-        :data:`MAX_CONTRADICTED`, while the NIS test fails: for rows ``g`` the statistic
-        ``(S^-1 nu)_g^T ((S^-1)_gg)^-1 (S^-1 nu)_g`` is the drop of NIS when they are left out
-        (chi-square with their dof for a sound reading), compared across readings by their
-        Wilson-Hilferty z. Kept out only when the rest then passes; (NIS, dof, rows kept,
-        (name, why)) of the rest."""
-        keep = np.ones(nu.size, dtype=bool)
-        left: list[tuple[str, str]] = []
-        current = list(readings)
-        for _ in range(MAX_CONTRADICTED):
-            idx = np.flatnonzero(keep)
-            Si = np.linalg.inv(S[np.ix_(idx, idx)])
-            y = Si @ nu[idx]
-            where = {int(k): i for i, k in enumerate(idx.tolist())}
-            scored = []
-            for name, rows, rdof in current:
-                if rdof >= dof:
-                    continue
-                local = [where[int(k)] for k in rows.tolist()]
-                block = Si[np.ix_(local, local)]
-                yg = y[local]
-                stat = float(yg @ np.linalg.solve(block, yg))
-                scored.append((wilson_hilferty(max(stat, 1e-300), rdof), stat, name, rows,
-                               rdof))
-            if not scored:
-                break
-            scored.sort(key=lambda s: s[0], reverse=True)
-            z, stat, name, rows, rdof = scored[0]
-            keep[rows] = False
-            nis -= stat
-            dof -= rdof
-            current = [c for c in current if c[0] != name]
-            left.append((name, f'contradicted by the prediction and the others: leaving it '
-                               f'out lowers the NIS by {stat:.4g} (normalized z = {z:.3g})'))
-            if nis <= consistency_threshold(dof, self.consistency_probability):
-                return nis, dof, keep, left
-        return nis, dof, np.ones(nu.size, dtype=bool), []
+        self._x, self._P = xn, out.covariance
+        self._cache = (xn, rest.copy(), load.copy(), dyn, out.correction)
+        return out.nis, out.dof, out.consistent, out.left_out
 
     # ------------------------------------------------------------------ (re)starts
     def _static_start(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray,
@@ -878,4 +792,120 @@ class JointFilter:
                              prep.describe(self.model.string_names), np.empty(0), consistent,
                              int(dof), names, why, restarted,
                              np.concatenate([v_s, w_s]), 0.5 * (twist_cov + twist_cov.T))
+
+
+@dataclass(slots=True)
+class UpdateResult:
+    """The outcome of :func:`kalman_update`: the state ``correction`` and the updated
+    ``covariance``; ``nis`` and its ``dof`` over the readings kept; ``consistent`` the NIS test
+    of those (None without readings), ``raw_consistent`` that of every reading but those still
+    held out (what a lost track is judged by); ``left_out`` (name, why) of the readings left
+    out."""
+
+    correction: FloatArray
+    covariance: FloatArray
+    nis: float
+    dof: int
+    consistent: bool | None
+    raw_consistent: bool | None
+    left_out: list[tuple[str, str]]
+
+
+def kalman_update(P: FloatArray, r: FloatArray, H: FloatArray,
+                  readings: list[tuple[str, NDArray[np.intp], int]], suspected: set[str],
+                  probability: float, reject_outliers: bool = True) -> UpdateResult:
+    """One stacked EKF update with the trust rules (module docstring) for the whitened
+    residual ``r = h(x) - z`` (rows,), its Jacobian ``H`` (rows, size) and the state covariance
+    ``P``; ``readings`` (name, rows, dof) name the rows, ``suspected`` the readings left out at
+    the last update: each stays out while its own innovation fails its test (the prediction's
+    uncertainty grows without it: a broken sensor would otherwise be absorbed by a load's random
+    walk after a few steps). Then the NIS test at ``probability``; while it fails the reading a
+    broken sensor explains best is left out (:func:`innovation_outliers`), kept out only when
+    the rest then passes."""
+    size = P.shape[0]
+    if not r.size:
+        return UpdateResult(np.zeros(size), P, 0.0, 0, None, None, [])
+    nu = -r
+    HP = H @ P
+    S = HP @ H.T
+    S[np.diag_indices_from(S)] += 1.0
+    left: list[tuple[str, str]] = []
+    if suspected and reject_outliers:
+        keep = np.ones(r.size, dtype=bool)
+        for name, rows, rdof in readings:
+            if name not in suspected:
+                continue
+            stat = float(nu[rows] @ np.linalg.solve(S[np.ix_(rows, rows)], nu[rows]))
+            if stat > consistency_threshold(rdof, probability):
+                keep[rows] = False
+                left.append((name, f'still contradicted by the prediction: its normalized '
+                                   f'innovation is {stat:.4g} on {rdof} degrees of freedom'))
+        if left:
+            readings = [c for c in readings if keep[c[1][0]]]
+            HP, nu = HP[keep], nu[keep]
+            S = S[np.ix_(keep, keep)]
+            offset = np.cumsum(np.r_[0, [c[1].size for c in readings]])
+            readings = [(c[0], np.arange(offset[i], offset[i + 1]), c[2])
+                        for i, c in enumerate(readings)]
+    if not readings:
+        return UpdateResult(np.zeros(size), P, 0.0, 0, None, None, left)
+    dof = sum(d for _, _, d in readings)
+    sol = np.linalg.solve(S, np.column_stack([nu, HP]))
+    nis = float(nu @ sol[:, 0])
+    raw = nis <= consistency_threshold(dof, probability)
+    consistent: bool | None = raw
+    if not raw and reject_outliers:
+        nis_kept, dof_kept, keep, snooped = innovation_outliers(S, nu, readings, nis, dof,
+                                                                probability)
+        if snooped:
+            nis, dof, consistent = nis_kept, dof_kept, True
+            left += snooped
+            HP, nu = HP[keep], nu[keep]
+            S = S[np.ix_(keep, keep)]
+            sol = np.linalg.solve(S, np.column_stack([nu, HP]))
+    dx = HP.T @ sol[:, 0]
+    Pn = P - HP.T @ sol[:, 1:]
+    return UpdateResult(dx, 0.5 * (Pn + Pn.T), nis, dof, consistent, raw, left)
+
+
+def innovation_outliers(S: FloatArray, nu: FloatArray,
+                        readings: list[tuple[str, NDArray[np.intp], int]], nis: float,
+                        dof: int, probability: float
+                        ) -> tuple[float, int, NDArray[np.bool_], list[tuple[str, str]]]:
+    """Leave out the reading whose innovation a broken sensor explains best, at most
+    :data:`~tensegrity_stiffness.estimation.estimators.MAX_CONTRADICTED`, while the NIS test at
+    ``probability`` fails: for a reading's rows ``g`` the statistic
+    ``(S^-1 nu)_g^T ((S^-1)_gg)^-1 (S^-1 nu)_g`` is the drop of NIS when they are left out
+    (chi-square with their dof for a sound reading: Baarda's test in innovation form), compared
+    across readings by their Wilson-Hilferty z. Kept out only when the rest then passes; returns
+    (NIS, dof, rows kept, (name, why)) of the rest (every row kept and none named otherwise)."""
+    keep = np.ones(nu.size, dtype=bool)
+    left: list[tuple[str, str]] = []
+    current = list(readings)
+    for _ in range(MAX_CONTRADICTED):
+        idx = np.flatnonzero(keep)
+        Si = np.linalg.inv(S[np.ix_(idx, idx)])
+        y = Si @ nu[idx]
+        where = {int(k): i for i, k in enumerate(idx.tolist())}
+        scored = []
+        for name, rows, rdof in current:
+            if rdof >= dof:
+                continue
+            local = [where[int(k)] for k in rows.tolist()]
+            yg = y[local]
+            stat = float(yg @ np.linalg.solve(Si[np.ix_(local, local)], yg))
+            scored.append((wilson_hilferty(max(stat, 1e-300), rdof), stat, name, rows, rdof))
+        if not scored:
+            break
+        scored.sort(key=lambda item: item[0], reverse=True)
+        z, stat, name, rows, rdof = scored[0]
+        keep[rows] = False
+        nis -= stat
+        dof -= rdof
+        current = [c for c in current if c[0] != name]
+        left.append((name, f'contradicted by the prediction and the others: leaving it out '
+                           f'lowers the NIS by {stat:.4g} (normalized z = {z:.3g})'))
+        if nis <= consistency_threshold(dof, probability):
+            return nis, dof, keep, left
+    return nis, dof, np.ones(nu.size, dtype=bool), []
 
