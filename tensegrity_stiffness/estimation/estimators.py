@@ -1230,6 +1230,9 @@ class ChainEstimate:
     ``redundancy``, ``outliers``, ``outlier_reasons`` and ``restarted`` as
     :class:`JointEstimate`'s (a joint's readings named ``joint <i> tension[<string>]``,
     ``joint <i> length[<string>]``, ``joint <i> pose``; the tip's ``pose`` and ``wrench``).
+    ``screw_rates`` (N, 6) and ``screw_rate_covariance`` (6N, 6N): the chain filter's
+    (:class:`~tensegrity_stiffness.estimation.chain_filter.ChainFilter`); empty from the static
+    estimator, which assumes rest.
     """
 
     success: bool
@@ -1255,6 +1258,8 @@ class ChainEstimate:
     outliers: tuple[str, ...] = ()
     outlier_reasons: tuple[str, ...] = ()
     restarted: bool = False
+    screw_rates: FloatArray = field(default_factory=lambda: np.zeros((0, 6)))
+    screw_rate_covariance: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 class _ChainProblem:
