@@ -192,24 +192,7 @@ class ChainFilter:
                              f'{len(joint_measurements)}')
         rest = [m.validate_rest_lengths(r, batched=False) for m, r in
                 zip(chain.joints, chain.rest_lengths_per_joint(rest_lengths), strict=True)]
-        preps: list[PreparedMeasurements | None] = []
-        dropped: list[tuple[str, str]] = []
-        for i, (model, m) in enumerate(zip(chain.joints, joint_measurements, strict=True)):
-            if m is None:
-                preps.append(None)
-                continue
-            if m.external_wrench is not None or m.gravity is not None:
-                raise ValueError(f'joint_measurements[{i}]: a spine takes its load as tip_wrench '
-                                 'and gravity from its chain')
-            try:
-                p = m.prepared(model.n_strings)
-            except ValueError as exc:
-                raise ValueError(f'joint_measurements[{i}].{exc}') from None
-            bad = p.impossible(model, rest[i])
-            if bad:
-                p = p.without([name for name, _ in bad], model.string_names)
-                dropped += [(f'joint {i + 1} {name}', why) for name, why in bad]
-            preps.append(p)
+        preps, dropped = self._prepared(joint_measurements, rest)
         pose_T = pose_whitener = None
         if tip_pose is not None:
             pose_T = rigid_transform(tip_pose, 'tip_pose')
@@ -261,6 +244,31 @@ class ChainFilter:
                                       True, dropped, start.outliers, start.outlier_reasons)
         return self._estimate(rest, load, out.nis, out.dof, out.consistent, False,
                               dropped + out.left_out)
+
+    def _prepared(self, joint_measurements: Sequence[Measurements | None],
+                  rest: list[FloatArray]
+                  ) -> tuple[list[PreparedMeasurements | None], list[tuple[str, str]]]:
+        """Each joint's readings prepared (ValueError naming the entry), impossible ones left
+        out and named ``joint <i> <reading>``."""
+        preps: list[PreparedMeasurements | None] = []
+        dropped: list[tuple[str, str]] = []
+        for i, (model, m) in enumerate(zip(self.chain.joints, joint_measurements, strict=True)):
+            if m is None:
+                preps.append(None)
+                continue
+            if m.external_wrench is not None or m.gravity is not None:
+                raise ValueError(f'joint_measurements[{i}]: a spine takes its load as tip_wrench '
+                                 'and gravity from its chain')
+            try:
+                p = m.prepared(model.n_strings)
+            except ValueError as exc:
+                raise ValueError(f'joint_measurements[{i}].{exc}') from None
+            bad = p.impossible(model, rest[i])
+            if bad:
+                p = p.without([name for name, _ in bad], model.string_names)
+                dropped += [(f'joint {i + 1} {name}', why) for name, why in bad]
+            preps.append(p)
+        return preps, dropped
 
     def predict(self, t: float, rest_lengths: Any = None, known_load: ArrayLike | None = None
                 ) -> None:
