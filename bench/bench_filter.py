@@ -9,8 +9,10 @@ new noise each step, side by side in one run with ``estimate_joint_state`` warm-
 same readings (12 tensions and the accelerometer's direction of gravity; its previous
 estimate as the warm start) and one ``JointModel.evaluate`` (the floor). The three are timed in
 alternating rounds (``--rounds``) of ``--repeats`` calls each; medians and p90 in us and the
-ratios to ``evaluate`` and to the static estimator. Target (issue 37): <= 100 us per update;
-a spine of 5 joints <= 1 ms (``ChainFilter``: not built yet, reported as such).
+ratios to ``evaluate`` and to the static estimator. Target (issue 37): <= 100 us per update.
+Then the spine of 5 joints (the packaged one, every joint's 12 load cells, unknown tip load):
+one ``ChainFilter.step`` beside a warm-started ``estimate_chain_state`` on the same readings,
+alternating; target <= 1 ms.
 ``--profile``: cProfile of the filter's steps, the functions by their own time.
 """
 
@@ -32,12 +34,16 @@ sys.path.insert(0, str(ROOT / 'test'))
 import numpy as np  # noqa: E402
 from support.estimation_trials import GRAVITY_STD, TENSION_STD, TRUTH_SPREAD  # noqa: E402
 
+from tensegrity_stiffness.config import packaged_config_path  # noqa: E402
 from tensegrity_stiffness.estimation import (  # noqa: E402
+    ChainFilter,
     JointFilter,
     Measurements,
+    estimate_chain_state,
     estimate_joint_state,
 )
 from tensegrity_stiffness.estimation import sensor_models as sm  # noqa: E402
+from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_joint.yaml'
@@ -82,6 +88,7 @@ def main() -> None:
     parser.add_argument('--repeats', type=int, default=2000)
     parser.add_argument('--rounds', type=int, default=5)
     parser.add_argument('--profile', action='store_true')
+    parser.add_argument('--spine-repeats', type=int, default=100)
     args = parser.parse_args()
     model = JointModel.from_yaml(CONFIG)
     rng = np.random.default_rng(0)
@@ -124,8 +131,8 @@ def main() -> None:
         p90 = float(np.percentile(times, 90))
         print(f'{name:40s} {med * 1e6:10.1f} {p90 * 1e6:8.1f} {med / floor:10.1f} '
               f'{med / static_median:8.2f}')
-    print('target: one filter update <= 100 us; spine of 5 joints <= 1 ms: ChainFilter not '
-          'built')
+    print('target: one filter update <= 100 us')
+    spine(args.spine_repeats, args.rounds)
     if args.profile:
         flt = filters['JointFilter.step (12 cells + IMU)']
         profile = cProfile.Profile()
@@ -137,6 +144,49 @@ def main() -> None:
         out = io.StringIO()
         pstats.Stats(profile, stream=out).sort_stats('tottime').print_stats(15)
         print(out.getvalue())
+
+
+def spine(repeats: int, rounds: int) -> None:
+    """The 5-joint spine: ``ChainFilter.step`` against a warm-started
+    ``estimate_chain_state``, alternating rounds of ``repeats``."""
+    chain = JointChain.from_yaml(packaged_config_path(DEFAULT_SPINE_CONFIG))
+    rng = np.random.default_rng(1)
+    xi = chain.unloaded_screws()
+    st = chain.evaluate(xi)
+
+    def reading():
+        return [Measurements(tensions=st.tensions[i] + rng.normal(scale=TENSION_STD,
+                                                                   size=st.tensions[i].size),
+                             tension_std=TENSION_STD) for i in range(chain.n_joints)]
+
+    flt = ChainFilter(chain, string_damping=0.5, stiffness_std=False)
+    clock = [0]
+    for _ in range(20):
+        clock[0] += 1
+        flt.step(clock[0] * 1e-3, reading())
+    warm = [estimate_chain_state(chain, reading(), stiffness_std=False).screws]
+
+    def static_step(m):
+        warm[0] = estimate_chain_state(chain, m, initial_screws=warm[0],
+                                       stiffness_std=False).screws
+
+    def filter_step(m):
+        clock[0] += 1
+        flt.step(clock[0] * 1e-3, m)
+
+    rows: dict[str, list[float]] = {'estimate_chain_state, warm (5 joints)': [],
+                                    'ChainFilter.step (5 joints, 60 cells)': []}
+    for _ in range(rounds):
+        rows['estimate_chain_state, warm (5 joints)'] += timed(
+            static_step, [reading() for _ in range(repeats)])
+        rows['ChainFilter.step (5 joints, 60 cells)'] += timed(
+            filter_step, [reading() for _ in range(repeats)])
+    base = statistics.median(rows['estimate_chain_state, warm (5 joints)'])
+    for name, times in rows.items():
+        med = statistics.median(times)
+        print(f'{name:40s} {med * 1e3:8.2f} ms {float(np.percentile(times, 90)) * 1e3:8.2f} ms '
+              f'{med / base:8.2f}')
+    print('target: one spine filter update (5 joints) <= 1 ms')
 
 
 if __name__ == '__main__':

@@ -142,6 +142,7 @@ class ChainFilter:
         self._P: FloatArray | None = None
         self._inconsistent = 0
         self._suspected: set[str] = set()
+        self._cache: tuple[Any, ...] | None = None
         if screws is not None and estimate is not None:
             raise ValueError('reset takes screws or an estimate, not both')
         n = self.n
@@ -237,6 +238,7 @@ class ChainFilter:
         xn = self._x + out.correction
         check_in_chart(xn[:6 * n].reshape(n, 6), 'screws')
         self._x, self._P = xn, out.covariance
+        self._cache = (xn, lin, _key(rest, load), out.correction)
         if self._inconsistent >= LOST_TRACK_STEPS:
             start = self._static_start(static_args, self._x[:6 * n].reshape(n, 6).copy())
             if start.success:
@@ -341,12 +343,22 @@ class ChainFilter:
         n = self.n
         m = 12 * n
         for _ in range(steps):
-            lin = self._linearize(rest, load)
+            cache = self._cache
+            if cache is not None and cache[0] is self._x and cache[2] == _key(rest, load):
+                # the last update's linearisation (at its prior) carried to its posterior to
+                # first order: one linearisation per step
+                lin, dx = cache[1], cache[3]
+            else:
+                lin, dx = self._linearize(rest, load), None
             A = np.zeros((m, m))
             A[:6 * n, 6 * n:] = np.eye(6 * n)
             A[6 * n:, :6 * n] = lin['d_screw']
             A[6 * n:, 6 * n:] = lin['d_rate']
             f = np.concatenate([self._x[6 * n:12 * n], lin['acc']])
+            if dx is not None:
+                f[6 * n:] += A[6 * n:] @ dx[:m]
+                if self.size > m:
+                    f[6 * n:] += lin['d_load'] @ dx[m:]
             E = np.eye(m) - 0.5 * h * A
             rhs = [f[:, None] * h, np.eye(m) + 0.5 * h * A]
             if self.size > m:
@@ -473,6 +485,11 @@ class ChainFilter:
                              True, 6, math.nan, 1, state, consistent, int(dof), names, why,
                              restarted, x[6 * n:12 * n].reshape(n, 6).copy(),
                              P[6 * n:12 * n, 6 * n:12 * n].copy())
+
+
+def _key(rest: list[FloatArray], load: FloatArray) -> bytes:
+    """The inputs a linearisation holds for (rest lengths and a known load), as bytes."""
+    return b''.join(r.tobytes() for r in rest) + load.tobytes()
 
 
 def _whitener(name: str, covariance: ArrayLike | None) -> FloatArray:
