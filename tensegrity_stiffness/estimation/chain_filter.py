@@ -43,7 +43,7 @@ from tensegrity_stiffness.estimation.estimators import (
     tip_stiffness_std,
 )
 from tensegrity_stiffness.estimation.joint_filter import (
-    DEFAULT_PROCESS_NOISE,
+    DEFAULT_CHAIN_PROCESS_NOISE,
     INITIAL_ANGULAR_VELOCITY_STD,
     INITIAL_LINEAR_VELOCITY_STD,
     KNOWN_LOAD_STD,
@@ -74,7 +74,8 @@ class ChainFilter:
     one :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` per link, and
     ``string_damping``) or a :class:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics`;
     ``process_noise`` a :class:`~tensegrity_stiffness.estimation.joint_filter.ProcessNoise`
-    (its accelerations act on each joint's ``xi_ddot``, its rates on the tip load);
+    (its accelerations act on each joint's ``xi_ddot``, its rates on the tip load; default
+    :data:`~tensegrity_stiffness.estimation.joint_filter.DEFAULT_CHAIN_PROCESS_NOISE`);
     ``load`` ``'unknown'`` or ``'known'``; the rest as :class:`~tensegrity_stiffness.estimation.
     joint_filter.JointFilter`'s."""
 
@@ -96,7 +97,7 @@ class ChainFilter:
         if load not in LOAD_MODES:
             raise ValueError(f'load must be one of {LOAD_MODES}, got {load!r}')
         if process_noise is None:
-            process_noise = DEFAULT_PROCESS_NOISE
+            process_noise = DEFAULT_CHAIN_PROCESS_NOISE
         if not isinstance(process_noise, ProcessNoise):
             raise ValueError(f'process_noise must be a ProcessNoise, got '
                              f'{type(process_noise).__name__}')

@@ -80,6 +80,7 @@ from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
 
 __all__ = [
+    'DEFAULT_CHAIN_PROCESS_NOISE',
     'DEFAULT_GRAVITY',
     'DEFAULT_PROCESS_NOISE',
     'INITIAL_ANGULAR_VELOCITY_STD',
@@ -159,8 +160,13 @@ class ProcessNoise:
         return np.array([self.force_rate ** 2] * 3 + [self.moment_rate ** 2] * 3)
 
 
-#: The defaults (the one home of their values: :class:`ProcessNoise`'s fields).
+#: The joint filter's defaults (the one home of their values: :class:`ProcessNoise`'s fields).
 DEFAULT_PROCESS_NOISE = ProcessNoise()
+#: The spine filter's defaults (:class:`~tensegrity_stiffness.estimation.chain_filter.
+#: ChainFilter`): its prediction leaves out the velocity-product terms and each joint's
+#: acceleration carries the others' motion, so its accelerations are 8x the joint's (tuned on
+#: the twin's moving spine, docs/estimation.md#spines-chainfilter).
+DEFAULT_CHAIN_PROCESS_NOISE = ProcessNoise(angular_acceleration=48.0, linear_acceleration=0.12)
 
 
 def _hat(a: FloatArray) -> FloatArray:
