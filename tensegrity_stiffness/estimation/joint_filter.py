@@ -266,6 +266,12 @@ class JointFilter:
     :meth:`step`); ``gravity`` (3,) m/s^2 in {1} for the accelerometer;
     ``consistency_probability`` of the NIS test; ``stiffness_std`` whether estimates carry the
     std of ``K_c``; ``reject_outliers`` whether contradicted readings are left out.
+
+    The :class:`~tensegrity_stiffness.estimation.estimators.JointEstimate` of a step: ``chi2``
+    is the update's NIS and ``dof`` = ``redundancy`` its degrees of freedom (every reading
+    checks itself against the prediction), ``condition_number`` NaN (not computed),
+    ``iterations`` 1; ``external_wrench`` the load state (or the known load, with a zero
+    covariance); ``twist`` and ``twist_covariance`` link 2's ``[dp/dt; w]`` in {1}.
     """
 
     def __init__(self, model: JointModel | JointDynamics, inertia: LinkInertia | None = None,
