@@ -60,7 +60,7 @@ from tensegrity_stiffness.geometry.screw import (
     log_se3,
 )
 from tensegrity_stiffness.geometry.transforms import rigid_transform
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, finite_array_of_shape
 from tensegrity_stiffness.mechanics.chain import ChainState, JointChain
 from tensegrity_stiffness.mechanics.equilibrium import (
     MAX_ROTATION_STEP,
@@ -91,9 +91,15 @@ __all__ = [
     'PreparedMeasurements',
     'cartesian_stiffness_jacobian',
     'consistency_threshold',
+    'entry_std',
     'estimate_chain_state',
     'estimate_joint_state',
+    'missing_message',
+    'stiffness_jacobian_near',
     'suspect_reading',
+    'tip_pose_jacobian',
+    'tip_stiffness_std',
+    'wilson_hilferty',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -274,6 +280,13 @@ class Measurements:
     in {1}. ``external_wrench`` (6,) [N; N m] on link 2 in {1} about its origin with
     ``wrench_covariance`` (6, 6): a known (zeros with a small covariance for "unloaded") or
     measured (force-torque) load; ``None`` for an unknown load.
+
+    For the recursive filter (:class:`~tensegrity_stiffness.estimation.joint_filter.
+    JointFilter`; the static estimator does not read them): ``specific_force`` (3,) m/s^2 the
+    accelerometer's raw specific force in {2} (acceleration minus gravity, modelled with the
+    link's acceleration) with ``specific_force_std`` (m/s^2, a scalar or (3,)), and
+    ``angular_velocity`` (3,) rad/s a gyro's reading of link 2's angular velocity in {2} with
+    ``angular_velocity_std`` (rad/s, a scalar or (3,)).
     """
 
     tensions: ArrayLike | None = None
@@ -287,6 +300,10 @@ class Measurements:
     gravity_base: ArrayLike | None = None
     external_wrench: ArrayLike | None = None
     wrench_covariance: ArrayLike | None = None
+    specific_force: ArrayLike | None = None
+    specific_force_std: ArrayLike | float | None = None
+    angular_velocity: ArrayLike | None = None
+    angular_velocity_std: ArrayLike | float | None = None
 
     def prepared(self, n_strings: int) -> PreparedMeasurements:
         """Validated and whitened for a joint with ``n_strings`` strings; bad input raises
@@ -404,6 +421,25 @@ class PreparedMeasurements:
             self.wrench = W
             self.wrench_covariance, self.wrench_whitener = _covariance(
                 'wrench_covariance', m.wrench_covariance, 6)
+        # the filter's IMU readings (not counted in rows / dof: the static estimator ignores
+        # them)
+        self.specific_force = None
+        if m.specific_force is not None:
+            self.specific_force = finite_array_of_shape('specific_force', m.specific_force,
+                                                        (3,))
+            self.specific_force_weight = 1.0 / _std('specific_force_std',
+                                                    m.specific_force_std, 3)
+        self.angular_velocity = None
+        if m.angular_velocity is not None:
+            self.angular_velocity = finite_array_of_shape('angular_velocity',
+                                                          m.angular_velocity, (3,))
+            self.angular_velocity_weight = 1.0 / _std('angular_velocity_std',
+                                                      m.angular_velocity_std, 3)
+        self._count()
+
+    def recount(self) -> None:
+        """Count the rows and degrees of freedom again after readings were set on a copy
+        (the filter hands the static estimator a specific force as a gravity direction)."""
         self._count()
 
     def _count(self) -> None:
@@ -531,6 +567,11 @@ class JointEstimate:
     ``length[<string>]``, ``gravity``, ``pose``, ``wrench``) with ``outlier_reasons`` (why, one
     each: impossible, or contradicted by the others); ``restarted`` when the warm start lost
     track (an inconsistent or failed estimate) and the estimate is a cold start's.
+
+    Motion (the recursive filter's; the static estimator assumes rest: zeros): ``twist`` (6,)
+    the rate of the pose in the PoseWithCovariance convention, ``[dp/dt; w]`` in {1} (the
+    velocity of {2}'s origin and link 2's angular velocity, both in {1}: the order and frame
+    of ``covariance``), with ``twist_covariance`` (6, 6).
     """
 
     success: bool
@@ -556,6 +597,8 @@ class JointEstimate:
     outliers: tuple[str, ...] = ()
     outlier_reasons: tuple[str, ...] = ()
     restarted: bool = False
+    twist: FloatArray = field(default_factory=lambda: np.zeros(6))
+    twist_covariance: FloatArray = field(default_factory=lambda: np.zeros((6, 6)))
 
 
 def _nan(*shape: int) -> FloatArray:
@@ -662,7 +705,7 @@ def _describe_direction(pose_change: FloatArray, length_scale: float) -> str:
     return f'{kind} ({axis[0]:.2f}, {axis[1]:.2f}, {axis[2]:.2f})'
 
 
-def _missing_message(prep: PreparedMeasurements, names: Sequence[str], rank: int,
+def missing_message(prep: PreparedMeasurements, names: Sequence[str], rank: int,
                      null_directions: list[str], slack: Sequence[str]) -> str:
     """Why a joint's measurement set cannot determine the pose, and what would."""
     inputs = prep.describe(names)
@@ -696,7 +739,7 @@ def _observability(problem: _JointProblem, J: FloatArray, state: JointState,
     null = Vt[rank:]
     words = [_describe_direction(P @ v, problem.length_scale) for v in null]
     slack = [problem.model.string_names[i] for i in prep.tension_index if state.slack[i]]
-    return rank, cond, s, _missing_message(prep, problem.model.string_names, rank, words,
+    return rank, cond, s, missing_message(prep, problem.model.string_names, rank, words,
                                                 slack)
 
 
@@ -807,7 +850,7 @@ _STIFFNESS_JACOBIANS: weakref.WeakKeyDictionary[JointModel, tuple[FloatArray, Fl
     weakref.WeakKeyDictionary()
 
 
-def _stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray) -> FloatArray:
+def stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray) -> FloatArray:
     """:func:`cartesian_stiffness_jacobian` at ``xi``, or the one computed last for this model
     and rest lengths when ``xi`` is within :data:`STIFFNESS_JACOBIAN_REUSE` of its screw (a
     tracker's consecutive estimates: 12 evaluations saved per estimate)."""
@@ -832,7 +875,7 @@ def _stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray
 _STIFFNESS_STEPS = np.vstack([np.eye(6), -np.eye(6)]) * STIFFNESS_STEP
 
 
-def _entry_std(jacobian: FloatArray, covariance: FloatArray) -> FloatArray:
+def entry_std(jacobian: FloatArray, covariance: FloatArray) -> FloatArray:
     """sqrt(diag(g C g^T)) per entry of a matrix with Jacobian (a, b, k)."""
     a, b, k = jacobian.shape
     G = jacobian.reshape(a * b, k)
@@ -870,7 +913,7 @@ def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArr
     return model.initial_screw.copy()
 
 
-def _wilson_hilferty(value: float, dof: int) -> float:
+def wilson_hilferty(value: float, dof: int) -> float:
     """The standard normal quantile of a chi-square(dof) ``value`` (Wilson-Hilferty): readings
     of different degrees of freedom compared on one scale."""
     a = 2.0 / (9.0 * dof)
@@ -900,7 +943,7 @@ def suspect_reading(r: FloatArray, J: FloatArray, C: FloatArray,
         proj = V[:, checked].T @ r[rows]
         statistic = float(np.sum(proj * proj / w[checked]))
         k = min(dof, int(checked.sum()))
-        scored.append((_wilson_hilferty(statistic, k), statistic, name))
+        scored.append((wilson_hilferty(statistic, k), statistic, name))
     if not scored:
         return None
     scored.sort(reverse=True)
@@ -1110,7 +1153,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     if dropped:
         prep = prep.without([name for name, _ in dropped], names)
     if prep.dof < 6:
-        message = _missing_message(prep, names, prep.dof, [], [])
+        message = missing_message(prep, names, prep.dof, [], [])
         if dropped:
             message += ' (left out: ' + '; '.join(f'{n} {why}' for n, why in dropped) + ')'
         return _failed_joint(message, prep, names, False, min(prep.dof, 6), math.inf,
@@ -1148,7 +1191,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     P = sm.pose_jacobian(x, fit.kin)  # at the estimate
     pose_cov = P @ C @ P.T
     K = state.stiffness
-    Kc_std = (_entry_std(_stiffness_jacobian_near(model, x, rest), C) if stiffness_std
+    Kc_std = (entry_std(stiffness_jacobian_near(model, x, rest), C) if stiffness_std
               else _nan(6, 6))
     return JointEstimate(True, 'ok', x, state.transform.copy(), 0.5 * (pose_cov + pose_cov.T), C,
                          -state.wrench, K @ C @ K.T, state, Kc_std, fit.chi2, prep.dof - 6,
@@ -1202,6 +1245,9 @@ class ChainEstimate:
     ``redundancy``, ``outliers``, ``outlier_reasons`` and ``restarted`` as
     :class:`JointEstimate`'s (a joint's readings named ``joint <i> tension[<string>]``,
     ``joint <i> length[<string>]``, ``joint <i> pose``; the tip's ``pose`` and ``wrench``).
+    ``screw_rates`` (N, 6) and ``screw_rate_covariance`` (6N, 6N): the chain filter's
+    (:class:`~tensegrity_stiffness.estimation.chain_filter.ChainFilter`); empty from the static
+    estimator, which assumes rest.
     """
 
     success: bool
@@ -1227,6 +1273,8 @@ class ChainEstimate:
     outliers: tuple[str, ...] = ()
     outlier_reasons: tuple[str, ...] = ()
     restarted: bool = False
+    screw_rates: FloatArray = field(default_factory=lambda: np.zeros((0, 6)))
+    screw_rate_covariance: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 class _ChainProblem:
@@ -1288,7 +1336,7 @@ class _ChainProblem:
         if self.tip_pose is not None:
             T = state.tip_transform
             jac = np.zeros((6, size))
-            jac[:, :6 * n] = _tip_pose_jacobian(self.chain, xi, T)
+            jac[:, :6 * n] = tip_pose_jacobian(self.chain, xi, T)
             r, jac = sm.pose_residual_unchecked(T, self.tip_pose, jac)
             rows_r.append(self.tip_pose_whitener @ r)
             rows_J.append(self.tip_pose_whitener @ jac)
@@ -1327,7 +1375,7 @@ class _ChainProblem:
         return None
 
 
-def _tip_pose_jacobian(chain: JointChain, xi: FloatArray, tip: FloatArray) -> FloatArray:
+def tip_pose_jacobian(chain: JointChain, xi: FloatArray, tip: FloatArray) -> FloatArray:
     """``d[dp; dtheta]/dxi`` (6, 6N) of the tip pose (PoseWithCovariance convention in the base)
     from the tip's spatial twist ``[dv; dw]`` (:meth:`JointChain.jacobian`):
     ``dp = dv + dw x p``, ``dtheta = dw``."""
@@ -1416,7 +1464,7 @@ def _chain_information(problem: _ChainProblem, J: FloatArray, Jc: FloatArray,
     return 0.5 * (C + C.T), rank, cond, np.empty((0, problem.size))
 
 
-def _chain_missing_message(null: FloatArray, n: int, inputs: str, rank: int) -> str:
+def _chainmissing_message(null: FloatArray, n: int, inputs: str, rank: int) -> str:
     weight = np.zeros(n + 1)
     for v in null:
         weight += np.sqrt(np.sum(v.reshape(n + 1, 6) ** 2, axis=1))
@@ -1728,7 +1776,7 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
     r, _, _, _, state = ev
     C, rank, cond = fit.C, fit.rank, fit.cond
     if rank < 6:
-        return _failed_chain(_chain_missing_message(fit.null, n, inputs.text, rank), n,
+        return _failed_chain(_chainmissing_message(fit.null, n, inputs.text, rank), n,
                              measured, dropped, False, rank, cond, iterations)
     if not fit.converged:
         return _failed_chain(f'{inputs.text}: {fit.why}', n, measured, dropped, True, rank,
@@ -1742,10 +1790,10 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
         joint_cov[i] = P @ C[6 * i:6 * i + 6, 6 * i:6 * i + 6] @ P.T
     T_tip = state.tip_transform
     M = np.zeros((6, 6 * n + 6))
-    M[:, :6 * n] = _tip_pose_jacobian(chain, xi, T_tip)
+    M[:, :6 * n] = tip_pose_jacobian(chain, xi, T_tip)
     tip_cov = M @ C @ M.T
     K_tip = chain.tip_stiffness_from_state(state, W, g)
-    K_tip_std = _tip_stiffness_std(chain, z, C, g, rest) if stiffness_std else _nan(6, 6)
+    K_tip_std = tip_stiffness_std(chain, z, C, g, rest) if stiffness_std else _nan(6, 6)
     return ChainEstimate(True, 'ok', xi.copy(), C[:6 * n, :6 * n], joint_cov, W.copy(),
                          C[6 * n:, 6 * n:], T_tip.copy(), 0.5 * (tip_cov + tip_cov.T), K_tip,
                          K_tip_std, float(r @ r), measured - 6, True, rank, cond, iterations,
@@ -1753,7 +1801,7 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
                          *_outlier_fields(dropped), restarted)
 
 
-def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,
+def tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,
                        rest: Any) -> FloatArray:
     """First-order std (6, 6) of the exact tip stiffness: central differences of
     :meth:`JointChain.tip_stiffness` over ``z = [xi; W]`` propagated with ``C``."""
@@ -1767,4 +1815,4 @@ def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: Float
             values.append(chain.tip_stiffness(zk[:6 * n].reshape(n, 6), zk[6 * n:], g,
                                               rest_lengths=rest))
         grads[:, :, k] = (values[0] - values[1]) / (2.0 * STIFFNESS_STEP)
-    return _entry_std(grads, C)
+    return entry_std(grads, C)
