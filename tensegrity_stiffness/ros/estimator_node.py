@@ -11,11 +11,12 @@ of the others no older than ``estimation.max_age``; publish. Parameters in
 in
 ``docs/estimation.md``.
 
-Built on :class:`.StreamingNode` (:mod:`.node_base`): the inputs are its streams (served in
-order on the fast lane), an estimate is its "configuration" (all outputs or none, under one
-lock, re-estimated when ``~/rest_lengths`` or a parameter changes), markers and /diagnostics as
-the stiffness node's. Bad or stale input, or a set that cannot determine the pose: a specific
-throttled warning, no publication, the state kept.
+Built on :class:`.StreamingNode` (:mod:`.node_base`): the inputs are its streams (on the fast
+lane, newest only: a reading queued behind a newer one is passed over and counted on
+/diagnostics, ``inputs skipped``), an estimate is its "configuration" (all outputs or none,
+under one lock, re-estimated when ``~/rest_lengths`` or a parameter changes), markers and
+/diagnostics as the stiffness node's. Bad or stale input, or a set that cannot determine the
+pose: a specific throttled warning, no publication, the state kept.
 """
 
 from __future__ import annotations
@@ -70,6 +71,10 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         (PoseWithCovarianceStamped, WrenchStamped, *[Float64MultiArray] * 5),
         (f'~/{name}' for name in ESTIMATOR_OUTPUTS), strict=True))
     SERVES_SOLVES = False  # no services: no worker process
+    #: Sensor readings: only the newest of each input's queue is taken (the others are counted
+    #: on /diagnostics), so that an estimate that takes longer than a reading's period passes
+    #: over the backlog instead of turning it into latency.
+    NEWEST_INPUT_ONLY = True
     #: What the frame of ~/measured_pose and ~/measured_wrench is called in warnings.
     INPUT_FRAME_NAME = "link 1's frame"
     _build_settings = staticmethod(estimator_node_settings)
