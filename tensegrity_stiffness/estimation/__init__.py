@@ -1,10 +1,15 @@
 """Estimation: sensor models (:mod:`.sensor_models`), the estimators of pose, load and stiffness
 with covariance (:mod:`.estimators`, re-exported here: ``tensegrity_stiffness.estimation`` is
-the documented path) and the calibration of each string from a recording (:mod:`.calibration`).
+the documented path), the recursive filter on the joint's dynamics (:mod:`.joint_filter`,
+re-exported) and the calibration of each string from a recording (:mod:`.calibration`).
 
 May import: :mod:`tensegrity_stiffness.mechanics`, :mod:`tensegrity_stiffness.geometry`,
 :mod:`tensegrity_stiffness.config`, numpy, scipy.
 """
 
 from tensegrity_stiffness.estimation.estimators import *  # noqa: F403
-from tensegrity_stiffness.estimation.estimators import __all__  # noqa: F401
+from tensegrity_stiffness.estimation.estimators import __all__ as estimator_names
+from tensegrity_stiffness.estimation.joint_filter import *  # noqa: F403
+from tensegrity_stiffness.estimation.joint_filter import __all__ as filter_names
+
+__all__ = [*estimator_names, *filter_names]

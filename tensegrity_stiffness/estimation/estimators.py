@@ -60,7 +60,7 @@ from tensegrity_stiffness.geometry.screw import (
     log_se3,
 )
 from tensegrity_stiffness.geometry.transforms import rigid_transform
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, finite_array_of_shape
 from tensegrity_stiffness.mechanics.chain import ChainState, JointChain
 from tensegrity_stiffness.mechanics.equilibrium import (
     MAX_ROTATION_STEP,
@@ -91,9 +91,13 @@ __all__ = [
     'PreparedMeasurements',
     'cartesian_stiffness_jacobian',
     'consistency_threshold',
+    'entry_std',
     'estimate_chain_state',
     'estimate_joint_state',
+    'missing_message',
+    'stiffness_jacobian_near',
     'suspect_reading',
+    'wilson_hilferty',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -268,6 +272,13 @@ class Measurements:
     in {1}. ``external_wrench`` (6,) [N; N m] on link 2 in {1} about its origin with
     ``wrench_covariance`` (6, 6): a known (zeros with a small covariance for "unloaded") or
     measured (force-torque) load; ``None`` for an unknown load.
+
+    For the recursive filter (:class:`~tensegrity_stiffness.estimation.joint_filter.
+    JointFilter`; the static estimator does not read them): ``specific_force`` (3,) m/s^2 the
+    accelerometer's raw specific force in {2} (acceleration minus gravity, modelled with the
+    link's acceleration) with ``specific_force_std`` (m/s^2, a scalar or (3,)), and
+    ``angular_velocity`` (3,) rad/s a gyro's reading of link 2's angular velocity in {2} with
+    ``angular_velocity_std`` (rad/s, a scalar or (3,)).
     """
 
     tensions: ArrayLike | None = None
@@ -281,6 +292,10 @@ class Measurements:
     gravity_base: ArrayLike | None = None
     external_wrench: ArrayLike | None = None
     wrench_covariance: ArrayLike | None = None
+    specific_force: ArrayLike | None = None
+    specific_force_std: ArrayLike | float | None = None
+    angular_velocity: ArrayLike | None = None
+    angular_velocity_std: ArrayLike | float | None = None
 
     def prepared(self, n_strings: int) -> PreparedMeasurements:
         """Validated and whitened for a joint with ``n_strings`` strings; bad input raises
@@ -398,6 +413,25 @@ class PreparedMeasurements:
             self.wrench = W
             self.wrench_covariance, self.wrench_whitener = _covariance(
                 'wrench_covariance', m.wrench_covariance, 6)
+        # the filter's IMU readings (not counted in rows / dof: the static estimator ignores
+        # them)
+        self.specific_force = None
+        if m.specific_force is not None:
+            self.specific_force = finite_array_of_shape('specific_force', m.specific_force,
+                                                        (3,))
+            self.specific_force_weight = 1.0 / _std('specific_force_std',
+                                                    m.specific_force_std, 3)
+        self.angular_velocity = None
+        if m.angular_velocity is not None:
+            self.angular_velocity = finite_array_of_shape('angular_velocity',
+                                                          m.angular_velocity, (3,))
+            self.angular_velocity_weight = 1.0 / _std('angular_velocity_std',
+                                                      m.angular_velocity_std, 3)
+        self._count()
+
+    def recount(self) -> None:
+        """Count the rows and degrees of freedom again after readings were set on a copy
+        (the filter hands the static estimator a specific force as a gravity direction)."""
         self._count()
 
     def _count(self) -> None:
@@ -525,6 +559,11 @@ class JointEstimate:
     ``length[<string>]``, ``gravity``, ``pose``, ``wrench``) with ``outlier_reasons`` (why, one
     each: impossible, or contradicted by the others); ``restarted`` when the warm start lost
     track (an inconsistent or failed estimate) and the estimate is a cold start's.
+
+    Motion (the recursive filter's; the static estimator assumes rest: zeros): ``twist`` (6,)
+    the rate of the pose in the PoseWithCovariance convention, ``[dp/dt; w]`` in {1} (the
+    velocity of {2}'s origin and link 2's angular velocity, both in {1}: the order and frame
+    of ``covariance``), with ``twist_covariance`` (6, 6).
     """
 
     success: bool
@@ -550,6 +589,8 @@ class JointEstimate:
     outliers: tuple[str, ...] = ()
     outlier_reasons: tuple[str, ...] = ()
     restarted: bool = False
+    twist: FloatArray = field(default_factory=lambda: np.zeros(6))
+    twist_covariance: FloatArray = field(default_factory=lambda: np.zeros((6, 6)))
 
 
 def _nan(*shape: int) -> FloatArray:
@@ -656,7 +697,7 @@ def _describe_direction(pose_change: FloatArray, length_scale: float) -> str:
     return f'{kind} ({axis[0]:.2f}, {axis[1]:.2f}, {axis[2]:.2f})'
 
 
-def _missing_message(prep: PreparedMeasurements, names: Sequence[str], rank: int,
+def missing_message(prep: PreparedMeasurements, names: Sequence[str], rank: int,
                      null_directions: list[str], slack: Sequence[str]) -> str:
     """Why a joint's measurement set cannot determine the pose, and what would."""
     inputs = prep.describe(names)
@@ -690,7 +731,7 @@ def _observability(problem: _JointProblem, J: FloatArray, state: JointState,
     null = Vt[rank:]
     words = [_describe_direction(P @ v, problem.length_scale) for v in null]
     slack = [problem.model.string_names[i] for i in prep.tension_index if state.slack[i]]
-    return rank, cond, s, _missing_message(prep, problem.model.string_names, rank, words,
+    return rank, cond, s, missing_message(prep, problem.model.string_names, rank, words,
                                                 slack)
 
 
@@ -801,7 +842,7 @@ _STIFFNESS_JACOBIANS: weakref.WeakKeyDictionary[JointModel, tuple[FloatArray, Fl
     weakref.WeakKeyDictionary()
 
 
-def _stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray) -> FloatArray:
+def stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray) -> FloatArray:
     """:func:`cartesian_stiffness_jacobian` at ``xi``, or the one computed last for this model
     and rest lengths when ``xi`` is within :data:`STIFFNESS_JACOBIAN_REUSE` of its screw (a
     tracker's consecutive estimates: 12 evaluations saved per estimate)."""
@@ -826,7 +867,7 @@ def _stiffness_jacobian_near(model: JointModel, xi: FloatArray, rest: FloatArray
 _STIFFNESS_STEPS = np.vstack([np.eye(6), -np.eye(6)]) * STIFFNESS_STEP
 
 
-def _entry_std(jacobian: FloatArray, covariance: FloatArray) -> FloatArray:
+def entry_std(jacobian: FloatArray, covariance: FloatArray) -> FloatArray:
     """sqrt(diag(g C g^T)) per entry of a matrix with Jacobian (a, b, k)."""
     a, b, k = jacobian.shape
     G = jacobian.reshape(a * b, k)
@@ -864,7 +905,7 @@ def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArr
     return model.initial_screw.copy()
 
 
-def _wilson_hilferty(value: float, dof: int) -> float:
+def wilson_hilferty(value: float, dof: int) -> float:
     """The standard normal quantile of a chi-square(dof) ``value`` (Wilson-Hilferty): readings
     of different degrees of freedom compared on one scale."""
     a = 2.0 / (9.0 * dof)
@@ -894,7 +935,7 @@ def suspect_reading(r: FloatArray, J: FloatArray, C: FloatArray,
         proj = V[:, checked].T @ r[rows]
         statistic = float(np.sum(proj * proj / w[checked]))
         k = min(dof, int(checked.sum()))
-        scored.append((_wilson_hilferty(statistic, k), statistic, name))
+        scored.append((wilson_hilferty(statistic, k), statistic, name))
     if not scored:
         return None
     scored.sort(reverse=True)
@@ -1104,7 +1145,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     if dropped:
         prep = prep.without([name for name, _ in dropped], names)
     if prep.dof < 6:
-        message = _missing_message(prep, names, prep.dof, [], [])
+        message = missing_message(prep, names, prep.dof, [], [])
         if dropped:
             message += ' (left out: ' + '; '.join(f'{n} {why}' for n, why in dropped) + ')'
         return _failed_joint(message, prep, names, False, min(prep.dof, 6), math.inf,
@@ -1133,7 +1174,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     P = sm.pose_jacobian(x, fit.kin)  # at the estimate
     pose_cov = P @ C @ P.T
     K = state.stiffness
-    Kc_std = (_entry_std(_stiffness_jacobian_near(model, x, rest), C) if stiffness_std
+    Kc_std = (entry_std(stiffness_jacobian_near(model, x, rest), C) if stiffness_std
               else _nan(6, 6))
     return JointEstimate(True, 'ok', x, state.transform.copy(), 0.5 * (pose_cov + pose_cov.T), C,
                          -state.wrench, K @ C @ K.T, state, Kc_std, fit.chi2, prep.dof - 6,
@@ -1401,7 +1442,7 @@ def _chain_information(problem: _ChainProblem, J: FloatArray, Jc: FloatArray,
     return 0.5 * (C + C.T), rank, cond, np.empty((0, problem.size))
 
 
-def _chain_missing_message(null: FloatArray, n: int, inputs: str, rank: int) -> str:
+def _chainmissing_message(null: FloatArray, n: int, inputs: str, rank: int) -> str:
     weight = np.zeros(n + 1)
     for v in null:
         weight += np.sqrt(np.sum(v.reshape(n + 1, 6) ** 2, axis=1))
@@ -1713,7 +1754,7 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
     r, _, _, _, state = ev
     C, rank, cond = fit.C, fit.rank, fit.cond
     if rank < 6:
-        return _failed_chain(_chain_missing_message(fit.null, n, inputs.text, rank), n,
+        return _failed_chain(_chainmissing_message(fit.null, n, inputs.text, rank), n,
                              measured, dropped, False, rank, cond, iterations)
     if not fit.converged:
         return _failed_chain(f'{inputs.text}: {fit.why}', n, measured, dropped, True, rank,
@@ -1752,4 +1793,4 @@ def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: Float
             values.append(chain.tip_stiffness(zk[:6 * n].reshape(n, 6), zk[6 * n:], g,
                                               rest_lengths=rest))
         grads[:, :, k] = (values[0] - values[1]) / (2.0 * STIFFNESS_STEP)
-    return _entry_std(grads, C)
+    return entry_std(grads, C)

@@ -344,3 +344,59 @@ def gravity_from_specific_force(specific_force: ArrayLike) -> FloatArray:
     at rest (``a - g`` = ``-g``: it points up), ``-a / |a|``; ValueError when it is not three
     finite numbers or zero."""
     return -unit_vector(specific_force, 'specific_force')
+
+
+# ---------------------------------------------------------------------------------- motion
+@dataclass(slots=True)
+class SpecificForcePrediction:
+    """An accelerometer at the origin of link 2 on a moving link, in {2}: ``value`` (3,) m/s^2
+    the specific force ``f = dv/dt + w x v - R^T g`` (the acceleration of {2}'s origin minus
+    gravity, both in {2}); its Jacobians ``screw`` (3, 6) = df/dxi (through ``R`` alone),
+    ``twist`` (3, 6) = df/dV and ``twist_rate`` (3, 6) = df/d(dV/dt), for the body twist
+    ``V = [w; v]`` of link 2 in {2} and its rate."""
+
+    value: FloatArray
+    screw: FloatArray
+    twist: FloatArray
+    twist_rate: FloatArray
+
+
+def predicted_specific_force(kinematics: ScrewKinematics, twist: FloatArray,
+                             twist_rate: FloatArray, gravity: FloatArray
+                             ) -> SpecificForcePrediction:
+    """:class:`SpecificForcePrediction` at the kinematics of a screw, link 2's body twist
+    ``twist`` (6,) ``[w; v]`` in {2}, its rate ``twist_rate`` (6,) and ``gravity`` (3,) m/s^2 in
+    {1} (e.g. (0, -9.81, 0)). The point acceleration of {2}'s origin is ``R (dv/dt + w x v)``
+    (``dp/dt = R v``), hence ``f = dv/dt + w x v - R^T g``; ``d(w x v)/d[w; v] =
+    [-hat(v), hat(w)]``, ``d(R^T g)/dxi`` as :func:`gravity_prediction_unchecked` (linear in
+    ``g``), ``df/d(dV/dt) = [0, I]``."""
+    w, v = twist[:3], twist[3:]
+    g2, dg = gravity_prediction_unchecked(kinematics, gravity)
+    value = twist_rate[3:] + np.cross(w, v) - g2
+    d_twist = np.empty((3, 6))
+    d_twist[:, :3] = -hat3(v)
+    d_twist[:, 3:] = hat3(w)
+    d_rate = np.zeros((3, 6))
+    d_rate[:, 3:] = np.eye(3)
+    return SpecificForcePrediction(value, -dg, d_twist, d_rate)
+
+
+def predicted_angular_velocity(twist: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """A gyro on link 2: its angular velocity ``w`` (3,) rad/s in {2} from the body twist
+    ``[w; v]`` (6,) and ``dw/dV = [I, 0]`` (3, 6)."""
+    J = np.zeros((3, 6))
+    J[:, :3] = np.eye(3)
+    return np.array(twist[:3], dtype=np.float64), J
+
+
+def gravity_direction_jacobian(specific_force: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The direction of gravity an accelerometer reports, ``u = -f / |f|`` (3,) (at rest
+    :func:`gravity_from_specific_force`; on a moving link the model of a ``gravity`` reading
+    taken from its specific force ``f``), and ``du/df = -(I - n n^T) / |f|`` (3, 3) with
+    ``n = f / |f|``; ValueError when ``f`` is (nearly) zero."""
+    fx, fy, fz = specific_force.tolist()
+    norm = math.sqrt(fx * fx + fy * fy + fz * fz)
+    if norm < MIN_GRAVITY_NORM:
+        raise ValueError('specific force must not be zero')
+    n = specific_force / norm
+    return -n, -(np.eye(3) - np.outer(n, n)) / norm

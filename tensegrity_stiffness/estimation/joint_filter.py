@@ -1,0 +1,843 @@
+"""A recursive estimator of a moving joint: an extended Kalman filter on the joint's dynamics
+(no rclpy; docs/estimation.md#the-filter).
+
+State ``x = [xi (6); V (6); W (6)]``: the screw ``xi`` of link 2 (the library's screw,
+``T = exp(hat(xi))``), link 2's body twist ``V = [w; v]`` in {2} (``hat(V) = T^-1 dT/dt``) and,
+with ``load='unknown'``, the external wrench ``W`` (``[f; m]`` on link 2 in {1} about its
+origin, constant in {1}) as a random walk. The error of ``xi`` is additive in screw
+coordinates (the static estimator's covariance, so the two compare directly).
+
+Prediction: the equations of motion of
+:class:`~tensegrity_stiffness.mechanics.dynamics.JointDynamics` in their Newton-Euler form in
+{2} (that module's docstring: ``G dV/dt - ad_V^T G V = J_b^-T Q``), :func:`body_dynamics`:
+
+    dxi/dt = J_b(xi)^-1 V,
+    G dV/dt = ad_V^T G V + Ad_T^T Pi (F(xi) + W) - A^T C A V,
+
+``G`` link 2's spatial inertia, ``F`` the strings' wrench (eq. 9) at the rest lengths in force
+during ``dt``, ``A = dl/dV = L J_b^-1`` the strings' length rates per body twist and ``C`` the
+string damping (``J_b^T`` maps these to ``JointDynamics.acceleration``; held to it in
+``test/estimation/test_joint_filter.py``). The body form needs no derivative of ``J_b`` (the
+screw form's ``Jdot_b xi_dot`` costs a 12x12 matrix exponential). Integration: one
+linearly implicit trapezoidal (Rosenbrock, ``gamma = 1/2``) step per at most
+:data:`MAX_SUBSTEP` s, ``dx = (I - h/2 A)^-1 h f(x)``: A-stable (the joint's modes are stiff
+against a 1 kHz step only at their damping), second order with the exact Jacobian; the
+covariance is propagated with ``Phi = (I - h/2 A)^-1 (I + h/2 A)`` and the discretised white
+noise of :class:`ProcessNoise`.
+
+Updates (one stacked update per step, whitened): tensions, lengths and a pose (the models of
+:mod:`~tensegrity_stiffness.estimation.sensor_models`, Jacobians in ``xi``), an accelerometer's
+specific force modelled with the link's acceleration
+(:func:`~tensegrity_stiffness.estimation.sensor_models.predicted_specific_force`, chained
+through ``dV/dt`` of the dynamics), a gravity direction (``-f / |f|`` of that specific force),
+a gyro (link 2's angular velocity) and, with an unknown load, a measured wrench.
+
+Trust: ``consistent`` is the normalised innovation squared (NIS) test of each update at
+``consistency_probability``; while it fails, the reading whose innovation a broken sensor
+explains best (the drop of NIS when it is left out, as :func:`~tensegrity_stiffness.
+estimation.estimators.suspect_reading` does for residuals) is left out, at most
+:data:`~tensegrity_stiffness.estimation.estimators.MAX_CONTRADICTED`, and only when the rest
+then passes. :data:`LOST_TRACK_STEPS` inconsistent updates in a row (or a gap longer than
+:data:`MAX_PREDICTION`) restart the filter from
+:func:`~tensegrity_stiffness.estimation.estimators.estimate_joint_state`.
+
+EKF, not UKF: every model here has an analytic Jacobian (the compiled kernel gives the strings'
+in one call), so one linearisation per update replaces the 2n + 1 = 37 sigma-point evaluations
+of the dynamics and the sensors that a UKF would make; at the joint's small motions per step
+(micrometres, milliradians) the linearisation error is far below the sensors' noise.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from tensegrity_stiffness.estimation import sensor_models as sm
+from tensegrity_stiffness.estimation.estimators import (
+    CONSISTENCY_PROBABILITY,
+    MAX_CONTRADICTED,
+    JointEstimate,
+    Measurements,
+    PreparedMeasurements,
+    consistency_threshold,
+    entry_std,
+    estimate_joint_state,
+    missing_message,
+    stiffness_jacobian_near,
+    wilson_hilferty,
+)
+from tensegrity_stiffness.geometry.screw import (
+    ScrewKinematics,
+    check_in_chart,
+    hat3,
+    left_jacobian_so3_inverse,
+)
+from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
+from tensegrity_stiffness.mechanics.joint import JointModel
+
+__all__ = [
+    'DEFAULT_GRAVITY',
+    'DEFAULT_PROCESS_NOISE',
+    'INITIAL_ANGULAR_VELOCITY_STD',
+    'INITIAL_LINEAR_VELOCITY_STD',
+    'KNOWN_LOAD_STD',
+    'LOAD_MODES',
+    'LOST_TRACK_STEPS',
+    'MAX_PREDICTION',
+    'MAX_SUBSTEP',
+    'BodyDynamics',
+    'JointFilter',
+    'ProcessNoise',
+    'body_dynamics',
+]
+
+FloatArray = NDArray[np.float64]
+
+#: The longest integration step (s); a longer ``dt`` is split into equal steps of at most this.
+MAX_SUBSTEP = 1e-3
+#: A gap between two steps longer than this (s) restarts the filter from the static estimator
+#: (the prediction would carry too little).
+MAX_PREDICTION = 0.5
+#: Consecutive updates whose NIS fails its test with every reading kept (a reading already
+#: known broken excepted) that mean the filter has lost track: it restarts from the static
+#: estimator. A single broken sensor fails one update (then it is held out); sound readings
+#: fail three in a row with the chance ``consistency_probability ** 3``.
+LOST_TRACK_STEPS = 3
+#: Gravity (m/s^2) in {1} that the accelerometer senses, default: the twin's
+#: (``simulation.twin.DEFAULT_JOINT_GRAVITY``; the joint itself carries no weight).
+DEFAULT_GRAVITY = (0.0, -9.81, 0.0)
+#: Std of the twist at a (re)start from the static estimator, which assumes rest: rad/s, m/s.
+INITIAL_ANGULAR_VELOCITY_STD = 1.0
+INITIAL_LINEAR_VELOCITY_STD = 0.05
+#: Std (N, N m) of a known load handed to the static estimator at a (re)start.
+KNOWN_LOAD_STD = 1e-6
+#: The load modes: the external wrench a state (random walk) or given at every step.
+LOAD_MODES = ('unknown', 'known')
+
+_SWAP = np.array([3, 4, 5, 0, 1, 2])
+_EYE3 = np.eye(3)
+
+
+@dataclass(frozen=True)
+class ProcessNoise:
+    """White-noise densities of what the model leaves out (one sigma per sqrt(s)).
+
+    ``angular_acceleration`` (rad/s^2 sqrt(s)) and ``linear_acceleration`` (m/s^2 sqrt(s)):
+    unmodelled accelerations of link 2 (in {2}); ``force_rate`` (N/s sqrt(s)) and
+    ``moment_rate`` (N m/s sqrt(s)): the random walk of an unknown load. Over a step ``dt``
+    a density ``q`` adds a variance ``q^2 dt`` (docs/estimation.md#process-noise says how to
+    choose them)."""
+
+    angular_acceleration: float = 30.0
+    linear_acceleration: float = 0.3
+    force_rate: float = 0.5
+    moment_rate: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ('angular_acceleration', 'linear_acceleration', 'force_rate',
+                     'moment_rate'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+                    not math.isfinite(value) or value < 0.0:
+                raise ValueError(f'process_noise.{name} must be a finite number >= 0, got '
+                                 f'{value!r}')
+
+    def twist_density(self) -> FloatArray:
+        """(6,) variances per second of the body twist ``[w; v]``."""
+        return np.array([self.angular_acceleration ** 2] * 3 +
+                        [self.linear_acceleration ** 2] * 3)
+
+    def load_density(self) -> FloatArray:
+        """(6,) variances per second of the load ``[f; m]``."""
+        return np.array([self.force_rate ** 2] * 3 + [self.moment_rate ** 2] * 3)
+
+
+#: The defaults (the one home of their values: :class:`ProcessNoise`'s fields).
+DEFAULT_PROCESS_NOISE = ProcessNoise()
+
+
+def _hat_pair(p: FloatArray) -> FloatArray:
+    """``C(p) = [[hat(p_m), hat(p_f)], [hat(p_f), 0]]`` (6, 6) for a wrench ``p = [m; f]``:
+    ``ad_V^T p = C(p) V`` for every twist ``V = [w; v]``."""
+    out = np.zeros((6, 6))
+    hm, hf = hat3(p[:3]), hat3(p[3:])
+    out[:3, :3] = hm
+    out[:3, 3:] = hf
+    out[3:, :3] = hf
+    return out
+
+
+@dataclass(slots=True)
+class BodyDynamics:
+    """The equations of motion in {2} at one state (:func:`body_dynamics`).
+
+    ``screw_rate`` (6,) ``dxi/dt = J_b^-1 V``; ``twist_rate`` (6,) ``dV/dt``; ``body_inverse``
+    (6, 6) ``J_b^-1``; Jacobians of ``dV/dt``: ``d_screw`` (6, 6) (the string damping's change
+    with the pose left out: it is ``c |V|`` per rad), ``d_twist`` (6, 6), ``d_load`` (6, 6);
+    ``prediction`` the strings' :class:`~tensegrity_stiffness.estimation.sensor_models.
+    StringPrediction` it was computed from."""
+
+    screw_rate: FloatArray
+    twist_rate: FloatArray
+    body_inverse: FloatArray
+    d_screw: FloatArray
+    d_twist: FloatArray
+    d_load: FloatArray
+    prediction: sm.StringPrediction
+
+
+def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twist: FloatArray,
+                  load: FloatArray, inertia_inverse: FloatArray | None = None) -> BodyDynamics:
+    """:class:`BodyDynamics` of ``dynamics`` at the strings' ``prediction`` (the screw's
+    :func:`~tensegrity_stiffness.estimation.sensor_models.string_predictions_unchecked`, with
+    the rest lengths in force), link 2's body twist ``twist`` ``[w; v]`` (6,) and the load
+    ``load`` ``[f; m]`` (6,) in {1} (module docstring). ``inertia_inverse``: ``G^-1`` when the
+    caller keeps it."""
+    kin, state = prediction.kinematics, prediction.state
+    T, Jl = kin.T, kin.J
+    R, p = T[:3, :3], T[:3, 3]
+    Ad = np.zeros((6, 6))  # Ad_T for twists [w; v]
+    Ad[:3, :3] = R
+    Ad[3:, 3:] = R
+    Ad[3:, :3] = hat3(p) @ R
+    # J_l^-1 = [[G^-1, 0], [-G^-1 Q G^-1, G^-1]]; J_b^-1 = J_l^-1 Ad_T (J_l = Ad_T J_b)
+    Gi = left_jacobian_so3_inverse(state.screw[:3])
+    Jl_inv = np.zeros((6, 6))
+    Jl_inv[:3, :3] = Gi
+    Jl_inv[3:, 3:] = Gi
+    Jl_inv[3:, :3] = -Gi @ kin.Q @ Gi
+    Jb_inv = Jl_inv @ Ad
+    G = dynamics.spatial_inertia
+    Ginv = np.linalg.inv(G) if inertia_inverse is None else inertia_inverse
+    spatial = (state.wrench + load)[_SWAP]  # [m; f] in {1}
+    AdT = Ad.T
+    body = AdT @ spatial
+    GV = G @ twist
+    w, v = twist[:3], twist[3:]
+    adT = np.zeros((6, 6))  # ad_V^T = [[-hat(w), -hat(v)], [0, -hat(w)]]
+    hw, hv = hat3(w), hat3(v)
+    adT[:3, :3] = -hw
+    adT[:3, 3:] = -hv
+    adT[3:, 3:] = -hw
+    coriolis = _hat_pair(GV)  # ad_V^T G V = C(G V) V
+    total = coriolis @ twist + body
+    d_twist = adT @ G + coriolis
+    if dynamics.damped:
+        A = prediction.length_jacobian @ Jb_inv  # dl/dV
+        D = (A.T * dynamics.string_damping) @ A
+        total -= D @ twist
+        d_twist -= D
+    d_screw = AdT @ (prediction.state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
+    return BodyDynamics(Jb_inv @ twist, Ginv @ total, Jb_inv, Ginv @ d_screw, Ginv @ d_twist,
+                        Ginv @ AdT[:, _SWAP], prediction)
+
+
+class JointFilter:
+    """Extended Kalman filter of one joint's pose, twist and load (module docstring).
+
+    ``model``: a :class:`~tensegrity_stiffness.mechanics.joint.JointModel` (with ``inertia``,
+    link 2's :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`, and
+    ``string_damping`` N s/m) or a :class:`~tensegrity_stiffness.mechanics.dynamics.
+    JointDynamics`; ``process_noise`` a :class:`ProcessNoise` (default
+    :data:`DEFAULT_PROCESS_NOISE`); ``load`` ``'unknown'`` (a state) or ``'known'`` (given to
+    :meth:`step`); ``gravity`` (3,) m/s^2 in {1} for the accelerometer;
+    ``consistency_probability`` of the NIS test; ``stiffness_std`` whether estimates carry the
+    std of ``K_c``; ``reject_outliers`` whether contradicted readings are left out.
+    """
+
+    def __init__(self, model: JointModel | JointDynamics, inertia: LinkInertia | None = None,
+                 process_noise: ProcessNoise | None = None, load: str = 'unknown', *,
+                 string_damping: ArrayLike = 0.0, gravity: ArrayLike = DEFAULT_GRAVITY,
+                 consistency_probability: float = CONSISTENCY_PROBABILITY,
+                 stiffness_std: bool = True, reject_outliers: bool = True) -> None:
+        if isinstance(model, JointDynamics):
+            if inertia is not None:
+                raise ValueError('inertia: give it to the JointDynamics, not to the filter')
+            self.dynamics = model
+        elif isinstance(model, JointModel):
+            self.dynamics = JointDynamics(model, inertia, string_damping)
+        else:
+            raise ValueError(f'model must be a JointModel or a JointDynamics, got '
+                             f'{type(model).__name__}')
+        if load not in LOAD_MODES:
+            raise ValueError(f'load must be one of {LOAD_MODES}, got {load!r}')
+        if process_noise is None:
+            process_noise = DEFAULT_PROCESS_NOISE
+        if not isinstance(process_noise, ProcessNoise):
+            raise ValueError(f'process_noise must be a ProcessNoise, got '
+                             f'{type(process_noise).__name__}')
+        consistency_threshold(1, consistency_probability)  # checks the probability
+        g = finite_array('gravity', gravity)
+        if g.shape != (3,):
+            raise ValueError(f'gravity must have 3 values (m/s^2 in {{1}}), got {g.size}')
+        self.model = self.dynamics.model
+        self.load = load
+        self.process_noise = process_noise
+        self.gravity = g
+        self.consistency_probability = consistency_probability
+        self.stiffness_std = stiffness_std
+        self.reject_outliers = reject_outliers
+        self.size = 18 if load == 'unknown' else 12
+        self._inertia_inverse = np.linalg.inv(self.dynamics.spatial_inertia)
+        self._twist_q = process_noise.twist_density()
+        self._load_q = process_noise.load_density()
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    @property
+    def initialized(self) -> bool:
+        """Whether the filter has a state (after :meth:`reset` with one, or a first step)."""
+        return self._x is not None
+
+    @property
+    def state(self) -> FloatArray | None:
+        """A copy of the state ``[xi; V; W]`` (18,) (``[xi; V]`` (12,) with a known load)."""
+        return None if self._x is None else self._x.copy()
+
+    @property
+    def covariance(self) -> FloatArray | None:
+        """A copy of the state's covariance."""
+        return None if self._P is None else self._P.copy()
+
+    def reset(self, screw: ArrayLike | None = None, estimate: JointEstimate | None = None,
+              covariance: ArrayLike | None = None, twist: ArrayLike | None = None,
+              load: ArrayLike | None = None) -> None:
+        """Forget the track. With ``estimate`` (a :class:`JointEstimate`, e.g. the static
+        estimator's): start from its screw, twist, load and their covariances; with ``screw``
+        (6,): start there with ``twist`` (6,, the estimates' ``[dp/dt; w]`` in {1}, default
+        rest), ``load`` (6,, an unknown load's start, default zero) and ``covariance``
+        (``size`` x ``size`` of the state, default: the restart stds on the twist, 1e-3 rad /
+        1e-5 m on the screw and 1 N / 0.01 N m on a load); without either: the next
+        :meth:`step` starts from the static estimator."""
+        self._t: float | None = None
+        self._inconsistent = 0
+        self._suspected: set[str] = set()
+        self._cache: tuple[Any, ...] | None = None
+        self._x: FloatArray | None = None
+        self._P: FloatArray | None = None
+        if screw is not None and estimate is not None:
+            raise ValueError('reset takes a screw or an estimate, not both')
+        if estimate is not None:
+            self._start_from(estimate)
+        elif screw is not None:
+            xi = finite_array('screw', screw)
+            if xi.shape != (6,):
+                raise ValueError(f'screw must have shape (6,), got {xi.shape}')
+            check_in_chart(xi, 'screw')
+            x = np.zeros(self.size)
+            x[:6] = xi
+            if twist is not None:
+                tw = finite_array('twist', twist)
+                if tw.shape != (6,):
+                    raise ValueError(f'twist must have shape (6,), got {tw.shape}')
+                R = ScrewKinematics(xi).R
+                x[6:9], x[9:12] = R.T @ tw[3:], R.T @ tw[:3]
+            if load is not None:
+                if self.size != 18:
+                    raise ValueError("load: a filter with load='known' has no load state")
+                W = finite_array('load', load)
+                if W.shape != (6,):
+                    raise ValueError(f'load must have shape (6,), got {W.shape}')
+                x[12:] = W
+            if covariance is None:
+                P = np.diag(np.r_[[1e-6] * 3, [1e-10] * 3, self._initial_twist_variance(),
+                                  [1.0] * 3 * (self.size == 18), [1e-4] * 3 * (self.size == 18)])
+            else:
+                P = finite_array('covariance', covariance)
+                if P.shape != (self.size, self.size):
+                    raise ValueError(f'covariance must have shape ({self.size}, {self.size}), '
+                                     f'got {P.shape}')
+            self._x, self._P = x, 0.5 * (P + P.T)
+
+    def set_state(self, state: ArrayLike, covariance: ArrayLike) -> None:
+        """Set the state ``[xi; V; W]`` (``size``,: screw, body twist ``[w; v]`` in {2},
+        load) and its covariance (``size`` x ``size``) directly, keeping the time."""
+        x = finite_array('state', state)
+        P = finite_array('covariance', covariance)
+        if x.shape != (self.size,) or P.shape != (self.size, self.size):
+            raise ValueError(f'state must have shape ({self.size},) and covariance '
+                             f'({self.size}, {self.size}), got {x.shape} and {P.shape}')
+        check_in_chart(x[:6], 'state')
+        self._x, self._P = x.copy(), 0.5 * (P + P.T)
+        self._cache = None
+
+    @staticmethod
+    def _initial_twist_variance() -> FloatArray:
+        return np.array([INITIAL_ANGULAR_VELOCITY_STD ** 2] * 3 +
+                        [INITIAL_LINEAR_VELOCITY_STD ** 2] * 3)
+
+    def _start_from(self, est: JointEstimate) -> None:
+        if not isinstance(est, JointEstimate) or not est.success:
+            raise ValueError('estimate must be a successful JointEstimate')
+        x = np.zeros(self.size)
+        P = np.zeros((self.size, self.size))
+        x[:6] = est.screw
+        P[:6, :6] = est.screw_covariance
+        kin = ScrewKinematics(est.screw)
+        R = kin.R
+        twist = np.asarray(est.twist, dtype=np.float64)
+        if np.any(twist) or np.any(est.twist_covariance):
+            # [dp/dt; w_s] in {1} -> body [w; v] = [R^T w_s; R^T dp/dt] (first order)
+            x[6:9], x[9:12] = R.T @ twist[3:], R.T @ twist[:3]
+            rot = np.zeros((6, 6))
+            rot[:3, 3:] = R.T
+            rot[3:, :3] = R.T
+            P[6:12, 6:12] = rot @ est.twist_covariance @ rot.T
+        else:
+            P[6:12, 6:12] = np.diag(self._initial_twist_variance())
+        if self.size == 18:
+            x[12:] = est.external_wrench
+            P[12:, 12:] = est.wrench_covariance
+            # the static estimate's load is -F(xi): correlated with the screw through K
+            K = est.state.stiffness if est.state is not None else np.zeros((6, 6))
+            P[12:, :6] = -K @ est.screw_covariance
+            P[:6, 12:] = P[12:, :6].T
+        self._x, self._P = x, 0.5 * (P + P.T)
+
+    # ------------------------------------------------------------------ one step
+    def step(self, t: float, measurements: Measurements | PreparedMeasurements,
+             rest_lengths: ArrayLike | None = None, known_load: ArrayLike | None = None
+             ) -> JointEstimate:
+        """Predict to time ``t`` (s, not earlier than the last step) with ``rest_lengths`` (the
+        encoders' values in force since the last step; default the model's) and update with
+        ``measurements``. ``known_load`` (6,) ``[f; m]`` in {1} with ``load='known'`` (default:
+        the measurements' ``external_wrench``, else zero). Returns the :class:`JointEstimate`
+        at ``t`` (with ``twist`` and ``twist_covariance``); bad input raises ValueError naming
+        the field, an unobservable set returns ``success=False`` naming what is missing."""
+        model = self.model
+        n = model.n_strings
+        t = float(t)
+        if not math.isfinite(t):
+            raise ValueError(f't must be finite, got {t}')
+        if self._t is not None and t < self._t:
+            raise ValueError(f't = {t} is earlier than the last step ({self._t})')
+        prep = (measurements if isinstance(measurements, PreparedMeasurements)
+                else Measurements.prepared(measurements, n))
+        if prep.n_strings != n:
+            raise ValueError(f'measurements were prepared for {prep.n_strings} strings, the '
+                             f'model has {n}')
+        rest = model.validate_rest_lengths(rest_lengths, batched=False)
+        load = self._load(prep, known_load)
+        names = model.string_names
+        dropped = prep.impossible(model, rest)
+        if dropped:
+            prep = prep.without([name for name, _ in dropped], names)
+        dof = self._measured_dof(prep)
+        restarted = False
+        if self._x is not None and self._t is not None and t - self._t > MAX_PREDICTION:
+            self.reset()
+            restarted = True
+        if dof < 6:
+            if self._x is not None and self._t is not None:
+                self._predict(t - self._t, rest, load)
+                self._t = t
+            message = missing_message(prep, names, dof, [], [])
+            return self._failed(message, prep, dropped)
+        if self._x is None:
+            start = self._static_start(prep, rest, load, None)
+            if not start.success:
+                return start
+            self._t = t
+            return self._estimate(prep, rest, load, start.chi2, start.dof, dropped,
+                                  start.consistent, restarted, start.outliers,
+                                  start.outlier_reasons)
+        self._predict(t - self._t, rest, load)
+        self._t = t
+        nis, nis_dof, consistent, suspects = self._update(prep, rest, load)
+        if self._inconsistent >= LOST_TRACK_STEPS:
+            start = self._static_start(prep, rest, load, self._x[:6].copy())
+            if start.success:
+                return self._estimate(prep, rest, load, start.chi2, start.dof, dropped,
+                                      start.consistent, True, start.outliers,
+                                      start.outlier_reasons)
+        return self._estimate(prep, rest, load, nis, nis_dof, dropped + suspects, consistent,
+                              restarted)
+
+    def predict(self, t: float, rest_lengths: ArrayLike | None = None,
+                known_load: ArrayLike | None = None) -> None:
+        """Only the prediction to time ``t`` (s) with ``rest_lengths`` in force (and
+        ``known_load`` with ``load='known'``, default zero); ValueError before the filter has a
+        state or when ``t`` is earlier than its time."""
+        if self._x is None:
+            raise ValueError('the filter has no state: reset it with a screw or an estimate, or '
+                             'step it with readings')
+        t = float(t)
+        if not math.isfinite(t) or (self._t is not None and t < self._t):
+            raise ValueError(f't = {t} must be finite and not earlier than the last step '
+                             f'({self._t})')
+        rest = self.model.validate_rest_lengths(rest_lengths, batched=False)
+        load = self._load(Measurements().prepared(self.model.n_strings), known_load)
+        if self._t is not None:
+            self._predict(t - self._t, rest, load)
+        self._t = t
+
+    def measurement_model(self, measurements: Measurements, rest_lengths: ArrayLike | None = None,
+                          known_load: ArrayLike | None = None
+                          ) -> tuple[FloatArray, FloatArray, list[str]]:
+        """At the current state: the whitened residual ``h(x) - z`` of ``measurements``, its
+        Jacobian in the state (rows, ``size``) and the reading of each row (the names of
+        ``outliers``), as the update uses them."""
+        if self._x is None:
+            raise ValueError('the filter has no state')
+        prep = Measurements.prepared(measurements, self.model.n_strings)
+        rest = self.model.validate_rest_lengths(rest_lengths, batched=False)
+        load = self._load(prep, known_load)
+        dyn = self._linearize(self._x[:6], self._x[6:12], self._current_load(load), rest)
+        r, H, readings = self._rows(prep, dyn)
+        labels = [''] * r.size
+        for name, rows, _ in readings:
+            for k in rows.tolist():
+                labels[k] = name
+        return r, H, labels
+
+    def _load(self, prep: PreparedMeasurements, known_load: ArrayLike | None) -> FloatArray:
+        if self.load == 'unknown':
+            if known_load is not None:
+                raise ValueError("known_load is given but the filter's load is 'unknown' "
+                                 '(a measured load goes into measurements.external_wrench)')
+            return np.zeros(6)
+        if known_load is None:
+            return prep.wrench.copy() if prep.wrench is not None else np.zeros(6)
+        W = finite_array('known_load', known_load)
+        if W.shape != (6,):
+            raise ValueError(f'known_load must have shape (6,), got {W.shape}')
+        return W
+
+    def _measured_dof(self, prep: PreparedMeasurements) -> int:
+        """Degrees of freedom the readings give the pose (the static estimator's count, an
+        accelerometer's specific force counting as a gravity direction, a known load 6)."""
+        dof = prep.dof  # a measured load's 6 included
+        if self.load == 'known' and prep.wrench is None:
+            dof += 6
+        if prep.specific_force is not None and prep.gravity is None:
+            dof += sm.GRAVITY_DOF
+        return dof
+
+    # ------------------------------------------------------------------ prediction
+    def _linearize(self, xi: FloatArray, twist: FloatArray, load: FloatArray,
+                   rest: FloatArray) -> BodyDynamics:
+        pred = sm.string_predictions_unchecked(self.model, xi, rest)
+        return body_dynamics(self.dynamics, pred, twist, load, self._inertia_inverse)
+
+    def _current_load(self, load: FloatArray) -> FloatArray:
+        return self._x[12:] if self.size == 18 else load
+
+    def _predict(self, dt: float, rest: FloatArray, load: FloatArray) -> None:
+        if dt <= 0.0:
+            return
+        steps = max(1, math.ceil(dt / MAX_SUBSTEP - 1e-9))
+        h = dt / steps
+        for _ in range(steps):
+            self._substep(h, rest, load)
+
+    def _substep(self, h: float, rest: FloatArray, load: FloatArray) -> None:
+        x, P = self._x, self._P
+        cache = self._cache
+        if cache is not None and cache[0] is x and np.array_equal(cache[1], rest) and \
+                (self.size == 18 or np.array_equal(cache[2], load)):
+            dyn = cache[3]
+        else:
+            dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
+        A = np.zeros((12, 12))
+        A[:6, 6:] = dyn.body_inverse
+        A[6:, :6] = dyn.d_screw
+        A[6:, 6:] = dyn.d_twist
+        rhs = np.empty((12, 13 + (6 if self.size == 18 else 0)))
+        rhs[:6, 0] = dyn.screw_rate
+        rhs[6:, 0] = dyn.twist_rate
+        rhs[:, 0] *= h
+        half = 0.5 * h
+        rhs[:, 1:13] = half * A
+        rhs[np.arange(12), np.arange(1, 13)] += 1.0
+        if self.size == 18:
+            rhs[:6, 13:] = 0.0
+            rhs[6:, 13:] = h * dyn.d_load
+        E = -half * A
+        E[np.arange(12), np.arange(12)] += 1.0
+        sol = np.linalg.solve(E, rhs)
+        Phi = np.eye(self.size)
+        Phi[:12, :12] = sol[:, 1:13]
+        if self.size == 18:
+            Phi[:12, 12:] = sol[:, 13:]
+        xn = x.copy()
+        xn[:12] += sol[:, 0]
+        check_in_chart(xn[:6], 'screw')
+        # discretised white noise: the twist's density through J_b^-1 into the screw
+        Q = np.zeros((self.size, self.size))
+        q = self._twist_q
+        Bq = dyn.body_inverse * q
+        Q[:6, :6] = Bq @ dyn.body_inverse.T * (h ** 3 / 3.0)
+        Q[:6, 6:12] = Bq * (h * h / 2.0)
+        Q[6:12, :6] = Q[:6, 6:12].T
+        Q[6:12, 6:12] = np.diag(q * h)
+        if self.size == 18:
+            Q[12:, 12:] = np.diag(self._load_q * h)
+        Pn = Phi @ P @ Phi.T + Q
+        self._x, self._P = xn, 0.5 * (Pn + Pn.T)
+
+    # ------------------------------------------------------------------ update
+    def _rows(self, prep: PreparedMeasurements, dyn: BodyDynamics
+              ) -> tuple[FloatArray, FloatArray, list[tuple[str, NDArray[np.intp], int]]]:
+        """(whitened residual h(x) - z, its Jacobian in the state, the readings (name, rows,
+        dof)) at the state the linearisation ``dyn`` was made at."""
+        names = self.model.string_names
+        size = self.size
+        pred = dyn.prediction
+        kin = pred.kinematics
+        x = self._x
+        blocks_r: list[FloatArray] = []
+        blocks_H: list[FloatArray] = []
+        readings: list[tuple[str, NDArray[np.intp], int]] = []
+        row = 0
+
+        def add(name: str, r: FloatArray, H: FloatArray, dof: int) -> None:
+            nonlocal row
+            blocks_r.append(r)
+            blocks_H.append(H)
+            readings.append((name, np.arange(row, row + r.size), dof))
+            row += r.size
+
+        for label, index, values, weight, h, dh in (
+                ('tension', prep.tension_index, prep.tensions, prep.tension_weight,
+                 pred.tensions, pred.tension_jacobian),
+                ('length', prep.length_index, prep.lengths, prep.length_weight,
+                 pred.lengths, pred.length_jacobian)):
+            if not index.size:
+                continue
+            H = np.zeros((index.size, size))
+            H[:, :6] = dh[index] * weight[:, None]
+            r = (h[index] - values) * weight
+            for k, i in enumerate(index.tolist()):
+                add(f'{label}[{names[i]}]', r[k:k + 1], H[k:k + 1], 1)
+        if prep.pose is not None:
+            res, jac = sm.pose_residual_unchecked(kin.T, prep.pose, sm.pose_jacobian(x[:6], kin))
+            H = np.zeros((6, size))
+            H[:, :6] = prep.pose_whitener @ jac
+            add('pose', prep.pose_whitener @ res, H, 6)
+        if prep.gravity is not None or prep.specific_force is not None:
+            sf = sm.predicted_specific_force(kin, x[6:12], dyn.twist_rate, self.gravity)
+            df = np.zeros((3, size))
+            rate = sf.twist_rate[:, 3:]  # df/d(dv/dt) = I
+            df[:, :6] = sf.screw + rate @ dyn.d_screw[3:]
+            df[:, 6:12] = sf.twist + rate @ dyn.d_twist[3:]
+            if size == 18:
+                df[:, 12:] = rate @ dyn.d_load[3:]
+            if prep.specific_force is not None:
+                w = prep.specific_force_weight
+                add('imu', (sf.value - prep.specific_force) * w, df * w[:, None], 3)
+            if prep.gravity is not None:
+                u, du = sm.gravity_direction_jacobian(sf.value)
+                w = prep.gravity_weight
+                add('gravity', (u - prep.gravity) * w, (du @ df) * w[:, None], sm.GRAVITY_DOF)
+        if prep.angular_velocity is not None:
+            value, dw = sm.predicted_angular_velocity(x[6:12])
+            w = prep.angular_velocity_weight
+            H = np.zeros((3, size))
+            H[:, 6:12] = dw * w[:, None]
+            add('gyro', (value - prep.angular_velocity) * w, H, 3)
+        if prep.wrench is not None and size == 18:
+            H = np.zeros((6, size))
+            H[:, 12:] = prep.wrench_whitener
+            add('wrench', prep.wrench_whitener @ (x[12:] - prep.wrench), H, 6)
+        if not blocks_r:
+            return np.empty(0), np.empty((0, size)), readings
+        return np.concatenate(blocks_r), np.vstack(blocks_H), readings
+
+    def _update(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray
+                ) -> tuple[float, int, bool | None, list[tuple[str, str]]]:
+        """One stacked update; (NIS, its dof, consistent, readings left out (name, why))."""
+        x, P = self._x, self._P
+        dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
+        r, H, readings = self._rows(prep, dyn)
+        if not r.size:
+            self._cache = (x, rest.copy(), load.copy(), dyn)
+            return 0.0, 0, None, []
+        nu = -r
+        HP = H @ P
+        S = HP @ H.T
+        S[np.diag_indices_from(S)] += 1.0
+        keep = np.ones(r.size, dtype=bool)
+        suspects: list[tuple[str, str]] = []
+        if self._suspected and self.reject_outliers:
+            # a reading left out at the last update stays out while its own innovation fails
+            # its test (the prediction's uncertainty grows without it: a broken sensor would
+            # otherwise be absorbed by the load's random walk after a few steps)
+            for name, rows, rdof in readings:
+                if name not in self._suspected:
+                    continue
+                Sg = S[np.ix_(rows, rows)]
+                stat = float(nu[rows] @ np.linalg.solve(Sg, nu[rows]))
+                if stat > consistency_threshold(rdof, self.consistency_probability):
+                    keep[rows] = False
+                    suspects.append((name, f'still contradicted by the prediction: its '
+                                           f'normalized innovation is {stat:.4g} on {rdof} '
+                                           f'degrees of freedom'))
+            if suspects:
+                readings = [c for c in readings if keep[c[1][0]]]
+                H, HP, nu, r = H[keep], HP[keep], nu[keep], r[keep]
+                S = S[np.ix_(keep, keep)]
+                keep = np.ones(r.size, dtype=bool)
+                offset = np.cumsum(np.r_[0, [c[1].size for c in readings]])
+                readings = [(c[0], np.arange(offset[i], offset[i + 1]), c[2])
+                            for i, c in enumerate(readings)]
+        dof = sum(d for _, _, d in readings)
+        if not readings:
+            self._suspected = {name for name, _ in suspects}
+            self._cache = (x, rest.copy(), load.copy(), dyn)
+            return 0.0, 0, None, suspects
+        threshold = consistency_threshold(dof, self.consistency_probability)
+        y = np.linalg.solve(S, nu)
+        nis = float(nu @ y)
+        consistent: bool | None = nis <= threshold
+        self._inconsistent = 0 if consistent else self._inconsistent + 1
+        if not consistent and self.reject_outliers:
+            nis_kept, dof_kept, keep, snooped = self._snoop(S, nu, readings, nis, dof)
+            if snooped:
+                nis, dof, consistent = nis_kept, dof_kept, True
+                suspects += snooped
+        self._suspected = {name for name, _ in suspects}
+        if not keep.all():
+            H, HP, nu = H[keep], HP[keep], nu[keep]
+            S = S[np.ix_(keep, keep)]
+        sol = np.linalg.solve(S, np.column_stack([nu, HP]))
+        dx = HP.T @ sol[:, 0]
+        Pn = P - HP.T @ sol[:, 1:]
+        xn = x + dx
+        check_in_chart(xn[:6], 'screw')
+        self._x, self._P = xn, 0.5 * (Pn + Pn.T)
+        self._cache = None
+        return nis, dof, consistent, suspects
+
+    def _snoop(self, S: FloatArray, nu: FloatArray,
+               readings: list[tuple[str, NDArray[np.intp], int]], nis: float, dof: int
+               ) -> tuple[float, int, NDArray[np.bool_], list[tuple[str, str]]]:
+        """Leave out the reading whose innovation a broken sensor explains best, at most
+        :data:`MAX_CONTRADICTED`, while the NIS test fails: for rows ``g`` the statistic
+        ``(S^-1 nu)_g^T ((S^-1)_gg)^-1 (S^-1 nu)_g`` is the drop of NIS when they are left out
+        (chi-square with their dof for a sound reading), compared across readings by their
+        Wilson-Hilferty z. Kept out only when the rest then passes; (NIS, dof, rows kept,
+        (name, why)) of the rest."""
+        keep = np.ones(nu.size, dtype=bool)
+        left: list[tuple[str, str]] = []
+        current = list(readings)
+        for _ in range(MAX_CONTRADICTED):
+            idx = np.flatnonzero(keep)
+            Si = np.linalg.inv(S[np.ix_(idx, idx)])
+            y = Si @ nu[idx]
+            where = {int(k): i for i, k in enumerate(idx.tolist())}
+            scored = []
+            for name, rows, rdof in current:
+                if rdof >= dof:
+                    continue
+                local = [where[int(k)] for k in rows.tolist()]
+                block = Si[np.ix_(local, local)]
+                yg = y[local]
+                stat = float(yg @ np.linalg.solve(block, yg))
+                scored.append((wilson_hilferty(max(stat, 1e-300), rdof), stat, name, rows,
+                               rdof))
+            if not scored:
+                break
+            scored.sort(key=lambda s: s[0], reverse=True)
+            z, stat, name, rows, rdof = scored[0]
+            keep[rows] = False
+            nis -= stat
+            dof -= rdof
+            current = [c for c in current if c[0] != name]
+            left.append((name, f'contradicted by the prediction and the others: leaving it '
+                               f'out lowers the NIS by {stat:.4g} (normalized z = {z:.3g})'))
+            if nis <= consistency_threshold(dof, self.consistency_probability):
+                return nis, dof, keep, left
+        return nis, dof, np.ones(nu.size, dtype=bool), []
+
+    # ------------------------------------------------------------------ (re)starts
+    def _static_start(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray,
+                      warm: FloatArray | None) -> JointEstimate:
+        """The static estimator on these readings (a specific force as a gravity direction,
+        a known load as a measured one); on success the filter starts from its estimate."""
+        static = self._static_readings(prep, load)
+        est = estimate_joint_state(self.model, static, rest, warm,
+                                   stiffness_std=False,
+                                   consistency_probability=self.consistency_probability,
+                                   reject_outliers=self.reject_outliers)
+        if est.success:
+            self._start_from(est)
+            self._inconsistent = 0
+            self._cache = None
+        return est
+
+    def _static_readings(self, prep: PreparedMeasurements, load: FloatArray
+                         ) -> PreparedMeasurements:
+        out = copy.copy(prep)
+        if prep.gravity is None and prep.specific_force is not None:
+            f = prep.specific_force
+            norm = float(np.linalg.norm(f))
+            if norm > sm.MIN_GRAVITY_NORM:
+                out.gravity = -f / norm
+                out.gravity_base = sm.unit_vector(self.gravity, 'gravity')
+                out.gravity_weight = prep.specific_force_weight * norm
+        if self.load == 'known':
+            out.wrench = load.copy()
+            out.wrench_covariance = np.eye(6) * KNOWN_LOAD_STD ** 2
+            out.wrench_whitener = np.eye(6) / KNOWN_LOAD_STD
+        out.recount()
+        return out
+
+    # ------------------------------------------------------------------ output
+    def _failed(self, message: str, prep: PreparedMeasurements,
+                dropped: list[tuple[str, str]]) -> JointEstimate:
+        nan6, nan66 = np.full(6, np.nan), np.full((6, 6), np.nan)
+        return JointEstimate(False, message, nan6, np.full((4, 4), np.nan), nan66, nan66.copy(),
+                             nan6.copy(), nan66.copy(), None, nan66.copy(), math.nan,
+                             prep.dof - 6, False, 0, math.inf, 0,
+                             prep.describe(self.model.string_names), np.empty(0), None,
+                             prep.dof - 6, tuple(n for n, _ in dropped),
+                             tuple(f'{n}: {w}' for n, w in dropped), False,
+                             nan6.copy(), nan66.copy())
+
+    def _estimate(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray,
+                  nis: float, dof: int, dropped: list[tuple[str, str]],
+                  consistent: bool | None, restarted: bool,
+                  outliers: tuple[str, ...] = (), reasons: tuple[str, ...] = ()
+                  ) -> JointEstimate:
+        x, P = self._x, self._P
+        dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
+        self._cache = (x, rest.copy(), load.copy(), dyn)
+        pred = dyn.prediction
+        state, kin = pred.state, pred.kinematics
+        xi = x[:6]
+        C = P[:6, :6].copy()
+        Pj = sm.pose_jacobian(xi, kin)
+        pose_cov = Pj @ C @ Pj.T
+        # twist [dp/dt; w_s] = [R v; R w]; first order in the screw through R (dtheta = G dxi)
+        R = kin.R
+        w_s, v_s = R @ x[6:9], R @ x[9:12]
+        Jt = np.zeros((6, 12))
+        Jt[:3, 9:12] = R
+        Jt[3:, 6:9] = R
+        Jt[:3, :6] = -hat3(v_s) @ Pj[3:]
+        Jt[3:, :6] = -hat3(w_s) @ Pj[3:]
+        twist_cov = Jt @ P[:12, :12] @ Jt.T
+        if self.size == 18:
+            W, W_cov = x[12:].copy(), P[12:, 12:].copy()
+        else:
+            W, W_cov = load.copy(), np.zeros((6, 6))
+        Kc_std = (entry_std(stiffness_jacobian_near(self.model, xi, rest), C)
+                  if self.stiffness_std else np.full((6, 6), np.nan))
+        names = tuple(n for n, _ in dropped) + tuple(outliers)
+        why = tuple(f'{n}: {w}' for n, w in dropped) + tuple(reasons)
+        scale = np.array([1.0] * 3 + [max(float(np.mean(rest)), 1e-6)] * 3)
+        ev = np.linalg.eigvalsh(C / np.outer(scale, scale))
+        cond = math.sqrt(ev[-1] / ev[0]) if ev[0] > 0.0 else math.inf
+        return JointEstimate(True, 'ok', xi.copy(), state.transform.copy(),
+                             0.5 * (pose_cov + pose_cov.T), C, W, W_cov, state, Kc_std,
+                             float(nis), int(dof), True, 6, cond, 1,
+                             prep.describe(self.model.string_names), np.empty(0), consistent,
+                             int(dof), names, why, restarted,
+                             np.concatenate([v_s, w_s]), 0.5 * (twist_cov + twist_cov.T))
+
