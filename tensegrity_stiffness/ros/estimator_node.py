@@ -32,6 +32,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
+from tensegrity_stiffness.estimation.joint_filter import JointFilter
 from tensegrity_stiffness.geometry.validation import require_frame
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.nodes.estimation_processing import (
@@ -41,8 +42,10 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     diagnostic_summary,
     diagnostic_values,
     estimator_outputs,
-    gravity_reading,
+    filter_outputs,
+    imu_reading,
     measured_array,
+    new_joint_filter,
 )
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.messages import stamp_is_set
@@ -84,6 +87,11 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         self._readings: dict[str, Reading] = {}
+        # estimation.method 'filter': the track (under the output lock; a new one after every
+        # parameter change, kept through rest-length changes)
+        self._joint_filter: JointFilter | None = None
+        self._estimates = 0
+        self._consistent_estimates = 0
         super().__init__(node_name, **kwargs)
         self._start(*self._warm_up(self._settings))
 
@@ -91,8 +99,9 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         """The worker's first job and the ready line's summary (see ``StreamingNode._start``)."""
         model = settings.model
         return (solve_equilibrium, (model, np.zeros(6)),
-                f'{model.n_strings} strings, load {settings.load_mode}, trigger '
-                f'~/{settings.trigger}, max age {settings.max_age:g} s')
+                f'{model.n_strings} strings, {settings.method} estimator, load '
+                f'{settings.load_mode}, trigger ~/{settings.trigger}, max age '
+                f'{settings.max_age:g} s')
 
     def _options(self, settings: Any) -> EstimatorNodeSettings:
         """The estimator's settings (sensors, load mode, trigger, max age)."""
@@ -130,7 +139,28 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     def _outputs(self, settings: EstimatorNodeSettings, snapshot: EstimatorInput,
                  wanted: tuple[bool, ...]) -> EstimatorOutputs:
         # the std of K_c (most of an estimate's time) only when it is wanted
-        return estimator_outputs(settings, snapshot, wanted[-1])
+        if settings.method == 'filter':
+            if self._joint_filter is None:
+                self._joint_filter = new_joint_filter(settings)
+            outputs = filter_outputs(settings, snapshot, self._joint_filter, wanted[-1])
+        else:
+            outputs = estimator_outputs(settings, snapshot, wanted[-1])
+        self._estimates += 1
+        self._consistent_estimates += outputs.estimate.consistent is not False
+        return outputs
+
+    def _apply_parameters(self, values: Any, names: set[str]) -> None:
+        """As every streaming node's; the filter starts a new track under the new settings."""
+        with self._output_lock:
+            self._joint_filter = None
+            super()._apply_parameters(values, names)
+
+    def _republish_last(self) -> None:
+        """The static estimator estimates the last readings again under new settings or rest
+        lengths; the filter does not (stepping it again on the same readings would count them
+        twice): its next reading is predicted with the rest lengths in force."""
+        if self._options(self._settings).method == 'static':
+            super()._republish_last()
 
     def _markers(self, settings: EstimatorNodeSettings, state: Any, stamp: Any) -> MarkerArray:
         return conversions.joint_markers(settings.model, state, settings.link1_frame, stamp)
@@ -191,8 +221,7 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     def _on_imu(self, msg: Imu) -> None:
         settings = self._settings
         self._store_framed('imu', msg, self._input_frames(settings)[1], "link 2's frame",
-                           lambda m: gravity_reading(estimation_msgs.imu_specific_force(m),
-                                                     settings.imu_rest_tolerance))
+                           lambda m: imu_reading(settings, *estimation_msgs.imu_motion(m)))
 
     @guarded('~/measured_wrench')
     def _on_wrench(self, msg: WrenchStamped) -> None:
@@ -207,7 +236,11 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         if outputs is not None:
             values += diagnostic_values(outputs)
             level, message = diagnostic_summary(outputs)
-        values += [('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
+        share = (self._consistent_estimates / self._estimates if self._estimates
+                 else float('nan'))
+        values += [('method', options.method), ('estimates', self._estimates),
+                   ('consistent share', share),
+                   ('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
                    ('max age [s]', options.max_age),
                    ('consistency probability', options.consistency_probability)]
         return [conversions.diagnostic_status(f'{self.get_name()}: estimator', level, message,

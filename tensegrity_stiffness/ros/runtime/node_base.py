@@ -106,6 +106,10 @@ class StreamingNode(Node):
             lambda reason: self.reporter.warn('parameter change', reason))
         self._settings = self._binding.build(self._binding.values())
         self._last = LastInput()
+        #: Called with ``(outputs, stamp)`` after every input's outputs are published, under the
+        #: output lock: a consumer in the same process (``control_loop``'s controller) takes them
+        #: without a topic in between.
+        self.output_listeners: list[Callable[[Any, Any], None]] = []
         self._last_solution: np.ndarray | None = None
         self._clock = self.get_clock()
         self._messages = self._output_messages(self._settings)
@@ -304,6 +308,8 @@ class StreamingNode(Node):
             self._publish_eigenvalues(outputs)
             self._publish_extras(settings, xi, outputs)
             self._last.record(xi, stamp, outputs, start)
+            for listener in self.output_listeners:
+                listener(outputs, stamp)
 
     def _cartesian_stiffness(self, outputs: Any) -> np.ndarray:
         """The Cartesian stiffness (linear first) whose principal stiffnesses go on
