@@ -84,7 +84,9 @@ class ControlMonitor:
                 f'  tick {v.get("tick time [ms]", "-")} ms')
 
 
-def _targets(model: JointModel) -> tuple[PoseStamped, Float64MultiArray]:
+def targets(model: JointModel) -> tuple[PoseStamped, Float64MultiArray]:
+    """The script's targets: the pose step's pose and the stiffness step's K_c (the design
+    at :data:`STIFFNESS_TENSIONS` there)."""
     xi = model.initial_screw + POSE_STEP
     pose = PoseStamped()
     pose.header.frame_id = 'tensegrity_link1'
@@ -132,7 +134,7 @@ def run(config_path: Path | None, duration: float | None) -> int:
     stiffness_pub = node.create_publisher(
         Float64MultiArray, f'{NAMESPACE}/stiffness_controller/target_stiffness', 10)
     load_pub = node.create_publisher(WrenchStamped, f'{NAMESPACE}/sim_node/external_wrench', 10)
-    pose, stiffness = _targets(model)
+    pose, stiffness = targets(model)
     spin = BackgroundSpin(node, stop)
     start = time.monotonic()
     code = 0
