@@ -1140,6 +1140,7 @@ def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
     """Validate a whole parameter set of ``spine_estimator_node``; ValueError names the bad
     field (an ``estimation.trigger`` the spine has no input for among them)."""
     spine = spine_node_settings(values, generation)
+    SPINE_ESTIMATION_METHOD.check(values['estimation.method'])
     if values['estimation.trigger'] not in SPINE_ESTIMATOR_INPUTS:
         raise ValueError(f'estimation.trigger must be one of {" | ".join(SPINE_ESTIMATOR_INPUTS)}'
                          f' for a spine, got {values["estimation.trigger"]!r}')
