@@ -168,16 +168,19 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     # ------------------------------------------------------------------ inputs
     def _store(self, name: str, value: Any, stamp: Any) -> None:
         """Keep the reading; when ``name`` is the trigger, estimate from the latest readings
-        (warm-started from the last estimate) and publish."""
+        (warm-started from the last estimate) and publish, stamped with the trigger's header
+        stamp or, for an input without a header (the measured arrays), the time it arrived: the
+        controller's latency from a reading to its command starts there."""
         now = time.monotonic()
+        arrived = None if stamp is not None and stamp_is_set(stamp) else self._clock.now()
         self._readings[name] = Reading(value, now)
         if name != self._options(self._settings).trigger:
             return
         last = self._last.outputs
         snapshot = EstimatorInput(dict(self._readings), now,
                                   None if last is None else last.screw)
-        has_stamp = stamp is not None and stamp_is_set(stamp)
-        self._compute_and_publish(snapshot, stamp if has_stamp else None, f'~/{name}')
+        self._compute_and_publish(snapshot, stamp if arrived is None else arrived.to_msg(),
+                                  f'~/{name}')
 
     def _measured(self, name: str, msg: Float64MultiArray) -> None:
         settings = self._settings
