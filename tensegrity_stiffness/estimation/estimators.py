@@ -97,6 +97,8 @@ __all__ = [
     'missing_message',
     'stiffness_jacobian_near',
     'suspect_reading',
+    'tip_pose_jacobian',
+    'tip_stiffness_std',
     'wilson_hilferty',
 ]
 
@@ -1228,6 +1230,9 @@ class ChainEstimate:
     ``redundancy``, ``outliers``, ``outlier_reasons`` and ``restarted`` as
     :class:`JointEstimate`'s (a joint's readings named ``joint <i> tension[<string>]``,
     ``joint <i> length[<string>]``, ``joint <i> pose``; the tip's ``pose`` and ``wrench``).
+    ``screw_rates`` (N, 6) and ``screw_rate_covariance`` (6N, 6N): the chain filter's
+    (:class:`~tensegrity_stiffness.estimation.chain_filter.ChainFilter`); empty from the static
+    estimator, which assumes rest.
     """
 
     success: bool
@@ -1253,6 +1258,8 @@ class ChainEstimate:
     outliers: tuple[str, ...] = ()
     outlier_reasons: tuple[str, ...] = ()
     restarted: bool = False
+    screw_rates: FloatArray = field(default_factory=lambda: np.zeros((0, 6)))
+    screw_rate_covariance: FloatArray = field(default_factory=lambda: np.zeros((0, 0)))
 
 
 class _ChainProblem:
@@ -1314,7 +1321,7 @@ class _ChainProblem:
         if self.tip_pose is not None:
             T = state.tip_transform
             jac = np.zeros((6, size))
-            jac[:, :6 * n] = _tip_pose_jacobian(self.chain, xi, T)
+            jac[:, :6 * n] = tip_pose_jacobian(self.chain, xi, T)
             r, jac = sm.pose_residual_unchecked(T, self.tip_pose, jac)
             rows_r.append(self.tip_pose_whitener @ r)
             rows_J.append(self.tip_pose_whitener @ jac)
@@ -1353,7 +1360,7 @@ class _ChainProblem:
         return None
 
 
-def _tip_pose_jacobian(chain: JointChain, xi: FloatArray, tip: FloatArray) -> FloatArray:
+def tip_pose_jacobian(chain: JointChain, xi: FloatArray, tip: FloatArray) -> FloatArray:
     """``d[dp; dtheta]/dxi`` (6, 6N) of the tip pose (PoseWithCovariance convention in the base)
     from the tip's spatial twist ``[dv; dw]`` (:meth:`JointChain.jacobian`):
     ``dp = dv + dw x p``, ``dtheta = dw``."""
@@ -1768,10 +1775,10 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
         joint_cov[i] = P @ C[6 * i:6 * i + 6, 6 * i:6 * i + 6] @ P.T
     T_tip = state.tip_transform
     M = np.zeros((6, 6 * n + 6))
-    M[:, :6 * n] = _tip_pose_jacobian(chain, xi, T_tip)
+    M[:, :6 * n] = tip_pose_jacobian(chain, xi, T_tip)
     tip_cov = M @ C @ M.T
     K_tip = chain.tip_stiffness_from_state(state, W, g)
-    K_tip_std = _tip_stiffness_std(chain, z, C, g, rest) if stiffness_std else _nan(6, 6)
+    K_tip_std = tip_stiffness_std(chain, z, C, g, rest) if stiffness_std else _nan(6, 6)
     return ChainEstimate(True, 'ok', xi.copy(), C[:6 * n, :6 * n], joint_cov, W.copy(),
                          C[6 * n:, 6 * n:], T_tip.copy(), 0.5 * (tip_cov + tip_cov.T), K_tip,
                          K_tip_std, float(r @ r), measured - 6, True, rank, cond, iterations,
@@ -1779,7 +1786,7 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
                          *_outlier_fields(dropped), restarted)
 
 
-def _tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,
+def tip_stiffness_std(chain: JointChain, z: FloatArray, C: FloatArray, g: FloatArray,
                        rest: Any) -> FloatArray:
     """First-order std (6, 6) of the exact tip stiffness: central differences of
     :meth:`JointChain.tip_stiffness` over ``z = [xi; W]`` propagated with ``C``."""

@@ -1,5 +1,5 @@
 """A recursive estimator of a moving joint: an extended Kalman filter on the joint's dynamics
-(no rclpy; docs/estimation.md#the-filter).
+(no rclpy; docs/estimation.md#the-filter-jointfilter).
 
 State ``x = [xi (6); V (6); W (6)]``: the screw ``xi`` of link 2 (the library's screw,
 ``T = exp(hat(xi))``), link 2's body twist ``V = [w; v]`` in {2} (``hat(V) = T^-1 dT/dt``) and,
@@ -74,14 +74,13 @@ from tensegrity_stiffness.estimation.estimators import (
 from tensegrity_stiffness.geometry.screw import (
     ScrewKinematics,
     check_in_chart,
-    hat3,
-    left_jacobian_so3_inverse,
 )
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
 
 __all__ = [
+    'DEFAULT_CHAIN_PROCESS_NOISE',
     'DEFAULT_GRAVITY',
     'DEFAULT_PROCESS_NOISE',
     'INITIAL_ANGULAR_VELOCITY_STD',
@@ -94,7 +93,10 @@ __all__ = [
     'BodyDynamics',
     'JointFilter',
     'ProcessNoise',
+    'UpdateResult',
     'body_dynamics',
+    'innovation_outliers',
+    'kalman_update',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -134,8 +136,8 @@ class ProcessNoise:
     a density ``q`` adds a variance ``q^2 dt`` (docs/estimation.md#process-noise says how to
     choose them)."""
 
-    angular_acceleration: float = 30.0
-    linear_acceleration: float = 0.3
+    angular_acceleration: float = 6.0
+    linear_acceleration: float = 0.015
     force_rate: float = 0.5
     moment_rate: float = 0.01
 
@@ -158,19 +160,28 @@ class ProcessNoise:
         return np.array([self.force_rate ** 2] * 3 + [self.moment_rate ** 2] * 3)
 
 
-#: The defaults (the one home of their values: :class:`ProcessNoise`'s fields).
+#: The joint filter's defaults (the one home of their values: :class:`ProcessNoise`'s fields).
 DEFAULT_PROCESS_NOISE = ProcessNoise()
+#: The spine filter's defaults (:class:`~tensegrity_stiffness.estimation.chain_filter.
+#: ChainFilter`): its prediction leaves out the velocity-product terms and each joint's
+#: acceleration carries the others' motion, so its accelerations are 8x the joint's (tuned on
+#: the twin's moving spine, docs/estimation.md#spines-chainfilter).
+DEFAULT_CHAIN_PROCESS_NOISE = ProcessNoise(angular_acceleration=48.0, linear_acceleration=0.12)
+
+
+def _hat(a: FloatArray) -> FloatArray:
+    """``hat(a)`` (3, 3) of one 3-vector from plain floats (the filter's per-step path)."""
+    x, y, z = a.tolist()
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
 
 
 def _hat_pair(p: FloatArray) -> FloatArray:
     """``C(p) = [[hat(p_m), hat(p_f)], [hat(p_f), 0]]`` (6, 6) for a wrench ``p = [m; f]``:
     ``ad_V^T p = C(p) V`` for every twist ``V = [w; v]``."""
-    out = np.zeros((6, 6))
-    hm, hf = hat3(p[:3]), hat3(p[3:])
-    out[:3, :3] = hm
-    out[:3, 3:] = hf
-    out[3:, :3] = hf
-    return out
+    a, b, c, d, e, f = p.tolist()
+    return np.array([[0.0, -c, b, 0.0, -f, e], [c, 0.0, -a, f, 0.0, -d],
+                     [-b, a, 0.0, -e, d, 0.0], [0.0, -f, e, 0.0, 0.0, 0.0],
+                     [f, 0.0, -d, 0.0, 0.0, 0.0], [-e, d, 0.0, 0.0, 0.0, 0.0]])
 
 
 @dataclass(slots=True)
@@ -201,15 +212,18 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
     caller keeps it."""
     kin, state = prediction.kinematics, prediction.state
     T, Jl = kin.T, kin.J
-    R, p = T[:3, :3], T[:3, 3]
-    Ad = np.zeros((6, 6))  # Ad_T for twists [w; v]
+    R = T[:3, :3]
+    Ad = np.empty((6, 6))  # Ad_T for twists [w; v]
     Ad[:3, :3] = R
+    Ad[:3, 3:] = 0.0
     Ad[3:, 3:] = R
-    Ad[3:, :3] = hat3(p) @ R
-    # J_l^-1 = [[G^-1, 0], [-G^-1 Q G^-1, G^-1]]; J_b^-1 = J_l^-1 Ad_T (J_l = Ad_T J_b)
-    Gi = left_jacobian_so3_inverse(state.screw[:3])
-    Jl_inv = np.zeros((6, 6))
+    Ad[3:, :3] = _hat(T[:3, 3]) @ R
+    # J_l^-1 = [[G^-1, 0], [-G^-1 Q G^-1, G^-1]]; J_b^-1 = J_l^-1 Ad_T (J_l = Ad_T J_b); G^-1
+    # by LAPACK (5x faster here than the closed form on plain floats)
+    Gi = np.linalg.inv(kin.G)
+    Jl_inv = np.empty((6, 6))
     Jl_inv[:3, :3] = Gi
+    Jl_inv[:3, 3:] = 0.0
     Jl_inv[3:, 3:] = Gi
     Jl_inv[3:, :3] = -Gi @ kin.Q @ Gi
     Jb_inv = Jl_inv @ Ad
@@ -217,25 +231,28 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
     Ginv = np.linalg.inv(G) if inertia_inverse is None else inertia_inverse
     spatial = (state.wrench + load)[_SWAP]  # [m; f] in {1}
     AdT = Ad.T
-    body = AdT @ spatial
     GV = G @ twist
-    w, v = twist[:3], twist[3:]
-    adT = np.zeros((6, 6))  # ad_V^T = [[-hat(w), -hat(v)], [0, -hat(w)]]
-    hw, hv = hat3(w), hat3(v)
-    adT[:3, :3] = -hw
-    adT[:3, 3:] = -hv
-    adT[3:, 3:] = -hw
+    # ad_V^T = [[-hat(w), -hat(v)], [0, -hat(w)]]: -C(V) with its lower blocks replaced
+    adT = _hat_pair(twist)
+    np.negative(adT, out=adT)
+    adT[3:, :3] = 0.0
+    adT[3:, 3:] = adT[:3, :3]
     coriolis = _hat_pair(GV)  # ad_V^T G V = C(G V) V
-    total = coriolis @ twist + body
+    total = coriolis @ twist + AdT @ spatial
     d_twist = adT @ G + coriolis
     if dynamics.damped:
         A = prediction.length_jacobian @ Jb_inv  # dl/dV
         D = (A.T * dynamics.string_damping) @ A
         total -= D @ twist
         d_twist -= D
-    d_screw = AdT @ (prediction.state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
-    return BodyDynamics(Jb_inv @ twist, Ginv @ total, Jb_inv, Ginv @ d_screw, Ginv @ d_twist,
-                        Ginv @ AdT[:, _SWAP], prediction)
+    stacked = np.empty((6, 19))  # one product with G^-1 for the rate and its Jacobians
+    stacked[:, 0] = total
+    stacked[:, 1:7] = AdT @ (state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
+    stacked[:, 7:13] = d_twist
+    stacked[:, 13:] = AdT[:, _SWAP]
+    out = Ginv @ stacked
+    return BodyDynamics(Jb_inv @ twist, out[:, 0], Jb_inv, out[:, 1:7], out[:, 7:13],
+                        out[:, 13:], prediction)
 
 
 class JointFilter:
@@ -249,6 +266,12 @@ class JointFilter:
     :meth:`step`); ``gravity`` (3,) m/s^2 in {1} for the accelerometer;
     ``consistency_probability`` of the NIS test; ``stiffness_std`` whether estimates carry the
     std of ``K_c``; ``reject_outliers`` whether contradicted readings are left out.
+
+    The :class:`~tensegrity_stiffness.estimation.estimators.JointEstimate` of a step: ``chi2``
+    is the update's NIS and ``dof`` = ``redundancy`` its degrees of freedom (every reading
+    checks itself against the prediction), ``condition_number`` NaN (not computed),
+    ``iterations`` 1; ``external_wrench`` the load state (or the known load, with a zero
+    covariance); ``twist`` and ``twist_covariance`` link 2's ``[dp/dt; w]`` in {1}.
     """
 
     def __init__(self, model: JointModel | JointDynamics, inertia: LinkInertia | None = None,
@@ -285,6 +308,7 @@ class JointFilter:
         self.reject_outliers = reject_outliers
         self.size = 18 if load == 'unknown' else 12
         self._inertia_inverse = np.linalg.inv(self.dynamics.spatial_inertia)
+        self._identity = np.eye(self.size)
         self._twist_q = process_noise.twist_density()
         self._load_q = process_noise.load_density()
         self.reset()
@@ -317,6 +341,7 @@ class JointFilter:
         :meth:`step` starts from the static estimator."""
         self._t: float | None = None
         self._inconsistent = 0
+        self._patterns: dict[tuple, tuple[list, int]] = {}
         self._suspected: set[str] = set()
         self._cache: tuple[Any, ...] | None = None
         self._x: FloatArray | None = None
@@ -539,19 +564,26 @@ class JointFilter:
     def _substep(self, h: float, rest: FloatArray, load: FloatArray) -> None:
         x, P = self._x, self._P
         cache = self._cache
+        A = np.zeros((12, 12))
+        f = np.empty(12)
         if cache is not None and cache[0] is x and np.array_equal(cache[1], rest) and \
                 (self.size == 18 or np.array_equal(cache[2], load)):
-            dyn = cache[3]
+            # the last update's linearisation (at its prior) carried to its posterior to first
+            # order: f(x + dx) = f(x) + A dx, one evaluation of the strings per step
+            dyn, dx = cache[3], cache[4]
         else:
-            dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
-        A = np.zeros((12, 12))
+            dyn, dx = self._linearize(x[:6], x[6:12], self._current_load(load), rest), None
         A[:6, 6:] = dyn.body_inverse
         A[6:, :6] = dyn.d_screw
         A[6:, 6:] = dyn.d_twist
+        f[:6] = dyn.screw_rate
+        f[6:] = dyn.twist_rate
+        if dx is not None:
+            f += A @ dx[:12]
+            if self.size == 18:
+                f[6:] += dyn.d_load @ dx[12:]
         rhs = np.empty((12, 13 + (6 if self.size == 18 else 0)))
-        rhs[:6, 0] = dyn.screw_rate
-        rhs[6:, 0] = dyn.twist_rate
-        rhs[:, 0] *= h
+        rhs[:, 0] = f * h
         half = 0.5 * h
         rhs[:, 1:13] = half * A
         rhs[np.arange(12), np.arange(1, 13)] += 1.0
@@ -561,7 +593,7 @@ class JointFilter:
         E = -half * A
         E[np.arange(12), np.arange(12)] += 1.0
         sol = np.linalg.solve(E, rhs)
-        Phi = np.eye(self.size)
+        Phi = self._identity.copy()
         Phi[:12, :12] = sol[:, 1:13]
         if self.size == 18:
             Phi[:12, 12:] = sol[:, 13:]
@@ -582,72 +614,91 @@ class JointFilter:
         self._x, self._P = xn, 0.5 * (Pn + Pn.T)
 
     # ------------------------------------------------------------------ update
+    def _readings(self, prep: PreparedMeasurements
+                  ) -> tuple[list[tuple[str, NDArray[np.intp], int]], int]:
+        """The readings of a sensor pattern (name, rows, dof) in row order and the row count
+        (kept per pattern: a tracker's pattern rarely changes)."""
+        key = (prep.tension_index.tobytes(), prep.length_index.tobytes(), prep.pose is not None,
+               prep.specific_force is not None, prep.gravity is not None,
+               prep.angular_velocity is not None, prep.wrench is not None and self.size == 18)
+        known = self._patterns.get(key)
+        if known is not None:
+            return known
+        names = self.model.string_names
+        out: list[tuple[str, NDArray[np.intp], int]] = []
+        row = 0
+        for label, index in (('tension', prep.tension_index), ('length', prep.length_index)):
+            for i in index.tolist():
+                out.append((f'{label}[{names[i]}]', np.array([row]), 1))
+                row += 1
+        for name, present, rows, dof in (('pose', key[2], 6, 6), ('imu', key[3], 3, 3),
+                                         ('gravity', key[4], 3, sm.GRAVITY_DOF),
+                                         ('gyro', key[5], 3, 3), ('wrench', key[6], 6, 6)):
+            if present:
+                out.append((name, np.arange(row, row + rows), dof))
+                row += rows
+        if len(self._patterns) >= 16:
+            self._patterns.pop(next(iter(self._patterns)))
+        self._patterns[key] = (out, row)
+        return out, row
+
     def _rows(self, prep: PreparedMeasurements, dyn: BodyDynamics
               ) -> tuple[FloatArray, FloatArray, list[tuple[str, NDArray[np.intp], int]]]:
         """(whitened residual h(x) - z, its Jacobian in the state, the readings (name, rows,
-        dof)) at the state the linearisation ``dyn`` was made at."""
-        names = self.model.string_names
+        dof)) at the state the linearisation ``dyn`` was made at (rows in the order of
+        :meth:`_readings`)."""
         size = self.size
         pred = dyn.prediction
         kin = pred.kinematics
         x = self._x
-        blocks_r: list[FloatArray] = []
-        blocks_H: list[FloatArray] = []
-        readings: list[tuple[str, NDArray[np.intp], int]] = []
+        readings, count = self._readings(prep)
+        r = np.empty(count)
+        H = np.zeros((count, size))
         row = 0
-
-        def add(name: str, r: FloatArray, H: FloatArray, dof: int) -> None:
-            nonlocal row
-            blocks_r.append(r)
-            blocks_H.append(H)
-            readings.append((name, np.arange(row, row + r.size), dof))
-            row += r.size
-
-        for label, index, values, weight, h, dh in (
-                ('tension', prep.tension_index, prep.tensions, prep.tension_weight,
-                 pred.tensions, pred.tension_jacobian),
-                ('length', prep.length_index, prep.lengths, prep.length_weight,
-                 pred.lengths, pred.length_jacobian)):
-            if not index.size:
-                continue
-            H = np.zeros((index.size, size))
-            H[:, :6] = dh[index] * weight[:, None]
-            r = (h[index] - values) * weight
-            for k, i in enumerate(index.tolist()):
-                add(f'{label}[{names[i]}]', r[k:k + 1], H[k:k + 1], 1)
+        for index, values, weight, h, dh in (
+                (prep.tension_index, prep.tensions, prep.tension_weight, pred.tensions,
+                 pred.tension_jacobian),
+                (prep.length_index, prep.lengths, prep.length_weight, pred.lengths,
+                 pred.length_jacobian)):
+            k = index.size
+            if k:
+                r[row:row + k] = (h[index] - values) * weight
+                H[row:row + k, :6] = dh[index] * weight[:, None]
+                row += k
         if prep.pose is not None:
             res, jac = sm.pose_residual_unchecked(kin.T, prep.pose, sm.pose_jacobian(x[:6], kin))
-            H = np.zeros((6, size))
-            H[:, :6] = prep.pose_whitener @ jac
-            add('pose', prep.pose_whitener @ res, H, 6)
+            r[row:row + 6] = prep.pose_whitener @ res
+            H[row:row + 6, :6] = prep.pose_whitener @ jac
+            row += 6
         if prep.gravity is not None or prep.specific_force is not None:
             sf = sm.predicted_specific_force(kin, x[6:12], dyn.twist_rate, self.gravity)
-            df = np.zeros((3, size))
-            rate = sf.twist_rate[:, 3:]  # df/d(dv/dt) = I
-            df[:, :6] = sf.screw + rate @ dyn.d_screw[3:]
-            df[:, 6:12] = sf.twist + rate @ dyn.d_twist[3:]
+            df = np.empty((3, size))
+            # df/d(dv/dt) = I: the dynamics' rows of dv/dt chained in
+            df[:, :6] = sf.screw + dyn.d_screw[3:]
+            df[:, 6:12] = sf.twist + dyn.d_twist[3:]
             if size == 18:
-                df[:, 12:] = rate @ dyn.d_load[3:]
+                df[:, 12:] = dyn.d_load[3:]
             if prep.specific_force is not None:
                 w = prep.specific_force_weight
-                add('imu', (sf.value - prep.specific_force) * w, df * w[:, None], 3)
+                r[row:row + 3] = (sf.value - prep.specific_force) * w
+                H[row:row + 3] = df * w[:, None]
+                row += 3
             if prep.gravity is not None:
                 u, du = sm.gravity_direction_jacobian(sf.value)
                 w = prep.gravity_weight
-                add('gravity', (u - prep.gravity) * w, (du @ df) * w[:, None], sm.GRAVITY_DOF)
+                r[row:row + 3] = (u - prep.gravity) * w
+                H[row:row + 3] = (du @ df) * w[:, None]
+                row += 3
         if prep.angular_velocity is not None:
-            value, dw = sm.predicted_angular_velocity(x[6:12])
             w = prep.angular_velocity_weight
-            H = np.zeros((3, size))
-            H[:, 6:12] = dw * w[:, None]
-            add('gyro', (value - prep.angular_velocity) * w, H, 3)
+            value, dw = sm.predicted_angular_velocity(x[6:12])
+            r[row:row + 3] = (value - prep.angular_velocity) * w
+            H[row:row + 3, 6:12] = dw * w[:, None]
+            row += 3
         if prep.wrench is not None and size == 18:
-            H = np.zeros((6, size))
-            H[:, 12:] = prep.wrench_whitener
-            add('wrench', prep.wrench_whitener @ (x[12:] - prep.wrench), H, 6)
-        if not blocks_r:
-            return np.empty(0), np.empty((0, size)), readings
-        return np.concatenate(blocks_r), np.vstack(blocks_H), readings
+            r[row:row + 6] = prep.wrench_whitener @ (x[12:] - prep.wrench)
+            H[row:row + 6, 12:] = prep.wrench_whitener
+        return r, H, readings
 
     def _update(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray
                 ) -> tuple[float, int, bool | None, list[tuple[str, str]]]:
@@ -655,105 +706,16 @@ class JointFilter:
         x, P = self._x, self._P
         dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
         r, H, readings = self._rows(prep, dyn)
-        if not r.size:
-            self._cache = (x, rest.copy(), load.copy(), dyn)
-            return 0.0, 0, None, []
-        nu = -r
-        HP = H @ P
-        S = HP @ H.T
-        S[np.diag_indices_from(S)] += 1.0
-        keep = np.ones(r.size, dtype=bool)
-        suspects: list[tuple[str, str]] = []
-        if self._suspected and self.reject_outliers:
-            # a reading left out at the last update stays out while its own innovation fails
-            # its test (the prediction's uncertainty grows without it: a broken sensor would
-            # otherwise be absorbed by the load's random walk after a few steps)
-            for name, rows, rdof in readings:
-                if name not in self._suspected:
-                    continue
-                Sg = S[np.ix_(rows, rows)]
-                stat = float(nu[rows] @ np.linalg.solve(Sg, nu[rows]))
-                if stat > consistency_threshold(rdof, self.consistency_probability):
-                    keep[rows] = False
-                    suspects.append((name, f'still contradicted by the prediction: its '
-                                           f'normalized innovation is {stat:.4g} on {rdof} '
-                                           f'degrees of freedom'))
-            if suspects:
-                readings = [c for c in readings if keep[c[1][0]]]
-                H, HP, nu, r = H[keep], HP[keep], nu[keep], r[keep]
-                S = S[np.ix_(keep, keep)]
-                keep = np.ones(r.size, dtype=bool)
-                offset = np.cumsum(np.r_[0, [c[1].size for c in readings]])
-                readings = [(c[0], np.arange(offset[i], offset[i + 1]), c[2])
-                            for i, c in enumerate(readings)]
-        dof = sum(d for _, _, d in readings)
-        if not readings:
-            self._suspected = {name for name, _ in suspects}
-            self._cache = (x, rest.copy(), load.copy(), dyn)
-            return 0.0, 0, None, suspects
-        threshold = consistency_threshold(dof, self.consistency_probability)
-        y = np.linalg.solve(S, nu)
-        nis = float(nu @ y)
-        consistent: bool | None = nis <= threshold
-        self._inconsistent = 0 if consistent else self._inconsistent + 1
-        if not consistent and self.reject_outliers:
-            nis_kept, dof_kept, keep, snooped = self._snoop(S, nu, readings, nis, dof)
-            if snooped:
-                nis, dof, consistent = nis_kept, dof_kept, True
-                suspects += snooped
-        self._suspected = {name for name, _ in suspects}
-        if not keep.all():
-            H, HP, nu = H[keep], HP[keep], nu[keep]
-            S = S[np.ix_(keep, keep)]
-        sol = np.linalg.solve(S, np.column_stack([nu, HP]))
-        dx = HP.T @ sol[:, 0]
-        Pn = P - HP.T @ sol[:, 1:]
-        xn = x + dx
+        out = kalman_update(P, r, H, readings, self._suspected, self.consistency_probability,
+                            self.reject_outliers)
+        self._suspected = {name for name, _ in out.left_out}
+        if out.raw_consistent is not None:
+            self._inconsistent = 0 if out.raw_consistent else self._inconsistent + 1
+        xn = x + out.correction
         check_in_chart(xn[:6], 'screw')
-        self._x, self._P = xn, 0.5 * (Pn + Pn.T)
-        self._cache = None
-        return nis, dof, consistent, suspects
-
-    def _snoop(self, S: FloatArray, nu: FloatArray,
-               readings: list[tuple[str, NDArray[np.intp], int]], nis: float, dof: int
-               ) -> tuple[float, int, NDArray[np.bool_], list[tuple[str, str]]]:
-        """Leave out the reading whose innovation a broken sensor explains best, at most
-        :data:`MAX_CONTRADICTED`, while the NIS test fails: for rows ``g`` the statistic
-        ``(S^-1 nu)_g^T ((S^-1)_gg)^-1 (S^-1 nu)_g`` is the drop of NIS when they are left out
-        (chi-square with their dof for a sound reading), compared across readings by their
-        Wilson-Hilferty z. Kept out only when the rest then passes; (NIS, dof, rows kept,
-        (name, why)) of the rest."""
-        keep = np.ones(nu.size, dtype=bool)
-        left: list[tuple[str, str]] = []
-        current = list(readings)
-        for _ in range(MAX_CONTRADICTED):
-            idx = np.flatnonzero(keep)
-            Si = np.linalg.inv(S[np.ix_(idx, idx)])
-            y = Si @ nu[idx]
-            where = {int(k): i for i, k in enumerate(idx.tolist())}
-            scored = []
-            for name, rows, rdof in current:
-                if rdof >= dof:
-                    continue
-                local = [where[int(k)] for k in rows.tolist()]
-                block = Si[np.ix_(local, local)]
-                yg = y[local]
-                stat = float(yg @ np.linalg.solve(block, yg))
-                scored.append((wilson_hilferty(max(stat, 1e-300), rdof), stat, name, rows,
-                               rdof))
-            if not scored:
-                break
-            scored.sort(key=lambda s: s[0], reverse=True)
-            z, stat, name, rows, rdof = scored[0]
-            keep[rows] = False
-            nis -= stat
-            dof -= rdof
-            current = [c for c in current if c[0] != name]
-            left.append((name, f'contradicted by the prediction and the others: leaving it '
-                               f'out lowers the NIS by {stat:.4g} (normalized z = {z:.3g})'))
-            if nis <= consistency_threshold(dof, self.consistency_probability):
-                return nis, dof, keep, left
-        return nis, dof, np.ones(nu.size, dtype=bool), []
+        self._x, self._P = xn, out.covariance
+        self._cache = (xn, rest.copy(), load.copy(), dyn, out.correction)
+        return out.nis, out.dof, out.consistent, out.left_out
 
     # ------------------------------------------------------------------ (re)starts
     def _static_start(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray,
@@ -806,22 +768,27 @@ class JointFilter:
                   outliers: tuple[str, ...] = (), reasons: tuple[str, ...] = ()
                   ) -> JointEstimate:
         x, P = self._x, self._P
-        dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
-        self._cache = (x, rest.copy(), load.copy(), dyn)
-        pred = dyn.prediction
-        state, kin = pred.state, pred.kinematics
         xi = x[:6]
+        cache = self._cache
+        if cache is not None and cache[0] is x:
+            # the strings at the estimate (one kernel call; the update linearised at its prior)
+            pred = sm.string_predictions_unchecked(self.model, xi, rest)
+            state, kin = pred.state, pred.kinematics
+        else:
+            dyn = self._linearize(xi, x[6:12], self._current_load(load), rest)
+            self._cache = (x, rest.copy(), load.copy(), dyn, np.zeros(self.size))
+            state, kin = dyn.prediction.state, dyn.prediction.kinematics
         C = P[:6, :6].copy()
         Pj = sm.pose_jacobian(xi, kin)
         pose_cov = Pj @ C @ Pj.T
         # twist [dp/dt; w_s] = [R v; R w]; first order in the screw through R (dtheta = G dxi)
-        R = kin.R
+        R = state.transform[:3, :3]
         w_s, v_s = R @ x[6:9], R @ x[9:12]
         Jt = np.zeros((6, 12))
         Jt[:3, 9:12] = R
         Jt[3:, 6:9] = R
-        Jt[:3, :6] = -hat3(v_s) @ Pj[3:]
-        Jt[3:, :6] = -hat3(w_s) @ Pj[3:]
+        Jt[:3, :6] = -_hat(v_s) @ Pj[3:]
+        Jt[3:, :6] = -_hat(w_s) @ Pj[3:]
         twist_cov = Jt @ P[:12, :12] @ Jt.T
         if self.size == 18:
             W, W_cov = x[12:].copy(), P[12:, 12:].copy()
@@ -831,13 +798,126 @@ class JointFilter:
                   if self.stiffness_std else np.full((6, 6), np.nan))
         names = tuple(n for n, _ in dropped) + tuple(outliers)
         why = tuple(f'{n}: {w}' for n, w in dropped) + tuple(reasons)
-        scale = np.array([1.0] * 3 + [max(float(np.mean(rest)), 1e-6)] * 3)
-        ev = np.linalg.eigvalsh(C / np.outer(scale, scale))
-        cond = math.sqrt(ev[-1] / ev[0]) if ev[0] > 0.0 else math.inf
         return JointEstimate(True, 'ok', xi.copy(), state.transform.copy(),
                              0.5 * (pose_cov + pose_cov.T), C, W, W_cov, state, Kc_std,
-                             float(nis), int(dof), True, 6, cond, 1,
+                             float(nis), int(dof), True, 6, math.nan, 1,
                              prep.describe(self.model.string_names), np.empty(0), consistent,
                              int(dof), names, why, restarted,
                              np.concatenate([v_s, w_s]), 0.5 * (twist_cov + twist_cov.T))
+
+
+@dataclass(slots=True)
+class UpdateResult:
+    """The outcome of :func:`kalman_update`: the state ``correction`` and the updated
+    ``covariance``; ``nis`` and its ``dof`` over the readings kept; ``consistent`` the NIS test
+    of those (None without readings), ``raw_consistent`` that of every reading but those still
+    held out (what a lost track is judged by); ``left_out`` (name, why) of the readings left
+    out."""
+
+    correction: FloatArray
+    covariance: FloatArray
+    nis: float
+    dof: int
+    consistent: bool | None
+    raw_consistent: bool | None
+    left_out: list[tuple[str, str]]
+
+
+def kalman_update(P: FloatArray, r: FloatArray, H: FloatArray,
+                  readings: list[tuple[str, NDArray[np.intp], int]], suspected: set[str],
+                  probability: float, reject_outliers: bool = True) -> UpdateResult:
+    """One stacked EKF update with the trust rules (module docstring) for the whitened
+    residual ``r = h(x) - z`` (rows,), its Jacobian ``H`` (rows, size) and the state covariance
+    ``P``; ``readings`` (name, rows, dof) name the rows, ``suspected`` the readings left out at
+    the last update: each stays out while its own innovation fails its test (the prediction's
+    uncertainty grows without it: a broken sensor would otherwise be absorbed by a load's random
+    walk after a few steps). Then the NIS test at ``probability``; while it fails the reading a
+    broken sensor explains best is left out (:func:`innovation_outliers`), kept out only when
+    the rest then passes."""
+    size = P.shape[0]
+    if not r.size:
+        return UpdateResult(np.zeros(size), P, 0.0, 0, None, None, [])
+    nu = -r
+    HP = H @ P
+    S = HP @ H.T
+    S[np.diag_indices_from(S)] += 1.0
+    left: list[tuple[str, str]] = []
+    if suspected and reject_outliers:
+        keep = np.ones(r.size, dtype=bool)
+        for name, rows, rdof in readings:
+            if name not in suspected:
+                continue
+            stat = float(nu[rows] @ np.linalg.solve(S[np.ix_(rows, rows)], nu[rows]))
+            if stat > consistency_threshold(rdof, probability):
+                keep[rows] = False
+                left.append((name, f'still contradicted by the prediction: its normalized '
+                                   f'innovation is {stat:.4g} on {rdof} degrees of freedom'))
+        if left:
+            readings = [c for c in readings if keep[c[1][0]]]
+            HP, nu = HP[keep], nu[keep]
+            S = S[np.ix_(keep, keep)]
+            offset = np.cumsum(np.r_[0, [c[1].size for c in readings]])
+            readings = [(c[0], np.arange(offset[i], offset[i + 1]), c[2])
+                        for i, c in enumerate(readings)]
+    if not readings:
+        return UpdateResult(np.zeros(size), P, 0.0, 0, None, None, left)
+    dof = sum(d for _, _, d in readings)
+    sol = np.linalg.solve(S, np.column_stack([nu, HP]))
+    nis = float(nu @ sol[:, 0])
+    raw = nis <= consistency_threshold(dof, probability)
+    consistent: bool | None = raw
+    if not raw and reject_outliers:
+        nis_kept, dof_kept, keep, snooped = innovation_outliers(S, nu, readings, nis, dof,
+                                                                probability)
+        if snooped:
+            nis, dof, consistent = nis_kept, dof_kept, True
+            left += snooped
+            HP, nu = HP[keep], nu[keep]
+            S = S[np.ix_(keep, keep)]
+            sol = np.linalg.solve(S, np.column_stack([nu, HP]))
+    dx = HP.T @ sol[:, 0]
+    Pn = P - HP.T @ sol[:, 1:]
+    return UpdateResult(dx, 0.5 * (Pn + Pn.T), nis, dof, consistent, raw, left)
+
+
+def innovation_outliers(S: FloatArray, nu: FloatArray,
+                        readings: list[tuple[str, NDArray[np.intp], int]], nis: float,
+                        dof: int, probability: float
+                        ) -> tuple[float, int, NDArray[np.bool_], list[tuple[str, str]]]:
+    """Leave out the reading whose innovation a broken sensor explains best, at most
+    :data:`~tensegrity_stiffness.estimation.estimators.MAX_CONTRADICTED`, while the NIS test at
+    ``probability`` fails: for a reading's rows ``g`` the statistic
+    ``(S^-1 nu)_g^T ((S^-1)_gg)^-1 (S^-1 nu)_g`` is the drop of NIS when they are left out
+    (chi-square with their dof for a sound reading: Baarda's test in innovation form), compared
+    across readings by their Wilson-Hilferty z. Kept out only when the rest then passes; returns
+    (NIS, dof, rows kept, (name, why)) of the rest (every row kept and none named otherwise)."""
+    keep = np.ones(nu.size, dtype=bool)
+    left: list[tuple[str, str]] = []
+    current = list(readings)
+    for _ in range(MAX_CONTRADICTED):
+        idx = np.flatnonzero(keep)
+        Si = np.linalg.inv(S[np.ix_(idx, idx)])
+        y = Si @ nu[idx]
+        where = {int(k): i for i, k in enumerate(idx.tolist())}
+        scored = []
+        for name, rows, rdof in current:
+            if rdof >= dof:
+                continue
+            local = [where[int(k)] for k in rows.tolist()]
+            yg = y[local]
+            stat = float(yg @ np.linalg.solve(Si[np.ix_(local, local)], yg))
+            scored.append((wilson_hilferty(max(stat, 1e-300), rdof), stat, name, rows, rdof))
+        if not scored:
+            break
+        scored.sort(key=lambda item: item[0], reverse=True)
+        z, stat, name, rows, rdof = scored[0]
+        keep[rows] = False
+        nis -= stat
+        dof -= rdof
+        current = [c for c in current if c[0] != name]
+        left.append((name, f'contradicted by the prediction and the others: leaving it out '
+                           f'lowers the NIS by {stat:.4g} (normalized z = {z:.3g})'))
+        if nis <= consistency_threshold(dof, probability):
+            return nis, dof, keep, left
+    return nis, dof, np.ones(nu.size, dtype=bool), []
 

@@ -60,6 +60,7 @@ FloatArray = NDArray[np.float64]
 GRAVITY_DOF = 2
 #: A gravity direction (or its reference) shorter than this cannot be normalised.
 MIN_GRAVITY_NORM = 1e-9
+_EYE3 = np.eye(3)
 
 
 def _screw(xi: ArrayLike) -> FloatArray:
@@ -370,15 +371,16 @@ def predicted_specific_force(kinematics: ScrewKinematics, twist: FloatArray,
     (``dp/dt = R v``), hence ``f = dv/dt + w x v - R^T g``; ``d(w x v)/d[w; v] =
     [-hat(v), hat(w)]``, ``d(R^T g)/dxi`` as :func:`gravity_prediction_unchecked` (linear in
     ``g``), ``df/d(dV/dt) = [0, I]``."""
-    w, v = twist[:3], twist[3:]
+    wx, wy, wz, vx, vy, vz = twist.tolist()
     g2, dg = gravity_prediction_unchecked(kinematics, gravity)
-    value = twist_rate[3:] + np.cross(w, v) - g2
-    d_twist = np.empty((3, 6))
-    d_twist[:, :3] = -hat3(v)
-    d_twist[:, 3:] = hat3(w)
+    value = twist_rate[3:] + np.array([wy * vz - wz * vy, wz * vx - wx * vz,
+                                       wx * vy - wy * vx]) - g2
+    d_twist = np.array([[0.0, vz, -vy, 0.0, -wz, wy], [-vz, 0.0, vx, wz, 0.0, -wx],
+                        [vy, -vx, 0.0, -wy, wx, 0.0]])  # [-hat(v), hat(w)]
     d_rate = np.zeros((3, 6))
-    d_rate[:, 3:] = np.eye(3)
-    return SpecificForcePrediction(value, -dg, d_twist, d_rate)
+    d_rate[:, 3:] = _EYE3
+    np.negative(dg, out=dg)
+    return SpecificForcePrediction(value, dg, d_twist, d_rate)
 
 
 def predicted_angular_velocity(twist: FloatArray) -> tuple[FloatArray, FloatArray]:
