@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness.estimation import sensor_models as sm
+from tensegrity_stiffness.estimation.chain_filter import ChainFilter
 from tensegrity_stiffness.estimation.estimators import (
     ChainEstimate,
     JointEstimate,
@@ -31,6 +32,7 @@ from tensegrity_stiffness.estimation.estimators import (
 from tensegrity_stiffness.estimation.joint_filter import DEFAULT_GRAVITY, JointFilter
 from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.mechanics.chain import ChainState
+from tensegrity_stiffness.mechanics.dynamics import chain_link_inertias
 from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS, SPINE_ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameters import (
@@ -382,18 +384,12 @@ def spine_output_arrays(outputs: SpineEstimatorOutputs) -> tuple[FloatArray, ...
             est.tip_stiffness, est.tip_stiffness_std)
 
 
-def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
-                            stiffness_std: bool | None = None) -> SpineEstimatorOutputs:
-    """The spine estimate of the fresh readings of ``snapshot`` (per-string arrays of every
-    joint, joint-major; ``measured_pose`` the tool frame in the base; ``measured_wrench`` the
-    tip load), with the std of the tip stiffness when ``stiffness_std`` (None: the settings');
-    ValueError (nothing is published) as :func:`estimator_outputs`."""
+def spine_joint_measurements(settings: SpineEstimatorNodeSettings,
+                             readings: Mapping[str, Reading]) -> list[Measurements | None]:
+    """Each joint's :class:`Measurements` of the fresh per-string arrays (joint-major; None for
+    a joint with nothing measured)."""
     options = settings.estimator
-    if stiffness_std is None:
-        stiffness_std = options.stiffness_std
-    readings, ages = _usable_readings(snapshot, options.max_age)
-    counts = settings.n_strings
-    bounds = np.cumsum([0, *counts])
+    bounds = np.cumsum([0, *settings.n_strings])
     joints: list[Measurements | None] = []
     for i in range(settings.n_joints):
         part = slice(bounds[i], bounds[i + 1])
@@ -405,17 +401,49 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
                 if not np.all(np.isnan(values)):
                     kw.update({key: values, f'{key[:-1]}_std': std})
         joints.append(Measurements(**kw) if kw else None)
+    return joints
+
+
+def new_chain_filter(settings: SpineEstimatorNodeSettings) -> ChainFilter:
+    """The spine's filter of a parameter set (as :func:`new_joint_filter`): the links'
+    inertias (``chain.link_inertias``), ``dynamics.string_damping``, ``filter.*``, a tip load
+    that is a state unless ``estimation.external_wrench`` is 'zero'."""
+    values, options = settings.values, settings.estimator
+    return ChainFilter(settings.chain, chain_link_inertias(settings.chain,
+                                                           values['chain.link_inertias']),
+                       options.process_noise,
+                       load='known' if options.load_mode == 'zero' else 'unknown',
+                       string_damping=values['dynamics.string_damping'],
+                       consistency_probability=options.consistency_probability,
+                       stiffness_std=options.stiffness_std)
+
+
+def spine_filter_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
+                         chain_filter: ChainFilter, stiffness_std: bool | None = None
+                         ) -> SpineEstimatorOutputs:
+    """``chain_filter`` stepped to ``snapshot.now`` (s) with the rest lengths in force and
+    updated with the fresh readings (as :func:`spine_estimator_outputs`); ValueError as
+    there."""
+    options = settings.estimator
+    if stiffness_std is None:
+        stiffness_std = options.stiffness_std
+    readings, ages = _usable_readings(snapshot, options.max_age)
     tip_pose, tip_cov = pose_reading(options, readings)
     load, load_covariance = load_measurement(options, readings)
-    initial_screws = initial_wrench = None
-    if snapshot.initial_screw is not None:
-        initial_screws, initial_wrench = snapshot.initial_screw
-    est = estimate_chain_state(
-        settings.chain, joints, tip_pose, tip_cov, load, load_covariance,
-        rest_lengths=settings.current_rest_lengths(), initial_screws=initial_screws,
-        initial_tip_wrench=initial_wrench, stiffness_std=stiffness_std,
-        consistency_probability=options.consistency_probability)
-    _require_success(est, snapshot, readings, options.max_age)
+    chain_filter.stiffness_std = stiffness_std
+    est = chain_filter.step(snapshot.now, spine_joint_measurements(settings, readings),
+                            settings.current_rest_lengths(), tip_pose, tip_cov,
+                            None if options.load_mode == 'zero' else load,
+                            None if options.load_mode == 'zero' else load_covariance)
+    return _checked_spine_outputs(est, snapshot, readings, ages, options.max_age,
+                                  stiffness_std)
+
+
+def _checked_spine_outputs(est: ChainEstimate, snapshot: EstimatorInput,
+                           readings: Mapping[str, Reading], ages: Mapping[str, float],
+                           max_age: float, stiffness_std: bool) -> SpineEstimatorOutputs:
+    """The outputs of a successful spine estimate with finite values; ValueError otherwise."""
+    _require_success(est, snapshot, readings, max_age)
     outputs = SpineEstimatorOutputs(
         est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages,
         stiffness_std)
@@ -423,3 +451,28 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
     count = len(arrays) if stiffness_std else len(arrays) - 1
     require_all_finite(SPINE_OUTPUT_NAMES[:count], arrays[:count])
     return outputs
+
+
+def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
+                            stiffness_std: bool | None = None) -> SpineEstimatorOutputs:
+    """The static spine estimate of the fresh readings of ``snapshot`` (per-string arrays of
+    every joint, joint-major; ``measured_pose`` the tool frame in the base;
+    ``measured_wrench`` the tip load), with the std of the tip stiffness when
+    ``stiffness_std`` (None: the settings'); ValueError (nothing is published) as
+    :func:`estimator_outputs`."""
+    options = settings.estimator
+    if stiffness_std is None:
+        stiffness_std = options.stiffness_std
+    readings, ages = _usable_readings(snapshot, options.max_age)
+    tip_pose, tip_cov = pose_reading(options, readings)
+    load, load_covariance = load_measurement(options, readings)
+    initial_screws = initial_wrench = None
+    if snapshot.initial_screw is not None:
+        initial_screws, initial_wrench = snapshot.initial_screw
+    est = estimate_chain_state(
+        settings.chain, spine_joint_measurements(settings, readings), tip_pose, tip_cov, load,
+        load_covariance, rest_lengths=settings.current_rest_lengths(),
+        initial_screws=initial_screws, initial_tip_wrench=initial_wrench,
+        stiffness_std=stiffness_std, consistency_probability=options.consistency_probability)
+    return _checked_spine_outputs(est, snapshot, readings, ages, options.max_age,
+                                  stiffness_std)

@@ -25,7 +25,11 @@ import numpy as np
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.estimation.estimators import CONSISTENCY_PROBABILITY
-from tensegrity_stiffness.estimation.joint_filter import DEFAULT_PROCESS_NOISE, ProcessNoise
+from tensegrity_stiffness.estimation.joint_filter import (
+    DEFAULT_CHAIN_PROCESS_NOISE,
+    DEFAULT_PROCESS_NOISE,
+    ProcessNoise,
+)
 from tensegrity_stiffness.mechanics import templates
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
@@ -1105,20 +1109,21 @@ SPINE_ESTIMATOR_INPUTS = ('measured_tensions', 'measured_lengths', 'measured_pos
                           'measured_wrench')
 
 
-#: ``estimation.method`` of a spine: the static estimator only (the spine's recursive filter,
-#: ``ChainFilter`` on ``ChainDynamics``, is not in the library yet).
-SPINE_ESTIMATION_METHOD = replace(
-    by_name(ESTIMATION_PARAMETERS)['estimation.method'], default='static', choices=('static',),
-    description="'static' (each reading set on its own); the spine's recursive filter is not "
-                'in the library yet')
+#: The filter's process noise of a spine (``ChainFilter``'s defaults,
+#: :data:`~tensegrity_stiffness.estimation.DEFAULT_CHAIN_PROCESS_NOISE`).
+SPINE_PROCESS_NOISE_PARAMETERS = tuple(
+    replace(spec, default=getattr(DEFAULT_CHAIN_PROCESS_NOISE, spec.name[len('filter.'):]))
+    for spec in ESTIMATION_PARAMETERS if spec.name.startswith('filter.'))
 
 
 def spine_estimator_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, ...]:
-    """Every parameter of ``spine_estimator_node``: the spine's (as ``spine_node``) and the
-    estimator's (``estimation.*``, ``sensors.*``; the IMU's and the filter's are not used)."""
+    """Every parameter of ``spine_estimator_node``: the spine's (as ``spine_node``: the links'
+    inertias and the strings' damping are the filter's dynamics) and the estimator's
+    (``estimation.*``, ``filter.*`` with the spine's defaults, ``sensors.*``; the IMU's are not
+    used)."""
+    spine_noise = by_name(SPINE_PROCESS_NOISE_PARAMETERS)
     return spine_node_parameters(n_joints) + tuple(
-        SPINE_ESTIMATION_METHOD if spec.name == 'estimation.method' else spec
-        for spec in ESTIMATION_PARAMETERS)
+        spine_noise.get(spec.name, spec) for spec in ESTIMATION_PARAMETERS)
 
 
 @dataclass(frozen=True)
@@ -1140,7 +1145,6 @@ def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
     """Validate a whole parameter set of ``spine_estimator_node``; ValueError names the bad
     field (an ``estimation.trigger`` the spine has no input for among them)."""
     spine = spine_node_settings(values, generation)
-    SPINE_ESTIMATION_METHOD.check(values['estimation.method'])
     if values['estimation.trigger'] not in SPINE_ESTIMATOR_INPUTS:
         raise ValueError(f'estimation.trigger must be one of {" | ".join(SPINE_ESTIMATOR_INPUTS)}'
                          f' for a spine, got {values["estimation.trigger"]!r}')

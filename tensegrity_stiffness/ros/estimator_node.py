@@ -32,6 +32,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
+from tensegrity_stiffness.estimation.chain_filter import ChainFilter
 from tensegrity_stiffness.estimation.joint_filter import JointFilter
 from tensegrity_stiffness.geometry.validation import require_frame
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
@@ -87,9 +88,9 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         self._readings: dict[str, Reading] = {}
-        # estimation.method 'filter': the track (under the output lock; a new one after every
-        # parameter change, kept through rest-length changes)
-        self._joint_filter: JointFilter | None = None
+        # estimation.method 'filter': the filter and its track (under the output lock; a new
+        # one after every parameter change, kept through rest-length changes)
+        self._track: JointFilter | ChainFilter | None = None
         self._estimates = 0
         self._consistent_estimates = 0
         super().__init__(node_name, **kwargs)
@@ -140,19 +141,23 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
                  wanted: tuple[bool, ...]) -> EstimatorOutputs:
         # the std of K_c (most of an estimate's time) only when it is wanted
         if settings.method == 'filter':
-            if self._joint_filter is None:
-                self._joint_filter = new_joint_filter(settings)
-            outputs = filter_outputs(settings, snapshot, self._joint_filter, wanted[-1])
+            if self._track is None:
+                self._track = new_joint_filter(settings)
+            outputs = filter_outputs(settings, snapshot, self._track, wanted[-1])
         else:
             outputs = estimator_outputs(settings, snapshot, wanted[-1])
+        self._count(outputs)
+        return outputs
+
+    def _count(self, outputs: Any) -> None:
+        """An estimate for /diagnostics' ``estimates`` and ``consistent share``."""
         self._estimates += 1
         self._consistent_estimates += outputs.estimate.consistent is not False
-        return outputs
 
     def _apply_parameters(self, values: Any, names: set[str]) -> None:
         """As every streaming node's; the filter starts a new track under the new settings."""
         with self._output_lock:
-            self._joint_filter = None
+            self._track = None
             super()._apply_parameters(values, names)
 
     def _republish_last(self) -> None:

@@ -287,9 +287,30 @@ def test_the_filter_at_rest_agrees_with_the_static_estimate(settings):
     assert est.twist.shape == (6,) and est.twist_covariance.shape == (6, 6)
 
 
-def test_a_spine_estimates_statically_only():
+def test_a_spine_filter_at_rest():
+    """A spine's default is the filter too (its process noise ChainFilter's defaults): stepped
+    on noiseless tensions of every joint at the unloaded configuration it converges there, with
+    a finite covariance; the static method is there too."""
+    from tensegrity_stiffness.estimation import DEFAULT_CHAIN_PROCESS_NOISE
+    from tensegrity_stiffness.nodes.estimation_processing import (
+        new_chain_filter,
+        spine_filter_outputs,
+    )
+
     values = parameters.defaults(parameters.spine_estimator_node_parameters())
-    assert values['estimation.method'] == 'static'
-    assert parameters.spine_estimator_node_settings(values).estimator.method == 'static'
-    with pytest.raises(ValueError, match=r'estimation\.method'):
-        parameters.spine_estimator_node_settings({**values, 'estimation.method': 'filter'})
+    assert values['estimation.method'] == 'filter'
+    noise = DEFAULT_CHAIN_PROCESS_NOISE
+    assert values['filter.angular_acceleration'] == noise.angular_acceleration
+    settings = parameters.spine_estimator_node_settings(values)
+    chain = settings.chain
+    screws = np.array([joint.initial_screw for joint in chain.joints])
+    state = chain.evaluate(screws)
+    tensions = np.concatenate([np.ravel(t) for t in state.tensions])
+    chain_filter = new_chain_filter(settings)
+    for k in range(50):
+        snapshot = EstimatorInput({'measured_tensions': Reading(tensions, 1e-3 * k)}, 1e-3 * k)
+        outputs = spine_filter_outputs(settings, snapshot, chain_filter, False)
+    assert outputs.estimate.success
+    assert np.all(np.isfinite(outputs.estimate.screws))
+    static = parameters.spine_estimator_node_settings({**values, 'estimation.method': 'static'})
+    assert static.estimator.method == 'static'
