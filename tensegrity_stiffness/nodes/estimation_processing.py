@@ -1,6 +1,9 @@
 """What ``estimator_node`` does with its inputs, without ROS: the latest reading of each sensor,
 the choice of those fresh enough for an estimate, the :class:`~tensegrity_stiffness.estimation.
-Measurements` they make with the node's settings, and the outputs of one estimate.
+Measurements` they make with the node's settings, and the outputs of one estimate: of the
+recursive filter (``estimation.method: filter``, :class:`~tensegrity_stiffness.estimation.
+JointFilter`, one :func:`new_joint_filter` per parameter set, stepped by :func:`filter_outputs`)
+or of the static estimator (``static``, :func:`estimator_outputs`).
 
 Decoding a message into numbers is :mod:`tensegrity_stiffness.ros.conversions.estimation`'s part;
 this module takes the
@@ -18,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness.estimation import sensor_models as sm
+from tensegrity_stiffness.estimation.chain_filter import ChainFilter
 from tensegrity_stiffness.estimation.estimators import (
     ChainEstimate,
     JointEstimate,
@@ -25,8 +29,10 @@ from tensegrity_stiffness.estimation.estimators import (
     estimate_chain_state,
     estimate_joint_state,
 )
+from tensegrity_stiffness.estimation.joint_filter import DEFAULT_GRAVITY, JointFilter
 from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.mechanics.chain import ChainState
+from tensegrity_stiffness.mechanics.dynamics import chain_link_inertias
 from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS, SPINE_ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameters import (
@@ -34,6 +40,7 @@ from tensegrity_stiffness.nodes.parameters import (
     SPINE_ESTIMATOR_INPUTS,
     EstimatorNodeSettings,
     SpineEstimatorNodeSettings,
+    link2_inertia_from_values,
 )
 
 FloatArray = NDArray[np.float64]
@@ -56,7 +63,7 @@ READING_FORMATS = {
     'measured_tensions': '(n,) N, NaN where not measured',
     'measured_lengths': '(n,) m, NaN where not measured',
     'measured_pose': '((4, 4) transform of {2} in {1}, (6, 6) covariance or None)',
-    'imu': '(3,) unit direction of gravity in {2}',
+    'imu': "(3,) unit direction of gravity in {2} ('static'), an ImuReading ('filter')",
     'measured_wrench': '(6,) [N; N m] on link 2 in {1} about its origin',
 }
 
@@ -97,6 +104,28 @@ def gravity_reading(specific_force: FloatArray, tolerance: float) -> FloatArray:
         raise ValueError(f'specific force of {norm:.3f} m/s^2 is not {STANDARD_GRAVITY} within '
                          f'{tolerance} m/s^2: the link is not at rest')
     return sm.gravity_from_specific_force(a)
+
+
+@dataclass(frozen=True)
+class ImuReading:
+    """An IMU's raw reading for the filter: ``specific_force`` (3,) m/s^2 and, with a gyro,
+    ``angular_velocity`` (3,) rad/s (else None), both in link 2's frame."""
+
+    specific_force: FloatArray
+    angular_velocity: FloatArray | None
+
+
+def imu_reading(settings: EstimatorNodeSettings, specific_force: FloatArray,
+                angular_velocity: FloatArray | None) -> FloatArray | ImuReading:
+    """The value of an ``~/imu`` :class:`Reading` under ``settings.method``: the raw reading for
+    the filter (its accelerometer is modelled with the link's acceleration), the direction of
+    gravity for the static estimator (ValueError when the link is not at rest:
+    :func:`gravity_reading`)."""
+    if settings.method == 'filter':
+        return ImuReading(np.asarray(specific_force, dtype=np.float64), None
+                          if angular_velocity is None else
+                          np.asarray(angular_velocity, dtype=np.float64))
+    return gravity_reading(specific_force, settings.imu_rest_tolerance)
 
 
 def fresh_readings(snapshot: EstimatorInput, max_age: float
@@ -153,8 +182,16 @@ def measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading
     if transform is not None:
         kw.update(pose=transform, pose_covariance=covariance)
     if 'imu' in readings:
-        kw.update(gravity=readings['imu'].value, gravity_std=settings.gravity_std,
-                  gravity_base=settings.gravity_base)
+        imu = readings['imu'].value
+        if isinstance(imu, ImuReading):
+            kw.update(specific_force=imu.specific_force,
+                      specific_force_std=settings.accelerometer_std)
+            if imu.angular_velocity is not None:
+                kw.update(angular_velocity=imu.angular_velocity,
+                          angular_velocity_std=settings.gyro_std)
+        else:
+            kw.update(gravity=imu, gravity_std=settings.gravity_std,
+                      gravity_base=settings.gravity_base)
     W, covariance = load_measurement(settings, readings)
     return Measurements(**kw, external_wrench=W, wrench_covariance=covariance)
 
@@ -210,7 +247,7 @@ def output_arrays(outputs: EstimatorOutputs) -> tuple[FloatArray, ...]:
 
 def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
                       stiffness_std: bool | None = None) -> EstimatorOutputs:
-    """The estimate of the fresh readings of ``snapshot``, with the std of K_c when
+    """The static estimate of the fresh readings of ``snapshot``, with the std of K_c when
     ``stiffness_std`` (None: ``settings.stiffness_std``; else NaN); ValueError (nothing is
     published) when the inputs are bad, the set cannot determine the pose (the message names
     what is missing), the estimate does not converge or an output is not finite."""
@@ -221,7 +258,46 @@ def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
                                initial_screw=snapshot.initial_screw,
                                stiffness_std=stiffness_std,
                                consistency_probability=settings.consistency_probability)
-    _require_success(est, snapshot, readings, settings.max_age)
+    return _checked_outputs(est, snapshot, readings, ages, settings.max_age, stiffness_std)
+
+
+def new_joint_filter(settings: EstimatorNodeSettings) -> JointFilter:
+    """The filter of a parameter set (a new one, without a track, after every parameter
+    change): link 2's inertia (``joint.link2_*``), ``dynamics.string_damping``, ``filter.*``
+    (the process noise), a load that is a state unless ``estimation.external_wrench`` is
+    'zero' (then known: zero; 'measured' updates the state with ``~/measured_wrench``), the
+    accelerometer's gravity along ``sensors.gravity_base``."""
+    values = settings.values
+    direction = np.asarray(settings.gravity_base, dtype=np.float64)
+    gravity = float(np.linalg.norm(DEFAULT_GRAVITY)) * direction / np.linalg.norm(direction)
+    return JointFilter(settings.model, link2_inertia_from_values(values),
+                       settings.process_noise,
+                       load='known' if settings.load_mode == 'zero' else 'unknown',
+                       string_damping=values['dynamics.string_damping'], gravity=gravity,
+                       consistency_probability=settings.consistency_probability,
+                       stiffness_std=settings.stiffness_std)
+
+
+def filter_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
+                   joint_filter: JointFilter, stiffness_std: bool | None = None
+                   ) -> EstimatorOutputs:
+    """``joint_filter`` stepped to ``snapshot.now`` (s) with the rest lengths in force
+    (``settings.model``'s) and updated with the fresh readings of ``snapshot``; the std of K_c
+    as :func:`estimator_outputs`; ValueError (nothing is published) as there."""
+    if stiffness_std is None:
+        stiffness_std = settings.stiffness_std
+    readings, ages = _usable_readings(snapshot, settings.max_age)
+    joint_filter.stiffness_std = stiffness_std
+    est = joint_filter.step(snapshot.now, measurements(settings, readings),
+                            settings.model.rest_lengths)
+    return _checked_outputs(est, snapshot, readings, ages, settings.max_age, stiffness_std)
+
+
+def _checked_outputs(est: JointEstimate, snapshot: EstimatorInput,
+                     readings: Mapping[str, Reading], ages: Mapping[str, float],
+                     max_age: float, stiffness_std: bool) -> EstimatorOutputs:
+    """The outputs of a successful estimate with finite values; ValueError otherwise."""
+    _require_success(est, snapshot, readings, max_age)
     outputs = EstimatorOutputs(est, tuple(name for name in ESTIMATOR_INPUTS if name in readings),
                                ages, stiffness_std)
     arrays = output_arrays(outputs)
@@ -308,18 +384,12 @@ def spine_output_arrays(outputs: SpineEstimatorOutputs) -> tuple[FloatArray, ...
             est.tip_stiffness, est.tip_stiffness_std)
 
 
-def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
-                            stiffness_std: bool | None = None) -> SpineEstimatorOutputs:
-    """The spine estimate of the fresh readings of ``snapshot`` (per-string arrays of every
-    joint, joint-major; ``measured_pose`` the tool frame in the base; ``measured_wrench`` the
-    tip load), with the std of the tip stiffness when ``stiffness_std`` (None: the settings');
-    ValueError (nothing is published) as :func:`estimator_outputs`."""
+def spine_joint_measurements(settings: SpineEstimatorNodeSettings,
+                             readings: Mapping[str, Reading]) -> list[Measurements | None]:
+    """Each joint's :class:`Measurements` of the fresh per-string arrays (joint-major; None for
+    a joint with nothing measured)."""
     options = settings.estimator
-    if stiffness_std is None:
-        stiffness_std = options.stiffness_std
-    readings, ages = _usable_readings(snapshot, options.max_age)
-    counts = settings.n_strings
-    bounds = np.cumsum([0, *counts])
+    bounds = np.cumsum([0, *settings.n_strings])
     joints: list[Measurements | None] = []
     for i in range(settings.n_joints):
         part = slice(bounds[i], bounds[i + 1])
@@ -331,17 +401,49 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
                 if not np.all(np.isnan(values)):
                     kw.update({key: values, f'{key[:-1]}_std': std})
         joints.append(Measurements(**kw) if kw else None)
+    return joints
+
+
+def new_chain_filter(settings: SpineEstimatorNodeSettings) -> ChainFilter:
+    """The spine's filter of a parameter set (as :func:`new_joint_filter`): the links'
+    inertias (``chain.link_inertias``), ``dynamics.string_damping``, ``filter.*``, a tip load
+    that is a state unless ``estimation.external_wrench`` is 'zero'."""
+    values, options = settings.values, settings.estimator
+    return ChainFilter(settings.chain, chain_link_inertias(settings.chain,
+                                                           values['chain.link_inertias']),
+                       options.process_noise,
+                       load='known' if options.load_mode == 'zero' else 'unknown',
+                       string_damping=values['dynamics.string_damping'],
+                       consistency_probability=options.consistency_probability,
+                       stiffness_std=options.stiffness_std)
+
+
+def spine_filter_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
+                         chain_filter: ChainFilter, stiffness_std: bool | None = None
+                         ) -> SpineEstimatorOutputs:
+    """``chain_filter`` stepped to ``snapshot.now`` (s) with the rest lengths in force and
+    updated with the fresh readings (as :func:`spine_estimator_outputs`); ValueError as
+    there."""
+    options = settings.estimator
+    if stiffness_std is None:
+        stiffness_std = options.stiffness_std
+    readings, ages = _usable_readings(snapshot, options.max_age)
     tip_pose, tip_cov = pose_reading(options, readings)
     load, load_covariance = load_measurement(options, readings)
-    initial_screws = initial_wrench = None
-    if snapshot.initial_screw is not None:
-        initial_screws, initial_wrench = snapshot.initial_screw
-    est = estimate_chain_state(
-        settings.chain, joints, tip_pose, tip_cov, load, load_covariance,
-        rest_lengths=settings.current_rest_lengths(), initial_screws=initial_screws,
-        initial_tip_wrench=initial_wrench, stiffness_std=stiffness_std,
-        consistency_probability=options.consistency_probability)
-    _require_success(est, snapshot, readings, options.max_age)
+    chain_filter.stiffness_std = stiffness_std
+    est = chain_filter.step(snapshot.now, spine_joint_measurements(settings, readings),
+                            settings.current_rest_lengths(), tip_pose, tip_cov,
+                            None if options.load_mode == 'zero' else load,
+                            None if options.load_mode == 'zero' else load_covariance)
+    return _checked_spine_outputs(est, snapshot, readings, ages, options.max_age,
+                                  stiffness_std)
+
+
+def _checked_spine_outputs(est: ChainEstimate, snapshot: EstimatorInput,
+                           readings: Mapping[str, Reading], ages: Mapping[str, float],
+                           max_age: float, stiffness_std: bool) -> SpineEstimatorOutputs:
+    """The outputs of a successful spine estimate with finite values; ValueError otherwise."""
+    _require_success(est, snapshot, readings, max_age)
     outputs = SpineEstimatorOutputs(
         est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages,
         stiffness_std)
@@ -349,3 +451,28 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
     count = len(arrays) if stiffness_std else len(arrays) - 1
     require_all_finite(SPINE_OUTPUT_NAMES[:count], arrays[:count])
     return outputs
+
+
+def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
+                            stiffness_std: bool | None = None) -> SpineEstimatorOutputs:
+    """The static spine estimate of the fresh readings of ``snapshot`` (per-string arrays of
+    every joint, joint-major; ``measured_pose`` the tool frame in the base;
+    ``measured_wrench`` the tip load), with the std of the tip stiffness when
+    ``stiffness_std`` (None: the settings'); ValueError (nothing is published) as
+    :func:`estimator_outputs`."""
+    options = settings.estimator
+    if stiffness_std is None:
+        stiffness_std = options.stiffness_std
+    readings, ages = _usable_readings(snapshot, options.max_age)
+    tip_pose, tip_cov = pose_reading(options, readings)
+    load, load_covariance = load_measurement(options, readings)
+    initial_screws = initial_wrench = None
+    if snapshot.initial_screw is not None:
+        initial_screws, initial_wrench = snapshot.initial_screw
+    est = estimate_chain_state(
+        settings.chain, spine_joint_measurements(settings, readings), tip_pose, tip_cov, load,
+        load_covariance, rest_lengths=settings.current_rest_lengths(),
+        initial_screws=initial_screws, initial_tip_wrench=initial_wrench,
+        stiffness_std=stiffness_std, consistency_probability=options.consistency_probability)
+    return _checked_spine_outputs(est, snapshot, readings, ages, options.max_age,
+                                  stiffness_std)

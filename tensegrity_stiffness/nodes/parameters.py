@@ -18,13 +18,18 @@ import difflib
 import math
 import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.estimation.estimators import CONSISTENCY_PROBABILITY
+from tensegrity_stiffness.estimation.joint_filter import (
+    DEFAULT_CHAIN_PROCESS_NOISE,
+    DEFAULT_PROCESS_NOISE,
+    ProcessNoise,
+)
 from tensegrity_stiffness.mechanics import templates
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
@@ -957,7 +962,24 @@ LOAD_MODES = ('unknown', 'zero', 'measured')
 ESTIMATOR_INPUTS = ('measured_tensions', 'measured_lengths', 'measured_pose', 'imu',
                     'measured_wrench')
 
+#: What ``estimation.method`` selects: the recursive filter on the joint's dynamics
+#: (:class:`~tensegrity_stiffness.estimation.JointFilter`) or the quasi-static estimate of each
+#: reading set (:func:`~tensegrity_stiffness.estimation.estimate_joint_state`).
+ESTIMATION_METHODS = ('filter', 'static')
+#: The filter's process noise densities, by parameter (``filter.<field>``: the fields of
+#: :class:`~tensegrity_stiffness.estimation.ProcessNoise`, whose defaults are the one home).
+PROCESS_NOISE_UNITS = {'angular_acceleration': 'rad/s^2 sqrt(s)',
+                       'linear_acceleration': 'm/s^2 sqrt(s)', 'force_rate': 'N/s sqrt(s)',
+                       'moment_rate': 'N m/s sqrt(s)'}
+
 ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('estimation.method', 'string', 'filter',
+                  "'filter' (recursive, on the joint's dynamics: a moving joint) or 'static' "
+                  '(each reading set on its own, the joint at rest); docs/estimation.md',
+                  choices=ESTIMATION_METHODS),
+    *(ParameterSpec(f'filter.{name}', 'double', getattr(DEFAULT_PROCESS_NOISE, name),
+                    f'process noise of the filter: {name.replace("_", " ")} density, {unit}',
+                    range=(0.0, 1e9)) for name, unit in PROCESS_NOISE_UNITS.items()),
     ParameterSpec('estimation.external_wrench', 'string', 'unknown',
                   "the load on link 2: 'unknown' (estimated, W = -F), 'zero' (unloaded, to "
                   "sensors.force_std / moment_std) or 'measured' (~/measured_wrench)",
@@ -985,8 +1007,16 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('sensors.gravity_base', 'double_array', [0.0, -1.0, 0.0],
                   'direction of gravity in {1} (3 values; normalised)'),
     ParameterSpec('sensors.imu_rest_tolerance', 'double', 1.0,
-                  'an ~/imu reading whose specific force differs from 9.81 m/s^2 by more than '
-                  'this (m/s^2) is not at rest and is rejected', range=(0.0, 1e3)),
+                  "estimation.method 'static': an ~/imu reading whose specific force differs "
+                  'from 9.81 m/s^2 by more than this (m/s^2) is not at rest and is rejected',
+                  range=(0.0, 1e3)),
+    ParameterSpec('sensors.accelerometer_std', 'double', 0.0981,
+                  "estimation.method 'filter': accelerometer std of each component, m/s^2 "
+                  '(modelled with the link\'s acceleration)', range=(1e-9, 1e3)),
+    ParameterSpec('sensors.gyro_std', 'double', 0.01,
+                  "estimation.method 'filter': gyro std of each component, rad/s (an ~/imu "
+                  'whose angular_velocity_covariance[0] is -1 has no gyro)',
+                  range=(1e-9, 1e3)),
     ParameterSpec('sensors.pose_position_std', 'double', 1e-4,
                   'motion capture position std, m, used when ~/measured_pose carries no '
                   'covariance (all zeros)', range=(1e-12, 1e3)),
@@ -1001,10 +1031,12 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
                   range=(1e-12, 1e6)),
 )
 
-#: Every parameter of ``estimator_node``, in declaration order.
+#: Every parameter of ``estimator_node``, in declaration order (link 2's inertia and the
+#: strings' damping: the filter's dynamics).
 ESTIMATOR_NODE_PARAMETERS: tuple[ParameterSpec, ...] = (
     JOINT_PARAMETERS + REST_LENGTH_OFFSET_PARAMETERS + FRAME_PARAMETERS + TF_PARAMETERS
-    + ESTIMATION_PARAMETERS + COMMON_PARAMETERS)
+    + ESTIMATION_PARAMETERS + COMMON_PARAMETERS + LINK2_PARAMETERS
+    + (JOINT_DYNAMICS_PARAMETERS[-1],))
 
 
 @dataclass(frozen=True)
@@ -1017,6 +1049,10 @@ class EstimatorNodeSettings:
     link2_frame: str
     load_mode: str
     trigger: str
+    method: str
+    process_noise: ProcessNoise
+    accelerometer_std: float
+    gyro_std: float
     max_age: float
     stiffness_std: bool
     consistency_probability: float
@@ -1051,7 +1087,11 @@ def estimator_node_settings(values: Mapping[str, Any], generation: int = 0
         model=joint_from_values(checked), link1_frame=checked['frames.link1'],
         link2_frame=checked['frames.link2'],
         load_mode=checked['estimation.external_wrench'], trigger=checked['estimation.trigger'],
-        max_age=checked['estimation.max_age'],
+        method=checked['estimation.method'],
+        process_noise=ProcessNoise(**{name: checked[f'filter.{name}']
+                                      for name in PROCESS_NOISE_UNITS}),
+        accelerometer_std=checked['sensors.accelerometer_std'],
+        gyro_std=checked['sensors.gyro_std'], max_age=checked['estimation.max_age'],
         stiffness_std=checked['estimation.stiffness_std'],
         consistency_probability=checked['estimation.consistency_probability'],
         tension_std=checked['sensors.tension_std'], length_std=checked['sensors.length_std'],
@@ -1073,10 +1113,21 @@ SPINE_ESTIMATOR_INPUTS = ('measured_tensions', 'measured_lengths', 'measured_pos
                           'measured_wrench')
 
 
+#: The filter's process noise of a spine (``ChainFilter``'s defaults,
+#: :data:`~tensegrity_stiffness.estimation.DEFAULT_CHAIN_PROCESS_NOISE`).
+SPINE_PROCESS_NOISE_PARAMETERS = tuple(
+    replace(spec, default=getattr(DEFAULT_CHAIN_PROCESS_NOISE, spec.name[len('filter.'):]))
+    for spec in ESTIMATION_PARAMETERS if spec.name.startswith('filter.'))
+
+
 def spine_estimator_node_parameters(n_joints: int = 5) -> tuple[ParameterSpec, ...]:
-    """Every parameter of ``spine_estimator_node``: the spine's (as ``spine_node``) and the
-    estimator's (``estimation.*``, ``sensors.*``; the IMU's are not used)."""
-    return spine_node_parameters(n_joints) + ESTIMATION_PARAMETERS
+    """Every parameter of ``spine_estimator_node``: the spine's (as ``spine_node``: the links'
+    inertias and the strings' damping are the filter's dynamics) and the estimator's
+    (``estimation.*``, ``filter.*`` with the spine's defaults, ``sensors.*``; the IMU's are not
+    used)."""
+    spine_noise = by_name(SPINE_PROCESS_NOISE_PARAMETERS)
+    return spine_node_parameters(n_joints) + tuple(
+        spine_noise.get(spec.name, spec) for spec in ESTIMATION_PARAMETERS)
 
 
 @dataclass(frozen=True)

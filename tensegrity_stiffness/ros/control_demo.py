@@ -4,9 +4,12 @@ IMU) -> ``stiffness_controller`` -> ``sim_node`` (the commanded rest lengths), w
 ``launch/control.launch.py`` wires them, and a scripted target sequence: hold the unloaded pose,
 a pose step, a stiffness step (the design with every tension in [0.5, 1.5] N: a stiffer
 prestress), a swinging load.
-Once a second a line from the controller's ``/diagnostics``: the phase, the pose error, the
-``K_c`` error, the saturated strings and the tick time (blank until the controller has a
-state). Ctrl-C (or ``duration``) stops the three nodes and exits 0.
+The controller runs at its default rate (``control.rate``, 500 Hz). Once a second a line from
+the nodes' ``/diagnostics``: the phase, the pose error, the ``K_c`` error, the saturated
+strings, the tick time, the controller's achieved tick rate (of the rate asked), its missed
+ticks, the latency from a reading to the first command computed from it (median / p99) and the
+estimator's share of consistent estimates (blank until the controller has a state). Ctrl-C (or
+``duration``) stops the three nodes and exits 0.
 """
 
 from __future__ import annotations
@@ -45,8 +48,6 @@ POSE_STEP = np.array([0.02, -0.01, 0.0, 0.0, 4e-4, 0.0])
 STIFFNESS_TENSIONS = (0.5, 1.5)
 LOAD_AMPLITUDE_N = 0.1
 LOAD_PERIOD_S = 8.0
-#: The controller's rate here: three Python nodes share the machine with this monitor.
-CONTROL_RATE_HZ = 200.0
 
 
 def phase_at(t: float) -> str:
@@ -55,11 +56,12 @@ def phase_at(t: float) -> str:
 
 
 class ControlMonitor:
-    """The controller's last diagnostic values (``/diagnostics``)."""
+    """The controller's and the estimator's last diagnostic values (``/diagnostics``)."""
 
     def __init__(self, node: Any) -> None:
         self._lock = threading.Lock()
         self._values: dict[str, str] = {}
+        self._estimator: dict[str, str] = {}
         node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
@@ -67,10 +69,14 @@ class ControlMonitor:
             if status.name == f'{NAMESPACE}/stiffness_controller: controller':
                 with self._lock:
                     self._values = {v.key: v.value for v in status.values}
+            elif status.name == 'estimator_node: estimator':
+                with self._lock:
+                    self._estimator = {v.key: v.value for v in status.values}
 
     def line(self, t: float) -> str:
         with self._lock:
             v = dict(self._values)
+            e = dict(self._estimator)
         head = f't {t:5.1f} s  {phase_at(t):15s}'
         if 'pose error [m, rad]' not in v:  # no state yet: nothing to show
             return head
@@ -81,10 +87,26 @@ class ControlMonitor:
         return (f'{head}  pose error {1e3 * np.linalg.norm(error[:3]):.3f} mm '
                 f'{rotation_deg:.3f} deg  K_c error {kc_error}  '
                 f'saturated {v.get("saturated strings", "-")}  feasible {v.get("feasible", "-")}'
-                f'  tick {v.get("tick time [ms]", "-")} ms')
+                f'  tick {_number(v.get("tick time [ms]"))} ms  rate '
+                f'{_number(v.get("achieved tick rate [Hz]"), "4.0f")}/'
+                f'{_number(v.get("tick rate [Hz]"), ".0f")} Hz  missed '
+                f'{v.get("missed ticks", "-")}  latency '
+                f'{_number(v.get("latency from the reading median [ms]"))}/'
+                f'{_number(v.get("latency from the reading p99 [ms]"))} ms  consistent '
+                f'{_number(e.get("consistent share"), ".1%")}')
 
 
-def _targets(model: JointModel) -> tuple[PoseStamped, Float64MultiArray]:
+def _number(value: str | None, spec: str = '.3g') -> str:
+    """A diagnostic value formatted, '-' when absent or not a number."""
+    try:
+        return format(float(value), spec)
+    except (TypeError, ValueError):
+        return '-'
+
+
+def targets(model: JointModel) -> tuple[PoseStamped, Float64MultiArray]:
+    """The script's targets: the pose step's pose and the stiffness step's K_c (the design
+    at :data:`STIFFNESS_TENSIONS` there)."""
     xi = model.initial_screw + POSE_STEP
     pose = PoseStamped()
     pose.header.frame_id = 'tensegrity_link1'
@@ -101,8 +123,7 @@ def _node_args(params: Path) -> list[tuple[str, list[str]]]:
                '-r', f'~/rest_lengths:={ctl}/rest_lengths']),
         (est, [*common, '-r', f'~/measured_tensions:={sim}/measured_tensions',
                '-r', f'~/imu:={sim}/imu', '-r', f'~/rest_lengths:={ctl}/rest_lengths']),
-        (ctl, [*common, '-p', f'control.rate:={CONTROL_RATE_HZ}',
-               '-p', 'control.integral_gain:=4.0',
+        (ctl, [*common, '-p', 'control.integral_gain:=4.0',
                '-r', f'~/pose_estimate:={est}/pose_estimate',
                '-r', f'~/wrench_estimate:={est}/wrench_estimate']),
     ]
@@ -132,7 +153,7 @@ def run(config_path: Path | None, duration: float | None) -> int:
     stiffness_pub = node.create_publisher(
         Float64MultiArray, f'{NAMESPACE}/stiffness_controller/target_stiffness', 10)
     load_pub = node.create_publisher(WrenchStamped, f'{NAMESPACE}/sim_node/external_wrench', 10)
-    pose, stiffness = _targets(model)
+    pose, stiffness = targets(model)
     spin = BackgroundSpin(node, stop)
     start = time.monotonic()
     code = 0

@@ -11,11 +11,12 @@ of the others no older than ``estimation.max_age``; publish. Parameters in
 in
 ``docs/estimation.md``.
 
-Built on :class:`.StreamingNode` (:mod:`.node_base`): the inputs are its streams (served in
-order on the fast lane), an estimate is its "configuration" (all outputs or none, under one
-lock, re-estimated when ``~/rest_lengths`` or a parameter changes), markers and /diagnostics as
-the stiffness node's. Bad or stale input, or a set that cannot determine the pose: a specific
-throttled warning, no publication, the state kept.
+Built on :class:`.StreamingNode` (:mod:`.node_base`): the inputs are its streams (on the fast
+lane, newest only: a reading queued behind a newer one is passed over and counted on
+/diagnostics, ``inputs skipped``), an estimate is its "configuration" (all outputs or none,
+under one lock, re-estimated when ``~/rest_lengths`` or a parameter changes), markers and
+/diagnostics as the stiffness node's. Bad or stale input, or a set that cannot determine the
+pose: a specific throttled warning, no publication, the state kept.
 """
 
 from __future__ import annotations
@@ -31,6 +32,8 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
+from tensegrity_stiffness.estimation.chain_filter import ChainFilter
+from tensegrity_stiffness.estimation.joint_filter import JointFilter
 from tensegrity_stiffness.geometry.validation import require_frame
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.nodes.estimation_processing import (
@@ -40,8 +43,10 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     diagnostic_summary,
     diagnostic_values,
     estimator_outputs,
-    gravity_reading,
+    filter_outputs,
+    imu_reading,
     measured_array,
+    new_joint_filter,
 )
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.messages import stamp_is_set
@@ -70,6 +75,10 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         (PoseWithCovarianceStamped, WrenchStamped, *[Float64MultiArray] * 5),
         (f'~/{name}' for name in ESTIMATOR_OUTPUTS), strict=True))
     SERVES_SOLVES = False  # no services: no worker process
+    #: Sensor readings: only the newest of each input's queue is taken (the others are counted
+    #: on /diagnostics), so that an estimate that takes longer than a reading's period passes
+    #: over the backlog instead of turning it into latency.
+    NEWEST_INPUT_ONLY = True
     #: What the frame of ~/measured_pose and ~/measured_wrench is called in warnings.
     INPUT_FRAME_NAME = "link 1's frame"
     _build_settings = staticmethod(estimator_node_settings)
@@ -79,6 +88,11 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
 
     def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
         self._readings: dict[str, Reading] = {}
+        # estimation.method 'filter': the filter and its track (under the output lock; a new
+        # one after every parameter change, kept through rest-length changes)
+        self._track: JointFilter | ChainFilter | None = None
+        self._estimates = 0
+        self._consistent_estimates = 0
         super().__init__(node_name, **kwargs)
         self._start(*self._warm_up(self._settings))
 
@@ -86,8 +100,9 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         """The worker's first job and the ready line's summary (see ``StreamingNode._start``)."""
         model = settings.model
         return (solve_equilibrium, (model, np.zeros(6)),
-                f'{model.n_strings} strings, load {settings.load_mode}, trigger '
-                f'~/{settings.trigger}, max age {settings.max_age:g} s')
+                f'{model.n_strings} strings, {settings.method} estimator, load '
+                f'{settings.load_mode}, trigger ~/{settings.trigger}, max age '
+                f'{settings.max_age:g} s')
 
     def _options(self, settings: Any) -> EstimatorNodeSettings:
         """The estimator's settings (sensors, load mode, trigger, max age)."""
@@ -125,7 +140,32 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     def _outputs(self, settings: EstimatorNodeSettings, snapshot: EstimatorInput,
                  wanted: tuple[bool, ...]) -> EstimatorOutputs:
         # the std of K_c (most of an estimate's time) only when it is wanted
-        return estimator_outputs(settings, snapshot, wanted[-1])
+        if settings.method == 'filter':
+            if self._track is None:
+                self._track = new_joint_filter(settings)
+            outputs = filter_outputs(settings, snapshot, self._track, wanted[-1])
+        else:
+            outputs = estimator_outputs(settings, snapshot, wanted[-1])
+        self._count(outputs)
+        return outputs
+
+    def _count(self, outputs: Any) -> None:
+        """An estimate for /diagnostics' ``estimates`` and ``consistent share``."""
+        self._estimates += 1
+        self._consistent_estimates += outputs.estimate.consistent is not False
+
+    def _apply_parameters(self, values: Any, names: set[str]) -> None:
+        """As every streaming node's; the filter starts a new track under the new settings."""
+        with self._output_lock:
+            self._track = None
+            super()._apply_parameters(values, names)
+
+    def _republish_last(self) -> None:
+        """The static estimator estimates the last readings again under new settings or rest
+        lengths; the filter does not (stepping it again on the same readings would count them
+        twice): its next reading is predicted with the rest lengths in force."""
+        if self._options(self._settings).method == 'static':
+            super()._republish_last()
 
     def _markers(self, settings: EstimatorNodeSettings, state: Any, stamp: Any) -> MarkerArray:
         return conversions.joint_markers(settings.model, state, settings.link1_frame, stamp)
@@ -133,16 +173,19 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     # ------------------------------------------------------------------ inputs
     def _store(self, name: str, value: Any, stamp: Any) -> None:
         """Keep the reading; when ``name`` is the trigger, estimate from the latest readings
-        (warm-started from the last estimate) and publish."""
+        (warm-started from the last estimate) and publish, stamped with the trigger's header
+        stamp or, for an input without a header (the measured arrays), the time it arrived: the
+        controller's latency from a reading to its command starts there."""
         now = time.monotonic()
+        arrived = None if stamp is not None and stamp_is_set(stamp) else self._clock.now()
         self._readings[name] = Reading(value, now)
         if name != self._options(self._settings).trigger:
             return
         last = self._last.outputs
         snapshot = EstimatorInput(dict(self._readings), now,
                                   None if last is None else last.screw)
-        has_stamp = stamp is not None and stamp_is_set(stamp)
-        self._compute_and_publish(snapshot, stamp if has_stamp else None, f'~/{name}')
+        self._compute_and_publish(snapshot, stamp if arrived is None else arrived.to_msg(),
+                                  f'~/{name}')
 
     def _measured(self, name: str, msg: Float64MultiArray) -> None:
         settings = self._settings
@@ -186,8 +229,7 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     def _on_imu(self, msg: Imu) -> None:
         settings = self._settings
         self._store_framed('imu', msg, self._input_frames(settings)[1], "link 2's frame",
-                           lambda m: gravity_reading(estimation_msgs.imu_specific_force(m),
-                                                     settings.imu_rest_tolerance))
+                           lambda m: imu_reading(settings, *estimation_msgs.imu_motion(m)))
 
     @guarded('~/measured_wrench')
     def _on_wrench(self, msg: WrenchStamped) -> None:
@@ -202,7 +244,11 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         if outputs is not None:
             values += diagnostic_values(outputs)
             level, message = diagnostic_summary(outputs)
-        values += [('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
+        share = (self._consistent_estimates / self._estimates if self._estimates
+                 else float('nan'))
+        values += [('method', options.method), ('estimates', self._estimates),
+                   ('consistent share', share),
+                   ('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
                    ('max age [s]', options.max_age),
                    ('consistency probability', options.consistency_probability)]
         return [conversions.diagnostic_status(f'{self.get_name()}: estimator', level, message,

@@ -159,7 +159,7 @@ class SimNode(Node):
         self._frames = FrameBroadcaster(self)
         self._send_static_frames()
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
-        self._diagnosed = (time.perf_counter(), 0, 0.0)
+        self._diagnosed = (time.perf_counter(), 0, 0.0, 0)
         self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
                                  LATCHED_QOS)
         self.create_subscription(WrenchStamped, '~/external_wrench', self._on_external_wrench,
@@ -426,16 +426,24 @@ class SimNode(Node):
 
     @guarded('diagnostics')
     def _publish_diagnostics(self) -> None:
-        """Steps, missed steps, publications, simulated time and the real-time factor of the
-        last period, the rejected inputs."""
+        """The step rate asked for and achieved (steps in the last period: of simulated time
+        per wall-clock second in real time, more as fast as possible), steps, missed steps, the
+        publication rate, publications, simulated time and the real-time factor of the last
+        period, the rejected inputs."""
         now, steps, sim_time = time.perf_counter(), self.steps, self.steps * self._period
-        then, _, sim_then = self._diagnosed
-        self._diagnosed = (now, steps, sim_time)
-        factor = (sim_time - sim_then) / (now - then) if now > then else 0.0
+        publications = self.publications
+        then, steps_then, sim_then, publications_then = self._diagnosed
+        self._diagnosed = (now, steps, sim_time, publications)
+        elapsed = now - then
+        factor = (sim_time - sim_then) / elapsed if elapsed > 0 else 0.0
+        step_rate = (steps - steps_then) / elapsed if elapsed > 0 else 0.0
+        publication_rate = (publications - publications_then) / elapsed if elapsed > 0 else 0.0
         rejected = self.reporter.rejected
         level = 'WARN' if self.missed_steps and self._real_time else 'OK'
-        values = [('steps', steps), ('missed steps', self.missed_steps),
-                  ('publications', self.publications), ('simulated time', sim_time),
+        values = [('step rate [Hz]', 1.0 / self._period), ('achieved step rate [Hz]', step_rate),
+                  ('steps', steps), ('missed steps', self.missed_steps),
+                  ('publication rate [Hz]', publication_rate),
+                  ('publications', publications), ('simulated time', sim_time),
                   ('real-time factor', factor), ('rejected inputs', rejected or 0)]
         message = (f'{steps} steps, {self.missed_steps} missed, real-time factor {factor:.3g}')
         self._pub_diagnostics.publish(conversions.diagnostic_array(

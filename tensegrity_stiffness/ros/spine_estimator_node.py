@@ -7,9 +7,11 @@ inputs and
 triggering (``~/measured_tensions`` / ``~/measured_lengths`` hold every joint's strings,
 joint-major, NaN = not measured; ``~/measured_pose`` is the tool frame in the base;
 ``~/measured_wrench`` the tip load in the base; no IMU), the library's
-:func:`~tensegrity_stiffness.estimation.estimate_chain_state` (the equilibria exact, the tip load
-shared by every joint), warm-started from the last estimate. The spine's parameters and
-``~/rest_lengths`` are ``spine_node``'s; the estimator's are ``estimator_node``'s.
+:class:`~tensegrity_stiffness.estimation.ChainFilter` (``estimation.method: filter``, the
+default: on the spine's dynamics) or
+:func:`~tensegrity_stiffness.estimation.estimate_chain_state` (``static``: the equilibria exact,
+the tip load shared by every joint, warm-started from the last estimate). The spine's
+parameters and ``~/rest_lengths`` are ``spine_node``'s; the estimator's are ``estimator_node``'s.
 """
 
 from __future__ import annotations
@@ -26,7 +28,9 @@ from tensegrity_stiffness.mechanics.chain import solve_chain_equilibrium
 from tensegrity_stiffness.nodes.estimation_processing import (
     EstimatorInput,
     SpineEstimatorOutputs,
+    new_chain_filter,
     spine_estimator_outputs,
+    spine_filter_outputs,
 )
 from tensegrity_stiffness.nodes.layouts import SPINE_ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameters import (
@@ -67,8 +71,9 @@ class SpineEstimatorNode(SpineFrames, SpineRestLengthTopic, EstimatorNode):
     def _warm_up(self, settings: SpineEstimatorNodeSettings) -> tuple[Any, tuple, str]:
         options = settings.estimator
         return (solve_chain_equilibrium, (settings.chain, np.zeros(6)),
-                f'{settings.n_joints} joints, load {options.load_mode}, trigger '
-                f'~/{options.trigger}, max age {options.max_age:g} s')
+                f'{settings.n_joints} joints, {options.method} estimator, load '
+                f'{options.load_mode}, trigger ~/{options.trigger}, max age '
+                f'{options.max_age:g} s')
 
     def _options(self, settings: SpineEstimatorNodeSettings) -> EstimatorNodeSettings:
         return settings.estimator
@@ -93,7 +98,14 @@ class SpineEstimatorNode(SpineFrames, SpineRestLengthTopic, EstimatorNode):
     def _outputs(self, settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
                  wanted: tuple[bool, ...]) -> SpineEstimatorOutputs:
         # the std of the tip stiffness only when it is wanted (EstimatorNode._wanted_outputs)
-        return spine_estimator_outputs(settings, snapshot, wanted[-1])
+        if settings.estimator.method == 'filter':
+            if self._track is None:
+                self._track = new_chain_filter(settings)
+            outputs = spine_filter_outputs(settings, snapshot, self._track, wanted[-1])
+        else:
+            outputs = spine_estimator_outputs(settings, snapshot, wanted[-1])
+        self._count(outputs)
+        return outputs
 
     def _markers(self, settings: SpineEstimatorNodeSettings, state: Any, stamp: Any
                  ) -> MarkerArray:

@@ -1,16 +1,20 @@
 """``stiffness_controller``: rest-length commands that hold a target pose with a target K_c, in
 closed loop, around :class:`tensegrity_stiffness.control.controller.StiffnessController`.
 
-Inputs (executor): ``~/target_pose`` (``PoseStamped`` in ``frames.link1``),
-``~/target_stiffness`` (``Float64MultiArray``: 36 row-major, 6 for a diagonal, empty for none),
-the state as ``estimator_node`` publishes it (``~/pose_estimate``,
-``PoseWithCovarianceStamped``; ``~/wrench_estimate``, ``WrenchStamped``: one remap each) or a
-known load on ``~/external_wrench``. A timer at ``control.rate`` runs one controller tick on the
-latest state and publishes ``~/rest_lengths`` (latched, the format ``sim_node``,
-``estimator_node`` and ``stiffness_node`` take: motor commands, ``true - offset``) and
-``~/predicted_stiffness`` (36 row-major); ``/diagnostics`` once a second. A state older than
-``control.max_state_age`` holds the last command and says so; a bad target or parameter is
-refused with a throttled warning and the last command is kept.
+Inputs: ``~/target_pose`` (``PoseStamped`` in ``frames.link1``), ``~/target_stiffness``
+(``Float64MultiArray``: 36 row-major, 6 for a diagonal, empty for none) on the executor; the
+state as ``estimator_node`` publishes it (``~/pose_estimate``, ``PoseWithCovarianceStamped``;
+``~/wrench_estimate``, ``WrenchStamped``: one remap each) or a known load on
+``~/external_wrench`` on the fast lane, newest only (a backlog is passed over and counted on
+/diagnostics). A paced loop on a thread of its own (:mod:`.runtime.paced_loop`) runs one
+controller tick at ``control.rate`` on the latest state and publishes ``~/rest_lengths``
+(latched, the format ``sim_node``, ``estimator_node`` and ``stiffness_node`` take: motor
+commands, ``true - offset``) and ``~/predicted_stiffness`` (36 row-major); ``/diagnostics`` once
+a second (the rate asked for and achieved, missed ticks, the latency from a reading to the first
+command computed from it, inputs skipped). A state older than ``control.max_state_age`` holds
+the last command and says so; a bad target or parameter is refused with a throttled warning and
+the last command is kept. In one process with the estimator (``control_loop``) the state is
+handed over directly (:meth:`StiffnessControllerNode.take_state`), not over topics.
 
 Built from the shared parts (:mod:`.runtime.declared_parameters`, :mod:`.runtime.reporting`,
 :mod:`.runtime.topics`, :mod:`.runtime.runner`); the parameter table and the settings are
@@ -19,6 +23,7 @@ Built from the shared parts (:mod:`.runtime.declared_parameters`, :mod:`.runtime
 
 from __future__ import annotations
 
+import threading
 import time
 from collections import deque
 from collections.abc import Mapping
@@ -52,6 +57,9 @@ from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
+from tensegrity_stiffness.ros.runtime.draining_subscription import SkippedCounts
+from tensegrity_stiffness.ros.runtime.fast_lane import FastLane
+from tensegrity_stiffness.ros.runtime.paced_loop import PacedLoop, RateCounter
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.topics import LATCHED_QOS, create_output_publisher, input_qos
 
@@ -64,17 +72,29 @@ STATISTICS_WINDOW = 2000
 
 
 class StiffnessControllerNode(Node):
-    """Ticks :class:`StiffnessController` at ``control.rate`` on the latest state."""
+    """Ticks :class:`StiffnessController` at ``control.rate`` on the latest state.
+    ``state_topics=False``: no state subscriptions; the state comes through :meth:`take_state`
+    (the estimator in the same process)."""
 
-    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
+    #: The /diagnostics key of the state inputs passed over for a newer one, per topic.
+    SKIPPED_KEY = 'inputs skipped (a newer one was queued)'
+
+    def __init__(self, node_name: str = NODE_NAME, *, state_topics: bool = True,
+                 **kwargs: Any) -> None:
         super().__init__(node_name, **kwargs)
         self.reporter = Reporter(self.get_logger(), context=self.context)
+        # The tick (its own thread) against parameter changes and targets (the executor).
+        self._lock = threading.Lock()
         self._binding = ParameterBinding(
             self, CONTROLLER_PARAMETERS, controller_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
         self._settings = self._binding.build(self._binding.values())
         self._controller = self._new_controller(self._settings, None)
-        self._pose: tuple[np.ndarray, float, int] | None = None
+        # (T, arrival time.monotonic, the reading's stamp ns, sequence number): one reference,
+        # replaced as a whole by the state's thread
+        self._pose: tuple[np.ndarray, float, int, int] | None = None
+        self._state_count = 0
+        self._commanded_state = 0  # the sequence number of the last state a command came from
         self._tick_times: deque[float] = deque(maxlen=STATISTICS_WINDOW)
         self._latencies: deque[float] = deque(maxlen=STATISTICS_WINDOW)
         self._old_state_ticks = 0
@@ -83,13 +103,15 @@ class StiffnessControllerNode(Node):
         self._target_pose: np.ndarray | None = None
         self._target_stiffness: np.ndarray | None = None
         self._last: ControlCommand | None = None
-        self._ticks = self._held = self._missed = 0
+        self._ticks = self._held = 0
         self._tick_time = 0.0
         self._state_age = float('nan')
         self._hold_reason = 'no target yet'
+        self._commands = RateCounter()
+        self.skipped = SkippedCounts()
         values = self._settings.values
         self._period = 1.0 / values['control.rate']
-        self._last_tick = None
+        self._last_tick: float | None = None
         self._pub_rest = create_output_publisher(self, Float64MultiArray, '~/rest_lengths',
                                                  LATCHED_QOS)
         self._pub_stiffness = create_output_publisher(self, Float64MultiArray,
@@ -100,17 +122,29 @@ class StiffnessControllerNode(Node):
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, qos)
         self.create_subscription(Float64MultiArray, '~/target_stiffness',
                                  self._on_target_stiffness, qos)
-        self.create_subscription(PoseWithCovarianceStamped, POSE_ESTIMATE,
-                                 self._on_pose_estimate, qos)
-        self.create_subscription(WrenchStamped, WRENCH_ESTIMATE, self._on_wrench_estimate,
-                                 qos)
-        self.create_subscription(WrenchStamped, '~/external_wrench', self._on_external_wrench,
-                                 qos)
+        self._lane = FastLane(self, self.reporter.internal_error)
+        if state_topics:
+            self._lane.create_subscription(PoseWithCovarianceStamped, POSE_ESTIMATE,
+                                           self._on_pose_estimate, qos, self.skipped)
+            self._lane.create_subscription(WrenchStamped, WRENCH_ESTIMATE,
+                                           self._on_wrench_estimate, qos, self.skipped)
+        self._lane.create_subscription(WrenchStamped, '~/external_wrench',
+                                       self._on_external_wrench, qos, self.skipped)
         self._publish_rest(self._controller.rest_lengths)
-        self.create_timer(self._period, self._tick)
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
+        self._loop = PacedLoop(values['control.rate'], self._tick,
+                               lambda exc: self.reporter.internal_error('tick', exc),
+                               name='controller ticks')
+        self._lane.start()
+        self._loop.start()
         self.get_logger().info(f'ready: {self._settings.model.n_strings} strings at '
                                f'{values["control.rate"]:g} Hz')
+
+    def close(self) -> None:
+        """End the ticks and the fast lane (called by the runner before the node is
+        destroyed)."""
+        self._loop.stop()
+        self._lane.stop()
 
     def _new_controller(self, settings: ControllerSettings, rest: np.ndarray | None
                         ) -> StiffnessController:
@@ -125,8 +159,9 @@ class StiffnessControllerNode(Node):
         """A validated change: a new controller from the last command (the integral restarts)."""
         try:
             settings = self._binding.build(values)
-            self._controller = self._new_controller(settings, self._controller.rest_lengths)
-            self._settings = settings
+            with self._lock:
+                self._controller = self._new_controller(settings, self._controller.rest_lengths)
+                self._settings = settings
         except Exception as exc:  # validated before: only a bug gets here
             self.reporter.internal_error('parameters', exc)
             return
@@ -155,6 +190,16 @@ class StiffnessControllerNode(Node):
             return
         self._target_stiffness = K
 
+    def take_state(self, T: np.ndarray, stamp_ns: int, wrench: np.ndarray | None = None
+                   ) -> None:
+        """The latest pose estimate ``T`` (link 2 in link 1) of the reading stamped
+        ``stamp_ns`` (0: unstamped) and, when given, the load estimate: what the next tick
+        uses (the state topics' handlers, or the estimator in the same process)."""
+        self._state_count += 1
+        self._pose = (T, time.monotonic(), stamp_ns, self._state_count)
+        if wrench is not None:
+            self._wrench = wrench
+
     @guarded(POSE_ESTIMATE)
     def _on_pose_estimate(self, msg: PoseWithCovarianceStamped) -> None:
         try:
@@ -164,7 +209,7 @@ class StiffnessControllerNode(Node):
             self.reporter.reject(POSE_ESTIMATE, str(exc))
             return
         stamp = msg.header.stamp
-        self._pose = (T, time.monotonic(), stamp.sec * 1_000_000_000 + stamp.nanosec)
+        self.take_state(T, stamp.sec * 1_000_000_000 + stamp.nanosec)
 
     def _wrench_input(self, name: str, msg: WrenchStamped) -> np.ndarray | None:
         try:
@@ -187,11 +232,13 @@ class StiffnessControllerNode(Node):
             self._known_wrench = W
 
     # ------------------------------------------------------------------ the tick
-    @guarded('tick')
-    def _tick(self) -> None:
+    def _tick(self, due: int = 1) -> None:
+        """One controller tick (the paced loop's thread; ``due`` periods since the last)."""
+        with self._lock:
+            self._tick_locked()
+
+    def _tick_locked(self) -> None:
         now = time.monotonic()
-        if self._last_tick is not None and now - self._last_tick > 1.5 * self._period:
-            self._missed += int((now - self._last_tick) / self._period) - 1
         dt = self._period if self._last_tick is None else min(now - self._last_tick,
                                                                  10 * self._period)
         self._last_tick = now
@@ -200,10 +247,11 @@ class StiffnessControllerNode(Node):
             return
         values = self._settings.values
         pose = None
-        if self._pose is not None:
-            self._state_age = now - self._pose[1]
+        state = self._pose
+        if state is not None:
+            self._state_age = now - state[1]
             if self._state_age <= values['control.max_state_age']:
-                pose = self._pose[0]
+                pose = state[0]
         if pose is None:
             self._held += 1
             self._hold_reason = (f'no pose estimate within control.max_state_age = '
@@ -229,9 +277,12 @@ class StiffnessControllerNode(Node):
             self._old_state_ticks += 1
         if cmd.feasible:
             self._publish_rest(cmd.rest_lengths)
-            if self._pose[2]:  # the reading's stamp (the estimator passes the sensors' on)
+            self._commands.record()
+            # the latency of a reading: to the first command computed from it
+            if state[2] and state[3] != self._commanded_state:
                 self._latencies.append(
-                    1e-9 * (self.get_clock().now().nanoseconds - self._pose[2]))
+                    1e-9 * (self.get_clock().now().nanoseconds - state[2]))
+            self._commanded_state = state[3]
             if self._pub_stiffness.get_subscription_count():
                 self._pub_stiffness.publish(conversions.matrix_to_multiarray(
                     cmd.predicted_cartesian_stiffness, STIFFNESS_ROW_LABEL,
@@ -246,12 +297,14 @@ class StiffnessControllerNode(Node):
     def _publish_diagnostics(self) -> None:
         cmd = self._last
         values: list[tuple[str, Any]] = [
-            ('ticks', self._ticks), ('held ticks (stale state)', self._held),
-            ('missed ticks', self._missed), ('tick time [ms]', 1e3 * self._tick_time),
+            *self._loop.statistics(), ('command rate [Hz]', self._commands.rate()),
+            ('commands computed', self._ticks), ('held ticks (stale state)', self._held),
+            ('tick time [ms]', 1e3 * self._tick_time),
             *_statistics('tick time', self._tick_times),
             *_statistics('latency from the reading', self._latencies),
             ('ticks on a state older than one period', self._old_state_ticks),
             ('age of the state used [s]', self._state_age),
+            (self.SKIPPED_KEY, self.skipped.counts() or 0),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0)]
         level, message = 'WARN', self._hold_reason or 'no command yet'
         if cmd is not None:

@@ -235,3 +235,82 @@ def test_the_consistency_probability_is_a_parameter(settings):
     values = parameters.defaults(ESTIMATOR_NODE_PARAMETERS)
     with pytest.raises(ValueError, match='consistency_probability'):
         estimator_node_settings({**values, 'estimation.consistency_probability': 0.9})
+
+
+def test_the_filter_at_rest_agrees_with_the_static_estimate(settings):
+    """``estimation.method: filter`` (the default): the node's filter stepped on noisy readings
+    of a resting joint (12 tensions, the IMU's raw specific force and gyro, 1 ms apart) agrees
+    with the static estimate of the same readings within its std; the IMU reading is raw for the
+    filter and the direction of gravity for the static estimator, which refuses an accelerating
+    one."""
+    from tensegrity_stiffness.estimation import sensor_models as sm
+    from tensegrity_stiffness.nodes.estimation_processing import (
+        ImuReading,
+        filter_outputs,
+        imu_reading,
+        new_joint_filter,
+    )
+
+    assert settings.method == 'filter'
+    static = estimator_node_settings({**parameters.defaults(ESTIMATOR_NODE_PARAMETERS),
+                                      'estimation.method': 'static'})
+    model = settings.model
+    truth = truth_from_model(model, model.initial_screw)
+    g = 9.81
+    specific_force = -g * truth.gravity  # at rest: -g in {2}
+    raw = imu_reading(settings, specific_force, np.zeros(3))
+    assert isinstance(raw, ImuReading)
+    np.testing.assert_allclose(imu_reading(static, specific_force, None),
+                               sm.gravity_from_specific_force(specific_force))
+    with pytest.raises(ValueError, match='not at rest'):
+        imu_reading(static, 2.0 * specific_force, None)
+    assert isinstance(imu_reading(settings, 2.0 * specific_force, None), ImuReading)
+    joint_filter = new_joint_filter(settings)
+    rng = np.random.default_rng(37)
+    for k in range(200):
+        now = 1e-3 * k
+        tensions = truth.tensions + rng.normal(scale=TENSION_STD, size=model.n_strings)
+        imu = ImuReading(specific_force + rng.normal(scale=settings.accelerometer_std, size=3),
+                         rng.normal(scale=settings.gyro_std, size=3))
+        snapshot = EstimatorInput({'measured_tensions': Reading(tensions, now),
+                                   'imu': Reading(imu, now)}, now)
+        outputs = filter_outputs(settings, snapshot, joint_filter, False)
+    est = outputs.estimate
+    assert est.success and outputs.used == ('measured_tensions', 'imu')
+    assert np.all(np.isnan(est.cartesian_stiffness_std))  # not asked
+    reference = estimator_outputs(static, EstimatorInput(
+        {'measured_tensions': Reading(truth.tensions, 0.0),
+         'imu': Reading(truth.gravity, 0.0)}, 0.0), False).estimate
+    std = np.sqrt(np.diag(est.screw_covariance))
+    assert np.all(np.abs(est.screw - reference.screw) <= 3.0 * std), (
+        (est.screw - reference.screw) / std)
+    assert est.twist.shape == (6,) and est.twist_covariance.shape == (6, 6)
+
+
+def test_a_spine_filter_at_rest():
+    """A spine's default is the filter too (its process noise ChainFilter's defaults): stepped
+    on noiseless tensions of every joint at the unloaded configuration it converges there, with
+    a finite covariance; the static method is there too."""
+    from tensegrity_stiffness.estimation import DEFAULT_CHAIN_PROCESS_NOISE
+    from tensegrity_stiffness.nodes.estimation_processing import (
+        new_chain_filter,
+        spine_filter_outputs,
+    )
+
+    values = parameters.defaults(parameters.spine_estimator_node_parameters())
+    assert values['estimation.method'] == 'filter'
+    noise = DEFAULT_CHAIN_PROCESS_NOISE
+    assert values['filter.angular_acceleration'] == noise.angular_acceleration
+    settings = parameters.spine_estimator_node_settings(values)
+    chain = settings.chain
+    screws = np.array([joint.initial_screw for joint in chain.joints])
+    state = chain.evaluate(screws)
+    tensions = np.concatenate([np.ravel(t) for t in state.tensions])
+    chain_filter = new_chain_filter(settings)
+    for k in range(50):
+        snapshot = EstimatorInput({'measured_tensions': Reading(tensions, 1e-3 * k)}, 1e-3 * k)
+        outputs = spine_filter_outputs(settings, snapshot, chain_filter, False)
+    assert outputs.estimate.success
+    assert np.all(np.isfinite(outputs.estimate.screws))
+    static = parameters.spine_estimator_node_settings({**values, 'estimation.method': 'static'})
+    assert static.estimator.method == 'static'

@@ -48,7 +48,9 @@ SPINE_CONFIG = REPO / 'config' / 'default_spine.yaml'
 TENSION_NOISE = 0.005
 MB = 1024 * 1024
 #: Inputs an estimate takes are fresh for this long (s): a loaded machine may delay the IMU.
-MAX_AGE = ['-p', 'estimation.max_age:=2.0']
+#: The static estimator's trust figures (redundancy, outliers, restarts of a resting joint);
+#: the filter's are the library's tests' (test/estimation/test_joint_filter.py).
+MAX_AGE = ['-p', 'estimation.max_age:=2.0', '-p', 'estimation.method:=static']
 #: The burst: messages per input, and extra values that are finite but impossible.
 BURST = {'measured_tensions': 1500, 'rest_lengths': 400, 'imu': 300}
 IMPOSSIBLE = (-0.3, 50.0, 1e6, -1e6)

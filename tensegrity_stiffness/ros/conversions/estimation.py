@@ -102,6 +102,15 @@ def imu_specific_force(msg: Any) -> FloatArray:
     return imu_to_arrays(msg)[1]
 
 
+def imu_motion(msg: Any) -> tuple[FloatArray, FloatArray | None]:
+    """(specific force (3,) m/s^2, angular velocity (3,) rad/s or None when the message says
+    it has no gyro: ``angular_velocity_covariance[0] == -1``, the sensor_msgs convention) of a
+    ``sensor_msgs/Imu``, in its frame; ValueError on NaN / inf."""
+    angular_velocity, specific_force = imu_to_arrays(msg)
+    has_gyro = msg.angular_velocity_covariance[0] != -1.0
+    return specific_force, angular_velocity if has_gyro else None
+
+
 class EstimatorOutputMessages:
     """The seven per-estimate messages of ``estimator_node``, refilled by :meth:`fill`:
     ``~/pose_estimate``, ``~/wrench_estimate``, ``~/screw_estimate``, ``~/stiffness``,

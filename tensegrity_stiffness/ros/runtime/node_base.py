@@ -2,7 +2,8 @@
 declares only what differs (its parameters and settings, its streamed inputs, its outputs and
 services); :class:`StreamingNode` wires the rest the same way for both.
 
-Concurrency: the streamed inputs are served in order on a thread of their own
+Concurrency: the streamed inputs are served in order (or, with ``NEWEST_INPUT_ONLY``, only the
+newest of each input's queue, the others counted: the estimators) on a thread of their own
 (:mod:`.fast_lane`: rclpy's executor costs more per message than the computation itself; with
 ``realtime.fast_lane: false`` the executor serves them, draining the queue behind each message).
 A single-threaded executor runs everything else. Services that need the solver are coroutines:
@@ -33,7 +34,10 @@ from tensegrity_stiffness.nodes.layouts import STIFFNESS_EIGENVALUES_LABEL
 from tensegrity_stiffness.nodes.parameters import ParameterSpec
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
-from tensegrity_stiffness.ros.runtime.draining_subscription import create_draining_subscription
+from tensegrity_stiffness.ros.runtime.draining_subscription import (
+    SkippedCounts,
+    create_draining_subscription,
+)
 from tensegrity_stiffness.ros.runtime.fast_lane import FastLane
 from tensegrity_stiffness.ros.runtime.last_input import LastInput
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
@@ -82,6 +86,12 @@ class StreamingNode(Node):
     WORKER_NAME = 'worker'
     #: Whether the node serves solver calls (services): only then does it run a worker process.
     SERVES_SOLVES = True
+    #: Whether each streamed input is taken newest only (the older messages queued behind it
+    #: passed over and counted on /diagnostics: sensor readings, where only the latest state
+    #: matters) instead of every message in order (one output per input).
+    NEWEST_INPUT_ONLY = False
+    #: The /diagnostics key of the inputs passed over for a newer one, per topic.
+    SKIPPED_KEY = 'inputs skipped (a newer one was queued)'
     _build_settings: Callable[..., Any]
     _output_frame: Callable[[Any], str]
 
@@ -96,6 +106,10 @@ class StreamingNode(Node):
             lambda reason: self.reporter.warn('parameter change', reason))
         self._settings = self._binding.build(self._binding.values())
         self._last = LastInput()
+        #: Called with ``(outputs, stamp)`` after every input's outputs are published, under the
+        #: output lock: a consumer in the same process (``control_loop``'s controller) takes them
+        #: without a topic in between.
+        self.output_listeners: list[Callable[[Any, Any], None]] = []
         self._last_solution: np.ndarray | None = None
         self._clock = self.get_clock()
         self._messages = self._output_messages(self._settings)
@@ -117,13 +131,16 @@ class StreamingNode(Node):
         qos = input_qos(depth, values['qos.input_reliability'])
         self._lane = FastLane(self, self.reporter.internal_error) \
             if values['realtime.fast_lane'] else None
+        self.skipped = SkippedCounts()
+        skipped = self.skipped if self.NEWEST_INPUT_ONLY else None
         for msg_type, topic, callback in self._streams():
             if self._lane is not None:
-                self._lane.create_subscription(msg_type, topic, callback, qos)
+                self._lane.create_subscription(msg_type, topic, callback, qos, skipped)
             else:
                 create_draining_subscription(
                     self, msg_type, topic, callback, qos,
-                    on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc))
+                    on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc),
+                    skipped=skipped)
         self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
                                  LATCHED_QOS)
 
@@ -291,6 +308,8 @@ class StreamingNode(Node):
             self._publish_eigenvalues(outputs)
             self._publish_extras(settings, xi, outputs)
             self._last.record(xi, stamp, outputs, start)
+            for listener in self.output_listeners:
+                listener(outputs, stamp)
 
     def _cartesian_stiffness(self, outputs: Any) -> np.ndarray:
         """The Cartesian stiffness (linear first) whose principal stiffnesses go on
@@ -370,6 +389,8 @@ class StreamingNode(Node):
         values: list[tuple[str, Any]] = [
             *self._last.statistics(),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0),
+            *([(self.SKIPPED_KEY, self.skipped.counts() or 0)] if self.NEWEST_INPUT_ONLY
+              else []),
             ('parameter generation', settings.generation),
             ('equilibrium worker restarts', 0 if self._solver is None else self._solver.restarts),
             ('library', 'compiled kernel' if kernel.available() else 'numpy'),

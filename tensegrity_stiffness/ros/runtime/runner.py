@@ -39,15 +39,17 @@ SWITCH_INTERVAL_S = 2e-4
 
 
 def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
-        executor_factory: Callable[[], Any] | None = None) -> None:
+        executor_factory: Callable[[], Any] | None = None, usage: str | None = None) -> None:
     """Create the node with ``node_factory`` (after ``rclpy.init(args=args)``) and spin it until
     shutdown (also one that lands inside rclpy's own calls); then ``node.close()`` (if it has
     one), destroy it and shut rclpy down. SIGINT is ignored from the clean-up on: ``run`` is the
     last thing its process does. With ``-h``/``--help`` before ``--ros-args`` it prints the
-    node's usage (``nodes.parameter_docs.node_usage``; the node is named by the module of
-    ``node_factory``) and returns without starting rclpy."""
+    node's usage (``usage``, else ``nodes.parameter_docs.node_usage``; the node is named by the
+    module of ``node_factory``) and returns without starting rclpy. ``node_factory`` may return
+    several nodes (a tuple: one process, one executor; each closed and destroyed)."""
     if asks_for_help(sys.argv if args is None else args):
-        sys.stdout.write(node_usage(node_factory.__module__.rpartition('.')[2]))
+        sys.stdout.write(usage if usage is not None else
+                         node_usage(node_factory.__module__.rpartition('.')[2]))
         return
     sys.setswitchinterval(SWITCH_INTERVAL_S)
     profile = bound_input_memory()
@@ -58,11 +60,12 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
             profile.unlink(missing_ok=True)
         report_config_error(exc)
         sys.exit(CONFIG_ERROR_EXIT_CODE)
-    node = None
+    nodes: tuple[Any, ...] = ()
     config_error = False
     try:
         try:
-            node = node_factory()
+            made = node_factory()
+            nodes = made if isinstance(made, tuple) else (made,)
         except CONFIG_ERRORS as exc:
             config_error = True
             report_config_error(exc)
@@ -75,7 +78,8 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
         gc.collect()
         gc.freeze()
         executor = (executor_factory or SingleThreadedExecutor)()
-        executor.add_node(node)
+        for node in nodes:
+            executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
@@ -91,10 +95,11 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
         # second Ctrl-C may follow; either, raised in close(), left the fast lane's thread
         # running into the interpreter's exit (an abort, exit -6).
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-        if node is not None:
+        for node in nodes:
             close = getattr(node, 'close', None)
             if close is not None:
                 close()
+        for node in nodes:
             node.destroy_node()
         rclpy.try_shutdown()
         if config_error:
