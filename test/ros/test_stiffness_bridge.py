@@ -25,6 +25,10 @@ pytestmark = pytest.mark.ros
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
+from support.eigenvalues import (  # noqa: E402
+    assert_eigenvalues_at_floor,
+    assert_eigenvalues_at_least,
+)
 from support.ros_harness import (  # noqa: E402
     REPO,
     NodeProcess,
@@ -382,7 +386,7 @@ def test_crisp_topic_layouts_accepted_by_the_crisp_rules(world, loaded_screw, pr
     assert len(refused) == 0
     if layout != 'diagonal_6':
         assert np.array_equal(got, got.T)
-        assert np.linalg.eigvalsh(got).min() >= MIN_EIGENVALUE * (1 - 1e-9)
+        assert_eigenvalues_at_least(got, MIN_EIGENVALUE)
         # the stand-in does refuse an asymmetric matrix (what the bridge never sends)
         raw = world.ros.publisher(Float64MultiArray, f'{ctrl.full_name}/target_stiffness')
         world.ros.wait_for_subscribers(raw)
@@ -405,7 +409,7 @@ def test_unstable_joint_output_is_spd_and_diagnostics_say_so(world, unstable_scr
                                   lambda: out.messages[0] if len(out) else None).data
                      ).reshape(6, 6)
     assert np.array_equal(got, got.T)
-    assert np.linalg.eigvalsh(got).min() >= MIN_EIGENVALUE * (1 - 1e-9)
+    assert_eigenvalues_at_floor(got, MIN_EIGENVALUE)
     np.testing.assert_allclose(got, expected(K), rtol=1e-9, atol=1e-12 * np.abs(got).max())
     status = world.bridge_status(bridge_ns, lambda s: kv(s)['inputs'] != '0')
     assert status.level == DiagnosticStatus.WARN
@@ -626,7 +630,7 @@ def test_hostile_burst_then_the_right_output(world, loaded_screw, record_propert
     for message in out.messages:  # every output finite, symmetric positive definite
         M = np.asarray(message.data).reshape(6, 6)
         assert np.all(np.isfinite(M)) and np.array_equal(M, M.T)
-        assert np.linalg.eigvalsh(M).min() >= MIN_EIGENVALUE * (1 - 1e-9)
+        assert_eigenvalues_at_least(M, MIN_EIGENVALUE)
     status = world.bridge_status(bridge_ns, lambda s: '~/input_stiffness' in kv(s)[
         'rejected inputs'])
     rss_after = bridge.rss_bytes()
