@@ -434,6 +434,7 @@ def test_unstable_joint_output_is_spd_and_diagnostics_say_so(world, unstable_scr
     assert 'input_stiffness rejected' in bridge.log()
 
 
+@pytest.mark.serial  # outputs per second of wall time
 def test_rate_limit_and_low_pass_hold(world, loaded_screw):
     """Inputs at ~200 Hz, outputs at most max_rate; after a step each output is
     P_old + f (P_new - P_old) with one f for all 36 entries, rising, never ahead of
