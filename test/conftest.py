@@ -23,6 +23,7 @@ running side by side never discover each other."""
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import pytest
 
@@ -131,10 +132,27 @@ def pytest_make_collect_report(collector: pytest.Collector):
     _fail_unrequested_skip(outcome.get_result())
 
 
+def plain(value: Any) -> Any:
+    """``value`` as plain Python data (numpy scalars and arrays through ``tolist``, containers
+    item by item, anything else its ``str``): what pytest-xdist's workers can send of a
+    ``record_property`` (execnet serializes builtins only)."""
+    if value is None or type(value) in (str, int, float, bool):  # not numpy.float64 (a float)
+        return value
+    if isinstance(value, (list, tuple)):
+        return type(value)(plain(v) for v in value)
+    if isinstance(value, dict):
+        return {plain(k): plain(v) for k, v in value.items()}
+    if hasattr(value, 'tolist'):
+        return plain(value.tolist())
+    return str(value)
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo):
     outcome = yield
-    _fail_unrequested_skip(outcome.get_result())
+    report = outcome.get_result()
+    _fail_unrequested_skip(report)
+    report.user_properties = [(name, plain(value)) for name, value in report.user_properties]
 
 
 def pytest_terminal_summary(terminalreporter) -> None:
