@@ -13,9 +13,9 @@ The build passes ``--cmake-args -DBUILD_TESTING=OFF``, its one option, which reu
 setup proved: scripts/setup_env.sh builds the same CMakeLists.txt with ``BUILD_TESTING=ON`` (in CI
 from a fresh clone too) and test_kernel_gtest.py runs those gtests, while compiling googletest
 and the two gtests again here was a third of this build (CPU 57 s against 37 s without them,
-side by side on the 2-core machine). Everything this test proves beyond that (the clone holds every file the build
-needs, the workspace layout, the consumer's ``find_package`` and link, the ament index of
-``ws/install``) is built and checked as before.
+side by side on the 2-core machine). Everything this test proves beyond that (the clone holds
+every file the build needs, the workspace layout, the consumer's ``find_package`` and link, the
+ament index of ``ws/install``) is built and checked as before.
 """
 
 from __future__ import annotations
