@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Idempotent setup of the development / CI environment of tensegrity_stiffness:
 #   1. .venv/      Python venv with pinned ROS 2 Jazzy wheels from PyPI (rclpy + fastrtps, message
-#                  packages, rosidl/ament build wheels, colcon) and numpy, scipy, PyYAML, pytest, ruff.
+#                  packages, rosidl/ament build wheels, colcon) and numpy, scipy, PyYAML, pytest, pytest-xdist, ruff.
 #   2. build/, install/   colcon build --symlink-install of the one ament_cmake package at the
 #                  repository root, tensegrity_stiffness (its service interfaces, the compiled
 #                  kernel, the Python packages, executables, launch and config files), exactly as a
@@ -58,6 +58,8 @@ REQUIREMENTS=(
   'scipy==1.17.1'
   'PyYAML==6.0.3'
   'pytest==9.2.0'
+  # scripts/test.sh's parallel pass (-n 2 --dist loadfile)
+  'pytest-xdist==3.8.0'
   'ruff==0.17.6'
   # plots of the tensegrity-stiffness CLI (optional at run time, needed by the tests)
   'matplotlib==3.11.2'

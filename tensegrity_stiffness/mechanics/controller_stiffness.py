@@ -34,6 +34,7 @@ from tensegrity_stiffness.geometry.validation import finite_array
 FloatArray = NDArray[np.float64]
 
 __all__ = [
+    'EIGENVALUE_MARGIN',
     'LAYOUTS',
     'LAYOUT_SIZES',
     'Conditioned',
@@ -55,6 +56,15 @@ __all__ = [
 LAYOUTS = ('row_major_36', 'column_major_36', 'diagonal_6')
 LAYOUT_SIZES = {'row_major_36': 36, 'column_major_36': 36, 'diagonal_6': 6}
 
+#: Margin of the eigenvalue floor, relative to the result's size ``|X|_2``: the projection clips
+#: at ``floor + EIGENVALUE_MARGIN |X|_2`` (and keeps a matrix whose smallest eigenvalue is at least
+#: half that margin above the floor), so that the eigenvalues a subscriber computes from the values
+#: sent (``numpy.linalg.eigvalsh``: accurate to a few ``eps |X|_2``; the reconstruction
+#: ``V diag V^T`` and its symmetrisation add as much; at most 15 eps |X|_2 seen over 20,000 random
+#: matrices) are ``>= floor``, as documented. 64 n eps with n = 6: ``8.5e-14 |X|_2``, 3.5e-10 for
+#: a stiffness of 4e3, far below any floor a controller uses.
+EIGENVALUE_MARGIN = 64 * 6 * float(np.finfo(np.float64).eps)
+
 
 def stiffness_matrix(K: ArrayLike, name: str = 'K') -> FloatArray:
     """``K`` as a finite (6, 6) float array (a copy); ValueError naming ``name`` otherwise."""
@@ -75,13 +85,16 @@ def nearest_positive_definite(K: ArrayLike, min_eigenvalue: float = 0.0
                               ) -> tuple[FloatArray, float]:
     """The nearest symmetric matrix to ``K`` (Frobenius norm) whose eigenvalues are all
     ``>= min_eigenvalue``, and the Frobenius norm of the change from ``K``.
+    The eigenvalues are clipped at ``min_eigenvalue`` plus the rounding margin
+    :data:`EIGENVALUE_MARGIN` ``|X|_2``, so that they are ``>= min_eigenvalue`` also as computed
+    from the result.
 
     Proof of minimality (Higham, Linear Algebra Appl. 103, 1988): symmetric and skew matrices are
     orthogonal, so for symmetric X ``|X - K|^2 = |X - S|^2 + |K - S|^2`` with ``S`` the symmetric
     part; ``X - m I`` is positive semidefinite, and the nearest such matrix to ``S - m I`` clips
     its eigenvalues at 0. So ``X = V max(lambda, m) V^T`` with ``S = V diag(lambda) V^T``. A
-    matrix whose eigenvalues are already above the floor is returned as its symmetric part
-    (idempotent).
+    matrix whose eigenvalues are already above the floor (by half the margin) is returned as its
+    symmetric part (idempotent: a result passes again unchanged).
     """
     K = stiffness_matrix(K)
     m = float(min_eigenvalue)
@@ -95,11 +108,15 @@ def nearest_positive_definite(K: ArrayLike, min_eigenvalue: float = 0.0
 
 def _eigenvalues_clipped(S: FloatArray, eigenvalues: FloatArray, vectors: FloatArray,
                          floor: float) -> FloatArray:
-    """``S`` (symmetric, ``S = V diag(eigenvalues) V^T``) with its eigenvalues clipped below
-    at ``floor``; ``S`` itself when none is below."""
-    if eigenvalues[0] >= floor:
+    """``S`` (symmetric, ``S = V diag(eigenvalues) V^T``, ascending) with its eigenvalues clipped
+    below at ``floor + EIGENVALUE_MARGIN |X|_2`` (``|X|_2 = max(largest eigenvalue, floor)``,
+    the size of the result, which sets the rounding of its eigenvalues); ``S`` itself when none
+    is below ``floor`` plus half that margin (so that a result, whose eigenvalues come out within
+    rounding of the clip, passes a second time unchanged)."""
+    margin = EIGENVALUE_MARGIN * max(float(eigenvalues[-1]), floor)  # |result|_2
+    if eigenvalues[0] >= floor + 0.5 * margin:
         return S
-    X = (vectors * np.maximum(eigenvalues, floor)) @ vectors.T
+    X = (vectors * np.maximum(eigenvalues, floor + margin)) @ vectors.T
     return 0.5 * (X + X.T)
 
 

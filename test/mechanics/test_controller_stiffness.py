@@ -11,11 +11,17 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 from support import REPO
+from support.eigenvalues import (
+    assert_eigenvalues_at_floor,
+    assert_eigenvalues_at_least,
+    eigenvalue_rounding,
+)
 
 from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.geometry.transforms import adjoint
 from tensegrity_stiffness.geometry.transforms import pose_vector_to_transform as pose_to_transform
 from tensegrity_stiffness.mechanics.controller_stiffness import (
+    EIGENVALUE_MARGIN,
     LAYOUTS,
     Conditioner,
     LowPass,
@@ -144,6 +150,7 @@ def test_a_matrix_whose_conditioning_overflows_is_refused(K):
         Conditioner(min_eigenvalue=1e-3, scale=1e12).apply(np.eye(6) * 1e300)
     tiny = conditioner.apply(np.full((6, 6), 5e-324))
     np.testing.assert_allclose(np.linalg.eigvalsh(tiny.matrix), 1e-3)
+    assert_eigenvalues_at_floor(tiny.matrix, 1e-3)
 
 
 # --------------------------------------------------------------------------- projection
@@ -182,7 +189,7 @@ def test_projection_is_the_nearest_against_an_optimiser():
         floor = [0.0, 0.1, 1.0][case % 3]
         X, distance = nearest_positive_definite(K, floor)
         assert np.array_equal(X, X.T)
-        assert np.linalg.eigvalsh(X).min() >= floor - 1e-12 * np.abs(K).max()
+        assert_eigenvalues_at_floor(X, floor)
         assert distance == pytest.approx(np.linalg.norm(X - K), rel=1e-12)
         optimised = _optimised_distance(K, floor, rng)
         # nothing feasible is closer; the optimiser gets there too (the check is not vacuous)
@@ -230,8 +237,38 @@ def test_conditioner_reports_an_unstable_joint_and_outputs_spd(model):
     assert not out.input_positive_definite
     assert out.input_min_eigenvalue < 0
     assert out.projection_distance > 0 and out.relative_projection > 0
-    assert np.linalg.eigvalsh(out.matrix).min() >= 0.5 - 1e-9
+    assert_eigenvalues_at_floor(out.matrix, 0.5)
     assert np.array_equal(out.matrix, out.matrix.T)
+
+
+def test_projection_floor_holds_as_a_subscriber_checks_it():
+    """Over 3,000 seeded matrices of sizes 1e-3 .. 1e6 (indefinite; the smallest eigenvalue above,
+    at or just below the floor; large ones beside a small floor, where eps |K| is well above
+    1e-9 of the floor): eigvalsh of the result is >= the floor with no tolerance, within the
+    margin and rounding of it where it clipped, and a second pass returns the result unchanged."""
+    rng = np.random.default_rng(43)
+    clipped = 0
+    for case in range(3000):
+        scale = 10.0 ** rng.uniform(-3.0, 6.0)
+        floor = [0.0, 1e-3, 1.0][case % 3]
+        Q, _ = np.linalg.qr(rng.normal(size=(6, 6)))
+        eigenvalues = rng.normal(scale=scale, size=6)
+        if case % 2:  # the smallest eigenvalue within rounding of the floor
+            eigenvalues[0] = floor + rng.normal(scale=eigenvalue_rounding(np.diag(eigenvalues)))
+        K = (Q * eigenvalues) @ Q.T
+        X, _ = nearest_positive_definite(K, floor)
+        assert np.array_equal(X, X.T)
+        assert_eigenvalues_at_least(X, floor)
+        if np.linalg.eigvalsh(symmetric_part(K)).min() < floor:
+            assert_eigenvalues_at_floor(X, floor)
+            clipped += 1
+        again, moved = nearest_positive_definite(X, floor)
+        assert np.array_equal(again, X) and moved == 0.0, case
+        out = Conditioner(pose=[0.02, 0, 0.01, 0, 0, math.sin(0.3), math.cos(0.3)],
+                          min_eigenvalue=floor).apply(K)
+        assert_eigenvalues_at_least(out.matrix, floor)
+    assert clipped > 1500  # the floor is what is judged, not only matrices far above it
+    assert EIGENVALUE_MARGIN < 1e-13
 
 
 # --------------------------------------------------------------------------- clamps, layouts

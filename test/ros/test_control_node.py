@@ -42,7 +42,8 @@ from tensegrity_stiffness.mechanics.design import design_rest_lengths
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.ros import conversions
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+# serial: the three-process loop holds its controller's deadlines only with nothing beside it
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.serial]
 
 JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
 MAX_RATE = 0.05

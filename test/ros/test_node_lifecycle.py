@@ -44,6 +44,7 @@ def wait_ready(proc: NodeProcess, timeout: float = 30.0) -> None:
         time.sleep(0.05)
 
 
+@pytest.mark.serial  # stopped within STOP_BOUND_S
 @pytest.mark.parametrize('to_group', [False, True], ids=['node', 'group'])
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
 def test_signal_stops_the_node_cleanly(sig: signal.Signals, to_group: bool) -> None:
@@ -171,6 +172,7 @@ def _call_async(ros: RosClient, client, request) -> tuple[threading.Event, list]
     return done, box
 
 
+@pytest.mark.serial  # the worker's solve budget and 'at once' are wall time
 def test_a_killed_worker_fails_its_solve_at_once_and_the_next_one_succeeds(slow_solver_node):
     proc, ros, client = slow_solver_node
     worker = proc.worker_pid()
@@ -191,6 +193,7 @@ def test_a_killed_worker_fails_its_solve_at_once_and_the_next_one_succeeds(slow_
     assert proc.alive()
 
 
+@pytest.mark.serial  # replaced within 4 s
 def test_a_worker_killed_while_idle_is_replaced_before_the_next_request(slow_solver_node):
     proc, ros, client = slow_solver_node
     worker = proc.worker_pid()
@@ -203,6 +206,7 @@ def test_a_worker_killed_while_idle_is_replaced_before_the_next_request(slow_sol
     assert np.isfinite(response.screw).all()
 
 
+@pytest.mark.serial  # an overrun of the solve's wall-time budget
 def test_a_stopped_worker_is_an_overrun_and_is_replaced(slow_solver_node):
     proc, ros, client = slow_solver_node
     worker = proc.worker_pid()

@@ -184,6 +184,7 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')  # utime + stime
 
 
+@pytest.mark.serial  # ~240 MB in flight through the loopback: nothing beside it
 def test_oversized_arrays_are_rejected_at_once(node, model, record_property):
     """10**6-element arrays on ~/screw and ~/rest_lengths: nothing published, the node alive,
     no memory kept, the next valid input answered, the warning throttled."""
@@ -340,6 +341,7 @@ def stream_node():
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # a 1 kHz stream on 2 cores: nothing beside it
 def test_no_torn_state_under_parameter_changes_at_1khz(stream_node, model, record_property):
     """Screws at 1 kHz while the whole joint (geometry, k, rest lengths, force law) switches
     between sets A and B and rejected changes come in between: every output (K, wrench,
@@ -491,6 +493,7 @@ def test_rejected_parameter_changes_keep_the_old_set(node, model):
 
 
 @pytest.mark.slow
+@pytest.mark.serial  # answers within a solve's 50 ms: nothing beside it
 def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_property):
     """A burst of equilibrium requests that each use up the solve's time budget (50 ms) while
     screws stream at 1 kHz: every screw is answered, and the answers keep coming *while* each
