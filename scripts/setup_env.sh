@@ -143,6 +143,27 @@ build_hash="$( {
     | LC_ALL=C sort
 } | sha)"
 
+# colcon_build OUT BUILD_TESTING colcon-args...: colcon build in the venv's environment (a
+# subshell: venv tools first, the wheels' ament prefix for cmake and ament_index), output to OUT.
+# The venv python is passed to cmake so that rosidl_generator_py builds against the venv's numpy
+# and this interpreter's headers.
+colcon_build() {
+  local out="$1" testing="$2"
+  shift 2
+  (
+    export VIRTUAL_ENV="$VENV"
+    export PATH="$VENV/bin:$PATH"
+    export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
+    export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
+    export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
+    unset PYTHONPATH
+    colcon build "$@" --event-handlers console_cohesion+ status- \
+      --cmake-args "-DBUILD_TESTING=$testing" \
+      "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
+      >"$out" 2>&1
+  )
+}
+
 # tf2_msgs (the /tf message) is not on PyPI: where nothing provides it, build it from its
 # definition (cmake/tf2_msgs/) into install/tf2_msgs, beside the package, so that every node
 # publishes its frames (a stock ROS install keeps its own).
@@ -165,18 +186,8 @@ build_tf2_msgs() {
   sed "s|@FIXES@|$REPO/cmake/include_directory_fixes.cmake|" "$TF2_DEFINITION/CMakeLists.txt.in" \
     >"$ws/src/tf2_msgs/CMakeLists.txt"
   log "colcon build tf2_msgs from its definition ($TF2_DEFINITION) into $TF2_PREFIX"
-  (
-    export VIRTUAL_ENV="$VENV"
-    export PATH="$VENV/bin:$PATH"
-    export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
-    export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
-    unset PYTHONPATH
-    colcon build --base-paths "$ws/src" --build-base "$ws/build" --install-base install \
-      --event-handlers console_cohesion+ status- \
-      --cmake-args -DBUILD_TESTING=OFF \
-      "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
-      >"$out" 2>&1
-  ) || {
+  colcon_build "$out" OFF --base-paths "$ws/src" --build-base "$ws/build" --install-base install \
+    || {
     cat "$out" >&2
     log "colcon build of tf2_msgs FAILED (output above)"
     exit 1
@@ -208,23 +219,7 @@ else
   mkdir -p build log
   BUILD_OUT="log/setup_env_colcon_build.txt"
   printf '%s\n' "$BUILD_ORIGIN" >build/.tensegrity_build_origin
-  # Environment for the build only (subshell): venv tools first, the wheels' ament prefix for
-  # cmake and ament_index. The venv python is passed to cmake so that rosidl_generator_py builds
-  # against the venv's numpy and this interpreter's headers.
-  (
-    export VIRTUAL_ENV="$VENV"
-    export PATH="$VENV/bin:$PATH"
-    export AMENT_PREFIX_PATH="$VENV${AMENT_PREFIX_PATH:+:$AMENT_PREFIX_PATH}"
-    export CMAKE_PREFIX_PATH="$VENV${CMAKE_PREFIX_PATH:+:$CMAKE_PREFIX_PATH}"
-    export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
-    unset PYTHONPATH
-    colcon build --symlink-install \
-      --base-paths . \
-      --event-handlers console_cohesion+ status- \
-      --cmake-args -DBUILD_TESTING=ON \
-      "-DPython3_EXECUTABLE=$VENV/bin/python" "-DPYTHON_EXECUTABLE=$VENV/bin/python" \
-      >"$BUILD_OUT" 2>&1
-  ) || {
+  colcon_build "$BUILD_OUT" ON --symlink-install --base-paths . || {
     cat "$BUILD_OUT" >&2
     log "colcon build FAILED (output above; full logs in log/latest_build/)"
     exit 1

@@ -100,10 +100,15 @@ def _cmd_new_structure(args: argparse.Namespace) -> int:
     document, what = _structure_document(args)
     made = ('the links at the config\'s screws' if args.template == 'from-config' else
             'rest lengths: an exact equilibrium at the pretension')
-    header = [f'Structure written by {PROG} new-config --template {args.template}: {what}.',
-              f'docs/structures.md; {made}.', f'Check it with: {PROG} structure check FILE']
-    if args.out:
-        path = config.write_yaml(args.out, document, header)
+    return _write_document(args.out, document, [
+        f'Structure written by {PROG} new-config --template {args.template}: {what}.',
+        f'docs/structures.md; {made}.', f'Check it with: {PROG} structure check FILE'])
+
+
+def _write_document(out: str | None, document: dict[str, Any], header: list[str]) -> int:
+    """``document`` with ``header`` to the file ``out``, or to standard output."""
+    if out:
+        path = config.write_yaml(out, document, header)
         print(f'{PROG}: wrote {path}', file=sys.stderr)
     else:
         sys.stdout.write(config.yaml_text(document, header))
@@ -116,16 +121,11 @@ def _cmd_new_config(args: argparse.Namespace) -> int:
         return _cmd_new_structure(args)
     document = templates.starter_config(_choices(args), args.spine or 0, args.spacing)
     joint = config.parameters(document)['joint']
-    header = [f'Starter config written by {PROG} new-config (template {args.template}).',
-              f"Template {args.template}, {len(joint['string_names'])} strings; initial_screw: "
-              'its unloaded equilibrium (docs/your_joint.md).',
-              f'Check it with: {PROG} check-config FILE']
-    if args.out:
-        path = config.write_yaml(args.out, document, header)
-        print(f'{PROG}: wrote {path}', file=sys.stderr)
-    else:
-        sys.stdout.write(config.yaml_text(document, header))
-    return EXIT_OK
+    return _write_document(args.out, document, [
+        f'Starter config written by {PROG} new-config (template {args.template}).',
+        f"Template {args.template}, {len(joint['string_names'])} strings; initial_screw: "
+        'its unloaded equilibrium (docs/your_joint.md).',
+        f'Check it with: {PROG} check-config FILE'])
 
 
 def _print_check(path: Path, report: dict[str, Any]) -> None:
