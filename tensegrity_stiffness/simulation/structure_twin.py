@@ -56,7 +56,7 @@ from tensegrity_stiffness.simulation.twin import (
 from tensegrity_stiffness.structures.elements import WORLD
 from tensegrity_stiffness.structures.equilibrium import structure_loads
 from tensegrity_stiffness.structures.mjcf import StructureMjcfOptions, structure_mjcf
-from tensegrity_stiffness.structures.structure import Structure, StructureState
+from tensegrity_stiffness.structures.structure import Structure, StructureState, cross3
 
 __all__ = [
     'DEFAULT_SETTLE_SPEED',
@@ -222,6 +222,9 @@ class StructureSimulation:
                 self._contact_node[geom] = n
         self._ground_geom = mj.mj_name2id(m, mj.mjtObj.mjOBJ_GEOM, 'ground')
         self._loads = np.zeros((structure.n_bodies, 6))
+        self._loaded = False
+        self._xfrc_set = False
+        self._moving = False
         self._pushes: list[_Push] = []
         self._limit_force = np.zeros(structure.n_strings)
         self._acceleration_time = math.nan
@@ -257,7 +260,7 @@ class StructureSimulation:
     @property
     def moving(self) -> bool:
         """True while a motor is still on its way to its target."""
-        return not np.array_equal(self._rest, self._target)
+        return self._moving
 
     def poses(self) -> FloatArray:
         """(N, 4, 4) every body's pose in the world (config order), MuJoCo's."""
@@ -346,6 +349,7 @@ class StructureSimulation:
         if rate is not None and not (isinstance(rate, (int, float)) and rate > 0.0):
             raise ValueError(f'rate must be > 0 (m/s) or None, got {rate!r}')
         self._target = rest.copy()
+        self._moving = not np.array_equal(self._rest, self._target)
         self._rate = self.options.rest_length_rate if rate is None else float(rate)
         if self._rate is None or self._rate == math.inf:
             self._write_rest(rest)
@@ -353,6 +357,7 @@ class StructureSimulation:
 
     def _write_rest(self, rest: FloatArray) -> None:
         self._rest = rest.copy()
+        self._moving = not np.array_equal(self._rest, self._target)
         self.model.tendon_lengthspring[:, 1] = rest
         lmax = rest + self._stretch
         self.model.tendon_range[self._limited, 1] = lmax[self._limited]
@@ -372,6 +377,7 @@ class StructureSimulation:
             except ValueError as exc:
                 raise ValueError(f'load on {self.structure.body_names[i]}: {exc}') from None
         self._loads = W.copy()
+        self._loaded = bool(np.any(W[self._free]))
         self._apply_loads()
 
     @property
@@ -392,19 +398,25 @@ class StructureSimulation:
 
     def _apply_loads(self) -> None:
         """The loads and pushes as ``xfrc_applied`` at each body's centre of mass (module
-        docstring), at the current pose; ended pushes dropped."""
-        now = self.data.time
-        self._pushes = [p for p in self._pushes if p.until > now + 1e-12]
+        docstring), at the current pose; ended pushes dropped (nothing to do without any)."""
+        if self._pushes:
+            now = self.data.time
+            self._pushes = [p for p in self._pushes if p.until > now + 1e-12]
+        xfrc = self.data.xfrc_applied
+        if not self._pushes and not self._loaded:
+            if self._xfrc_set:
+                xfrc[:] = 0.0
+                self._xfrc_set = False
+            return
         W = self._loads.copy()
         for p in self._pushes:
             W[p.body] += p.wrench
-        c = self.data.xipos[self._bodies]
-        xfrc = self.data.xfrc_applied
+        bodies = self._bodies[self._free]
+        f = W[self._free, :3]
         xfrc[:] = 0.0
-        for i in self._free:
-            f = W[i, :3]
-            xfrc[self._bodies[i], :3] = f
-            xfrc[self._bodies[i], 3:] = W[i, 3:] - np.cross(c[i], f)
+        xfrc[bodies, :3] = f
+        xfrc[bodies, 3:] = W[self._free, 3:] - cross3(self.data.xipos[bodies], f)
+        self._xfrc_set = True
 
     # ------------------------------------------------------------------ stepping
     def _forward(self) -> None:
