@@ -27,6 +27,7 @@ import math
 import sys
 import threading
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -98,7 +99,10 @@ class StructureSimNode(Node):
         self._settings = settings
         values = settings.values
         structure = settings.structure
-        self._sim = StructureSimulation(structure, settings.options,
+        # The node checks every load and push against its own limits.* (changeable at run
+        # time): the twin's own bound would only repeat that check.
+        self._sim = StructureSimulation(structure, replace(settings.options, max_force=math.inf,
+                                                           max_moment=math.inf),
                                         poses=resting_poses(structure))
         self._period = settings.options.timestep
         self._real_time = values['sim.real_time']

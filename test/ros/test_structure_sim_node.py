@@ -171,3 +171,42 @@ def test_a_push_moves_the_twin(twin):
     twin['push_pub'].publish(wrench_stamped([0.0, 0.0, 3.0, 0, 0, 0], frame_id='bar1'))
     twin['poses'].wait_until(
         lambda m: np.abs(poses_of(m)[1, :3] - before[1, :3]).max() > 1e-3, timeout=10.0)
+
+
+@pytest.mark.slow
+def test_the_node_rolls_the_six_bar_with_the_gait(tmp_path):
+    """gait.enabled: the node plans and runs one roll; /diagnostics shows the phases and the
+    contact nodes of the planned landing face (the library's plan, computed here too)."""
+    from tensegrity_stiffness.simulation.structure_gait import plan_roll_step
+
+    structure = Structure.from_yaml(config.example_config_path('six_bar.yaml'))
+    step = plan_roll_step(structure)
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    gait:\n      enabled: true\n')
+    ns = unique_namespace('structure_roll')
+    proc = NodeProcess(ns, params, executable='structure_sim_node')
+    ros = RosClient('structure_roll_test')
+    try:
+        diagnostics = ros.subscribe(DiagnosticArray, '/diagnostics')
+
+        def values(msg):
+            for s in msg.status:
+                if s.name == 'structure_sim_node: structure twin':
+                    return {kv.key: kv.value for kv in s.values}
+            return None
+
+        phases = set()
+
+        def rolled(msg):
+            v = values(msg)
+            if v is None:
+                return False
+            phases.add(v['gait phase'])
+            return v['gait steps done'] == '1'
+
+        msg = diagnostics.wait_until(rolled, timeout=90.0)
+        assert {'tip', 'recover'} <= phases
+        assert sorted(values(msg)['contact nodes'].split()) == sorted(step.landing_face)
+    finally:
+        ros.close()
+        assert proc.stop() == 0, proc.log()[-3000:]
