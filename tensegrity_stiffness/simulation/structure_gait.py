@@ -35,6 +35,7 @@ from scipy.spatial import ConvexHull
 
 from tensegrity_stiffness.geometry.screw import exp_so3
 from tensegrity_stiffness.simulation.structure_twin import StructureSimulation
+from tensegrity_stiffness.structures.elements import WORLD
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
 from tensegrity_stiffness.structures.structure import Structure
 
@@ -78,7 +79,7 @@ def face_across(structure: Structure, poses: ArrayLike, face: tuple[str, ...],
                 edge: tuple[str, str]) -> tuple[str, str, str]:
     """The face of the convex hull of the body nodes at ``poses`` that shares ``edge`` with
     ``face`` (the face the structure lands on when it rolls over that edge), in node order."""
-    names = [n for n in structure.node_names if not n.startswith('world.')]
+    names = [n for n in structure.node_names if not n.startswith(f'{WORLD}.')]
     x = structure.node_positions(structure.transforms(poses))[:len(names)]
     hull = ConvexHull(x)
     want = {names.index(edge[0]), names.index(edge[1])}
