@@ -189,9 +189,9 @@ def structure_sim_usage() -> str:
 
 
 def live_line(time: float, com: np.ndarray, contacts: list[str], slack: list[str],
-              phase: str, factor: float) -> str:
+              phase: str, factor: float, missed: int = 0) -> str:
     """One line of the twin's state: simulated time, centre of mass (m), contact nodes, slack
-    strings, the gait's phase and the real-time factor."""
+    strings, the gait's phase, the real-time factor and the steps missed so far."""
     return (f't {time:7.2f} s  com [{com[0]:+.3f} {com[1]:+.3f} {com[2]:+.3f}] m  contacts '
             f'{",".join(contacts) or "-"}  slack {",".join(slack) or "-"}  gait {phase}  '
-            f'rtf {factor:.2f}')
+            f'rtf {factor:.2f}  missed {missed}')

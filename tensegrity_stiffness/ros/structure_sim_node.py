@@ -388,7 +388,8 @@ class StructureSimNode(Node):
         contacts = sim.contact_nodes()
         slack = [name for name, s in zip(sim.structure.string_names, sim.slack(), strict=True)
                  if s]
-        line = live_line(sim.time, com, contacts, slack, self.gait_phase, factor)
+        line = live_line(sim.time, com, contacts, slack, self.gait_phase, factor,
+                         self.missed_steps)
         self._state_line = line
         level = 'WARN' if (self.missed_steps and self._real_time) or slack else 'OK'
         values = [('centre of mass', ' '.join(f'{v:.6g}' for v in com)),

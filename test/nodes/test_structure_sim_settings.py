@@ -67,6 +67,6 @@ def test_usage_and_live_line():
     usage = structure_sim_usage()
     assert usage.startswith('usage: structure_sim_node')
     assert all(spec.name in usage for spec in STRUCTURE_SIM_PARAMETERS)
-    line = live_line(1.5, [0.01, -0.02, 0.125], ['x1.a', 'y2.a'], [], 'tip', 1.0)
+    line = live_line(1.5, [0.01, -0.02, 0.125], ['x1.a', 'y2.a'], [], 'tip', 1.0, 3)
     assert 'com [+0.010 -0.020 +0.125] m' in line and 'contacts x1.a,y2.a' in line
-    assert 'slack -' in line and 'gait tip' in line
+    assert 'slack -' in line and 'gait tip' in line and line.endswith('missed 3')
