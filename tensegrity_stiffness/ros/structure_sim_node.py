@@ -56,6 +56,7 @@ from tensegrity_stiffness.nodes.structure_sim_node import (
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
+from tensegrity_stiffness.ros.runtime.pacing import wait_until
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.topics import (
     LATCHED_QOS,
@@ -321,11 +322,7 @@ class StructureSimNode(Node):
             while not self._stop.is_set() and self.context.ok():
                 n = 1
                 if self._real_time:
-                    deadline = start + (self.steps + 1) * self._period
-                    now = time.perf_counter()
-                    if deadline > now:
-                        time.sleep(deadline - now)
-                        now = time.perf_counter()
+                    now = wait_until(start + (self.steps + 1) * self._period)
                     due = int((now - start) / self._period) - self.steps
                     if due > 1:
                         self.missed_steps += due - 1
