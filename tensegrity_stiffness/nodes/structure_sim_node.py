@@ -1,0 +1,197 @@
+"""The ROS-free half of ``structure_sim_node`` (the MuJoCo twin of a structure over ROS 2,
+:mod:`tensegrity_stiffness.ros.structure_sim_node`): its parameter table, the settings built
+from it, the labels of its arrays, its ``--help`` text and its live line.
+
+The structure comes from ``structure.file`` (a YAML file with a ``structure:`` section: a
+structure file of ``new-config --template``, or a ROS parameter file whose
+``<node>: ros__parameters:`` holds that section) or, without one, the packaged example
+``structure.example`` (``config/examples/``, default ``six_bar.yaml``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.nodes.parameters import COMMON_PARAMETERS, ParameterSpec
+from tensegrity_stiffness.simulation.structure_twin import StructureTwinOptions
+from tensegrity_stiffness.simulation.twin import (
+    DEFAULT_JOINT_DAMPING,
+    DEFAULT_MAX_FORCE,
+    DEFAULT_MAX_MOMENT,
+    DEFAULT_TENDON_DAMPING,
+    SensorNoise,
+)
+from tensegrity_stiffness.structures.structure import Structure
+
+NODE_NAME = 'structure_sim_node'
+#: The packaged example simulated without ``structure.file``.
+DEFAULT_EXAMPLE = 'six_bar.yaml'
+#: Sensor kinds with a noise parameter (the fields of :class:`~.twin.SensorNoise`).
+STRUCTURE_NOISE_KINDS = ('lengths', 'tensions', 'encoders', 'gyro', 'accelerometer', 'markers')
+_NOISE_UNITS = {'lengths': 'm', 'tensions': 'N', 'encoders': 'm', 'gyro': 'rad/s',
+                'accelerometer': 'm/s^2', 'markers': 'm'}
+#: Labels of the published arrays.
+LENGTHS_LABEL = 'measured string lengths [m], string order of the structure'
+TENSIONS_LABEL = 'measured string tensions (load cells) [N], string order of the structure'
+ENCODERS_LABEL = 'measured rest lengths (motor encoders) [m], string order of the structure'
+MARKERS_LABEL = 'measured marker positions [m] x y z per body node, node order of the structure'
+#: The gait's phases shown when no roll runs.
+IDLE = 'idle'
+
+STRUCTURE_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
+    ParameterSpec('structure.file', 'string', '',
+                  'YAML file with the structure: section (empty: structure.example)',
+                  read_only=True),
+    ParameterSpec('structure.example', 'string', DEFAULT_EXAMPLE,
+                  'packaged example of config/examples simulated without structure.file',
+                  read_only=True),
+    ParameterSpec('sim.rate', 'double', 1000.0,
+                  'simulation rate, Hz (the MuJoCo time step is 1 / rate)', read_only=True,
+                  range=(100.0, 100_000.0)),
+    ParameterSpec('sim.real_time', 'bool', True,
+                  'true: paced by the wall clock; false: as fast as possible, publishing /clock',
+                  read_only=True),
+    ParameterSpec('sim.publish_every', 'int', 10, 'publish every this many steps',
+                  range=(1, 1_000_000)),
+    ParameterSpec('sim.joint_damping', 'double', DEFAULT_JOINT_DAMPING,
+                  'damping of each free-joint dof against the world, N s/m and N m s/rad',
+                  read_only=True, range=(0.0, 1e6)),
+    ParameterSpec('sim.string_damping', 'double', DEFAULT_TENDON_DAMPING,
+                  'damping of the strings whose structure gives none, N s/m', read_only=True,
+                  range=(0.0, 1e6)),
+    ParameterSpec('sim.rest_length_rate', 'double', 0.02,
+                  'motor speed: largest change of a rest length per second, m/s (0: at once)',
+                  range=(0.0, 1e3)),
+    *(ParameterSpec(f'noise.{kind}', 'double', 0.0,
+                    f'standard deviation of the simulated {kind} sensor, {_NOISE_UNITS[kind]}',
+                    range=(0.0, 1e3)) for kind in STRUCTURE_NOISE_KINDS),
+    ParameterSpec('noise.seed', 'int', 0, 'seed of the sensor noise', read_only=True,
+                  range=(0, 2**31 - 1)),
+    ParameterSpec('markers.enabled', 'bool', False,
+                  'publish ~/measured_markers (every body node in the world)'),
+    ParameterSpec('push.duration', 'double', 0.1,
+                  'how long a ~/push wrench acts, s', range=(1e-4, 100.0)),
+    ParameterSpec('gait.enabled', 'bool', False,
+                  'roll: plan and run the scripted gait (docs/structures.md) from the start',
+                  read_only=True),
+    ParameterSpec('gait.steps', 'int', 1, 'faces to roll over', read_only=True,
+                  range=(1, 1000)),
+    ParameterSpec('gait.direction', 'double_array', [1.0, 0.0, 0.0],
+                  'the direction of the first roll in the ground plane (world)',
+                  read_only=True),
+    ParameterSpec('limits.max_force', 'double', DEFAULT_MAX_FORCE,
+                  'a load or push with a larger force is rejected as absurd, N',
+                  range=(0.0, 1e9)),
+    ParameterSpec('limits.max_moment', 'double', DEFAULT_MAX_MOMENT,
+                  'a load or push with a larger moment (about the world origin) is rejected, N m',
+                  range=(0.0, 1e9)),
+    ParameterSpec('limits.rest_length_range', 'double_array', None,
+                  '[min, max] of the rest lengths the twin takes, m (empty: each string\'s '
+                  'physical range)', read_only=True),
+    ParameterSpec('frames.world', 'string', 'world', 'frame_id of the poses and markers'),
+    *(s for s in COMMON_PARAMETERS if s.name in ('qos.depth', 'limits.max_array_length')),
+)
+
+
+@dataclass(frozen=True)
+class StructureSimSettings:
+    """Everything ``structure_sim_node`` needs: the ``structure`` (and where it came from),
+    the twin's ``options``, the ``noise``, the world frame, and the checked ``values``."""
+
+    structure: Structure
+    source: str
+    options: StructureTwinOptions
+    noise: SensorNoise
+    world_frame: str
+    values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def gait_direction(self) -> np.ndarray:
+        """(3,) the first roll's direction."""
+        return np.array(self.values['gait.direction'], dtype=float)
+
+
+def structure_source(values: Mapping[str, Any]) -> Path:
+    """The structure file of ``structure.file`` or the packaged ``structure.example``;
+    ValueError naming the parameter."""
+    path = values['structure.file'].strip()
+    if path:
+        if not Path(path).is_file():
+            raise ValueError(f'structure.file: no file {path!r}')
+        return Path(path)
+    try:
+        return config.example_config_path(values['structure.example'])
+    except ValueError as exc:
+        raise ValueError(f'structure.example: {exc}') from None
+
+
+def structure_sim_settings(values: Mapping[str, Any], generation: int = 0
+                           ) -> StructureSimSettings:
+    """Validate a whole parameter set of ``structure_sim_node``; ValueError names the bad field
+    (``generation`` for symmetry with the other nodes' builders)."""
+    checked = {spec.name: spec.check(values[spec.name]) for spec in STRUCTURE_SIM_PARAMETERS}
+    source = structure_source(checked)
+    try:
+        structure = Structure.from_yaml(source)
+    except ValueError as exc:
+        raise ValueError(f'structure {source}: {exc}') from None
+    if structure.force_law != 'hooke':
+        raise ValueError(f"structure {source}: the twin simulates Hooke's law only (force_law: "
+                         f'{structure.force_law})')
+    if not checked['frames.world'].strip():
+        raise ValueError('frames.world must not be empty')
+    direction = checked['gait.direction']
+    if len(direction) != 3 or not any(direction):
+        raise ValueError(f'gait.direction must be 3 values, not all zero, got {direction}')
+    bounds = checked['limits.rest_length_range']
+    if bounds and (len(bounds) != 2 or not 0.0 < bounds[0] < bounds[1]):
+        raise ValueError(f'limits.rest_length_range must be [min, max] with 0 < min < max, got '
+                         f'{bounds}')
+    rate = checked['sim.rest_length_rate']
+    options = StructureTwinOptions(
+        timestep=1.0 / checked['sim.rate'], joint_damping=checked['sim.joint_damping'],
+        string_damping=checked['sim.string_damping'],
+        rest_length_rate=rate if rate > 0.0 else None,
+        rest_length_range=(bounds[0], bounds[1]) if bounds else None,
+        max_force=checked['limits.max_force'], max_moment=checked['limits.max_moment'])
+    noise = SensorNoise(**{kind: checked[f'noise.{kind}'] for kind in STRUCTURE_NOISE_KINDS})
+    return StructureSimSettings(structure, str(source), options, noise, checked['frames.world'],
+                                values=checked)
+
+
+def loads_label(structure: Structure) -> str:
+    """The label of ``~/loads``: 6 values per body."""
+    return (f'loads [fx fy fz mx my mz] per body in the world about its origin [N, N m], body '
+            f'order: {" ".join(structure.body_names)}')
+
+
+def structure_sim_usage() -> str:
+    """The ``--help`` text of ``structure_sim_node``."""
+    names = '\n'.join(f'  {s.name} ({s.type}, default {s.default!r}): {s.description}'
+                      for s in STRUCTURE_SIM_PARAMETERS)
+    return (f'usage: {NODE_NAME} [-h] [--ros-args [--params-file FILE] [-p NAME:=VALUE ...] '
+            "[-r '~/TOPIC:=/OTHER' ...] [-r __ns:=/NAMESPACE]]\n\n"
+            f'{NODE_NAME}, a ROS 2 node of the tensegrity_stiffness package. The MuJoCo twin '
+            'of any structure (docs/structures.md): poses, string lengths, load cells, motor '
+            'encoders, an IMU per bar; rest-length commands at the motors\' rate; loads and '
+            'pushes; the scripted roll.\n\n'
+            'Start it (ros2 run finds the same executable):\n'
+            f'  ros2 run tensegrity_stiffness {NODE_NAME} --ros-args -p '
+            'structure.example:=three_bar.yaml\n\n'
+            'options:\n  -h, --help  print this text and exit, without starting the node\n\n'
+            f'Parameters:\n{names}\n')
+
+
+def live_line(time: float, com: np.ndarray, contacts: list[str], slack: list[str],
+              phase: str, factor: float, missed: int = 0) -> str:
+    """One line of the twin's state: simulated time, centre of mass (m), contact nodes, slack
+    strings, the gait's phase, the real-time factor and the steps missed so far."""
+    return (f't {time:7.2f} s  com [{com[0]:+.3f} {com[1]:+.3f} {com[2]:+.3f}] m  contacts '
+            f'{",".join(contacts) or "-"}  slack {",".join(slack) or "-"}  gait {phase}  '
+            f'rtf {factor:.2f}  missed {missed}')

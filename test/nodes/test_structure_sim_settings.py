@@ -1,0 +1,72 @@
+"""The ROS-free settings of structure_sim_node: the structure from structure.file or the packaged
+example, the twin's options and noise from the table, refusals naming the parameter."""
+
+import pytest
+
+from tensegrity_stiffness import config
+from tensegrity_stiffness.nodes.parameters import defaults
+from tensegrity_stiffness.nodes.structure_sim_node import (
+    STRUCTURE_SIM_PARAMETERS,
+    live_line,
+    structure_sim_settings,
+    structure_sim_usage,
+)
+
+
+def values(**changes):
+    v = defaults(STRUCTURE_SIM_PARAMETERS)
+    v.update({k.replace('__', '.'): x for k, x in changes.items()})
+    return v
+
+
+def test_the_default_is_the_packaged_six_bar():
+    settings = structure_sim_settings(values())
+    assert settings.structure.n_bodies == 6 and settings.structure.n_strings == 24
+    assert settings.source.endswith('six_bar.yaml')
+    assert settings.options.timestep == 1e-3
+    assert settings.options.rest_length_rate == 0.02
+    assert settings.world_frame == 'world'
+
+
+def test_a_file_the_rates_the_noise_and_the_range():
+    path = str(config.example_config_path('three_bar.yaml'))
+    settings = structure_sim_settings(values(**{
+        'structure__file': path, 'sim__rate': 500.0, 'sim__rest_length_rate': 0.0,
+        'noise__encoders': 1e-4, 'noise__markers': 2e-3,
+        'limits__rest_length_range': [0.01, 1.0]}))
+    assert settings.structure.n_bodies == 3
+    assert settings.options.timestep == 2e-3
+    assert settings.options.rest_length_rate is None  # 0: at once
+    assert settings.noise.encoders == 1e-4 and settings.noise.markers == 2e-3
+    assert settings.options.rest_length_range == (0.01, 1.0)
+
+
+@pytest.mark.parametrize('changes, match', [
+    ({'structure__file': '/no/such.yaml'}, "structure.file: no file '/no/such.yaml'"),
+    ({'structure__example': 'nine_bar.yaml'}, "structure.example: no packaged example"),
+    ({'gait__direction': [0.0, 0.0, 0.0]}, 'gait.direction'),
+    ({'gait__direction': [1.0, 0.0]}, 'gait.direction'),
+    ({'limits__rest_length_range': [0.5, 0.1]}, 'limits.rest_length_range'),
+    ({'frames__world': ' '}, 'frames.world'),
+    ({'sim__rate': 10.0}, r'sim.rate = 10 is outside'),
+    ({'noise__gyro': -1.0}, 'noise.gyro'),
+])
+def test_bad_settings_name_the_parameter(changes, match):
+    with pytest.raises(ValueError, match=match):
+        structure_sim_settings(values(**changes))
+
+
+def test_a_structure_file_with_an_error_names_the_file(tmp_path):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('structure:\n  bodies: []\n  strings: []\n')
+    with pytest.raises(ValueError, match=f'structure {bad}'):
+        structure_sim_settings(values(structure__file=str(bad)))
+
+
+def test_usage_and_live_line():
+    usage = structure_sim_usage()
+    assert usage.startswith('usage: structure_sim_node')
+    assert all(spec.name in usage for spec in STRUCTURE_SIM_PARAMETERS)
+    line = live_line(1.5, [0.01, -0.02, 0.125], ['x1.a', 'y2.a'], [], 'tip', 1.0, 3)
+    assert 'com [+0.010 -0.020 +0.125] m' in line and 'contacts x1.a,y2.a' in line
+    assert 'slack -' in line and 'gait tip' in line and line.endswith('missed 3')
