@@ -8,9 +8,9 @@
 For each structure (a packaged example) the installed ``structure_node`` runs as its own process.
 This process publishes the bodies' poses on ``~/pose_values`` (7N values, small seeded motions
 about the equilibrium on the ground) at ``--rate`` Hz for ``--seconds``; a controller-like client
-subscribes to ``~/stiffness`` (6N x 6N) and, per message, forms the restoring wrenches ``-K e``
-of a small error. The latency of a set of poses is the time until its ``~/stiffness`` arrives
-(outputs come in input order over reliable QoS; each is matched to its input by value against
+subscribes to ``~/stiffness`` (6N x 6N; ``--output body_wrenches``: the 6N wrenches) and, per
+message, forms the restoring wrenches ``-K e`` of a small error. The latency of a set of poses
+is the time until its output arrives (outputs come in input order over reliable QoS; each is matched to its input by value against
 the library, so a drop cannot shift the pairing). Then the round trip of
 ``~/solve_equilibrium`` (the equilibrium on the ground from the config's start).
 Target (issue 41, the 6-bar): median <= 1 ms at 1 kHz, 0 drops.
@@ -61,8 +61,9 @@ class Controller:
     """The client's ``~/stiffness`` callback: keeps the message and its arrival time and computes
     the restoring wrenches ``-K e`` of a fixed small error."""
 
-    def __init__(self, n: int) -> None:
+    def __init__(self, n: int, output: str) -> None:
         self.n = n
+        self.rows = 6 * n if output == 'stiffness' else n
         self.messages: list[np.ndarray] = []
         self.times: list[float] = []
         self.error = np.tile([1e-4, -2e-4, 1e-4, 1e-3, 0.0, -1e-3], n)
@@ -71,8 +72,8 @@ class Controller:
 
     def __call__(self, msg: Float64MultiArray) -> None:
         now = time.perf_counter()
-        K = np.asarray(msg.data, dtype=np.float64).reshape(6 * self.n, 6 * self.n)
-        self.command = -K @ self.error
+        K = np.asarray(msg.data, dtype=np.float64).reshape(self.rows, -1)
+        self.command = K.ravel()[:6 * self.n] * self.error
         with self._lock:
             self.messages.append(K.ravel().copy())
             self.times.append(now)
@@ -83,20 +84,23 @@ class Controller:
 
 
 def stream(ros: RosClient, base: str, structure: Structure, rate: float, seconds: float,
-           rng: np.random.Generator, loop: str, spin_s: float) -> tuple[list[float], int, int]:
-    """Publish poses at ``rate`` for ``seconds``; returns (latencies, sent, drops)."""
-    controller = Controller(structure.n_bodies)
+           rng: np.random.Generator, loop: str, spin_s: float, output: str
+           ) -> tuple[list[float], int, int]:
+    """Publish poses at ``rate`` for ``seconds``, the client reading ``output``
+    (``stiffness`` or ``body_wrenches``); returns (latencies, sent, drops)."""
+    controller = Controller(structure.n_bodies, output)
     pub = ros.publisher(Float64MultiArray, f'{base}/pose_values')
     ros.wait_for_subscribers(pub)
-    ros.wait_for_publishers(f'{base}/stiffness')
+    ros.wait_for_publishers(f'{base}/{output}')
     eq = solve_structure_equilibrium(structure)
     n = int(rate * seconds)
     poses = [[pose_vector(twist_exp(d) @ P) for d, P in zip(
         rng.normal(scale=[0.002] * 3 + [0.01] * 3, size=(structure.n_bodies, 6)), eq.poses,
         strict=True)] for _ in range(n)]
-    expected = [structure.evaluate(np.array(p)).stiffness.ravel() for p in poses]
+    expected = [getattr(structure.evaluate(np.array(p)), 'stiffness' if output == 'stiffness'
+                        else 'wrenches').ravel() for p in poses]
     messages = [Float64MultiArray(data=np.ravel(p).tolist()) for p in poses]
-    with receiving(ros, [(Float64MultiArray, f'{base}/stiffness', controller)], loop):
+    with receiving(ros, [(Float64MultiArray, f'{base}/{output}', controller)], loop):
         time.sleep(STARTUP_SETTLE_S)
         with collector_paused():
             sent_at = publish_paced(pub, messages, rate, spin_s, lambda: len(controller))
@@ -132,9 +136,9 @@ def run(name: str, loop: str, spin_s: float, args: argparse.Namespace,
     structure = Structure.from_yaml(example_config_path(name))
     try:
         latencies, sent, drops = stream(ros, base, structure, args.rate, args.seconds, rng,
-                                        loop, spin_s)
+                                        loop, spin_s, args.output)
         print(f'{name} ({structure.n_bodies} bodies), client {loop:<8}: pose_values -> '
-              f'stiffness at {args.rate:.0f} Hz for {args.seconds:.0f} s: sent {sent}, '
+              f'{args.output} at {args.rate:.0f} Hz for {args.seconds:.0f} s: sent {sent}, '
               f'drops {drops}')
         print(latency_summary('  latency', latencies))
         if services:
@@ -155,6 +159,8 @@ def main() -> None:
     parser.add_argument('--seconds', type=float, default=10.0, help='stream duration, s')
     parser.add_argument('--structures', nargs='+', default=['six_bar.yaml'],
                         help='packaged examples (config/examples)')
+    parser.add_argument('--output', choices=['stiffness', 'body_wrenches'],
+                        default='stiffness', help='the output the client reads')
     add_client_arguments(parser)
     parser.add_argument('--calls', type=int, default=20,
                         help='service calls (first structure; 0: none)')

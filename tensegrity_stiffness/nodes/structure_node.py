@@ -24,6 +24,10 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.components import TWIST_NAMES, WRENCH_NAMES
 from tensegrity_stiffness.geometry.errors import WrongLengthError, in_context
+from tensegrity_stiffness.geometry.quaternion import (
+    QUATERNION_UNIT_TOLERANCE,
+    unit_quaternions_to_rotations,
+)
 from tensegrity_stiffness.geometry.screw import hat3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
 from tensegrity_stiffness.nodes.frames import FrameTransform
@@ -171,13 +175,24 @@ def poses_input(frame_id: str, poses: Sequence[Any], world_frame: str, n_bodies:
 
 def pose_values_input(values: FloatArray, structure: Structure) -> FloatArray:
     """The (N, 4, 4) transforms of a ``~/pose_values`` message's 7N finite values
-    ``[x y z qx qy qz qw]`` per body (config order); ValueError on another length or a pose
-    that is not rigid (naming the body: :meth:`Structure.transforms`)."""
+    ``[x y z qx qy qz qw]`` per body (config order), as :meth:`Structure.transforms` reads them
+    (quaternions of unit norm within ``QUATERNION_UNIT_TOLERANCE``, renormalised), in one
+    batch; ValueError on another length or a pose that is not rigid (naming the body:
+    :meth:`Structure.transforms`)."""
     n = structure.n_bodies
     if values.shape != (7 * n,):
         raise WrongLengthError(f'expected 7 N = {7 * n} values ([x y z qx qy qz qw] per body), '
                                f'got {values.size}')
-    return structure.transforms(values.reshape(n, 7))
+    poses = values.reshape(n, 7)
+    q = poses[:, 3:]
+    norms = np.sqrt(np.sum(q * q, axis=1))
+    if not np.all(np.abs(norms - 1.0) <= QUATERNION_UNIT_TOLERANCE):  # NaN too
+        return structure.transforms(poses)  # the error names the body
+    T = np.zeros((n, 4, 4))
+    T[:, :3, :3] = unit_quaternions_to_rotations(q / norms[:, None])
+    T[:, :3, 3] = poses[:, :3]
+    T[:, 3, 3] = 1.0
+    return T
 
 
 def with_commanded_rest_lengths(settings: StructureNodeSettings, commanded: FloatArray
@@ -304,15 +319,21 @@ def balancing_contact_forces(structure: Structure, state: StructureState,
     return np.linalg.lstsq(G, rhs, rcond=None)[0].reshape(-1, 3)
 
 
-def structure_outputs(settings: StructureNodeSettings, T: FloatArray) -> StructureOutputs:
+def structure_outputs(settings: StructureNodeSettings, T: FloatArray, contacts: bool = True
+                      ) -> StructureOutputs:
     """The outputs at the checked transforms ``T`` (N, 4, 4): the library's evaluation
     (:meth:`Structure.evaluate_transforms`, the compiled kernel when built) with the settings'
-    rest lengths and, with a ground, the balancing contact forces of the nodes on it. ValueError
-    where a string has zero length; overflow shows as non-finite values, which
-    :func:`require_finite` rejects."""
+    rest lengths and, with a ground, the balancing contact forces of the nodes on it
+    (``contacts=False``: zeros, for a node whose ``~/contact_forces`` nobody reads; the markers
+    and the diagnostics find them from the state, :func:`outputs_of_state`). ValueError where a
+    string has zero length; overflow shows as non-finite values, which :func:`require_finite`
+    rejects."""
     with np.errstate(all='ignore'):
         state = settings.structure.evaluate_transforms(T, settings.rest_lengths)
-        return outputs_of_state(settings, state)
+        if contacts or settings.structure.ground is None:
+            return outputs_of_state(settings, state)
+    return StructureOutputs(state, (), np.zeros((int(np.count_nonzero(
+        settings.structure.node_bodies >= 0)), 3)))
 
 
 def outputs_of_state(settings: StructureNodeSettings, state: StructureState
@@ -438,10 +459,12 @@ def contact_constraints(structure: Structure, T: FloatArray, contacts: Sequence[
 
 def structure_health(settings: StructureNodeSettings, outputs: StructureOutputs
                      ) -> StructureHealth:
-    """The health of one evaluated configuration (:class:`StructureHealth`): the tangent space
-    keeps the contacts in place and removes the gauge (the bars' spins, the rigid or plane
-    motions: :func:`~tensegrity_stiffness.structures.equilibrium.gauge_twists`)."""
+    """The health of one evaluated configuration (:class:`StructureHealth`; its contacts found
+    again from the state, :func:`outputs_of_state`): the tangent space keeps the contacts in
+    place and removes the gauge (the bars' spins, the rigid or plane motions:
+    :func:`~tensegrity_stiffness.structures.equilibrium.gauge_twists`)."""
     s = settings.structure
+    outputs = outputs_of_state(settings, outputs.state)
     state = outputs.state
     T = state.poses
     names = np.array(s.string_names)

@@ -47,6 +47,8 @@ from tensegrity_stiffness.srv import SolveStructureEquilibrium, StructureReport
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
 from tensegrity_stiffness.structures.structure import StructureState
 
+#: The index of ``~/contact_forces`` among the outputs (with a ground).
+CONTACTS = processing.STRUCTURE_OUTPUTS.index('contact_forces')
 #: Seconds a report (the equilibrium, the modes, the prestressed equilibrium and the analysis:
 #: some 50 ms for the 6-bar) may take in the worker.
 REPORT_BUDGET_S = 10.0
@@ -92,7 +94,9 @@ class StructureNode(StreamingNode):
 
     def _outputs(self, settings: StructureNodeSettings, T: np.ndarray, wanted: tuple[bool, ...]
                  ) -> StructureOutputs:
-        return processing.structure_outputs(settings, T)
+        """The outputs; the contact forces only while ``~/contact_forces`` has a subscriber."""
+        return processing.structure_outputs(settings, T, contacts=len(wanted) > CONTACTS
+                                            and wanted[CONTACTS])
 
     def _markers(self, settings: StructureNodeSettings, state: StructureState, stamp: Any
                  ) -> MarkerArray:
