@@ -11,8 +11,9 @@ about the equilibrium on the ground) at ``--rate`` Hz for ``--seconds``; a contr
 subscribes to ``~/stiffness`` (6N x 6N; ``--output body_wrenches``: the 6N wrenches) and, per
 message, forms the restoring wrenches ``-K e`` of a small error. The latency of a set of poses
 is the time until its output arrives (outputs come in input order over reliable QoS; each is
-matched to its input by value against the library, so a drop cannot shift the pairing). Then the round trip of
-``~/solve_equilibrium`` (the equilibrium on the ground from the config's start).
+matched to its input by value against the library, so a drop cannot shift the pairing). Then
+the round trip of ``~/solve_equilibrium`` (the equilibrium on the ground from the config's
+start).
 Target (issue 41, the 6-bar): median <= 1 ms at 1 kHz, 0 drops.
 """
 
