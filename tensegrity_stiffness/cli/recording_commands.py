@@ -134,22 +134,28 @@ def add_bag_parser(sub: Any) -> None:
                                    'would publish (wrench, stiffness, cartesian_stiffness, '
                                    'string_tensions, stiffness_interpretation) to a new rosbag2, '
                                    'each answer at the log time of its input (needs rosbags); '
-                                   "with --node spine, spine_node's topics.")
+                                   "with --node spine, spine_node's topics; with --node "
+                                   "structure, structure_node's.")
     p.add_argument('input', metavar='INPUT', help='rosbag2 folder (or a .mcap / .db3 file)')
     p.add_argument('--out', required=True, metavar='OUTPUT', help='rosbag2 folder to write')
-    p.add_argument('--node', choices=('stiffness', 'spine'), default='stiffness',
+    p.add_argument('--node', choices=('stiffness', 'spine', 'structure'), default='stiffness',
                    help='the node whose topics are processed: stiffness_node (default; inputs '
                         'screw, pose, rest_lengths) or spine_node (inputs screws, poses, '
                         'rest_lengths; outputs joint_wrenches joint_stiffness '
                         'joint_cartesian_stiffness tip_pose tip_wrench tip_stiffness '
-                        'tip_stiffness_base)')
+                        'tip_stiffness_base) or structure_node (inputs poses, pose_values, '
+                        'rest_lengths; outputs body_wrenches stiffness string_tensions '
+                        'bar_forces contact_forces)')
     p.add_argument('--config', metavar='YAML',
                    help="the node's parameter file (default: the packaged "
                         'config/default_joint.yaml, with --node spine '
-                        'config/default_spine.yaml; a file overrides the parameters it has)')
+                        'config/default_spine.yaml; a file overrides the parameters it has; '
+                        'with --node structure also a structure file, default the packaged '
+                        'six_bar.yaml)')
     p.add_argument('--namespace', default=None, metavar='NS',
                    help="the node's topics' prefix (default /stiffness_node, with --node spine "
-                        '/spine_node: the node in the root namespace)')
+                        '/spine_node, with --node structure /structure_node: the node in the '
+                        'root namespace)')
     p.add_argument('--storage', metavar='mcap|sqlite3',
                    help="storage of OUTPUT (default: the input's)")
     p.add_argument('--csv', metavar='FILE', help='also write one row per answered input')

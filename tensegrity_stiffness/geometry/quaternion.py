@@ -24,6 +24,7 @@ __all__ = [
     'ROTATION_TOLERANCE',
     'quaternion_to_rotation',
     'rotation_to_quaternion',
+    'unit_quaternions_to_rotations',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -62,12 +63,25 @@ def quaternion_to_rotation(quaternion: ArrayLike,
         raise BadQuaternionError(
             f'not a unit quaternion: norm {norm:.9g} deviates from 1 by more than '
             f'unit_tolerance={unit_tolerance:g}')
-    x, y, z, w = q / norm
-    return np.array([
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
-    ])
+    return unit_quaternions_to_rotations(q / norm)
+
+
+def unit_quaternions_to_rotations(q: FloatArray) -> FloatArray:
+    """(..., 3, 3) rotation matrices of unit quaternions ``[x, y, z, w]`` (..., 4), unchecked
+    (the callers check and normalise: :func:`quaternion_to_rotation`, and the batched pose
+    readers)."""
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    R = np.empty(q.shape[:-1] + (3, 3))
+    R[..., 0, 0] = 1.0 - 2.0 * (y * y + z * z)
+    R[..., 0, 1] = 2.0 * (x * y - z * w)
+    R[..., 0, 2] = 2.0 * (x * z + y * w)
+    R[..., 1, 0] = 2.0 * (x * y + z * w)
+    R[..., 1, 1] = 1.0 - 2.0 * (x * x + z * z)
+    R[..., 1, 2] = 2.0 * (y * z - x * w)
+    R[..., 2, 0] = 2.0 * (x * z - y * w)
+    R[..., 2, 1] = 2.0 * (y * z + x * w)
+    R[..., 2, 2] = 1.0 - 2.0 * (x * x + y * y)
+    return R
 
 
 def rotation_to_quaternion(rotation: ArrayLike,

@@ -525,6 +525,8 @@ def node_tables() -> tuple[NodeTable, ...]:
     function, so that tables defined further down this module, and the controller's in
     :mod:`.control_processing` (which builds on this module), can be listed too."""
     from tensegrity_stiffness.nodes.control_processing import CONTROLLER_PARAMETERS
+    from tensegrity_stiffness.nodes.structure_node import STRUCTURE_NODE_PARAMETERS
+    from tensegrity_stiffness.nodes.structure_sim_node import STRUCTURE_SIM_PARAMETERS
 
     return (
         NodeTable('stiffness_node', STIFFNESS_NODE_PARAMETERS, 'config/default_joint.yaml',
@@ -555,6 +557,14 @@ def node_tables() -> tuple[NodeTable, ...]:
         NodeTable('stiffness_controller', CONTROLLER_PARAMETERS, 'config/default_joint.yaml',
                   'rest-length commands that hold a target pose with a target K_c in closed '
                   'loop, within the actuators\' range and rate', 'docs/control.md'),
+        NodeTable('structure_node', STRUCTURE_NODE_PARAMETERS, '',
+                  'a structure of rigid bodies and strings (the 3-bar, the 6-bar): per-body '
+                  'wrenches, the 6N x 6N stiffness, tensions, bar and contact forces; '
+                  'equilibrium and analysis-report services', 'docs/structures.md'),
+        NodeTable('structure_sim_node', STRUCTURE_SIM_PARAMETERS, '',
+                  'the MuJoCo twin of a structure on the ground: body poses, string lengths, '
+                  'tensions, encoders, one IMU per bar; rest-length commands, loads, pushes and '
+                  'the scripted roll', 'docs/structures.md'),
     )
 
 

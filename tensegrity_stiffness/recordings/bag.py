@@ -1,7 +1,9 @@
-"""Offline: what ``stiffness_node`` or ``spine_node`` would publish, for a whole rosbag2 recording.
+"""Offline: what ``stiffness_node``, ``spine_node`` or ``structure_node`` would publish, for a
+whole rosbag2 recording.
 
 Reads the node's inputs (``stiffness_node``: ``<namespace>/screw``, ``pose``, ``rest_lengths``;
-``spine_node``: ``screws``, ``poses``, ``rest_lengths``) from a rosbag2 (mcap or sqlite3) with
+``spine_node``: ``screws``, ``poses``, ``rest_lengths``; ``structure_node``: ``poses``,
+``pose_values``, ``rest_lengths``) from a rosbag2 (mcap or sqlite3) with
 ``rosbags`` (pure Python, no ROS install: neither rclpy nor a ROS message package is imported),
 in log-time order, and writes a rosbag2 with the node's per-input outputs
 (:data:`NODE_TOPICS`): the same message types, layouts, labels
@@ -55,7 +57,7 @@ from numpy.typing import NDArray
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.errors import INVALID, SingularStiffnessError, error_kind
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG
-from tensegrity_stiffness.nodes import layouts, parameters, spine_processing
+from tensegrity_stiffness.nodes import layouts, parameters, spine_processing, structure_node
 from tensegrity_stiffness.nodes.messages import (
     NANOSECONDS_PER_SECOND,
     MessageTypes,
@@ -118,10 +120,17 @@ NODE_TOPICS: dict[str, NodeTopics] = {
                 'rest_lengths': FLOAT64_MULTIARRAY},
         outputs={name: layout.msgtype for name, layout in
                  layouts.spine_output_layouts(1).items()}),
+    # structure_node's, in the order of structure_node.STRUCTURE_OUTPUTS (contact_forces only
+    # for a structure with a ground: the structure kind's writer skips it otherwise).
+    'structure': NodeTopics(
+        inputs={'poses': POSE_ARRAY, 'pose_values': FLOAT64_MULTIARRAY,
+                'rest_lengths': FLOAT64_MULTIARRAY},
+        outputs=dict.fromkeys(structure_node.STRUCTURE_OUTPUTS, FLOAT64_MULTIARRAY)),
 }
 OUTPUT_NAMES = tuple(NODE_TOPICS['stiffness'].outputs)
 #: Default namespace (the node's name in the root namespace) of each node kind.
-DEFAULT_NAMESPACES = {'stiffness': DEFAULT_NAMESPACE, 'spine': '/spine_node'}
+DEFAULT_NAMESPACES = {'stiffness': DEFAULT_NAMESPACE, 'spine': '/spine_node',
+                      'structure': '/structure_node'}
 
 
 class BagError(ValueError):
@@ -199,6 +208,26 @@ def spine_settings(path: str | Path | None = None) -> SpineNodeSettings:
     except ValueError as exc:
         text = str(exc)
         raise BagError(text if str(path) in text else f'config {path}: {text}') from None
+
+
+def structure_settings(path: str | Path | None = None) -> structure_node.StructureNodeSettings:
+    """The settings ``structure_node`` runs with for ``--params-file path`` (default: the
+    parameter table's defaults, the packaged 6-bar); a structure file itself (a ``structure``
+    section with ``bodies``) is taken as ``structure.config``. BagError names the file and the
+    field."""
+    table = structure_node.STRUCTURE_NODE_PARAMETERS
+    try:
+        if path is None:
+            return structure_node.structure_node_settings(parameters.defaults(table))
+        values = parameters.values_from_config(path, table)
+        section = config.parameters(config.load_yaml(path)).get('structure')
+        if isinstance(section, Mapping) and 'bodies' in section:
+            values['structure.config'] = str(path)
+        return structure_node.structure_node_settings(values)
+    except ValueError as exc:
+        text = str(exc)
+        raise BagError(text if path is None or str(path) in text else f'config {path}: {text}'
+                       ) from None
 
 
 def single_threaded_blas() -> Any:
@@ -628,6 +657,88 @@ class SpineProcessor(Processor):
         self.emit(SpineAnswer(log_time, source, stamp, outputs, self.messages.messages()))
 
 
+# ------------------------------------------------------------------------------ structure
+@dataclass
+class StructureAnswer:
+    """One answer of the structure node: the input's log time (ns), its source ('poses',
+    'pose_values' or 're-publish'), the library's outputs and the node's filled messages
+    (rosbags', in :func:`structure_node.structure_output_layouts` order)."""
+
+    log_time: int
+    source: str
+    outputs: structure_node.StructureOutputs
+    messages: tuple[Any, ...]
+
+
+class StructureProcessor(Processor):
+    """``structure_node``'s per-input behaviour (``_on_poses``, ``_on_pose_values``,
+    ``_on_rest_lengths``, ``_compute_and_publish``) over a recording, one input at a time with
+    the node's functions (:mod:`tensegrity_stiffness.nodes.structure_node`: its inputs, outputs
+    and ``StructureOutputMessages`` with rosbags' types). Each answer goes to ``emit``
+    (:class:`StructureAnswer`, its messages reused by the next answer)."""
+
+    def __init__(self, settings: structure_node.StructureNodeSettings,
+                 emit: Callable[[StructureAnswer], None], typestore: Any | None = None
+                 ) -> None:
+        super().__init__(typestore)
+        self.settings = settings
+        self.emit = emit
+        self.types = rosbags_types(self.typestore)
+        self.messages = structure_node.StructureOutputMessages(settings.structure, self.types)
+        self._last: FloatArray | None = None
+
+    def handlers(self) -> dict[str, Callable[[Any, int], None]]:
+        return {'poses': self.poses, 'pose_values': self.pose_values,
+                'rest_lengths': self.rest_lengths}
+
+    def poses(self, msg: Any, log_time: int) -> None:
+        """A ``~/poses`` message (the node's ``_on_poses``)."""
+        settings = self.settings
+        try:
+            T = structure_node.poses_input(msg.header.frame_id, msg.poses, settings.world_frame,
+                                           settings.n_bodies, pose_message_to_transform)
+        except ValueError as exc:
+            self.reject('poses', exc)
+            return
+        self._compute(T, log_time, 'poses')
+
+    def pose_values(self, msg: Any, log_time: int) -> None:
+        """A ``~/pose_values`` message (the node's ``_on_pose_values``)."""
+        settings = self.settings
+        try:
+            T = structure_node.pose_values_input(multiarray_to_array(
+                msg, max_length=settings.max_array_length), settings.structure)
+        except ValueError as exc:
+            self.reject('pose_values', exc)
+            return
+        self._compute(T, log_time, 'pose_values')
+
+    def rest_lengths(self, msg: Any, log_time: int) -> None:
+        """A ``~/rest_lengths`` message (the node's ``_on_rest_lengths``): in force from its log
+        time on; the last answer is re-published under it."""
+        try:
+            self.settings = structure_node.with_commanded_rest_lengths(
+                self.settings, multiarray_to_array(
+                    msg, max_length=self.settings.max_array_length))
+        except ValueError as exc:
+            self.reject('rest_lengths', exc)
+            return
+        if self._last is not None:
+            self._compute(self._last, log_time, 're-publish')
+
+    def _compute(self, T: FloatArray, log_time: int, source: str) -> None:
+        settings = self.settings
+        try:
+            outputs = structure_node.structure_outputs(settings, T)
+            self.messages.fill(outputs, self.types.time(log_time), settings.world_frame)
+        except ValueError as exc:
+            self.reject(source, exc, 'non-finite result')
+            return
+        self._last = T
+        self.answered[source] += 1
+        self.emit(StructureAnswer(log_time, source, outputs, self.messages.messages()))
+
+
 # ------------------------------------------------------------------------------ output messages
 class _Template:
     """Serialized bytes of one output message of ``layout`` whose payload ends the message:
@@ -756,6 +867,38 @@ def _spine_writer(writer: Any, typestore: Any, connections: Sequence[Any],
     return write
 
 
+def _structure_csv_columns(settings: structure_node.StructureNodeSettings) -> list[str]:
+    """The bodies' wrenches, the tensions and the bar forces."""
+    s = settings.structure
+    return [*(f'{b}_{c}' for b in s.body_names for c in layouts.WRENCH_NAMES),
+            *(f'tension_{name}' for name in s.string_names),
+            *(f'bar_{name}' for name in s.bar_names)]
+
+
+def _structure_csv_rows(a: StructureAnswer) -> Iterable[list[Any]]:
+    state = a.outputs.state
+    return [[a.log_time, a.source, a.log_time, *np.concatenate(
+        [state.wrenches.ravel(), state.tensions, state.bar_forces]).tolist()]]
+
+
+def _structure_writer(writer: Any, typestore: Any, connections: Sequence[Any],
+                      outputs: Sequence[str], settings: structure_node.StructureNodeSettings
+                      ) -> Callable[[StructureAnswer], None]:
+    """Writes an answer's messages on ``connections`` (of ``outputs``; ``contact_forces`` only
+    with a ground), serialized by rosbags."""
+    names = list(structure_node.structure_output_layouts(settings.structure))
+    chosen = [(names.index(name), c) for name, c in zip(outputs, connections, strict=True)
+              if name in names]
+    serialize = typestore.serialize_cdr
+
+    def write(a: StructureAnswer) -> None:
+        for k, connection in chosen:
+            writer.write(connection, a.log_time,
+                         bytes(serialize(a.messages[k], connection.msgtype)))
+
+    return write
+
+
 @dataclass(frozen=True)
 class _NodeKind:
     """What :func:`process_bag` does differently for one node kind: its settings from
@@ -779,6 +922,10 @@ _NODE_KINDS = {
     'spine': _NodeKind(
         spine_settings, _spine_csv_columns, _spine_csv_rows, _spine_writer,
         lambda settings, emit, typestore, _: SpineProcessor(settings, emit, typestore),
+        batched=False),
+    'structure': _NodeKind(
+        structure_settings, _structure_csv_columns, _structure_csv_rows, _structure_writer,
+        lambda settings, emit, typestore, _: StructureProcessor(settings, emit, typestore),
         batched=False),
 }
 
@@ -915,8 +1062,10 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     """Read the node's inputs from the rosbag2 ``input_path`` and write what the node would
     publish to the rosbag2 ``output_path`` (and ``csv_path``); see the module docstring.
 
-    ``node``: 'stiffness' (``stiffness_node``) or 'spine' (``spine_node``: its inputs and
-    per-input outputs, config ``config/default_spine.yaml`` unless ``config_path``);
+    ``node``: 'stiffness' (``stiffness_node``), 'spine' (``spine_node``: its inputs and
+    per-input outputs, config ``config/default_spine.yaml`` unless ``config_path``) or
+    'structure' (``structure_node``: config its parameter file or a structure file; default the
+    packaged 6-bar);
     ``namespace``: the topics' prefix (default :data:`DEFAULT_NAMESPACES` of the node);
     ``storage``: 'mcap' or 'sqlite3' (default: the input's); ``topics``: the outputs to write
     (default all); ``progress(done, total)``: inputs read so far of all.

@@ -2,10 +2,10 @@
 PyPI, so the package's setup builds it from its definition (``cmake/tf2_msgs/``, into
 ``install/tf2_msgs``; ``support/tf2_standin.py`` builds the same in the test's workspace where
 neither the setup nor a ROS install provides it), then ``support/tf_check.py`` runs in a process
-that imports it: ``stiffness_node``, ``spine_node``,
-``estimator_node`` and ``sim_node`` (joint and spine) broadcast frames whose poses are the
-library's to 1e-12, the spine's tool frame is latched on ``/tf_static``, and ``tf.enabled: false``
-stops the broadcast at run time (the frames go out only while someone subscribes)."""
+that imports it: ``stiffness_node``, ``spine_node``, ``estimator_node``, ``sim_node`` (joint
+and spine) and ``structure_node`` broadcast frames whose poses are the library's to 1e-12, the
+spine's tool frame is latched on ``/tf_static``, and ``tf.enabled: false`` stops the broadcast at
+run time (the frames go out only while someone subscribes)."""
 
 from __future__ import annotations
 
@@ -48,6 +48,7 @@ def test_tf_frames_are_the_library_poses(tf2_msgs_prefix: Path | None) -> None:
     assert 'TF OK' in ran.stdout, output[-8000:]
     lines = re.findall(r'^TF (.+): (\d+) frames, largest difference (\S+)$', ran.stdout, re.M)
     assert {name for name, _, _ in lines} == {
-        'stiffness_node', 'spine_node', 'estimator_node', 'sim_node', 'sim_node (spine)'}, lines
+        'stiffness_node', 'spine_node', 'estimator_node', 'sim_node', 'sim_node (spine)',
+        'structure_node'}, lines
     for name, count, worst in lines:
         assert int(count) > 0 and float(worst) < 1e-12, (name, count, worst)

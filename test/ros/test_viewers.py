@@ -1,7 +1,8 @@
 """The viewers' configurations against running nodes: every topic they name (in the twin demo's
-namespace, mapped to this test's) is one the running ``stiffness_node`` / ``spine_node``
-publishes, and the plotted ``~/stiffness_eigenvalues`` (``~/tip_stiffness_eigenvalues``) are the
-principal stiffnesses of the library's K_c (tip stiffness) to 1e-12."""
+namespace, mapped to this test's) is one the running ``stiffness_node`` / ``spine_node`` /
+``structure_node`` publishes, and the plotted ``~/stiffness_eigenvalues``
+(``~/tip_stiffness_eigenvalues``) are the principal stiffnesses of the library's K_c (tip
+stiffness) to 1e-12."""
 
 from __future__ import annotations
 
@@ -43,10 +44,14 @@ def published_by(ros: RosClient, node: str, ns: str, wanted: set[str]) -> set[st
         time.sleep(0.05)
 
 
-def test_viewer_topics_are_published_and_the_eigenvalues_are_the_librarys() -> None:
+def test_viewer_topics_are_published_and_the_eigenvalues_are_the_librarys(tmp_path) -> None:
     ns = unique_namespace('view')
     joint = NodeProcess(ns, JOINT)
     spine = NodeProcess(ns, SPINE, executable='spine_node')
+    structure_params = tmp_path / 'structure_node.yaml'  # the packaged 6-bar (its default)
+    structure_params.write_text('structure_node:\n  ros__parameters:\n    structure.config: '
+                                'six_bar.yaml\n')
+    structure = NodeProcess(ns, structure_params, executable='structure_node')
     ros = RosClient('viewers')
     try:
         for config in viewer_configs():
@@ -76,5 +81,6 @@ def test_viewer_topics_are_published_and_the_eigenvalues_are_the_librarys() -> N
             assert np.all(np.diff(got.data[:3]) >= 0) and np.all(np.diff(got.data[3:]) >= 0)
     finally:
         ros.close()
-        codes = joint.stop(), spine.stop()
-    assert codes == (0, 0), joint.log()[-2000:] + spine.log()[-2000:]
+        codes = joint.stop(), spine.stop(), structure.stop()
+    assert codes == (0, 0, 0), (joint.log()[-2000:] + spine.log()[-2000:]
+                                + structure.log()[-2000:])

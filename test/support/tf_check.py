@@ -257,6 +257,23 @@ class Session:
             pose = pose @ pose_message_to_transform(msg.poses[i])
         return pose
 
+    def structure_node(self, ns: str, proc: NodeProcess) -> tuple[int, float]:
+        """The packaged 6-bar: world -> every body at the poses sent on ``~/pose_values``
+        (the bodies' transforms as the node reads them, ``Structure.transforms``)."""
+        from tensegrity_stiffness.config import example_config_path
+        from tensegrity_stiffness.mechanics.templates import pose_vector
+        from tensegrity_stiffness.structures.structure import Structure, twist_exp
+
+        structure = Structure.from_yaml(example_config_path('six_bar.yaml'))
+        rng = np.random.default_rng(5)
+        values = [np.array([pose_vector(twist_exp(0.05 * rng.standard_normal(6)) @ P)
+                            for P in structure.start_poses()]) for _ in range(4)]
+        expected = [{('world', name): T for name, T in zip(
+            structure.body_names, structure.transforms(v), strict=True)} for v in values]
+        _, worst = self._send_and_match(f'{ns}/structure_node/pose_values', values, expected,
+                                        proc)
+        return sum(len(f) for f in expected), worst
+
     def close(self) -> None:
         self.ros.close()
 
@@ -278,6 +295,9 @@ def main() -> None:
         session.run('sim_node (spine)', lambda ns: NodeProcess(
             ns, SPINE_CONFIG, ['-p', 'sim.spine:=true', '-p', 'sim.publish_every:=20'],
             executable='sim_node'), session.sim_spine)
+        session.run('structure_node', lambda ns: NodeProcess(
+            ns, JOINT_CONFIG, ['-p', 'structure.config:=six_bar.yaml'],
+            executable='structure_node'), session.structure_node)
     finally:
         session.close()
     print('TF OK', flush=True)
