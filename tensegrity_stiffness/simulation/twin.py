@@ -87,8 +87,11 @@ __all__ = [
     'chain_mjcf',
     'checked_wrench',
     'export_mjcf',
+    'import_mujoco',
     'joint_mjcf',
     'measure',
+    'rate_limited',
+    'rest_length_bounds',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -271,18 +274,37 @@ def _chain_layout(chain: JointChain, options: SimulationOptions) -> _Layout:
                    chain.link_coms.copy(), g, chain.unloaded_screws(), False, names)
 
 
-def _rest_length_bounds(layout: _Layout, options: SimulationOptions
-                        ) -> tuple[FloatArray, FloatArray]:
-    """(low, high) (n_total,) m: the rest lengths the twin takes (``options.rest_length_range``
-    or each string's physical range, :data:`MIN_REST_LENGTH_FRACTION`,
-    :data:`REST_LENGTH_MARGIN`)."""
-    rest = np.concatenate([m.rest_lengths for m in layout.joints])
-    if options.rest_length_range is not None:
-        low, high = options.rest_length_range
+def rest_length_bounds(rest_lengths: FloatArray, max_lengths: FloatArray,
+                       rest_length_range: tuple[float, float] | None = None
+                       ) -> tuple[FloatArray, FloatArray]:
+    """(low, high) (n,) m: the rest lengths a twin takes, ``rest_length_range`` for every
+    string, or each string's physical range: above :data:`MIN_REST_LENGTH_FRACTION` of its
+    configured rest length, at most ``1 + REST_LENGTH_MARGIN`` times its maximum length (its
+    rest length without one). The one home of that rule (joint, spine and structure twins)."""
+    rest = np.asarray(rest_lengths, dtype=np.float64)
+    if rest_length_range is not None:
+        low, high = rest_length_range
         return np.full(rest.shape, low), np.full(rest.shape, high)
-    lmax = np.concatenate([m.max_lengths for m in layout.joints])
+    lmax = np.asarray(max_lengths, dtype=np.float64)
     longest = np.where(np.isfinite(lmax), lmax, rest)
     return MIN_REST_LENGTH_FRACTION * rest, (1.0 + REST_LENGTH_MARGIN) * longest
+
+
+def rate_limited(current: FloatArray, target: FloatArray, max_step: float) -> FloatArray:
+    """``current`` moved towards ``target`` by at most ``max_step`` per entry (a motor's rate
+    limit over one time step; ``inf``: at once). An entry within ``max_step`` of its target
+    lands on it exactly."""
+    change = target - current
+    return np.where(np.abs(change) <= max_step, target,
+                    current + np.clip(change, -max_step, max_step))
+
+
+def _rest_length_bounds(layout: _Layout, options: SimulationOptions
+                        ) -> tuple[FloatArray, FloatArray]:
+    """:func:`rest_length_bounds` of every string of the layout (joint-major)."""
+    return rest_length_bounds(np.concatenate([m.rest_lengths for m in layout.joints]),
+                              np.concatenate([m.max_lengths for m in layout.joints]),
+                              options.rest_length_range)
 
 
 def _num(value: float) -> str:
@@ -436,7 +458,8 @@ class ImuReading:
     specific_force: FloatArray
 
 
-def _import_mujoco() -> Any:
+def import_mujoco() -> Any:
+    """The ``mujoco`` module (ImportError naming the package when it is missing)."""
     try:
         import mujoco
     except ImportError as exc:  # pragma: no cover - the setup installs it
@@ -449,7 +472,7 @@ class _Simulation:
     """The MuJoCo model and data of a layout, and everything the two public classes share."""
 
     def __init__(self, layout: _Layout, options: SimulationOptions, model_name: str) -> None:
-        mujoco = _import_mujoco()
+        mujoco = import_mujoco()
         self._mj = mujoco
         self.options = options
         self._layout = layout
@@ -614,7 +637,7 @@ class _Simulation:
             self._ramping = False
             return
         step = (math.inf if self._rate is None else self._rate) * self.options.timestep
-        self._write_rest(self._rest + np.clip(self._target - self._rest, -step, step))
+        self._write_rest(rate_limited(self._rest, self._target, step))
 
     def _set_load(self, wrench: ArrayLike) -> None:
         W = checked_wrench(wrench, self.options.max_force, self.options.max_moment)
@@ -995,16 +1018,20 @@ class ChainSimulation(_Twin):
 @dataclass(frozen=True)
 class SensorNoise:
     """Standard deviations of the simulated sensors (white Gaussian noise; 0: exact):
-    ``lengths`` (m), ``tensions`` (N), ``gyro`` (rad/s), ``accelerometer`` (m/s^2).
-    The one home of the twin's noise model (the sim node's parameters fill it)."""
+    ``lengths`` (m), ``tensions`` (N), ``gyro`` (rad/s), ``accelerometer`` (m/s^2), and of a
+    structure twin's ``encoders`` (m, the rest lengths in force) and ``markers`` (m, each
+    coordinate of a node position). The one home of the twins' noise model (the sim nodes'
+    parameters fill it)."""
 
     lengths: float = 0.0
     tensions: float = 0.0
     gyro: float = 0.0
     accelerometer: float = 0.0
+    encoders: float = 0.0
+    markers: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ('lengths', 'tensions', 'gyro', 'accelerometer'):
+        for name in ('lengths', 'tensions', 'gyro', 'accelerometer', 'encoders', 'markers'):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'noise {name} must be a finite standard deviation >= 0, got '
