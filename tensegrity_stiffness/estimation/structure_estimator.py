@@ -76,6 +76,8 @@ __all__ = [
     'DEFAULT_MARKER_STD',
     'DEFAULT_TENSION_STD',
     'DEFAULT_WRENCH_STD',
+    'FLIPPED_IMU_ANGLE',
+    'GAUGE_TOLERANCE',
     'NULL_TOLERANCE',
     'Reading',
     'StructureEstimate',
@@ -106,9 +108,15 @@ DEFAULT_WRENCH_STD = (0.02, 0.002)
 #: A direction of the scaled whitened Jacobian is undetermined below this times its largest
 #: singular value (far above rounding, far below the weakest determined direction here).
 NULL_TOLERANCE = 1e-7
+#: A spin or a rigid motion of the whole is a gauge when the readings see it less than this
+#: times the best-seen direction (:func:`_gauge`).
+GAUGE_TOLERANCE = 1e-4
 #: Gauss-Newton stops when the step's predicted chi2 decrease is below this (far below chi2's
 #: own spread, sqrt(2 dof)).
 DECREMENT_TOLERANCE = 1e-6
+#: An IMU whose gravity is more than this (deg) from the estimate's is left out first (a
+#: flipped or misplaced IMU: far beyond any noise, so not weighed against the others).
+FLIPPED_IMU_ANGLE = 90.0
 #: Step limits (rad; fraction of the length scale), as the joint's solver.
 MAX_ROTATION_STEP = 0.5
 MAX_TRANSLATION_FRACTION = 0.5
@@ -468,11 +476,12 @@ class _Fit:
     T: FloatArray
     forces: FloatArray  # (c, 3) the contact forces of a wrench balance
     r: FloatArray
-    J: FloatArray  # whitened, scaled columns of the unknowns
+    J: FloatArray  # whitened, scaled columns of the unknowns, the gauge projected out
     C: FloatArray  # covariance of the scaled unknowns (pseudo-inverse)
     rank: int
     condition: float
-    null: FloatArray  # (n_unknowns, d) undetermined directions (scaled)
+    null: FloatArray  # (n_unknowns, d) undetermined directions besides the gauge (scaled)
+    gauge: FloatArray  # (n_pose_unknowns, g) the gauge directions (scaled, orthonormal)
     iterations: int
 
     @property
@@ -480,10 +489,34 @@ class _Fit:
         return float(self.r @ self.r)
 
 
+def _gauge(structure: Structure, T: FloatArray, J: FloatArray, cols: NDArray[np.intp],
+           pose_scale: FloatArray) -> FloatArray:
+    """The gauge (npose, g) at ``T``: the directions among the bars' spins and the rigid motions
+    of the whole that the readings see less than :data:`GAUGE_TOLERANCE` of the best-seen
+    direction, the contact forces eliminated (a turn of the whole turns them too). Tested on
+    this span with a tolerance of its own because a residual's imbalance gives them a spurious,
+    second-order weight (1e-6 of the largest on the twin's data)."""
+    npose = cols.size
+    _, spins = spin_basis(structure, T)
+    _, rigid = rigid_motion_basis(structure, T)
+    G = np.hstack([spins[cols], rigid[cols]]) / pose_scale[:, None]
+    Q, _ = np.linalg.qr(G)
+    Jp = J[:, :npose]
+    if J.shape[1] > npose:
+        Ul, sl, _ = np.linalg.svd(J[:, npose:], full_matrices=False)
+        Ul = Ul[:, sl > NULL_TOLERANCE * sl[0]]
+        Jp = Jp - Ul @ (Ul.T @ Jp)
+    _, sm, Vm = np.linalg.svd(Jp @ Q, full_matrices=True)
+    s0 = float(np.linalg.norm(J, 2))
+    sm = np.concatenate([sm, np.zeros(Q.shape[1] - sm.size)])
+    return Q @ Vm[sm < GAUGE_TOLERANCE * s0].T
+
+
 def _fit(structure: Structure, readings: Sequence[Reading], rest: FloatArray, T0: FloatArray,
          cols: NDArray[np.intp], scale: FloatArray, max_iterations: int) -> _Fit:
     """Gauss-Newton from ``T0`` over the free pose columns ``cols`` and the contact forces
-    (module docstring); ``scale`` (len(cols) + 3c) the unknowns' units."""
+    (module docstring); ``scale`` (len(cols) + 3c) the unknowns' units; no step along the
+    gauge (:func:`_gauge`)."""
     z = np.concatenate([r.value for r in readings])
     lc = float(scale[0])
     n6 = 6 * structure.n_bodies
@@ -491,12 +524,15 @@ def _fit(structure: Structure, readings: Sequence[Reading], rest: FloatArray, T0
     sel = np.concatenate([cols, n6 + np.arange(nf)])
     npose = cols.size
 
-    def whitened(T: FloatArray, lam: FloatArray) -> tuple[FloatArray, FloatArray]:
+    def whitened(T: FloatArray, lam: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         h, H, std, _ = measurement_model(structure, T, readings, rest, lam)
-        return (h - z) / std, (H[:, sel] * scale[None, :]) / std[:, None]
+        J = (H[:, sel] * scale[None, :]) / std[:, None]
+        Z = _gauge(structure, T, J, cols, scale[:npose])
+        J[:, :npose] -= (J[:, :npose] @ Z) @ Z.T
+        return (h - z) / std, J, Z
 
     T, lam = T0, np.zeros(nf)
-    r, J = whitened(T, lam)
+    r, J, Z = whitened(T, lam)
     cost = float(r @ r)
     iterations = 0
     for iteration in range(1, max_iterations + 1):
@@ -514,7 +550,7 @@ def _fit(structure: Structure, readings: Sequence[Reading], rest: FloatArray, T0
         dlam = step[npose:] / limit
         for _ in range(30):
             T_new, lam_new = apply_increment(T, dx), lam + dlam
-            r_new, J_new = whitened(T_new, lam_new)
+            r_new, J_new, Z_new = whitened(T_new, lam_new)
             new_cost = float(r_new @ r_new)
             if new_cost <= cost or not np.isfinite(cost):
                 break
@@ -522,50 +558,55 @@ def _fit(structure: Structure, readings: Sequence[Reading], rest: FloatArray, T0
             dlam *= 0.5
         else:
             break
-        T, lam, r, J, cost = T_new, lam_new, r_new, J_new, new_cost
+        T, lam, r, J, Z, cost = T_new, lam_new, r_new, J_new, Z_new, new_cost
         if predicted < DECREMENT_TOLERANCE:
             break
     U, s, Vt = np.linalg.svd(J, full_matrices=True)
     keep = s > NULL_TOLERANCE * s[0]
     rank = int(keep.sum())
     C = (Vt[:rank].T / s[:rank] ** 2) @ Vt[:rank]
-    return _Fit(T, lam.reshape(-1, 3), r, J, C, rank, float(s[0] / s[rank - 1]), Vt[rank:].T,
+    null = Vt[rank:].T
+    if Z.shape[1]:  # the gauge is not an undetermined direction to report
+        Zf = np.vstack([Z, np.zeros((nf, Z.shape[1]))])
+        null = null - Zf @ (Zf.T @ null)
+        U_n, s_n, _ = np.linalg.svd(null, full_matrices=False)
+        null = U_n[:, s_n > 0.5]
+    return _Fit(T, lam.reshape(-1, 3), r, J, C, rank, float(s[0] / s[rank - 1]), null, Z,
                 iterations)
 
 
 def _classify(structure: Structure, fit: _Fit, cols: NDArray[np.intp], scale: FloatArray,
               hold_rigid_motion: bool) -> tuple[list[str], list[str]]:
-    """(gauge names, undetermined descriptions) of the fit's null space (module docstring)."""
-    if fit.null.shape[1] == 0:
-        return [], []
+    """(gauge names, undetermined descriptions) of the fit (module docstring)."""
+    pose_scale = scale[:cols.size]
     spin_names, spins = spin_basis(structure, fit.T)
     rigid_names, rigid = rigid_motion_basis(structure, fit.T)
-    pose_scale = scale[:cols.size]
     spins_s, rigid_s = spins[cols] / pose_scale[:, None], rigid[cols] / pose_scale[:, None]
-    s0 = float(np.linalg.norm(fit.J, 2))
-    Jp = fit.J[:, :cols.size]
-    held = [k for k, v in enumerate(spins_s.T)
-            if np.linalg.norm(Jp @ v) <= NULL_TOLERANCE * s0 * np.linalg.norm(v)]
-    gauge = [spin_names[k] for k in held]
-    G = np.hstack([spins_s[:, held], rigid_s])
-    Q, _ = np.linalg.qr(G)
-    U_n, s_n, _ = np.linalg.svd(fit.null[:cols.size], full_matrices=False)
-    null = U_n[:, s_n > 1e-6]  # the poses' part (a null direction of contact forces alone: no
-    # pose is concerned, the forces are not reported)
-    outside = null - Q @ (Q.T @ null)
-    U_o, s_o, Vt_o = np.linalg.svd(outside, full_matrices=True)
-    k = int(np.sum(s_o > 1e-6))
-    inside = null @ Vt_o[k:].T
-    undetermined = []
-    if inside.shape[1]:
-        coef = np.linalg.norm(np.linalg.lstsq(G, inside, rcond=None)[0], axis=1)[len(held):]
-        seen = [n for n, c in zip(rigid_names, coef, strict=True)
-                if c > 1e-3 * max(coef.max(), 1e-300) and c > 1e-9]
+    Z = fit.gauge
+    gauge: list[str] = []
+    undetermined: list[str] = []
+    if Z.shape[1]:
+        G = np.hstack([spins_s, rigid_s])
+        coef = np.linalg.lstsq(G, Z, rcond=None)[0]
+        ns = spins_s.shape[1]
+        spin_part = spins_s @ coef[:ns]
+        # a spin is held when it is in the gauge
+        for k, v in enumerate(spins_s.T):
+            if np.linalg.norm(v - Z @ (Z.T @ v)) < 1e-6 * np.linalg.norm(v):
+                gauge.append(spin_names[k])
+        rigid_coef = np.linalg.norm(coef[ns:], axis=1)
+        rigid_in = np.linalg.norm(Z - spin_part) > 1e-6
+        seen = [n for n, c in zip(rigid_names, rigid_coef, strict=True)
+                if rigid_in and c > 1e-3 * max(rigid_coef.max(), 1e-300)]
         if seen and hold_rigid_motion:
             gauge += [f'{n} of the whole structure' for n in seen]
         elif seen:
             undetermined.append(', '.join(seen) + ' of the whole structure')
-    undetermined += [_describe(structure, v, rigid_names, rigid_s, cols) for v in U_o[:, :k].T]
+    null = fit.null[:cols.size]
+    if null.shape[1]:
+        U_n, s_n, _ = np.linalg.svd(null, full_matrices=False)
+        undetermined += [_describe(structure, v, rigid_names, rigid_s, cols)
+                         for v in U_n[:, s_n > 0.1].T]
     return gauge, undetermined
 
 
@@ -603,7 +644,16 @@ def estimate_structure_poses(structure: Structure, measurements: StructureMeasur
         redundancy = measured - fit.rank
         threshold = consistency_threshold(redundancy, consistency_probability)
         if (fit.chi2 > threshold and redundancy > 0 and len(dropped) < MAX_CONTRADICTED):
-            _, _, _, starts = measurement_model(structure, fit.T, readings, rest)
+            h, _, _, starts = measurement_model(structure, fit.T, readings, rest, fit.forces)
+            flipped = [(r, math.degrees(math.acos(float(np.clip(h[a:a + 3] @ r.value, -1, 1)))))
+                       for r, a in zip(readings, starts, strict=True) if r.kind == 'imu']
+            flipped = [(r, angle) for r, angle in flipped if angle > FLIPPED_IMU_ANGLE]
+            if flipped and redundancy >= 2:
+                r, angle = max(flipped, key=lambda item: item[1])
+                dropped.append((r.name, f'flipped or misplaced: {angle:.0f} deg from the '
+                                        'direction of gravity the other readings give'))
+                readings = [q for q in readings if q.name != r.name]
+                continue
             ends = starts[1:] + [fit.r.size]
             named = [(r.name, np.arange(a, b), r.dof)  # the statics are the model: kept
                      for r, a, b in zip(readings, starts, ends, strict=True)
