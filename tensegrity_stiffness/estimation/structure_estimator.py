@@ -49,6 +49,7 @@ minus the determined unknowns), ``consistent`` (chi-square at
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -70,7 +71,10 @@ from tensegrity_stiffness.mechanics.joint import string_forces
 from tensegrity_stiffness.structures.structure import Structure, StructureState
 
 __all__ = [
+    'DEFAULT_ACCELERATION_STD',
     'DEFAULT_CONTACT_STD',
+    'DEFAULT_CONTACT_VELOCITY_STD',
+    'DEFAULT_GYRO_STD',
     'DEFAULT_IMU_STD',
     'DEFAULT_LENGTH_STD',
     'DEFAULT_MARKER_STD',
@@ -81,6 +85,8 @@ __all__ = [
     'NULL_TOLERANCE',
     'Reading',
     'StructureEstimate',
+    'StructureFilter',
+    'StructureFilterUpdate',
     'StructureMeasurements',
     'apply_increment',
     'contact_nodes',
@@ -89,6 +95,7 @@ __all__ = [
     'length_scale',
     'measurement_model',
     'readings_of',
+    'replace_at_rest',
     'rigid_motion_basis',
     'spin_basis',
     'string_model',
@@ -688,3 +695,188 @@ def _failed(message: str, structure: Structure, inputs: str, dropped: list[tuple
                              np.full((6 * n, 6 * n), np.nan), None, math.nan, 0, None, (), 0,
                              math.nan, 0, inputs, tuple(d for d, _ in dropped),
                              tuple(w for _, w in dropped), tuple(undetermined))
+
+
+# ---------------------------------------------------------------------------------- recursive
+#: Default process noise of :class:`StructureFilter`: white accelerations (m/s^2, rad/s^2) of
+#: each body's origin and turn, std per axis per sqrt(s) (a rolling robot's).
+DEFAULT_ACCELERATION_STD = (2.0, 20.0)
+#: Default std of a gyro (rad/s) and of a contact node's velocity (m/s: it sticks).
+DEFAULT_GYRO_STD = 0.01
+DEFAULT_CONTACT_VELOCITY_STD = 2e-3
+
+
+@dataclass
+class StructureFilterUpdate:
+    """One :meth:`StructureFilter.update`: ``poses`` (N, 4, 4), ``velocities`` (N, 6)
+    ``[v; w]`` (the origin's velocity and the angular velocity in the world), ``covariance``
+    (6N, 6N) of the poses (PoseWithCovariance per body), ``nis`` and ``dof`` of the readings
+    kept, ``consistent`` (the NIS's chi-square test), ``outliers`` the readings gated out by
+    name with ``outlier_reasons``."""
+
+    poses: FloatArray
+    velocities: FloatArray
+    covariance: FloatArray
+    nis: float
+    dof: int
+    consistent: bool | None
+    outliers: tuple[str, ...]
+    outlier_reasons: tuple[str, ...]
+
+
+class StructureFilter:
+    """The recursive form: an extended Kalman filter on every free body's pose and velocity
+    (constant velocity with white accelerations, :data:`DEFAULT_ACCELERATION_STD`), updated by
+    the static estimator's measurement models (:func:`measurement_model`) plus each IMU's gyro
+    (``R^T w``, Jacobian ``R^T`` in ``w`` and ``R^T hat(w)`` in ``dw``) and the contacts' zero
+    velocity (a sticking node: ``v + w x (x - p) = 0``), which carries the position along the
+    ground and the turn about it through a roll. Each reading is gated by its own NIS
+    (:func:`~tensegrity_stiffness.estimation.estimators.consistency_threshold` of its degrees
+    of freedom) and a gated one is named in ``outliers`` at once (a broken length sensor, a
+    flipped IMU: in the first update that has it). The accelerometer's gravity direction is
+    used moving too, its std the caller's (a roll's accelerations, ~0.5 m/s^2 / g, belong in
+    ``imu_std``).
+
+    ``poses`` the start ((N, 4, 4) or (N, 7)); ``pose_std`` (m, rad) its std per axis."""
+
+    def __init__(self, structure: Structure, poses: ArrayLike, pose_std: tuple[float, float]
+                 = (0.01, 0.05), acceleration_std: tuple[float, float] = DEFAULT_ACCELERATION_STD,
+                 gyro_std: float = DEFAULT_GYRO_STD,
+                 contact_velocity_std: float = DEFAULT_CONTACT_VELOCITY_STD,
+                 gate_probability: float = CONSISTENCY_PROBABILITY) -> None:
+        self.structure = structure
+        self.T = structure.transforms(poses)
+        n = structure.n_bodies
+        self.V = np.zeros((n, 6))
+        self.cols = np.flatnonzero(np.repeat(~structure.fixed, 6))
+        f = self.cols.size
+        p_std = np.tile([pose_std[0]] * 3 + [pose_std[1]] * 3, f // 6)
+        v_std = np.tile([0.1] * 3 + [1.0] * 3, f // 6)
+        self.P = np.diag(np.concatenate([p_std, v_std]) ** 2)
+        self.q = np.tile([acceleration_std[0]] * 3 + [acceleration_std[1]] * 3, f // 6) ** 2
+        self.gyro_std = _positive('gyro_std', gyro_std)
+        self.contact_velocity_std = _positive('contact_velocity_std', contact_velocity_std)
+        self.gate_probability = gate_probability
+
+    def predict(self, dt: float) -> None:
+        """Move the state ``dt`` (s) at constant velocity; grow the covariance."""
+        dt = _positive('dt', dt)
+        for i in range(self.structure.n_bodies):
+            if not self.structure.fixed[i]:
+                self.T[i, :3, 3] += self.V[i, :3] * dt
+                self.T[i, :3, :3] = exp_so3(self.V[i, 3:] * dt) @ self.T[i, :3, :3]
+        f = self.cols.size
+        F = np.eye(2 * f)
+        F[:f, f:] = dt * np.eye(f)
+        Q = np.zeros((2 * f, 2 * f))
+        Q[:f, :f] = np.diag(self.q) * dt ** 3 / 3.0
+        Q[:f, f:] = Q[f:, :f] = np.diag(self.q) * dt ** 2 / 2.0
+        Q[f:, f:] = np.diag(self.q) * dt
+        self.P = F @ self.P @ F.T + Q
+
+    def _rows(self, measurements: StructureMeasurements,
+              gyros: Mapping[str, ArrayLike] | None
+              ) -> tuple[list[str], list[FloatArray], list[FloatArray], list[FloatArray],
+                         list[int]]:
+        """(names, residuals z - h, Jacobians in the state, stds, dofs) of every reading."""
+        s = self.structure
+        n6 = 6 * s.n_bodies
+        f = self.cols.size
+        readings = readings_of(s, replace_at_rest(measurements))
+        names, res, jac, stds, dofs = [], [], [], [], []
+        if readings:
+            h, H, std, starts = measurement_model(s, self.T, readings, s.validate_rest_lengths(
+                measurements.rest_lengths))
+            ends = starts[1:] + [h.size]
+            z = np.concatenate([r.value for r in readings])
+            for r, a, b in zip(readings, starts, ends, strict=True):
+                J = np.zeros((b - a, 2 * f))
+                J[:, :f] = H[a:b, :n6][:, self.cols]
+                names.append(r.name)
+                res.append(z[a:b] - h[a:b])
+                jac.append(J)
+                stds.append(std[a:b])
+                dofs.append(r.dof)
+            for r in readings:
+                if r.kind != 'contact':
+                    continue
+                b = int(s.node_bodies[r.index])
+                arm = self.T[b, :3, :3] @ s.node_points[r.index]
+                w = self.V[b, 3:]
+                J = np.zeros((3, 2 * f))
+                k = int(np.searchsorted(self.cols, 6 * b))
+                J[:, f + k:f + k + 3] = np.eye(3)
+                J[:, f + k + 3:f + k + 6] = -hat3(arm)
+                J[:, k + 3:k + 6] = -hat3(w) @ hat3(arm)
+                names.append(f'contact_velocity[{s.node_names[r.index]}]')
+                res.append(-(self.V[b, :3] + np.cross(w, arm)))
+                jac.append(J)
+                stds.append(np.full(3, self.contact_velocity_std))
+                dofs.append(3)
+        for key, value in (gyros or {}).items():
+            i = s.body_index(key)
+            g = finite_array(f'gyros[{key}]', value).reshape(-1)
+            if g.shape != (3,):
+                raise ValueError(f'gyros[{key}] must be 3 values (rad/s)')
+            R = self.T[i, :3, :3]
+            w = self.V[i, 3:]
+            k = int(np.searchsorted(self.cols, 6 * i))
+            J = np.zeros((3, 2 * f))
+            J[:, f + k + 3:f + k + 6] = R.T
+            J[:, k + 3:k + 6] = R.T @ hat3(w)
+            names.append(f'gyro[{key}]')
+            res.append(g - R.T @ w)
+            jac.append(J)
+            stds.append(np.full(3, self.gyro_std))
+            dofs.append(3)
+        return names, res, jac, stds, dofs
+
+    def update(self, measurements: StructureMeasurements,
+               gyros: Mapping[str, ArrayLike] | None = None) -> StructureFilterUpdate:
+        """Correct the state with one set of readings (``at_rest`` is ignored: the robot
+        moves) and the IMUs' ``gyros`` {body: (3,) rad/s in its frame}."""
+        names, res, jac, stds, dofs = self._rows(measurements, gyros)
+        kept, gated = [], []
+        for k in range(len(names)):
+            H = jac[k] / stds[k][:, None]
+            r = res[k] / stds[k]
+            S = H @ self.P @ H.T + np.eye(r.size)
+            value = float(r @ np.linalg.solve(S, r))
+            if value > consistency_threshold(dofs[k], self.gate_probability):
+                gated.append((names[k], f'gated: NIS {value:.4g} over {dofs[k]} dof'))
+            else:
+                kept.append(k)
+        nis, dof = math.nan, 0
+        if kept:
+            H = np.vstack([jac[k] / stds[k][:, None] for k in kept])
+            r = np.concatenate([res[k] / stds[k] for k in kept])
+            S = H @ self.P @ H.T + np.eye(r.size)
+            K = np.linalg.solve(S, H @ self.P).T
+            dx = K @ r
+            nis = float(r @ np.linalg.solve(S, r))
+            dof = sum(dofs[k] for k in kept)
+            I_KH = np.eye(self.P.shape[0]) - K @ H
+            self.P = I_KH @ self.P @ I_KH.T + K @ K.T
+            f = self.cols.size
+            full = np.zeros(6 * self.structure.n_bodies)
+            full[self.cols] = dx[:f]
+            self.T = apply_increment(self.T, full)
+            self.V.reshape(-1)[self.cols] += dx[f:]
+        consistent = None if dof == 0 else bool(nis <= consistency_threshold(
+            dof, self.gate_probability))
+        return StructureFilterUpdate(self.T.copy(), self.V.copy(), self.pose_covariance(), nis,
+                                     dof, consistent, tuple(n for n, _ in gated),
+                                     tuple(w for _, w in gated))
+
+    def pose_covariance(self) -> FloatArray:
+        """(6N, 6N) the poses' covariance (PoseWithCovariance per body; fixed bodies zero)."""
+        n6 = 6 * self.structure.n_bodies
+        C = np.zeros((n6, n6))
+        f = self.cols.size
+        C[np.ix_(self.cols, self.cols)] = self.P[:f, :f]
+        return C
+
+
+def replace_at_rest(measurements: StructureMeasurements) -> StructureMeasurements:
+    """The readings without the statics (a moving robot's)."""
+    return dataclasses.replace(measurements, at_rest=False)
