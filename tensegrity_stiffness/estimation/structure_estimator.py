@@ -836,32 +836,36 @@ class StructureFilter:
         """Correct the state with one set of readings (``at_rest`` is ignored: the robot
         moves) and the IMUs' ``gyros`` {body: (3,) rad/s in its frame}."""
         names, res, jac, stds, dofs = self._rows(measurements, gyros)
-        kept, gated = [], []
-        for k in range(len(names)):
-            H = jac[k] / stds[k][:, None]
-            r = res[k] / stds[k]
-            S = H @ self.P @ H.T + np.eye(r.size)
-            value = float(r @ np.linalg.solve(S, r))
-            if value > consistency_threshold(dofs[k], self.gate_probability):
-                gated.append((names[k], f'gated: NIS {value:.4g} over {dofs[k]} dof'))
-            else:
-                kept.append(k)
-        nis, dof = math.nan, 0
-        if kept:
-            H = np.vstack([jac[k] / stds[k][:, None] for k in kept])
-            r = np.concatenate([res[k] / stds[k] for k in kept])
-            S = H @ self.P @ H.T + np.eye(r.size)
-            K = np.linalg.solve(S, H @ self.P).T
-            dx = K @ r
-            nis = float(r @ np.linalg.solve(S, r))
-            dof = sum(dofs[k] for k in kept)
-            I_KH = np.eye(self.P.shape[0]) - K @ H
-            self.P = I_KH @ self.P @ I_KH.T + K @ K.T
-            f = self.cols.size
-            full = np.zeros(6 * self.structure.n_bodies)
-            full[self.cols] = dx[:f]
-            self.T = apply_increment(self.T, full)
-            self.V.reshape(-1)[self.cols] += dx[f:]
+        nis, dof, gated = math.nan, 0, []
+        if names:
+            sizes = [r.size for r in res]
+            H_all = np.vstack(jac) / np.concatenate(stds)[:, None]
+            r_all = np.concatenate(res) / np.concatenate(stds)
+            HP = H_all @ self.P
+            S_all = HP @ H_all.T + np.eye(r_all.size)
+            bounds = np.concatenate([[0], np.cumsum(sizes)])
+            keep = np.zeros(r_all.size, dtype=bool)
+            for k in range(len(names)):
+                a, b = bounds[k], bounds[k + 1]
+                r = r_all[a:b]
+                value = float(r @ np.linalg.solve(S_all[a:b, a:b], r))
+                if value > consistency_threshold(dofs[k], self.gate_probability):
+                    gated.append((names[k], f'gated: NIS {value:.4g} over {dofs[k]} dof'))
+                else:
+                    keep[a:b] = True
+                    dof += dofs[k]
+            if keep.any():
+                H, r, S = H_all[keep], r_all[keep], S_all[np.ix_(keep, keep)]
+                K = np.linalg.solve(S, HP[keep]).T
+                dx = K @ r
+                nis = float(r @ np.linalg.solve(S, r))
+                I_KH = np.eye(self.P.shape[0]) - K @ H
+                self.P = I_KH @ self.P @ I_KH.T + K @ K.T
+                f = self.cols.size
+                full = np.zeros(6 * self.structure.n_bodies)
+                full[self.cols] = dx[:f]
+                self.T = apply_increment(self.T, full)
+                self.V.reshape(-1)[self.cols] += dx[f:]
         consistent = None if dof == 0 else bool(nis <= consistency_threshold(
             dof, self.gate_probability))
         return StructureFilterUpdate(self.T.copy(), self.V.copy(), self.pose_covariance(), nis,
