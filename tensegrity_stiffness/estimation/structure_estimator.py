@@ -373,65 +373,68 @@ def _equilibrium(structure: Structure, T: FloatArray, rest: FloatArray, nodes: S
     return W, J
 
 
+_SIZES = {'length': 1, 'tension': 1, 'contact': 1, 'imu': 3, 'marker': 3, 'equilibrium': 6}
+
+
 def measurement_model(structure: Structure, T: FloatArray, readings: Sequence[Reading],
                       rest: FloatArray, forces: FloatArray | None = None
                       ) -> tuple[FloatArray, FloatArray, FloatArray, list[int]]:
     """Predictions ``h`` (m,), Jacobian ``H`` (m, 6N + 3c) in the ``[dp; dw]`` of the bodies
     and the contact forces (c, 3) ``forces`` at :func:`contact_nodes` (a wrench balance's
     unknowns), the rows' stds (m,) and the first row of each reading, at transforms ``T``
-    (module docstring)."""
+    (module docstring). The strings' readings in one vectorised pass."""
     nodes = contact_nodes(readings)
     forces = np.zeros((len(nodes), 3)) if forces is None else forces.reshape(-1, 3)
     n6 = 6 * structure.n_bodies
     width = n6 + 3 * len(nodes)
-    balance = None
-    h: list[FloatArray] = []
-    H: list[FloatArray] = []
-    std: list[float] = []
-    starts: list[int] = []
-    row = 0
-    strings = None
+    sizes = np.array([_SIZES[r.kind] for r in readings], dtype=np.intp)
+    starts_arr = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.intp)
+    m = int(sizes.sum())
+    h = np.zeros(m)
+    H = np.zeros((m, width))
+    std = np.zeros(m)
     g_hat = (None if structure.gravity is None or not np.any(structure.gravity)
              else structure.gravity / np.linalg.norm(structure.gravity))
-    for r in readings:
-        starts.append(row)
+    string_kinds = [(q, r) for q, r in enumerate(readings) if r.kind in ('length', 'tension')]
+    if string_kinds:
+        lengths, phi, dl, dphi = string_model(structure, T, rest)
+        for kind, value, jac in (('length', lengths, dl), ('tension', phi, dphi)):
+            pick = [(starts_arr[q], r.index, r.std) for q, r in string_kinds if r.kind == kind]
+            if pick:
+                rows, js, sd = (np.array(x) for x in zip(*pick, strict=True))
+                h[rows] = value[js]
+                H[rows, :n6] = jac[js]
+                std[rows] = sd
+    balance = None
+    for q, r in enumerate(readings):
+        a = starts_arr[q]
         if r.kind in ('length', 'tension'):
-            if strings is None:
-                strings = string_model(structure, T, rest)
-            lengths, phi, dl, dphi = strings
-            h.append((lengths if r.kind == 'length' else phi)[r.index:r.index + 1])
-            block = np.zeros((1, width))
-            block[:, :n6] = (dl if r.kind == 'length' else dphi)[r.index:r.index + 1]
-            H.append(block)
-        elif r.kind == 'imu':
+            continue
+        rows = slice(a, a + sizes[q])
+        std[rows] = r.std
+        if r.kind == 'imu':
             R = T[r.index, :3, :3]
-            block = np.zeros((3, width))
-            block[:, 6 * r.index + 3:6 * r.index + 6] = R.T @ hat3(g_hat)
-            h.append(R.T @ g_hat)
-            H.append(block)
+            H[rows, 6 * r.index + 3:6 * r.index + 6] = R.T @ hat3(g_hat)
+            h[rows] = R.T @ g_hat
         elif r.kind == 'equilibrium':
             if balance is None:
                 balance = _equilibrium(structure, T, rest, nodes, forces)
-            h.append(balance[0][r.index])
-            H.append(balance[1][6 * r.index:6 * r.index + 6])
+            h[rows] = balance[0][r.index]
+            H[rows] = balance[1][6 * r.index:6 * r.index + 6]
         else:
-            b, rows = _node_rows(structure, T, r.index)
+            b, block = _node_rows(structure, T, r.index)
             x = (structure.node_points[r.index] if b < 0
                  else T[b, :3, :3] @ structure.node_points[r.index] + T[b, :3, 3])
-            block = np.zeros((3, width))
-            if b >= 0:
-                block[:, 6 * b:6 * b + 6] = rows
             if r.kind == 'marker':
-                h.append(x)
-                H.append(block)
+                h[rows] = x
+                if b >= 0:
+                    H[rows, 6 * b:6 * b + 6] = block
             else:
                 ground = structure.ground
-                h.append(np.array([ground.normal @ x - ground.height]))
-                H.append(ground.normal[None] @ block)
-        k = h[-1].size
-        std.extend(np.broadcast_to(r.std, (k,)).tolist())
-        row += k
-    return np.concatenate(h), np.vstack(H), np.array(std), starts
+                h[rows] = ground.normal @ x - ground.height
+                if b >= 0:
+                    H[rows, 6 * b:6 * b + 6] = ground.normal[None] @ block
+    return h, H, std, starts_arr.tolist()
 
 
 def apply_increment(T: FloatArray, dx: FloatArray) -> FloatArray:
@@ -780,23 +783,20 @@ class StructureFilter:
                          list[int]]:
         """(names, residuals z - h, Jacobians in the state, stds, dofs) of every reading."""
         s = self.structure
-        n6 = 6 * s.n_bodies
         f = self.cols.size
         readings = readings_of(s, replace_at_rest(measurements))
         names, res, jac, stds, dofs = [], [], [], [], []
         if readings:
             h, H, std, starts = measurement_model(s, self.T, readings, s.validate_rest_lengths(
                 measurements.rest_lengths))
-            ends = starts[1:] + [h.size]
             z = np.concatenate([r.value for r in readings])
-            for r, a, b in zip(readings, starts, ends, strict=True):
-                J = np.zeros((b - a, 2 * f))
-                J[:, :f] = H[a:b, :n6][:, self.cols]
-                names.append(r.name)
-                res.append(z[a:b] - h[a:b])
-                jac.append(J)
-                stds.append(std[a:b])
-                dofs.append(r.dof)
+            J_all = np.zeros((h.size, 2 * f))
+            J_all[:, :f] = H[:, self.cols]
+            names = [r.name for r in readings]
+            res = np.split(z - h, starts[1:])
+            jac = np.split(J_all, starts[1:])
+            stds = np.split(std, starts[1:])
+            dofs = [r.dof for r in readings]
             for r in readings:
                 if r.kind != 'contact':
                     continue
@@ -845,14 +845,22 @@ class StructureFilter:
             S_all = HP @ H_all.T + np.eye(r_all.size)
             bounds = np.concatenate([[0], np.cumsum(sizes)])
             keep = np.zeros(r_all.size, dtype=bool)
+            sizes_arr = np.array(sizes)
+            values = np.empty(len(names))
+            for size in (1, 3, 6):
+                which = np.flatnonzero(sizes_arr == size)
+                if not which.size:
+                    continue
+                idx = bounds[which][:, None] + np.arange(size)[None, :]
+                blocks = S_all[idx[:, :, None], idx[:, None, :]]
+                rr = r_all[idx]
+                values[which] = np.einsum('ki,ki->k', rr,
+                                          np.linalg.solve(blocks, rr[..., None])[..., 0])
             for k in range(len(names)):
-                a, b = bounds[k], bounds[k + 1]
-                r = r_all[a:b]
-                value = float(r @ np.linalg.solve(S_all[a:b, a:b], r))
-                if value > consistency_threshold(dofs[k], self.gate_probability):
-                    gated.append((names[k], f'gated: NIS {value:.4g} over {dofs[k]} dof'))
+                if values[k] > consistency_threshold(dofs[k], self.gate_probability):
+                    gated.append((names[k], f'gated: NIS {values[k]:.4g} over {dofs[k]} dof'))
                 else:
-                    keep[a:b] = True
+                    keep[bounds[k]:bounds[k + 1]] = True
                     dof += dofs[k]
             if keep.any():
                 H, r, S = H_all[keep], r_all[keep], S_all[np.ix_(keep, keep)]
