@@ -442,10 +442,8 @@ def apply_increment(T: FloatArray, dx: FloatArray) -> FloatArray:
     ``exp(hat(dw)) R``."""
     out = T.copy()
     d = dx.reshape(-1, 6)
-    for i in range(T.shape[0]):
-        if np.any(d[i]):
-            out[i, :3, 3] += d[i, :3]
-            out[i, :3, :3] = exp_so3(d[i, 3:]) @ T[i, :3, :3]
+    out[:, :3, 3] += d[:, :3]
+    out[:, :3, :3] = exp_so3(d[:, 3:]) @ T[:, :3, :3]  # one batched Rodrigues
     return out
 
 
@@ -764,10 +762,9 @@ class StructureFilter:
     def predict(self, dt: float) -> None:
         """Move the state ``dt`` (s) at constant velocity; grow the covariance."""
         dt = _positive('dt', dt)
-        for i in range(self.structure.n_bodies):
-            if not self.structure.fixed[i]:
-                self.T[i, :3, 3] += self.V[i, :3] * dt
-                self.T[i, :3, :3] = exp_so3(self.V[i, 3:] * dt) @ self.T[i, :3, :3]
+        step = self.V * dt
+        step[self.structure.fixed] = 0.0
+        self.T = apply_increment(self.T, step.ravel())
         f = self.cols.size
         F = np.eye(2 * f)
         F[:f, f:] = dt * np.eye(f)
