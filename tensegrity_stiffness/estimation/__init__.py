@@ -8,4 +8,4 @@ May import: :mod:`tensegrity_stiffness.mechanics`, :mod:`tensegrity_stiffness.ge
 
 from tensegrity_stiffness.estimation.estimators import *  # noqa: F403
 from tensegrity_stiffness.estimation.estimators import __all__  # noqa: F401
-from tensegrity_stiffness.estimation.structure_estimator import StructureFilter, estimate_structure_poses  # noqa: F401, E501
+from tensegrity_stiffness.estimation.structure_estimator import estimate_structure_poses  # noqa: F401
