@@ -14,5 +14,6 @@ from tensegrity_stiffness.estimation.estimators import *  # noqa: F403
 from tensegrity_stiffness.estimation.estimators import __all__ as estimator_names
 from tensegrity_stiffness.estimation.joint_filter import *  # noqa: F403
 from tensegrity_stiffness.estimation.joint_filter import __all__ as filter_names
+from tensegrity_stiffness.estimation.structure_estimator import estimate_structure_poses
 
-__all__ = [*estimator_names, *filter_names, *chain_filter_names]
+__all__ = [*estimator_names, *filter_names, *chain_filter_names, 'estimate_structure_poses']
