@@ -76,6 +76,7 @@ from tensegrity_stiffness.geometry.screw import (
     check_in_chart,
 )
 from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
 
@@ -192,7 +193,8 @@ class BodyDynamics:
     (6, 6) ``J_b^-1``; Jacobians of ``dV/dt``: ``d_screw`` (6, 6) (the string damping's change
     with the pose left out: it is ``c |V|`` per rad), ``d_twist`` (6, 6), ``d_load`` (6, 6);
     ``prediction`` the strings' :class:`~tensegrity_stiffness.estimation.sensor_models.
-    StringPrediction` it was computed from."""
+    StringPrediction` it was computed from; ``packed`` the compiled kernel's buffer the arrays
+    are views of (``tsk_filter_body_dynamics``' layout), None from the numpy path."""
 
     screw_rate: FloatArray
     twist_rate: FloatArray
@@ -201,6 +203,15 @@ class BodyDynamics:
     d_twist: FloatArray
     d_load: FloatArray
     prediction: sm.StringPrediction
+    packed: FloatArray | None = None
+
+    def packed_buffer(self) -> FloatArray:
+        """The fields in ``tsk_filter_body_dynamics``' layout (156,): ``packed`` or a copy."""
+        if self.packed is not None:
+            return self.packed
+        return np.concatenate([self.screw_rate, self.twist_rate, self.body_inverse.ravel(),
+                               self.d_screw.ravel(), self.d_twist.ravel(),
+                               self.d_load.ravel()])
 
 
 def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twist: FloatArray,
@@ -255,6 +266,35 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
                         out[:, 13:], prediction)
 
 
+def body_dynamics_kernel(library: Any, dynamics: JointDynamics,
+                         prediction: sm.StringPrediction, twist: FloatArray, load: FloatArray,
+                         inertia_inverse: FloatArray) -> BodyDynamics:
+    """:func:`body_dynamics` in the compiled kernel (``tsk_filter_body_dynamics`` of
+    ``library``, :func:`~tensegrity_stiffness.mechanics.kernel.library`): the same equations,
+    equal to rounding (``test/kernel/test_filter_kernel.py``); the arrays are views of one
+    buffer (``packed``)."""
+    kin, state = prediction.kinematics, prediction.state
+    # every array bound to a name until the call returns (kernel.address)
+    T = np.ascontiguousarray(kin.T)
+    J = np.ascontiguousarray(kin.J)
+    L = np.ascontiguousarray(prediction.length_jacobian)
+    F = np.ascontiguousarray(state.wrench)
+    K = np.ascontiguousarray(state.stiffness)
+    V = np.ascontiguousarray(twist)
+    W = np.ascontiguousarray(load)
+    G = dynamics.spatial_inertia
+    c = dynamics.string_damping
+    address = kernel.address
+    out = np.empty(kernel.FILTER_BODY_SIZE)
+    kernel.check(library.filter_body_dynamics(
+        L.shape[0], int(dynamics.damped), address(T), address(J), address(L), address(F),
+        address(K), address(V), address(W), address(G), address(inertia_inverse), address(c),
+        address(out), out.size), 'tsk_filter_body_dynamics')
+    return BodyDynamics(out[:6], out[6:12], out[12:48].reshape(6, 6),
+                        out[48:84].reshape(6, 6), out[84:120].reshape(6, 6),
+                        out[120:].reshape(6, 6), prediction, out)
+
+
 class JointFilter:
     """Extended Kalman filter of one joint's pose, twist and load (module docstring).
 
@@ -265,7 +305,10 @@ class JointFilter:
     :data:`DEFAULT_PROCESS_NOISE`); ``load`` ``'unknown'`` (a state) or ``'known'`` (given to
     :meth:`step`); ``gravity`` (3,) m/s^2 in {1} for the accelerometer;
     ``consistency_probability`` of the NIS test; ``stiffness_std`` whether estimates carry the
-    std of ``K_c``; ``reject_outliers`` whether contradicted readings are left out.
+    std of ``K_c``; ``reject_outliers`` whether contradicted readings are left out;
+    ``use_kernel`` the prediction's and the update's linear algebra in the compiled kernel
+    when it is loaded (``tsk_filter_*``; the numpy lines here are the reference, equal to
+    rounding).
 
     The :class:`~tensegrity_stiffness.estimation.estimators.JointEstimate` of a step: ``chi2``
     is the update's NIS and ``dof`` = ``redundancy`` its degrees of freedom (every reading
@@ -278,7 +321,8 @@ class JointFilter:
                  process_noise: ProcessNoise | None = None, load: str = 'unknown', *,
                  string_damping: ArrayLike = 0.0, gravity: ArrayLike = DEFAULT_GRAVITY,
                  consistency_probability: float = CONSISTENCY_PROBABILITY,
-                 stiffness_std: bool = True, reject_outliers: bool = True) -> None:
+                 stiffness_std: bool = True, reject_outliers: bool = True,
+                 use_kernel: bool = True) -> None:
         if isinstance(model, JointDynamics):
             if inertia is not None:
                 raise ValueError('inertia: give it to the JointDynamics, not to the filter')
@@ -311,6 +355,11 @@ class JointFilter:
         self._identity = np.eye(self.size)
         self._twist_q = process_noise.twist_density()
         self._load_q = process_noise.load_density()
+        self._kernel = kernel.library() if use_kernel else None
+        self.use_kernel = self._kernel is not None
+        self._damping = np.ascontiguousarray(self.dynamics.string_damping, dtype=np.float64)
+        if self._kernel is not None:
+            self._propagate_size = self._kernel.filter_propagate_size(self.size)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -548,6 +597,9 @@ class JointFilter:
     def _linearize(self, xi: FloatArray, twist: FloatArray, load: FloatArray,
                    rest: FloatArray) -> BodyDynamics:
         pred = sm.string_predictions_unchecked(self.model, xi, rest)
+        if self._kernel is not None:
+            return body_dynamics_kernel(self._kernel, self.dynamics, pred, twist, load,
+                                        self._inertia_inverse)
         return body_dynamics(self.dynamics, pred, twist, load, self._inertia_inverse)
 
     def _current_load(self, load: FloatArray) -> FloatArray:
@@ -564,8 +616,6 @@ class JointFilter:
     def _substep(self, h: float, rest: FloatArray, load: FloatArray) -> None:
         x, P = self._x, self._P
         cache = self._cache
-        A = np.zeros((12, 12))
-        f = np.empty(12)
         if cache is not None and cache[0] is x and np.array_equal(cache[1], rest) and \
                 (self.size == 18 or np.array_equal(cache[2], load)):
             # the last update's linearisation (at its prior) carried to its posterior to first
@@ -573,6 +623,11 @@ class JointFilter:
             dyn, dx = cache[3], cache[4]
         else:
             dyn, dx = self._linearize(x[:6], x[6:12], self._current_load(load), rest), None
+        if self._kernel is not None:
+            self._substep_kernel(h, dyn, dx)
+            return
+        A = np.zeros((12, 12))
+        f = np.empty(12)
         A[:6, 6:] = dyn.body_inverse
         A[6:, :6] = dyn.d_screw
         A[6:, 6:] = dyn.d_twist
@@ -612,6 +667,24 @@ class JointFilter:
             Q[12:, 12:] = np.diag(self._load_q * h)
         Pn = Phi @ P @ Phi.T + Q
         self._x, self._P = xn, 0.5 * (Pn + Pn.T)
+
+    def _substep_kernel(self, h: float, dyn: BodyDynamics, dx: FloatArray | None) -> None:
+        """:meth:`_substep`'s step and covariance propagation in the kernel
+        (``tsk_filter_propagate``)."""
+        size = self.size
+        buf = np.empty(self._propagate_size)
+        buf[:size] = self._x
+        buf[size:size + size * size] = self._P.ravel()
+        packed = dyn.packed_buffer()
+        dxc = None if dx is None else np.ascontiguousarray(dx)
+        address = kernel.address
+        kernel.check(self._kernel.filter_propagate(
+            size, h, address(packed), None if dxc is None else address(dxc),
+            address(self._twist_q), address(self._load_q), address(buf), buf.size),
+            'tsk_filter_propagate')
+        xn = buf[:size]
+        check_in_chart(xn[:6], 'screw')
+        self._x, self._P = xn, buf[size:size + size * size].reshape(size, size)
 
     # ------------------------------------------------------------------ update
     def _readings(self, prep: PreparedMeasurements
@@ -707,7 +780,7 @@ class JointFilter:
         dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
         r, H, readings = self._rows(prep, dyn)
         out = kalman_update(P, r, H, readings, self._suspected, self.consistency_probability,
-                            self.reject_outliers)
+                            self.reject_outliers, self.use_kernel)
         self._suspected = {name for name, _ in out.left_out}
         if out.raw_consistent is not None:
             self._inconsistent = 0 if out.raw_consistent else self._inconsistent + 1
@@ -825,7 +898,8 @@ class UpdateResult:
 
 def kalman_update(P: FloatArray, r: FloatArray, H: FloatArray,
                   readings: list[tuple[str, NDArray[np.intp], int]], suspected: set[str],
-                  probability: float, reject_outliers: bool = True) -> UpdateResult:
+                  probability: float, reject_outliers: bool = True,
+                  use_kernel: bool = False) -> UpdateResult:
     """One stacked EKF update with the trust rules (module docstring) for the whitened
     residual ``r = h(x) - z`` (rows,), its Jacobian ``H`` (rows, size) and the state covariance
     ``P``; ``readings`` (name, rows, dof) name the rows, ``suspected`` the readings left out at
@@ -833,10 +907,17 @@ def kalman_update(P: FloatArray, r: FloatArray, H: FloatArray,
     uncertainty grows without it: a broken sensor would otherwise be absorbed by a load's random
     walk after a few steps). Then the NIS test at ``probability``; while it fails the reading a
     broken sensor explains best is left out (:func:`innovation_outliers`), kept out only when
-    the rest then passes."""
+    the rest then passes. ``use_kernel``: the update with every reading kept in the compiled
+    kernel (``tsk_filter_update``, when it is loaded) while no reading is held out; the search
+    for a contradicted one stays here."""
     size = P.shape[0]
     if not r.size:
         return UpdateResult(np.zeros(size), P, 0.0, 0, None, None, [])
+    library = kernel.library() if use_kernel else None
+    if library is not None and not (suspected and reject_outliers):
+        fast = _kalman_update_kernel(library, P, r, H, readings, probability, reject_outliers)
+        if fast is not None:
+            return fast
     nu = -r
     HP = H @ P
     S = HP @ H.T
@@ -878,6 +959,31 @@ def kalman_update(P: FloatArray, r: FloatArray, H: FloatArray,
     dx = HP.T @ sol[:, 0]
     Pn = P - HP.T @ sol[:, 1:]
     return UpdateResult(dx, 0.5 * (Pn + Pn.T), nis, dof, consistent, raw, left)
+
+
+def _kalman_update_kernel(library: Any, P: FloatArray, r: FloatArray, H: FloatArray,
+                          readings: list[tuple[str, NDArray[np.intp], int]], probability: float,
+                          reject_outliers: bool) -> UpdateResult | None:
+    """:func:`kalman_update` with every reading kept, in the kernel; None when its NIS test
+    fails and readings are to be searched (or S is singular: the numpy path then decides)."""
+    size, rows = P.shape[0], r.size
+    buf = np.empty(library.filter_update_size(size, rows))
+    end = size * size
+    buf[:end] = P.ravel()
+    buf[end:end + rows] = r
+    buf[end + rows:end + rows + rows * size] = H.ravel()
+    status = library.filter_update(size, rows, kernel.address(buf), buf.size)
+    if status == kernel.ERROR_SINGULAR_SYSTEM:
+        return None
+    kernel.check(status, 'tsk_filter_update')
+    start = end + rows + rows * size
+    nis = float(buf[start])
+    dof = sum(d for _, _, d in readings)
+    raw = nis <= consistency_threshold(dof, probability)
+    if not raw and reject_outliers:
+        return None
+    return UpdateResult(buf[start + 1:start + 1 + size], buf[start + 1 + size:].reshape(size, size),
+                        nis, dof, raw, raw, [])
 
 
 def innovation_outliers(S: FloatArray, nu: FloatArray,
