@@ -982,8 +982,8 @@ def _kalman_update_kernel(library: Any, P: FloatArray, r: FloatArray, H: FloatAr
     raw = nis <= consistency_threshold(dof, probability)
     if not raw and reject_outliers:
         return None
-    return UpdateResult(buf[start + 1:start + 1 + size], buf[start + 1 + size:].reshape(size, size),
-                        nis, dof, raw, raw, [])
+    return UpdateResult(buf[start + 1:start + 1 + size],
+                        buf[start + 1 + size:].reshape(size, size), nis, dof, raw, raw, [])
 
 
 def innovation_outliers(S: FloatArray, nu: FloatArray,

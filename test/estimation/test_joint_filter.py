@@ -20,12 +20,12 @@ from tensegrity_stiffness.estimation import (
 )
 from tensegrity_stiffness.estimation import sensor_models as sm
 from tensegrity_stiffness.geometry.screw import ScrewKinematics
+from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.dynamics import (
     JointDynamics,
     body_jacobian,
     body_jacobian_rate,
 )
-from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.joint import JointModel
 
 CONFIG = REPO / 'config' / 'default_joint.yaml'
@@ -401,11 +401,14 @@ def _run(model, use_kernel, load='unknown', damping=0.5, dt=1e-3):
 def test_kernel_run_equals_numpy(model, load, damping):
     """A whole seeded run (moving joint, outliers, a lost track, a gap, substeps) gives the
     same estimates with the compiled kernel as with the numpy reference: the same decisions,
-    numbers equal to 1e-12 of their scale (the estimates' covariances to 1e-9 of theirs)."""
+    the screw, its covariance and the load to 1e-12 of their scale, the twist to 1e-11 and
+    its covariance and the NIS to 1e-10 (measured: 2e-16, 1e-14, 1e-14; 1e-12, 5e-12,
+    2e-12: rounding carried over 60 steps)."""
     a = _run(model, True, load, damping)
     b = _run(model, False, load, damping)
-    for k, (ea, eb) in enumerate(zip(a, b)):
+    for k, (ea, eb) in enumerate(zip(a, b, strict=True)):
         assert ea[6:] == eb[6:], k
-        for x, y in zip(ea[:6], eb[:6]):
+        for x, y, rel in zip(ea[:6], eb[:6], (1e-12, 1e-12, 1e-11, 1e-10, 1e-12, 1e-10),
+                             strict=True):
             scale = max(np.abs(y).max(), 1e-300)
-            np.testing.assert_allclose(x, y, rtol=0, atol=1e-9 * scale, err_msg=str(k))
+            np.testing.assert_allclose(x, y, rtol=0, atol=rel * scale, err_msg=str(k))

@@ -78,7 +78,8 @@ def test_propagate_equals_numpy(model, load):
         for with_dx in (False, True):
             for flt in pair:
                 flt.set_state(x, P)
-                dyn = flt._linearize(x[:6], x[6:12], x[12:] if size == 18 else W, model.rest_lengths)
+                dyn = flt._linearize(x[:6], x[6:12], x[12:] if size == 18 else W,
+                                     model.rest_lengths)
                 if with_dx:
                     flt._cache = (flt._x, model.rest_lengths.copy(), W.copy(), dyn, dx)
                 flt._substep(7e-4, model.rest_lengths, W)
@@ -142,7 +143,7 @@ def _body_args(model):
 
 def test_body_dynamics_refuses_bad_arguments(model):
     lib = kernel.library()
-    arrays, ptrs = _body_args(model)
+    _arrays, ptrs = _body_args(model)
     out = np.full(kernel.FILTER_BODY_SIZE, 7.0)
     o = kernel.address(out)
     call = lib.filter_body_dynamics
