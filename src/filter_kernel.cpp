@@ -36,15 +36,19 @@ void hat_pair(const double* p, double* out) {
 }
 
 // C = A B for row-major A (m x k), B (k x r).
-void matmul(const double* A, const double* B, double* C, int64_t m, int64_t k, int64_t r) {
+// (C must not overlap A or B.) Row-update form: the sums of a row are independent.
+void matmul(const double* __restrict A, const double* __restrict B, double* __restrict C,
+            int64_t m, int64_t k, int64_t r) {
   for (int64_t i = 0; i < m; ++i) {
+    double* __restrict c = C + i * r;
     for (int64_t j = 0; j < r; ++j) {
-      C[i * r + j] = 0.0;
+      c[j] = 0.0;
     }
     for (int64_t l = 0; l < k; ++l) {
       const double a = A[i * k + l];
+      const double* __restrict b = B + l * r;
       for (int64_t j = 0; j < r; ++j) {
-        C[i * r + j] += a * B[l * r + j];
+        c[j] += a * b[j];
       }
     }
   }
@@ -358,22 +362,20 @@ int64_t tsk_filter_propagate(int64_t size, double h, const double* dynamics, con
         Q[(12 + i) * s + 12 + i] = load_density[i] * h;
       }
     }
-    std::vector<double> PhiP(static_cast<size_t>(s * s));
+    // Phi P Phi^T + Q, both products in their row-update form (independent sums)
+    std::vector<double> PhiP(static_cast<size_t>(s * s)), PhiT(static_cast<size_t>(s * s)),
+        Pn(static_cast<size_t>(s * s));
     matmul(Phi.data(), P, PhiP.data(), s, s, s);
-    std::vector<double> Pn(static_cast<size_t>(s * s));
     for (int64_t i = 0; i < s; ++i) {
       for (int64_t j = 0; j < s; ++j) {
-        double acc = 0.0;
-        for (int64_t l = 0; l < s; ++l) {
-          acc += PhiP[i * s + l] * Phi[j * s + l];
-        }
-        Pn[i * s + j] = acc + Q[i * s + j];
+        PhiT[j * s + i] = Phi[i * s + j];
       }
     }
+    matmul(PhiP.data(), PhiT.data(), Pn.data(), s, s, s);
     for (int64_t i = 0; i < s; ++i) {
       x[i] += step[i];
       for (int64_t j = 0; j < s; ++j) {
-        P[i * s + j] = 0.5 * (Pn[i * s + j] + Pn[j * s + i]);
+        P[i * s + j] = 0.5 * ((Pn[i * s + j] + Q[i * s + j]) + (Pn[j * s + i] + Q[j * s + i]));
       }
     }
     return TSK_OK;
@@ -410,15 +412,16 @@ int64_t tsk_filter_update(int64_t size, int64_t rows, double* buf, int64_t buf_l
     std::vector<double> HP(static_cast<size_t>(m * s));
     matmul(H, P, HP.data(), m, s, s);
     // S = H P H^T + I; solve S [nu, HP]
-    std::vector<double> S(static_cast<size_t>(m * m));
+    // S = (H P) H^T + I, the product in its row-update form (independent sums)
+    std::vector<double> Ht(static_cast<size_t>(s * m)), S(static_cast<size_t>(m * m));
     for (int64_t i = 0; i < m; ++i) {
-      for (int64_t j = 0; j < m; ++j) {
-        double acc = 0.0;
-        for (int64_t l = 0; l < s; ++l) {
-          acc += HP[i * s + l] * H[j * s + l];
-        }
-        S[i * m + j] = acc + (i == j ? 1.0 : 0.0);
+      for (int64_t l = 0; l < s; ++l) {
+        Ht[l * m + i] = H[i * s + l];
       }
+    }
+    matmul(HP.data(), Ht.data(), S.data(), m, s, m);
+    for (int64_t i = 0; i < m; ++i) {
+      S[i * m + i] += 1.0;
     }
     const int64_t width = s + 1;
     std::vector<double> sol(static_cast<size_t>(m * width));
@@ -443,19 +446,215 @@ int64_t tsk_filter_update(int64_t size, int64_t rows, double* buf, int64_t buf_l
       }
       dx[j] = d;
     }
-    std::vector<double> full(static_cast<size_t>(s * s));
-    for (int64_t i = 0; i < s; ++i) {
-      for (int64_t j = 0; j < s; ++j) {
-        double d = 0.0;
-        for (int64_t l = 0; l < m; ++l) {
-          d += HP[l * s + i] * sol[l * width + 1 + j];
-        }
-        full[i * s + j] = P[i * s + j] - d;
+    // (H P)^T S^-1 H P: the transpose of HP times the solved block (row-update form)
+    std::vector<double> HPt(static_cast<size_t>(s * m)), X(static_cast<size_t>(m * s)),
+        full(static_cast<size_t>(s * s));
+    for (int64_t l = 0; l < m; ++l) {
+      for (int64_t i = 0; i < s; ++i) {
+        HPt[i * m + l] = HP[l * s + i];
+        X[l * s + i] = sol[l * width + 1 + i];
       }
+    }
+    matmul(HPt.data(), X.data(), full.data(), s, m, s);
+    for (int64_t i = 0; i < s * s; ++i) {
+      full[i] = P[i] - full[i];
     }
     for (int64_t i = 0; i < s; ++i) {
       for (int64_t j = 0; j < s; ++j) {
         Pn[i * s + j] = 0.5 * (full[i * s + j] + full[j * s + i]);
+      }
+    }
+    return TSK_OK;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
+}
+
+int64_t tsk_filter_motion_rows(int64_t size, int64_t readings, double min_gravity_norm,
+                               const double* in, const double* dynamics, double* r, double* H) {
+  try {
+    if (size != 12 && size != 18) {
+      return TSK_ERROR_COUNT;
+    }
+    if (in == nullptr || dynamics == nullptr || r == nullptr || H == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (readings < 0 || readings > 7 || !(min_gravity_norm >= 0.0)) {
+      return TSK_ERROR_ARGUMENT;
+    }
+    const int64_t s = size;
+    const double* T = in;
+    const double* J = in + 16;
+    const double* V = in + 52;
+    const double* g = in + 58;
+    const double* twist_rate = dynamics + 6;
+    const double* d_screw = dynamics + 48;
+    const double* d_twist = dynamics + 84;
+    const double* d_load = dynamics + 120;
+    const double wx = V[0], wy = V[1], wz = V[2], vx = V[3], vy = V[4], vz = V[5];
+    double value[3] = {0.0, 0.0, 0.0};
+    double df[3 * 18] = {0.0};
+    if (readings & (TSK_FILTER_SPECIFIC_FORCE | TSK_FILTER_GRAVITY)) {
+      // f = dv/dt + w x v - R^T g; df/dxi = -R^T hat(g) G (+ the dynamics' rows of dv/dt)
+      const double hg[9] = {0.0, -g[2], g[1], g[2], 0.0, -g[0], -g[1], g[0], 0.0};
+      double Rt[9], RtH[9], G3[9], dg[9];
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+          Rt[i * 3 + j] = T[j * 4 + i];
+          G3[i * 3 + j] = J[i * 6 + j];
+        }
+      }
+      matmul(Rt, hg, RtH, 3, 3, 3);
+      matmul(RtH, G3, dg, 3, 3, 3);
+      double g2[3];
+      matmul(Rt, g, g2, 3, 3, 1);
+      const double cross[3] = {wy * vz - wz * vy, wz * vx - wx * vz, wx * vy - wy * vx};
+      const double dtw[18] = {0.0, vz, -vy, 0.0, -wz, wy, -vz, 0.0, vx, wz, 0.0, -wx,
+                              vy, -vx, 0.0, -wy, wx, 0.0};
+      for (int i = 0; i < 3; ++i) {
+        value[i] = twist_rate[3 + i] + cross[i] - g2[i];
+        for (int j = 0; j < 6; ++j) {
+          df[i * s + j] = (j < 3 ? -dg[i * 3 + j] : 0.0) + d_screw[(3 + i) * 6 + j];
+          df[i * s + 6 + j] = dtw[i * 6 + j] + d_twist[(3 + i) * 6 + j];
+          if (s == 18) {
+            df[i * s + 12 + j] = d_load[(3 + i) * 6 + j];
+          }
+        }
+      }
+    }
+    int64_t row = 0;
+    if (readings & TSK_FILTER_SPECIFIC_FORCE) {
+      const double* z = in + 61;
+      const double* w = in + 64;
+      for (int i = 0; i < 3; ++i) {
+        r[row + i] = (value[i] - z[i]) * w[i];
+        for (int64_t j = 0; j < s; ++j) {
+          H[(row + i) * s + j] = df[i * s + j] * w[i];
+        }
+      }
+      row += 3;
+    }
+    if (readings & TSK_FILTER_GRAVITY) {
+      const double* z = in + 67;
+      const double* w = in + 70;
+      const double norm = std::sqrt(value[0] * value[0] + value[1] * value[1] +
+                                    value[2] * value[2]);
+      if (!(norm >= min_gravity_norm)) {
+        return TSK_ERROR_ARGUMENT;
+      }
+      const double nv[3] = {value[0] / norm, value[1] / norm, value[2] / norm};
+      double du[9];
+      for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 3; ++j) {
+          du[i * 3 + j] = -((i == j ? 1.0 : 0.0) - nv[i] * nv[j]) / norm;
+        }
+      }
+      for (int i = 0; i < 3; ++i) {
+        r[row + i] = (-nv[i] - z[i]) * w[i];
+        for (int64_t j = 0; j < s; ++j) {
+          double acc = 0.0;
+          for (int l = 0; l < 3; ++l) {
+            acc += du[i * 3 + l] * df[l * s + j];
+          }
+          H[(row + i) * s + j] = acc * w[i];
+        }
+      }
+      row += 3;
+    }
+    if (readings & TSK_FILTER_GYRO) {
+      const double* z = in + 73;
+      const double* w = in + 76;
+      for (int i = 0; i < 3; ++i) {
+        r[row + i] = (V[i] - z[i]) * w[i];
+        for (int64_t j = 0; j < s; ++j) {
+          H[(row + i) * s + j] = (j == 6 + i) ? w[i] : 0.0;
+        }
+      }
+      row += 3;
+    }
+    return row;
+  } catch (...) {
+    return TSK_ERROR_INTERNAL;
+  }
+}
+
+int64_t tsk_filter_output(int64_t size, const double* P, const double* x, const double* T,
+                          const double* pose_jacobian, double* out, int64_t out_len) {
+  try {
+    if (size < 12 || size > kMaxRows) {
+      return TSK_ERROR_COUNT;
+    }
+    if (P == nullptr || x == nullptr || T == nullptr || pose_jacobian == nullptr ||
+        out == nullptr) {
+      return TSK_ERROR_NULL_POINTER;
+    }
+    if (out_len < TSK_FILTER_OUTPUT_SIZE) {
+      return TSK_ERROR_BUFFER_SIZE;
+    }
+    const int64_t s = size;
+    const double* Pj = pose_jacobian;
+    double C[36], PjT[36], PC[36], cov[36];
+    for (int i = 0; i < 6; ++i) {
+      for (int j = 0; j < 6; ++j) {
+        C[i * 6 + j] = P[i * s + j];
+        PjT[j * 6 + i] = Pj[i * 6 + j];
+      }
+    }
+    matmul(Pj, C, PC, 6, 6, 6);
+    matmul(PC, PjT, cov, 6, 6, 6);
+    double* pose_cov = out;
+    double* twist = out + 36;
+    double* twist_cov = out + 42;
+    for (int i = 0; i < 6; ++i) {
+      for (int j = 0; j < 6; ++j) {
+        pose_cov[i * 6 + j] = 0.5 * (cov[i * 6 + j] + cov[j * 6 + i]);
+      }
+    }
+    // [dp/dt; w_s] = [R v; R w]; first order in the screw through R (dtheta = Pj[3:] dxi)
+    double R[9], ws[3], vs[3];
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 3; ++j) {
+        R[i * 3 + j] = T[i * 4 + j];
+      }
+    }
+    matmul(R, x + 6, ws, 3, 3, 1);
+    matmul(R, x + 9, vs, 3, 3, 1);
+    const double hv[9] = {0.0, vs[2], -vs[1], -vs[2], 0.0, vs[0], vs[1], -vs[0], 0.0};
+    const double hw[9] = {0.0, ws[2], -ws[1], -ws[2], 0.0, ws[0], ws[1], -ws[0], 0.0};
+    double Jt[72] = {0.0};
+    double top[18], bottom[18];
+    matmul(hv, Pj + 18, top, 3, 3, 6);     // -hat(v_s) Pj[3:]
+    matmul(hw, Pj + 18, bottom, 3, 3, 6);  // -hat(w_s) Pj[3:]
+    for (int i = 0; i < 3; ++i) {
+      for (int j = 0; j < 6; ++j) {
+        Jt[i * 12 + j] = top[i * 6 + j];
+        Jt[(3 + i) * 12 + j] = bottom[i * 6 + j];
+      }
+      for (int j = 0; j < 3; ++j) {
+        Jt[i * 12 + 9 + j] = R[i * 3 + j];
+        Jt[(3 + i) * 12 + 6 + j] = R[i * 3 + j];
+      }
+    }
+    double P12[144], JP[72], JtT[72], tc[36];
+    for (int i = 0; i < 12; ++i) {
+      for (int j = 0; j < 12; ++j) {
+        P12[i * 12 + j] = P[i * s + j];
+      }
+    }
+    for (int i = 0; i < 6; ++i) {
+      for (int j = 0; j < 12; ++j) {
+        JtT[j * 6 + i] = Jt[i * 12 + j];
+      }
+    }
+    matmul(Jt, P12, JP, 6, 12, 12);
+    matmul(JP, JtT, tc, 6, 12, 6);
+    for (int i = 0; i < 3; ++i) {
+      twist[i] = vs[i];
+      twist[3 + i] = ws[i];
+    }
+    for (int i = 0; i < 6; ++i) {
+      for (int j = 0; j < 6; ++j) {
+        twist_cov[i * 6 + j] = 0.5 * (tc[i * 6 + j] + tc[j * 6 + i]);
       }
     }
     return TSK_OK;

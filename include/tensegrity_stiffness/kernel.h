@@ -241,6 +241,36 @@ int64_t tsk_filter_update_size(int64_t size, int64_t rows);
  * Errors: counts, null buf, a short buffer, a singular S (TSK_ERROR_SINGULAR_SYSTEM). */
 int64_t tsk_filter_update(int64_t size, int64_t rows, double* buf, int64_t buf_len);
 
+/* Readings of tsk_filter_motion_rows (a bit mask; rows in this order, 3 each). */
+#define TSK_FILTER_SPECIFIC_FORCE 1
+#define TSK_FILTER_GRAVITY 2
+#define TSK_FILTER_GYRO 4
+/* Doubles of tsk_filter_motion_rows' input: T (16), the SE(3) left Jacobian J (36), link 2's
+ * body twist (6), gravity in {1} (3), then each reading's value and whitening weights (3 + 3):
+ * specific force, gravity direction, gyro. */
+#define TSK_FILTER_MOTION_INPUT 79
+
+/* The whitened rows r = (h(x) - z) w (3 per reading) and their Jacobian H (3 per reading x
+ * size, row-major, every column written) of the accelerometer (specific force f = dv/dt + w x v
+ * - R^T g with dv/dt of the dynamics, a tsk_filter_body_dynamics output), the gravity direction
+ * -f / |f| and the gyro (w) (JointFilter._rows). Returns the rows written (>= 0) or an error:
+ * size not 12 / 18 (TSK_ERROR_COUNT), null pointers, readings outside the mask or a negative
+ * min_gravity_norm, |f| below min_gravity_norm with a gravity reading (TSK_ERROR_ARGUMENT). */
+int64_t tsk_filter_motion_rows(int64_t size, int64_t readings, double min_gravity_norm,
+                               const double* in, const double* dynamics, double* r, double* H);
+
+/* Doubles of tsk_filter_output's output: the pose covariance (36), the twist [dp/dt; w] in {1}
+ * (6) and its covariance (36). */
+#define TSK_FILTER_OUTPUT_SIZE 78
+
+/* The joint filter's estimate of its state (JointFilter._estimate): from the state x (its
+ * first 12: screw, body twist [w; v]) with covariance P (size x size, size >= 12), T at the
+ * screw and the pose Jacobian (36): the pose covariance Pj C Pj^T (C = P[:6, :6]), the twist
+ * [R v; R w] and its first-order covariance (both symmetrised). Errors: size < 12, null
+ * pointers, a short buffer. */
+int64_t tsk_filter_output(int64_t size, const double* P, const double* x, const double* T,
+                          const double* pose_jacobian, double* out, int64_t out_len);
+
 #ifdef __cplusplus
 }
 #endif

@@ -743,7 +743,14 @@ class JointFilter:
             r[row:row + 6] = prep.pose_whitener @ res
             H[row:row + 6, :6] = prep.pose_whitener @ jac
             row += 6
-        if prep.gravity is not None or prep.specific_force is not None:
+        motion = (prep.gravity is not None or prep.specific_force is not None or
+                  prep.angular_velocity is not None)
+        if motion and self._kernel is not None and \
+                self._motion_rows_kernel(prep, dyn, r, H, row):
+            row += 3 * ((prep.gravity is not None) + (prep.specific_force is not None) +
+                        (prep.angular_velocity is not None))
+            motion = False
+        if motion and (prep.gravity is not None or prep.specific_force is not None):
             sf = sm.predicted_specific_force(kin, x[6:12], dyn.twist_rate, self.gravity)
             df = np.empty((3, size))
             # df/d(dv/dt) = I: the dynamics' rows of dv/dt chained in
@@ -762,7 +769,7 @@ class JointFilter:
                 r[row:row + 3] = (u - prep.gravity) * w
                 H[row:row + 3] = (du @ df) * w[:, None]
                 row += 3
-        if prep.angular_velocity is not None:
+        if motion and prep.angular_velocity is not None:
             w = prep.angular_velocity_weight
             value, dw = sm.predicted_angular_velocity(x[6:12])
             r[row:row + 3] = (value - prep.angular_velocity) * w
@@ -772,6 +779,42 @@ class JointFilter:
             r[row:row + 6] = prep.wrench_whitener @ (x[12:] - prep.wrench)
             H[row:row + 6, 12:] = prep.wrench_whitener
         return r, H, readings
+
+    def _motion_rows_kernel(self, prep: PreparedMeasurements, dyn: BodyDynamics,
+                            r: FloatArray, H: FloatArray, row: int) -> bool:
+        """:meth:`_rows`' accelerometer, gravity and gyro rows in the kernel
+        (``tsk_filter_motion_rows``) into ``r`` and ``H`` from ``row``; False (nothing
+        written) where the numpy lines decide (a specific force below
+        ``sensor_models.MIN_GRAVITY_NORM`` with a gravity reading: their error)."""
+        kin = dyn.prediction.kinematics
+        buf = np.empty(kernel.FILTER_MOTION_INPUT)
+        buf[:16] = kin.T.ravel()
+        buf[16:52] = kin.J.ravel()
+        buf[52:58] = self._x[6:12]
+        buf[58:61] = self.gravity
+        readings = 0
+        if prep.specific_force is not None:
+            buf[61:64] = prep.specific_force
+            buf[64:67] = prep.specific_force_weight
+            readings |= kernel.FILTER_SPECIFIC_FORCE
+        if prep.gravity is not None:
+            buf[67:70] = prep.gravity
+            buf[70:73] = prep.gravity_weight
+            readings |= kernel.FILTER_GRAVITY
+        if prep.angular_velocity is not None:
+            buf[73:76] = prep.angular_velocity
+            buf[76:79] = prep.angular_velocity_weight
+            readings |= kernel.FILTER_GYRO
+        packed = dyn.packed_buffer()
+        address = kernel.address
+        status = self._kernel.filter_motion_rows(
+            self.size, readings, sm.MIN_GRAVITY_NORM, address(buf), address(packed),
+            address(r) + 8 * row, address(H) + 8 * row * self.size)
+        if status == kernel.ERROR_ARGUMENT:
+            return False
+        if status < 0:
+            kernel.check(status, 'tsk_filter_motion_rows')
+        return True
 
     def _update(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray
                 ) -> tuple[float, int, bool | None, list[tuple[str, str]]]:
@@ -853,16 +896,10 @@ class JointFilter:
             state, kin = dyn.prediction.state, dyn.prediction.kinematics
         C = P[:6, :6].copy()
         Pj = sm.pose_jacobian(xi, kin)
-        pose_cov = Pj @ C @ Pj.T
-        # twist [dp/dt; w_s] = [R v; R w]; first order in the screw through R (dtheta = G dxi)
-        R = state.transform[:3, :3]
-        w_s, v_s = R @ x[6:9], R @ x[9:12]
-        Jt = np.zeros((6, 12))
-        Jt[:3, 9:12] = R
-        Jt[3:, 6:9] = R
-        Jt[:3, :6] = -_hat(v_s) @ Pj[3:]
-        Jt[3:, :6] = -_hat(w_s) @ Pj[3:]
-        twist_cov = Jt @ P[:12, :12] @ Jt.T
+        if self._kernel is not None:
+            pose_cov, twist, twist_cov = self._output_kernel(P, x, state.transform, Pj)
+        else:
+            pose_cov, twist, twist_cov = self._output_numpy(P, x, state.transform, Pj, C)
         if self.size == 18:
             W, W_cov = x[12:].copy(), P[12:, 12:].copy()
         else:
@@ -871,12 +908,40 @@ class JointFilter:
                   if self.stiffness_std else np.full((6, 6), np.nan))
         names = tuple(n for n, _ in dropped) + tuple(outliers)
         why = tuple(f'{n}: {w}' for n, w in dropped) + tuple(reasons)
-        return JointEstimate(True, 'ok', xi.copy(), state.transform.copy(),
-                             0.5 * (pose_cov + pose_cov.T), C, W, W_cov, state, Kc_std,
-                             float(nis), int(dof), True, 6, math.nan, 1,
+        return JointEstimate(True, 'ok', xi.copy(), state.transform.copy(), pose_cov, C, W,
+                             W_cov, state, Kc_std, float(nis), int(dof), True, 6, math.nan, 1,
                              prep.describe(self.model.string_names), np.empty(0), consistent,
-                             int(dof), names, why, restarted,
-                             np.concatenate([v_s, w_s]), 0.5 * (twist_cov + twist_cov.T))
+                             int(dof), names, why, restarted, twist, twist_cov)
+
+    def _output_kernel(self, P: FloatArray, x: FloatArray, T: FloatArray, Pj: FloatArray
+                       ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`_output_numpy` in the kernel (``tsk_filter_output``)."""
+        out = np.empty(kernel.FILTER_OUTPUT_SIZE)
+        Pc, xc, Tc = np.ascontiguousarray(P), np.ascontiguousarray(x), np.ascontiguousarray(T)
+        address = kernel.address
+        kernel.check(self._kernel.filter_output(self.size, address(Pc), address(xc),
+                                                address(Tc), address(Pj), address(out),
+                                                out.size), 'tsk_filter_output')
+        return out[:36].reshape(6, 6), out[36:42], out[42:].reshape(6, 6)
+
+    @staticmethod
+    def _output_numpy(P: FloatArray, x: FloatArray, T: FloatArray, Pj: FloatArray,
+                      C: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The pose covariance, the twist ``[dp/dt; w]`` in {1} and its covariance (both
+        symmetrised) of the state ``x`` with covariance ``P`` (``C`` its screw block), ``T``
+        and the pose Jacobian ``Pj`` at its screw."""
+        pose_cov = Pj @ C @ Pj.T
+        # twist [dp/dt; w_s] = [R v; R w]; first order in the screw through R (dtheta = G dxi)
+        R = T[:3, :3]
+        w_s, v_s = R @ x[6:9], R @ x[9:12]
+        Jt = np.zeros((6, 12))
+        Jt[:3, 9:12] = R
+        Jt[3:, 6:9] = R
+        Jt[:3, :6] = -_hat(v_s) @ Pj[3:]
+        Jt[3:, :6] = -_hat(w_s) @ Pj[3:]
+        twist_cov = Jt @ P[:12, :12] @ Jt.T
+        return (0.5 * (pose_cov + pose_cov.T), np.concatenate([v_s, w_s]),
+                0.5 * (twist_cov + twist_cov.T))
 
 
 @dataclass(slots=True)

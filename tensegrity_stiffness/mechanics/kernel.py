@@ -61,6 +61,13 @@ TIP_SIZE = 78
 #: Doubles of ``tsk_filter_body_dynamics``' output (``TSK_FILTER_BODY_SIZE``): ``dxi/dt`` 6,
 #: ``dV/dt`` 6, ``J_b^-1`` 36, its Jacobians in the screw, twist and load 36 each.
 FILTER_BODY_SIZE = 156
+#: Readings of ``tsk_filter_motion_rows`` (``TSK_FILTER_*``, a bit mask) and the doubles of its
+#: input (``TSK_FILTER_MOTION_INPUT``).
+FILTER_SPECIFIC_FORCE, FILTER_GRAVITY, FILTER_GYRO = 1, 2, 4
+FILTER_MOTION_INPUT = 79
+#: Doubles of ``tsk_filter_output``'s output (``TSK_FILTER_OUTPUT_SIZE``): the pose covariance
+#: 36, the twist 6 and its covariance 36.
+FILTER_OUTPUT_SIZE = 78
 
 _P = ctypes.c_void_p
 _I = ctypes.c_int64
@@ -214,6 +221,12 @@ class _Library:
         self.filter_update = lib.tsk_filter_update
         self.filter_update.restype = _I
         self.filter_update.argtypes = [_I, _I, _P, _I]
+        self.filter_motion_rows = lib.tsk_filter_motion_rows
+        self.filter_motion_rows.restype = _I
+        self.filter_motion_rows.argtypes = [_I, _I, _D, _P, _P, _P, _P]
+        self.filter_output = lib.tsk_filter_output
+        self.filter_output.restype = _I
+        self.filter_output.argtypes = [_I, _P, _P, _P, _P, _P, _I]
         self.path = path
         self._lib = lib
 
