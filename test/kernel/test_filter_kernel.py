@@ -1,6 +1,8 @@
 """The joint filter's entry points of the compiled kernel (``tsk_filter_body_dynamics``,
-``tsk_filter_propagate``, ``tsk_filter_update``) against their numpy references in
-``estimation/joint_filter.py`` (``body_dynamics``, ``JointFilter._substep``, ``kalman_update``)
+``tsk_filter_propagate``, ``tsk_filter_update``, ``tsk_filter_motion_rows``,
+``tsk_filter_output``) against their numpy references in ``estimation/joint_filter.py``
+(``body_dynamics``, ``JointFilter._substep``, ``kalman_update``, ``JointFilter._rows``,
+``JointFilter._output_numpy``)
 to 1e-12 of each quantity's scale, and their boundary: counts, null pointers, short buffers
 and bad arguments are refused before anything is written, and poisoned calls (every freed
 small buffer handed out again and overwritten with NaN before C runs, as
@@ -227,7 +229,8 @@ def test_poisoned_calls_give_the_same_run(model, monkeypatch):
 
     clean = run()
     library = kernel.library()
-    for name in ('filter_body_dynamics', 'filter_propagate', 'filter_update'):
+    for name in ('filter_body_dynamics', 'filter_propagate', 'filter_update',
+                 'filter_motion_rows', 'filter_output'):
         monkeypatch.setattr(library, name, _poisoned(getattr(library, name)))
     np.testing.assert_array_equal(run(), clean)
 
@@ -244,7 +247,106 @@ def sm_readings(st, rng):
 def test_no_ctypes_mismatch():
     """The loader's argument types match the header's parameter counts."""
     lib = kernel.library()
+    assert len(lib.filter_motion_rows.argtypes) == 7
+    assert len(lib.filter_output.argtypes) == 7
     assert len(lib.filter_body_dynamics.argtypes) == 14
     assert len(lib.filter_propagate.argtypes) == 8
     assert len(lib.filter_update.argtypes) == 4
     assert lib.filter_update.restype is ctypes.c_int64
+
+
+def all_readings(model, rng, load):
+    from tensegrity_stiffness.estimation import Measurements
+    xi = model.initial_screw + rng.normal(scale=SPREAD)
+    st = model.evaluate(xi)
+    lengths = st.lengths + rng.normal(scale=1e-4, size=12)
+    lengths[4:] = np.nan
+    return Measurements(
+        tensions=st.tensions + rng.normal(scale=0.05, size=12), tension_std=0.05,
+        lengths=lengths, length_std=1e-4,
+        pose=st.transform, pose_covariance=np.eye(6) * 1e-6,
+        specific_force=rng.normal(size=3) + [0.0, 9.81, 0.0], specific_force_std=0.05,
+        gravity=[0.0, -1.0, 0.0], gravity_std=0.01, gravity_base=[0.0, -1.0, 0.0],
+        angular_velocity=rng.normal(scale=0.01, size=3), angular_velocity_std=0.01,
+        external_wrench=rng.normal(scale=0.01, size=6) if load == 'unknown' else None,
+        wrench_covariance=np.eye(6) * 1e-4 if load == 'unknown' else None)
+
+
+@pytest.mark.parametrize('load', ['unknown', 'known'])
+def test_measurement_rows_equal_numpy(model, load):
+    """Every kind of reading (tensions, lengths, pose, accelerometer, gravity direction,
+    gyro, wrench): the whitened residual and its Jacobian of a kernel filter equal the numpy
+    filter's at moving states."""
+    rng = np.random.default_rng(36)
+    pair = [JointFilter(model, load=load, string_damping=0.5, use_kernel=flag)
+            for flag in (True, False)]
+    size = pair[0].size
+    for xi, V, W in states(model, rng, 8):
+        m = all_readings(model, rng, load)
+        got = []
+        for flt in pair:
+            flt.set_state(np.r_[xi, V, W][:size], np.eye(size) * 1e-6)
+            got.append(flt.measurement_model(m, known_load=W if load == 'known' else None))
+        assert got[0][2] == got[1][2] and 'gravity' in got[0][2] and 'imu' in got[0][2]
+        assert_close(got[0][0], got[1][0])
+        assert_close(got[0][1], got[1][1])
+
+
+def test_output_equals_numpy(model):
+    rng = np.random.default_rng(37)
+    flt = JointFilter(model)
+    for xi, V, W in states(model, rng, 8):
+        x = np.r_[xi, V, W]
+        A = rng.normal(size=(18, 18)) * 1e-3
+        P = A @ A.T
+        pred = sm.string_predictions_unchecked(model, xi, model.rest_lengths)
+        T = pred.kinematics.T
+        Pj = sm.pose_jacobian(xi, pred.kinematics)
+        got = flt._output_kernel(P, x, T, Pj)
+        ref = flt._output_numpy(P, x, T, Pj, P[:6, :6].copy())
+        for a, b in zip(got, ref, strict=True):
+            assert_close(a, b)
+
+
+def test_motion_rows_and_output_refuse_bad_arguments(model):
+    lib = kernel.library()
+    inp = np.zeros(kernel.FILTER_MOTION_INPUT)
+    inp[:16] = np.eye(4).ravel()
+    inp[16:52] = np.eye(6).ravel()
+    dyn = np.zeros(kernel.FILTER_BODY_SIZE)
+    r = np.full(9, 5.0)
+    H = np.full((9, 18), 5.0)
+    i, d, ra, Ha = (kernel.address(a) for a in (inp, dyn, r, H))
+    call = lib.filter_motion_rows
+    every = kernel.FILTER_SPECIFIC_FORCE | kernel.FILTER_GRAVITY | kernel.FILTER_GYRO
+    assert call(13, every, 1e-9, i, d, ra, Ha) == kernel.ERROR_COUNT
+    assert call(18, 8, 1e-9, i, d, ra, Ha) == kernel.ERROR_ARGUMENT
+    assert call(18, -1, 1e-9, i, d, ra, Ha) == kernel.ERROR_ARGUMENT
+    assert call(18, every, -1.0, i, d, ra, Ha) == kernel.ERROR_ARGUMENT
+    for k in range(4):
+        args = [i, d, ra, Ha]
+        args[k] = None
+        assert call(18, every, 1e-9, *args) == kernel.ERROR_NULL_POINTER
+    assert np.all(r == 5.0) and np.all(H == 5.0)
+    # zero specific force (no gravity, at rest): a gravity reading is refused, as numpy's
+    # gravity_direction_jacobian raises
+    assert call(18, kernel.FILTER_GRAVITY, 1e-9, i, d, ra, Ha) == kernel.ERROR_ARGUMENT
+    with pytest.raises(ValueError, match='specific force'):
+        sm.gravity_direction_jacobian(np.zeros(3))
+    assert call(18, kernel.FILTER_SPECIFIC_FORCE | kernel.FILTER_GYRO, 1e-9, i, d, ra,
+                Ha) == 6
+    assert call(12, 0, 1e-9, i, d, ra, Ha) == 0
+    out = np.full(kernel.FILTER_OUTPUT_SIZE, 5.0)
+    P = np.eye(18)
+    x = np.zeros(18)
+    Pj = np.eye(6)
+    args = [kernel.address(a) for a in (P, x, inp, Pj, out)]
+    out_call = lib.filter_output
+    assert out_call(11, *args, out.size) == kernel.ERROR_COUNT
+    assert out_call(18, *args, out.size - 1) == kernel.ERROR_BUFFER_SIZE
+    for k in range(5):
+        bad = list(args)
+        bad[k] = None
+        assert out_call(18, *bad, out.size) == kernel.ERROR_NULL_POINTER
+    assert np.all(out == 5.0)
+    assert out_call(18, *args, out.size) == kernel.OK
