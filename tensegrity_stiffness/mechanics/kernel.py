@@ -206,6 +206,13 @@ class _Library:
         self.chain_tip = lib.tsk_chain_tip
         self.chain_tip.restype = _I
         self.chain_tip.argtypes = [_I] + [_P] * 8 + [_I, _P, _I]
+        self._bind_filter(lib)
+        self.path = path
+        self._lib = lib
+
+
+    def _bind_filter(self, lib: ctypes.CDLL) -> None:
+        """The joint filter's entry points (``tsk_filter_*``), typed."""
         self.filter_body_dynamics = lib.tsk_filter_body_dynamics
         self.filter_body_dynamics.restype = _I
         self.filter_body_dynamics.argtypes = [_I, _I] + [_P] * 11 + [_I]
@@ -227,8 +234,6 @@ class _Library:
         self.filter_output = lib.tsk_filter_output
         self.filter_output.restype = _I
         self.filter_output.argtypes = [_I, _P, _P, _P, _P, _P, _I]
-        self.path = path
-        self._lib = lib
 
 
 @functools.lru_cache(maxsize=1)
