@@ -54,6 +54,28 @@ void matmul(const double* __restrict A, const double* __restrict B, double* __re
   }
 }
 
+// matmul for a sparse A (the update's H: a string's row has 6 nonzero columns of 18; the
+// step's Phi): its zero entries are skipped (adding 0 b is exact for finite B).
+void matmul_sparse(const double* __restrict A, const double* __restrict B, double* __restrict C,
+                   int64_t m, int64_t k, int64_t r) {
+  for (int64_t i = 0; i < m; ++i) {
+    double* __restrict c = C + i * r;
+    for (int64_t j = 0; j < r; ++j) {
+      c[j] = 0.0;
+    }
+    for (int64_t l = 0; l < k; ++l) {
+      const double a = A[i * k + l];
+      if (a == 0.0) {
+        continue;
+      }
+      const double* __restrict b = B + l * r;
+      for (int64_t j = 0; j < r; ++j) {
+        c[j] += a * b[j];
+      }
+    }
+  }
+}
+
 // Inverse of a 3 x 3 matrix by its adjugate; false when the determinant is zero.
 bool inverse3(const double* M, double* out) {
   const double c00 = M[4] * M[8] - M[5] * M[7];
@@ -365,7 +387,7 @@ int64_t tsk_filter_propagate(int64_t size, double h, const double* dynamics, con
     // Phi P Phi^T + Q, both products in their row-update form (independent sums)
     std::vector<double> PhiP(static_cast<size_t>(s * s)), PhiT(static_cast<size_t>(s * s)),
         Pn(static_cast<size_t>(s * s));
-    matmul(Phi.data(), P, PhiP.data(), s, s, s);
+    matmul_sparse(Phi.data(), P, PhiP.data(), s, s, s);
     for (int64_t i = 0; i < s; ++i) {
       for (int64_t j = 0; j < s; ++j) {
         PhiT[j * s + i] = Phi[i * s + j];
@@ -410,16 +432,15 @@ int64_t tsk_filter_update(int64_t size, int64_t rows, double* buf, int64_t buf_l
     double* dx = nis + 1;
     double* Pn = dx + s;
     std::vector<double> HP(static_cast<size_t>(m * s));
-    matmul(H, P, HP.data(), m, s, s);
-    // S = H P H^T + I; solve S [nu, HP]
-    // S = (H P) H^T + I, the product in its row-update form (independent sums)
-    std::vector<double> Ht(static_cast<size_t>(s * m)), S(static_cast<size_t>(m * m));
-    for (int64_t i = 0; i < m; ++i) {
-      for (int64_t l = 0; l < s; ++l) {
-        Ht[l * m + i] = H[i * s + l];
+    matmul_sparse(H, P, HP.data(), m, s, s);
+    // S = H (H P)^T + I (= H P H^T + I, P symmetric); solve S [nu, HP]
+    std::vector<double> HPt(static_cast<size_t>(s * m)), S(static_cast<size_t>(m * m));
+    for (int64_t l = 0; l < m; ++l) {
+      for (int64_t i = 0; i < s; ++i) {
+        HPt[i * m + l] = HP[l * s + i];
       }
     }
-    matmul(HP.data(), Ht.data(), S.data(), m, s, m);
+    matmul_sparse(H, HPt.data(), S.data(), m, s, m);
     for (int64_t i = 0; i < m; ++i) {
       S[i * m + i] += 1.0;
     }
@@ -447,11 +468,9 @@ int64_t tsk_filter_update(int64_t size, int64_t rows, double* buf, int64_t buf_l
       dx[j] = d;
     }
     // (H P)^T S^-1 H P: the transpose of HP times the solved block (row-update form)
-    std::vector<double> HPt(static_cast<size_t>(s * m)), X(static_cast<size_t>(m * s)),
-        full(static_cast<size_t>(s * s));
+    std::vector<double> X(static_cast<size_t>(m * s)), full(static_cast<size_t>(s * s));
     for (int64_t l = 0; l < m; ++l) {
       for (int64_t i = 0; i < s; ++i) {
-        HPt[i * m + l] = HP[l * s + i];
         X[l * s + i] = sol[l * width + 1 + i];
       }
     }
