@@ -268,11 +268,13 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
 
 def body_dynamics_kernel(library: Any, dynamics: JointDynamics,
                          prediction: sm.StringPrediction, twist: FloatArray, load: FloatArray,
-                         inertia_inverse: FloatArray) -> BodyDynamics:
+                         inertia_inverse: FloatArray,
+                         constants: tuple[int, int, int] | None = None) -> BodyDynamics:
     """:func:`body_dynamics` in the compiled kernel (``tsk_filter_body_dynamics`` of
     ``library``, :func:`~tensegrity_stiffness.mechanics.kernel.library`): the same equations,
     equal to rounding (``test/kernel/test_filter_kernel.py``); the arrays are views of one
-    buffer (``packed``)."""
+    buffer (``packed``). ``constants``: the addresses of ``G``, ``inertia_inverse`` and the
+    string damping when the caller keeps them alive (a filter, for its life)."""
     kin, state = prediction.kinematics, prediction.state
     # every array bound to a name until the call returns (kernel.address)
     T = np.ascontiguousarray(kin.T)
@@ -282,14 +284,17 @@ def body_dynamics_kernel(library: Any, dynamics: JointDynamics,
     K = np.ascontiguousarray(state.stiffness)
     V = np.ascontiguousarray(twist)
     W = np.ascontiguousarray(load)
-    G = dynamics.spatial_inertia
-    c = dynamics.string_damping
     address = kernel.address
+    if constants is None:
+        G = np.ascontiguousarray(dynamics.spatial_inertia)
+        Gi = np.ascontiguousarray(inertia_inverse)
+        c = np.ascontiguousarray(dynamics.string_damping, dtype=np.float64)
+        constants = (address(G), address(Gi), address(c))
     out = np.empty(kernel.FILTER_BODY_SIZE)
     kernel.check(library.filter_body_dynamics(
         L.shape[0], int(dynamics.damped), address(T), address(J), address(L), address(F),
-        address(K), address(V), address(W), address(G), address(inertia_inverse), address(c),
-        address(out), out.size), 'tsk_filter_body_dynamics')
+        address(K), address(V), address(W), *constants, address(out), out.size),
+        'tsk_filter_body_dynamics')
     return BodyDynamics(out[:6], out[6:12], out[12:48].reshape(6, 6),
                         out[48:84].reshape(6, 6), out[84:120].reshape(6, 6),
                         out[120:].reshape(6, 6), prediction, out)
@@ -360,6 +365,11 @@ class JointFilter:
         self._damping = np.ascontiguousarray(self.dynamics.string_damping, dtype=np.float64)
         if self._kernel is not None:
             self._propagate_size = self._kernel.filter_propagate_size(self.size)
+            # arrays the filter keeps for its life: their addresses taken once
+            self._spatial_inertia = np.ascontiguousarray(self.dynamics.spatial_inertia)
+            self._constants = tuple(kernel.address(a) for a in (
+                self._spatial_inertia, self._inertia_inverse, self._damping))
+            self._densities = (kernel.address(self._twist_q), kernel.address(self._load_q))
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -599,7 +609,7 @@ class JointFilter:
         pred = sm.string_predictions_unchecked(self.model, xi, rest)
         if self._kernel is not None:
             return body_dynamics_kernel(self._kernel, self.dynamics, pred, twist, load,
-                                        self._inertia_inverse)
+                                        self._inertia_inverse, self._constants)
         return body_dynamics(self.dynamics, pred, twist, load, self._inertia_inverse)
 
     def _current_load(self, load: FloatArray) -> FloatArray:
@@ -680,7 +690,7 @@ class JointFilter:
         address = kernel.address
         kernel.check(self._kernel.filter_propagate(
             size, h, address(packed), None if dxc is None else address(dxc),
-            address(self._twist_q), address(self._load_q), address(buf), buf.size),
+            *self._densities, address(buf), buf.size),
             'tsk_filter_propagate')
         xn = buf[:size]
         check_in_chart(xn[:6], 'screw')
