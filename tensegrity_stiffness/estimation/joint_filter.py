@@ -626,8 +626,9 @@ class JointFilter:
     def _substep(self, h: float, rest: FloatArray, load: FloatArray) -> None:
         x, P = self._x, self._P
         cache = self._cache
-        if cache is not None and cache[0] is x and np.array_equal(cache[1], rest) and \
-                (self.size == 18 or np.array_equal(cache[2], load)):
+        # (the cached arrays have the shapes of these: == then all(), array_equal's test)
+        if cache is not None and cache[0] is x and bool((cache[1] == rest).all()) and \
+                (self.size == 18 or bool((cache[2] == load).all())):
             # the last update's linearisation (at its prior) carried to its posterior to first
             # order: f(x + dx) = f(x) + A dx, one evaluation of the strings per step
             dyn, dx = cache[3], cache[4]
