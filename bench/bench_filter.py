@@ -7,13 +7,16 @@ One ``JointFilter.step`` (prediction over 1 ms and the update) with 12 load cell
 (accelerometer and gyro), unknown load, on the default joint at rest at a seeded state with
 new noise each step, side by side in one run with ``estimate_joint_state`` warm-started on the
 same readings (12 tensions and the accelerometer's direction of gravity; its previous
-estimate as the warm start) and one ``JointModel.evaluate`` (the floor). The three are timed in
-alternating rounds (``--rounds``) of ``--repeats`` calls each; medians and p90 in us and the
-ratios to ``evaluate`` and to the static estimator. Target (issue 37): <= 100 us per update.
+estimate as the warm start) and one ``JointModel.evaluate`` (the floor). The filter runs twice,
+with its linear algebra in the compiled kernel (``use_kernel=True``, the default) and on the
+numpy path (the reference); all are timed in alternating rounds (``--rounds``) of
+``--repeats`` calls each; medians and p90 in us and the ratios to ``evaluate``, to the static
+estimator and (``/numpy``) of the kernel path to the numpy path. Target (issue 37): <= 100 us
+per update.
 Then the spine of 5 joints (the packaged one, every joint's 12 load cells, unknown tip load):
 one ``ChainFilter.step`` beside a warm-started ``estimate_chain_state`` on the same readings,
 alternating; target <= 1 ms.
-``--profile``: cProfile of the filter's steps, the functions by their own time.
+``--profile``: cProfile of the filter's steps (kernel path), the functions by their own time.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from tensegrity_stiffness.estimation import (  # noqa: E402
     estimate_joint_state,
 )
 from tensegrity_stiffness.estimation import sensor_models as sm  # noqa: E402
+from tensegrity_stiffness.mechanics import kernel  # noqa: E402
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
@@ -95,13 +99,15 @@ def main() -> None:
     xi = model.initial_screw + rng.normal(scale=TRUTH_SPREAD)
     n = args.repeats
     ours, static = readings(model, xi, rng, n * args.rounds + 200)
+    filters = {
+        f'JointFilter.step{label}, {path}': JointFilter(model, string_damping=0.5,
+                                                        stiffness_std=std,
+                                                        use_kernel=path == 'kernel')
+        for label, std in ((' (12 cells + IMU)', False), (' + std of K_c', True))
+        for path in ('kernel', 'numpy')}
     rows: dict[str, list[float]] = {'JointModel.evaluate (floor)': [],
-                                    'estimate_joint_state, warm': [],
-                                    'JointFilter.step (12 cells + IMU)': [],
-                                    'JointFilter.step + std of K_c': []}
-    filters = {'JointFilter.step (12 cells + IMU)': JointFilter(model, string_damping=0.5,
-                                                                 stiffness_std=False),
-               'JointFilter.step + std of K_c': JointFilter(model, string_damping=0.5)}
+                                    'estimate_joint_state, warm': []}
+    rows.update({name: [] for name in filters})
     clock = {name: 0 for name in filters}
     for name, flt in filters.items():  # start-up: out of the timing
         for k in range(200):
@@ -124,19 +130,25 @@ def main() -> None:
             rows[name] += timed(step, ours[chunk])
     floor = statistics.median(rows['JointModel.evaluate (floor)'])
     static_median = statistics.median(rows['estimate_joint_state, warm'])
+    print(f'kernel: {kernel.status()}')
     print(f'load: {os.getloadavg()[0]:.2f} (1 min); {args.rounds} alternating rounds of {n}')
-    print(f'{"":40s} {"median us":>10s} {"p90 us":>8s} {"/evaluate":>10s} {"/static":>8s}')
+    print(f'{"":46s} {"median us":>10s} {"p90 us":>8s} {"/evaluate":>10s} {"/static":>8s} '
+          f'{"/numpy":>7s}')
     for name, times in rows.items():
         med = statistics.median(times)
         p90 = float(np.percentile(times, 90))
-        print(f'{name:40s} {med * 1e6:10.1f} {p90 * 1e6:8.1f} {med / floor:10.1f} '
-              f'{med / static_median:8.2f}')
-    print('target: one filter update <= 100 us')
+        twin = name.replace(', kernel', ', numpy')
+        ratio = (f'{med / statistics.median(rows[twin]):7.2f}'
+                 if twin != name and twin in rows else '')
+        print(f'{name:46s} {med * 1e6:10.1f} {p90 * 1e6:8.1f} {med / floor:10.1f} '
+              f'{med / static_median:8.2f} {ratio}')
+    print('target: one filter update <= 100 us (the kernel path)')
     spine(args.spine_repeats, args.rounds)
     if args.profile:
-        flt = filters['JointFilter.step (12 cells + IMU)']
+        first = next(iter(filters))
+        flt = filters[first]
         profile = cProfile.Profile()
-        t0 = clock['JointFilter.step (12 cells + IMU)']
+        t0 = clock[first]
         profile.enable()
         for k, prep in enumerate(ours[200:200 + n]):
             flt.step((t0 + k + 1) * 1e-3, prep)

@@ -26,8 +26,9 @@ extern "C" {
 /* Version of this ABI: bumped with every change below (1: the series tables set through a
  * global tsk_set_series, positive return values as screw indices; 2: without
  * tsk_joint_measure_packed; 3: without tsk_joint_linear_model, tsk_joint_pose_terms,
- * tsk_qp_warm_face and tsk_joint_transform). */
-#define TSK_ABI_VERSION 4
+ * tsk_qp_warm_face and tsk_joint_transform; 4: without tsk_filter_body_dynamics,
+ * tsk_filter_propagate and tsk_filter_update). */
+#define TSK_ABI_VERSION 5
 
 /* Status codes. */
 #define TSK_OK 0
@@ -195,6 +196,80 @@ int64_t tsk_chain_tip(int64_t n_joints, const double* P, const double* L, const 
                       const double* F, const double* Kc, const double* weights,
                       const double* coms, const double* W_in, int64_t outputs, double* out,
                       int64_t out_len);
+
+/* Doubles of tsk_filter_body_dynamics' output: dxi/dt (6), dV/dt (6), J_b^-1 (36), the
+ * Jacobians of dV/dt in the screw (36), the twist (36) and the load (36). */
+#define TSK_FILTER_BODY_SIZE 156
+
+/* The joint filter's equations of motion in {2} (estimation/joint_filter.py, body_dynamics) at
+ * one screw: T (16), the SE(3) left Jacobian J (36), dl/dxi (n x 6, read when damped), the
+ * strings' wrench F [f; m] (6) and K (36) there, link 2's body twist [w; v] (6), the load
+ * [f; m] (6), the spatial inertia G (36) and its inverse (36), the string damping (n, N s/m,
+ * read when damped == 1). out (out_len >= TSK_FILTER_BODY_SIZE) as above. Errors: n < 1, null
+ * pointers, a short buffer, damped not 0 / 1 (TSK_ERROR_ARGUMENT), a singular SO(3) Jacobian
+ * (TSK_ERROR_SINGULAR_SYSTEM). */
+int64_t tsk_filter_body_dynamics(int64_t n_strings, int64_t damped, const double* T,
+                                 const double* J, const double* length_jacobian,
+                                 const double* wrench, const double* stiffness,
+                                 const double* twist, const double* load, const double* inertia,
+                                 const double* inertia_inverse, const double* damping,
+                                 double* out, int64_t out_len);
+
+/* Doubles of tsk_filter_propagate's buffer for a state of size 12 or 18: the state x (size)
+ * and its covariance P (size x size), both updated in place, then the step of x (size) and the
+ * rate f (12) it was made with. */
+int64_t tsk_filter_propagate_size(int64_t size);
+
+/* One linearly implicit trapezoidal (Rosenbrock) step of h seconds of the filter's state
+ * [xi; V (; W)] (JointFilter._substep): dynamics is a tsk_filter_body_dynamics output at the
+ * linearisation point, dx (size, or null) the correction since it (f + A dx), twist_density
+ * (6) and load_density (6, read when size == 18) the process noise's variances per second.
+ * x += (I - h/2 A)^-1 h f, P = Phi P Phi^T + Q (symmetrised) with Phi = (I - h/2 A)^-1 (I +
+ * h/2 A). Errors: size not 12 / 18 (TSK_ERROR_COUNT), null pointers, a short buffer, h not
+ * finite and > 0 (TSK_ERROR_ARGUMENT), a singular step matrix (TSK_ERROR_SINGULAR_SYSTEM). */
+int64_t tsk_filter_propagate(int64_t size, double h, const double* dynamics, const double* dx,
+                             const double* twist_density, const double* load_density,
+                             double* buf, int64_t buf_len);
+
+/* Doubles of tsk_filter_update's buffer: P (size x size), the whitened residual r = h(x) - z
+ * (rows), its Jacobian H (rows x size), then the outputs NIS (1), the correction (size) and the
+ * updated covariance (size x size). */
+int64_t tsk_filter_update_size(int64_t size, int64_t rows);
+
+/* The stacked whitened EKF update with every row kept (kalman_update): S = H P H^T + I,
+ * nu = -r, NIS = nu^T S^-1 nu, dx = (H P)^T S^-1 nu, P - (H P)^T S^-1 H P (symmetrised).
+ * Errors: counts, null buf, a short buffer, a singular S (TSK_ERROR_SINGULAR_SYSTEM). */
+int64_t tsk_filter_update(int64_t size, int64_t rows, double* buf, int64_t buf_len);
+
+/* Readings of tsk_filter_motion_rows (a bit mask; rows in this order, 3 each). */
+#define TSK_FILTER_SPECIFIC_FORCE 1
+#define TSK_FILTER_GRAVITY 2
+#define TSK_FILTER_GYRO 4
+/* Doubles of tsk_filter_motion_rows' input: T (16), the SE(3) left Jacobian J (36), link 2's
+ * body twist (6), gravity in {1} (3), then each reading's value and whitening weights (3 + 3):
+ * specific force, gravity direction, gyro. */
+#define TSK_FILTER_MOTION_INPUT 79
+
+/* The whitened rows r = (h(x) - z) w (3 per reading) and their Jacobian H (3 per reading x
+ * size, row-major, every column written) of the accelerometer (specific force f = dv/dt + w x v
+ * - R^T g with dv/dt of the dynamics, a tsk_filter_body_dynamics output), the gravity direction
+ * -f / |f| and the gyro (w) (JointFilter._rows). Returns the rows written (>= 0) or an error:
+ * size not 12 / 18 (TSK_ERROR_COUNT), null pointers, readings outside the mask or a negative
+ * min_gravity_norm, |f| below min_gravity_norm with a gravity reading (TSK_ERROR_ARGUMENT). */
+int64_t tsk_filter_motion_rows(int64_t size, int64_t readings, double min_gravity_norm,
+                               const double* in, const double* dynamics, double* r, double* H);
+
+/* Doubles of tsk_filter_output's output: the pose covariance (36), the twist [dp/dt; w] in {1}
+ * (6) and its covariance (36). */
+#define TSK_FILTER_OUTPUT_SIZE 78
+
+/* The joint filter's estimate of its state (JointFilter._estimate): from the state x (its
+ * first 12: screw, body twist [w; v]) with covariance P (size x size, size >= 12), T at the
+ * screw and the pose Jacobian (36): the pose covariance Pj C Pj^T (C = P[:6, :6]), the twist
+ * [R v; R w] and its first-order covariance (both symmetrised). Errors: size < 12, null
+ * pointers, a short buffer. */
+int64_t tsk_filter_output(int64_t size, const double* P, const double* x, const double* T,
+                          const double* pose_jacobian, double* out, int64_t out_len);
 
 #ifdef __cplusplus
 }

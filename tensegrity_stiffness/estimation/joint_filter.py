@@ -76,6 +76,7 @@ from tensegrity_stiffness.geometry.screw import (
     check_in_chart,
 )
 from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
 
@@ -192,7 +193,8 @@ class BodyDynamics:
     (6, 6) ``J_b^-1``; Jacobians of ``dV/dt``: ``d_screw`` (6, 6) (the string damping's change
     with the pose left out: it is ``c |V|`` per rad), ``d_twist`` (6, 6), ``d_load`` (6, 6);
     ``prediction`` the strings' :class:`~tensegrity_stiffness.estimation.sensor_models.
-    StringPrediction` it was computed from."""
+    StringPrediction` it was computed from; ``packed`` the compiled kernel's buffer the arrays
+    are views of (``tsk_filter_body_dynamics``' layout), None from the numpy path."""
 
     screw_rate: FloatArray
     twist_rate: FloatArray
@@ -201,6 +203,15 @@ class BodyDynamics:
     d_twist: FloatArray
     d_load: FloatArray
     prediction: sm.StringPrediction
+    packed: FloatArray | None = None
+
+    def packed_buffer(self) -> FloatArray:
+        """The fields in ``tsk_filter_body_dynamics``' layout (156,): ``packed`` or a copy."""
+        if self.packed is not None:
+            return self.packed
+        return np.concatenate([self.screw_rate, self.twist_rate, self.body_inverse.ravel(),
+                               self.d_screw.ravel(), self.d_twist.ravel(),
+                               self.d_load.ravel()])
 
 
 def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twist: FloatArray,
@@ -255,6 +266,40 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
                         out[:, 13:], prediction)
 
 
+def body_dynamics_kernel(library: Any, dynamics: JointDynamics,
+                         prediction: sm.StringPrediction, twist: FloatArray, load: FloatArray,
+                         inertia_inverse: FloatArray,
+                         constants: tuple[int, int, int] | None = None) -> BodyDynamics:
+    """:func:`body_dynamics` in the compiled kernel (``tsk_filter_body_dynamics`` of
+    ``library``, :func:`~tensegrity_stiffness.mechanics.kernel.library`): the same equations,
+    equal to rounding (``test/kernel/test_filter_kernel.py``); the arrays are views of one
+    buffer (``packed``). ``constants``: the addresses of ``G``, ``inertia_inverse`` and the
+    string damping when the caller keeps them alive (a filter, for its life)."""
+    kin, state = prediction.kinematics, prediction.state
+    # every array bound to a name until the call returns (kernel.address)
+    T = np.ascontiguousarray(kin.T)
+    J = np.ascontiguousarray(kin.J)
+    L = np.ascontiguousarray(prediction.length_jacobian)
+    F = np.ascontiguousarray(state.wrench)
+    K = np.ascontiguousarray(state.stiffness)
+    V = np.ascontiguousarray(twist)
+    W = np.ascontiguousarray(load)
+    address = kernel.address
+    if constants is None:
+        G = np.ascontiguousarray(dynamics.spatial_inertia)
+        Gi = np.ascontiguousarray(inertia_inverse)
+        c = np.ascontiguousarray(dynamics.string_damping, dtype=np.float64)
+        constants = (address(G), address(Gi), address(c))
+    out = np.empty(kernel.FILTER_BODY_SIZE)
+    kernel.check(library.filter_body_dynamics(
+        L.shape[0], int(dynamics.damped), address(T), address(J), address(L), address(F),
+        address(K), address(V), address(W), *constants, address(out), out.size),
+        'tsk_filter_body_dynamics')
+    return BodyDynamics(out[:6], out[6:12], out[12:48].reshape(6, 6),
+                        out[48:84].reshape(6, 6), out[84:120].reshape(6, 6),
+                        out[120:].reshape(6, 6), prediction, out)
+
+
 class JointFilter:
     """Extended Kalman filter of one joint's pose, twist and load (module docstring).
 
@@ -265,7 +310,10 @@ class JointFilter:
     :data:`DEFAULT_PROCESS_NOISE`); ``load`` ``'unknown'`` (a state) or ``'known'`` (given to
     :meth:`step`); ``gravity`` (3,) m/s^2 in {1} for the accelerometer;
     ``consistency_probability`` of the NIS test; ``stiffness_std`` whether estimates carry the
-    std of ``K_c``; ``reject_outliers`` whether contradicted readings are left out.
+    std of ``K_c``; ``reject_outliers`` whether contradicted readings are left out;
+    ``use_kernel`` the prediction's and the update's linear algebra in the compiled kernel
+    when it is loaded (``tsk_filter_*``; the numpy lines here are the reference, equal to
+    rounding).
 
     The :class:`~tensegrity_stiffness.estimation.estimators.JointEstimate` of a step: ``chi2``
     is the update's NIS and ``dof`` = ``redundancy`` its degrees of freedom (every reading
@@ -278,7 +326,8 @@ class JointFilter:
                  process_noise: ProcessNoise | None = None, load: str = 'unknown', *,
                  string_damping: ArrayLike = 0.0, gravity: ArrayLike = DEFAULT_GRAVITY,
                  consistency_probability: float = CONSISTENCY_PROBABILITY,
-                 stiffness_std: bool = True, reject_outliers: bool = True) -> None:
+                 stiffness_std: bool = True, reject_outliers: bool = True,
+                 use_kernel: bool = True) -> None:
         if isinstance(model, JointDynamics):
             if inertia is not None:
                 raise ValueError('inertia: give it to the JointDynamics, not to the filter')
@@ -311,6 +360,16 @@ class JointFilter:
         self._identity = np.eye(self.size)
         self._twist_q = process_noise.twist_density()
         self._load_q = process_noise.load_density()
+        self._kernel = kernel.library() if use_kernel else None
+        self.use_kernel = self._kernel is not None
+        self._damping = np.ascontiguousarray(self.dynamics.string_damping, dtype=np.float64)
+        if self._kernel is not None:
+            self._propagate_size = self._kernel.filter_propagate_size(self.size)
+            # arrays the filter keeps for its life: their addresses taken once
+            self._spatial_inertia = np.ascontiguousarray(self.dynamics.spatial_inertia)
+            self._constants = tuple(kernel.address(a) for a in (
+                self._spatial_inertia, self._inertia_inverse, self._damping))
+            self._densities = (kernel.address(self._twist_q), kernel.address(self._load_q))
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -548,6 +607,9 @@ class JointFilter:
     def _linearize(self, xi: FloatArray, twist: FloatArray, load: FloatArray,
                    rest: FloatArray) -> BodyDynamics:
         pred = sm.string_predictions_unchecked(self.model, xi, rest)
+        if self._kernel is not None:
+            return body_dynamics_kernel(self._kernel, self.dynamics, pred, twist, load,
+                                        self._inertia_inverse, self._constants)
         return body_dynamics(self.dynamics, pred, twist, load, self._inertia_inverse)
 
     def _current_load(self, load: FloatArray) -> FloatArray:
@@ -564,15 +626,19 @@ class JointFilter:
     def _substep(self, h: float, rest: FloatArray, load: FloatArray) -> None:
         x, P = self._x, self._P
         cache = self._cache
-        A = np.zeros((12, 12))
-        f = np.empty(12)
-        if cache is not None and cache[0] is x and np.array_equal(cache[1], rest) and \
-                (self.size == 18 or np.array_equal(cache[2], load)):
+        # (the cached arrays have the shapes of these: == then all(), array_equal's test)
+        if cache is not None and cache[0] is x and bool((cache[1] == rest).all()) and \
+                (self.size == 18 or bool((cache[2] == load).all())):
             # the last update's linearisation (at its prior) carried to its posterior to first
             # order: f(x + dx) = f(x) + A dx, one evaluation of the strings per step
             dyn, dx = cache[3], cache[4]
         else:
             dyn, dx = self._linearize(x[:6], x[6:12], self._current_load(load), rest), None
+        if self._kernel is not None:
+            self._substep_kernel(h, dyn, dx)
+            return
+        A = np.zeros((12, 12))
+        f = np.empty(12)
         A[:6, 6:] = dyn.body_inverse
         A[6:, :6] = dyn.d_screw
         A[6:, 6:] = dyn.d_twist
@@ -612,6 +678,24 @@ class JointFilter:
             Q[12:, 12:] = np.diag(self._load_q * h)
         Pn = Phi @ P @ Phi.T + Q
         self._x, self._P = xn, 0.5 * (Pn + Pn.T)
+
+    def _substep_kernel(self, h: float, dyn: BodyDynamics, dx: FloatArray | None) -> None:
+        """:meth:`_substep`'s step and covariance propagation in the kernel
+        (``tsk_filter_propagate``)."""
+        size = self.size
+        buf = np.empty(self._propagate_size)
+        buf[:size] = self._x
+        buf[size:size + size * size] = self._P.ravel()
+        packed = dyn.packed_buffer()
+        dxc = None if dx is None else np.ascontiguousarray(dx)
+        address = kernel.address
+        kernel.check(self._kernel.filter_propagate(
+            size, h, address(packed), None if dxc is None else address(dxc),
+            *self._densities, address(buf), buf.size),
+            'tsk_filter_propagate')
+        xn = buf[:size]
+        check_in_chart(xn[:6], 'screw')
+        self._x, self._P = xn, buf[size:size + size * size].reshape(size, size)
 
     # ------------------------------------------------------------------ update
     def _readings(self, prep: PreparedMeasurements
@@ -670,7 +754,14 @@ class JointFilter:
             r[row:row + 6] = prep.pose_whitener @ res
             H[row:row + 6, :6] = prep.pose_whitener @ jac
             row += 6
-        if prep.gravity is not None or prep.specific_force is not None:
+        motion = (prep.gravity is not None or prep.specific_force is not None or
+                  prep.angular_velocity is not None)
+        if motion and self._kernel is not None and \
+                self._motion_rows_kernel(prep, dyn, r, H, row):
+            row += 3 * ((prep.gravity is not None) + (prep.specific_force is not None) +
+                        (prep.angular_velocity is not None))
+            motion = False
+        if motion and (prep.gravity is not None or prep.specific_force is not None):
             sf = sm.predicted_specific_force(kin, x[6:12], dyn.twist_rate, self.gravity)
             df = np.empty((3, size))
             # df/d(dv/dt) = I: the dynamics' rows of dv/dt chained in
@@ -689,7 +780,7 @@ class JointFilter:
                 r[row:row + 3] = (u - prep.gravity) * w
                 H[row:row + 3] = (du @ df) * w[:, None]
                 row += 3
-        if prep.angular_velocity is not None:
+        if motion and prep.angular_velocity is not None:
             w = prep.angular_velocity_weight
             value, dw = sm.predicted_angular_velocity(x[6:12])
             r[row:row + 3] = (value - prep.angular_velocity) * w
@@ -700,6 +791,42 @@ class JointFilter:
             H[row:row + 6, 12:] = prep.wrench_whitener
         return r, H, readings
 
+    def _motion_rows_kernel(self, prep: PreparedMeasurements, dyn: BodyDynamics,
+                            r: FloatArray, H: FloatArray, row: int) -> bool:
+        """:meth:`_rows`' accelerometer, gravity and gyro rows in the kernel
+        (``tsk_filter_motion_rows``) into ``r`` and ``H`` from ``row``; False (nothing
+        written) where the numpy lines decide (a specific force below
+        ``sensor_models.MIN_GRAVITY_NORM`` with a gravity reading: their error)."""
+        kin = dyn.prediction.kinematics
+        buf = np.empty(kernel.FILTER_MOTION_INPUT)
+        buf[:16] = kin.T.ravel()
+        buf[16:52] = kin.J.ravel()
+        buf[52:58] = self._x[6:12]
+        buf[58:61] = self.gravity
+        readings = 0
+        if prep.specific_force is not None:
+            buf[61:64] = prep.specific_force
+            buf[64:67] = prep.specific_force_weight
+            readings |= kernel.FILTER_SPECIFIC_FORCE
+        if prep.gravity is not None:
+            buf[67:70] = prep.gravity
+            buf[70:73] = prep.gravity_weight
+            readings |= kernel.FILTER_GRAVITY
+        if prep.angular_velocity is not None:
+            buf[73:76] = prep.angular_velocity
+            buf[76:79] = prep.angular_velocity_weight
+            readings |= kernel.FILTER_GYRO
+        packed = dyn.packed_buffer()
+        address = kernel.address
+        status = self._kernel.filter_motion_rows(
+            self.size, readings, sm.MIN_GRAVITY_NORM, address(buf), address(packed),
+            address(r) + 8 * row, address(H) + 8 * row * self.size)
+        if status == kernel.ERROR_ARGUMENT:
+            return False
+        if status < 0:
+            kernel.check(status, 'tsk_filter_motion_rows')
+        return True
+
     def _update(self, prep: PreparedMeasurements, rest: FloatArray, load: FloatArray
                 ) -> tuple[float, int, bool | None, list[tuple[str, str]]]:
         """One stacked update; (NIS, its dof, consistent, readings left out (name, why))."""
@@ -707,7 +834,7 @@ class JointFilter:
         dyn = self._linearize(x[:6], x[6:12], self._current_load(load), rest)
         r, H, readings = self._rows(prep, dyn)
         out = kalman_update(P, r, H, readings, self._suspected, self.consistency_probability,
-                            self.reject_outliers)
+                            self.reject_outliers, self.use_kernel)
         self._suspected = {name for name, _ in out.left_out}
         if out.raw_consistent is not None:
             self._inconsistent = 0 if out.raw_consistent else self._inconsistent + 1
@@ -780,16 +907,10 @@ class JointFilter:
             state, kin = dyn.prediction.state, dyn.prediction.kinematics
         C = P[:6, :6].copy()
         Pj = sm.pose_jacobian(xi, kin)
-        pose_cov = Pj @ C @ Pj.T
-        # twist [dp/dt; w_s] = [R v; R w]; first order in the screw through R (dtheta = G dxi)
-        R = state.transform[:3, :3]
-        w_s, v_s = R @ x[6:9], R @ x[9:12]
-        Jt = np.zeros((6, 12))
-        Jt[:3, 9:12] = R
-        Jt[3:, 6:9] = R
-        Jt[:3, :6] = -_hat(v_s) @ Pj[3:]
-        Jt[3:, :6] = -_hat(w_s) @ Pj[3:]
-        twist_cov = Jt @ P[:12, :12] @ Jt.T
+        if self._kernel is not None:
+            pose_cov, twist, twist_cov = self._output_kernel(P, x, state.transform, Pj)
+        else:
+            pose_cov, twist, twist_cov = self._output_numpy(P, x, state.transform, Pj, C)
         if self.size == 18:
             W, W_cov = x[12:].copy(), P[12:, 12:].copy()
         else:
@@ -798,12 +919,40 @@ class JointFilter:
                   if self.stiffness_std else np.full((6, 6), np.nan))
         names = tuple(n for n, _ in dropped) + tuple(outliers)
         why = tuple(f'{n}: {w}' for n, w in dropped) + tuple(reasons)
-        return JointEstimate(True, 'ok', xi.copy(), state.transform.copy(),
-                             0.5 * (pose_cov + pose_cov.T), C, W, W_cov, state, Kc_std,
-                             float(nis), int(dof), True, 6, math.nan, 1,
+        return JointEstimate(True, 'ok', xi.copy(), state.transform.copy(), pose_cov, C, W,
+                             W_cov, state, Kc_std, float(nis), int(dof), True, 6, math.nan, 1,
                              prep.describe(self.model.string_names), np.empty(0), consistent,
-                             int(dof), names, why, restarted,
-                             np.concatenate([v_s, w_s]), 0.5 * (twist_cov + twist_cov.T))
+                             int(dof), names, why, restarted, twist, twist_cov)
+
+    def _output_kernel(self, P: FloatArray, x: FloatArray, T: FloatArray, Pj: FloatArray
+                       ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """:meth:`_output_numpy` in the kernel (``tsk_filter_output``)."""
+        out = np.empty(kernel.FILTER_OUTPUT_SIZE)
+        Pc, xc, Tc = np.ascontiguousarray(P), np.ascontiguousarray(x), np.ascontiguousarray(T)
+        address = kernel.address
+        kernel.check(self._kernel.filter_output(self.size, address(Pc), address(xc),
+                                                address(Tc), address(Pj), address(out),
+                                                out.size), 'tsk_filter_output')
+        return out[:36].reshape(6, 6), out[36:42], out[42:].reshape(6, 6)
+
+    @staticmethod
+    def _output_numpy(P: FloatArray, x: FloatArray, T: FloatArray, Pj: FloatArray,
+                      C: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """The pose covariance, the twist ``[dp/dt; w]`` in {1} and its covariance (both
+        symmetrised) of the state ``x`` with covariance ``P`` (``C`` its screw block), ``T``
+        and the pose Jacobian ``Pj`` at its screw."""
+        pose_cov = Pj @ C @ Pj.T
+        # twist [dp/dt; w_s] = [R v; R w]; first order in the screw through R (dtheta = G dxi)
+        R = T[:3, :3]
+        w_s, v_s = R @ x[6:9], R @ x[9:12]
+        Jt = np.zeros((6, 12))
+        Jt[:3, 9:12] = R
+        Jt[3:, 6:9] = R
+        Jt[:3, :6] = -_hat(v_s) @ Pj[3:]
+        Jt[3:, :6] = -_hat(w_s) @ Pj[3:]
+        twist_cov = Jt @ P[:12, :12] @ Jt.T
+        return (0.5 * (pose_cov + pose_cov.T), np.concatenate([v_s, w_s]),
+                0.5 * (twist_cov + twist_cov.T))
 
 
 @dataclass(slots=True)
@@ -825,7 +974,8 @@ class UpdateResult:
 
 def kalman_update(P: FloatArray, r: FloatArray, H: FloatArray,
                   readings: list[tuple[str, NDArray[np.intp], int]], suspected: set[str],
-                  probability: float, reject_outliers: bool = True) -> UpdateResult:
+                  probability: float, reject_outliers: bool = True,
+                  use_kernel: bool = False) -> UpdateResult:
     """One stacked EKF update with the trust rules (module docstring) for the whitened
     residual ``r = h(x) - z`` (rows,), its Jacobian ``H`` (rows, size) and the state covariance
     ``P``; ``readings`` (name, rows, dof) name the rows, ``suspected`` the readings left out at
@@ -833,10 +983,17 @@ def kalman_update(P: FloatArray, r: FloatArray, H: FloatArray,
     uncertainty grows without it: a broken sensor would otherwise be absorbed by a load's random
     walk after a few steps). Then the NIS test at ``probability``; while it fails the reading a
     broken sensor explains best is left out (:func:`innovation_outliers`), kept out only when
-    the rest then passes."""
+    the rest then passes. ``use_kernel``: the update with every reading kept in the compiled
+    kernel (``tsk_filter_update``, when it is loaded) while no reading is held out; the search
+    for a contradicted one stays here."""
     size = P.shape[0]
     if not r.size:
         return UpdateResult(np.zeros(size), P, 0.0, 0, None, None, [])
+    library = kernel.library() if use_kernel else None
+    if library is not None and not (suspected and reject_outliers):
+        fast = _kalman_update_kernel(library, P, r, H, readings, probability, reject_outliers)
+        if fast is not None:
+            return fast
     nu = -r
     HP = H @ P
     S = HP @ H.T
@@ -878,6 +1035,31 @@ def kalman_update(P: FloatArray, r: FloatArray, H: FloatArray,
     dx = HP.T @ sol[:, 0]
     Pn = P - HP.T @ sol[:, 1:]
     return UpdateResult(dx, 0.5 * (Pn + Pn.T), nis, dof, consistent, raw, left)
+
+
+def _kalman_update_kernel(library: Any, P: FloatArray, r: FloatArray, H: FloatArray,
+                          readings: list[tuple[str, NDArray[np.intp], int]], probability: float,
+                          reject_outliers: bool) -> UpdateResult | None:
+    """:func:`kalman_update` with every reading kept, in the kernel; None when its NIS test
+    fails and readings are to be searched (or S is singular: the numpy path then decides)."""
+    size, rows = P.shape[0], r.size
+    buf = np.empty(library.filter_update_size(size, rows))
+    end = size * size
+    buf[:end] = P.ravel()
+    buf[end:end + rows] = r
+    buf[end + rows:end + rows + rows * size] = H.ravel()
+    status = library.filter_update(size, rows, kernel.address(buf), buf.size)
+    if status == kernel.ERROR_SINGULAR_SYSTEM:
+        return None
+    kernel.check(status, 'tsk_filter_update')
+    start = end + rows + rows * size
+    nis = float(buf[start])
+    dof = sum(d for _, _, d in readings)
+    raw = nis <= consistency_threshold(dof, probability)
+    if not raw and reject_outliers:
+        return None
+    return UpdateResult(buf[start + 1:start + 1 + size],
+                        buf[start + 1 + size:].reshape(size, size), nis, dof, raw, raw, [])
 
 
 def innovation_outliers(S: FloatArray, nu: FloatArray,

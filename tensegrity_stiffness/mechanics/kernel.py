@@ -43,7 +43,7 @@ OFF_VALUES = ('off', '0', 'no', 'false', 'numpy')
 # The mirror of include/tensegrity_stiffness/kernel.h (test/kernel/test_kernel_abi.py holds it
 # to the library: version, struct layout, buffer sizes, status codes).
 #: ABI version this module speaks (``TSK_ABI_VERSION``, ``tsk_abi_version()``).
-ABI_VERSION = 4
+ABI_VERSION = 5
 #: Status codes (``TSK_OK``, ``TSK_ERROR_*``): 0 success, negative errors.
 OK = 0
 ERRORS = {-1: 'NULL_POINTER', -2: 'COUNT', -3: 'BUFFER_SIZE', -4: 'ARGUMENT', -5: 'ZERO_LENGTH',
@@ -58,6 +58,16 @@ FACE_OPTIMAL, FACE_REJECTED, FACE_SINGULAR = 0, 1, 2
 TIP_BASE, TIP_TOOL = 1, 2
 #: Doubles of ``tsk_chain_tip``'s output buffer: tip wrench 6, K_tip base 36, tool 36.
 TIP_SIZE = 78
+#: Doubles of ``tsk_filter_body_dynamics``' output (``TSK_FILTER_BODY_SIZE``): ``dxi/dt`` 6,
+#: ``dV/dt`` 6, ``J_b^-1`` 36, its Jacobians in the screw, twist and load 36 each.
+FILTER_BODY_SIZE = 156
+#: Readings of ``tsk_filter_motion_rows`` (``TSK_FILTER_*``, a bit mask) and the doubles of its
+#: input (``TSK_FILTER_MOTION_INPUT``).
+FILTER_SPECIFIC_FORCE, FILTER_GRAVITY, FILTER_GYRO = 1, 2, 4
+FILTER_MOTION_INPUT = 79
+#: Doubles of ``tsk_filter_output``'s output (``TSK_FILTER_OUTPUT_SIZE``): the pose covariance
+#: 36, the twist 6 and its covariance 36.
+FILTER_OUTPUT_SIZE = 78
 
 _P = ctypes.c_void_p
 _I = ctypes.c_int64
@@ -196,8 +206,34 @@ class _Library:
         self.chain_tip = lib.tsk_chain_tip
         self.chain_tip.restype = _I
         self.chain_tip.argtypes = [_I] + [_P] * 8 + [_I, _P, _I]
+        self._bind_filter(lib)
         self.path = path
         self._lib = lib
+
+
+    def _bind_filter(self, lib: ctypes.CDLL) -> None:
+        """The joint filter's entry points (``tsk_filter_*``), typed."""
+        self.filter_body_dynamics = lib.tsk_filter_body_dynamics
+        self.filter_body_dynamics.restype = _I
+        self.filter_body_dynamics.argtypes = [_I, _I] + [_P] * 11 + [_I]
+        for name in ('tsk_filter_propagate_size', 'tsk_filter_update_size'):
+            getattr(lib, name).restype = _I
+        lib.tsk_filter_propagate_size.argtypes = [_I]
+        lib.tsk_filter_update_size.argtypes = [_I, _I]
+        self.filter_propagate_size = lib.tsk_filter_propagate_size
+        self.filter_update_size = lib.tsk_filter_update_size
+        self.filter_propagate = lib.tsk_filter_propagate
+        self.filter_propagate.restype = _I
+        self.filter_propagate.argtypes = [_I, _D, _P, _P, _P, _P, _P, _I]
+        self.filter_update = lib.tsk_filter_update
+        self.filter_update.restype = _I
+        self.filter_update.argtypes = [_I, _I, _P, _I]
+        self.filter_motion_rows = lib.tsk_filter_motion_rows
+        self.filter_motion_rows.restype = _I
+        self.filter_motion_rows.argtypes = [_I, _I, _D, _P, _P, _P, _P]
+        self.filter_output = lib.tsk_filter_output
+        self.filter_output.restype = _I
+        self.filter_output.argtypes = [_I, _P, _P, _P, _P, _P, _I]
 
 
 @functools.lru_cache(maxsize=1)
