@@ -16,9 +16,10 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.screw import check_in_chart, log_se3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
+from tensegrity_stiffness.mechanics.dynamics import JointModes
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
-from tensegrity_stiffness.nodes.layouts import JOINT_OUTPUTS
+from tensegrity_stiffness.nodes.layouts import JOINT_OUTPUTS, natural_frequencies_label
 
 FloatArray = NDArray[np.float64]
 
@@ -127,3 +128,14 @@ def finite_rows(outputs: JointOutputs) -> NDArray[np.bool_]:
     for array in output_arrays(outputs):
         mask &= np.isfinite(array.reshape(n, -1)).all(axis=1)
     return mask
+
+
+def frequency_report(modes: JointModes) -> tuple[FloatArray, str]:
+    """``~/natural_frequencies``' payload and label of ``modes``: the frequencies (Hz), an
+    overdamped mode's (a pair of real eigenvalues, :attr:`JointModes.overdamped`) as 0 Hz, and
+    the label saying whether the pose is stable and which modes are overdamped
+    (:func:`~tensegrity_stiffness.nodes.layouts.natural_frequencies_label`)."""
+    overdamped = modes.overdamped
+    values = np.where(overdamped, 0.0, modes.frequencies)
+    return values, natural_frequencies_label(modes.stable,
+                                             np.flatnonzero(overdamped).tolist())

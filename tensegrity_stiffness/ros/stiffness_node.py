@@ -28,7 +28,7 @@ from tensegrity_stiffness.mechanics.design import design_rest_lengths
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.health import joint_health
-from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL, joint_output_layouts
+from tensegrity_stiffness.nodes.layouts import joint_output_layouts
 from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameters import (
     STIFFNESS_NODE_PARAMETERS,
@@ -38,6 +38,7 @@ from tensegrity_stiffness.nodes.parameters import (
 )
 from tensegrity_stiffness.nodes.processing import (
     JointOutputs,
+    frequency_report,
     joint_outputs,
     pose_input,
     screw_input,
@@ -114,8 +115,8 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
         except (ValueError, np.linalg.LinAlgError) as exc:
             self.reporter.warn('~/natural_frequencies', str(exc))
             return
-        publisher.publish(conversions.vector_to_multiarray(modes.frequencies,
-                                                           NATURAL_FREQUENCIES_LABEL))
+        values, label = frequency_report(modes)
+        publisher.publish(conversions.vector_to_multiarray(values, label))
 
     def _cartesian_stiffness(self, outputs: JointOutputs) -> np.ndarray:
         return outputs.state.cartesian_stiffness
