@@ -19,24 +19,31 @@ from tensegrity_stiffness.geometry.validation import require_all_finite, require
 from tensegrity_stiffness.mechanics.dynamics import JointModes
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
+from tensegrity_stiffness.mechanics.plausibility import check_screw, check_translation
 from tensegrity_stiffness.nodes.layouts import JOINT_OUTPUTS, natural_frequencies_label
 
 FloatArray = NDArray[np.float64]
 
 
-def screw_input(values: FloatArray) -> FloatArray:
+def screw_input(values: FloatArray, model: JointModel | None = None) -> FloatArray:
     """The screw of a ``~/screw`` message's six finite values; ValueError outside the chart
-    ``|omega| < 2 pi``."""
+    ``|omega| < 2 pi`` or, given the ``model``, out of its reach
+    (:func:`~tensegrity_stiffness.mechanics.plausibility.check_screw`: a norm when within)."""
     check_in_chart(values, 'screw')
+    if model is not None:
+        check_screw(model, values, 'screw')
     return values
 
 
 def pose_input(frame_id: str, transform: ArrayLike, link1_frame: str,
-               reference: ArrayLike) -> FloatArray:
+               reference: ArrayLike, model: JointModel | None = None) -> FloatArray:
     """The screw of a pose of link 2 in link 1 (``~/pose``): the log map on the rotation branch
     nearest ``reference`` (the last screw). ValueError when ``frame_id`` is set and is not
-    ``link1_frame``."""
+    ``link1_frame`` or, given the ``model``, when the pose is out of its reach
+    (:func:`~tensegrity_stiffness.mechanics.plausibility.check_translation`)."""
     require_frame(frame_id, link1_frame, "link 1's frame")
+    if model is not None:
+        check_translation(model, np.asarray(transform, dtype=np.float64)[:3, 3], 'pose')
     return log_se3(transform, reference=reference)
 
 
