@@ -70,9 +70,21 @@ _RANGES: weakref.WeakKeyDictionary[JointModel, tuple[bytes, JointRanges]] = \
     weakref.WeakKeyDictionary()
 
 
+#: The ranges of each model at its own rest lengths (a model's rest lengths do not change:
+#: :meth:`JointModel.with_rest_lengths` makes a new model).
+_OWN_RANGES: weakref.WeakKeyDictionary[JointModel, JointRanges] = weakref.WeakKeyDictionary()
+
+
 def joint_ranges(model: JointModel, rest_lengths: ArrayLike | None = None) -> JointRanges:
     """:class:`JointRanges` of ``model`` at ``rest_lengths`` (default the model's), kept for the
-    last rest lengths of each model."""
+    last rest lengths of each model (and for the model's own, looked up without a copy: a
+    node's per-message path)."""
+    if rest_lengths is None:
+        own = _OWN_RANGES.get(model)
+        if own is not None:
+            return own
+        own = _OWN_RANGES[model] = joint_ranges(model, model.rest_lengths)
+        return own
     rest = model.validate_rest_lengths(rest_lengths, batched=False)
     key = rest.tobytes()
     cached = _RANGES.get(model)
@@ -153,7 +165,9 @@ def check_screw(model: JointModel, screw: ArrayLike, name: str = 'screw') -> Non
     caller). The translation is ``t = G(omega) v`` with every singular value of ``G`` at most
     1, so ``|v|`` within reach passes without the exponential."""
     xi = np.asarray(screw, dtype=np.float64)
-    if _norm(xi[3:]) <= REACH_MARGIN * joint_ranges(model).reach:
+    v = xi[3:].tolist()
+    limit = REACH_MARGIN * joint_ranges(model).reach
+    if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= limit * limit:  # the fast path: a norm
         return
     with np.errstate(over='ignore', invalid='ignore'):
         T = exp_se3(xi)
