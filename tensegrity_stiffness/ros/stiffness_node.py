@@ -189,10 +189,10 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
             settings = self._settings
             try:
                 job = joint_services.equilibrium_job(request, settings, self._last_solution)
-            except ValueError as exc:
+                result = solve_equilibrium(settings.model, job.external_wrench,
+                                           **job.quick_kwargs())
+            except ValueError as exc:  # the door's checks, or the solver's own refusal
                 return self._invalid_request(kind, response, exc)
-            result = solve_equilibrium(settings.model, job.external_wrench,
-                                       **job.quick_kwargs())
             if not result.success:
                 result = await self._in_worker_or_fail(
                     kind, response, solve_equilibrium, (settings.model, job.external_wrench),

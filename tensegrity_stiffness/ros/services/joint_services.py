@@ -122,6 +122,7 @@ def equilibrium_job(request: Any, settings: JointNodeSettings,
     rest = None
     if len(request.rest_lengths):
         rest = check_rest_lengths(model, np.asarray(request.rest_lengths, dtype=np.float64))
+    # the strings' capacity at the request's rest lengths, as solve_equilibrium judges it
     W = check_wrench(model, conversions.msg_to_wrench(request.external_wrench),
                      rest_lengths=rest)
     if len(request.initial_screw):
