@@ -237,7 +237,13 @@ class StiffnessControllerNode(Node):
                    ) -> None:
         """The latest pose estimate ``T`` (link 2 in link 1) of the reading stamped
         ``stamp_ns`` (0: unstamped) and, when given, the load estimate: what the next tick
-        uses (the state topics' handlers, or the estimator in the same process)."""
+        uses (the state topics' handlers, or the estimator in the same process). A pose out of
+        the joint's reach is refused by name (counted as a rejected ``~/pose_estimate``)."""
+        try:
+            check_translation(self._settings.model, T[:3, 3], 'pose_estimate')
+        except ValueError as exc:
+            self.reporter.reject(POSE_ESTIMATE, str(exc))
+            return
         self._state_count += 1
         self._pose = (T, time.monotonic(), stamp_ns, self._state_count)
         if wrench is not None:
@@ -248,7 +254,6 @@ class StiffnessControllerNode(Node):
         try:
             require_frame(msg.header.frame_id, self._settings.link1_frame, "link 1's frame")
             T, _ = estimation_msgs.pose_with_covariance_to_arrays(msg.pose)
-            check_translation(self._settings.model, T[:3, 3], 'pose_estimate')
         except ValueError as exc:
             self.reporter.reject(POSE_ESTIMATE, str(exc))
             return
