@@ -34,7 +34,14 @@ The math (notation of :mod:`tensegrity_stiffness.mechanics.design`)
   offset, an unknown load) ``z`` converges to the shift that puts the true pose at ``T*``
   (no steady-state error; the stiffness then follows the model's error, about ``|dk/k|``).
   Anti-windup: ``z`` is frozen while a rate or range limit binds (the commands lag the
-  feedforward) or the pose cannot be held, and clamped to ``integral_limit``.
+  feedforward) or the pose cannot be held, and clamped to ``integral_limit``. So that the
+  integral cannot sit at its clamp without a limit binding (issue #42: a target turned by
+  180 deg needs the same rest lengths, no limit binds, and the clamped correction of that
+  target stayed on after it), two rules: the error integrated per tick is at most the clamp
+  (rotation and translation parts scaled down as the clamp is), and ``z`` restarts from 0
+  when the target pose moves by more than the clamp (a correction learned at one target says
+  nothing about another far from it). A pose error that is not finite (a pose turned by
+  about 180 deg from the target, where the error has no direction) is refused by name.
 * **Limits.** Commands move at most ``max_rate * dt`` per string per tick and stay within
   ``[rest_length_min, rest_length_max]``; a changed target is followed at the rate limit (no
   jump). An infeasible pose keeps the last command (``feasible=False``).
@@ -599,6 +606,23 @@ def _clamp_integral(z: FloatArray, limit: tuple[float, float]) -> FloatArray:
     return out
 
 
+def _at_clamp(z: FloatArray, limit: tuple[float, float]) -> bool:
+    """True when a part of the integral ``z`` (rotation, translation) is at its clamp."""
+    return any(lim > 0.0 and float(np.linalg.norm(z[part])) >= lim * (1.0 - 1e-9)
+               for part, lim in ((slice(0, 3), limit[0]), (slice(3, 6), limit[1])))
+
+
+def _target_moved(previous: FloatArray | None, target: FloatArray,
+                  limit: tuple[float, float]) -> bool:
+    """True when ``target`` (4, 4) is farther from ``previous`` than the integral clamp
+    ``limit`` (rad, m): rotation angle of ``R_prev^T R`` or the translation's change."""
+    if previous is None:
+        return False
+    cosine = 0.5 * (float(np.trace(previous[:3, :3].T @ target[:3, :3])) - 1.0)
+    angle = math.acos(min(1.0, max(-1.0, cosine)))
+    return angle > limit[0] or float(np.linalg.norm(target[:3, 3] - previous[:3, 3])) > limit[1]
+
+
 def _exp(kn: kernel.JointKernel | None, xi: FloatArray) -> FloatArray:
     """``exp_se3`` of one finite screw, in the compiled kernel when there is one."""
     return exp_se3(xi) if kn is None else kn.exp_se3(xi)
@@ -663,6 +687,8 @@ class _PoseFeedback:
     integral_gain: float
     integral_limit: tuple[float, float]
     _z: FloatArray
+    #: The target pose of the last committed tick (the integral restarts when it moves far).
+    _target_transform: FloatArray | None = None
     #: The compiled kernel of the exp maps of the feedback (a joint model's), or None.
     _exp_kernel: kernel.JointKernel | None = None
 
@@ -680,9 +706,16 @@ class _PoseFeedback:
         W = np.zeros(6) if wrench is None else finite_array_of_shape(wrench_name, wrench, (6,))
         if measured is not None:
             e, error = _pose_error(target.transform, measured)
+            if not (np.all(np.isfinite(e)) and np.all(np.isfinite(error))):
+                raise ValueError('pose: the error to the target is not finite (a pose turned '
+                                 'by about 180 deg from the target): the tick is skipped')
         else:
             e, error = np.zeros(6), np.zeros(6)
-        z = _clamp_integral(self._z + self.integral_gain * dt * e, self.integral_limit)
+        z0 = self._z
+        if _target_moved(self._target_transform, target.transform, self.integral_limit):
+            z0 = np.zeros(6)  # a new target far from the last: restart the integral
+        step = _clamp_integral(self.integral_gain * dt * e, self.integral_limit)
+        z = _clamp_integral(z0 + step, self.integral_limit)
         return dt, W, e, error, z
 
 
@@ -739,12 +772,17 @@ class StiffnessController(_PoseFeedback):
         """Forget the integral and the warm start; ``rest_lengths`` (n,) the motors' positions."""
         n = self.model.n_strings
         rest = finite_array_of_shape('rest_lengths', rest_lengths, (n,))
-        if np.any(rest + self.offsets <= 0.0):
-            raise ValueError('rest_lengths: every true rest length (command + offset) must be '
-                             '> 0')
+        bad = np.flatnonzero(rest + self.offsets <= 0.0)
+        if bad.size:
+            j = int(bad[0])
+            raise ValueError(f'rest_lengths: the true rest length (command + offset) of '
+                             f'{self.model.string_names[j]} would be '
+                             f'{rest[j] + self.offsets[j]:.4g} m (command {rest[j]:.4g} m, '
+                             f'offset {self.offsets[j]:.4g} m); it must be > 0')
         self._command = rest.copy()
         self._z = np.zeros(6)
         self._t = None
+        self._target_transform = None
         self._at_lo = np.zeros(n, bool)
         self._at_hi = np.zeros(n, bool)
 
@@ -815,9 +853,16 @@ class StiffnessController(_PoseFeedback):
                             f'relative error {err:.3g} ({at} strings at a tension bound)')
         if saturated.any():
             messages.append(f'{int(saturated.sum())} strings at the rate or range limit')
-        # Commit: anti-windup keeps z while a limit binds.
+        elif _at_clamp(z, self.integral_limit):
+            messages.append('integral correction at its clamp with no limit binding (the '
+                            'pose error does not answer the correction; a new target restarts '
+                            'it)')
+        # Commit: anti-windup keeps z while a limit binds (a moved target restarts it anyway).
         if not saturated.any():
             self._z = z
+        elif _target_moved(self._target_transform, target.transform, self.integral_limit):
+            self._z = np.zeros(6)
+        self._target_transform = target.transform
         self._command = command
         self._t, self._at_lo, self._at_hi = t, sol.at_lo, sol.at_hi
         return ControlCommand(command.copy(), True, err, Kc, t.copy(), saturated,

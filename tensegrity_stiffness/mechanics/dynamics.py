@@ -70,6 +70,7 @@ from tensegrity_stiffness.geometry.validation import finite_array, optional_vect
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.plausibility import check_dynamics
 
 FloatArray = NDArray[np.float64]
 ComplexArray = NDArray[np.complex128]
@@ -381,6 +382,13 @@ class JointModes:
     stable: bool
     screw: FloatArray
 
+    @property
+    def overdamped(self) -> NDArray[np.bool_]:
+        """(m,) True for a mode of a pair of real eigenvalues (overdamped, or unstable with
+        real growth): it does not oscillate, and its ``frequencies`` entry is
+        ``sqrt(l1 l2) / 2 pi`` of the pair, not a frequency of vibration (issue #42)."""
+        return np.asarray(self.eigenvalues).imag == 0.0
+
 
 def _dgeev(A: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
     """LAPACK's ``dgeev`` of a real square ``A`` (through ``scipy.linalg.lapack``, the routine
@@ -530,6 +538,7 @@ class JointDynamics:
         self.inertia = inertia
         self._string_damping = _string_damping(string_damping, model.n_strings)
         self._string_damping.flags.writeable = False
+        check_dynamics(model, inertia.mass, inertia.com, self._string_damping)
         self._damped = bool(np.any(self._string_damping > 0.0))
         self.spatial_inertia = inertia.spatial_inertia(model.link2_nodes)
         self._p1 = model.link1_nodes[model.connections[:, 0]]

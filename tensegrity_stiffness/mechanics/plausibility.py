@@ -70,9 +70,21 @@ _RANGES: weakref.WeakKeyDictionary[JointModel, tuple[bytes, JointRanges]] = \
     weakref.WeakKeyDictionary()
 
 
+#: The ranges of each model at its own rest lengths (a model's rest lengths do not change:
+#: :meth:`JointModel.with_rest_lengths` makes a new model).
+_OWN_RANGES: weakref.WeakKeyDictionary[JointModel, JointRanges] = weakref.WeakKeyDictionary()
+
+
 def joint_ranges(model: JointModel, rest_lengths: ArrayLike | None = None) -> JointRanges:
     """:class:`JointRanges` of ``model`` at ``rest_lengths`` (default the model's), kept for the
-    last rest lengths of each model."""
+    last rest lengths of each model (and for the model's own, looked up without a copy: a
+    node's per-message path)."""
+    if rest_lengths is None:
+        own = _OWN_RANGES.get(model)
+        if own is not None:
+            return own
+        own = _OWN_RANGES[model] = joint_ranges(model, model.rest_lengths)
+        return own
     rest = model.validate_rest_lengths(rest_lengths, batched=False)
     key = rest.tobytes()
     cached = _RANGES.get(model)
@@ -153,7 +165,9 @@ def check_screw(model: JointModel, screw: ArrayLike, name: str = 'screw') -> Non
     caller). The translation is ``t = G(omega) v`` with every singular value of ``G`` at most
     1, so ``|v|`` within reach passes without the exponential."""
     xi = np.asarray(screw, dtype=np.float64)
-    if _norm(xi[3:]) <= REACH_MARGIN * joint_ranges(model).reach:
+    v = xi[3:].tolist()
+    limit = REACH_MARGIN * joint_ranges(model).reach
+    if v[0] * v[0] + v[1] * v[1] + v[2] * v[2] <= limit * limit:  # the fast path: a norm
         return
     with np.errstate(over='ignore', invalid='ignore'):
         T = exp_se3(xi)
@@ -236,3 +250,34 @@ def check_target_stiffness(model: JointModel, target: ArrayLike,
                          f'outside the range of this joint (at most {limit:.4g} N/m: '
                          f'{PLAUSIBILITY_MARGIN:g} x what its strings can give)')
     return K
+
+
+#: The lightest moving link (kg): below it the modes' frequencies are those of no real link.
+MIN_LINK_MASS = 1e-6
+#: Standard gravity (m/s^2), for the heaviest link the strings can hold.
+_GRAVITY = 9.80665
+
+
+def check_dynamics(model: JointModel, mass: float, com: ArrayLike,
+                   string_damping: ArrayLike) -> None:
+    """ValueError naming the field when link 2's dynamics are outside the joint's range
+    (issue #42): ``mass`` (kg) from :data:`MIN_LINK_MASS` to ``PLAUSIBILITY_MARGIN`` times the
+    weight its strings can hold (capacity / g); ``com`` (3,) m within ``REACH_MARGIN`` sizes of
+    link 2's origin; each ``string_damping`` (N s/m) at most ``PLAUSIBILITY_MARGIN ** 2`` times
+    the link's critical damping ``2 sqrt(stiffness_scale * mass)`` (more stops every mode)."""
+    ranges = joint_ranges(model)
+    heaviest = PLAUSIBILITY_MARGIN * ranges.capacity / _GRAVITY
+    if not MIN_LINK_MASS <= mass <= heaviest:
+        raise ValueError(f'link mass: {mass:.4g} kg is outside the range of this joint '
+                         f'({MIN_LINK_MASS:g} to {heaviest:.4g} kg: {PLAUSIBILITY_MARGIN:g} x '
+                         'the weight its strings can hold)')
+    offset = _norm(np.asarray(com, dtype=np.float64))
+    if not offset <= REACH_MARGIN * ranges.size:
+        raise _range_error('link com', offset, REACH_MARGIN * ranges.size,
+                           "m from link 2's origin", f'{REACH_MARGIN:g} x its size')
+    critical = 2.0 * math.sqrt(ranges.stiffness_scale * mass)
+    damping = float(np.max(np.asarray(string_damping, dtype=np.float64), initial=0.0))
+    if not damping <= PLAUSIBILITY_MARGIN ** 2 * critical:
+        raise _range_error('string_damping', damping, PLAUSIBILITY_MARGIN ** 2 * critical,
+                           'N s/m', f"{PLAUSIBILITY_MARGIN ** 2:g} x link 2's critical damping "
+                           '2 sqrt(stiffness scale x mass)')

@@ -34,6 +34,7 @@ from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.mechanics.chain import ChainState
 from tensegrity_stiffness.mechanics.dynamics import chain_link_inertias
 from tensegrity_stiffness.mechanics.joint import JointState
+from tensegrity_stiffness.mechanics.plausibility import check_translation, check_wrench
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS, SPINE_ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameters import (
     ESTIMATOR_INPUTS,
@@ -173,6 +174,38 @@ def measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading
     """The :class:`Measurements` of the fresh ``readings`` under ``settings`` (the sensors'
     stds, the direction of gravity, the load mode); ValueError when the load is 'measured' and
     no fresh ``measured_wrench`` is there."""
+    W, covariance = load_measurement(settings, readings)
+    return Measurements(**sensor_measurements(settings, readings), external_wrench=W,
+                        wrench_covariance=covariance)
+
+
+def check_reading(settings: Any, name: str, value: Any) -> None:
+    """ValueError naming ``~/name`` when one reading cannot be used on its own (issue #42: a bad
+    reading spoils only itself, it is dropped at arrival instead of failing every estimate
+    until it ages out): validated as the estimator validates it (lengths > 0, a symmetric
+    positive definite pose covariance, ...) and, for a pose, within the joint's reach
+    (:func:`~tensegrity_stiffness.mechanics.plausibility.check_translation`), for a wrench
+    within its strings' capacity (``check_wrench``). A spine's readings (settings without one
+    joint model) are judged at the estimate."""
+    if not isinstance(settings, EstimatorNodeSettings):
+        return
+    model = settings.model
+    try:
+        if name == 'measured_wrench':
+            check_wrench(model, value, 'measured_wrench')
+            return
+        kw = sensor_measurements(settings, {name: Reading(value, 0.0)})
+        Measurements(**kw).prepared(model.n_strings)
+        if name == 'measured_pose':
+            check_translation(model, np.asarray(value[0])[:3, 3], 'measured_pose')
+    except ValueError as exc:
+        raise ValueError(f'~/{name}: {exc} (this reading dropped, the others kept)') from None
+
+
+def sensor_measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading]
+                        ) -> dict[str, Any]:
+    """The keyword arguments of :class:`Measurements` of the sensors among ``readings`` (the
+    load apart: :func:`load_measurement`)."""
     kw: dict[str, Any] = {}
     if 'measured_tensions' in readings:
         kw.update(tensions=readings['measured_tensions'].value, tension_std=settings.tension_std)
@@ -192,8 +225,7 @@ def measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading
         else:
             kw.update(gravity=imu, gravity_std=settings.gravity_std,
                       gravity_base=settings.gravity_base)
-    W, covariance = load_measurement(settings, readings)
-    return Measurements(**kw, external_wrench=W, wrench_covariance=covariance)
+    return kw
 
 
 def load_measurement(settings: EstimatorNodeSettings, readings: Mapping[str, Reading]

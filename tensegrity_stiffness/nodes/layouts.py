@@ -33,6 +33,18 @@ CARTESIAN_STIFFNESS_COL_LABEL = 'cols: ' + TWIST_LABEL
 #: Label of ``~/natural_frequencies`` (``dynamics.enabled``): the undamped natural frequencies
 #: of the joint's 6 modes (or a spine's 6N), ascending.
 NATURAL_FREQUENCIES_LABEL = 'natural frequencies [Hz], modes in ascending order'
+
+
+def natural_frequencies_label(stable: bool, overdamped: list[int]) -> str:
+    """The label of one ``~/natural_frequencies`` message (issue #42): the
+    :data:`NATURAL_FREQUENCIES_LABEL`, then ``; stable: yes`` or ``; stable: no`` (an unstable
+    pose's frequencies are not those of a vibration about it) and, when some modes are
+    overdamped (they do not oscillate: published as 0 Hz), ``; overdamped (0 Hz): modes i, j``
+    (0-based positions)."""
+    label = f'{NATURAL_FREQUENCIES_LABEL}; stable: {"yes" if stable else "no"}'
+    if overdamped:
+        label += '; overdamped (0 Hz): modes ' + ', '.join(map(str, overdamped))
+    return label
 #: Label of ``~/stiffness_eigenvalues`` (a spine's ``~/tip_stiffness_eigenvalues``): the
 #: principal stiffnesses of K_c (the tip stiffness in the tool frame),
 #: :func:`~tensegrity_stiffness.mechanics.interpretation.principal_stiffnesses`.

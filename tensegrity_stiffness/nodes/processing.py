@@ -16,26 +16,34 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.screw import check_in_chart, log_se3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
+from tensegrity_stiffness.mechanics.dynamics import JointModes
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
-from tensegrity_stiffness.nodes.layouts import JOINT_OUTPUTS
+from tensegrity_stiffness.mechanics.plausibility import check_screw, check_translation
+from tensegrity_stiffness.nodes.layouts import JOINT_OUTPUTS, natural_frequencies_label
 
 FloatArray = NDArray[np.float64]
 
 
-def screw_input(values: FloatArray) -> FloatArray:
+def screw_input(values: FloatArray, model: JointModel | None = None) -> FloatArray:
     """The screw of a ``~/screw`` message's six finite values; ValueError outside the chart
-    ``|omega| < 2 pi``."""
+    ``|omega| < 2 pi`` or, given the ``model``, out of its reach
+    (:func:`~tensegrity_stiffness.mechanics.plausibility.check_screw`: a norm when within)."""
     check_in_chart(values, 'screw')
+    if model is not None:
+        check_screw(model, values, 'screw')
     return values
 
 
 def pose_input(frame_id: str, transform: ArrayLike, link1_frame: str,
-               reference: ArrayLike) -> FloatArray:
+               reference: ArrayLike, model: JointModel | None = None) -> FloatArray:
     """The screw of a pose of link 2 in link 1 (``~/pose``): the log map on the rotation branch
     nearest ``reference`` (the last screw). ValueError when ``frame_id`` is set and is not
-    ``link1_frame``."""
+    ``link1_frame`` or, given the ``model``, when the pose is out of its reach
+    (:func:`~tensegrity_stiffness.mechanics.plausibility.check_translation`)."""
     require_frame(frame_id, link1_frame, "link 1's frame")
+    if model is not None:
+        check_translation(model, np.asarray(transform, dtype=np.float64)[:3, 3], 'pose')
     return log_se3(transform, reference=reference)
 
 
@@ -127,3 +135,14 @@ def finite_rows(outputs: JointOutputs) -> NDArray[np.bool_]:
     for array in output_arrays(outputs):
         mask &= np.isfinite(array.reshape(n, -1)).all(axis=1)
     return mask
+
+
+def frequency_report(modes: JointModes) -> tuple[FloatArray, str]:
+    """``~/natural_frequencies``' payload and label of ``modes``: the frequencies (Hz), an
+    overdamped mode's (a pair of real eigenvalues, :attr:`JointModes.overdamped`) as 0 Hz, and
+    the label saying whether the pose is stable and which modes are overdamped
+    (:func:`~tensegrity_stiffness.nodes.layouts.natural_frequencies_label`)."""
+    overdamped = modes.overdamped
+    values = np.where(overdamped, 0.0, modes.frequencies)
+    return values, natural_frequencies_label(modes.stable,
+                                             np.flatnonzero(overdamped).tolist())

@@ -40,6 +40,7 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     EstimatorInput,
     EstimatorOutputs,
     Reading,
+    check_reading,
     diagnostic_summary,
     diagnostic_values,
     estimator_outputs,
@@ -176,6 +177,11 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         (warm-started from the last estimate) and publish, stamped with the trigger's header
         stamp or, for an input without a header (the measured arrays), the time it arrived: the
         controller's latency from a reading to its command starts there."""
+        try:
+            check_reading(self._settings, name, value)
+        except ValueError as exc:
+            self.reporter.reject(f'~/{name}', str(exc))
+            return
         now = time.monotonic()
         arrived = None if stamp is not None and stamp_is_set(stamp) else self._clock.now()
         self._readings[name] = Reading(value, now)

@@ -41,6 +41,11 @@ from tensegrity_stiffness.control.controller import (
     StiffnessController,
 )
 from tensegrity_stiffness.geometry.validation import require_frame
+from tensegrity_stiffness.mechanics.plausibility import (
+    check_target_stiffness,
+    check_translation,
+    check_wrench,
+)
 from tensegrity_stiffness.nodes.control_processing import (
     CONTROLLER_PARAMETERS,
     REST_LENGTHS_LABEL,
@@ -67,8 +72,16 @@ from tensegrity_stiffness.ros.runtime.topics import LATCHED_QOS, create_output_p
 POSE_ESTIMATE, WRENCH_ESTIMATE = (f'~/{name}' for name in ESTIMATOR_OUTPUTS[:2])
 
 NODE_NAME = 'stiffness_controller'
+#: A reading's stamp counts into the latency only within this window of the node's clock (s):
+#: at most this far in the future (clock offsets between machines) and at most
+#: ``STAMP_WINDOW[1]`` in the past. A stamp outside it (1 s after the epoch, a day ahead) is
+#: counted on /diagnostics, the reading used (its arrival is what ages it).
+STAMP_WINDOW = (0.01, 10.0)
 #: Ticks over which /diagnostics reports the tick time and the latency (median, p99).
 STATISTICS_WINDOW = 2000
+#: The /diagnostics key of the readings whose stamp is outside :data:`STAMP_WINDOW`.
+STAMPS_KEY = (f'stamps outside -{STAMP_WINDOW[1]:g} s .. +{STAMP_WINDOW[0]:g} s of the clock '
+              '(left out of the latency)')
 
 
 class StiffnessControllerNode(Node):
@@ -85,11 +98,15 @@ class StiffnessControllerNode(Node):
         self.reporter = Reporter(self.get_logger(), context=self.context)
         # The tick (its own thread) against parameter changes and targets (the executor).
         self._lock = threading.Lock()
+        self._controller: StiffnessController | None = None
         self._binding = ParameterBinding(
-            self, CONTROLLER_PARAMETERS, controller_settings, self._apply_parameters,
+            self, CONTROLLER_PARAMETERS, self._checked_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
         self._settings = self._binding.build(self._binding.values())
         self._controller = self._new_controller(self._settings, None)
+        if self._settings.start_warning:
+            self.get_logger().warning(self._settings.start_warning)
+        self._stamps_out_of_window = 0
         # (T, arrival time.monotonic, the reading's stamp ns, sequence number): one reference,
         # replaced as a whole by the state's thread
         self._pose: tuple[np.ndarray, float, int, int] | None = None
@@ -149,23 +166,44 @@ class StiffnessControllerNode(Node):
     def _new_controller(self, settings: ControllerSettings, rest: np.ndarray | None
                         ) -> StiffnessController:
         values = settings.values
-        start = settings.model.rest_lengths - settings.offsets if rest is None else rest
+        start = settings.start if rest is None else rest
         return StiffnessController(settings.model, settings.limits, start,
                                    integral_gain=values['control.integral_gain'],
                                    proportional_gain=values['control.proportional_gain'],
                                    rest_length_offsets=settings.offsets)
 
+    def _checked_settings(self, values: Mapping[str, Any]) -> ControllerSettings:
+        """The settings of a parameter set, refused (ValueError) when a controller of them
+        cannot take over from the present command (new offsets that make a true rest length
+        <= 0): a change applies whole or not at all."""
+        settings = controller_settings(values)
+        if self._controller is not None:
+            try:
+                self._new_controller(settings, self._controller.rest_lengths)
+            except ValueError as exc:
+                raise ValueError(f'from the present command: {exc}') from None
+        return settings
+
     def _apply_parameters(self, values: Mapping[str, Any], names: set[str]) -> None:
-        """A validated change: a new controller from the last command (the integral restarts)."""
+        """A validated change: a new controller from the last command (the integral restarts);
+        a command outside a new rest-length range is moved in at the rate, with a warning."""
         try:
             settings = self._binding.build(values)
             with self._lock:
-                self._controller = self._new_controller(settings, self._controller.rest_lengths)
+                present = self._controller.rest_lengths
+                self._controller = self._new_controller(settings, present)
                 self._settings = settings
         except Exception as exc:  # validated before: only a bug gets here
             self.reporter.internal_error('parameters', exc)
             return
         self.get_logger().info(f'parameters applied: {sorted(names)}')
+        low, high, *_ = settings.limits.for_strings(settings.model.n_strings)
+        outside = np.flatnonzero((present < low) | (present > high))
+        if outside.size:
+            self.get_logger().warning(
+                'the present command is outside limits.rest_length_min/max for '
+                f'{", ".join(settings.model.string_names[j] for j in outside)}: moved into the '
+                'range at limits.max_rate')
 
     # ------------------------------------------------------------------ inputs
     @guarded('~/target_pose')
@@ -174,6 +212,7 @@ class StiffnessControllerNode(Node):
             require_frame(msg.header.frame_id, self._settings.link1_frame, "link 1's frame")
             T = conversions.pose_message_to_transform(msg.pose)
             ControlTarget(pose=T)
+            check_translation(self._settings.model, T[:3, 3], 'target_pose')
         except ValueError as exc:
             self.reporter.reject('~/target_pose', str(exc))
             return
@@ -184,7 +223,11 @@ class StiffnessControllerNode(Node):
         try:
             values = conversions.multiarray_to_array(
                 msg, max_length=self._settings.values['limits.max_array_length'])
-            K = stiffness_target(values)
+            K = stiffness_target(values, tuple(d.size for d in msg.layout.dim))
+            if K is not None:
+                load = self._known_wrench if self._wrench is None else self._wrench
+                check_target_stiffness(self._settings.model, K, 'target_stiffness',
+                                       length_scale=self._controller.length_scale, wrench=load)
         except ValueError as exc:
             self.reporter.reject('~/target_stiffness', str(exc))
             return
@@ -194,7 +237,13 @@ class StiffnessControllerNode(Node):
                    ) -> None:
         """The latest pose estimate ``T`` (link 2 in link 1) of the reading stamped
         ``stamp_ns`` (0: unstamped) and, when given, the load estimate: what the next tick
-        uses (the state topics' handlers, or the estimator in the same process)."""
+        uses (the state topics' handlers, or the estimator in the same process). A pose out of
+        the joint's reach is refused by name (counted as a rejected ``~/pose_estimate``)."""
+        try:
+            check_translation(self._settings.model, T[:3, 3], 'pose_estimate')
+        except ValueError as exc:
+            self.reporter.reject(POSE_ESTIMATE, str(exc))
+            return
         self._state_count += 1
         self._pose = (T, time.monotonic(), stamp_ns, self._state_count)
         if wrench is not None:
@@ -214,7 +263,8 @@ class StiffnessControllerNode(Node):
     def _wrench_input(self, name: str, msg: WrenchStamped) -> np.ndarray | None:
         try:
             require_frame(msg.header.frame_id, self._settings.link1_frame, "link 1's frame")
-            return estimation_msgs.wrench_stamped_to_array(msg)
+            W = estimation_msgs.wrench_stamped_to_array(msg)
+            return check_wrench(self._settings.model, W, name.removeprefix('~/'))
         except ValueError as exc:
             self.reporter.reject(name, str(exc))
             return None
@@ -280,8 +330,11 @@ class StiffnessControllerNode(Node):
             self._commands.record()
             # the latency of a reading: to the first command computed from it
             if state[2] and state[3] != self._commanded_state:
-                self._latencies.append(
-                    1e-9 * (self.get_clock().now().nanoseconds - state[2]))
+                latency = 1e-9 * (self.get_clock().now().nanoseconds - state[2])
+                if -STAMP_WINDOW[0] <= latency <= STAMP_WINDOW[1]:
+                    self._latencies.append(latency)
+                else:
+                    self._stamps_out_of_window += 1
             self._commanded_state = state[3]
             if self._pub_stiffness.get_subscription_count():
                 self._pub_stiffness.publish(conversions.matrix_to_multiarray(
@@ -302,6 +355,7 @@ class StiffnessControllerNode(Node):
             ('tick time [ms]', 1e3 * self._tick_time),
             *_statistics('tick time', self._tick_times),
             *_statistics('latency from the reading', self._latencies),
+            (STAMPS_KEY, self._stamps_out_of_window),
             ('ticks on a state older than one period', self._old_state_ticks),
             ('age of the state used [s]', self._state_age),
             (self.SKIPPED_KEY, self.skipped.counts() or 0),

@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 from geometry_msgs.msg import PoseStamped
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.callback_groups import ReentrantCallbackGroup
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
@@ -28,7 +29,7 @@ from tensegrity_stiffness.mechanics.design import design_rest_lengths
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.health import joint_health
-from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL, joint_output_layouts
+from tensegrity_stiffness.nodes.layouts import joint_output_layouts
 from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameters import (
     STIFFNESS_NODE_PARAMETERS,
@@ -38,6 +39,7 @@ from tensegrity_stiffness.nodes.parameters import (
 )
 from tensegrity_stiffness.nodes.processing import (
     JointOutputs,
+    frequency_report,
     joint_outputs,
     pose_input,
     screw_input,
@@ -80,13 +82,20 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
             self, Float64MultiArray, '~/natural_frequencies',
             output_qos(self._settings.values['qos.depth'])) \
             if self._settings.dynamics is not None else None
-        # Own group: the coroutine holds its group while it awaits the worker; the default group
-        # (topics, planar services, timer) stays free.
+        # Own reentrant group: each request is taken at once (a coroutine awaiting the worker
+        # holds no queue), at most MAX_OUTSTANDING_REQUESTS in progress, the next refused with
+        # a message; the default group (topics, planar services, timer) stays free.
+        service_qos = QoSProfile(history=HistoryPolicy.KEEP_LAST,
+                                 depth=joint_services.SERVICE_QUEUE_DEPTH,
+                                 reliability=ReliabilityPolicy.RELIABLE)
+        self._outstanding = {
+            name: joint_services.OutstandingRequests(name)
+            for name in ('~/solve_equilibrium', '~/design_rest_lengths')}
         self.create_service(SolveEquilibrium, '~/solve_equilibrium', self._on_solve_equilibrium,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+                            qos_profile=service_qos, callback_group=ReentrantCallbackGroup())
         self.create_service(DesignRestLengths, '~/design_rest_lengths',
-                            self._on_design_rest_lengths,
-                            callback_group=MutuallyExclusiveCallbackGroup())
+                            self._on_design_rest_lengths, qos_profile=service_qos,
+                            callback_group=ReentrantCallbackGroup())
         self.create_service(PlanarForwardKinematics, '~/planar_forward_kinematics',
                             self._on_planar_forward)
         self.create_service(PlanarInverseKinematics, '~/planar_inverse_kinematics',
@@ -114,8 +123,8 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
         except (ValueError, np.linalg.LinAlgError) as exc:
             self.reporter.warn('~/natural_frequencies', str(exc))
             return
-        publisher.publish(conversions.vector_to_multiarray(modes.frequencies,
-                                                           NATURAL_FREQUENCIES_LABEL))
+        values, label = frequency_report(modes)
+        publisher.publish(conversions.vector_to_multiarray(values, label))
 
     def _cartesian_stiffness(self, outputs: JointOutputs) -> np.ndarray:
         return outputs.state.cartesian_stiffness
@@ -141,7 +150,7 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
         settings = self._settings
         try:
             xi = screw_input(conversions.multiarray_to_array(
-                msg, expected_length=6, max_length=settings.max_array_length))
+                msg, expected_length=6, max_length=settings.max_array_length), settings.model)
         except ValueError as exc:
             self.reporter.reject('~/screw', str(exc))
             return
@@ -154,7 +163,8 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
             last = self._last.screws
             xi = pose_input(msg.header.frame_id, conversions.pose_message_to_transform(msg.pose),
                             settings.link1_frame,
-                            last if last is not None else settings.model.initial_screw)
+                            last if last is not None else settings.model.initial_screw,
+                            settings.model)
         except ValueError as exc:
             self.reporter.reject('~/pose', str(exc))
             return
@@ -171,19 +181,27 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
         (:meth:`.EquilibriumJob.quick_kwargs`); a request that try does not solve goes to the
         worker process, within ``equilibrium.time_budget``."""
         kind = '~/solve_equilibrium'
-        settings = self._settings
+        outstanding = self._outstanding[kind]
+        refusal = outstanding.enter()
+        if refusal is not None:
+            return joint_services.fail(response, refusal)
         try:
-            job = joint_services.equilibrium_job(request, settings, self._last_solution)
-        except ValueError as exc:
-            return self._invalid_request(kind, response, exc)
-        result = solve_equilibrium(settings.model, job.external_wrench, **job.quick_kwargs())
-        if not result.success:
-            result = await self._in_worker_or_fail(
-                kind, response, solve_equilibrium, (settings.model, job.external_wrench),
-                job.kwargs(), job.time_budget + SOLVER_GRACE_S)
-        if result is not None and joint_services.fill_equilibrium(response, result):
-            self._last_solution = result.screw
-        return response
+            settings = self._settings
+            try:
+                job = joint_services.equilibrium_job(request, settings, self._last_solution)
+                result = solve_equilibrium(settings.model, job.external_wrench,
+                                           **job.quick_kwargs())
+            except ValueError as exc:  # the door's checks, or the solver's own refusal
+                return self._invalid_request(kind, response, exc)
+            if not result.success:
+                result = await self._in_worker_or_fail(
+                    kind, response, solve_equilibrium, (settings.model, job.external_wrench),
+                    job.kwargs(), job.time_budget + SOLVER_GRACE_S)
+            if result is not None and joint_services.fill_equilibrium(response, result):
+                self._last_solution = result.screw
+            return response
+        finally:
+            outstanding.leave()
 
     @guarded_service('~/design_rest_lengths')
     async def _on_design_rest_lengths(self, request: DesignRestLengths.Request,
@@ -191,18 +209,27 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
                                       ) -> DesignRestLengths.Response:
         """Validated here, designed in the worker process; the node's rest lengths stay."""
         kind = '~/design_rest_lengths'
-        settings = self._settings
-        last = self._last.screws
+        outstanding = self._outstanding[kind]
+        refusal = outstanding.enter()
+        if refusal is not None:
+            return joint_services.fail(response, refusal)
         try:
-            kwargs = joint_services.design_kwargs(
-                request, settings, last if last is not None else settings.model.initial_screw)
-        except ValueError as exc:
-            return self._invalid_request(kind, response, exc)
-        # may_refuse: a request the library refuses (e.g. outside the chart)
-        result = await self._in_worker_or_fail(kind, response, design_rest_lengths,
-                                               (settings.model,), kwargs, DESIGN_DEADLINE_S,
-                                               may_refuse=True)
-        return response if result is None else joint_services.fill_design(response, result)
+            settings = self._settings
+            last = self._last.screws
+            try:
+                kwargs = joint_services.design_kwargs(
+                    request, settings,
+                    last if last is not None else settings.model.initial_screw)
+            except ValueError as exc:
+                return self._invalid_request(kind, response, exc)
+            # may_refuse: a request the library refuses (e.g. outside the chart)
+            result = await self._in_worker_or_fail(kind, response, design_rest_lengths,
+                                                   (settings.model,), kwargs,
+                                                   DESIGN_DEADLINE_S, may_refuse=True)
+            return response if result is None else joint_services.fill_design(response,
+                                                                              result)
+        finally:
+            outstanding.leave()
 
     @guarded_service('~/planar_forward_kinematics')
     def _on_planar_forward(self, request: PlanarForwardKinematics.Request,

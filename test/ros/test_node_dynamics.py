@@ -16,7 +16,10 @@ from support.ros_harness import NodeProcess, RosClient, repeat_until, unique_nam
 
 from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
-from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL  # noqa: E402
+from tensegrity_stiffness.nodes.layouts import (  # noqa: E402
+    NATURAL_FREQUENCIES_LABEL,
+    natural_frequencies_label,
+)
 
 CONFIG = REPO / 'config' / 'default_joint.yaml'
 
@@ -50,7 +53,10 @@ def test_natural_frequencies_are_the_library_s_modes_at_each_input() -> None:
                 lambda xi=xi: screw.publish(Float64MultiArray(data=xi.tolist())),
                 lambda expected=expected: next((m for m in frequencies.messages if np.allclose(
                     m.data, expected, rtol=1e-12, atol=0.0)), None))
-            assert msg.layout.dim[0].label == NATURAL_FREQUENCIES_LABEL
+            modes = dynamics.modes_at_pose(xi)[0]
+            assert msg.layout.dim[0].label == natural_frequencies_label(
+                modes.stable, np.flatnonzero(modes.overdamped).tolist())
+            assert msg.layout.dim[0].label.startswith(NATURAL_FREQUENCIES_LABEL)
             assert msg.layout.dim[0].size == 6
             assert np.all(np.diff(msg.data) >= 0.0)
     finally:

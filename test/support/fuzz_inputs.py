@@ -36,6 +36,11 @@ from tensegrity_stiffness.mechanics.equilibrium import RESIDUAL_TOLERANCE, is_st
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
+from tensegrity_stiffness.mechanics.plausibility import (
+    check_rest_lengths,
+    check_screw,
+    check_wrench,
+)
 from tensegrity_stiffness.nodes import parameters
 from tensegrity_stiffness.ros import conversions
 
@@ -712,6 +717,24 @@ def equilibrium_refusal(model: JointModel, case: Case,
     return None
 
 
+def plausibility_refusal(model: JointModel, case: Case) -> str | None:
+    """Why the node's ranges (issue #42, :mod:`tensegrity_stiffness.mechanics.plausibility`)
+    refuse an equilibrium request its validation accepts (None: within them)."""
+    p = case.payload
+    try:
+        rest = np.asarray(p['rest_lengths'], dtype=np.float64)
+        if rest.size:
+            check_rest_lengths(model, rest)
+        check_wrench(model, np.asarray(p['wrench'], dtype=np.float64),
+                     rest_lengths=rest if rest.size else None)
+        x0 = np.asarray(p['initial_screw'], dtype=np.float64)
+        if x0.size:
+            check_screw(model, x0, 'initial_screw')
+    except ValueError as exc:
+        return str(exc)
+    return None
+
+
 def check_equilibrium(model: JointModel, case: Case, response: Any) -> str | None:
     """None if the node's equilibrium answer is right, else why not.
 
@@ -730,6 +753,9 @@ def check_equilibrium(model: JointModel, case: Case, response: Any) -> str | Non
             return f'an invalid request was not refused: {response.message!r}'
         return None
     if not response.success:
+        out_of_range = 'range of this joint' in response.message
+        if out_of_range and plausibility_refusal(model, case) is not None:
+            return None  # outside the joint's ranges: refused by name
         if response.message.startswith(('invalid request', 'internal error')):
             return f'a valid request was refused: {response.message!r}'
         if p['easy']:

@@ -11,6 +11,7 @@ planar services are answered here whole.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,6 +26,11 @@ from tensegrity_stiffness.mechanics.design import (
 )
 from tensegrity_stiffness.mechanics.equilibrium import EquilibriumResult
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
+from tensegrity_stiffness.mechanics.plausibility import (
+    check_rest_lengths,
+    check_screw,
+    check_wrench,
+)
 from tensegrity_stiffness.nodes.parameters import JointNodeSettings
 from tensegrity_stiffness.ros import conversions
 
@@ -38,6 +44,45 @@ QUICK_SOLVE_ITERATIONS = 8
 #: Wall-clock budget (s) of that try, past its first ``MIN_NEWTON_ITERATIONS`` steps: what the
 #: executor (and the GIL the fast lane shares) gives a service request at most.
 QUICK_SOLVE_BUDGET_S = 0.002
+
+
+#: Requests of one service in progress at once (being solved or waiting for the worker); one
+#: more is answered at once with ``success: false`` and :meth:`OutstandingRequests.enter`'s
+#: message (issue #42: past 10 outstanding, requests were dropped unanswered by the service's
+#: request queue, 10 deep by default, while the service's callback group was held by the one
+#: awaiting the worker).
+MAX_OUTSTANDING_REQUESTS = 32
+#: Depth of the services' request queues (the middleware's history): a burst of up to this many
+#: is taken and answered or refused; the node takes each request at once (a reentrant group).
+SERVICE_QUEUE_DEPTH = 1000
+
+
+class OutstandingRequests:
+    """The count of one service's requests in progress, bounded by ``limit``
+    (thread-safe)."""
+
+    def __init__(self, service: str, limit: int = MAX_OUTSTANDING_REQUESTS) -> None:
+        self.service = service
+        self.limit = limit
+        self.count = 0
+        self.refused = 0
+        self._lock = threading.Lock()
+
+    def enter(self) -> str | None:
+        """Count a new request in, or the refusal to answer it with when ``limit`` are in
+        progress."""
+        with self._lock:
+            if self.count >= self.limit:
+                self.refused += 1
+                return (f'busy: {self.count} {self.service} requests are in progress (at most '
+                        f'{self.limit}); send it again once one is answered')
+            self.count += 1
+            return None
+
+    def leave(self) -> None:
+        """A request answered."""
+        with self._lock:
+            self.count -= 1
 
 
 @dataclass(frozen=True)
@@ -73,12 +118,13 @@ def equilibrium_job(request: Any, settings: JointNodeSettings,
         if n > settings.max_array_length:  # rejected before anything is converted
             raise ValueError(f'{name}: too many elements: {n} > max_length '
                              f'{settings.max_array_length}')
-    W = conversions.msg_to_wrench(request.external_wrench)
     model = settings.model
     rest = None
     if len(request.rest_lengths):
-        rest = model.validate_rest_lengths(np.asarray(request.rest_lengths, dtype=np.float64),
-                                           batched=False)
+        rest = check_rest_lengths(model, np.asarray(request.rest_lengths, dtype=np.float64))
+    # the strings' capacity at the request's rest lengths, as solve_equilibrium judges it
+    W = check_wrench(model, conversions.msg_to_wrench(request.external_wrench),
+                     rest_lengths=rest)
     if len(request.initial_screw):
         x0 = np.asarray(request.initial_screw, dtype=np.float64)
         if x0.shape != (6,):
@@ -88,6 +134,7 @@ def equilibrium_job(request: Any, settings: JointNodeSettings,
     x0 = np.asarray(x0, dtype=np.float64)
     if not np.isfinite(x0).all() or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
         raise ValueError('initial_screw must have finite values and |omega| < 2 pi')
+    check_screw(model, x0, 'initial_screw')
     return EquilibriumJob(W, rest, x0, settings.equilibrium_time_budget,
                           settings.equilibrium_max_iterations)
 
