@@ -175,10 +175,12 @@ def solve_equilibrium(
         raise ValueError(f'external_wrench must have shape (6,), got {W.shape}')
     if not np.all(np.isfinite(W)):
         raise ValueError(f'external_wrench must be finite, got {W}')
-    # Finite but absurd inputs are refused by name before any work (mechanics.plausibility).
+    # Finite but absurd inputs are refused by name before any work (mechanics.plausibility);
+    # the load's range is the joint's (its own rest lengths): rest lengths that slacken every
+    # string are the solver's to report, not a smaller range.
     rest = (model.rest_lengths if rest_lengths is None
             else plausibility.check_rest_lengths(model, rest_lengths))
-    plausibility.check_wrench(model, W, rest_lengths=rest)
+    plausibility.check_wrench(model, W)
     x0 = as_screws(model.initial_screw if initial_screw is None else initial_screw,
                    'initial_screw')
     if x0.shape != (6,):
