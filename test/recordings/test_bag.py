@@ -171,6 +171,30 @@ def test_bag_namespace_config_and_topics(tmp_path: Path) -> None:
     np.testing.assert_allclose(got[3][2].data, state.tensions, rtol=1e-12)
 
 
+def test_bag_names_outputs_by_the_node_that_would_publish_them(tmp_path: Path) -> None:
+    """#39: inputs read under the twin's name (/twin/sim_node) are answered under the stiffness
+    node's (/twin/stiffness_node), not the simulator's; --output-namespace chooses."""
+    xi = screw_stream(2, seed=3)
+    src = write_bag(tmp_path / 'in', [In('screw', T0, multiarray(xi[0]))],
+                    namespace='/twin/sim_node')
+    code, stdout, stderr = run_cli('bag', src, '--out', tmp_path / 'out', '--namespace',
+                                   '/twin/sim_node', '--json')
+    assert code == 0, stderr
+    report = json.loads(stdout)
+    assert report['output_namespace'] == '/twin/stiffness_node'
+    assert {topic for topic, _, _ in read_bag(tmp_path / 'out')} == {
+        f'/twin/stiffness_node/{name}' for name in OUTPUTS}
+    code, stdout, stderr = run_cli('bag', src, '--out', tmp_path / 'out2', '--namespace',
+                                   '/twin/sim_node', '--output-namespace', '/lab/joint',
+                                   '--topics', 'wrench', '--json')
+    assert code == 0, stderr
+    assert [topic for topic, _, _ in read_bag(tmp_path / 'out2')] == ['/lab/joint/wrench']
+    assert bag.publisher_prefix('/robot/j1/stiffness_node', 'stiffness') == \
+        '/robot/j1/stiffness_node'
+    assert bag.publisher_prefix('/a/spine_estimator_node', 'spine') == '/a/spine_node'
+    assert bag.publisher_prefix('', 'stiffness') == ''
+
+
 def test_bag_errors_exit_2_with_one_line(tmp_path: Path) -> None:
     msgs, _, _ = scenario()
     src = write_bag(tmp_path / 'in', msgs)
