@@ -10,10 +10,9 @@
 set -euo pipefail
 
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-cd "$REPO"
-
-bash scripts/setup_env.sh
+# Run from any folder: relative paths (--config FILE) are the caller's.
+bash "$REPO/scripts/setup_env.sh"
 # shellcheck disable=SC1091
-source scripts/env.sh
+source "$REPO/scripts/env.sh"
 
 exec "$REPO/install/tensegrity_stiffness/lib/tensegrity_stiffness/twin_demo" "$@"
