@@ -125,8 +125,8 @@ def _page_shell_commands() -> list[list[str]]:
 @pytest.mark.slow
 def test_the_pages_demos_run_from_outside_the_repository(tmp_path, monkeypatch, capsys):
     """Section 6 from a scratch folder: the page's config commands, then each demo of the page
-    (its --duration bounded to 6 s, the loop's to 15 s), with the repository's script by its path: each
-    runs the joint the page made, shows its live lines and stops cleanly (exit 0)."""
+    (its --duration bounded to 6 s, the loop's to 15 s), with the repository's script by its
+    path: each runs the joint the page made, shows its live lines and stops cleanly (exit 0)."""
     import os
     import subprocess
 
