@@ -249,6 +249,8 @@ def _run_to_exit(executable: str, params_file, extra_args: list[str],
     ('stiffness_node', CONFIG, 'joint.stifness', 'joint.stiffness'),
     ('sim_node', CONFIG, 'limits.max_forse', 'limits.max_force'),
     ('estimator_node', CONFIG, 'estimation.max_agee', 'estimation.max_age'),
+    ('spine_node', REPO / 'config' / 'default_spine.yaml', 'chain.n_joint', 'chain.n_joints'),
+    ('stiffness_controller', CONFIG, 'control.integral_gian', 'control.integral_gain'),
 ])
 def test_a_misspelt_parameter_stops_the_node_by_name(tmp_path, executable, config, key, hint):
     """#39: a misspelt key under the node's own sections in a parameter file: the node refuses
