@@ -62,7 +62,7 @@ RING_PENDING = pytest.mark.xfail(reason='#39: controller limits from the joint a
     pytest.param('ring16_joint.yaml', marks=RING_PENDING)])
 def test_the_control_demo_holds_the_pose_on_any_joint(tmp_path: Path, which: str) -> None:
     config = _config(tmp_path, which)
-    proc = subprocess.Popen([_demo(), '--control', '--config', str(config), '--duration', '60'],
+    proc = subprocess.Popen([_demo(), '--control', '--config', str(config), '--duration', '40'],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                             env=os.environ.copy(), start_new_session=True)
     lines: list[str] = []
