@@ -134,11 +134,13 @@ def main() -> None:
             for b, out in enumerate(outputs):
                 times = np.arange(b * chunk, b * chunk + len(out.screw), dtype=np.int64) + 1
                 s = out.state
-                payloads = (s.wrench, s.stiffness, s.cartesian_stiffness, s.tensions,
-                            out.interpretation)
-                bag.write_blocks(writer, conns, times, [
-                    templates[name].rows(p, times if name == 'wrench' else None)
-                    for name, p in zip(bag.OUTPUT_NAMES, payloads, strict=True)])
+                payloads = dict(zip(layouts.JOINT_OUTPUTS, (
+                    s.wrench, s.stiffness, s.cartesian_stiffness, s.tensions,
+                    out.interpretation), strict=True))
+                bag.write_blocks(writer, conns, times, [  # the stamped matrices: their source's
+                    templates[name].rows(payloads[output_layouts[name].source or name],
+                                         times if templates[name].stamped else None)
+                    for name in bag.OUTPUT_NAMES])
         write = time.perf_counter() - start
 
     rate = n / end_to_end

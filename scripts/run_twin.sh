@@ -4,15 +4,15 @@
 # summary once a second (input rate, pose, smallest and largest eigenvalue of K_c, slack
 # strings, latency). Ctrl-C stops both nodes cleanly.
 #   bash scripts/run_twin.sh [--spine | --control] [--duration SECONDS] [--swing N] [--swing-period S]
-#                            [--rate HZ] [--config FILE.yaml]
+#                            [--rate HZ] [--publish-every N] [--config FILE.yaml] [-- ROS ARGS]
+# Arguments after -- go to every node: run_twin.sh --control --config FILE -- -p limits.tension_max:=3
 # Environment: see scripts/env.sh (LOCALHOST discovery, ROS_DOMAIN_ID default 42 if unset).
 set -euo pipefail
 
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-cd "$REPO"
-
-bash scripts/setup_env.sh
+# Run from any folder: relative paths (--config FILE) are the caller's.
+bash "$REPO/scripts/setup_env.sh"
 # shellcheck disable=SC1091
-source scripts/env.sh
+source "$REPO/scripts/env.sh"
 
 exec "$REPO/install/tensegrity_stiffness/lib/tensegrity_stiffness/twin_demo" "$@"

@@ -134,7 +134,7 @@ build_hash="$( {
   done
   # Compiled or generated: contents count (the kernel's generated header is made from the
   # series tables and thresholds of these three modules).
-  { find cmake srv src include -type f 2>/dev/null
+  { find cmake srv msg src include -type f 2>/dev/null
     printf '%s\n' tensegrity_stiffness/geometry/screw.py tensegrity_stiffness/mechanics/joint.py \
       tensegrity_stiffness/mechanics/kernel.py; } | LC_ALL=C sort \
     | while read -r f; do printf '== %s\n' "$f"; cat "$f"; done

@@ -35,7 +35,8 @@ def _cmd_bag(args: argparse.Namespace) -> int:
     try:
         summary = bag.process_bag(
             args.input, args.out, config_path=args.config, namespace=args.namespace,
-            storage=args.storage, csv_path=args.csv, topics=args.topics,
+            output_namespace=args.output_namespace, storage=args.storage, csv_path=args.csv,
+            topics=args.topics,
             overwrite=args.overwrite, node=args.node, progress=progress,
             allow_damaged=args.allow_damaged)
     except ImportError as exc:  # rosbags not installed
@@ -143,9 +144,9 @@ def add_bag_parser(sub: Any) -> None:
                         'screw, pose, rest_lengths) or spine_node (inputs screws, poses, '
                         'rest_lengths; outputs joint_wrenches joint_stiffness '
                         'joint_cartesian_stiffness tip_pose tip_wrench tip_stiffness '
-                        'tip_stiffness_base) or structure_node (inputs poses, pose_values, '
-                        'rest_lengths; outputs body_wrenches stiffness string_tensions '
-                        'bar_forces contact_forces)')
+                        'tip_stiffness_base tip_stiffness_stamped tip_stiffness_base_stamped) or '
+                        'structure_node (inputs poses, pose_values, rest_lengths; outputs '
+                        'body_wrenches stiffness string_tensions bar_forces contact_forces)')
     p.add_argument('--config', metavar='YAML',
                    help="the node's parameter file (default: the packaged "
                         'config/default_joint.yaml, with --node spine '
@@ -153,15 +154,20 @@ def add_bag_parser(sub: Any) -> None:
                         'with --node structure also a structure file, default the packaged '
                         'six_bar.yaml)')
     p.add_argument('--namespace', default=None, metavar='NS',
-                   help="the node's topics' prefix (default /stiffness_node, with --node spine "
+                   help="the input topics' prefix (default /stiffness_node, with --node spine "
                         '/spine_node, with --node structure /structure_node: the node in the '
                         'root namespace)')
+    p.add_argument('--output-namespace', default=None, metavar='NS',
+                   help='the outputs\' prefix (default: the node that would publish them: NS, '
+                        'or, where NS ends in another node of the package (/twin/sim_node), '
+                        'that name replaced by the node\'s (/twin/stiffness_node))')
     p.add_argument('--storage', metavar='mcap|sqlite3',
                    help="storage of OUTPUT (default: the input's)")
     p.add_argument('--csv', metavar='FILE', help='also write one row per answered input')
     p.add_argument('--topics', nargs='+', metavar='TOPIC',
                    help='outputs to write (default all: wrench stiffness cartesian_stiffness '
-                        'string_tensions stiffness_interpretation)')
+                        'string_tensions stiffness_interpretation stiffness_stamped '
+                        'cartesian_stiffness_stamped)')
     add_allow_damaged(p)
     p.add_argument('--overwrite', action='store_true',
                    help='replace OUTPUT (a rosbag2) and FILE if they exist')

@@ -11,7 +11,7 @@ a matrix of shape (rows, cols) has ``dim[0] = (row_label, rows, rows*cols)`` and
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 from tensegrity_stiffness.geometry.components import (
@@ -104,6 +104,12 @@ def stacked_matrix_dims(n: int, rows: int, cols: int, stack_label: str, row_labe
 FLOAT64_MULTIARRAY = 'std_msgs/msg/Float64MultiArray'
 WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
 POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+#: The package's stamped matrix (``msg/StampedMatrix.msg``: header with the input's stamp and
+#: the frame, row and column labels and counts, row-major data).
+STAMPED_MATRIX = 'tensegrity_stiffness/msg/StampedMatrix'
+#: Its definition, relative to the package's share folder (read by the bag command, which
+#: registers it with rosbags).
+STAMPED_MATRIX_DEFINITION = 'msg/StampedMatrix.msg'
 
 
 @dataclass(frozen=True)
@@ -116,17 +122,33 @@ class OutputLayout:
 
     msgtype: str
     dims: tuple[tuple[str, int, int], ...] = ()
+    #: The output whose array this one carries too (a :data:`STAMPED_MATRIX` beside the
+    #: ``Float64MultiArray`` of the same matrix); None: its own array.
+    source: str | None = None
 
     @property
     def size(self) -> int:
         """Values in the payload (6 for a wrench, 16 for a pose's (4, 4) transform)."""
-        if self.msgtype == FLOAT64_MULTIARRAY:
+        if self.msgtype in (FLOAT64_MULTIARRAY, STAMPED_MATRIX):
             return self.dims[0][2]
         return 6 if self.msgtype == WRENCH_STAMPED else 16
+
+    @property
+    def stamped(self) -> bool:
+        """Whether the message has a header (stamp and frame id)."""
+        return self.msgtype != FLOAT64_MULTIARRAY
 
 
 def _array(dims: Sequence[tuple[str, int, int]]) -> OutputLayout:
     return OutputLayout(FLOAT64_MULTIARRAY, tuple(dims))
+
+
+def with_stamped_matrices(arrays: dict[str, OutputLayout], stamped: Mapping[str, str]
+                          ) -> dict[str, OutputLayout]:
+    """``arrays`` followed by a :data:`STAMPED_MATRIX` for each ``stamped`` name -> the name
+    of the matrix output of ``arrays`` it carries (same labels and data, with a header)."""
+    return {**arrays, **{name: OutputLayout(STAMPED_MATRIX, arrays[of].dims, source=of)
+                         for name, of in stamped.items()}}
 
 
 #: ``stiffness_node``'s per-input outputs, topic names relative to the node, in the order they
@@ -138,6 +160,14 @@ JOINT_OUTPUTS = ('wrench', 'stiffness', 'cartesian_stiffness', 'string_tensions'
 SPINE_OUTPUTS = ('joint_wrenches', 'joint_stiffness', 'joint_cartesian_stiffness', 'tip_pose',
                  'tip_wrench', 'tip_stiffness', 'tip_stiffness_base')
 
+#: The stamped matrices published beside ``stiffness_node``'s arrays (name -> the array it
+#: carries), after :data:`JOINT_OUTPUTS`: a subscriber pairs each with its input by stamp.
+JOINT_STAMPED_OUTPUTS = {'stiffness_stamped': 'stiffness',
+                         'cartesian_stiffness_stamped': 'cartesian_stiffness'}
+#: ``spine_node``'s, likewise (the tip stiffness in the tool and in the base frame).
+SPINE_STAMPED_OUTPUTS = {'tip_stiffness_stamped': 'tip_stiffness',
+                         'tip_stiffness_base_stamped': 'tip_stiffness_base'}
+
 #: ``estimator_node``'s per-estimate outputs, likewise (K, K_c and the tensions on the names of
 #: ``stiffness_node``'s, so that one remap serves both).
 ESTIMATOR_OUTPUTS = ('pose_estimate', 'wrench_estimate', 'screw_estimate', 'stiffness',
@@ -148,8 +178,13 @@ SPINE_ESTIMATOR_OUTPUTS = ('screws_estimate', 'tip_pose_estimate', 'tip_wrench_e
 
 
 def joint_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
-    """``stiffness_node``'s per-input outputs by topic, in :data:`JOINT_OUTPUTS` order: wrench,
-    K, K_c, tensions, interpretation."""
+    """``stiffness_node``'s per-input outputs by topic, in :data:`JOINT_OUTPUTS` order (wrench,
+    K, K_c, tensions, interpretation), then :data:`JOINT_STAMPED_OUTPUTS`."""
+    return with_stamped_matrices(joint_array_layouts(string_names), JOINT_STAMPED_OUTPUTS)
+
+
+def joint_array_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
+    """The outputs of :data:`JOINT_OUTPUTS` alone (one array each)."""
     n = len(string_names)
     return dict(zip(JOINT_OUTPUTS, (
         OutputLayout(WRENCH_STAMPED),
@@ -161,7 +196,13 @@ def joint_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]
 
 
 def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
-    """``spine_node``'s per-input outputs by topic, in :data:`SPINE_OUTPUTS` order."""
+    """``spine_node``'s per-input outputs by topic, in :data:`SPINE_OUTPUTS` order, then
+    :data:`SPINE_STAMPED_OUTPUTS`."""
+    return with_stamped_matrices(spine_array_layouts(n_joints), SPINE_STAMPED_OUTPUTS)
+
+
+def spine_array_layouts(n_joints: int) -> dict[str, OutputLayout]:
+    """The outputs of :data:`SPINE_OUTPUTS` alone (one array each)."""
     return dict(zip(SPINE_OUTPUTS, (
         _array(matrix_dims(n_joints, 6, JOINTS_LABEL, WRENCH_LABEL)),
         _array(stacked_matrix_dims(

@@ -41,6 +41,7 @@ from tensegrity_stiffness.nodes import processing, spine_processing
 from tensegrity_stiffness.nodes.layouts import (
     FLOAT64_MULTIARRAY,
     POSE_STAMPED,
+    STAMPED_MATRIX,
     WRENCH_STAMPED,
     OutputLayout,
     joint_output_layouts,
@@ -204,7 +205,7 @@ MESSAGE_CLASS_NAMES = (
     'builtin_interfaces/msg/Time', 'std_msgs/msg/Header', 'std_msgs/msg/MultiArrayDimension',
     'std_msgs/msg/MultiArrayLayout', FLOAT64_MULTIARRAY, 'geometry_msgs/msg/Vector3',
     'geometry_msgs/msg/Wrench', WRENCH_STAMPED, 'geometry_msgs/msg/Point',
-    'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Pose', POSE_STAMPED)
+    'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Pose', POSE_STAMPED, STAMPED_MATRIX)
 
 
 def multiarray(dims: Sequence[tuple[str, int, int]], values: FloatArray,
@@ -229,6 +230,10 @@ def new_message(layout: OutputLayout, types: MessageTypes) -> Any:
     if layout.msgtype == FLOAT64_MULTIARRAY:
         return multiarray(layout.dims, np.zeros(layout.size), types)
     header = c['std_msgs/msg/Header'](stamp=types.time(0), frame_id='')
+    if layout.msgtype == STAMPED_MATRIX:
+        (row_label, rows, _), (column_label, cols, _) = layout.dims
+        return c[STAMPED_MATRIX](header=header, row_label=row_label, column_label=column_label,
+                                 rows=rows, cols=cols, data=types.payload(np.zeros(rows * cols)))
     if layout.msgtype == WRENCH_STAMPED:
         vector3 = c['geometry_msgs/msg/Vector3']
         return c[WRENCH_STAMPED](header=header, wrench=c['geometry_msgs/msg/Wrench'](
@@ -259,6 +264,19 @@ def write_pose_stamped(msg: Any, values: FloatArray, stamp: Any, frame_id: str) 
     msg.header.frame_id = frame_id
 
 
+def stamped_matrix_writer(types: MessageTypes) -> Writer:
+    """The :data:`Writer` of a ``StampedMatrix``: its header and data (labels and counts,
+    set once, stay)."""
+    payload = types.payload
+
+    def write_stamped_matrix(msg: Any, values: FloatArray, stamp: Any, frame_id: str) -> None:
+        msg.header.stamp = stamp
+        msg.header.frame_id = frame_id
+        msg.data = payload(values)
+
+    return write_stamped_matrix
+
+
 def output_writer(layout: OutputLayout, types: MessageTypes) -> Writer:
     """The :data:`Writer` of a message of ``layout``: a ``Float64MultiArray``'s data (its
     layout, labelled once, stays), or a stamped message's header and fields."""
@@ -266,6 +284,8 @@ def output_writer(layout: OutputLayout, types: MessageTypes) -> Writer:
         return write_wrench_stamped
     if layout.msgtype == POSE_STAMPED:
         return write_pose_stamped
+    if layout.msgtype == STAMPED_MATRIX:
+        return stamped_matrix_writer(types)
     return payload_writer(types)
 
 
@@ -293,13 +313,18 @@ def fill_outputs(messages: Sequence[Any], arrays: Sequence[FloatArray],
 # ------------------------------------------------------------------------------ node outputs
 class OutputMessages:
     """One preallocated message per output of ``layouts`` (topic -> layout, in publishing
-    order), refilled per input by :meth:`fill_arrays`."""
+    order), refilled per input by :meth:`fill_arrays`: the outputs with their own array first,
+    then those that carry another's (:attr:`OutputLayout.source`, the stamped matrices)."""
 
     def __init__(self, layouts: Mapping[str, OutputLayout], types: MessageTypes) -> None:
         self.layouts = dict(layouts)
         self.types = types
         self._messages = tuple(new_message(layout, types) for layout in self.layouts.values())
         self.writers = tuple(output_writer(layout, types) for layout in self.layouts.values())
+        names = list(self.layouts)
+        #: For each message, the index of its array among the outputs with their own.
+        self.array_index = tuple(names.index(layout.source or name)
+                                 for name, layout in self.layouts.items())
 
     def messages(self) -> tuple[Any, ...]:
         """The messages in the order of :attr:`layouts`."""
@@ -307,13 +332,15 @@ class OutputMessages:
 
     def fill_arrays(self, arrays: Sequence[FloatArray], stamp: Any, frame_id: str,
                     wanted: Sequence[bool] | None = None) -> None:
-        """Write ``arrays`` (checked finite, in :meth:`messages` order) into the messages
-        flagged in ``wanted`` (default all); the stamped ones get ``stamp`` and ``frame_id``."""
-        fill_outputs(self._messages, arrays, self.writers, stamp, frame_id, wanted)
+        """Write ``arrays`` (checked finite, one per output with its own array, in
+        :meth:`messages` order) into the messages flagged in ``wanted`` (default all), each
+        stamped matrix the array it carries; the stamped ones get ``stamp`` and ``frame_id``."""
+        fill_outputs(self._messages, [arrays[k] for k in self.array_index], self.writers,
+                     stamp, frame_id, wanted)
 
 
 class JointOutputMessages(OutputMessages):
-    """``stiffness_node``'s five per-input output messages
+    """``stiffness_node``'s seven per-input output messages (five arrays, two stamped matrices)
     (:func:`~tensegrity_stiffness.nodes.layouts.joint_output_layouts`), refilled by
     :meth:`fill`."""
 
@@ -321,7 +348,8 @@ class JointOutputMessages(OutputMessages):
         self.string_names = tuple(string_names)
         super().__init__(joint_output_layouts(self.string_names), types)
         (self.wrench, self.stiffness, self.cartesian_stiffness, self.tensions,
-         self.interpretation) = self._messages
+         self.interpretation, self.stiffness_stamped,
+         self.cartesian_stiffness_stamped) = self._messages
 
     def fill(self, outputs: processing.JointOutputs, stamp: Any, frame_id: str,
              wanted: Sequence[bool] | None = None) -> None:
@@ -332,21 +360,26 @@ class JointOutputMessages(OutputMessages):
 
 
 class SpineOutputMessages(OutputMessages):
-    """``spine_node``'s seven per-input output messages of a spine of ``n_joints``
+    """``spine_node``'s nine per-input output messages (seven arrays and stamped messages,
+    two stamped matrices) of a spine of ``n_joints``
     (:func:`~tensegrity_stiffness.nodes.layouts.spine_output_layouts`), refilled by
     :meth:`fill`."""
 
-    def __init__(self, n_joints: int, types: MessageTypes) -> None:
+    def __init__(self, n_joints: int, types: MessageTypes, tool_frame: str = '') -> None:
         self.n_joints = n_joints
+        #: The frame id of the stamped tip stiffness in the tool frame (the others: the base).
+        self.tool_frame = tool_frame
         super().__init__(spine_output_layouts(n_joints), types)
         (self.joint_wrenches, self.joint_stiffness, self.joint_cartesian_stiffness,
-         self.tip_pose, self.tip_wrench, self.tip_stiffness,
-         self.tip_stiffness_base) = self._messages
+         self.tip_pose, self.tip_wrench, self.tip_stiffness, self.tip_stiffness_base,
+         self.tip_stiffness_stamped, self.tip_stiffness_base_stamped) = self._messages
 
     def fill(self, outputs: spine_processing.SpineOutputs, stamp: Any, base_frame: str,
              wanted: Sequence[bool] | None = None) -> None:
         """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
         order; default all); ValueError if any output is not finite (then none is set), or if
-        the tip transform's rotation block is not a rotation."""
+        the tip transform's rotation block is not a rotation. The stamped matrices carry
+        ``base_frame``, the tool-frame tip stiffness :attr:`tool_frame`."""
         spine_processing.require_finite(outputs)
         self.fill_arrays(spine_processing.output_arrays(outputs), stamp, base_frame, wanted)
+        self.tip_stiffness_stamped.header.frame_id = self.tool_frame

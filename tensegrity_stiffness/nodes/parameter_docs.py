@@ -24,7 +24,12 @@ import sys
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
-from tensegrity_stiffness.nodes.parameters import NodeTable, ParameterSpec, node_tables
+from tensegrity_stiffness.nodes.parameters import (
+    STRICT_PARAMETERS,
+    NodeTable,
+    ParameterSpec,
+    node_tables,
+)
 
 #: Where ``--write`` and ``--check`` look by default (relative to the working directory: run
 #: the command from the repository root).
@@ -146,6 +151,9 @@ def render(tables: Sequence[NodeTable] | None = None) -> str:
         'node runs; `[a, b]` is an inclusive range; choices are separated by `|`. An array '
         'default `empty` means the optional array is left out. `joint_<i>.*` rows stand for '
         'every joint i = 1..`chain.n_joints`.',
+        '',
+        f'Every node also declares `{STRICT_PARAMETERS.name}` ({STRICT_PARAMETERS.type}, '
+        f'default `{_default(STRICT_PARAMETERS)}`, read-only): {STRICT_PARAMETERS.description}.',
         '',
         'Nodes: ' + ', '.join(f'[`{t.node}`](#{t.node})' for t in tables) + '.',
         '',

@@ -14,9 +14,9 @@ optional array left out, e.g. ``joint.link2_nodes``: link 2 uses link 1's nodes)
 
 from __future__ import annotations
 
-import difflib
 import math
 import re
+import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
@@ -288,15 +288,25 @@ def _generic(name: str) -> str:
     return _OVERRIDE_SECTION.sub('joint_<i>', name)
 
 
-def unknown_parameter_warnings(given: Iterable[str], table: Iterable[ParameterSpec]
+#: Every node's switch between refusing and warning about an unknown parameter of its own
+#: sections (declared by every node beside its table: ``ros/runtime/declared_parameters.py``).
+STRICT_PARAMETERS = ParameterSpec(
+    'strict_parameters', 'bool', True,
+    "an unknown parameter in one of the node's own sections (joint.stifness) makes the node "
+    "refuse to start, naming the nearest name; false (a file shared with other packages' nodes "
+    'that use the same section names): warn and run', read_only=True)
+
+
+def unknown_parameter_messages(given: Iterable[str], table: Iterable[ParameterSpec]
                                ) -> list[str]:
-    """One line per name of ``given`` (the parameters a node's parameter file and overrides
+    """One message per name of ``given`` (the parameters a node's parameter file and overrides
     set) that lies under one of the node's own sections (the first part of a dotted name of
     ``table``: ``joint``, ``joint_<i>``, ``estimation``, ``control``, ...) and is a parameter of
-    none of the package's nodes: ``unknown parameter joint.stifness (did you mean
-    joint.stiffness?)``. Such a value would be left out silently and the default used instead.
-    A parameter of another node (a shared file) is no mistake; names outside the node's
-    sections (``use_sim_time``, ``qos_overrides.*``, another package's) are not judged."""
+    none of the package's nodes, in the one format of :func:`config.unknown_key_messages`:
+    ``joint.stifness: unknown key (did you mean joint.stiffness?)``. Such a value would be left
+    out and the default used instead. A parameter of another node (a shared file) is no
+    mistake; names outside the node's sections (``use_sim_time``, ``qos_overrides.*``, another
+    package's) are not judged."""
     own = sorted({_generic(spec.name) for spec in table})
     sections = {name.split('.', 1)[0] for name in own if '.' in name}
     known = set(own) | {_generic(spec.name) for t in node_tables() for spec in t.parameters}
@@ -305,21 +315,42 @@ def unknown_parameter_warnings(given: Iterable[str], table: Iterable[ParameterSp
         generic = _generic(name)
         if '.' not in name or generic.split('.', 1)[0] not in sections or generic in known:
             continue
-        close = difflib.get_close_matches(generic, own, n=1, cutoff=0.75)
-        section = name.split('.', 1)[0]
-        hint = f' (did you mean {close[0].replace("joint_<i>", section)}?)' if close else ''
-        lines.append(f'unknown parameter {name}{hint}: ignored')
+        section, key = name.split('.', 1)
+        generic_section = generic.split('.', 1)[0]
+        keys = [n.split('.', 1)[1] for n in own if n.startswith(generic_section + '.')]
+        lines += config.unknown_key_messages({key: None}, keys, section)
     return lines
 
 
-def values_from_config(path: Any, table: Iterable[ParameterSpec]) -> dict[str, Any]:
+def refuse_unknown_parameters(given: Iterable[str], table: Iterable[ParameterSpec],
+                              strict: bool = True) -> list[str]:
+    """Refuse (ValueError, every message of :func:`unknown_parameter_messages` and the opt-out)
+    the unknown parameters of the node's own sections in ``given``; with ``strict=False``
+    (``strict_parameters: false``) return them as warnings (``...: ignored``) instead."""
+    lines = unknown_parameter_messages(given, table)
+    if lines and strict:
+        raise ValueError('; '.join(lines) + f' ({STRICT_PARAMETERS.name}:=false to warn and '
+                         'run with the defaults instead)')
+    return [f'{line}: ignored' for line in lines]
+
+
+def values_from_config(path: Any, table: Iterable[ParameterSpec], strict: bool | None = None
+                       ) -> dict[str, Any]:
     """The table's defaults overridden by the parameters of a config file (a ROS parameter file
-    or a plain config of the same sections); ValueError names a mistyped one. Names that are not
+    or a plain config of the same sections); ValueError names a mistyped one, and an unknown one
+    of the table's own sections (:func:`refuse_unknown_parameters`, as a node refuses it)
+    unless ``strict`` is False (None: the file's ``strict_parameters``, default true; the
+    unknown names are then warned about, :class:`config.UnknownKeyWarning`). Names that are not
     in the table are left out, as a node leaves out the undeclared parameters of its
     ``--params-file`` (``use_sim_time``, ``qos_overrides``, another node's)."""
     specs = by_name(table)
     values = defaults(specs.values())
-    for name, value in flatten(config.parameters(config.load_yaml(path))).items():
+    given = flatten(config.parameters(config.load_yaml(path)))
+    if strict is None:
+        strict = bool(STRICT_PARAMETERS.check(given.get(STRICT_PARAMETERS.name, True)))
+    for line in refuse_unknown_parameters(given, specs.values(), strict):
+        warnings.warn(f'{path}: {line}', config.UnknownKeyWarning, stacklevel=2)
+    for name, value in given.items():
         if name in specs:
             values[name] = specs[name].check(value)
     return values

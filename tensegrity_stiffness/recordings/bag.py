@@ -241,10 +241,14 @@ def single_threaded_blas() -> Any:
 
 
 def jazzy_typestore() -> Any:
-    """rosbags' type store of ROS 2 Jazzy's messages (decodes and encodes recordings)."""
-    from rosbags.typesys import Stores, get_typestore
+    """rosbags' type store of ROS 2 Jazzy's messages (decodes and encodes recordings), with
+    the package's own ``StampedMatrix`` registered from its definition (``msg/``)."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    return get_typestore(Stores.ROS2_JAZZY)
+    typestore = get_typestore(Stores.ROS2_JAZZY)
+    definition = config.packaged_path(layouts.STAMPED_MATRIX_DEFINITION).read_text('utf-8')
+    typestore.register(get_types_from_msg(definition, layouts.STAMPED_MATRIX))
+    return typestore
 
 
 def rosbags_types(typestore: Any) -> MessageTypes:
@@ -594,7 +598,7 @@ class SpineProcessor(Processor):
         self.settings = settings
         self.emit = emit
         self.types = rosbags_types(self.typestore)
-        self.messages = SpineOutputMessages(settings.n_joints, self.types)
+        self.messages = SpineOutputMessages(settings.n_joints, self.types, settings.tool_frame)
         self._last_screws: FloatArray | None = None
         self._last_stamp: int | None = None
 
@@ -754,8 +758,9 @@ class _Template:
     def __init__(self, typestore: Any, layout: layouts.OutputLayout, frame_id: str) -> None:
         types = rosbags_types(typestore)
         self.size = size = layout.size
-        self.stamped = layout.msgtype == layouts.WRENCH_STAMPED
-        if layout.msgtype not in (FLOAT64_MULTIARRAY, layouts.WRENCH_STAMPED):
+        self.stamped = layout.stamped
+        if layout.msgtype not in (FLOAT64_MULTIARRAY, layouts.WRENCH_STAMPED,
+                                  layouts.STAMPED_MATRIX):
             raise ValueError(f'{layout.msgtype}: no template')
         msg = new_message(layout, types)
         probe = np.arange(1.0, size + 1.0)
@@ -845,7 +850,8 @@ def _joint_writer(writer: Any, typestore: Any, connections: Sequence[Any],
             a.wrenches, a.stiffness, a.cartesian_stiffness, a.tensions, a.interpretation),
             strict=True))
         write_blocks(writer, connections, a.log_times, [template.rows(
-            payloads[name], a.stamps if name == 'wrench' else None)
+            payloads[output_layouts[name].source or name],
+            a.stamps if template.stamped else None)
             for name, template in zip(outputs, templates, strict=True)])
 
     return write
@@ -856,7 +862,8 @@ def _spine_writer(writer: Any, typestore: Any, connections: Sequence[Any],
                   ) -> Callable[[SpineAnswer], None]:
     """Writes an answer's messages on ``connections`` (of ``outputs``), serialized by
     rosbags."""
-    chosen = [spine_processing.OUTPUT_NAMES.index(name) for name in outputs]
+    names = list(layouts.spine_output_layouts(settings.n_joints))  # the messages' order
+    chosen = [names.index(name) for name in outputs]
     serialize = typestore.serialize_cdr
 
     def write(a: SpineAnswer) -> None:
@@ -952,6 +959,17 @@ def namespace_prefix(namespace: str) -> str:
     return ''.join('/' + p for p in parts)
 
 
+def publisher_prefix(prefix: str, node: str) -> str:
+    """The namespace of the node of kind ``node`` that would publish the outputs of inputs read
+    under ``prefix``: ``prefix`` itself, unless its last part is the name of another of the
+    package's nodes (``/twin/sim_node``: the twin publishes the inputs), which is then replaced
+    by the node's own name (``/twin/stiffness_node``)."""
+    head, _, last = prefix.rpartition('/')
+    own = DEFAULT_NAMESPACES[node].strip('/')
+    others = {table.node for table in parameters.node_tables()} - {own}
+    return f'{head}/{own}' if last in others else prefix
+
+
 def _storage_of(path: Path) -> str:
     """Storage identifier of a rosbag2 folder (its metadata.yaml) or storage file."""
     if path.is_file():
@@ -1001,6 +1019,8 @@ class BagSummary:
     storage: str
     csv: str | None
     namespace: str
+    #: The namespace of the outputs (:func:`publisher_prefix`, or ``output_namespace``).
+    output_namespace: str = ''
     inputs: dict[str, int] = field(default_factory=dict)
     answered: dict[str, int] = field(default_factory=dict)
     written: dict[str, int] = field(default_factory=dict)
@@ -1022,6 +1042,7 @@ class BagSummary:
         return {
             'input': self.input, 'output': self.output, 'storage': self.storage,
             'csv': self.csv, 'namespace': self.namespace or '/',
+            'output_namespace': self.output_namespace or '/',
             'inputs': dict(self.inputs), 'answered': dict(self.answered),
             'answers': self.answers, 'written': dict(self.written),
             'rejected': dict(sorted(self.rejected.items())),
@@ -1054,8 +1075,9 @@ def _output_topics(topics: Sequence[str] | None, prefix: str,
 
 def process_bag(input_path: str | Path, output_path: str | Path, *,
                 config_path: str | Path | None = None,
-                namespace: str | None = None, storage: str | None = None,
-                csv_path: str | Path | None = None, topics: Sequence[str] | None = None,
+                namespace: str | None = None, output_namespace: str | None = None,
+                storage: str | None = None, csv_path: str | Path | None = None,
+                topics: Sequence[str] | None = None,
                 overwrite: bool = False, node: str = 'stiffness',
                 progress: Callable[[int, int], None] | None = None,
                 chunk_size: int = CHUNK_SIZE, allow_damaged: bool = False) -> BagSummary:
@@ -1066,7 +1088,9 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     per-input outputs, config ``config/default_spine.yaml`` unless ``config_path``) or
     'structure' (``structure_node``: config its parameter file or a structure file; default the
     packaged 6-bar);
-    ``namespace``: the topics' prefix (default :data:`DEFAULT_NAMESPACES` of the node);
+    ``namespace``: the input topics' prefix (default :data:`DEFAULT_NAMESPACES` of the node);
+    ``output_namespace``: the outputs' (default: the node that would publish them,
+    :func:`publisher_prefix` of ``namespace``);
     ``storage``: 'mcap' or 'sqlite3' (default: the input's); ``topics``: the outputs to write
     (default all); ``progress(done, total)``: inputs read so far of all.
     Raises :class:`BagError` (a ValueError) for the files and options, and when no input
@@ -1085,7 +1109,9 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     if storage is not None and storage not in STORAGES:
         raise BagError(f"unknown storage '{storage}' (mcap or sqlite3)")
     prefix = namespace_prefix(DEFAULT_NAMESPACES[node] if namespace is None else namespace)
-    outputs = _output_topics(topics, prefix, tuple(spec.outputs))
+    out_prefix = (publisher_prefix(prefix, node) if output_namespace is None
+                  else namespace_prefix(output_namespace))
+    outputs = _output_topics(topics, out_prefix, tuple(spec.outputs))
     settings = kind.settings(config_path)
     if out.resolve() == src.resolve():
         raise BagError(f'{out}: the output must not be the input')
@@ -1096,8 +1122,9 @@ def process_bag(input_path: str | Path, output_path: str | Path, *,
     except (ReaderError, OSError, KeyError, ValueError) as exc:
         raise BagError(f'{src}: not a readable rosbag2: {exc}') from None
     try:
-        summary = _process(reader, _Job(src, out, csv_file, storage, prefix, outputs, spec,
-                                        kind, settings, overwrite, chunk_size), progress)
+        summary = _process(reader, _Job(src, out, csv_file, storage, prefix, out_prefix,
+                                        outputs, spec, kind, settings, overwrite, chunk_size),
+                           progress)
     finally:
         reader.close()
     summary.seconds = time.perf_counter() - started
@@ -1127,6 +1154,7 @@ class _Job:
     csv_file: Path | None
     storage: str | None
     prefix: str
+    out_prefix: str
     outputs: list[str]
     spec: NodeTopics
     kind: _NodeKind
@@ -1153,7 +1181,8 @@ def _process(reader: Any, job: _Job, progress: Callable[[int, int], None] | None
                        f'its topics: {have}')
     connections = [c for c in reader.connections if c.topic in wanted]
     summary = BagSummary(input=str(src), output=str(out), storage=out_storage,
-                         csv=str(job.csv_file) if job.csv_file else None, namespace=prefix)
+                         csv=str(job.csv_file) if job.csv_file else None, namespace=prefix,
+                         output_namespace=job.out_prefix)
     clear_output(out, job.overwrite, 'output')
     if job.csv_file is not None:
         clear_output(job.csv_file, job.overwrite, 'csv file')
@@ -1168,7 +1197,7 @@ def _process(reader: Any, job: _Job, progress: Callable[[int, int], None] | None
         if job.csv_file is not None:
             csv_sink = _CsvSink(job.csv_file, kind.csv_columns(job.settings))
         emit = kind.writer(writer, typestore, [
-            writer.add_connection(f'{prefix}/{name}', job.spec.outputs[name],
+            writer.add_connection(f'{job.out_prefix}/{name}', job.spec.outputs[name],
                                   typestore=typestore) for name in job.outputs],
             job.outputs, job.settings)
         if csv_sink is not None:
@@ -1183,7 +1212,7 @@ def _process(reader: Any, job: _Job, progress: Callable[[int, int], None] | None
             csv_sink.close()
     summary.inputs = {name: inputs[name] for name in job.spec.inputs if inputs[name]}
     summary.answered = dict(processor.answered)
-    summary.written = {f'{prefix}/{name}': summary.answers for name in job.outputs}
+    summary.written = {f'{job.out_prefix}/{name}': summary.answers for name in job.outputs}
     summary.rejected = dict(processor.rejected)
     summary.rejection_examples = dict(processor.examples)
     summary.messages_total, summary.messages_read = reading.total, reading.read

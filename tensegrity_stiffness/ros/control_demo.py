@@ -8,7 +8,12 @@ The controller runs at its default rate (``control.rate``, 500 Hz). Once a secon
 the nodes' ``/diagnostics``: the phase, the pose error, the ``K_c`` error, the saturated
 strings, the tick time, the controller's achieved tick rate (of the rate asked), its missed
 ticks, the latency from a reading to the first command computed from it (median / p99) and the
-estimator's share of consistent estimates (blank until the controller has a state). Ctrl-C (or
+estimator's share of consistent estimates (blank until the controller has a state), and the
+true pose error (the twin's own pose against the target) beside the estimate's; an infeasible
+tick shows the controller's reason (its ``/diagnostics`` message). ``--config FILE`` runs any
+joint; arguments after ``--`` go to every node (``-p limits.tension_max:=3``). A stiffness step
+whose design fails (``design_rest_lengths`` without ``success``: the joint's strings cannot
+reach the step's tensions) is announced and no stiffness target is published. Ctrl-C (or
 ``duration``) stops the three nodes and exits 0.
 """
 
@@ -30,7 +35,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.geometry.screw import exp_se3
+from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.mechanics.design import design_rest_lengths
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.ros import conversions
@@ -58,25 +63,48 @@ def phase_at(t: float) -> str:
 class ControlMonitor:
     """The controller's and the estimator's last diagnostic values (``/diagnostics``)."""
 
-    def __init__(self, node: Any) -> None:
+    def __init__(self, node: Any, model: JointModel | None = None) -> None:
         self._lock = threading.Lock()
         self._values: dict[str, str] = {}
+        self._message = ''
         self._estimator: dict[str, str] = {}
+        self._true_pose: np.ndarray | None = None
+        #: The pose the controller is asked to hold now (4x4), set by the script.
+        self.target: np.ndarray | None = None
         node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+        if model is not None:
+            node.create_subscription(PoseStamped, f'{NAMESPACE}/sim_node/pose',
+                                     self._on_true_pose, 10)
 
     def _on_diagnostics(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
             if status.name == f'{NAMESPACE}/stiffness_controller: controller':
                 with self._lock:
                     self._values = {v.key: v.value for v in status.values}
-            elif status.name == 'estimator_node: estimator':
+                    self._message = status.message
+            elif status.name.endswith('estimator_node: estimator'):
                 with self._lock:
                     self._estimator = {v.key: v.value for v in status.values}
+
+    def _on_true_pose(self, msg: PoseStamped) -> None:
+        T = conversions.pose_message_to_transform(msg.pose)
+        with self._lock:
+            self._true_pose = T
+
+    def true_error(self) -> tuple[float, float] | None:
+        """The twin's own pose against the target: (position error m, rotation error rad),
+        None before both are known."""
+        with self._lock:
+            T, target = self._true_pose, self.target
+        if T is None or target is None:
+            return None
+        return pose_error(target, T)
 
     def line(self, t: float) -> str:
         with self._lock:
             v = dict(self._values)
             e = dict(self._estimator)
+            message = self._message
         head = f't {t:5.1f} s  {phase_at(t):15s}'
         if 'pose error [m, rad]' not in v:  # no state yet: nothing to show
             return head
@@ -84,9 +112,14 @@ class ControlMonitor:
         error = np.array(v['pose error [m, rad]'].strip('[]').replace(',', ' ').split(), float)
         rotation_deg = np.degrees(np.linalg.norm(error[3:]))
         kc_error = v.get('stiffness error', '-') if v.get('stiffness target') == 'set' else '-'
+        true = self.true_error()
+        true_text = '-' if true is None else \
+            f'{1e3 * true[0]:.3f} mm {np.degrees(true[1]):.3f} deg'
+        feasible = v.get('feasible', '-')
+        why = f' ({message})' if feasible == 'false' and message else ''
         return (f'{head}  pose error {1e3 * np.linalg.norm(error[:3]):.3f} mm '
-                f'{rotation_deg:.3f} deg  K_c error {kc_error}  '
-                f'saturated {v.get("saturated strings", "-")}  feasible {v.get("feasible", "-")}'
+                f'{rotation_deg:.3f} deg (true {true_text})  K_c error {kc_error}  '
+                f'saturated {v.get("saturated strings", "-")}  feasible {feasible}{why}'
                 f'  tick {_number(v.get("tick time [ms]"))} ms  rate '
                 f'{_number(v.get("achieved tick rate [Hz]"), "4.0f")}/'
                 f'{_number(v.get("tick rate [Hz]"), ".0f")} Hz  missed '
@@ -94,6 +127,13 @@ class ControlMonitor:
                 f'{_number(v.get("latency from the reading median [ms]"))}/'
                 f'{_number(v.get("latency from the reading p99 [ms]"))} ms  consistent '
                 f'{_number(e.get("consistent share"), ".1%")}')
+
+
+def pose_error(target: np.ndarray, pose: np.ndarray) -> tuple[float, float]:
+    """(|p - p_target| m, rotation angle of R_target^T R rad) of two (4, 4) poses."""
+    position = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
+    rotation = float(np.linalg.norm(log_se3(np.linalg.inv(target) @ pose)[:3]))
+    return position, rotation
 
 
 def _number(value: str | None, spec: str = '.3g') -> str:
@@ -104,33 +144,42 @@ def _number(value: str | None, spec: str = '.3g') -> str:
         return '-'
 
 
-def targets(model: JointModel) -> tuple[PoseStamped, Float64MultiArray]:
-    """The script's targets: the pose step's pose and the stiffness step's K_c (the design
-    at :data:`STIFFNESS_TENSIONS` there)."""
+def targets(model: JointModel, frame_id: str = 'tensegrity_link1'
+            ) -> tuple[PoseStamped, Float64MultiArray | None, str]:
+    """The script's targets: the pose step's pose, the stiffness step's K_c (the design at
+    :data:`STIFFNESS_TENSIONS` there) and the design's message. The K_c is None when the
+    design fails (``success`` false: never a target from a failed design, whose K_c is NaN
+    or beside the tensions asked)."""
     xi = model.initial_screw + POSE_STEP
     pose = PoseStamped()
-    pose.header.frame_id = 'tensegrity_link1'
+    pose.header.frame_id = frame_id
     pose.pose = conversions.transform_to_pose(exp_se3(xi))
     design = design_rest_lengths(model, xi, None, *STIFFNESS_TENSIONS)
-    return pose, Float64MultiArray(data=design.cartesian_stiffness.ravel().tolist())
+    if not design.success or not np.all(np.isfinite(design.cartesian_stiffness)):
+        return pose, None, design.message or 'the design failed'
+    return pose, Float64MultiArray(data=design.cartesian_stiffness.ravel().tolist()), ''
 
 
-def _node_args(params: Path) -> list[tuple[str, list[str]]]:
+def _node_args(params: Path, extra: list[str] = ()) -> list[tuple[str, list[str]]]:
+    """The three nodes' command lines; ``extra`` (ROS arguments: ``-p name:=value``) goes to
+    each after the demo's own, so it overrides them."""
     sim, est, ctl = 'sim_node', 'estimator_node', 'stiffness_controller'
     common = ['--ros-args', '--params-file', str(params), '-r', f'__ns:={NAMESPACE}']
     return [
         (sim, [*common, '-p', 'sim.publish_every:=5',
-               '-r', f'~/rest_lengths:={ctl}/rest_lengths']),
+               '-r', f'~/rest_lengths:={ctl}/rest_lengths', *extra]),
         (est, [*common, '-r', f'~/measured_tensions:={sim}/measured_tensions',
-               '-r', f'~/imu:={sim}/imu', '-r', f'~/rest_lengths:={ctl}/rest_lengths']),
+               '-r', f'~/imu:={sim}/imu', '-r', f'~/rest_lengths:={ctl}/rest_lengths', *extra]),
         (ctl, [*common, '-p', 'control.integral_gain:=4.0',
                '-r', f'~/pose_estimate:={est}/pose_estimate',
-               '-r', f'~/wrench_estimate:={est}/wrench_estimate']),
+               '-r', f'~/wrench_estimate:={est}/wrench_estimate', *extra]),
     ]
 
 
-def run(config_path: Path | None, duration: float | None) -> int:
-    """The demo; the exit status (0 after a clean stop of the three nodes)."""
+def run(config_path: Path | None, duration: float | None, extra: list[str] = ()) -> int:
+    """The demo on the joint of ``config_path`` (default the packaged one), ``extra`` ROS
+    arguments to every node; the exit status (0 after a clean stop of the three nodes)."""
+    extra = list(extra)
     params = Path(config_path or config.packaged_config_path())
     model = JointModel.from_yaml(params)
     logs = Path(tempfile.mkdtemp(prefix='control_demo_'))
@@ -140,20 +189,24 @@ def run(config_path: Path | None, duration: float | None) -> int:
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     processes = []
-    for name, args in _node_args(params):
+    for name, args in _node_args(params, extra):
         with (logs / f'{name}.log').open('w') as out:
             processes.append(subprocess.Popen([node_executable(name), *args], stdout=out,
                                               stderr=subprocess.STDOUT, env=os.environ.copy(),
                                               start_new_session=True))
     rclpy.init(args=None, signal_handler_options=rclpy.signals.SignalHandlerOptions.NO)
     node = rclpy.create_node('control_monitor')
-    monitor = ControlMonitor(node)
+    monitor = ControlMonitor(node, model)
+    monitor.target = exp_se3(model.initial_screw)
     pose_pub = node.create_publisher(PoseStamped, f'{NAMESPACE}/stiffness_controller/target_pose',
                                      10)
     stiffness_pub = node.create_publisher(
         Float64MultiArray, f'{NAMESPACE}/stiffness_controller/target_stiffness', 10)
     load_pub = node.create_publisher(WrenchStamped, f'{NAMESPACE}/sim_node/external_wrench', 10)
-    pose, stiffness = targets(model)
+    pose, stiffness, refused = targets(model)
+    if stiffness is None:
+        print(f'control_demo: no stiffness step: its design (tensions in {STIFFNESS_TENSIONS} '
+              f'N) failed: {refused}', flush=True)
     spin = BackgroundSpin(node, stop)
     start = time.monotonic()
     code = 0
@@ -164,7 +217,8 @@ def run(config_path: Path | None, duration: float | None) -> int:
             phase = phase_at(t)
             if phase != 'hold':  # targets are re-sent each second (a late subscriber gets them)
                 pose_pub.publish(pose)
-            if phase in ('stiffness step', 'load swing'):
+                monitor.target = conversions.pose_message_to_transform(pose.pose)
+            if phase in ('stiffness step', 'load swing') and stiffness is not None:
                 stiffness_pub.publish(stiffness)
             if phase == 'load swing':
                 f = LOAD_AMPLITUDE_N * np.sin(2 * np.pi * t / LOAD_PERIOD_S)
@@ -186,6 +240,7 @@ def run(config_path: Path | None, duration: float | None) -> int:
         codes = [stop_process(p) for p in processes]
         spin.close()
     print('control_demo: stopped (' + ', '.join(
-        f'{name} exit {c}' for (name, _), c in zip(_node_args(params), codes, strict=True))
+        f'{name} exit {c}' for (name, _), c in zip(_node_args(params, extra), codes,
+                                                    strict=True))
         + ')', flush=True)
     return code or int(any(codes))

@@ -447,8 +447,9 @@ class SimNode(Node):
                   ('real-time factor', factor), ('rejected inputs', rejected or 0)]
         message = (f'{steps} steps, {self.missed_steps} missed, real-time factor {factor:.3g}')
         self._pub_diagnostics.publish(conversions.diagnostic_array(
-            [conversions.diagnostic_status(f'{self.get_name()}: twin', level, message, values,
-                                         hardware_id=self._settings.base_frame)],
+            [conversions.diagnostic_status(
+                f'{self.get_fully_qualified_name()}: twin', level, message, values,
+                hardware_id=self._settings.base_frame)],
             self.get_clock().now().to_msg()))
 
 

@@ -108,7 +108,7 @@ class SpineNode(SpineFrames, SpineRestLengthTopic, StreamingNode):
                 (PoseArray, '~/poses', self._on_poses))
 
     def _output_messages(self, settings: SpineNodeSettings) -> conversions.SpineOutputMessages:
-        return conversions.SpineOutputMessages(settings.n_joints)
+        return conversions.SpineOutputMessages(settings.n_joints, settings.tool_frame)
 
     def _publish_extras(self, settings: SpineNodeSettings, xi: np.ndarray,
                         outputs: SpineOutputs) -> None:
@@ -184,7 +184,7 @@ class SpineNode(SpineFrames, SpineRestLengthTopic, StreamingNode):
     # ------------------------------------------------------------------ diagnostics
     def _diagnostic_statuses(self, settings: SpineNodeSettings, outputs: SpineOutputs | None,
                              values: list[tuple[str, Any]]) -> list[Any]:
-        name = self.get_name()
+        name = self.get_fully_qualified_name()
         statuses = []
         problems = []
         if outputs is not None:

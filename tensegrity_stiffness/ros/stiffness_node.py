@@ -252,8 +252,9 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
             values += health.values()
             level = 'WARN' if health.problems else 'OK'
             message = ', '.join(health.problems) or 'all strings taut, stable'
-        return [conversions.diagnostic_status(f'{self.get_name()}: joint', level, message,
-                                            values, hardware_id=settings.link1_frame)]
+        return [conversions.diagnostic_status(
+            f'{self.get_fully_qualified_name()}: joint', level, message, values,
+            hardware_id=settings.link1_frame)]
 
 
 def main(args: list[str] | None = None) -> None:

@@ -23,7 +23,7 @@ import sys
 import tempfile
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +48,11 @@ SPINE_SWING = (0.01, 10.0)
 #: five poses and 60 tensions per publication are more than a 1 kHz Python loop carries on a
 #: shared 2-core machine).
 SPINE_PUBLISH_EVERY = 5
+#: The joint's twin, likewise (200 Hz: a rate the stiffness node and the monitor sustain on a
+#: shared 2-core machine; every step, 1 kHz, outran them there and the latency grew).
+JOINT_PUBLISH_EVERY = 5
+#: The live line calls the node behind when it answers less than this share of its inputs.
+ANSWERED_SHARE_BEHIND = 0.95
 #: Seconds a node gets to stop after SIGINT before it is killed.
 STOP_TIMEOUT_S = 10.0
 
@@ -77,6 +82,7 @@ class Monitor:
         self.n_strings = n_strings
         self._lock = threading.Lock()
         self._inputs = 0
+        self._outputs = 0
         self._pose: np.ndarray | None = None
         self._stiffness: np.ndarray | None = None
         self._tensions: np.ndarray | None = None
@@ -117,6 +123,7 @@ class Monitor:
         stamp = msg.header.stamp
         latency = (now - stamp_nanoseconds(stamp)) * 1e-9
         with self._lock:
+            self._outputs += 1
             self._latencies.append(latency)
 
     def _on_stiffness(self, msg: Float64MultiArray) -> None:
@@ -133,22 +140,32 @@ class Monitor:
         counters of the period)."""
         with self._lock:
             inputs, self._inputs = self._inputs, 0
+            outputs, self._outputs = self._outputs, 0
             latencies, self._latencies = self._latencies, []
             pose, K, tensions = self._pose, self._stiffness, self._tensions
         return summary_line(elapsed, inputs / period, pose, K, tensions, latencies,
-                            spine=self.spine, n_strings=self.n_strings)
+                            spine=self.spine, n_strings=self.n_strings,
+                            output_rate=outputs / period)
 
 
 def summary_line(elapsed: float, input_rate: float, pose: np.ndarray | None,
                  stiffness: np.ndarray | None, tensions: np.ndarray | None,
-                 latencies: list[float], *, spine: bool, n_strings: int) -> str:
-    """The live line: time, input rate, pose (4x4; the tip's for a spine), the smallest and
+                 latencies: list[float], *, spine: bool, n_strings: int,
+                 output_rate: float | None = None) -> str:
+    """The live line: time, input rate (and, given ``output_rate``, the rate of the node's
+    answers, with ``behind`` when it answers less than :data:`ANSWERED_SHARE_BEHIND` of its
+    inputs: the input outruns the node, newest-only inputs skip the rest, and the latency
+    describes only what it answered), pose (4x4; the tip's for a spine), the smallest and
     largest eigenvalue of the symmetric part of ``stiffness`` (K_c or the tip stiffness), slack
     strings, latency median and maximum (s). A field with nothing to show is ``-``; so are the
     stiffness and the latency while no input arrives (a rate of 0 Hz: at the start, before the
     subscriptions have matched, or after the twin stopped), as they would describe old or
     unrelated messages."""
     parts = [f't {elapsed:6.1f} s', f'input {input_rate:6.0f} Hz']
+    if output_rate is not None and input_rate > 0.0:
+        behind = output_rate < ANSWERED_SHARE_BEHIND * input_rate
+        parts.append(f'answered {output_rate:6.0f} Hz' + (
+            ' (behind: the input outruns the node, inputs skipped)' if behind else ''))
     if pose is not None:
         p = pose[:3, 3] * 1e3
         angle = math.degrees(math.acos(max(-1.0, min(1.0, (np.trace(pose[:3, :3]) - 1) / 2))))
@@ -207,8 +224,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help='period of the swinging load, s (default 10)')
     parser.add_argument('--rate', type=float, default=1000.0, help='simulation rate, Hz')
     parser.add_argument('--publish-every', type=int, default=None, metavar='N',
-                        help='the twin publishes every N-th step (default 1 for the joint, '
-                             f'{SPINE_PUBLISH_EVERY} for the spine)')
+                        help='the twin publishes every N-th step (default '
+                             f'{JOINT_PUBLISH_EVERY} for the joint, {SPINE_PUBLISH_EVERY} for '
+                             'the spine)')
+    parser.epilog = ('Arguments after -- go to every node as ROS arguments, e.g. '
+                     '-- -p limits.tension_max:=3.')
     return parser
 
 
@@ -226,6 +246,8 @@ class DemoSetup:
     rate: float
     publish_every: int
     duration: float | None
+    #: ROS arguments given after ``--``, passed to both nodes after the demo's own.
+    node_arguments: tuple[str, ...] = ()
 
     @property
     def stiffness_node(self) -> str:
@@ -240,9 +262,10 @@ class DemoSetup:
                     '-p', f'sim.rate:={self.rate}',
                     '-p', f'load.swing_amplitude:={self.amplitude}',
                     '-p', f'load.swing_period:={self.period}',
-                    '-p', f'sim.publish_every:={self.publish_every}']
+                    '-p', f'sim.publish_every:={self.publish_every}', *self.node_arguments]
         node_args = [node_executable(self.stiffness_node), '--ros-args', '--params-file',
-                     str(self.params), '-r', f'__ns:={NAMESPACE}', '-r', wired]
+                     str(self.params), '-r', f'__ns:={NAMESPACE}', '-r', wired,
+                     *self.node_arguments]
         return node_args, sim_args
 
 
@@ -250,7 +273,7 @@ def demo_setup(args: argparse.Namespace, parser: argparse.ArgumentParser) -> Dem
     """The checked :class:`DemoSetup` of parsed ``args`` (``parser.error`` on a bad one)."""
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         parser.error(f'--duration must be a positive number of seconds, got {args.duration}')
-    every = args.publish_every or (SPINE_PUBLISH_EVERY if args.spine else 1)
+    every = args.publish_every or (SPINE_PUBLISH_EVERY if args.spine else JOINT_PUBLISH_EVERY)
     if every < 1:
         parser.error(f'--publish-every must be >= 1, got {every}')
     amplitude, period = SPINE_SWING if args.spine else JOINT_SWING
@@ -271,16 +294,28 @@ def demo_setup(args: argparse.Namespace, parser: argparse.ArgumentParser) -> Dem
                      args.duration)
 
 
+def split_node_arguments(argv: list[str]) -> tuple[list[str], list[str]]:
+    """The demo's own arguments and those after ``--`` (ROS arguments for every node:
+    ``-p limits.tension_max:=3``)."""
+    if '--' not in argv:
+        return argv, []
+    at = argv.index('--')
+    return argv[:at], argv[at + 1:]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    own, extra = split_node_arguments(list(sys.argv[1:] if argv is None else argv))
+    args = parser.parse_args(own)
     if args.control:
         from tensegrity_stiffness.ros import control_demo
 
         if args.spine:
             parser.error('--control drives the joint (the spine controller is library-only)')
-        return control_demo.run(args.config, args.duration)
-    return run_demo(demo_setup(args, parser))
+        if args.config is not None and not Path(args.config).is_file():
+            parser.error(f'--config {args.config}: no such file')
+        return control_demo.run(args.config, args.duration, extra)
+    return run_demo(replace(demo_setup(args, parser), node_arguments=tuple(extra)))
 
 
 def run_demo(setup: DemoSetup) -> int:

@@ -112,3 +112,42 @@ def test_new_config_to_stdout_and_bad_choices(capsys):
     assert main(['new-config', '--template', 'ring', '--strings', '7']) == 2
     assert 'n_strings must be even' in capsys.readouterr().err
     assert main(['new-config', '--pretension', '1', '--rest-lengths', '0.03']) == 2
+
+
+def _page_shell_commands() -> list[list[str]]:
+    """The page's ``bash scripts/...`` lines (the demos), as argument lists."""
+    blocks = re.findall(r'```bash\n(.*?)```', PAGE.read_text(encoding='utf-8'), re.S)
+    return [shlex.split(line) for block in blocks for line in block.splitlines()
+            if line.startswith('bash scripts/')]
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_the_pages_demos_run_from_outside_the_repository(tmp_path, monkeypatch, capsys):
+    """Section 6 from a scratch folder: the page's config commands, then each demo of the page
+    (its --duration bounded to 6 s, the loop's to 15 s), with the repository's script by its
+    path: each runs the joint the page made, shows its live lines and stops cleanly (exit 0)."""
+    import os
+    import subprocess
+
+    pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
+    monkeypatch.chdir(tmp_path)
+    for argv in _page_commands():
+        if 'lab_joint.yaml' in argv:
+            assert main(argv) == 0, argv
+            capsys.readouterr()
+    demos = _page_shell_commands()
+    assert len(demos) >= 2 and all('lab_joint.yaml' in argv for argv in demos)
+    for argv in demos:
+        argv = [str(REPO / a) if a.startswith('scripts/') else a for a in argv]
+        # bounded: long enough for the controller's first state on a loaded machine
+        argv[argv.index('--duration') + 1] = '15' if '--control' in argv else '6'
+        done = subprocess.run(argv, cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                              env=os.environ.copy(), check=False)
+        lines = [line for line in done.stdout.splitlines() if line.startswith('t ')]
+        assert done.returncode == 0, done.stdout + done.stderr
+        assert len(lines) >= 5 and 'stopped (' in done.stdout, done.stdout
+        if '--control' in argv:
+            assert any('(true ' in line for line in lines), done.stdout
+        else:
+            assert any('answered' in line and 'slack 0/8' in line for line in lines), done.stdout

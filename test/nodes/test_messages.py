@@ -19,7 +19,7 @@ rosbags_typesys = pytest.importorskip('rosbags.typesys')
 serialization = pytest.importorskip('rclpy.serialization')
 conversions = pytest.importorskip('tensegrity_stiffness.ros.conversions')
 
-TYPESTORE = rosbags_typesys.get_typestore(rosbags_typesys.Stores.ROS2_JAZZY)
+TYPESTORE = pytest.importorskip('tensegrity_stiffness.recordings.bag').jazzy_typestore()
 STAMP_NS = 1_700_000_123_456_789_012
 
 
@@ -47,13 +47,23 @@ def test_joint_messages_of_rclpy_and_rosbags_are_the_same() -> None:
     offline.fill(outputs, offline.types.time(STAMP_NS), 'link_a')
     found = layouts.joint_output_layouts(model.string_names)
     assert list(found) == ['wrench', 'stiffness', 'cartesian_stiffness', 'string_tensions',
-                           'stiffness_interpretation']
-    for (name, layout), mine, theirs, values in zip(
-            found.items(), offline.messages(), node.messages(),
-            processing.output_arrays(outputs), strict=True):
-        assert values.size == layout.size, name
+                           'stiffness_interpretation', 'stiffness_stamped',
+                           'cartesian_stiffness_stamped']
+    arrays = processing.output_arrays(outputs)
+    for (name, layout), mine, theirs, k in zip(
+            found.items(), offline.messages(), node.messages(), node.array_index, strict=True):
+        assert arrays[k].size == layout.size, name
         assert same_bytes(theirs, mine, layout.msgtype), name
     assert node.wrench.header.frame_id == 'link_a'
+    # #39: the stamped K and K_c carry the input's stamp, the frame, labels and row-major data
+    for stamped, of, matrix in ((node.stiffness_stamped, node.stiffness, outputs.state.stiffness),
+                                (node.cartesian_stiffness_stamped, node.cartesian_stiffness,
+                                 outputs.state.cartesian_stiffness)):
+        assert messages.stamp_nanoseconds(stamped.header.stamp) == STAMP_NS
+        assert stamped.header.frame_id == 'link_a'
+        assert (stamped.rows, stamped.cols) == (6, 6)
+        assert [stamped.row_label, stamped.column_label] == [d.label for d in of.layout.dim]
+        np.testing.assert_array_equal(np.asarray(stamped.data).reshape(6, 6), matrix)
     assert [d.label for d in node.tensions.layout.dim] == [
         layouts.tensions_label(model.string_names)]
 
@@ -62,17 +72,22 @@ def test_spine_messages_of_rclpy_and_rosbags_are_the_same() -> None:
     chain = JointChain.from_yaml(config.packaged_config_path(DEFAULT_SPINE_CONFIG))
     xi = np.array([m.initial_screw for m in chain.joints]) + 0.01
     outputs = spine_processing.spine_outputs(chain, xi)
-    node = conversions.SpineOutputMessages(chain.n_joints)
-    offline = messages.SpineOutputMessages(chain.n_joints, rosbags_types())
+    node = conversions.SpineOutputMessages(chain.n_joints, 'tool')
+    offline = messages.SpineOutputMessages(chain.n_joints, rosbags_types(), 'tool')
     node.fill(outputs, conversions.stamp_from_nanoseconds(STAMP_NS), 'base')
     offline.fill(outputs, offline.types.time(STAMP_NS), 'base')
     found = layouts.spine_output_layouts(chain.n_joints)
-    assert tuple(found) == spine_processing.OUTPUT_NAMES
-    for (name, layout), mine, theirs, values in zip(
-            found.items(), offline.messages(), node.messages(),
-            spine_processing.output_arrays(outputs), strict=True):
-        assert values.size == layout.size, name
+    assert tuple(found) == (*spine_processing.OUTPUT_NAMES, 'tip_stiffness_stamped',
+                            'tip_stiffness_base_stamped')
+    arrays = spine_processing.output_arrays(outputs)
+    for (name, layout), mine, theirs, k in zip(
+            found.items(), offline.messages(), node.messages(), node.array_index, strict=True):
+        assert arrays[k].size == layout.size, name
         assert same_bytes(theirs, mine, layout.msgtype), name
+    assert [node.tip_stiffness_stamped.header.frame_id,
+            node.tip_stiffness_base_stamped.header.frame_id] == ['tool', 'base']
+    np.testing.assert_array_equal(np.asarray(node.tip_stiffness_base_stamped.data).reshape(6, 6),
+                                  outputs.tip_stiffness_base)
     T = outputs.state.tip_transform
     np.testing.assert_allclose(messages.pose_message_to_transform(node.tip_pose.pose), T,
                                atol=1e-12)

@@ -127,6 +127,41 @@ def test_values_from_config_overrides_defaults_and_ignores_undeclared(tmp_path):
         values_from_config(path, STIFFNESS_NODE_PARAMETERS)
 
 
+def test_values_from_config_refuses_an_unknown_key_of_its_sections(tmp_path):
+    """#39: ``stifness: 120`` is refused by name (not run as the default joint's 77 N/m);
+    ``strict_parameters: false`` (in the file, or ``strict=False``) warns and goes on."""
+    from tensegrity_stiffness.config import UnknownKeyWarning
+
+    path = tmp_path / 'typo.yaml'
+    path.write_text(yaml.safe_dump({'joint': {'stifness': 120.0}}))
+    with pytest.raises(ValueError, match=r'joint\.stifness: unknown key \(did you mean '
+                                         r'joint\.stiffness\?\)'):
+        values_from_config(path, STIFFNESS_NODE_PARAMETERS)
+    with pytest.warns(UnknownKeyWarning, match=r'joint\.stifness: unknown key'):
+        values = values_from_config(path, STIFFNESS_NODE_PARAMETERS, strict=False)
+    assert values['joint.stiffness'] == TABLE['joint.stiffness'].default
+    path.write_text(yaml.safe_dump({'strict_parameters': False, 'joint': {'stifness': 120.0}}))
+    with pytest.warns(UnknownKeyWarning):
+        values_from_config(path, STIFFNESS_NODE_PARAMETERS)
+
+
+def test_every_packaged_config_is_strictly_sound():
+    """No packaged config or example carries an unknown key of a node's sections."""
+    from pathlib import Path
+
+    from tensegrity_stiffness.nodes.parameters import node_tables
+
+    root = Path(__file__).resolve().parents[2] / 'config'
+    files = sorted(root.rglob('*.yaml'))
+    assert files
+    for path in files:
+        for table in node_tables():
+            try:
+                values_from_config(path, table.parameters, strict=True)
+            except ValueError as exc:
+                assert 'unknown key' not in str(exc), f'{path}: {exc}'
+
+
 def test_the_cli_planar_defaults_are_the_table():
     from tensegrity_stiffness.cli.planar_commands import PLANAR_KEYS
 
@@ -142,19 +177,19 @@ def test_unknown_parameters_under_a_nodes_own_sections_are_named_with_the_neares
         BRIDGE_PARAMETERS,
         STIFFNESS_NODE_PARAMETERS,
         spine_node_parameters,
-        unknown_parameter_warnings,
+        unknown_parameter_messages,
     )
 
     given = ['joint.stifness', 'joint.stiffness', 'limits.max_force', 'use_sim_time',
              'qos_overrides./x.publisher.depth', 'other_package.anything', 'planar.LL',
              'estimation.max_age']
-    assert unknown_parameter_warnings(given, STIFFNESS_NODE_PARAMETERS) == [
-        'unknown parameter joint.stifness (did you mean joint.stiffness?): ignored',
-        'unknown parameter planar.LL (did you mean planar.L?): ignored']
-    assert unknown_parameter_warnings(['joint_9.rest_lenghts', 'chain.n_joint'],
+    assert unknown_parameter_messages(given, STIFFNESS_NODE_PARAMETERS) == [
+        'joint.stifness: unknown key (did you mean joint.stiffness?)',
+        'planar.LL: unknown key (did you mean planar.L?)']
+    assert unknown_parameter_messages(['joint_9.rest_lenghts', 'chain.n_joint'],
                                       spine_node_parameters(9)) == [
-        'unknown parameter chain.n_joint (did you mean chain.n_joints?): ignored',
-        'unknown parameter joint_9.rest_lenghts (did you mean joint_9.rest_lengths?): ignored']
-    assert unknown_parameter_warnings(['target.nod', 'target.zzzzzz'], BRIDGE_PARAMETERS) == [
-        'unknown parameter target.nod (did you mean target.node?): ignored',
-        'unknown parameter target.zzzzzz: ignored']
+        'chain.n_joint: unknown key (did you mean chain.n_joints?)',
+        'joint_9.rest_lenghts: unknown key (did you mean joint_9.rest_lengths?)']
+    assert unknown_parameter_messages(['target.nod', 'target.zzzzzz'], BRIDGE_PARAMETERS) == [
+        'target.nod: unknown key (did you mean target.node?)',
+        'target.zzzzzz: unknown key']

@@ -38,14 +38,14 @@ LAYERS = (
     Layer('nodes', 3, (T + 'nodes',)),
     Layer('recordings', 4, (T + 'recordings',)),
     Layer('cli', 5, (T + 'cli',)),
-    Layer('ros', 6, (T + 'ros', T + 'srv')),
+    Layer('ros', 6, (T + 'ros', T + 'srv', T + 'msg')),
     Layer('documented paths', 7, ('tensegrity_stiffness',), alias=True),
 )
 #: Imported only under tensegrity_stiffness.ros.
 ROS_ONLY_IMPORTS = ('rclpy', 'std_msgs', 'geometry_msgs', 'sensor_msgs', 'diagnostic_msgs',
                     'visualization_msgs', 'builtin_interfaces', 'rcl_interfaces', 'tf2_msgs',
                     'std_srvs', 'rosidl_runtime_py', 'launch', 'launch_ros',
-                    'ament_index_python', T + 'srv', T + 'ros')
+                    'ament_index_python', T + 'srv', T + 'msg', T + 'ros')
 
 
 def layer_of(module: str) -> Layer | None:

@@ -60,7 +60,7 @@ def test_bag_answers_every_valid_input_like_the_node(tmp_path: Path, storage: st
     assert report['storage'] == storage
     with Reader(out) as reader:  # same storage as the input by default
         assert {c.msgtype for c in reader.connections} == {
-            'geometry_msgs/msg/WrenchStamped', FMA}
+            'geometry_msgs/msg/WrenchStamped', FMA, 'tensegrity_stiffness/msg/StampedMatrix'}
     assert report['answers'] == len(expected)
     assert report['answered'] == {'screw': 9, 'pose': 3, 're-publish': 2}
     assert report['inputs'] == {'screw': 14, 'pose': 5, 'rest_lengths': 4}
@@ -171,6 +171,30 @@ def test_bag_namespace_config_and_topics(tmp_path: Path) -> None:
     np.testing.assert_allclose(got[3][2].data, state.tensions, rtol=1e-12)
 
 
+def test_bag_names_outputs_by_the_node_that_would_publish_them(tmp_path: Path) -> None:
+    """#39: inputs read under the twin's name (/twin/sim_node) are answered under the stiffness
+    node's (/twin/stiffness_node), not the simulator's; --output-namespace chooses."""
+    xi = screw_stream(2, seed=3)
+    src = write_bag(tmp_path / 'in', [In('screw', T0, multiarray(xi[0]))],
+                    namespace='/twin/sim_node')
+    code, stdout, stderr = run_cli('bag', src, '--out', tmp_path / 'out', '--namespace',
+                                   '/twin/sim_node', '--json')
+    assert code == 0, stderr
+    report = json.loads(stdout)
+    assert report['output_namespace'] == '/twin/stiffness_node'
+    assert {topic for topic, _, _ in read_bag(tmp_path / 'out')} == {
+        f'/twin/stiffness_node/{name}' for name in OUTPUTS}
+    code, stdout, stderr = run_cli('bag', src, '--out', tmp_path / 'out2', '--namespace',
+                                   '/twin/sim_node', '--output-namespace', '/lab/joint',
+                                   '--topics', 'wrench', '--json')
+    assert code == 0, stderr
+    assert [topic for topic, _, _ in read_bag(tmp_path / 'out2')] == ['/lab/joint/wrench']
+    assert bag.publisher_prefix('/robot/j1/stiffness_node', 'stiffness') == \
+        '/robot/j1/stiffness_node'
+    assert bag.publisher_prefix('/a/spine_estimator_node', 'spine') == '/a/spine_node'
+    assert bag.publisher_prefix('', 'stiffness') == ''
+
+
 def test_bag_errors_exit_2_with_one_line(tmp_path: Path) -> None:
     msgs, _, _ = scenario()
     src = write_bag(tmp_path / 'in', msgs)
@@ -180,7 +204,11 @@ def test_bag_errors_exit_2_with_one_line(tmp_path: Path) -> None:
     (tmp_path / 'exists' / 'keep.txt').write_text('not a bag')
     write_bag(tmp_path / 'old_out', [In('screw', T0, multiarray([0.0] * 6))])
     bad_only = write_bag(tmp_path / 'bad_only', [In('screw', T0, multiarray([1.0] * 3))])
+    typo = tmp_path / 'typo.yaml'  # #39: not the default joint's 77 N/m for a misspelt key
+    typo.write_text('joint:\n  stifness: 120.0\n')
     cases = [
+        (['bag', src, '--out', tmp_path / 'o8', '--config', typo],
+         'joint.stifness: unknown key (did you mean joint.stiffness?)'),
         (['bag', tmp_path / 'missing', '--out', tmp_path / 'o1'], 'no such rosbag2'),
         (['bag', tmp_path / 'plain', '--out', tmp_path / 'o2'], 'not a rosbag2'),
         (['bag', tmp_path / 'exists' / 'keep.txt', '--out', tmp_path / 'o3'], 'not a rosbag2'),
@@ -202,7 +230,7 @@ def test_bag_errors_exit_2_with_one_line(tmp_path: Path) -> None:
     # --overwrite replaces an earlier output bag
     code, _, stderr = run_cli('bag', src, '--out', tmp_path / 'old_out', '--overwrite')
     assert code == 0, stderr
-    assert len(read_bag(tmp_path / 'old_out')) == 5 * 14
+    assert len(read_bag(tmp_path / 'old_out')) == len(OUTPUTS) * 14
 
 
 def test_bag_command_as_a_subprocess(tmp_path: Path) -> None:
@@ -251,7 +279,7 @@ def test_bag_output_equals_the_running_nodes_recorded_output(
     same inputs compared message by message. Stamps: equal where the node copies them (poses,
     re-publishes of poses); the node's time of computation elsewhere, the log time in the bag."""
     pytest.importorskip('rclpy', reason='ROS 2 is set up by scripts/test.sh')
-    from geometry_msgs.msg import PoseStamped, WrenchStamped
+    from geometry_msgs.msg import PoseStamped
     from rclpy.serialization import deserialize_message, serialize_message
     from std_msgs.msg import Float64MultiArray
     from support.ros_harness import LATCHED, NodeProcess, RosClient, unique_namespace
@@ -262,7 +290,9 @@ def test_bag_output_equals_the_running_nodes_recorded_output(
     src = write_bag(tmp_path / 'in', msgs, namespace=base)
     rcl_types = {'screw': Float64MultiArray, 'pose': PoseStamped,
                  'rest_lengths': Float64MultiArray}
-    out_types = {'wrench': WrenchStamped, **dict.fromkeys(OUTPUTS[1:], Float64MultiArray)}
+    from tensegrity_stiffness.ros.conversions.outputs import RCLPY_TYPES
+
+    out_types = {name: RCLPY_TYPES.classes[t] for name, t in TYPESTORE_NAMES.items()}
     recorded = tmp_path / 'node_out'
     # The installed node with its own sources: this checkout's are left off its PYTHONPATH.
     paths = [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep)
@@ -317,10 +347,10 @@ def test_bag_output_equals_the_running_nodes_recorded_output(
     code, _, stderr = run_cli('bag', src, '--out', tmp_path / 'bag_out', '--namespace', base)
     assert code == 0, stderr
     node_out, bag_out = read_bag(recorded), read_bag(tmp_path / 'bag_out')
-    assert len(node_out) == len(bag_out) == 5 * len(expected)
+    assert len(node_out) == len(bag_out) == len(OUTPUTS) * len(expected)
     for k, ((topic_n, t_n, n), (topic_b, t_b, b)) in enumerate(
             zip(node_out, bag_out, strict=True)):
-        exp = expected[k // 5]
+        exp = expected[k // len(OUTPUTS)]
         assert topic_n == topic_b and t_n == t_b == exp['t'], k
         if topic_b.endswith('/wrench'):
             assert n.header.frame_id == b.header.frame_id == FRAME
@@ -334,6 +364,11 @@ def test_bag_output_equals_the_running_nodes_recorded_output(
             vb = [b.wrench.force.x, b.wrench.force.y, b.wrench.force.z,
                   b.wrench.torque.x, b.wrench.torque.y, b.wrench.torque.z]
             np.testing.assert_allclose(vb, vn, rtol=1e-12, atol=ATOL)
+        elif topic_b.endswith('_stamped'):
+            assert n.header.frame_id == b.header.frame_id == FRAME
+            assert (n.row_label, n.column_label, n.rows, n.cols) == (
+                b.row_label, b.column_label, b.rows, b.cols)
+            np.testing.assert_allclose(b.data, n.data, rtol=1e-12, atol=ATOL_K)
         else:
             assert [(d.label, d.size, d.stride) for d in n.layout.dim] == \
                 [(d.label, d.size, d.stride) for d in b.layout.dim]
@@ -341,8 +376,7 @@ def test_bag_output_equals_the_running_nodes_recorded_output(
             np.testing.assert_allclose(b.data, n.data, rtol=1e-12, atol=ATOL_K)
 
 
-TYPESTORE_NAMES = {'wrench': 'geometry_msgs/msg/WrenchStamped',
-                   **dict.fromkeys(OUTPUTS[1:], FMA)}
+TYPESTORE_NAMES = dict(bag.NODE_TOPICS['stiffness'].outputs)
 
 
 # ------------------------------------------------------------------------------ batched parts

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from tensegrity_stiffness.nodes import spine_processing
+from tensegrity_stiffness.nodes import layouts, spine_processing
 from tensegrity_stiffness.recordings import bag
 from tensegrity_stiffness.ros import conversions
 
@@ -21,6 +21,7 @@ rosbags = pytest.importorskip('rosbags')
 from rosbags.rosbag2 import StoragePlugin, Writer  # noqa: E402
 from support import REPO  # noqa: E402
 from support.spine_bag_recordings import (  # noqa: E402
+    ALL_OUTPUTS,
     ATOL,
     BASE,
     CHAIN,
@@ -57,7 +58,7 @@ def test_spine_bag_answers_every_valid_input_like_the_node(tmp_path: Path, stora
     assert report['answered'] == {'screws': 2, 'poses': 3, 're-publish': 1}
     assert report['rejected'] == rejected
     assert report['written'] == {f'{NS}/{name}': len(expected)
-                                 for name in spine_processing.OUTPUT_NAMES}
+                                 for name in ALL_OUTPUTS}
     assert 'joint 3 screw' in report['rejection_examples']['screws: outside the chart']
     assert 'joint 4 pose' in report['rejection_examples']['poses: bad quaternion']
     assert 'joint 2' in report['rejection_examples']['rest_lengths: bad rest lengths']
@@ -77,11 +78,11 @@ def test_spine_bag_messages_are_the_nodes_messages(tmp_path: Path) -> None:
     bag.process_bag(src, tmp_path / 'out', node='spine')
     raw = read_raw(tmp_path / 'out')
     for i, xi in enumerate(xs):
-        node = conversions.SpineOutputMessages(N)
+        node = conversions.SpineOutputMessages(N, SETTINGS.tool_frame)
         node.fill(spine_processing.spine_outputs(CHAIN, xi), conversions.stamp_from_nanoseconds(
             T0 + 5 * i), BASE)
         mine = {topic: data for topic, t, _, data in raw if t == T0 + 5 * i}
-        for name, msg in zip(spine_processing.OUTPUT_NAMES, node.messages(), strict=True):
+        for name, msg in zip(ALL_OUTPUTS, node.messages(), strict=True):
             msgtype = TYPES[name]
             theirs = TYPESTORE.deserialize_cdr(bytes(serialize_message(msg)), msgtype)
             assert mine[f'{NS}/{name}'] == bytes(TYPESTORE.serialize_cdr(theirs, msgtype)), name
@@ -188,8 +189,11 @@ def test_spine_bag_output_equals_the_running_spine_nodes_recorded_output(
     src = write_bag(tmp_path / 'in', msgs, namespace=base)
     rcl_types = {'screws': Float64MultiArray, 'poses': PoseArray,
                  'rest_lengths': Float64MultiArray}
-    rcl_out = {'tip_pose': PoseStamped, 'tip_wrench': WrenchStamped}
-    names = spine_processing.OUTPUT_NAMES
+    from tensegrity_stiffness.msg import StampedMatrix
+
+    rcl_out = {'tip_pose': PoseStamped, 'tip_wrench': WrenchStamped,
+               **dict.fromkeys(layouts.SPINE_STAMPED_OUTPUTS, StampedMatrix)}
+    names = ALL_OUTPUTS
     recorded = tmp_path / 'node_out'
     paths = [p for p in os.environ.get('PYTHONPATH', '').split(os.pathsep)
              if p and Path(p).resolve() not in (REPO, REPO / 'test')]
@@ -266,7 +270,8 @@ def test_spine_bag_output_equals_the_running_spine_nodes_recorded_output(
         exp = expected[times.index(t_b)]
         name = topic_b[len(base) + 1:]
         if name in rcl_out:
-            assert n.header.frame_id == b.header.frame_id == BASE
+            assert n.header.frame_id == b.header.frame_id == (
+                SETTINGS.tool_frame if name == 'tip_stiffness_stamped' else BASE)
             if exp['stamp'] < T0:  # the scenario's pose stamps precede its log times
                 assert (n.header.stamp.sec, n.header.stamp.nanosec) == (
                     b.header.stamp.sec, b.header.stamp.nanosec)
@@ -274,10 +279,14 @@ def test_spine_bag_output_equals_the_running_spine_nodes_recorded_output(
                 vn, vb = ([m.pose.position.x, m.pose.position.y, m.pose.position.z,
                            m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
                            m.pose.orientation.w] for m in (n, b))
-            else:
+            elif name == 'tip_wrench':
                 vn, vb = ([m.wrench.force.x, m.wrench.force.y, m.wrench.force.z,
                            m.wrench.torque.x, m.wrench.torque.y, m.wrench.torque.z]
                           for m in (n, b))
+            else:  # a stamped matrix
+                assert (n.row_label, n.column_label, n.rows, n.cols) == (
+                    b.row_label, b.column_label, b.rows, b.cols)
+                vn, vb = n.data, b.data
             np.testing.assert_array_equal(vb, vn)
         else:
             assert dims_of(n) == dims_of(b) and n.layout.data_offset == b.layout.data_offset

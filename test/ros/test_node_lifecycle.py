@@ -253,18 +253,29 @@ def _run_to_exit(executable: str, params_file, extra_args: list[str],
     ('stiffness_node', CONFIG, 'joint.stifness', 'joint.stiffness'),
     ('sim_node', CONFIG, 'limits.max_forse', 'limits.max_force'),
     ('estimator_node', CONFIG, 'estimation.max_agee', 'estimation.max_age'),
+    ('spine_node', REPO / 'config' / 'default_spine.yaml', 'chain.n_joint', 'chain.n_joints'),
+    ('stiffness_controller', CONFIG, 'control.integral_gian', 'control.integral_gain'),
 ])
-def test_a_misspelt_parameter_is_warned_about_by_name(tmp_path, executable, config, key, hint):
-    """A misspelt key under the node's own sections in a parameter file: a warning naming it
-    and the nearest parameter; the node runs (with the default of the parameter it missed)."""
+def test_a_misspelt_parameter_stops_the_node_by_name(tmp_path, executable, config, key, hint):
+    """#39: a misspelt key under the node's own sections in a parameter file: the node refuses
+    to start (one line naming the key and the nearest parameter, exit 2) rather than run with
+    the default of the parameter it missed; with ``strict_parameters:=false`` (a file shared
+    with other packages' nodes) it warns by name and runs."""
     import yaml
 
     section, name = key.split('.')
     extra = tmp_path / 'typo.yaml'
     extra.write_text(yaml.safe_dump({'/**': {'ros__parameters': {section: {name: 1.0}}}}))
-    code, log = _run_to_exit(executable, config, ['--params-file', str(extra)], until='ready:')
+    message = f'{key}: unknown key (did you mean {hint}?)'
+    code, log = _run_to_exit(executable, config, ['--params-file', str(extra)])
+    assert code == 2, log
+    lines = [line for line in log.splitlines() if 'configuration error' in line]
+    assert len(lines) == 1 and message in lines[0] and 'strict_parameters:=false' in lines[0], log
+    assert 'ready:' not in log and 'Traceback' not in log, log
+    code, log = _run_to_exit(executable, config, ['--params-file', str(extra), '-p',
+                                                  'strict_parameters:=false'], until='ready:')
     assert code == 0, log
-    assert f'unknown parameter {key} (did you mean {hint}?)' in log, log
+    assert f'{message}: ignored' in log, log
 
 
 @pytest.mark.parametrize(('executable', 'args', 'problem'), [

@@ -44,3 +44,40 @@ def test_with_input_the_line_shows_the_eigenvalues_and_latency(state) -> None:
 def test_nothing_received_yet_is_blank_everywhere() -> None:
     line = summary_line(1.0, 0.0, None, None, None, [], spine=False, n_strings=12)
     assert line == ('t    1.0 s  input      0 Hz  pose -  K_c -  slack -/12  latency -')
+
+
+def test_a_node_behind_its_input_is_named(state) -> None:
+    """#39: an input that outruns the node is said, not shown as a growing latency."""
+    K = state.cartesian_stiffness
+    line = summary_line(4.0, 1000.0, state.transform, K, state.tensions, [0.05], spine=False,
+                        n_strings=12, output_rate=400.0)
+    assert 'answered    400 Hz (behind: the input outruns the node, inputs skipped)' in line
+    line = summary_line(4.0, 200.0, state.transform, K, state.tensions, [0.001], spine=False,
+                        n_strings=12, output_rate=199.0)
+    assert 'answered    199 Hz' in line and 'behind' not in line
+
+
+def test_control_demo_publishes_no_target_from_a_failed_design() -> None:
+    """#39: a stiffness step whose design fails (tensions the joint cannot reach) gives no
+    target, only the design's message; the default joint's design succeeds."""
+    import warnings
+
+    import numpy as np
+
+    from tensegrity_stiffness import config
+    from tensegrity_stiffness.ros.control_demo import pose_error, targets
+
+    model = JointModel.from_yaml(packaged_config_path())
+    _, stiffness, message = targets(model)
+    assert stiffness is not None and message == ''
+    assert np.all(np.isfinite(stiffness.data))
+    section = dict(config.load_section(packaged_config_path(), 'joint'))
+    section['max_lengths'] = [1.001 * r for r in section['rest_lengths']]  # strings barely give
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')  # its initial screw is no longer an equilibrium
+        short = JointModel.from_dict(section)
+    _, none, why = targets(short)
+    assert none is None and 'tension_min' in why
+    T = np.eye(4)
+    T[:3, 3] = [0.001, 0.0, 0.0]
+    assert np.allclose(pose_error(np.eye(4), T), (0.001, 0.0))

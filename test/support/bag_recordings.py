@@ -12,7 +12,6 @@ from typing import Any
 
 import numpy as np
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from tensegrity_stiffness import cli, config
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
@@ -20,9 +19,10 @@ from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes import layouts
+from tensegrity_stiffness.recordings.bag import jazzy_typestore
 
 NS = '/stiffness_node'
-TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+TYPESTORE = jazzy_typestore()  # with the package's StampedMatrix
 FMA = 'std_msgs/msg/Float64MultiArray'
 POSE = 'geometry_msgs/msg/PoseStamped'
 FRAME = 'tensegrity_link1'
@@ -186,14 +186,23 @@ def check_output(out: Path, expected: list[dict[str, Any]], frame: str = FRAME,
     model = default_model()
     got = read_bag(out)
     names = [f'{namespace}/{name}' for name in OUTPUTS]
-    assert len(got) == 5 * len(expected)
+    n = len(OUTPUTS)
+    assert len(got) == n * len(expected)
     for k, exp in enumerate(expected):
-        group = got[5 * k: 5 * k + 5]
+        group = got[n * k: n * k + n]
         assert [topic for topic, _, _ in group] == names
         assert all(t == exp['t'] for _, t, _ in group)
         m = model.with_rest_lengths(exp['rest'])
         state = m.evaluate(exp['xi'])
-        wrench, K, Kc, tensions, interp = (msg for _, _, msg in group)
+        wrench, K, Kc, tensions, interp, K_stamped, Kc_stamped = (msg for _, _, msg in group)
+        for stamped, array in ((K_stamped, K), (Kc_stamped, Kc)):  # #39: stamped like the wrench
+            assert stamped.header.frame_id == frame
+            assert (stamped.header.stamp.sec, stamped.header.stamp.nanosec) == (
+                wrench.header.stamp.sec, wrench.header.stamp.nanosec)
+            assert [stamped.row_label, stamped.column_label] == [d.label for d in
+                                                                 array.layout.dim]
+            assert (stamped.rows, stamped.cols) == (6, 6)
+            np.testing.assert_array_equal(stamped.data, array.data)
         assert wrench.header.frame_id == frame
         assert wrench.header.stamp.sec * 1_000_000_000 + wrench.header.stamp.nanosec == \
             exp['stamp']
@@ -218,7 +227,7 @@ def check_output(out: Path, expected: list[dict[str, Any]], frame: str = FRAME,
 
 
 OUTPUTS = ('wrench', 'stiffness', 'cartesian_stiffness', 'string_tensions',
-           'stiffness_interpretation')
+           'stiffness_interpretation', 'stiffness_stamped', 'cartesian_stiffness_stamped')
 
 
 def check_layout(msg: Any, dims: list[tuple[str, int, int]]) -> None:

@@ -11,7 +11,6 @@ from typing import Any
 
 import numpy as np
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
-from rosbags.typesys import Stores, get_typestore
 
 from tensegrity_stiffness import cli
 from tensegrity_stiffness.geometry.quaternion import quaternion_to_rotation, rotation_to_quaternion
@@ -21,7 +20,7 @@ from tensegrity_stiffness.recordings import bag
 from tensegrity_stiffness.ros import conversions
 
 NS = '/spine_node'
-TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+TYPESTORE = bag.jazzy_typestore()  # with the package's StampedMatrix
 FMA = 'std_msgs/msg/Float64MultiArray'
 POSE_ARRAY = 'geometry_msgs/msg/PoseArray'
 T0 = 1_700_000_000_000_000_000  # log time of the first message (ns)
@@ -198,10 +197,12 @@ EXPECTED_DIMS = {
                            (layouts.TIP_STIFFNESS_LABELS['base'][1], 6, 6)],
 }
 TYPES = dict(bag.NODE_TOPICS['spine'].outputs)
+#: Every output of the spine node (the arrays and stamped messages, then the stamped matrices).
+ALL_OUTPUTS = tuple(TYPES)
 
 
 def check_output(out: Path, expected: list[dict[str, Any]], names: Sequence[str] =
-                 spine_processing.OUTPUT_NAMES, namespace: str = NS) -> None:
+                 ALL_OUTPUTS, namespace: str = NS) -> None:
     """Every output message of ``out`` against the library's answer to its input."""
     by_topic: dict[str, list[tuple[int, Any]]] = {}
     for topic, t, msgtype, raw in read_raw(out):
@@ -212,11 +213,11 @@ def check_output(out: Path, expected: list[dict[str, Any]], names: Sequence[str]
     for name in names:
         got = by_topic[name]
         assert len(got) == len(expected), name
-        k = spine_processing.OUTPUT_NAMES.index(name)
+        k = ALL_OUTPUTS.index(name)
         for (t, msg), e in zip(got, expected, strict=True):
             assert t == e['t']
             outputs = spine_processing.spine_outputs(CHAIN, e['screws'], e['rest'])
-            value = spine_processing.output_arrays(outputs)[k]
+            value = spine_processing.output_arrays(outputs)[NODE_MESSAGES.array_index[k]]
             if name == 'tip_pose':
                 p, q = msg.pose.position, msg.pose.orientation
                 np.testing.assert_allclose([p.x, p.y, p.z], value[:3, 3], atol=ATOL, rtol=0)
@@ -226,6 +227,15 @@ def check_output(out: Path, expected: list[dict[str, Any]], names: Sequence[str]
                 f, m = msg.wrench.force, msg.wrench.torque
                 np.testing.assert_allclose([f.x, f.y, f.z, m.x, m.y, m.z], value,
                                            atol=ATOL, rtol=0)
+            elif TYPES[name] == layouts.STAMPED_MATRIX:
+                of = layouts.SPINE_STAMPED_OUTPUTS[name]
+                assert [(msg.row_label, msg.rows), (msg.column_label, msg.cols)] == [
+                    (label, size) for label, size, _ in EXPECTED_DIMS[of]]
+                assert msg.header.frame_id == (bag.spine_settings().tool_frame
+                                               if name == 'tip_stiffness_stamped' else BASE)
+                stamp = msg.header.stamp
+                assert stamp.sec * 1_000_000_000 + stamp.nanosec == e['stamp']
+                np.testing.assert_allclose(msg.data, value.ravel(), atol=ATOL, rtol=1e-12)
             else:
                 assert dims_of(msg) == EXPECTED_DIMS[name] == dims_of(NODE_MESSAGES.messages()[k])
                 assert msg.layout.data_offset == 0

@@ -15,6 +15,7 @@ from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, Wre
 from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
 
+from tensegrity_stiffness.msg import StampedMatrix
 from tensegrity_stiffness.nodes.layouts import OutputLayout
 from tensegrity_stiffness.nodes.messages import (
     MESSAGE_CLASS_NAMES,
@@ -40,7 +41,7 @@ def payload(arr: NDArray[np.float64]) -> array.array:
 RCLPY_TYPES = MessageTypes(
     classes=dict(zip(MESSAGE_CLASS_NAMES, (
         Time, Header, MultiArrayDimension, MultiArrayLayout, Float64MultiArray, Vector3, Wrench,
-        WrenchStamped, Point, Quaternion, Pose, PoseStamped), strict=True)),
+        WrenchStamped, Point, Quaternion, Pose, PoseStamped, StampedMatrix), strict=True)),
     payload=payload)
 
 #: Writes an array into a ``Float64MultiArray`` of rclpy (:func:`fill_outputs`' writer form).

@@ -28,8 +28,8 @@ class SpineOutputMessages(messages.SpineOutputMessages):
     """The seven output messages of a spine of ``n_joints`` (rclpy), refilled per input by
     :meth:`fill`."""
 
-    def __init__(self, n_joints: int) -> None:
-        super().__init__(n_joints, RCLPY_TYPES)
+    def __init__(self, n_joints: int, tool_frame: str = '') -> None:
+        super().__init__(n_joints, RCLPY_TYPES, tool_frame)
 
 
 def _in_base(pose: np.ndarray, points: np.ndarray) -> np.ndarray:

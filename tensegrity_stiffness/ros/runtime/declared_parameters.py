@@ -20,7 +20,11 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from tensegrity_stiffness.mechanics.unloaded import InitialScrewWarning
-from tensegrity_stiffness.nodes.parameters import ParameterSpec, unknown_parameter_warnings
+from tensegrity_stiffness.nodes.parameters import (
+    STRICT_PARAMETERS,
+    ParameterSpec,
+    refuse_unknown_parameters,
+)
 from tensegrity_stiffness.ros.runtime.rclpy_internals import parameter_override_names
 
 _ROS_TYPES = {
@@ -53,6 +57,14 @@ def declare(node: Node, table: Iterable[ParameterSpec]) -> None:
         node.declare_parameter(spec.name, value, descriptor(spec))
 
 
+def declared_strictness(node: Node) -> bool:
+    """Declare :data:`STRICT_PARAMETERS` on ``node`` (once) and return its value."""
+    if not node.has_parameter(STRICT_PARAMETERS.name):
+        node.declare_parameter(STRICT_PARAMETERS.name, STRICT_PARAMETERS.default,
+                               descriptor(STRICT_PARAMETERS))
+    return bool(node.get_parameter(STRICT_PARAMETERS.name).value)
+
+
 def current_values(node: Node, table: Iterable[ParameterSpec]) -> dict[str, Any]:
     """``{name: value}`` of the node's parameters (a typed array without a value as ``[]``)."""
     values = {}
@@ -67,8 +79,10 @@ def current_values(node: Node, table: Iterable[ParameterSpec]) -> dict[str, Any]
 
 
 class ParameterBinding:
-    """Declares ``table`` on ``node`` (warning by name about a misspelt parameter of the node's
-    own sections in its parameter file or overrides), validates every parameter change of
+    """Declares ``table`` on ``node`` and refuses (ValueError: the node does not start) a
+    misspelt parameter of the node's own sections in its parameter file or overrides, naming
+    the nearest name (with ``strict_parameters:=false``: a warning, and the node runs);
+    validates every parameter change of
     ``node`` as a whole with ``build`` (values -> settings, ValueError naming the field) and,
     once ROS has applied it, rebuilds the settings and hands them to ``apply``.
     ``on_rejected(reason)`` reports a rejected change."""
@@ -83,7 +97,8 @@ class ParameterBinding:
         self._apply = apply
         self._on_rejected = on_rejected
         declare(node, self._table)
-        for line in unknown_parameter_warnings(parameter_override_names(node), self._table):
+        for line in refuse_unknown_parameters(parameter_override_names(node), self._table,
+                                              declared_strictness(node)):
             node.get_logger().warning(line)
         node.add_on_set_parameters_callback(self._validate)
         node.add_post_set_parameters_callback(self._applied)
@@ -120,4 +135,4 @@ class ParameterBinding:
         self._apply(self.values(), {p.name for p in parameters})
 
 
-__all__ = ['ParameterBinding', 'current_values', 'declare', 'descriptor']
+__all__ = ['ParameterBinding', 'current_values', 'declare', 'declared_strictness', 'descriptor']
