@@ -171,23 +171,6 @@ def loads_label(structure: Structure) -> str:
             f'order: {" ".join(structure.body_names)}')
 
 
-def structure_sim_usage() -> str:
-    """The ``--help`` text of ``structure_sim_node``."""
-    names = '\n'.join(f'  {s.name} ({s.type}, default {s.default!r}): {s.description}'
-                      for s in STRUCTURE_SIM_PARAMETERS)
-    return (f'usage: {NODE_NAME} [-h] [--ros-args [--params-file FILE] [-p NAME:=VALUE ...] '
-            "[-r '~/TOPIC:=/OTHER' ...] [-r __ns:=/NAMESPACE]]\n\n"
-            f'{NODE_NAME}, a ROS 2 node of the tensegrity_stiffness package. The MuJoCo twin '
-            'of any structure (docs/structures.md): poses, string lengths, load cells, motor '
-            'encoders, an IMU per bar; rest-length commands at the motors\' rate; loads and '
-            'pushes; the scripted roll.\n\n'
-            'Start it (ros2 run finds the same executable):\n'
-            f'  ros2 run tensegrity_stiffness {NODE_NAME} --ros-args -p '
-            'structure.example:=three_bar.yaml\n\n'
-            'options:\n  -h, --help  print this text and exit, without starting the node\n\n'
-            f'Parameters:\n{names}\n')
-
-
 def live_line(time: float, com: np.ndarray, contacts: list[str], slack: list[str],
               phase: str, factor: float, missed: int = 0) -> str:
     """One line of the twin's state: simulated time, centre of mass (m), contact nodes, slack

@@ -80,6 +80,7 @@ from tensegrity_stiffness.nodes.processing import (
     screw_inputs,
     with_rest_lengths,
 )
+from tensegrity_stiffness.structures.schema import is_structure_document
 
 FloatArray = NDArray[np.float64]
 
@@ -219,10 +220,10 @@ def structure_settings(path: str | Path | None = None) -> structure_node.Structu
     try:
         if path is None:
             return structure_node.structure_node_settings(parameters.defaults(table))
-        values = parameters.values_from_config(path, table)
-        section = config.parameters(config.load_yaml(path)).get('structure')
-        if isinstance(section, Mapping) and 'bodies' in section:
-            values['structure.config'] = str(path)
+        if is_structure_document(config.load_yaml(path)):  # the structure itself
+            values = {**parameters.defaults(table), 'structure.config': str(path)}
+        else:
+            values = parameters.values_from_config(path, table)
         return structure_node.structure_node_settings(values)
     except ValueError as exc:
         text = str(exc)

@@ -38,7 +38,6 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
-from tensegrity_stiffness.nodes.parameter_docs import asks_for_help
 from tensegrity_stiffness.nodes.structure_sim_node import (
     ENCODERS_LABEL,
     IDLE,
@@ -51,7 +50,6 @@ from tensegrity_stiffness.nodes.structure_sim_node import (
     live_line,
     loads_label,
     structure_sim_settings,
-    structure_sim_usage,
 )
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
@@ -413,9 +411,6 @@ def main(args: list[str] | None = None) -> None:
     the live line every second)."""
     global LIVE
     argv = list(sys.argv if args is None else args)
-    if asks_for_help(argv):
-        sys.stdout.write(structure_sim_usage())
-        return
     if '--live' in argv:
         LIVE = True
         argv.remove('--live')

@@ -56,24 +56,23 @@ GROUND_KEYS = ('normal', 'height', 'friction')
 NEAREST_NAME_CUTOFF = 0.75
 
 
-class StructureConfigWarning(UserWarning):
-    """A key of a structure config that the schema does not know (it is ignored)."""
-
-
 def nearest_name(name: str, known: Sequence[str]) -> str | None:
     """The known name nearest to ``name`` (difflib), or None when none is close."""
     close = difflib.get_close_matches(name, list(known), n=1, cutoff=NEAREST_NAME_CUTOFF)
     return close[0] if close else None
 
 
-def warn_unknown_keys(entry: Mapping[str, Any], known: Sequence[str], where: str) -> None:
-    """A :class:`StructureConfigWarning` for every key of ``entry`` not in ``known``."""
-    for key in entry:
-        if key not in known:
-            near = nearest_name(str(key), known)
-            hint = f' (did you mean {where}.{near}?)' if near else ''
-            warnings.warn(f'unknown key {where}.{key}{hint}: ignored', StructureConfigWarning,
-                          stacklevel=4)
+def unknown_keys(entry: Mapping[str, Any], known: Sequence[str], where: str,
+                 found: list[str] | None) -> None:
+    """The unknown keys of ``entry`` in the one format of every reader
+    (:func:`tensegrity_stiffness.config.unknown_key_messages`), appended to ``found``; with
+    ``found`` None, refused at once (ValueError)."""
+    lines = config.unknown_key_messages(entry, known, where)
+    if found is None:
+        if lines:
+            raise ValueError('; '.join(lines))
+    else:
+        found.extend(lines)
 
 
 def _mapping(value: Any, where: str) -> Mapping[str, Any]:
@@ -97,9 +96,9 @@ def _named(error: ValueError, where: str) -> ValueError:
     return ValueError(f'{where}.{error}')
 
 
-def parse_body(entry: Mapping[str, Any], where: str) -> Body:
+def parse_body(entry: Mapping[str, Any], where: str, found: list[str] | None = None) -> Body:
     """One entry of ``structure.bodies`` (ValueErrors name ``where``)."""
-    warn_unknown_keys(entry, BODY_KEYS, where)
+    unknown_keys(entry, BODY_KEYS, where, found)
     name = entry.get('name')
     if not isinstance(name, str) or not name or '.' in name or name == WORLD:
         raise ValueError(f'{where}.name must be a non-empty string without "." and not '
@@ -151,9 +150,10 @@ def _node_reference(value: Any, bodies: Mapping[str, Body], world: Mapping[str, 
 
 
 def parse_string(entry: Mapping[str, Any], index: int, bodies: Mapping[str, Body],
-                 world: Mapping[str, Any], where: str) -> StringSpec:
+                 world: Mapping[str, Any], where: str, found: list[str] | None = None
+                 ) -> StringSpec:
     """One entry of ``structure.strings``."""
-    warn_unknown_keys(entry, STRING_KEYS, where)
+    unknown_keys(entry, STRING_KEYS, where, found)
     start = _node_reference(entry.get('from'), bodies, world, f'{where}.from')
     end = _node_reference(entry.get('to'), bodies, world, f'{where}.to')
     if start == end:
@@ -176,22 +176,34 @@ def parse_string(entry: Mapping[str, Any], index: int, bodies: Mapping[str, Body
         raise _named(exc, where) from None
 
 
-def parse_ground(value: Any) -> Ground | None:
+def parse_ground(value: Any, found: list[str] | None = None) -> Ground | None:
     """``structure.ground`` (None: no ground)."""
     if value is None:
         return None
     where = f'{SECTION}.ground'
     entry = _mapping(value, where)
-    warn_unknown_keys(entry, GROUND_KEYS, where)
+    unknown_keys(entry, GROUND_KEYS, where, found)
     try:
         return Ground(**{k: entry[k] for k in GROUND_KEYS if entry.get(k) is not None})
     except ValueError as exc:
         raise _named(exc, where) from None
 
 
-def parse_structure(document: Any) -> dict[str, Any]:
+def is_structure_document(document: Any) -> bool:
+    """Whether ``document`` describes a structure (a ``structure`` section with ``bodies``, at
+    the top level or under ``ros__parameters``), not a node's parameter file that names one."""
+    try:
+        section = config.parameters(document).get(SECTION)
+    except ValueError:
+        return False
+    return isinstance(section, Mapping) and 'bodies' in section
+
+
+def parse_structure(document: Any, strict: bool = True) -> dict[str, Any]:
     """The keyword arguments of :class:`~tensegrity_stiffness.structures.structure.Structure`
-    from a config document (plain or ROS parameter file) or its ``structure`` section."""
+    from a config document (plain or ROS parameter file) or its ``structure`` section. Unknown
+    keys are refused, all named at once with the nearest name (``strict=False``: warned about,
+    :class:`~tensegrity_stiffness.config.UnknownKeyWarning`, and ignored)."""
     params = config.parameters(document)
     if SECTION in params:
         section = _mapping(params[SECTION], SECTION)
@@ -200,10 +212,11 @@ def parse_structure(document: Any) -> dict[str, Any]:
     else:
         raise ValueError(f'config has no "{SECTION}" section (top level or under '
                          f'{config.ROS_PARAMETERS})')
-    warn_unknown_keys(section, STRUCTURE_KEYS, SECTION)
+    found: list[str] = []
+    unknown_keys(section, STRUCTURE_KEYS, SECTION, found)
     bodies: dict[str, Body] = {}
     for i, entry in enumerate(_entries(section, 'bodies', True)):
-        body = parse_body(entry, f'{SECTION}.bodies[{i}]')
+        body = parse_body(entry, f'{SECTION}.bodies[{i}]', found)
         if body.name in bodies:
             raise ValueError(f'{SECTION}.bodies[{i}].name: {body.name!r} is taken')
         bodies[body.name] = body
@@ -216,7 +229,7 @@ def parse_structure(document: Any) -> dict[str, Any]:
         if p is None or p.shape != (3,) or not np.all(np.isfinite(p)):
             raise ValueError(f'{SECTION}.world_nodes.{key} must be 3 finite values [x, y, z]')
         world[str(key)] = p
-    strings = [parse_string(entry, i, bodies, world, f'{SECTION}.strings[{i}]')
+    strings = [parse_string(entry, i, bodies, world, f'{SECTION}.strings[{i}]', found)
                for i, entry in enumerate(_entries(section, 'strings', True))]
     if len({s.name for s in strings}) != len(strings):
         raise ValueError(f'{SECTION}.strings: names must be unique')
@@ -229,9 +242,14 @@ def parse_structure(document: Any) -> dict[str, Any]:
         if g is None or g.shape != (3,) or not np.all(np.isfinite(g)):
             raise ValueError(f'{SECTION}.gravity must be 3 finite values [gx, gy, gz] (m/s^2)')
         gravity = g
+    ground = parse_ground(section.get('ground'), found)
+    if found:
+        if strict:
+            raise ValueError('; '.join(found))
+        for line in found:
+            warnings.warn(f'{line}: ignored', config.UnknownKeyWarning, stacklevel=3)
     return {'bodies': list(bodies.values()), 'strings': strings, 'world_nodes': world,
-            'gravity': gravity, 'ground': parse_ground(section.get('ground')),
-            'force_law': str(force_law)}
+            'gravity': gravity, 'ground': ground, 'force_law': str(force_law)}
 
 
 def _floats(values: Any) -> list[float]:

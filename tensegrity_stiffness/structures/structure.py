@@ -224,17 +224,19 @@ class Structure:
 
     # ------------------------------------------------------------------ construction
     @classmethod
-    def from_dict(cls, document: Any, use_kernel: bool = True) -> Structure:
+    def from_dict(cls, document: Any, use_kernel: bool = True, strict: bool = True
+                  ) -> Structure:
         """From a config document (plain, or a ROS parameter file) with a ``structure``
         section, or that section itself: the schema of
-        :mod:`~tensegrity_stiffness.structures.schema` (errors name the entry, unknown keys
-        warn with the nearest name)."""
-        return cls(**schema.parse_structure(document), use_kernel=use_kernel)
+        :mod:`~tensegrity_stiffness.structures.schema` (errors name the entry; unknown keys are
+        refused with the nearest name, ``strict=False`` warns)."""
+        return cls(**schema.parse_structure(document, strict), use_kernel=use_kernel)
 
     @classmethod
-    def from_yaml(cls, path: str | Path, use_kernel: bool = True) -> Structure:
+    def from_yaml(cls, path: str | Path, use_kernel: bool = True, strict: bool = True
+                  ) -> Structure:
         """From a YAML file (see :meth:`from_dict`)."""
-        return cls.from_dict(config.load_yaml(path), use_kernel=use_kernel)
+        return cls.from_dict(config.load_yaml(path), use_kernel=use_kernel, strict=strict)
 
     def to_dict(self) -> dict[str, Any]:
         """The config document ``{'structure': ...}`` that :meth:`from_dict` reads back to

@@ -15,6 +15,7 @@ from tensegrity_stiffness.nodes.control_processing import (
     CONTROLLER_PARAMETERS,
     DEFAULT_RANGE,
     controller_settings,
+    default_tension_limits,
     stiffness_target,
 )
 
@@ -51,8 +52,11 @@ def test_default_settings_are_the_default_joint_and_the_default_range(defaults, 
     np.testing.assert_array_equal(settings.limits.rest_length_max,
                                   DEFAULT_RANGE[1] * model.rest_lengths)
     assert float(settings.limits.max_rate) == defaults['limits.max_rate']
-    assert float(settings.limits.tension_min) == defaults['limits.tension_min']
-    assert float(settings.limits.tension_max) == defaults['limits.tension_max']
+    # 0 (the default) takes the tension range from the joint (issue #39):
+    # the default joint's 0.1 / 1.5 N.
+    assert defaults['limits.tension_min'] == defaults['limits.tension_max'] == 0.0
+    assert (float(settings.limits.tension_min), float(settings.limits.tension_max)) == \
+        default_tension_limits(model) == (0.1, 1.5)
     np.testing.assert_array_equal(settings.offsets, np.zeros(model.n_strings))
     assert settings.link1_frame == defaults['frames.link1']
     assert settings.values['control.rate'] == defaults['control.rate']
@@ -84,7 +88,7 @@ def test_rest_length_offsets_are_read(defaults, model):
     ('limits.max_rate', 0.0, 'max_rate'),
     ('limits.max_rate', -1.0, 'max_rate'),
     ('limits.tension_min', 2.0, 'tension'),            # above tension_max 1.5
-    ('limits.tension_max', 0.0, 'tension_max'),
+    ('limits.tension_max', -1.0, 'tension_max'),
     ('limits.rest_length_min', [0.05], 'rest_length'),  # above the default maximum
     ('limits.rest_length_max', [-0.01], 'rest_length'),
     ('control.integral_gain', -1.0, 'integral_gain'),

@@ -159,7 +159,8 @@ def test_the_controller_takes_the_newest_state_and_reports_its_rate():
         assert int(values['missed ticks']) >= 0 and int(values['ticks']) > 0
         assert 'command rate [Hz]' in values
         twin = repeat_until(lambda: None, lambda: status_values(
-            diagnostics, 'sim_node: twin', lambda v: float(v['achieved step rate [Hz]']) > 0),
+            diagnostics, f'{ns}/sim_node: twin',
+            lambda v: float(v['achieved step rate [Hz]']) > 0),
             explain=sim.log)
         assert float(twin['step rate [Hz]']) > 0 and int(twin['missed steps']) >= 0
         assert 'publication rate [Hz]' in twin

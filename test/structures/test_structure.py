@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from structure_fixtures import PRISM3, SIXBAR, example, mixed_document, perturbed
 
-from tensegrity_stiffness.structures.schema import StructureConfigWarning
+from tensegrity_stiffness.config import UnknownKeyWarning
 from tensegrity_stiffness.structures.structure import Structure
 
 
@@ -94,21 +94,26 @@ def test_errors_name_the_entry(edit, message):
     assert message in str(info.value)
 
 
-def test_unknown_keys_warn_with_the_nearest_name():
+def test_unknown_keys_are_refused_with_the_nearest_name():
+    """All named at once, in the one format of every reader (issue #39); strict=False warns."""
     document = copy.deepcopy(mixed_document())
     document['structure']['strings'][0]['stifness'] = 3.0
     document['structure']['strings'][0]['stiffness'] = 3.0
     document['structure']['bodies'][1]['lenght'] = 2.0
     document['structure']['gravty'] = [0, 0, -1]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter('always')
+    expected = ('structure.strings[0].stifness: unknown key (did you mean '
+                'structure.strings[0].stiffness?)',
+                'structure.bodies[1].lenght: unknown key (did you mean '
+                'structure.bodies[1].length?)',
+                'structure.gravty: unknown key (did you mean structure.gravity?)')
+    with pytest.raises(ValueError) as caught:
         numpy_structure(document)
-    texts = [str(w.message) for w in caught if issubclass(w.category, StructureConfigWarning)]
-    assert any('structure.strings[0].stifness (did you mean structure.strings[0].stiffness?)'
-               in t for t in texts)
-    assert any('structure.bodies[1].lenght (did you mean structure.bodies[1].length?)' in t
-               for t in texts)
-    assert any('structure.gravty (did you mean structure.gravity?)' in t for t in texts)
+    assert all(line in str(caught.value) for line in expected), caught.value
+    with warnings.catch_warnings(record=True) as warned:
+        warnings.simplefilter('always')
+        numpy_structure(document, strict=False)
+    texts = [str(w.message) for w in warned if issubclass(w.category, UnknownKeyWarning)]
+    assert all(any(line in t for t in texts) for line in expected), texts
 
 
 def test_bars_have_their_nodes_on_their_axis():
