@@ -52,7 +52,11 @@ from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
-from tensegrity_stiffness.ros.runtime.pacing import SPIN_S, wait_until  # noqa: F401 (SPIN_S kept)
+from tensegrity_stiffness.ros.runtime.pacing import (  # noqa: F401 (SPIN_S kept)
+    SPIN_S,
+    periods_due,
+    wait_until,
+)
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.tf_broadcast import FrameBroadcaster
 from tensegrity_stiffness.ros.runtime.topics import (
@@ -332,12 +336,9 @@ class SimNode(Node):
             while not self._stop.is_set() and self.context.ok():
                 n = 1
                 if self._real_time:
-                    deadline = start + (self.steps + 1) * self._period
-                    now = wait_until(deadline)
-                    due = int((now - start) / self._period) - self.steps
-                    if due > 1:
-                        self.missed_steps += due - 1
-                        n = due
+                    now = wait_until(start + (self.steps + 1) * self._period)
+                    n = periods_due(start, self.steps, self._period, now)
+                    self.missed_steps += n - 1
                 before = self.steps
                 self._advance(n)
                 every = self._settings.values['sim.publish_every']

@@ -97,7 +97,7 @@ class PacedLoop:
             now = wait_until(start + (done + 1) * self.period, self._stop)
             if self._stop.is_set():
                 break
-            due = max(1, int((now - start) / self.period) - done)
+            due = pacing.periods_due(start, done, self.period, now)
             self.missed += due - 1
             done += due
             self.ticks += 1

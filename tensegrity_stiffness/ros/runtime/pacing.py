@@ -22,3 +22,10 @@ def wait_until(deadline: float, spin_s: float = SPIN_S, *,
         if deadline - now > spin_s:
             time.sleep(min(deadline - now - spin_s, max_sleep))
     return now
+
+
+def periods_due(start: float, done: int, period: float, now: float) -> int:
+    """Periods of a loop on absolute deadlines ``start + k period`` (``perf_counter`` s) due at
+    ``now`` after ``done`` of them: 1 on time, more when ``now`` is whole periods late (the
+    missed ones, run at once or counted, are ``due - 1``)."""
+    return max(1, int((now - start) / period) - done)
