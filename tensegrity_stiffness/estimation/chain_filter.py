@@ -56,7 +56,7 @@ from tensegrity_stiffness.estimation.joint_filter import (
     resolved_load,
     validated_filter_options,
 )
-from tensegrity_stiffness.geometry.screw import ScrewKinematics, check_in_chart
+from tensegrity_stiffness.geometry.screw import BLOCK_SWAP, ScrewKinematics, check_in_chart
 from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.chain import JointChain
@@ -66,7 +66,6 @@ __all__ = ['ChainFilter']
 
 FloatArray = NDArray[np.float64]
 
-_SWAP = np.array([3, 4, 5, 0, 1, 2])
 
 
 class ChainFilter(FilterTrack):
@@ -296,7 +295,7 @@ class ChainFilter(FilterTrack):
         damping = np.zeros((6 * n, 6 * n))
         for i, (jd, pred) in enumerate(zip(cd.joint_dynamics, preds, strict=True)):
             blk = slice(6 * i, 6 * i + 6)
-            JT[blk, blk] = pred.kinematics.J.T[:, _SWAP]
+            JT[blk, blk] = pred.kinematics.J.T[:, BLOCK_SWAP]
             if jd.damped:
                 L = pred.length_jacobian
                 damping[blk, blk] = (L.T * jd.string_damping) @ L

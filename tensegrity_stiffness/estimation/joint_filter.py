@@ -72,6 +72,7 @@ from tensegrity_stiffness.estimation.estimators import (
     wilson_hilferty,
 )
 from tensegrity_stiffness.geometry.screw import (
+    BLOCK_SWAP,
     ScrewKinematics,
     check_in_chart,
 )
@@ -127,7 +128,6 @@ KNOWN_LOAD_STD = 1e-6
 #: The load modes: the external wrench a state (random walk) or given at every step.
 LOAD_MODES = ('unknown', 'known')
 
-_SWAP = np.array([3, 4, 5, 0, 1, 2])
 _EYE3 = np.eye(3)
 
 
@@ -244,7 +244,7 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
     Jb_inv = Jl_inv @ Ad
     G = dynamics.spatial_inertia
     Ginv = np.linalg.inv(G) if inertia_inverse is None else inertia_inverse
-    spatial = (state.wrench + load)[_SWAP]  # [m; f] in {1}
+    spatial = (state.wrench + load)[BLOCK_SWAP]  # [m; f] in {1}
     AdT = Ad.T
     GV = G @ twist
     # ad_V^T = [[-hat(w), -hat(v)], [0, -hat(w)]]: -C(V) with its lower blocks replaced
@@ -262,9 +262,9 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
         d_twist -= D
     stacked = np.empty((6, 19))  # one product with G^-1 for the rate and its Jacobians
     stacked[:, 0] = total
-    stacked[:, 1:7] = AdT @ (state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
+    stacked[:, 1:7] = AdT @ (state.stiffness[BLOCK_SWAP] + _hat_pair(spatial) @ Jl)
     stacked[:, 7:13] = d_twist
-    stacked[:, 13:] = AdT[:, _SWAP]
+    stacked[:, 13:] = AdT[:, BLOCK_SWAP]
     out = Ginv @ stacked
     return BodyDynamics(Jb_inv @ twist, out[:, 0], Jb_inv, out[:, 1:7], out[:, 7:13],
                         out[:, 13:], prediction)
