@@ -45,6 +45,7 @@ from support.ros_harness import (  # noqa: E402
     pacing_spin_s,
     publish_paced,
     receiving,
+    timed_service_calls,
     unique_namespace,
 )
 from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
@@ -125,15 +126,10 @@ def _stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: floa
 def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Generator
                         ) -> tuple[list[float], int]:
     client = ros.client(SolveChainEquilibrium, f'{base}/solve_equilibrium')
-    times, failures = [], 0
-    for _ in range(calls):
-        W = np.r_[rng.normal(scale=0.03, size=3), rng.normal(scale=0.0006, size=3)]
-        request = SolveChainEquilibrium.Request(tip_wrench=conversions.wrench_to_msg(W))
-        start = time.perf_counter()
-        response = ros.call(client, request, timeout=30.0)
-        times.append(time.perf_counter() - start)
-        failures += not response.success
-    return times, failures
+    requests = (SolveChainEquilibrium.Request(tip_wrench=conversions.wrench_to_msg(
+        np.r_[rng.normal(scale=0.03, size=3), rng.normal(scale=0.0006, size=3)]))
+        for _ in range(calls))
+    return timed_service_calls(ros, client, requests)
 
 
 def main() -> None:

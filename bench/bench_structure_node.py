@@ -45,6 +45,7 @@ from support.ros_harness import (  # noqa: E402
     pacing_spin_s,
     publish_paced,
     receiving,
+    timed_service_calls,
     unique_namespace,
 )
 from tensegrity_stiffness.srv import SolveStructureEquilibrium  # noqa: E402
@@ -114,14 +115,8 @@ def service_round_trips(ros: RosClient, base: str, structure: Structure, calls: 
                         ) -> tuple[list[float], int]:
     client = ros.client(SolveStructureEquilibrium, f'{base}/solve_equilibrium')
     start = [v for P in structure.start_poses() for v in pose_vector(P)]
-    times, failures = [], 0
-    for _ in range(calls):
-        request = SolveStructureEquilibrium.Request(start=start)
-        begin = time.perf_counter()
-        response = ros.call(client, request, timeout=30.0)
-        times.append(time.perf_counter() - begin)
-        failures += not response.success
-    return times, failures
+    return timed_service_calls(ros, client, (SolveStructureEquilibrium.Request(start=start)
+                                             for _ in range(calls)))
 
 
 def run(name: str, loop: str, spin_s: float, args: argparse.Namespace,

@@ -36,9 +36,12 @@ void hat_pair(const double* p, double* out) {
 }
 
 // C = A B for row-major A (m x k), B (k x r).
-// (C must not overlap A or B.) Row-update form: the sums of a row are independent.
-void matmul(const double* __restrict A, const double* __restrict B, double* __restrict C,
-            int64_t m, int64_t k, int64_t r) {
+// (C must not overlap A or B.) Row-update form: the sums of a row are independent. With
+// kSkipZeros (matmul_sparse) the zero entries of A are skipped (adding 0 b is exact for
+// finite B).
+template <bool kSkipZeros>
+void matmul_rows(const double* __restrict A, const double* __restrict B, double* __restrict C,
+                 int64_t m, int64_t k, int64_t r) {
   for (int64_t i = 0; i < m; ++i) {
     double* __restrict c = C + i * r;
     for (int64_t j = 0; j < r; ++j) {
@@ -46,6 +49,11 @@ void matmul(const double* __restrict A, const double* __restrict B, double* __re
     }
     for (int64_t l = 0; l < k; ++l) {
       const double a = A[i * k + l];
+      if constexpr (kSkipZeros) {
+        if (a == 0.0) {
+          continue;
+        }
+      }
       const double* __restrict b = B + l * r;
       for (int64_t j = 0; j < r; ++j) {
         c[j] += a * b[j];
@@ -54,26 +62,16 @@ void matmul(const double* __restrict A, const double* __restrict B, double* __re
   }
 }
 
+void matmul(const double* __restrict A, const double* __restrict B, double* __restrict C,
+            int64_t m, int64_t k, int64_t r) {
+  matmul_rows<false>(A, B, C, m, k, r);
+}
+
 // matmul for a sparse A (the update's H: a string's row has 6 nonzero columns of 18; the
-// step's Phi): its zero entries are skipped (adding 0 b is exact for finite B).
+// step's Phi).
 void matmul_sparse(const double* __restrict A, const double* __restrict B, double* __restrict C,
                    int64_t m, int64_t k, int64_t r) {
-  for (int64_t i = 0; i < m; ++i) {
-    double* __restrict c = C + i * r;
-    for (int64_t j = 0; j < r; ++j) {
-      c[j] = 0.0;
-    }
-    for (int64_t l = 0; l < k; ++l) {
-      const double a = A[i * k + l];
-      if (a == 0.0) {
-        continue;
-      }
-      const double* __restrict b = B + l * r;
-      for (int64_t j = 0; j < r; ++j) {
-        c[j] += a * b[j];
-      }
-    }
-  }
+  matmul_rows<true>(A, B, C, m, k, r);
 }
 
 // Inverse of a 3 x 3 matrix by its adjugate; false when the determinant is zero.

@@ -19,6 +19,7 @@
 #include "tensegrity_stiffness/kernel.h"
 
 #include "dense_solve.hpp"
+#include "string_law.hpp"
 
 #include <cmath>
 #include <cstddef>
@@ -27,6 +28,8 @@
 namespace {
 
 using tensegrity_stiffness::detail::solve_in_place;
+using tensegrity_stiffness::detail::string_force;
+using tensegrity_stiffness::detail::StringForce;
 
 struct Coefficients {
   double a, b, c, b1, c1;
@@ -162,22 +165,11 @@ bool evaluate_one(const tsk_joint_model& model, const double* x, const double* r
     }
     lengths[j] = l;
     const double r0 = r[j];
-    const double lmax = r0 + model.max_stretch[j];
-    const bool is_slack = l <= r0;
-    const bool is_saturated = l >= lmax;
-    slack[j] = is_slack;
-    saturated[j] = is_saturated;
-    const bool taut = !(is_slack || is_saturated);
-    const double clipped = std::fmin(std::fmax(l, r0), lmax);
-    const double kj = model.k[j];
-    double tension, dtension;
-    if (model.law == TSK_LAW_HOOKE) {
-      tension = kj * (clipped - r0);
-      dtension = taut ? kj : 0.0;
-    } else {
-      tension = kj * (clipped - r0) / clipped;
-      dtension = taut ? kj * r0 / (clipped * clipped) : 0.0;
-    }
+    const StringForce force = string_force(l, r0, model.max_stretch[j], model.k[j], model.law);
+    slack[j] = force.slack;
+    saturated[j] = force.saturated;
+    const double tension = force.tension;
+    const double dtension = force.dtension;
     phi[j] = tension;
     const double beta = tension / l;
     const double f[3] = {beta * sv[0], beta * sv[1], beta * sv[2]};

@@ -18,6 +18,8 @@
 
 #include "tensegrity_stiffness/structure_kernel.h"
 
+#include "string_law.hpp"
+
 namespace {
 
 constexpr int64_t kMaxCount = int64_t(1) << 20;
@@ -164,21 +166,12 @@ int64_t tsk_structure_evaluate(int64_t n_bodies, int64_t n_strings, const int64_
       }
       lengths[j] = l;
       const double r0 = rest[j];
-      const double lmax = r0 + max_stretch[j];
-      const bool is_slack = l <= r0;
-      const bool is_saturated = l >= lmax;
-      slack[j] = is_slack;
-      saturated[j] = is_saturated;
-      const bool taut = !(is_slack || is_saturated);
-      const double clipped = std::fmin(std::fmax(l, r0), lmax);
-      double tension, dtension;
-      if (law == TSK_LAW_HOOKE) {
-        tension = k[j] * (clipped - r0);
-        dtension = taut ? k[j] : 0.0;
-      } else {
-        tension = k[j] * (clipped - r0) / clipped;
-        dtension = taut ? k[j] * r0 / (clipped * clipped) : 0.0;
-      }
+      const tensegrity_stiffness::detail::StringForce force =
+          tensegrity_stiffness::detail::string_force(l, r0, max_stretch[j], k[j], law);
+      slack[j] = force.slack;
+      saturated[j] = force.saturated;
+      const double tension = force.tension;
+      const double dtension = force.dtension;
       phi[j] = tension;
       const double beta = tension / l;
       const double f[3] = {beta * sv[0], beta * sv[1], beta * sv[2]};

@@ -37,7 +37,6 @@ from tensegrity_stiffness.estimation.estimators import (
     ChainEstimate,
     Measurements,
     PreparedMeasurements,
-    consistency_threshold,
     estimate_chain_state,
     tip_pose_jacobian,
     tip_stiffness_std,
@@ -47,14 +46,17 @@ from tensegrity_stiffness.estimation.joint_filter import (
     INITIAL_ANGULAR_VELOCITY_STD,
     INITIAL_LINEAR_VELOCITY_STD,
     KNOWN_LOAD_STD,
-    LOAD_MODES,
     LOST_TRACK_STEPS,
     MAX_PREDICTION,
     MAX_SUBSTEP,
+    FilterTrack,
     ProcessNoise,
+    checked_prediction_time,
     kalman_update,
+    resolved_load,
+    validated_filter_options,
 )
-from tensegrity_stiffness.geometry.screw import ScrewKinematics, check_in_chart
+from tensegrity_stiffness.geometry.screw import BLOCK_SWAP, ScrewKinematics, check_in_chart
 from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.chain import JointChain
@@ -64,10 +66,9 @@ __all__ = ['ChainFilter']
 
 FloatArray = NDArray[np.float64]
 
-_SWAP = np.array([3, 4, 5, 0, 1, 2])
 
 
-class ChainFilter:
+class ChainFilter(FilterTrack):
     """Extended Kalman filter of a spine's screws, screw rates and tip load (module docstring).
 
     ``chain``: a :class:`~tensegrity_stiffness.mechanics.chain.JointChain` (with ``inertias``,
@@ -94,14 +95,9 @@ class ChainFilter:
         else:
             raise ValueError(f'chain must be a JointChain or a ChainDynamics, got '
                              f'{type(chain).__name__}')
-        if load not in LOAD_MODES:
-            raise ValueError(f'load must be one of {LOAD_MODES}, got {load!r}')
-        if process_noise is None:
-            process_noise = DEFAULT_CHAIN_PROCESS_NOISE
-        if not isinstance(process_noise, ProcessNoise):
-            raise ValueError(f'process_noise must be a ProcessNoise, got '
-                             f'{type(process_noise).__name__}')
-        consistency_threshold(1, consistency_probability)
+        process_noise = validated_filter_options(load, process_noise,
+                                                 DEFAULT_CHAIN_PROCESS_NOISE,
+                                                 consistency_probability)
         self.chain = self.dynamics.chain
         self.n = self.chain.n_joints
         self.load = load
@@ -117,21 +113,7 @@ class ChainFilter:
         self.reset()
 
     # ------------------------------------------------------------------ state
-    @property
-    def initialized(self) -> bool:
-        """Whether the filter has a state."""
-        return self._x is not None
-
-    @property
-    def state(self) -> FloatArray | None:
-        """A copy of the state ``[xi; xi_dot; W]``."""
-        return None if self._x is None else self._x.copy()
-
-    @property
-    def covariance(self) -> FloatArray | None:
-        """A copy of the state's covariance."""
-        return None if self._P is None else self._P.copy()
-
+    # (initialized, state ``[xi; xi_dot; W]`` and covariance: FilterTrack's)
     def reset(self, screws: ArrayLike | None = None, estimate: ChainEstimate | None = None
               ) -> None:
         """Forget the track; with ``estimate`` (a successful :class:`ChainEstimate`) start from
@@ -185,10 +167,7 @@ class ChainFilter:
         Returns a :class:`ChainEstimate` with ``screw_rates`` and their covariance."""
         n = self.n
         chain = self.chain
-        t = float(t)
-        if not math.isfinite(t) or (self._t is not None and t < self._t):
-            raise ValueError(f't = {t} must be finite and not earlier than the last step '
-                             f'({self._t})')
+        t = checked_prediction_time(t, self._t)
         if len(joint_measurements) != n:
             raise ValueError(f'joint_measurements must hold one entry per joint ({n}), got '
                              f'{len(joint_measurements)}')
@@ -279,10 +258,7 @@ class ChainFilter:
         if self._x is None:
             raise ValueError('the filter has no state: reset it with screws or an estimate, or '
                              'step it with readings')
-        t = float(t)
-        if not math.isfinite(t) or (self._t is not None and t < self._t):
-            raise ValueError(f't = {t} must be finite and not earlier than the last step '
-                             f'({self._t})')
+        t = checked_prediction_time(t, self._t)
         rest = [m.validate_rest_lengths(r, batched=False) for m, r in
                 zip(self.chain.joints, self.chain.rest_lengths_per_joint(rest_lengths),
                     strict=True)]
@@ -292,17 +268,8 @@ class ChainFilter:
         self._t = t
 
     def _known(self, known_load: ArrayLike | None, measured: FloatArray | None) -> FloatArray:
-        if self.load == 'unknown':
-            if known_load is not None:
-                raise ValueError("known_load is given but the filter's load is 'unknown' (a "
-                                 'measured tip load goes into tip_wrench)')
-            return np.zeros(6)
-        if known_load is None:
-            return measured.copy() if measured is not None else np.zeros(6)
-        W = finite_array('known_load', known_load)
-        if W.shape != (6,):
-            raise ValueError(f'known_load must have shape (6,), got {W.shape}')
-        return W
+        return resolved_load(self.load, known_load, measured,
+                             'a measured tip load goes into tip_wrench')
 
     # ------------------------------------------------------------------ model
     def _load_of(self, load: FloatArray) -> FloatArray:
@@ -328,7 +295,7 @@ class ChainFilter:
         damping = np.zeros((6 * n, 6 * n))
         for i, (jd, pred) in enumerate(zip(cd.joint_dynamics, preds, strict=True)):
             blk = slice(6 * i, 6 * i + 6)
-            JT[blk, blk] = pred.kinematics.J.T[:, _SWAP]
+            JT[blk, blk] = pred.kinematics.J.T[:, BLOCK_SWAP]
             if jd.damped:
                 L = pred.length_jacobian
                 damping[blk, blk] = (L.T * jd.string_damping) @ L

@@ -72,6 +72,7 @@ from tensegrity_stiffness.estimation.estimators import (
     wilson_hilferty,
 )
 from tensegrity_stiffness.geometry.screw import (
+    BLOCK_SWAP,
     ScrewKinematics,
     check_in_chart,
 )
@@ -92,12 +93,16 @@ __all__ = [
     'MAX_PREDICTION',
     'MAX_SUBSTEP',
     'BodyDynamics',
+    'FilterTrack',
     'JointFilter',
     'ProcessNoise',
     'UpdateResult',
     'body_dynamics',
+    'checked_prediction_time',
     'innovation_outliers',
     'kalman_update',
+    'resolved_load',
+    'validated_filter_options',
 ]
 
 FloatArray = NDArray[np.float64]
@@ -123,7 +128,6 @@ KNOWN_LOAD_STD = 1e-6
 #: The load modes: the external wrench a state (random walk) or given at every step.
 LOAD_MODES = ('unknown', 'known')
 
-_SWAP = np.array([3, 4, 5, 0, 1, 2])
 _EYE3 = np.eye(3)
 
 
@@ -240,7 +244,7 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
     Jb_inv = Jl_inv @ Ad
     G = dynamics.spatial_inertia
     Ginv = np.linalg.inv(G) if inertia_inverse is None else inertia_inverse
-    spatial = (state.wrench + load)[_SWAP]  # [m; f] in {1}
+    spatial = (state.wrench + load)[BLOCK_SWAP]  # [m; f] in {1}
     AdT = Ad.T
     GV = G @ twist
     # ad_V^T = [[-hat(w), -hat(v)], [0, -hat(w)]]: -C(V) with its lower blocks replaced
@@ -258,9 +262,9 @@ def body_dynamics(dynamics: JointDynamics, prediction: sm.StringPrediction, twis
         d_twist -= D
     stacked = np.empty((6, 19))  # one product with G^-1 for the rate and its Jacobians
     stacked[:, 0] = total
-    stacked[:, 1:7] = AdT @ (state.stiffness[_SWAP] + _hat_pair(spatial) @ Jl)
+    stacked[:, 1:7] = AdT @ (state.stiffness[BLOCK_SWAP] + _hat_pair(spatial) @ Jl)
     stacked[:, 7:13] = d_twist
-    stacked[:, 13:] = AdT[:, _SWAP]
+    stacked[:, 13:] = AdT[:, BLOCK_SWAP]
     out = Ginv @ stacked
     return BodyDynamics(Jb_inv @ twist, out[:, 0], Jb_inv, out[:, 1:7], out[:, 7:13],
                         out[:, 13:], prediction)
@@ -300,7 +304,75 @@ def body_dynamics_kernel(library: Any, dynamics: JointDynamics,
                         out[120:].reshape(6, 6), prediction, out)
 
 
-class JointFilter:
+class FilterTrack:
+    """The track a recursive filter keeps (``_x``, ``_P``): the properties
+    :class:`JointFilter` and :class:`~tensegrity_stiffness.estimation.chain_filter.ChainFilter`
+    share."""
+
+    _x: FloatArray | None
+    _P: FloatArray | None
+
+    @property
+    def initialized(self) -> bool:
+        """Whether the filter has a state (after ``reset`` with one, or a first step)."""
+        return self._x is not None
+
+    @property
+    def state(self) -> FloatArray | None:
+        """A copy of the state (its parts: the filter's class docstring)."""
+        return None if self._x is None else self._x.copy()
+
+    @property
+    def covariance(self) -> FloatArray | None:
+        """A copy of the state's covariance."""
+        return None if self._P is None else self._P.copy()
+
+
+def validated_filter_options(load: str, process_noise: ProcessNoise | None,
+                             default_noise: ProcessNoise, consistency_probability: float
+                             ) -> ProcessNoise:
+    """A filter's ``load`` mode (one of :data:`LOAD_MODES`), ``process_noise`` (None:
+    ``default_noise``) and ``consistency_probability`` checked (ValueError naming the field);
+    returns the process noise in force."""
+    if load not in LOAD_MODES:
+        raise ValueError(f'load must be one of {LOAD_MODES}, got {load!r}')
+    if process_noise is None:
+        process_noise = default_noise
+    if not isinstance(process_noise, ProcessNoise):
+        raise ValueError(f'process_noise must be a ProcessNoise, got '
+                         f'{type(process_noise).__name__}')
+    consistency_threshold(1, consistency_probability)  # checks the probability
+    return process_noise
+
+
+def checked_prediction_time(t: float, last: float | None) -> float:
+    """``t`` (s) as a float, ValueError unless finite and not earlier than ``last``."""
+    t = float(t)
+    if not math.isfinite(t) or (last is not None and t < last):
+        raise ValueError(f't = {t} must be finite and not earlier than the last step '
+                         f'({last})')
+    return t
+
+
+def resolved_load(mode: str, known_load: ArrayLike | None, measured: FloatArray | None,
+                  measured_hint: str) -> FloatArray:
+    """The load (6,) a step predicts with: zero with ``mode='unknown'`` (ValueError if
+    ``known_load`` is given; ``measured_hint`` says where a measured load goes), else
+    ``known_load``, by default the ``measured`` load, else zero."""
+    if mode == 'unknown':
+        if known_load is not None:
+            raise ValueError("known_load is given but the filter's load is 'unknown' "
+                             f'({measured_hint})')
+        return np.zeros(6)
+    if known_load is None:
+        return measured.copy() if measured is not None else np.zeros(6)
+    W = finite_array('known_load', known_load)
+    if W.shape != (6,):
+        raise ValueError(f'known_load must have shape (6,), got {W.shape}')
+    return W
+
+
+class JointFilter(FilterTrack):
     """Extended Kalman filter of one joint's pose, twist and load (module docstring).
 
     ``model``: a :class:`~tensegrity_stiffness.mechanics.joint.JointModel` (with ``inertia``,
@@ -337,14 +409,8 @@ class JointFilter:
         else:
             raise ValueError(f'model must be a JointModel or a JointDynamics, got '
                              f'{type(model).__name__}')
-        if load not in LOAD_MODES:
-            raise ValueError(f'load must be one of {LOAD_MODES}, got {load!r}')
-        if process_noise is None:
-            process_noise = DEFAULT_PROCESS_NOISE
-        if not isinstance(process_noise, ProcessNoise):
-            raise ValueError(f'process_noise must be a ProcessNoise, got '
-                             f'{type(process_noise).__name__}')
-        consistency_threshold(1, consistency_probability)  # checks the probability
+        process_noise = validated_filter_options(load, process_noise, DEFAULT_PROCESS_NOISE,
+                                                 consistency_probability)
         g = finite_array('gravity', gravity)
         if g.shape != (3,):
             raise ValueError(f'gravity must have 3 values (m/s^2 in {{1}}), got {g.size}')
@@ -373,21 +439,8 @@ class JointFilter:
         self.reset()
 
     # ------------------------------------------------------------------ state
-    @property
-    def initialized(self) -> bool:
-        """Whether the filter has a state (after :meth:`reset` with one, or a first step)."""
-        return self._x is not None
-
-    @property
-    def state(self) -> FloatArray | None:
-        """A copy of the state ``[xi; V; W]`` (18,) (``[xi; V]`` (12,) with a known load)."""
-        return None if self._x is None else self._x.copy()
-
-    @property
-    def covariance(self) -> FloatArray | None:
-        """A copy of the state's covariance."""
-        return None if self._P is None else self._P.copy()
-
+    # (initialized, state: ``[xi; V; W]`` (18,), ``[xi; V]`` (12,) with a known load, and
+    # covariance: FilterTrack's)
     def reset(self, screw: ArrayLike | None = None, estimate: JointEstimate | None = None,
               covariance: ArrayLike | None = None, twist: ArrayLike | None = None,
               load: ArrayLike | None = None) -> None:
@@ -551,10 +604,7 @@ class JointFilter:
         if self._x is None:
             raise ValueError('the filter has no state: reset it with a screw or an estimate, or '
                              'step it with readings')
-        t = float(t)
-        if not math.isfinite(t) or (self._t is not None and t < self._t):
-            raise ValueError(f't = {t} must be finite and not earlier than the last step '
-                             f'({self._t})')
+        t = checked_prediction_time(t, self._t)
         rest = self.model.validate_rest_lengths(rest_lengths, batched=False)
         load = self._load(Measurements().prepared(self.model.n_strings), known_load)
         if self._t is not None:
@@ -581,17 +631,8 @@ class JointFilter:
         return r, H, labels
 
     def _load(self, prep: PreparedMeasurements, known_load: ArrayLike | None) -> FloatArray:
-        if self.load == 'unknown':
-            if known_load is not None:
-                raise ValueError("known_load is given but the filter's load is 'unknown' "
-                                 '(a measured load goes into measurements.external_wrench)')
-            return np.zeros(6)
-        if known_load is None:
-            return prep.wrench.copy() if prep.wrench is not None else np.zeros(6)
-        W = finite_array('known_load', known_load)
-        if W.shape != (6,):
-            raise ValueError(f'known_load must have shape (6,), got {W.shape}')
-        return W
+        return resolved_load(self.load, known_load, prep.wrench,
+                             'a measured load goes into measurements.external_wrench')
 
     def _measured_dof(self, prep: PreparedMeasurements) -> int:
         """Degrees of freedom the readings give the pose (the static estimator's count, an

@@ -38,6 +38,10 @@ SCALAR_KINEMATICS_ROWS = 16
 #: The chart of screw coordinates: |omega| < CHART_LIMIT (the left Jacobian G, eq. 4, is singular
 #: at 2 pi, so neither dT/dxi nor K can be inverted there).
 CHART_LIMIT = 2.0 * math.pi
+#: The swap of the 3-blocks of a 6-vector: ``[omega; v] <-> [v; omega]`` (index array, its own
+#: inverse; ``Pi`` of the chain's and the dynamics' equations).
+BLOCK_SWAP = np.array([3, 4, 5, 0, 1, 2])
+BLOCK_SWAP.flags.writeable = False
 
 
 def check_in_chart(xi: ArrayLike, name: str = 'screw') -> None:

@@ -73,6 +73,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.screw import (
+    BLOCK_SWAP,
     ScrewKinematics,
     check_in_chart,
     exp_se3,
@@ -106,8 +107,6 @@ MAX_JOINTS = 100
 #: read by :func:`~tensegrity_stiffness.mechanics.dynamics.chain_inertias_from_config`).
 CHAIN_KEYS = ('n_joints', 'link_offsets', 'tool', 'link_masses', 'link_coms', 'gravity',
               'link_inertias')
-#: Swap of the 3-blocks: [omega; v] <-> [v; omega].
-_SWAP = np.array([3, 4, 5, 0, 1, 2])
 
 
 def _load_transport(B: FloatArray) -> FloatArray:
@@ -401,7 +400,7 @@ class JointChain:
         xi = self.validated_screws(screws)
         kin = ScrewKinematics(xi)
         P = self._frames(kin.T)[0]
-        return np.concatenate(list(adjoint(P) @ kin.J[:, _SWAP]), axis=1)
+        return np.concatenate(list(adjoint(P) @ kin.J[:, BLOCK_SWAP]), axis=1)
 
     # ------------------------------------------------------------------ evaluation
     def evaluate(self, screws: ArrayLike, rest_lengths: Any = None) -> ChainState:
@@ -496,7 +495,7 @@ class JointChain:
     def residual_screw_jacobian(self, D: FloatArray, screws: FloatArray) -> FloatArray:
         """``dr/dxi = dr/d(delta) diag(Pi J_j)`` (6N, 6N) from the twist form ``D``."""
         n = self.n_joints
-        PJ = ScrewKinematics(screws).J[:, _SWAP]
+        PJ = ScrewKinematics(screws).J[:, BLOCK_SWAP]
         return np.einsum('ajb,jbc->ajc', D.reshape(6 * n, n, 6), PJ).reshape(6 * n, 6 * n)
 
     def _tip(self, state: ChainState, W: FloatArray | None, g: FloatArray, base: bool,

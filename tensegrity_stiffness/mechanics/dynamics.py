@@ -64,7 +64,14 @@ from scipy.linalg.lapack import dgeev
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.components import SCREW_NAMES
-from tensegrity_stiffness.geometry.screw import ScrewKinematics, check_in_chart, hat, hat3, vee
+from tensegrity_stiffness.geometry.screw import (
+    BLOCK_SWAP,
+    ScrewKinematics,
+    check_in_chart,
+    hat,
+    hat3,
+    vee,
+)
 from tensegrity_stiffness.geometry.transforms import adjoint
 from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics import kernel
@@ -96,7 +103,6 @@ REAL_TOLERANCE = 1e-9
 #: Labels of the screw coordinates and of the modes' frequencies (for messages and reports).
 SCREW_LABELS = SCREW_NAMES
 
-_SWAP = np.array([3, 4, 5, 0, 1, 2])
 _EYE3 = np.eye(3)
 
 
@@ -634,7 +640,7 @@ class JointDynamics:
         return self._force(state, Jl, W, r)
 
     def _force(self, state: Any, Jl: FloatArray, W: FloatArray, r: FloatArray) -> FloatArray:
-        Q = Jl.T @ (state.wrench + W)[_SWAP]
+        Q = Jl.T @ (state.wrench + W)[BLOCK_SWAP]
         if self.damped and np.any(r):
             L = self._length_jacobian(state.string_vectors, state.lengths, Jl)
             Q -= L.T @ (self.string_damping * (L @ r))
@@ -705,7 +711,7 @@ class JointDynamics:
         G = self.spatial_inertia
         M = Jb.T @ G @ Jb
         net = state.wrench + W
-        JlT_Pi = Jl.T[:, _SWAP]
+        JlT_Pi = Jl.T[:, BLOCK_SWAP]
         n = self.model.n_strings
         damped = self.damped
         unit = self._unit_wrenches(state.string_vectors, state.lengths) \
@@ -718,7 +724,7 @@ class JointDynamics:
             extra = np.empty((6, 6))
             for i in range(6):
                 dM = dJb[i].T @ G @ Jb + Jb.T @ G @ dJb[i]
-                extra[:, i] = dJl[i].T @ net[_SWAP] - dM @ acc
+                extra[:, i] = dJl[i].T @ net[BLOCK_SWAP] - dM @ acc
             parts[0] = parts[0] + extra
         if damped:
             L = -unit @ Jl
@@ -773,12 +779,12 @@ class JointDynamics:
         W = optional_vector('external_wrench', external_wrench)
         A21, A22, _, Jl = self._blocks(x, self._rest(rest_lengths), W, inputs=False)
         if not self.damped:
-            return _undamped_modes(A21, Jl[_SWAP], x)
+            return _undamped_modes(A21, Jl[BLOCK_SWAP], x)
         A = np.zeros((12, 12))
         A[:6, 6:] = np.eye(6)
         A[6:, :6] = A21
         A[6:, 6:] = A22
-        return _modes(A, Jl[_SWAP], x, self.damped)
+        return _modes(A, Jl[BLOCK_SWAP], x, self.damped)
 
     def modes_at_pose(self, xi: ArrayLike, rest_lengths: ArrayLike | None = None
                       ) -> tuple[JointModes, FloatArray]:
@@ -801,7 +807,7 @@ class JointDynamics:
         A, B = self.linearize(x, rest_lengths, external_wrench)
         Jl = ScrewKinematics(x).J
         C = np.zeros((6, 12))
-        C[:, :6] = Jl[_SWAP]
+        C[:, :6] = Jl[BLOCK_SWAP]
         return _frequency_response(A, B[:, -6:], C, frequencies_hz)
 
 
@@ -960,7 +966,7 @@ class ChainDynamics:
         Q = np.empty(6 * self.n_joints)
         for i, jd in enumerate(self.joint_dynamics):
             Jl = ScrewKinematics(xi[i]).J
-            q = Jl.T @ res[i][_SWAP]
+            q = Jl.T @ res[i][BLOCK_SWAP]
             if jd.damped and np.any(r[i]):
                 state = jd.model.evaluate(xi[i], rest[i])
                 L = jd._length_jacobian(state.string_vectors, state.lengths, Jl)
@@ -1018,7 +1024,7 @@ class ChainDynamics:
         for i, jd in enumerate(self.joint_dynamics):
             Jl = ScrewKinematics(xi[i]).J
             blk = slice(6 * i, 6 * i + 6)
-            JT[blk, blk] = Jl.T[:, _SWAP]
+            JT[blk, blk] = Jl.T[:, BLOCK_SWAP]
             dQdl[blk, starts[i]:starts[i + 1]] = Jl.T @ jd._rest_derivative(states[i], rest[i])
             dQdW[blk] = JT[blk, blk] @ Ad[i].T
             if jd.damped:
@@ -1038,7 +1044,7 @@ class ChainDynamics:
         """The 6N modes at an equilibrium (:class:`JointModes`; twists per joint in {1}_i)."""
         xi = self._screws(screws)
         A, _ = self.linearize(xi, rest_lengths, tip_wrench)
-        twist = scipy.linalg.block_diag(*[ScrewKinematics(x).J[_SWAP] for x in xi])
+        twist = scipy.linalg.block_diag(*[ScrewKinematics(x).J[BLOCK_SWAP] for x in xi])
         if not self.damped:
             m = 6 * self.n_joints
             return _undamped_modes(A[m:, :m], twist, xi)

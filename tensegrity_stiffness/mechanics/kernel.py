@@ -26,7 +26,7 @@ import ctypes
 import functools
 import os
 from pathlib import Path
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -108,6 +108,16 @@ def check(status: int, call: str) -> None:
                           f'(TSK_ERROR_{ERRORS.get(status, "UNKNOWN")})')
 
 
+
+def bind(lib: ctypes.CDLL, name: str, argtypes: list[Any]) -> Any:
+    """The entry point ``name`` of a loaded kernel ``lib``, typed: ``argtypes`` (ctypes types)
+    and the ``int64`` status or size every ``tsk_*`` function returns; AttributeError when
+    ``lib`` lacks it."""
+    function = getattr(lib, name)
+    function.restype = _I
+    function.argtypes = argtypes
+    return function
+
 def address(arr: NDArray) -> int:
     """Data address of a C-contiguous array for a pointer argument of the kernel (a writable
     one through ctypes' buffer view: a third of the time of ``__array_interface__``).
@@ -154,58 +164,29 @@ class _Library:
         version = lib.tsk_abi_version()
         if version != ABI_VERSION:
             raise OSError(f'{path} speaks ABI {version}, this package {ABI_VERSION}')
-        lib.tsk_joint_model_layout.restype = _I
-        lib.tsk_joint_model_layout.argtypes = [_P, _I]
+        model_layout_of = bind(lib, 'tsk_joint_model_layout', [_P, _I])
         layout = np.zeros(32, dtype=np.int64)
-        count = lib.tsk_joint_model_layout(address(layout), layout.size)
+        count = model_layout_of(address(layout), layout.size)
         self.model_layout = layout[:max(count, 0)].tolist()
         if self.model_layout != model_layout():
             raise OSError(f'{path}: tsk_joint_model layout {self.model_layout} differs from '
                           f'the ctypes mirror {model_layout()}')
-        for name in ('tsk_joint_packed_size', 'tsk_joint_batch_size'):
-            getattr(lib, name).restype = _I
-        lib.tsk_joint_packed_size.argtypes = [_I]
-        lib.tsk_joint_batch_size.argtypes = [_I, _I]
-        self.packed_size = lib.tsk_joint_packed_size
-        self.batch_size = lib.tsk_joint_batch_size
-        self.evaluate = lib.tsk_joint_evaluate
-        self.evaluate.restype = _I
-        self.evaluate.argtypes = [_P, _I, _P, _P, _I, _I, _P, _I]
-        self.evaluate_packed = lib.tsk_joint_evaluate_packed
-        self.evaluate_packed.restype = _I
-        self.evaluate_packed.argtypes = [_P, _I, _P, _I]
-        lib.tsk_joint_measure_size.restype = _I
-        lib.tsk_joint_measure_size.argtypes = [_I]
-        self.measure_size = lib.tsk_joint_measure_size
-        self.measure_packed = lib.tsk_joint_measure_packed
-        self.measure_packed.restype = _I
-        self.measure_packed.argtypes = [_P, _I, _P, _I, _P, _I]
-        for name in ('tsk_joint_linear_size', 'tsk_joint_pose_terms_size'):
-            getattr(lib, name).restype = _I
-            getattr(lib, name).argtypes = [_I]
-        self.linear_size = lib.tsk_joint_linear_size
-        self.pose_terms_size = lib.tsk_joint_pose_terms_size
-        self.linear_model = lib.tsk_joint_linear_model
-        self.linear_model.restype = _I
-        self.linear_model.argtypes = [_P, _P, _P, _D, _P, _I, _P, _I]
-        self.pose_terms = lib.tsk_joint_pose_terms
-        self.pose_terms.restype = _I
-        self.pose_terms.argtypes = [_P, _P, _I]
-        self.transform = lib.tsk_joint_transform
-        self.transform.restype = _I
-        self.transform.argtypes = [_P, _P, _I]
-        lib.tsk_qp_face_size.restype = _I
-        lib.tsk_qp_face_size.argtypes = [_I, _I]
-        self.qp_face_size = lib.tsk_qp_face_size
-        self.qp_warm_face = lib.tsk_qp_warm_face
-        self.qp_warm_face.restype = _I
-        self.qp_warm_face.argtypes = [_I, _I, _D, _D, _D, _D, _P, _I]
-        self.chain_frames = lib.tsk_chain_frames
-        self.chain_frames.restype = _I
-        self.chain_frames.argtypes = [_I, _P, _P, _P, _P, _I]
-        self.chain_tip = lib.tsk_chain_tip
-        self.chain_tip.restype = _I
-        self.chain_tip.argtypes = [_I] + [_P] * 8 + [_I, _P, _I]
+        self.packed_size = bind(lib, 'tsk_joint_packed_size', [_I])
+        self.batch_size = bind(lib, 'tsk_joint_batch_size', [_I, _I])
+        self.evaluate = bind(lib, 'tsk_joint_evaluate', [_P, _I, _P, _P, _I, _I, _P, _I])
+        self.evaluate_packed = bind(lib, 'tsk_joint_evaluate_packed', [_P, _I, _P, _I])
+        self.measure_size = bind(lib, 'tsk_joint_measure_size', [_I])
+        self.measure_packed = bind(lib, 'tsk_joint_measure_packed', [_P, _I, _P, _I, _P, _I])
+        self.linear_size = bind(lib, 'tsk_joint_linear_size', [_I])
+        self.pose_terms_size = bind(lib, 'tsk_joint_pose_terms_size', [_I])
+        self.linear_model = bind(lib, 'tsk_joint_linear_model',
+                                 [_P, _P, _P, _D, _P, _I, _P, _I])
+        self.pose_terms = bind(lib, 'tsk_joint_pose_terms', [_P, _P, _I])
+        self.transform = bind(lib, 'tsk_joint_transform', [_P, _P, _I])
+        self.qp_face_size = bind(lib, 'tsk_qp_face_size', [_I, _I])
+        self.qp_warm_face = bind(lib, 'tsk_qp_warm_face', [_I, _I, _D, _D, _D, _D, _P, _I])
+        self.chain_frames = bind(lib, 'tsk_chain_frames', [_I, _P, _P, _P, _P, _I])
+        self.chain_tip = bind(lib, 'tsk_chain_tip', [_I] + [_P] * 8 + [_I, _P, _I])
         self._bind_filter(lib)
         self.path = path
         self._lib = lib
@@ -213,27 +194,16 @@ class _Library:
 
     def _bind_filter(self, lib: ctypes.CDLL) -> None:
         """The joint filter's entry points (``tsk_filter_*``), typed."""
-        self.filter_body_dynamics = lib.tsk_filter_body_dynamics
-        self.filter_body_dynamics.restype = _I
-        self.filter_body_dynamics.argtypes = [_I, _I] + [_P] * 11 + [_I]
-        for name in ('tsk_filter_propagate_size', 'tsk_filter_update_size'):
-            getattr(lib, name).restype = _I
-        lib.tsk_filter_propagate_size.argtypes = [_I]
-        lib.tsk_filter_update_size.argtypes = [_I, _I]
-        self.filter_propagate_size = lib.tsk_filter_propagate_size
-        self.filter_update_size = lib.tsk_filter_update_size
-        self.filter_propagate = lib.tsk_filter_propagate
-        self.filter_propagate.restype = _I
-        self.filter_propagate.argtypes = [_I, _D, _P, _P, _P, _P, _P, _I]
-        self.filter_update = lib.tsk_filter_update
-        self.filter_update.restype = _I
-        self.filter_update.argtypes = [_I, _I, _P, _I]
-        self.filter_motion_rows = lib.tsk_filter_motion_rows
-        self.filter_motion_rows.restype = _I
-        self.filter_motion_rows.argtypes = [_I, _I, _D, _P, _P, _P, _P]
-        self.filter_output = lib.tsk_filter_output
-        self.filter_output.restype = _I
-        self.filter_output.argtypes = [_I, _P, _P, _P, _P, _P, _I]
+        self.filter_body_dynamics = bind(lib, 'tsk_filter_body_dynamics',
+                                         [_I, _I] + [_P] * 11 + [_I])
+        self.filter_propagate_size = bind(lib, 'tsk_filter_propagate_size', [_I])
+        self.filter_update_size = bind(lib, 'tsk_filter_update_size', [_I, _I])
+        self.filter_propagate = bind(lib, 'tsk_filter_propagate',
+                                     [_I, _D, _P, _P, _P, _P, _P, _I])
+        self.filter_update = bind(lib, 'tsk_filter_update', [_I, _I, _P, _I])
+        self.filter_motion_rows = bind(lib, 'tsk_filter_motion_rows',
+                                       [_I, _I, _D, _P, _P, _P, _P])
+        self.filter_output = bind(lib, 'tsk_filter_output', [_I, _P, _P, _P, _P, _P, _I])
 
 
 @functools.lru_cache(maxsize=1)

@@ -52,6 +52,11 @@ from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
+from tensegrity_stiffness.ros.runtime.pacing import (  # noqa: F401 (SPIN_S kept)
+    SPIN_S,
+    periods_due,
+    wait_until,
+)
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.tf_broadcast import FrameBroadcaster
 from tensegrity_stiffness.ros.runtime.topics import (
@@ -73,9 +78,6 @@ NODE_NAME = 'sim_node'
 SUBSCRIBERS_PERIOD_S = 0.25
 #: Seconds between /diagnostics messages (steps, missed steps, real-time factor, rejections).
 DIAGNOSTICS_PERIOD_S = 1.0
-#: Sleep no closer than this to a step's deadline; wait the rest by spinning (s). The loop keeps
-#: its 1 kHz to tens of microseconds at the cost of this much CPU per period.
-SPIN_S = 1e-4
 #: Label of the measured arrays (string order of the config, joint-major for a spine).
 LENGTHS_LABEL = 'measured string lengths [m], string order of the config'
 TENSIONS_LABEL = 'measured string tensions [N], string order of the config'
@@ -334,12 +336,9 @@ class SimNode(Node):
             while not self._stop.is_set() and self.context.ok():
                 n = 1
                 if self._real_time:
-                    deadline = start + (self.steps + 1) * self._period
-                    now = _wait_until(deadline)
-                    due = int((now - start) / self._period) - self.steps
-                    if due > 1:
-                        self.missed_steps += due - 1
-                        n = due
+                    now = wait_until(start + (self.steps + 1) * self._period)
+                    n = periods_due(start, self.steps, self._period, now)
+                    self.missed_steps += n - 1
                 before = self.steps
                 self._advance(n)
                 every = self._settings.values['sim.publish_every']
@@ -451,14 +450,6 @@ class SimNode(Node):
                 f'{self.get_fully_qualified_name()}: twin', level, message, values,
                 hardware_id=self._settings.base_frame)],
             self.get_clock().now().to_msg()))
-
-
-def _wait_until(deadline: float) -> float:
-    """Sleep until :data:`SPIN_S` before ``deadline``, spin the rest; the time it stopped."""
-    while (now := time.perf_counter()) < deadline:
-        if deadline - now > SPIN_S:
-            time.sleep(deadline - now - SPIN_S)
-    return now
 
 
 def main(args: list[str] | None = None) -> None:

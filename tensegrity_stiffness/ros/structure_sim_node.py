@@ -54,7 +54,7 @@ from tensegrity_stiffness.nodes.structure_sim_node import (
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
-from tensegrity_stiffness.ros.runtime.pacing import wait_until
+from tensegrity_stiffness.ros.runtime.pacing import periods_due, wait_until
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.topics import (
     LATCHED_QOS,
@@ -321,10 +321,8 @@ class StructureSimNode(Node):
                 n = 1
                 if self._real_time:
                     now = wait_until(start + (self.steps + 1) * self._period)
-                    due = int((now - start) / self._period) - self.steps
-                    if due > 1:
-                        self.missed_steps += due - 1
-                        n = due
+                    n = periods_due(start, self.steps, self._period, now)
+                    self.missed_steps += n - 1
                 self._take_inputs()
                 before = self.steps
                 self._sim.step(n)

@@ -64,7 +64,14 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.geometry.screw import ScrewKinematics, exp_se3, exp_so3, hat3, log_se3
+from tensegrity_stiffness.geometry.screw import (
+    BLOCK_SWAP,
+    ScrewKinematics,
+    exp_se3,
+    exp_so3,
+    hat3,
+    log_se3,
+)
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.equilibrium import (
     MAX_NEWTON_ITERATIONS,
@@ -99,8 +106,6 @@ SLIP_START = 1e-6
 MAX_ROLLS = 4
 #: Steps of the scan for the angle of a roll-over (then bisection).
 ROLL_SCAN = 180
-#: Swap of the 3-blocks: [omega; v] <-> [v; omega].
-_SWAP = np.array([3, 4, 5, 0, 1, 2])
 STICK, SLIDE = 'stick', 'slide'
 
 
@@ -294,7 +299,7 @@ class _Problem:
         for k, i in enumerate(self.free):
             kin = ScrewKinematics(x[6 * k:6 * k + 6])
             T[i] = kin.T @ self.reference[i]
-            PJ[k] = kin.J[_SWAP]
+            PJ[k] = kin.J[BLOCK_SWAP]
         return T, PJ
 
     def moment_rows(self, size: int) -> FloatArray:

@@ -40,14 +40,12 @@ def _load() -> tuple[Any, str]:
         return None, f'numpy ({kernel.status()})'
     try:
         lib = ctypes.CDLL(str(library.path))
-        size, evaluate = (getattr(lib, name) for name in ENTRY_POINTS)
+        size, evaluate = (kernel.bind(lib, name, argtypes) for name, argtypes in zip(
+            ENTRY_POINTS, ([_I, _I], [_I, _I, _P, _P, _P, _P, _P, _I, _D, _P, _I, _P, _I]),
+            strict=True))
     except (OSError, AttributeError) as exc:
         return None, f'numpy ({library.path} has no structure kernel: {exc}; rebuild: bash ' \
                      'scripts/setup_env.sh)'
-    size.restype = _I
-    size.argtypes = [_I, _I]
-    evaluate.restype = _I
-    evaluate.argtypes = [_I, _I, _P, _P, _P, _P, _P, _I, _D, _P, _I, _P, _I]
     return (size, evaluate), f'compiled kernel {library.path}'
 
 

@@ -34,6 +34,7 @@ import numpy as np
 import scipy.linalg
 from numpy.typing import NDArray
 
+from tensegrity_stiffness.geometry.screw import BLOCK_SWAP
 from tensegrity_stiffness.geometry.transforms import adjoint
 from tensegrity_stiffness.mechanics.dynamics import state_matrix_modes
 from tensegrity_stiffness.structures.equilibrium import StructureEquilibrium, gauge_kind
@@ -43,7 +44,6 @@ FloatArray = NDArray[np.float64]
 
 #: An eigenvalue of M^-1 K is a zero mode when its modulus is at most this times the largest.
 ZERO_MODE_TOLERANCE = 1e-8
-_SWAP = np.array([3, 4, 5, 0, 1, 2])
 
 
 def mass_matrix(structure: Structure, T: FloatArray) -> FloatArray:
@@ -54,7 +54,7 @@ def mass_matrix(structure: Structure, T: FloatArray) -> FloatArray:
     for i, body in enumerate(structure.bodies):
         if body.mass == 0.0:
             continue
-        G = body.link_inertia.spatial_inertia(body.node_array)[np.ix_(_SWAP, _SWAP)]
+        G = body.link_inertia.spatial_inertia(body.node_array)[np.ix_(BLOCK_SWAP, BLOCK_SWAP)]
         inverse = np.linalg.inv(adjoint(T[i]))
         M[6 * i:6 * i + 6, 6 * i:6 * i + 6] = inverse.T @ G @ inverse
     return M

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 from support import REPO
+from support.cli_runs import run, run_json
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.cli import plots
@@ -31,7 +32,6 @@ from tensegrity_stiffness.cli.common import (
     parse_number,
 )
 from tensegrity_stiffness.cli.figure_commands import FIGURE_FILES, README_JOINT_SCREW, png_size
-from tensegrity_stiffness.cli.parser import main
 from tensegrity_stiffness.cli.progress import ProgressBar
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics import sweeps
@@ -62,18 +62,6 @@ MAX_FIGURE_BYTES = 300_000
 @pytest.fixture(scope='module')
 def model() -> JointModel:
     return JointModel.from_yaml(CONFIG)
-
-
-def run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def run_json(capsys: pytest.CaptureFixture, *argv: str) -> dict:
-    code, out, err = run(capsys, *argv, '--json')
-    assert code == 0, err
-    return json.loads(out)
 
 
 def screw_args(xi: np.ndarray) -> list[str]:

@@ -14,17 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from support.cli_runs import run
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.cli.parser import main
 from tensegrity_stiffness.mechanics.chain import MAX_JOINTS, JointChain
 from tensegrity_stiffness.mechanics.joint import MAX_STRINGS, JointModel
-
-
-def run(capsys, *argv: object) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def refused(capsys, *argv: object) -> str:

@@ -11,21 +11,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from support.cli_runs import run
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.cli.common import EXIT_BAD_INPUT, EXIT_OK
 from tensegrity_stiffness.cli.dynamics_plots import DEFAULT_SIZE
-from tensegrity_stiffness.cli.parser import main
 from tensegrity_stiffness.mechanics import dynamics
 
 #: Relative agreement of the table's 4-decimal frequencies with the library.
 TABLE_RTOL = 1e-4
-
-
-def run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def png_header_size(path: Path) -> tuple[int, int]:

@@ -14,23 +14,12 @@ import sys
 import numpy as np
 import pytest
 import yaml
+from support.cli_runs import run, run_json
 
 from tensegrity_stiffness.cli.common import EXIT_BAD_INPUT, EXIT_NO_SOLUTION
 from tensegrity_stiffness.cli.parser import main
 from tensegrity_stiffness.structures import templates
 from tensegrity_stiffness.structures.structure import Structure
-
-
-def run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
-    code = main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
-def run_json(capsys: pytest.CaptureFixture, *argv: str) -> dict:
-    code, out, err = run(capsys, *argv, '--json')
-    assert code == 0, err
-    return json.loads(out)
 
 
 def write_prism(tmp_path, name='prism.yaml', **kwargs):

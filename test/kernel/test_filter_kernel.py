@@ -13,6 +13,7 @@ import ctypes
 import numpy as np
 import pytest
 from support import REPO
+from support.kernel_checks import poisoned
 
 from tensegrity_stiffness.estimation import sensor_models as sm
 from tensegrity_stiffness.estimation.joint_filter import (
@@ -29,7 +30,6 @@ pytestmark = pytest.mark.skipif(not kernel.available(), reason=kernel.status())
 
 CONFIG = REPO / 'config' / 'default_joint.yaml'
 SPREAD = np.array([0.02] * 3 + [5e-4] * 3)
-POISON_BYTES = 1016
 FIELDS = ('screw_rate', 'twist_rate', 'body_inverse', 'd_screw', 'd_twist', 'd_load')
 
 
@@ -203,16 +203,6 @@ def test_propagate_and_update_refuse_bad_arguments(model):
     assert lib.filter_update(3, 2, u, ub.size) == kernel.ERROR_SINGULAR_SYSTEM
 
 
-def _poisoned(call):
-    def poisoned(*args):
-        held = [np.full(k, np.nan) for k in range(1, POISON_BYTES // 8 + 1)]
-        try:
-            return call(*args)
-        finally:
-            del held
-    return poisoned
-
-
 def test_poisoned_calls_give_the_same_run(model, monkeypatch):
     """Every array the filter hands to these entry points lives until the call returns: with
     the freed small buffers overwritten before C runs, a seeded run gives the same estimates."""
@@ -231,7 +221,7 @@ def test_poisoned_calls_give_the_same_run(model, monkeypatch):
     library = kernel.library()
     for name in ('filter_body_dynamics', 'filter_propagate', 'filter_update',
                  'filter_motion_rows', 'filter_output'):
-        monkeypatch.setattr(library, name, _poisoned(getattr(library, name)))
+        monkeypatch.setattr(library, name, poisoned(getattr(library, name)))
     np.testing.assert_array_equal(run(), clean)
 
 

@@ -16,50 +16,29 @@ Both fail on the code before this test (commit 5525cc4) and pass now.
 """
 
 import ctypes
-import os
-import shutil
-import subprocess
-import sys
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
 from support.joint_compare import assert_same, random_model
+from support.kernel_checks import assert_asan_clean, poisoned
 
-import tensegrity_stiffness
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
 
 pytestmark = pytest.mark.skipif(not kernel.available(), reason=kernel.status())
 
-#: Largest freed block (bytes) the poisoned calls hand out again and overwrite: numpy keeps
-#: freed data buffers below 1024 bytes in a cache (per size, last freed first out); larger ones
-#: go back to malloc, where the AddressSanitizer test sees them.
-POISON_BYTES = 1016
 #: The entry points of the library that take addresses.
 ENTRY_POINTS = ('evaluate', 'evaluate_packed', 'chain_frames', 'chain_tip', 'linear_model',
                 'pose_terms', 'qp_warm_face', 'transform')
-
-
-def _poisoned(call):
-    """``call`` preceded by reallocating and NaN-filling every freed block up to POISON_BYTES
-    (kept until the call returns, so that C sees them overwritten)."""
-    def poisoned(*args):
-        held = [np.full(k, np.nan) for k in range(1, POISON_BYTES // 8 + 1)]
-        try:
-            return call(*args)
-        finally:
-            del held
-    return poisoned
 
 
 @pytest.fixture
 def poisoned_library(monkeypatch):
     library = kernel.library()
     for name in ENTRY_POINTS:
-        monkeypatch.setattr(library, name, _poisoned(getattr(library, name)))
+        monkeypatch.setattr(library, name, poisoned(getattr(library, name)))
     return library
 
 
@@ -81,7 +60,7 @@ def test_poisoning_overwrites_freed_memory_before_the_call(doubles):
     freed = np.arange(1.0, doubles + 1.0)
     address = kernel.address(freed)
     del freed
-    _poisoned(read)(address, doubles)
+    poisoned(read)(address, doubles)
     assert np.isnan(seen).all()
 
 
@@ -179,25 +158,6 @@ def test_the_warm_face_outlives_the_call(poisoned_library):
     np.testing.assert_allclose(new, old, rtol=0.0, atol=1e-12)
 
 
-def _kernel_sources() -> list[Path]:
-    """The kernel's C++ sources of the checkout under test (this package's repository)."""
-    root = Path(tensegrity_stiffness.__file__).resolve().parents[1]
-    for folder in (root / 'tensegrity_stiffness_kernel' / 'src', root / 'src'):
-        sources = sorted(folder.glob('*_kernel.cpp'))
-        if sources:
-            return sources
-    pytest.fail(f'no kernel sources (*_kernel.cpp) under {root}')
-
-
-def _libasan() -> str:
-    done = subprocess.run(['g++', '-print-file-name=libasan.so'], capture_output=True,
-                          text=True, check=False)
-    path = done.stdout.strip()
-    if done.returncode != 0 or not os.path.isabs(path):
-        pytest.skip('g++ has no libasan')
-    return path
-
-
 ASAN_SCRIPT = textwrap.dedent('''
     import numpy as np
     from tensegrity_stiffness.mechanics.joint import JointModel
@@ -221,20 +181,4 @@ ASAN_SCRIPT = textwrap.dedent('''
 
 @pytest.mark.slow
 def test_addresssanitizer_finds_no_use_after_free(tmp_path):
-    if shutil.which('g++') is None:
-        pytest.skip('no g++')
-    libasan = _libasan()
-    sources = _kernel_sources()
-    root = sources[0].parents[1]
-    library = tmp_path / kernel.LIBRARY_NAME
-    includes = [f'-I{root / "include"}'] if (root / 'include').is_dir() else []
-    subprocess.run(['g++', '-std=c++17', '-O1', '-g', '-fsanitize=address',
-                    '-fno-omit-frame-pointer', '-ffp-contract=off', '-shared', '-fPIC',
-                    *includes, *map(str, sources), '-o', str(library)], check=True, timeout=300)
-    env = dict(os.environ, LD_PRELOAD=libasan, ASAN_OPTIONS='detect_leaks=0',
-               TENSEGRITY_STIFFNESS_KERNEL=str(library))
-    done = subprocess.run([sys.executable, '-c', ASAN_SCRIPT], env=env, capture_output=True,
-                          text=True, timeout=120, check=False)
-    report = done.stderr[-3000:]
-    assert 'AddressSanitizer' not in done.stderr, report
-    assert done.returncode == 0 and done.stdout.strip() == 'ok', report
+    assert_asan_clean(tmp_path, ASAN_SCRIPT)

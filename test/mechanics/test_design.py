@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog, minimize
 from support import REPO
+from support.cli_runs import run
 
-from tensegrity_stiffness import cli
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics.design import (
@@ -486,12 +486,6 @@ def test_service_request_bad_fields(args, field):
 
 
 # ------------------------------------------------------------------------------ command line
-def run(capsys, *argv: str) -> tuple[int, str, str]:
-    code = cli.main(list(argv))
-    out, err = capsys.readouterr()
-    return code, out, err
-
-
 def test_cli_design_json_matches_library(capsys):
     model = JointModel.from_yaml(CONFIG)
     xi = model.initial_screw + np.array([0.02, 0, 0, 0, 0.001, 0])

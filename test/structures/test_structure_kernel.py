@@ -3,16 +3,12 @@
 live until it returns (the poisoned-call proof of test/kernel/test_kernel_boundary.py, and
 AddressSanitizer on the kernel compiled with it: slow)."""
 
-import os
-import shutil
-import subprocess
-import sys
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest
 from structure_fixtures import PRISM3, SIXBAR, example, mixed_document, perturbed
+from support.kernel_checks import assert_asan_clean, poisoned
 
 from tensegrity_stiffness.mechanics import kernel as joint_kernel
 from tensegrity_stiffness.structures import kernel
@@ -104,14 +100,7 @@ def test_only_live_arrays_reach_the_kernel(monkeypatch):
     kn = structure.compiled_kernel
     call = kn.call
 
-    def poisoned(*args):
-        held = [np.full(k, np.nan) for k in range(1, 128)]
-        try:
-            return call(*args)
-        finally:
-            del held
-
-    monkeypatch.setattr(kn, 'call', poisoned)
+    monkeypatch.setattr(kn, 'call', poisoned(call))
     T = perturbed(structure.start_poses(), rng, 0.05)
     strided_T = np.empty((6, 4, 4, 2))
     strided_T[..., 0] = T
@@ -146,24 +135,4 @@ ASAN_SCRIPT = textwrap.dedent('''
 
 @pytest.mark.slow
 def test_addresssanitizer_finds_no_use_after_free_in_the_structure_kernel(tmp_path):
-    if shutil.which('g++') is None:
-        pytest.skip('no g++')
-    done = subprocess.run(['g++', '-print-file-name=libasan.so'], capture_output=True,
-                          text=True, check=False)
-    libasan = done.stdout.strip()
-    if done.returncode != 0 or not os.path.isabs(libasan):
-        pytest.skip('g++ has no libasan')
-    root = Path(__file__).resolve().parents[2]
-    sources = sorted((root / 'src').glob('*_kernel.cpp'))
-    library = tmp_path / joint_kernel.LIBRARY_NAME
-    subprocess.run(['g++', '-std=c++17', '-O1', '-g', '-fsanitize=address',
-                    '-fno-omit-frame-pointer', '-ffp-contract=off', '-shared', '-fPIC',
-                    f'-I{root / "include"}', *map(str, sources), '-o', str(library)],
-                   check=True, timeout=300)
-    env = dict(os.environ, LD_PRELOAD=libasan, ASAN_OPTIONS='detect_leaks=0',
-               TENSEGRITY_STIFFNESS_KERNEL=str(library))
-    done = subprocess.run([sys.executable, '-c', ASAN_SCRIPT], env=env, capture_output=True,
-                          text=True, timeout=120, check=False)
-    report = done.stderr[-3000:]
-    assert 'AddressSanitizer' not in done.stderr, report
-    assert done.returncode == 0 and done.stdout.strip() == 'ok', report
+    assert_asan_clean(tmp_path, ASAN_SCRIPT)

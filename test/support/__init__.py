@@ -4,8 +4,10 @@ the reference comparisons of joints (:mod:`.joint_compare`), estimation trials o
 (:mod:`.estimation_trials`), calibration recordings made by the twin
 (:mod:`.calibration_recordings`), stand-in controllers run as processes
 (:mod:`.controller_standins`), the bag command's recordings (:mod:`.bag_recordings`,
-:mod:`.spine_bag_recordings`), seeded screws and the exact dT/dxi (:mod:`.screw_samples`) and
-the workspace check run inside a colcon workspace (:mod:`.workspace_check`)."""
+:mod:`.spine_bag_recordings`), seeded screws and the exact dT/dxi (:mod:`.screw_samples`), the
+command line run in-process (:mod:`.cli_runs`), the kernels' live-array checks
+(:mod:`.kernel_checks`) and the workspace check run inside a colcon
+workspace (:mod:`.workspace_check`)."""
 
 import os
 import random

@@ -129,6 +129,20 @@ def latency_summary(name: str, seconds: list[float]) -> str:
             f'p99 {percentile(ms, 0.99):7.3f} ms  max {max(ms):8.3f} ms')
 
 
+
+def timed_service_calls(ros: RosClient, client: Any, requests: Iterable[Any],
+                        timeout: float = 30.0) -> tuple[list[float], int]:
+    """Each of ``requests`` (made lazily, in order) called in turn on ``client``: the round
+    trips (s, ``perf_counter``) and the count of responses with ``success`` False."""
+    times: list[float] = []
+    failures = 0
+    for request in requests:
+        begin = time.perf_counter()
+        response = ros.call(client, request, timeout=timeout)
+        times.append(time.perf_counter() - begin)
+        failures += not response.success
+    return times, failures
+
 def process_children(pid: int) -> list[int]:
     """Child process ids of ``pid`` (from /proc; [] once it is gone)."""
     children = []

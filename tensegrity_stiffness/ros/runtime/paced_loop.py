@@ -14,22 +14,20 @@ from collections import deque
 from collections.abc import Callable
 from typing import Any
 
-#: Sleep no closer than this to a deadline; wait the rest by spinning (s): the ticks keep their
-#: phase to tens of microseconds at the cost of this much CPU per period.
-SPIN_S = 1e-4
+from tensegrity_stiffness.ros.runtime import pacing
+from tensegrity_stiffness.ros.runtime.pacing import SPIN_S  # noqa: F401 (the name kept)
+
+#: Longest single sleep (s) of a wait: how late a stop is seen.
+STOP_POLL_S = 0.1
 #: Seconds over which the achieved rate is counted.
 RATE_WINDOW_S = 1.0
 
 
 def wait_until(deadline: float, stop: threading.Event | None = None) -> float:
-    """Sleep until :data:`SPIN_S` before ``deadline`` (``time.perf_counter``), spin the rest;
-    the time it stopped (early when ``stop`` is set)."""
-    while (now := time.perf_counter()) < deadline:
-        if stop is not None and stop.is_set():
-            break
-        if deadline - now > SPIN_S:
-            time.sleep(min(deadline - now - SPIN_S, 0.1))
-    return now
+    """:func:`~tensegrity_stiffness.ros.runtime.pacing.wait_until` (sleep until
+    :data:`~tensegrity_stiffness.ros.runtime.pacing.SPIN_S` before ``deadline``, spin the rest)
+    that returns early when ``stop`` is set (seen within :data:`STOP_POLL_S`)."""
+    return pacing.wait_until(deadline, stop=stop, max_sleep=STOP_POLL_S)
 
 
 class RateCounter:
@@ -99,7 +97,7 @@ class PacedLoop:
             now = wait_until(start + (done + 1) * self.period, self._stop)
             if self._stop.is_set():
                 break
-            due = max(1, int((now - start) / self.period) - done)
+            due = pacing.periods_due(start, done, self.period, now)
             self.missed += due - 1
             done += due
             self.ticks += 1
