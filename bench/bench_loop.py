@@ -108,7 +108,7 @@ def run(kind: str, seconds: float, rate: float, publish_every: int, method: str)
         target_pub = ros.publisher(PoseStamped, f'{ctl}/target_pose')
         stiffness_pub = ros.publisher(Float64MultiArray, f'{ctl}/target_stiffness')
         load_pub = ros.publisher(WrenchStamped, f'{ns}/sim_node/external_wrench')
-        pose, stiffness = targets(model)
+        pose, stiffness, _ = targets(model)
         hold = PoseStamped()
         hold.header.frame_id = 'tensegrity_link1'
         hold.pose = conversions.transform_to_pose(exp_se3(model.initial_screw))
@@ -125,7 +125,7 @@ def run(kind: str, seconds: float, rate: float, publish_every: int, method: str)
             while (now := time.monotonic()) < end:
                 t = now - start_t
                 target_pub.publish(hold if phase == 'hold' else pose)
-                if phase in ('stiffness step', 'load swing'):
+                if phase in ('stiffness step', 'load swing') and stiffness is not None:
                     stiffness_pub.publish(stiffness)
                 if phase == 'load swing':
                     load = WrenchStamped()
