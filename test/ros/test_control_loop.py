@@ -116,7 +116,9 @@ def test_one_process_answers_as_the_two_nodes():
         (T1, C1), (T2, C2) = (estimation_msgs.pose_with_covariance_to_arrays(poses[ns].pose)
                               for ns in (one, two))
         np.testing.assert_allclose(T1, T2, rtol=0, atol=1e-9)
-        np.testing.assert_allclose(C1, C2, rtol=1e-6, atol=1e-18)
+        # The covariance is linearised where each fit stopped (within 0.03 std of the optimum,
+        # from warm starts that depend on which readings each process passed over): a few %.
+        np.testing.assert_allclose(C1, C2, rtol=0.1, atol=1e-18)
         # the one-process controller: no state subscription, commands from the handed-over
         # estimates (a latency from the reading to its command)
         assert ros.node.count_subscribers(f'{one}/estimator_node/pose_estimate') == 1  # this

@@ -45,7 +45,9 @@ def test_spine_twin_drives_spine_estimator_node() -> None:
     sim = NodeProcess(ns, SPINE_CONFIG, executable='sim_node', extra_args=[
         '-p', 'sim.spine:=true', '-p', 'sim.publish_every:=50',
         '-p', f'noise.tensions:={TENSION_NOISE}'])
+    # The static estimator's figures (the filter's, on the twin: test_chain_filter.py).
     estimator = NodeProcess(ns, SPINE_CONFIG, executable='spine_estimator_node', extra_args=[
+        '-p', 'estimation.method:=static',
         '-r', f'{est_base}/measured_tensions:={sim_base}/measured_tensions'])
     ros = RosClient('spine_estimator_test')
     try:
