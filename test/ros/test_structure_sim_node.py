@@ -202,7 +202,8 @@ def test_the_node_rolls_the_six_bar_with_the_gait(tmp_path):
             if v is None:
                 return False
             phases.add(v['gait phase'])
-            return v['gait steps done'] == '1'
+            # Landed and resting on a face (a report between bounces lists no contact).
+            return v['gait steps done'] == '1' and bool(v['contact nodes'].split())
 
         msg = diagnostics.wait_until(rolled, timeout=90.0)
         assert {'tip', 'recover'} <= phases
