@@ -189,31 +189,56 @@ def test_oversized_arrays_are_rejected_at_once(node, model, record_property):
     """10**6-element arrays on ~/screw and ~/rest_lengths: nothing published, the node alive,
     no memory kept, the next valid input answered, the warning throttled."""
     proc, ros, base = node
+    diagnostics = ros.subscribe(DiagnosticArray, '/diagnostics')
     inputs = fi.InputFuzzer(model, fi.planar_from_config(), seed=7)
     fuzzer = _fuzzer(proc, ros, base, model, timeout=60.0)
+    # The 8 MB screws from a writer of their own (keep-last 1): through the valid screws'
+    # writer, each valid screw waits in its reliable stream behind the 8 MB before it (on a
+    # loaded machine up to 60 s: ~240 MB through the loopback), which tests the transport,
+    # not the node. The node sees both writers on its one ~/screw subscription.
+    big_screws = ros.publisher(Float64MultiArray, f'{base}/screw', reliable_qos(1))
+    ros.wait_for_subscribers(big_screws)
     _warm_up(fuzzer, inputs)
-    time.sleep(0.5)
+
+    def rejected() -> int:
+        """The node's count of rejected inputs, every kind (its last /diagnostics)."""
+        for m in reversed(diagnostics.messages):
+            values = _diagnostic_values(m)
+            if values is not None:
+                return sum(int(n) for n in re.findall(r': (\d+)', values['rejected inputs']))
+        return 0
+
+    def all_rejected(n: int) -> None:
+        diagnostics.wait_until(lambda m: (_diagnostic_values(m) is not None
+                                          and rejected() >= n), timeout=60.0)
+
+    all_rejected(0)  # a first /diagnostics
     rss_before, cpu_before = proc.rss_bytes(), _cpu_seconds(proc.pid)
     big = np.zeros(fi.OVERSIZED)
     n_big = 0
     start = time.monotonic()
-    for i in range(30):
-        target = 'rest_lengths' if i % 3 == 2 else 'screw'
-        fuzzer.send(fi.Case(target, 'oversized', {'data': big}, must_reject=True))
-        fuzzer.send(inputs.valid_screw_case())
+
+    def send_big(target: str) -> None:
+        nonlocal n_big
+        case = fi.Case(target, 'oversized', {'data': big}, must_reject=True)
+        if target == 'screw':
+            big_screws.publish(fi.to_message(case))
+        else:
+            fuzzer.send(case)
         n_big += 1
-        # One 8 MB message in flight at a time. Sent back to back, on a loaded machine, up to
-        # 20 of the valid screws between them stayed unanswered for 60 s (2 of 8 full-suite
-        # runs, never when run alone), with ~240 MB in flight through the middleware's loopback
-        # transport. Tested is that each is rejected and the next valid input answered.
-        fuzzer.sync()
-    # One more after the throttle interval: its warning counts the ones left out since the last.
+
+    for i in range(30):
+        send_big('rest_lengths' if i % 3 == 2 else 'screw')
+        fuzzer.send(inputs.valid_screw_case())
+        fuzzer.sync()  # the valid screw answered
+        all_rejected(n_big)  # one 8 MB message in flight at a time
+    # One more after the throttle interval (a condition on the node's clock, not a state to
+    # wait for): its warning counts the ones left out since the last.
     time.sleep(1.2)
-    fuzzer.send(fi.Case('screw', 'oversized', {'data': big}, must_reject=True))
-    n_big += 1
+    send_big('screw')
+    all_rejected(n_big)
     figures = fuzzer.finish()
     elapsed = time.monotonic() - start
-    time.sleep(0.5)
     rss_after = proc.rss_bytes()
     cpu_per_message = (_cpu_seconds(proc.pid) - cpu_before) / n_big
     log = proc.log()
@@ -225,7 +250,7 @@ def test_oversized_arrays_are_rejected_at_once(node, model, record_property):
           f'{rss_before / MB:.1f} -> {rss_after / MB:.1f} MB, node CPU '
           f'{1e3 * cpu_per_message:.1f} ms per message, warnings {warnings}')
     assert figures['wrong publications'] == 0, figures['wrong examples']
-    assert figures['missing answers'] == 0 and figures['valid messages'] == 200 + 30
+    assert figures['missing answers'] == 0 and figures['valid messages'] == 200 + 30, figures
     assert proc.alive()
     assert rss_after - rss_before < 8 * MB, (rss_before, rss_after)
     # Throttled: at most one warning per kind and second (plus the first one).
@@ -515,36 +540,58 @@ def test_equilibrium_burst_does_not_stall_the_screws(light_node, model, record_p
     solves: list[tuple[float, float]] = []  # (request sent, response received)
     window: list[float] = []
 
+    answers: list[str] = []  # the solves' messages that were not the budget's
+
     def burst() -> None:
         window.append(time.perf_counter())
         for _ in range(40):
             t = time.perf_counter()
             res = ros.call(client, fi.to_message(hard), timeout=30.0)
             solves.append((t, time.perf_counter()))
-            assert not res.success and 'budget' in res.message, res.message
+            if res.success or 'budget' not in res.message:
+                answers.append(res.message)
         window.append(time.perf_counter())
 
     thread = threading.Thread(target=burst, daemon=True)
-    for i in range(5000):
+    deadline = time.monotonic() + 300.0
+    i = 0
+    # Screws stream from before the burst until its last solve returned (however long the
+    # machine takes for 40 solves).
+    while i <= 500 or thread.is_alive():
+        assert time.monotonic() < deadline, f'the burst did not end: {len(solves)} of 40 solves'
         if i == 500:
             thread.start()
-        if i > 500 and not thread.is_alive():
-            break
         fuzzer.send(inputs.valid_screw_case())
-    thread.join(30.0)
+        i += 1
+    thread.join()
+    assert not answers and len(window) == 2, answers
     figures = fuzzer.finish(quiet=0.3)
-    if figures['wrong publications'] or figures['missing answers']:
-        # the node's own count says which side lost them: inputs it never got, or outputs (the
-        # test's node is the only stiffness_node running)
-        diagnostics.clear()
-        status = diagnostics.wait_until(lambda m: _diagnostic_values(m) is not None, 3.0)
-        node_says = {k: v for k, v in _diagnostic_values(status).items()
-                     if k in ('outputs published', 'rejected inputs')}
-        pytest.fail(f'{figures["missing answers"]} missing, {figures["wrong publications"]} '
-                    'wrong: ' + str({k: figures[k] for k in (
-                        'valid messages', 'stiffness received', 'wrench received',
-                        'sync timeouts', 'node alive')}) + f'; the node: {node_says}; its log '
+    # The node's own count says which side lost an answer: inputs it never answered, or
+    # outputs the middleware did not deliver to this client (on 2 cores, a reader starved
+    # beside the node and its solver loses a few of 3,000 reliable samples: seen 9 in one of
+    # five runs). The node must answer every screw; the transport's loss is reported and
+    # bounded (1 %), not the node's fault.
+    valid = figures['valid messages']
+
+    def published(m) -> int | None:
+        values = _diagnostic_values(m)
+        return None if values is None else int(values['outputs published'])
+
+    diagnostics.clear()
+    try:
+        status = diagnostics.wait_until(lambda m: (published(m) or 0) >= valid, 10.0)
+        node_published = published(status)
+    except TimeoutError:
+        last = next((published(m) for m in reversed(diagnostics.messages)
+                     if published(m) is not None), None)
+        pytest.fail(f'the node answered {last} of {valid} valid screws; {figures}; its log '
                     f'ends: {proc.log()[-1500:]}')
+    record_property('answers lost in transport', figures['missing answers'])
+    assert figures['wrong publications'] == 0, figures['wrong examples']
+    assert node_published == valid, (node_published, valid)
+    assert figures['missing answers'] <= 0.01 * valid, (
+        f'{figures["missing answers"]} of {valid} answers published by the node never reached '
+        f'the client: {figures}')
     during = [lat for sent, lat in fuzzer.latencies if window[0] <= sent <= window[1]]
     before = [lat for sent, lat in fuzzer.latencies if sent < window[0]]
     durations = [end - start for start, end in solves]

@@ -55,6 +55,11 @@ RELIABLE = reliable_qos(100)
 #: must not lose messages from its own history (pair with the node's ``qos.depth``).
 DEEP = reliable_qos(2000)
 LATCHED = reliable_qos(1, DurabilityPolicy.TRANSIENT_LOCAL)
+#: Default wait (s) for a node's start: its graph entities, services, worker. Generous: on the
+#: 2-core machine beside other jobs a node's start took over 20 s; a wait ends at its condition.
+STARTUP_TIMEOUT = 60.0
+#: Default wait (s) for a message or a log line once a node runs.
+MESSAGE_TIMEOUT = 15.0
 
 
 def node_executable(executable: str = EXECUTABLE) -> Path:
@@ -227,7 +232,7 @@ class NodeProcess:
         """Process ids of the node's child processes (its solver worker among them)."""
         return process_children(self.process.pid)
 
-    def worker_pid(self, timeout: float = 20.0) -> int:
+    def worker_pid(self, timeout: float = STARTUP_TIMEOUT) -> int:
         """The pid of the node's solver worker (a spawned multiprocessing child)."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -264,7 +269,7 @@ class NodeProcess:
         self._log.close()
 
 
-def log_has(proc: NodeProcess, pattern: str, timeout: float = 5.0) -> bool:
+def log_has(proc: NodeProcess, pattern: str, timeout: float = MESSAGE_TIMEOUT) -> bool:
     """Whether the node's log matches ``pattern`` (re.search) within ``timeout`` s."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -305,7 +310,7 @@ class Inbox:
         with self._cond:
             return len(self.messages)
 
-    def wait_for(self, count: int, timeout: float = 5.0) -> list[Any]:
+    def wait_for(self, count: int, timeout: float = MESSAGE_TIMEOUT) -> list[Any]:
         """Wait until at least ``count`` messages arrived; returns all of them."""
         deadline = time.monotonic() + timeout
         with self._cond:
@@ -316,7 +321,8 @@ class Inbox:
                 self._cond.wait(left)
             return list(self.messages)
 
-    def wait_until(self, predicate: Callable[[Any], bool], timeout: float = 5.0) -> Any:
+    def wait_until(self, predicate: Callable[[Any], bool], timeout: float = MESSAGE_TIMEOUT
+                   ) -> Any:
         """Wait for a message satisfying ``predicate`` (checks old and new ones)."""
         deadline = time.monotonic() + timeout
         seen = 0
@@ -410,7 +416,7 @@ class RosClient:
         request = SetParameters.Request(parameters=[parameter.to_parameter_msg()])
         return self.call(client, request).results[0]
 
-    def client(self, srv_type: Any, name: str, timeout: float = 20.0) -> Any:
+    def client(self, srv_type: Any, name: str, timeout: float = STARTUP_TIMEOUT) -> Any:
         client = self.node.create_client(srv_type, name)
         if not client.wait_for_service(timeout_sec=timeout):
             raise TimeoutError(f'service {name} not available after {timeout} s')
@@ -425,14 +431,15 @@ class RosClient:
             raise TimeoutError(f'no answer from {client.srv_name} within {timeout} s')
         return future.result()
 
-    def wait_for_subscribers(self, publisher: Any, count: int = 1, timeout: float = 20.0) -> None:
+    def wait_for_subscribers(self, publisher: Any, count: int = 1,
+                             timeout: float = STARTUP_TIMEOUT) -> None:
         deadline = time.monotonic() + timeout
         while publisher.get_subscription_count() < count:
             if time.monotonic() > deadline:
                 raise TimeoutError(f'no subscriber on {publisher.topic_name}')
             time.sleep(0.02)
 
-    def wait_for_executor(self, node: str, timeout: float = 20.0) -> None:
+    def wait_for_executor(self, node: str, timeout: float = STARTUP_TIMEOUT) -> None:
         """Wait until the executor of the node named ``node`` (its full name) answers a
         service: inputs sent after this are served by a spinning node (at start-up a fast lane
         can serve its topics before the executor serves the others, e.g. latched rest lengths)."""
@@ -442,7 +449,8 @@ class RosClient:
         self.call(client, GetParameters.Request(names=['qos.depth']), timeout)
         self.node.destroy_client(client)
 
-    def wait_for_publishers(self, topic: str, count: int = 1, timeout: float = 20.0) -> None:
+    def wait_for_publishers(self, topic: str, count: int = 1,
+                            timeout: float = STARTUP_TIMEOUT) -> None:
         """Wait until ``topic`` has ``count`` publishers and this client's own subscriptions on
         it are matched to them: the graph can list a publisher whose writer has not matched a
         new reader yet, and a message it sends then is lost to that reader."""
