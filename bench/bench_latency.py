@@ -40,16 +40,12 @@ from geometry_msgs.msg import WrenchStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from support import use_own_ros_domain  # noqa: E402
 from support.ros_harness import (  # noqa: E402
-    Inbox,
     NodeProcess,
     RosClient,
     add_client_arguments,
-    collector_paused,
-    latencies_in_order,
     latency_summary,
     pacing_spin_s,
-    publish_paced,
-    receiving,
+    stream_latencies,
     unique_namespace,
 )
 from tensegrity_stiffness.srv import (  # noqa: E402
@@ -64,8 +60,6 @@ from tensegrity_stiffness.ros import conversions  # noqa: E402
 
 use_own_ros_domain()
 
-#: Seconds between the node being reachable and the start of the stream.
-STARTUP_SETTLE_S = 3.0
 
 
 
@@ -84,33 +78,16 @@ def stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: f
     """Publish screws at ``rate`` for ``seconds``; returns (latencies, sent, drops). The client
     receives on its rclpy executor (``loop='executor'``) or on a lean wait-set loop of its own
     (``'lane'``: the node's :class:`FastLane`, as a compiled controller's loop would)."""
-    outputs = {'stiffness': Float64MultiArray, **(OTHER_OUTPUTS if all_outputs else {})}
-    inbox = Inbox()
-    with receiving(ros, [(msg_type, f'{base}/{topic}',
-                          inbox if topic == 'stiffness' else (lambda _msg: None))
-                         for topic, msg_type in outputs.items()], loop):
-        with collector_paused():
-            return _stream(ros, base, model, rate, seconds, rng, inbox, spin_s)
-
-
-def _stream(ros: RosClient, base: str, model: JointModel, rate: float, seconds: float,
-            rng: np.random.Generator, inbox: Inbox, spin_s: float
-            ) -> tuple[list[float], int, int]:
-    pub = ros.publisher(Float64MultiArray, f'{base}/screw')
-    ros.wait_for_subscribers(pub)
-    ros.wait_for_publishers(f'{base}/stiffness')
-    # Measure the steady state: let the node finish starting up (its solver process imports
-    # numpy and scipy and solves once, which takes a core for about a second).
-    time.sleep(STARTUP_SETTLE_S)
     n = int(rate * seconds)
     screws = model.initial_screw + rng.normal(scale=[0.05] * 3 + [0.002] * 3, size=(n, 6))
-    sent_at = publish_paced(pub, [Float64MultiArray(data=x.tolist()) for x in screws], rate,
-                            spin_s, lambda: len(inbox))
     # One screw at a time, as the node computes (the batched path rounds differently).
     expected = np.array([model.stiffness(x).ravel() for x in screws])
-    latencies = latencies_in_order([np.asarray(m.data) for m in list(inbox.messages)],
-                                   list(inbox.times), expected, sent_at)
-    return latencies, n, n - len(latencies)
+    others = [(t, f'{base}/{topic}') for topic, t in OTHER_OUTPUTS.items()] if all_outputs \
+        else []
+    return stream_latencies(ros, ros.publisher(Float64MultiArray, f'{base}/screw'),
+                            (Float64MultiArray, f'{base}/stiffness'),
+                            [Float64MultiArray(data=x.tolist()) for x in screws], expected,
+                            rate, loop, spin_s, others=others)
 
 
 def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Generator

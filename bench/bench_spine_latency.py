@@ -23,8 +23,6 @@ import argparse
 import gc
 import os
 import sys
-import threading
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,12 +37,9 @@ from support.ros_harness import (  # noqa: E402
     NodeProcess,
     RosClient,
     add_client_arguments,
-    collector_paused,
-    latencies_in_order,
     latency_summary,
     pacing_spin_s,
-    publish_paced,
-    receiving,
+    stream_latencies,
     timed_service_calls,
     unique_namespace,
 )
@@ -55,37 +50,14 @@ from tensegrity_stiffness.nodes.spine_processing import spine_outputs  # noqa: E
 from tensegrity_stiffness.ros import conversions  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_spine.yaml'
-#: Seconds between the node being reachable and the start of the stream (the worker's warm-up).
-STARTUP_SETTLE_S = 3.0
 
 
 
 
 
 
-class Controller:
-    """The client's ``~/tip_stiffness`` callback: keeps the message and its arrival time and
-    computes the restoring wrench ``-K e`` of a fixed small tip error."""
-
-    def __init__(self) -> None:
-        self.messages: list[np.ndarray] = []
-        self.times: list[float] = []
-        self.error = np.array([1e-4, -2e-4, 1e-4, 1e-3, 0.0, -1e-3])
-        self.command = np.zeros(6)
-        self._lock = threading.Lock()
-
-    def __call__(self, msg: Float64MultiArray) -> None:
-        now = time.perf_counter()
-        K = np.frombuffer(msg.data, dtype=np.float64).reshape(6, 6) if isinstance(
-            msg.data, memoryview) else np.asarray(msg.data, dtype=np.float64).reshape(6, 6)
-        self.command = -K @ self.error
-        with self._lock:
-            self.messages.append(K.ravel().copy())
-            self.times.append(now)
-
-    def __len__(self) -> int:
-        with self._lock:
-            return len(self.messages)
+#: A fixed small tip error: the client computes the restoring wrench ``-K e`` of it.
+TIP_ERROR = np.array([1e-4, -2e-4, 1e-4, 1e-3, 0.0, -1e-3])
 
 
 def settings_for(n_joints: int) -> parameters.SpineNodeSettings:
@@ -97,30 +69,18 @@ def settings_for(n_joints: int) -> parameters.SpineNodeSettings:
 def stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float,
            rng: np.random.Generator, loop: str, spin_s: float) -> tuple[list[float], int, int]:
     """Publish screws at ``rate`` for ``seconds`` (``spin_s``: see :func:`publish_paced`), the
-    client receiving on ``loop`` (:func:`receiving`); returns (latencies, sent, drops)."""
-    controller = Controller()
-    with receiving(ros, [(Float64MultiArray, f'{base}/tip_stiffness', controller)], loop):
-        with collector_paused():
-            return _stream(ros, base, n_joints, rate, seconds, rng, controller, spin_s)
-
-
-def _stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float,
-            rng: np.random.Generator, controller: Controller, spin_s: float
-            ) -> tuple[list[float], int, int]:
+    client receiving on ``loop`` (:func:`receiving`) and computing ``-K e`` of each tip
+    stiffness; returns (latencies, sent, drops)."""
     chain = settings_for(n_joints).chain
-    pub = ros.publisher(Float64MultiArray, f'{base}/screws')
-    ros.wait_for_subscribers(pub)
-    ros.wait_for_publishers(f'{base}/tip_stiffness')
-    time.sleep(STARTUP_SETTLE_S)
     n = int(rate * seconds)
     center = chain.unloaded_screws()
     screws = center + rng.normal(scale=[0.02] * 3 + [0.0005] * 3, size=(n, n_joints, 6))
-    sent_at = publish_paced(pub, [Float64MultiArray(data=x.ravel().tolist()) for x in screws],
-                            rate, spin_s, lambda: len(controller))
     expected = [spine_outputs(chain, x).tip_stiffness_tool.ravel() for x in screws]
-    latencies = latencies_in_order(list(controller.messages), list(controller.times), expected,
-                                   sent_at)
-    return latencies, n, n - len(latencies)
+    return stream_latencies(ros, ros.publisher(Float64MultiArray, f'{base}/screws'),
+                            (Float64MultiArray, f'{base}/tip_stiffness'),
+                            [Float64MultiArray(data=x.ravel().tolist()) for x in screws],
+                            expected, rate, loop, spin_s,
+                            work=lambda K: -K.reshape(6, 6) @ TIP_ERROR)
 
 
 def service_round_trips(ros: RosClient, base: str, calls: int, rng: np.random.Generator

@@ -23,8 +23,6 @@ import argparse
 import gc
 import os
 import sys
-import threading
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,12 +37,9 @@ from support.ros_harness import (  # noqa: E402
     NodeProcess,
     RosClient,
     add_client_arguments,
-    collector_paused,
-    latencies_in_order,
     latency_summary,
     pacing_spin_s,
-    publish_paced,
-    receiving,
+    stream_latencies,
     timed_service_calls,
     unique_namespace,
 )
@@ -55,34 +50,8 @@ from tensegrity_stiffness.mechanics.templates import pose_vector  # noqa: E402
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium  # noqa: E402
 from tensegrity_stiffness.structures.structure import Structure, twist_exp  # noqa: E402
 
-#: Seconds between the node being reachable and the start of the stream (the worker's warm-up).
-STARTUP_SETTLE_S = 3.0
-
-
-class Controller:
-    """The client's ``~/stiffness`` callback: keeps the message and its arrival time and computes
-    the restoring wrenches ``-K e`` of a fixed small error."""
-
-    def __init__(self, n: int, output: str) -> None:
-        self.n = n
-        self.rows = 6 * n if output == 'stiffness' else n
-        self.messages: list[np.ndarray] = []
-        self.times: list[float] = []
-        self.error = np.tile([1e-4, -2e-4, 1e-4, 1e-3, 0.0, -1e-3], n)
-        self.command = np.zeros(6 * n)
-        self._lock = threading.Lock()
-
-    def __call__(self, msg: Float64MultiArray) -> None:
-        now = time.perf_counter()
-        K = np.asarray(msg.data, dtype=np.float64).reshape(self.rows, -1)
-        self.command = K.ravel()[:6 * self.n] * self.error
-        with self._lock:
-            self.messages.append(K.ravel().copy())
-            self.times.append(now)
-
-    def __len__(self) -> int:
-        with self._lock:
-            return len(self.messages)
+#: A fixed small error per body: the client computes ``K e`` of it.
+BODY_ERROR = np.array([1e-4, -2e-4, 1e-4, 1e-3, 0.0, -1e-3])
 
 
 def stream(ros: RosClient, base: str, structure: Structure, rate: float, seconds: float,
@@ -90,25 +59,20 @@ def stream(ros: RosClient, base: str, structure: Structure, rate: float, seconds
            ) -> tuple[list[float], int, int]:
     """Publish poses at ``rate`` for ``seconds``, the client reading ``output``
     (``stiffness`` or ``body_wrenches``); returns (latencies, sent, drops)."""
-    controller = Controller(structure.n_bodies, output)
-    pub = ros.publisher(Float64MultiArray, f'{base}/pose_values')
-    ros.wait_for_subscribers(pub)
-    ros.wait_for_publishers(f'{base}/{output}')
+    n_bodies = structure.n_bodies
     eq = solve_structure_equilibrium(structure)
     n = int(rate * seconds)
     poses = [[pose_vector(twist_exp(d) @ P) for d, P in zip(
-        rng.normal(scale=[0.002] * 3 + [0.01] * 3, size=(structure.n_bodies, 6)), eq.poses,
+        rng.normal(scale=[0.002] * 3 + [0.01] * 3, size=(n_bodies, 6)), eq.poses,
         strict=True)] for _ in range(n)]
     expected = [getattr(structure.evaluate(np.array(p)), 'stiffness' if output == 'stiffness'
                         else 'wrenches').ravel() for p in poses]
-    messages = [Float64MultiArray(data=np.ravel(p).tolist()) for p in poses]
-    with receiving(ros, [(Float64MultiArray, f'{base}/{output}', controller)], loop):
-        time.sleep(STARTUP_SETTLE_S)
-        with collector_paused():
-            sent_at = publish_paced(pub, messages, rate, spin_s, lambda: len(controller))
-    latencies = latencies_in_order(list(controller.messages), list(controller.times), expected,
-                                   sent_at)
-    return latencies, n, n - len(latencies)
+    error = np.tile(BODY_ERROR, n_bodies)
+    return stream_latencies(ros, ros.publisher(Float64MultiArray, f'{base}/pose_values'),
+                            (Float64MultiArray, f'{base}/{output}'),
+                            [Float64MultiArray(data=np.ravel(p).tolist()) for p in poses],
+                            expected, rate, loop, spin_s,
+                            work=lambda K: K[:6 * n_bodies] * error)
 
 
 def service_round_trips(ros: RosClient, base: str, structure: Structure, calls: int

@@ -904,3 +904,50 @@ def receiving(ros: RosClient, subscriptions: Iterable[tuple[Any, str, Callable[[
     finally:
         if lane is not None:
             lane.stop()
+
+
+#: Seconds a bench waits between the node being reachable and the start of its stream (the
+#: node's solver process warms up: imports numpy and scipy and solves once).
+BENCH_SETTLE_S = 3.0
+
+
+class ControllerInbox(Inbox):
+    """An :class:`Inbox` that keeps each message's ``values(msg)`` and hands them to
+    ``work(values)`` (a controller's use of them, e.g. ``-K e``) in the receive callback."""
+
+    def __init__(self, values: Callable[[Any], Any],
+                 work: Callable[[Any], Any] | None = None) -> None:
+        super().__init__()
+        self._values, self._work = values, work
+        self.last_work: Any = None
+
+    def __call__(self, msg: Any) -> None:
+        value = self._values(msg)
+        if self._work is not None:
+            self.last_work = self._work(value)
+        super().__call__(value)
+
+
+def stream_latencies(ros: RosClient, publisher: Any, output: tuple[Any, str], messages: list[Any],
+                     expected: Any, rate: float, loop: str, spin_s: float,
+                     values: Callable[[Any], Any] = lambda m: np.asarray(m.data),
+                     work: Callable[[Any], Any] | None = None,
+                     others: Iterable[tuple[Any, str]] = (),
+                     settle_s: float = BENCH_SETTLE_S) -> tuple[list[float], int, int]:
+    """The benches' topic latency: publish ``messages`` on ``publisher`` at ``rate`` Hz while
+    the client receives ``output`` (``(msg_type, topic)``) on ``loop`` (:func:`receiving`;
+    ``others``: more topics taken and dropped), each message's ``values`` kept (and handed to
+    ``work``); each output matched in order to ``expected`` (:func:`latencies_in_order`).
+    Returns (latencies, sent, drops)."""
+    inbox = ControllerInbox(values, work)
+    ros.wait_for_subscribers(publisher)
+    ros.wait_for_publishers(output[1])
+    handlers = [(output[0], output[1], inbox),
+                *((t, topic, lambda _msg: None) for t, topic in others)]
+    with receiving(ros, handlers, loop):
+        time.sleep(settle_s)  # a warm-up to skip, not a state to wait for
+        with collector_paused():
+            sent_at = publish_paced(publisher, messages, rate, spin_s, lambda: len(inbox))
+    latencies = latencies_in_order(list(inbox.messages), list(inbox.times), expected, sent_at)
+    n = len(messages)
+    return latencies, n, n - len(latencies)
