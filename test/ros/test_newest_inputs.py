@@ -110,7 +110,10 @@ def test_a_burst_of_readings_is_answered_by_its_newest(executable):
             repeat_until(lambda: None, lambda last=last: True if estimates.messages and
                          estimates.messages[-1].header.stamp.sec == last else None,
                          explain=node.log)
-            answered = [m.header.stamp.sec for m in estimates.messages]
+            # The first reading was sent until answered: an answer to one of its copies
+            # (stamp 1) can still arrive after the clear, before the burst's answers.
+            answered = [m.header.stamp.sec for m in estimates.messages
+                        if not (burst == 1 and m.header.stamp.sec == 1)]
             assert all(first <= k <= sent for k in answered), answered
             assert answered == sorted(set(answered)), answered  # in order, none twice
             assert len(answered) < BURST, (burst, len(answered))

@@ -502,12 +502,13 @@ def test_a_controller_that_answers_late_counts_as_lost_and_is_retried(world, loa
         'preset': 'cartesian_controllers', 'target.node': ctrl.full_name,
         'target.timeout': 0.3}))
     world.bridge_status(bridge_ns)
-    status = repeat_until(lambda: world.send_screw(loaded_screw), lambda: world.bridge_status_now(
-        bridge_ns, lambda s: kv(s)['calls lost'] not in ('0', '1')), explain=lambda: (
-            f'last status {kv(world.bridge_status(bridge_ns))}; the bridge log ends: '
-            f'{bridge.log()[-1500:]}'))
+    # Until a call was given up on for its late answer (before the controller's service is
+    # matched, calls are lost as 'not available' too: on a loaded machine, several).
+    repeat_until(lambda: world.send_screw(loaded_screw), lambda: True if (
+        'gave no answer within target.timeout = 0.3 s' in bridge.log()) else None,
+        explain=lambda: f'the bridge log ends: {bridge.log()[-1500:]}')
+    status = world.bridge_status(bridge_ns, lambda s: kv(s)['calls lost'] not in ('0', '1'))
     assert kv(status)['target reachable'] == 'false'
-    assert 'gave no answer within target.timeout = 0.3 s' in bridge.log()
     # a lost call is sent again without a new input (the controller may not have applied it)
     world.diagnostics.clear()
     lost = int(kv(world.bridge_status(bridge_ns))['calls lost'])
@@ -683,7 +684,7 @@ def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, 
 
     k = seen = 0
     updates: set[int] = set()  # distinct inputs held whole: one per update the bridge sent
-    deadline = time.monotonic() + 60.0
+    deadline = time.monotonic() + 120.0
     while len(updates) < 30:
         assert time.monotonic() < deadline, (len(updates), bridge.log()[-2000:])
         pub.publish(Float64MultiArray(data=(K0 * (1.0 + 0.01 * (k % 2000))).ravel().tolist()))
@@ -695,7 +696,8 @@ def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, 
         seen = len(messages)
     status = kv(world.bridge_status(bridge_ns, lambda s: int(kv(s)['updates sent']) >= 30))
     # A call sent while the new controller's service is in the graph but not yet matched can
-    # be lost (the discovery race the announcement period narrows, not closes): at most one.
-    assert int(status['calls lost']) <= 1, status
+    # be lost (the discovery race the announcement period narrows, not closes): one on a quiet
+    # machine, two seen beside a load of 20; a stall would lose a call per update.
+    assert int(status['calls lost']) <= 3, status
     assert status['updates refused'] == '0'
     assert ctrl.stop() == 0

@@ -63,6 +63,10 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
     nodes: tuple[Any, ...] = ()
     config_error = False
     try:
+        # The executor before the nodes: a signal once the node said 'ready:' cannot then cut
+        # the executor's construction short (rclpy's Executor.__del__ of a half-built executor
+        # prints a traceback: AttributeError '_sigint_gc').
+        executor = (executor_factory or SingleThreadedExecutor)()
         try:
             made = node_factory()
             nodes = made if isinstance(made, tuple) else (made,)
@@ -77,7 +81,6 @@ def run(node_factory: Callable[[], Any], args: list[str] | None = None, *,
         # out of the collector's reach, full collections stay short.
         gc.collect()
         gc.freeze()
-        executor = (executor_factory or SingleThreadedExecutor)()
         for node in nodes:
             executor.add_node(node)
         executor.spin()
