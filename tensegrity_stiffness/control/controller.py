@@ -706,13 +706,13 @@ def held_equilibrium(A: FloatArray, b: FloatArray, k: int
 def unheld_twist_text(twist: FloatArray) -> str:
     """A scaled unit twist ``[L omega; v]`` in words: 'rotation about (x, y, z)' when its
     rotation dominates, else 'translation along (x, y, z)' or the six values."""
-    rotation, translation = np.linalg.norm(twist[:3]), np.linalg.norm(twist[3:])
+    rotation, translation = math.hypot(*twist[:3]), math.hypot(*twist[3:])
     if rotation >= 0.9:
-        axis = twist[:3] / rotation
-        return 'rotation about ({:.2f}, {:.2f}, {:.2f})'.format(*(axis + 0.0))
+        x, y, z = (round(float(v) / rotation, 2) + 0.0 for v in twist[:3])
+        return f'rotation about ({x:.2f}, {y:.2f}, {z:.2f})'
     if translation >= 0.9:
-        return 'translation along ({:.2f}, {:.2f}, {:.2f})'.format(*(twist[3:] / translation
-                                                                   + 0.0))
+        x, y, z = (round(float(v) / translation, 2) + 0.0 for v in twist[3:])
+        return f'translation along ({x:.2f}, {y:.2f}, {z:.2f})'
     return 'twist [L omega; v] ' + np.array2string(twist, precision=2)
 
 
