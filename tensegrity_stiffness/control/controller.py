@@ -42,6 +42,13 @@ The math (notation of :mod:`tensegrity_stiffness.mechanics.design`)
   when the target pose moves by more than the clamp (a correction learned at one target says
   nothing about another far from it). A pose error that is not finite (a pose turned by
   about 180 deg from the target, where the error has no direction) is refused by name.
+* **Directions the strings do not hold** (issue #39). Where ``S B`` at the joint's unloaded
+  pose has singular values below ``UNHELD_DIRECTION_TOLERANCE`` of its largest
+  (:func:`unheld_count`: a ring's spin about its axis, about which no string has a moment),
+  every tick keeps the equilibrium on the ``6 - k`` strongest wrench directions at the design
+  pose only (:func:`held_equilibrium`) and removes the pairing twist of the weak ones (along
+  which no string wrench does work) from the pose error before it is integrated; the pose
+  settles along it where the strings balance, and the message says so.
 * **Limits.** Commands move at most ``max_rate * dt`` per string per tick and stay within
   ``[rest_length_min, rest_length_max]``; a changed target is followed at the rate limit (no
   jump). An infeasible pose keeps the last command (``feasible=False``).
