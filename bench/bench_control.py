@@ -8,7 +8,8 @@ terms, warm QP face), on the numpy path (``use_kernel=False``), of an earlier ch
 ``--previous DIR`` (``git archive <commit> | tar -x -C DIR``), and a full
 ``design_rest_lengths`` per tick (cold, what a controller without warm start would pay), in
 three regimes: holding a pose with a noisy measurement, following a moving target (a 1 Hz
-circle of 1 mm and 0.02 rad), and the same with a target K_c. Then the same tick on a paced
+circle of 1 mm and 0.02 rad), and the same with a target K_c; then the 8-string ring example
+(whose spin its strings do not hold) against the default joint. Then the same tick on a paced
 clock at 500 Hz and 1 kHz (``--paced``, as the node's timer runs it): tick time and missed
 ticks, against a full design per tick. Also the spine controller's tick (5 joints). Part
 ``--loop``: the whole loop across processes (sim_node -> estimator_node with 12 load cells +
@@ -154,6 +155,37 @@ def joint_part(ticks: int, previous: dict | None) -> None:
                   f'last face{goal})')
         print(f'  {"design_rest_lengths (cold)":27s}{stats(times[-1])}   '
               f'(kernel update {first / np.median(times[-1]):.2f}x)')
+
+
+def ring_part(ticks: int) -> None:
+    """update() on the 8-string ring example (its spin not held by its strings: one SVD of
+    the 6 x 8 string wrenches per tick, issue #39) against the default joint, both holding the
+    control demo's tilt with a noisy measurement, interleaved tick by tick."""
+    tilt = np.array([0.02, -0.01, 0.0, 0.0, 4e-4, 0.0])  # ros/control_demo.py's POSE_STEP
+    rng = np.random.default_rng(1)
+    fns, names = [], []
+    for name, path in (('default joint', config.packaged_config_path()),
+                       ('ring8_joint.yaml', config.example_config_path('ring8_joint.yaml'))):
+        model = JointModel.from_yaml(path)
+        lim = ActuatorLimits(0.5 * model.rest_lengths, 1.2 * model.rest_lengths, 0.05, 0.1,
+                             2.0)
+        ctl = StiffnessController(model, lim, model.rest_lengths)
+        target = ControlTarget(screw=model.initial_screw + tilt)
+        screws = [model.initial_screw + tilt + rng.normal(0, NOISE, 6)
+                  for _ in range(ticks + 500)]
+        for k in range(500):
+            ctl.update(DT, target, screw=screws[k])
+
+        def tick(k: int, ctl=ctl, target=target, screws=screws) -> None:
+            ctl.update(DT, target, screw=screws[k + 500])
+
+        fns.append(tick)
+        names.append(f'{name} ({ctl.unheld_count} direction(s) not held)')
+    times = timed_side_by_side(fns, ticks)
+    print(f'ring joint against the default joint, {ticks} ticks, update() alone, interleaved:')
+    for name, t in zip(names, times, strict=True):
+        print(f'  {name:45s}{stats(t)}')
+    print(f'  ring / default (medians): {np.median(times[1]) / np.median(times[0]):.2f}')
 
 
 def paced(fn: Callable[[int], object], rate: float, seconds: float) -> tuple[np.ndarray, int]:
@@ -314,6 +346,7 @@ def main() -> None:
                                          'tensegrity_stiffness.mechanics.joint'], library)
         previous['root'] = root
     joint_part(args.ticks, previous)
+    ring_part(args.ticks)
     if args.paced > 0.0:
         paced_part(args.paced)
     spine_part(args.ticks)

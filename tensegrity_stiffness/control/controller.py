@@ -42,6 +42,13 @@ The math (notation of :mod:`tensegrity_stiffness.mechanics.design`)
   when the target pose moves by more than the clamp (a correction learned at one target says
   nothing about another far from it). A pose error that is not finite (a pose turned by
   about 180 deg from the target, where the error has no direction) is refused by name.
+* **Directions the strings do not hold** (issue #39). Where ``S B`` at the joint's unloaded
+  pose has singular values below ``UNHELD_DIRECTION_TOLERANCE`` of its largest
+  (:func:`unheld_count`: a ring's spin about its axis, about which no string has a moment),
+  every tick keeps the equilibrium on the ``6 - k`` strongest wrench directions at the design
+  pose only (:func:`held_equilibrium`) and removes the pairing twist of the weak ones (along
+  which no string wrench does work) from the pose error before it is integrated; the pose
+  settles along it where the strings balance, and the message says so.
 * **Limits.** Commands move at most ``max_rate * dt`` per string per tick and stay within
   ``[rest_length_min, rest_length_max]``; a changed target is followed at the rate limit (no
   jump). An infeasible pose keeps the last command (``feasible=False``).
@@ -102,6 +109,7 @@ __all__ = [
     'POSE_ROTATION_TOLERANCE',
     'SATURATION_TOLERANCE',
     'STIFFNESS_MET_TOLERANCE',
+    'UNHELD_DIRECTION_TOLERANCE',
     'WARM_ACTIVE_SET_ITERATIONS',
     'ActuatorLimits',
     'BoolArray',
@@ -113,6 +121,7 @@ __all__ = [
     'QPResult',
     'StiffnessController',
     'adjoint_twist',
+    'held_equilibrium',
     'pose_terms',
     'pose_terms_at',
     'pose_terms_numpy',
@@ -120,6 +129,8 @@ __all__ = [
     'rest_from_tensions',
     'solve_box_qp',
     'tension_bounds',
+    'unheld_count',
+    'unheld_twist_text',
     'warm_face',
     'warm_face_numpy',
 ]
@@ -143,6 +154,10 @@ WARM_ACTIVE_SET_ITERATIONS = 100
 STIFFNESS_MET_TOLERANCE = 1e-3
 #: A command is "saturated" when it differs from the feedforward by more than this (m).
 SATURATION_TOLERANCE = 1e-12
+#: A direction of the (scaled) string wrenches ``S B`` at the joint's unloaded pose whose
+#: singular value is below this share of the largest is one the strings do not hold (a ring's
+#: spin about its axis: no string has a moment about it there, exactly 0 to rounding).
+UNHELD_DIRECTION_TOLERANCE = 1e-6
 #: Gauss-Newton iterations of the spine's redundancy resolution per tick.
 CHAIN_IK_ITERATIONS = 3
 #: Levenberg damping of the spine's tip-stiffness step, relative to the mean curvature.
@@ -669,6 +684,43 @@ class _JointProblem:
     A: FloatArray
     b: FloatArray
     start: FloatArray
+    #: (k, 6) the twists the strings do not hold at this pose (scaled, unit; k = 0: none).
+    unheld: FloatArray
+
+
+def unheld_count(A: FloatArray) -> int:
+    """How many directions of the scaled string wrenches ``A = S B`` (6, n) the strings do not
+    hold: singular values below ``UNHELD_DIRECTION_TOLERANCE`` of the largest."""
+    s = np.linalg.svd(A, compute_uv=False)
+    return int(np.count_nonzero(s < UNHELD_DIRECTION_TOLERANCE * s[0])) + max(0, 6 - s.size)
+
+
+def held_equilibrium(A: FloatArray, b: FloatArray, k: int
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The equilibrium ``A t = b`` (scaled, 6 rows) on the ``6 - k`` directions of the
+    strongest string wrenches (the left singular vectors ``U_h`` of ``A``: ``U_h' A t = U_h'
+    b``), and the ``k`` twists left out, in scaled coordinates ``[L omega; v]`` (unit, screw
+    order): the pairing duals of the ``k`` weakest wrench directions ``u = [u_f; u_m]``, i.e.
+    ``[u_m; u_f]``, along which no string wrench of the pose does work."""
+    U = np.linalg.svd(A)[0]
+    held, weak = U[:, :6 - k], U[:, 6 - k:]
+    twists = np.concatenate([weak[3:], weak[:3]]).T
+    largest = np.abs(twists).argmax(axis=1)
+    twists *= np.sign(twists[np.arange(k), largest])[:, None]  # a sign that does not flicker
+    return held.T @ A, held.T @ b, twists
+
+
+def unheld_twist_text(twist: FloatArray) -> str:
+    """A scaled unit twist ``[L omega; v]`` in words: 'rotation about (x, y, z)' when its
+    rotation dominates, else 'translation along (x, y, z)' or the six values."""
+    rotation, translation = math.hypot(*twist[:3]), math.hypot(*twist[3:])
+    if rotation >= 0.9:
+        x, y, z = (round(float(v) / rotation, 2) + 0.0 for v in twist[:3])
+        return f'rotation about ({x:.2f}, {y:.2f}, {z:.2f})'
+    if translation >= 0.9:
+        x, y, z = (round(float(v) / translation, 2) + 0.0 for v in twist[3:])
+        return f'translation along ({x:.2f}, {y:.2f}, {z:.2f})'
+    return 'twist [L omega; v] ' + np.array2string(twist, precision=2)
 
 
 def _failure(A: FloatArray, b: FloatArray, sol: QPResult) -> str:
@@ -711,12 +763,17 @@ class _PoseFeedback:
                                  'by about 180 deg from the target): the tick is skipped')
         else:
             e, error = np.zeros(6), np.zeros(6)
+        e = self._held_error(e)
         z0 = self._z
         if _target_moved(self._target_transform, target.transform, self.integral_limit):
             z0 = np.zeros(6)  # a new target far from the last: restart the integral
         step = _clamp_integral(self.integral_gain * dt * e, self.integral_limit)
         z = _clamp_integral(z0 + step, self.integral_limit)
         return dt, W, e, error, z
+
+    def _held_error(self, e: FloatArray) -> FloatArray:
+        """The pose error ``e`` (6,) on the directions the strings hold (all by default)."""
+        return e
 
 
 class StiffnessController(_PoseFeedback):
@@ -756,6 +813,11 @@ class StiffnessController(_PoseFeedback):
             if self.length_scale <= 0.0:
                 raise ValueError('length_scale must be > 0')
         self._S = length_scaling(self.length_scale)
+        reference = self._S[:, None] * pose_terms(model, model.initial_screw).B
+        #: How many directions the strings do not hold at the unloaded pose (a ring: 1, its
+        #: spin); those are left out of the equilibrium and of the pose feedback every tick.
+        self.unheld_count = unheld_count(reference)
+        self._unheld = held_equilibrium(reference, np.zeros(6), self.unheld_count)[2]
         self.reset(rest_lengths)
 
     @property
@@ -767,6 +829,21 @@ class StiffnessController(_PoseFeedback):
     def integral(self) -> FloatArray:
         """The integral pose correction z (6,), screw order [omega; v]."""
         return self._z.copy()
+
+    @property
+    def unheld_twists(self) -> FloatArray:
+        """(k, 6) unit twists in scaled coordinates ``[L omega; v]`` that the strings do not
+        hold at the last design pose (at the unloaded pose before the first tick); k =
+        :attr:`unheld_count`. The pose settles along them where the strings balance: they are
+        not controlled, and the pose feedback leaves them out."""
+        return self._unheld.copy()
+
+    def _held_error(self, e: FloatArray) -> FloatArray:
+        if not self.unheld_count:
+            return e
+        scale = np.concatenate([np.full(3, self.length_scale), np.ones(3)])
+        scaled = e * scale
+        return (scaled - self._unheld.T @ (self._unheld @ scaled)) / scale
 
     def reset(self, rest_lengths: ArrayLike) -> None:
         """Forget the integral and the warm start; ``rest_lengths`` (n,) the motors' positions."""
@@ -817,8 +894,10 @@ class StiffnessController(_PoseFeedback):
             return ('infeasible: no tension within the tension and rest-length limits at this '
                     f'pose for {", ".join(bad)}')
         start = 0.5 * (lo + hi) if self._t is None else self._t
-        return _JointProblem(terms, lo, hi, 0.5 * (self._t_min + upper), S[:, None] * terms.B,
-                             -S * W, start)
+        A, b, unheld = S[:, None] * terms.B, -S * W, self._unheld
+        if self.unheld_count:
+            A, b, unheld = held_equilibrium(A, b, self.unheld_count)
+        return _JointProblem(terms, lo, hi, 0.5 * (self._t_min + upper), A, b, start, unheld)
 
     def _tick(self, dt: float, target: ControlTarget, T_d: FloatArray, W: FloatArray,
               z: FloatArray, error: FloatArray) -> ControlCommand:
@@ -830,6 +909,7 @@ class StiffnessController(_PoseFeedback):
                            self.model.uses_kernel)
         if not sol.converged:
             return self._hold(T_d, error, _failure(pr.A, pr.b, sol))
+        self._unheld = pr.unheld
         return self._apply(dt, target, T_d, z, error, pr.terms, sol)
 
     def _apply(self, dt: float, target: ControlTarget, T_d: FloatArray, z: FloatArray,
@@ -857,6 +937,10 @@ class StiffnessController(_PoseFeedback):
             messages.append('integral correction at its clamp with no limit binding (the '
                             'pose error does not answer the correction; a new target restarts '
                             'it)')
+        if self.unheld_count:
+            free = ', '.join(unheld_twist_text(u) for u in self._unheld)
+            messages.append(f'the strings hold {6 - self.unheld_count} of 6 directions: '
+                            f'{free} not held (it settles where the strings balance)')
         # Commit: anti-windup keeps z while a limit binds (a moved target restarts it anyway).
         if not saturated.any():
             self._z = z

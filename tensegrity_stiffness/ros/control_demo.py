@@ -3,7 +3,8 @@ without hardware. ``sim_node`` (the MuJoCo twin) -> ``estimator_node`` (its 12 l
 IMU) -> ``stiffness_controller`` -> ``sim_node`` (the commanded rest lengths), wired as
 ``launch/control.launch.py`` wires them, and a scripted target sequence: hold the unloaded pose,
 a pose step, a stiffness step (the design with every tension in [0.5, 1.5] N: a stiffer
-prestress), a swinging load.
+prestress, designed by the controller's own QP at the stepped pose, so that a ring's spin,
+which its strings do not hold, is left out as in the loop), a swinging load.
 The controller runs at its default rate (``control.rate``, 500 Hz). Once a second a line from
 the nodes' ``/diagnostics``: the phase, the pose error, the ``K_c`` error, the saturated
 strings, the tick time, the controller's achieved tick rate (of the rate asked), its missed
@@ -13,7 +14,8 @@ true pose error (the twin's own pose against the target) beside the estimate's; 
 tick shows the controller's reason (its ``/diagnostics`` message). ``--config FILE`` runs any
 joint; arguments after ``--`` go to every node (``-p limits.tension_max:=3``). A stiffness step
 whose design fails (``design_rest_lengths`` without ``success``: the joint's strings cannot
-reach the step's tensions) is announced and no stiffness target is published. Ctrl-C (or
+reach the step's tensions: the QP infeasible) is announced and no stiffness target is
+published. Ctrl-C (or
 ``duration``) stops the three nodes and exits 0.
 """
 
@@ -35,8 +37,13 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness import config
+from tensegrity_stiffness.control.controller import (
+    ActuatorLimits,
+    ControlCommand,
+    ControlTarget,
+    StiffnessController,
+)
 from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
-from tensegrity_stiffness.mechanics.design import design_rest_lengths
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.twin_demo import (
@@ -51,6 +58,10 @@ PHASES = ((0.0, 'hold'), (4.0, 'pose step'), (10.0, 'stiffness step'), (16.0, 'l
 POSE_STEP = np.array([0.02, -0.01, 0.0, 0.0, 4e-4, 0.0])
 #: The stiffness step's design: its tension limits (N).
 STIFFNESS_TENSIONS = (0.5, 1.5)
+#: The rest-length floor of the stiffness step's design (m): no actuator range, only > 0.
+MIN_REST_LENGTH = 1e-9
+#: What the controller adds to the message of a tick it refuses (not part of the design's).
+HELD_SUFFIX = '; the last command is kept'
 LOAD_AMPLITUDE_N = 0.1
 LOAD_PERIOD_S = 8.0
 
@@ -144,20 +155,33 @@ def _number(value: str | None, spec: str = '.3g') -> str:
         return '-'
 
 
+def stiffness_design(model: JointModel, screw: np.ndarray) -> ControlCommand:
+    """The stiffness step's design at ``screw`` under no load: one tick of the controller
+    without feedback, tensions in :data:`STIFFNESS_TENSIONS` and each string's caps, no
+    actuator range (the optimum of ``design_rest_lengths`` for a joint that holds all six
+    directions, tested equal; on a ring the spin its strings do not hold is left out, as the
+    loop leaves it out). ``feasible`` false: no tensions hold the pose."""
+    lengths = model.evaluate(screw).lengths
+    limits = ActuatorLimits(MIN_REST_LENGTH, 10.0 * float(lengths.max()), 1.0,
+                            *STIFFNESS_TENSIONS)
+    start = np.clip(model.rest_lengths, MIN_REST_LENGTH, 10.0 * float(lengths.max()))
+    return StiffnessController(model, limits, start).update(1.0, ControlTarget(screw=screw))
+
+
 def targets(model: JointModel, frame_id: str = 'tensegrity_link1'
             ) -> tuple[PoseStamped, Float64MultiArray | None, str]:
-    """The script's targets: the pose step's pose, the stiffness step's K_c (the design at
-    :data:`STIFFNESS_TENSIONS` there) and the design's message. The K_c is None when the
-    design fails (``success`` false: never a target from a failed design, whose K_c is NaN
-    or beside the tensions asked)."""
+    """The script's targets: the pose step's pose, the stiffness step's K_c
+    (:func:`stiffness_design` there) and the design's message. The K_c is None when the
+    design fails (never a target from a failed design, whose K_c is NaN)."""
     xi = model.initial_screw + POSE_STEP
     pose = PoseStamped()
     pose.header.frame_id = frame_id
     pose.pose = conversions.transform_to_pose(exp_se3(xi))
-    design = design_rest_lengths(model, xi, None, *STIFFNESS_TENSIONS)
-    if not design.success or not np.all(np.isfinite(design.cartesian_stiffness)):
-        return pose, None, design.message or 'the design failed'
-    return pose, Float64MultiArray(data=design.cartesian_stiffness.ravel().tolist()), ''
+    design = stiffness_design(model, xi)
+    K = design.predicted_cartesian_stiffness
+    if not design.feasible or not np.all(np.isfinite(K)):
+        return pose, None, design.message.removesuffix(HELD_SUFFIX) or 'the design failed'
+    return pose, Float64MultiArray(data=K.ravel().tolist()), ''
 
 
 def _node_args(params: Path, extra: list[str] = ()) -> list[tuple[str, list[str]]]:

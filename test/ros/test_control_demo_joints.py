@@ -46,20 +46,8 @@ def _config(tmp_path: Path, which: str) -> Path:
     return REPO / 'config' / 'examples' / which
 
 
-#: Why the ring joints do not hold yet on this branch (the live line names it): the
-#: controller's default limits (limits.tension_max 1.5 N below the ring's pretension: "the pose
-#: cannot be held under this load within the limits") and the estimator on a ring's tensions
-#: ("no pose estimate": its rotation about the axis is not determined by tensions alone) are
-#: #39's controller and estimator parts, in ros/stiffness_controller.py and estimation/.
-RING_PENDING = pytest.mark.xfail(reason='#39: controller limits from the joint and the ring '
-                                 "joint's estimator are other parts of the issue", strict=False)
-
-
 @pytest.mark.parametrize('which', [
-    'template vertebra',
-    pytest.param('template ring', marks=RING_PENDING),
-    pytest.param('ring8_joint.yaml', marks=RING_PENDING),
-    pytest.param('ring16_joint.yaml', marks=RING_PENDING)])
+    'template vertebra', 'template ring', 'ring8_joint.yaml', 'ring16_joint.yaml'])
 def test_the_control_demo_holds_the_pose_on_any_joint(tmp_path: Path, which: str) -> None:
     config = _config(tmp_path, which)
     proc = subprocess.Popen([_demo(), '--control', '--config', str(config), '--duration', '40'],
@@ -89,5 +77,5 @@ def test_the_control_demo_holds_the_pose_on_any_joint(tmp_path: Path, which: str
         lines += out.splitlines()
     assert held >= HELD_LINES, '\n'.join(lines)
     assert any('control_demo: stopped' in line for line in lines), '\n'.join(lines)
-    assert not any(line.startswith('control_demo: no stiffness step') for line in lines) or \
-        which != 'template vertebra', '\n'.join(lines)
+    assert not any(line.startswith('control_demo: no stiffness step') for line in lines), \
+        '\n'.join(lines)

@@ -77,7 +77,42 @@ def test_control_demo_publishes_no_target_from_a_failed_design() -> None:
         warnings.simplefilter('ignore')  # its initial screw is no longer an equilibrium
         short = JointModel.from_dict(section)
     _, none, why = targets(short)
-    assert none is None and 'tension_min' in why
+    assert none is None and 'no tension within the tension' in why
     T = np.eye(4)
     T[:3, 3] = [0.001, 0.0, 0.0]
     assert np.allclose(pose_error(np.eye(4), T), (0.001, 0.0))
+
+
+@pytest.mark.parametrize('name', ['ring8_joint.yaml', 'ring16_joint.yaml'])
+def test_control_demo_designs_a_stiffness_step_for_a_ring_and_the_design_for_a_vertebra(
+        name: str) -> None:
+    """#39: the stiffness step's design is the controller's QP at the stepped pose: on the
+    default joint the optimum of ``design_rest_lengths`` (which holds all six directions), on a
+    ring, where that design fails (its spin is not held by the strings), a finite K_c with
+    every tension in the step's range."""
+    from tensegrity_stiffness import config
+    from tensegrity_stiffness.mechanics.design import design_rest_lengths
+    from tensegrity_stiffness.ros.control_demo import (
+        POSE_STEP,
+        STIFFNESS_TENSIONS,
+        stiffness_design,
+        targets,
+    )
+
+    model = JointModel.from_yaml(packaged_config_path())
+    xi = model.initial_screw + POSE_STEP
+    reference = design_rest_lengths(model, xi, None, *STIFFNESS_TENSIONS)
+    design = stiffness_design(model, xi)
+    assert reference.success and design.feasible
+    scale = np.abs(reference.cartesian_stiffness).max()
+    np.testing.assert_allclose(design.predicted_cartesian_stiffness,
+                               reference.cartesian_stiffness, rtol=0, atol=1e-9 * scale)
+    ring = JointModel.from_yaml(config.example_config_path(name))
+    xi = ring.initial_screw + POSE_STEP
+    assert not design_rest_lengths(ring, xi, None, *STIFFNESS_TENSIONS).success
+    _, stiffness, message = targets(ring)
+    assert stiffness is not None and message == ''
+    assert np.all(np.isfinite(stiffness.data))
+    tensions = stiffness_design(ring, xi).tensions
+    assert np.all(tensions >= STIFFNESS_TENSIONS[0] - 1e-12)
+    assert np.all(tensions <= STIFFNESS_TENSIONS[1] + 1e-12)
