@@ -226,7 +226,7 @@ def test_poisoned_calls_give_the_same_run(model, monkeypatch):
 
 
 def sm_readings(st, rng):
-    from tensegrity_stiffness.estimation import Measurements
+    from tensegrity_stiffness.estimation.estimators import Measurements
     return Measurements(tensions=st.tensions + rng.normal(scale=0.05, size=12), tension_std=0.05,
                         specific_force=-st.transform[:3, :3].T @ [0.0, -9.81, 0.0]
                         + rng.normal(scale=0.05, size=3), specific_force_std=0.05,
@@ -246,7 +246,7 @@ def test_no_ctypes_mismatch():
 
 
 def all_readings(model, rng, load):
-    from tensegrity_stiffness.estimation import Measurements
+    from tensegrity_stiffness.estimation.estimators import Measurements
     xi = model.initial_screw + rng.normal(scale=SPREAD)
     st = model.evaluate(xi)
     lengths = st.lengths + rng.normal(scale=1e-4, size=12)
