@@ -9,8 +9,8 @@ the controller's latched ``~/rest_lengths`` (motor commands) drive the twin and 
 estimator what is commanded. All three read the same ``params_file`` (default: the installed
 ``config/default_joint.yaml``). Targets go to ``stiffness_controller/target_pose`` and
 ``stiffness_controller/target_stiffness`` (docs/control.md). ``launch`` is not on PyPI: the
-test suite's launch checks compile files like this one; ``test/test_control_node.py`` starts the
-same three processes by hand.
+test suite's launch checks compile files like this one; ``test/ros/test_control_node.py``
+starts the same three processes by hand.
 """
 
 from pathlib import Path

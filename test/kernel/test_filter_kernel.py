@@ -1,12 +1,11 @@
 """The joint filter's entry points of the compiled kernel (``tsk_filter_body_dynamics``,
-``tsk_filter_propagate``, ``tsk_filter_update``, ``tsk_filter_motion_rows``,
-``tsk_filter_output``) against their numpy references in ``estimation/joint_filter.py``
-(``body_dynamics``, ``JointFilter._substep``, ``kalman_update``, ``JointFilter._rows``,
-``JointFilter._output_numpy``)
-to 1e-12 of each quantity's scale, and their boundary: counts, null pointers, short buffers
-and bad arguments are refused before anything is written, and poisoned calls (every freed
-small buffer handed out again and overwritten with NaN before C runs, as
-``test_kernel_boundary.py``) give the same results."""
+``tsk_filter_propagate``, ``tsk_filter_update``, ``tsk_filter_motion_rows``, ``tsk_filter_output``)
+against their numpy references in ``estimation/joint_filter.py`` (``body_dynamics``,
+``JointFilter._substep``, ``kalman_update``, ``JointFilter._rows``, ``JointFilter._output_numpy``)
+to 1e-12 of each quantity's scale, and their boundary: counts, null pointers, short buffers and bad
+arguments are refused before anything is written, and poisoned calls (every freed small buffer
+handed out again and overwritten with NaN before C runs, as ``test_kernel_boundary.py``) give the
+same results."""
 
 import ctypes
 
