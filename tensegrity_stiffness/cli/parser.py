@@ -19,8 +19,8 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
 * ``bag``          what the node would publish, for a whole rosbag2 recording (needs rosbags)
 * ``calibrate``    each string's stiffness and rest-length offset from a recording (rosbag2 or
   CSV), with identifiability and std (:mod:`tensegrity_stiffness.cli.calibration_report`)
-* ``record``       a rosbag2 of a running node's topics (:mod:`.record_command`; rclpy, in a child
-  process)
+* ``record``       a rosbag2 of a running node's topics (:mod:`.record_command`; rclpy, in a
+  child process)
 * ``export-mjcf``  the digital twin's MuJoCo model of the joint or the spine
 * ``new-config``   a starter joint (or spine) config from a template, its unloaded equilibrium
   written as ``initial_screw`` (:mod:`tensegrity_stiffness.mechanics.templates`)
