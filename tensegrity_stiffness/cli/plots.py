@@ -24,8 +24,7 @@ Figures (defaults are the papers' parameter sets):
   admissible tensions along a sweep of one screw coordinate
   (:mod:`tensegrity_stiffness.mechanics.design`).
 * :func:`plot_spine` -- a chain of joints (:mod:`tensegrity_stiffness.mechanics.chain`) in the
-base frame,
-  strings coloured by tension.
+  base frame, strings coloured by tension.
 """
 
 from __future__ import annotations
