@@ -1,6 +1,7 @@
 """Declare a node's parameters from the table of :mod:`tensegrity_stiffness.nodes.parameters` and
-keep its settings in step with them: a change is validated as a whole before it is accepted, and
-the settings are rebuilt and swapped as one object after it."""
+keep
+its settings in step with them: a change is validated as a whole before it is accepted, and the
+settings are rebuilt and swapped as one object after it."""
 
 from __future__ import annotations
 
@@ -78,11 +79,12 @@ def current_values(node: Node, table: Iterable[ParameterSpec]) -> dict[str, Any]
 
 
 class ParameterBinding:
-    """Declares ``table`` on ``node`` and refuses (ValueError: the node does not start) a misspelt
-    parameter of the node's own sections in its parameter file or overrides, naming the nearest
-    name (with ``strict_parameters:=false``: a warning, and the node runs); validates every
-    parameter change of ``node`` as a whole with ``build`` (values -> settings, ValueError naming
-    the field) and, once ROS has applied it, rebuilds the settings and hands them to ``apply``.
+    """Declares ``table`` on ``node`` and refuses (ValueError: the node does not start) a
+    misspelt parameter of the node's own sections in its parameter file or overrides, naming
+    the nearest name (with ``strict_parameters:=false``: a warning, and the node runs);
+    validates every parameter change of
+    ``node`` as a whole with ``build`` (values -> settings, ValueError naming the field) and,
+    once ROS has applied it, rebuilds the settings and hands them to ``apply``.
     ``on_rejected(reason)`` reports a rejected change."""
 
     def __init__(self, node: Node, table: Iterable[ParameterSpec],
