@@ -158,6 +158,12 @@ IN_PROGRESS = {
     ('tensegrity_stiffness/ros/estimator_node.py', f'{T}.estimation.estimate_joint_state'),
     ('tensegrity_stiffness/ros/spine_estimator_node.py', f'{T}.estimation.ChainFilter'),
     ('tensegrity_stiffness/ros/spine_estimator_node.py', f'{T}.estimation.estimate_chain_state'),
+    # where h-nodes moves the estimators' tables
+    ('tensegrity_stiffness/nodes/estimator_node.py', f'{T}.estimation.JointFilter'),
+    ('tensegrity_stiffness/nodes/estimator_node.py', f'{T}.estimation.estimate_joint_state'),
+    ('tensegrity_stiffness/nodes/estimator_node.py', f'{T}.estimation.ProcessNoise'),
+    ('tensegrity_stiffness/nodes/spine_estimator_node.py',
+     f'{T}.estimation.DEFAULT_CHAIN_PROCESS_NOISE'),
 }
 
 
