@@ -4,12 +4,11 @@
 
 Writes a rosbag2 (default mcap) of N screws (default 100,000, 1 kHz log times, near the default
 joint's unloaded equilibrium) to a temporary folder, then measures side by side in one run:
-* end to end: :func:`tensegrity_stiffness.recordings.bag.process_bag` (read, decode and validate
-as the
-  node does, batched evaluation, write five outputs per input), in inputs per second, best of
-  R runs; with ``--baseline CHECKOUT`` (a checkout of another commit, e.g. a ``git worktree``)
-  that checkout's ``tensegrity_stiffness/bag.py`` too, on this checkout's library, its runs
-  interleaved with this one's, and the ratio;
+* end to end: :func:`tensegrity_stiffness.recordings.bag.process_bag` (read, decode and validate as
+  the node does, batched evaluation, write five outputs per input), in inputs per second, best of R
+  runs; with ``--baseline CHECKOUT`` (a checkout of another commit, e.g. a ``git worktree``) that
+  checkout's ``tensegrity_stiffness/bag.py`` too, on this checkout's library, its runs interleaved
+  with this one's, and the ratio;
 * its parts, with the command's own pieces: reading and decoding (rosbags ``Reader.messages``,
   plain screws decoded in blocks with ``plain_screw_values`` and checked with
   ``processing.screw_inputs``); the library (``processing.joint_outputs_batch`` and

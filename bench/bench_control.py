@@ -13,12 +13,12 @@ circle of 1 mm and 0.02 rad), and the same with a target K_c; then the 8-string 
 clock at 500 Hz and 1 kHz (``--paced``, as the node's timer runs it): tick time and missed
 ticks, against a full design per tick. Also the spine controller's tick (5 joints). Part
 ``--loop``: the whole loop across processes (sim_node -> estimator_node with 12 load cells +
-IMU -> stiffness_controller -> sim_node, started as test/test_control_node.py does; needs
+IMU -> stiffness_controller -> sim_node, started as test/ros/test_control_node.py does; needs
 ``source scripts/env.sh``) at 500 Hz and 1 kHz: the controller's ticks, missed ticks, tick time
-and the latency from the twin's
-reading (the stamp the estimate carries) to the command it causes (median, p99; goal median
-<= 3 ms), and the ticks that used a state older than one period, from its /diagnostics. Numbers
-only, no assertions; the issue's goal for the joint tick is <= 200 us (median).
+and the latency from the twin's reading (the stamp the estimate carries) to the command it
+causes (median, p99; goal median <= 3 ms), and the ticks that used a state older than one
+period, from its /diagnostics. Numbers only, no assertions; the issue's goal for the joint tick
+is <= 200 us (median).
 """
 
 from __future__ import annotations

@@ -38,14 +38,14 @@ import numpy as np  # noqa: E402
 from support.estimation_trials import GRAVITY_STD, TENSION_STD, TRUTH_SPREAD  # noqa: E402
 
 from tensegrity_stiffness.config import packaged_config_path  # noqa: E402
-from tensegrity_stiffness.estimation import (  # noqa: E402
-    ChainFilter,
-    JointFilter,
+from tensegrity_stiffness.estimation import sensor_models as sm  # noqa: E402
+from tensegrity_stiffness.estimation.chain_filter import ChainFilter  # noqa: E402
+from tensegrity_stiffness.estimation.estimators import (  # noqa: E402
     Measurements,
     estimate_chain_state,
     estimate_joint_state,
 )
-from tensegrity_stiffness.estimation import sensor_models as sm  # noqa: E402
+from tensegrity_stiffness.estimation.joint_filter import JointFilter  # noqa: E402
 from tensegrity_stiffness.mechanics import kernel  # noqa: E402
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402

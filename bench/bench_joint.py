@@ -92,8 +92,8 @@ def build_previous_kernel(root: Path, out_dir: Path) -> Path:
 
 def import_previous(root: Path, library: Path) -> tuple[ModuleType, ModuleType]:
     """``tensegrity_stiffness.mechanics.joint`` and ``.kernel`` of the checkout ``root``, imported
-    beside
-    this package (its modules swapped out of ``sys.modules`` meanwhile), bound to ``library``."""
+    beside this package (its modules swapped out of ``sys.modules`` meanwhile), bound to
+    ``library``."""
     prefix = 'tensegrity_stiffness'
     ours = {k: v for k, v in sys.modules.items() if k == prefix or k.startswith(prefix + '.')}
     for name in ours:

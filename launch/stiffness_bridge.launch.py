@@ -4,18 +4,22 @@
         input_topic:=/j1/stiffness_node/cartesian_stiffness target_node:=/admittance_controller
 
 Arguments: ``preset`` (crisp, crisp_full, column_major_36, cartesian_controllers, admittance,
-crisp_parameters), ``namespace``, ``input_topic`` (remaps ``~/input_stiffness``),
-``output_topic`` (remaps ``~/output_stiffness`` of topic presets, e.g. the controller's
-``target_stiffness``), ``target_node`` (the controller node of parameter presets) and
-``params_file`` (a ROS parameter file with the bridge's other parameters: output.pose, clamps,
-time constant...; empty: none). The per-preset files ``stiffness_bridge_<preset>.launch.py``
-include this one with their preset. ``launch`` is not on PyPI, so the test suite only checks that
-these files compile and name the installed executable and presets.
+crisp_parameters), ``namespace``, ``input_topic`` (remaps ``~/input_stiffness``), ``output_topic``
+(remaps ``~/output_stiffness`` of topic presets, e.g. the controller's ``target_stiffness``),
+``target_node`` (the controller node of parameter presets) and ``params_file`` (a ROS parameter
+file with the bridge's other parameters: output.pose, clamps, time constant...; empty: none); any
+parameter of the bridge's table (docs/parameters.md) or ``use_sim_time`` given as ``name:=value``
+is set after them, typed by the table (:mod:`tensegrity_stiffness.ros.launch_parameters`). The
+per-preset files ``stiffness_bridge_<preset>.launch.py`` include this one with their preset.
+``launch`` is not on PyPI, so the test suite only checks that these files compile and name the
+installed executable and presets.
 """
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch_ros.actions import Node
+
+from tensegrity_stiffness.ros.launch_parameters import single_parameters
 
 PACKAGE = 'tensegrity_stiffness'
 EXECUTABLE = 'stiffness_bridge'
@@ -37,6 +41,9 @@ def _bridge(context, *args, **kwargs) -> list:
     parameters: list = [{'preset': value['preset'], 'target.node': value['target_node']}]
     if value['params_file']:
         parameters.append(value['params_file'])
+    given = single_parameters(EXECUTABLE, context.launch_configurations)
+    if given:
+        parameters.append(given)
     remappings = [(topic, value[arg]) for topic, arg in (('~/input_stiffness', 'input_topic'),
                                                           ('~/output_stiffness', 'output_topic'))
                   if value[arg]]

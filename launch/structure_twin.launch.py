@@ -9,14 +9,19 @@ onto the input ``~/poses`` of ``structure_node``; both nodes take their rest len
 topic ``<namespace>/rest_lengths`` (the twin as motor commands at its rate limit, the node as
 the rest lengths it evaluates with), so a command published there (latched) drives both.
 ``structure`` is a packaged example of config/examples (default ``six_bar.yaml``): the twin's
-``structure.example`` and the node's ``structure.config``. ``launch`` is not on PyPI: the test
-suite checks that this file compiles and names the installed executables and config.
+``structure.example`` and the node's ``structure.config``. ``params_file`` (default none) is a
+ROS parameter file for both; any parameter of either node's table (docs/parameters.md) or
+``use_sim_time`` given as ``name:=value`` is set on each node that has it, after the file, typed
+by the table (:mod:`tensegrity_stiffness.ros.launch_parameters`). ``launch`` is not on PyPI: the
+test suite checks that this file compiles, names the installed executables and config and sets
+only the nodes' parameters.
 """
 
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+
+from tensegrity_stiffness.ros.launch_parameters import launch_node
 
 PACKAGE = 'tensegrity_stiffness'
 EXECUTABLE = 'structure_sim_node'
@@ -33,13 +38,12 @@ def generate_launch_description() -> LaunchDescription:
                               description='namespace of both nodes'),
         DeclareLaunchArgument('structure', default_value=STRUCTURE,
                               description='a packaged example of config/examples'),
-        Node(package=PACKAGE, executable=EXECUTABLE, name=EXECUTABLE, namespace=namespace,
-             parameters=[{'structure.example': structure}],
-             remappings=[('~/rest_lengths', 'rest_lengths')],
-             output='screen', emulate_tty=True),
-        Node(package=PACKAGE, executable=PARTNER, name=PARTNER, namespace=namespace,
-             parameters=[{'structure.config': structure}],
-             remappings=[('~/poses', f'{EXECUTABLE}/poses'),
-                         ('~/rest_lengths', 'rest_lengths')],
-             output='screen', emulate_tty=True),
+        DeclareLaunchArgument('params_file', default_value='',
+                              description='ROS parameter file of both nodes (empty: none); '
+                              'single parameters: <name>:=<value>'),
+        launch_node(EXECUTABLE, fixed=[{'structure.example': structure}],
+                    remappings=[('~/rest_lengths', 'rest_lengths')], namespace=namespace),
+        launch_node(PARTNER, fixed=[{'structure.config': structure}],
+                    remappings=[('~/poses', f'{EXECUTABLE}/poses'),
+                                ('~/rest_lengths', 'rest_lengths')], namespace=namespace),
     ])

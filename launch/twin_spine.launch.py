@@ -5,7 +5,8 @@
 
 The twin publishes the truth on ``sim_node/poses``, which is remapped onto the input
 ``~/poses`` of ``spine_node``; both read the same ``params_file`` (default: the installed
-``config/default_spine.yaml``). The description is ``twin.launch.py``'s, for the spine.
+``config/default_spine.yaml``; single parameters as ``name:=value`` too). The description is
+``twin.launch.py``'s, for the spine.
 """
 
 import importlib.util

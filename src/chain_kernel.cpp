@@ -1,5 +1,6 @@
-// Compiled kernel of tensegrity_stiffness.chain: the frames of a spine, the implied tip wrench
-// and the exact tip stiffness (the conventions and the derivation are in chain.py's docstring):
+// Compiled kernel of tensegrity_stiffness.mechanics.chain: the frames of a spine, the implied tip
+// wrench and the exact tip stiffness (the conventions and the derivation are in
+// mechanics/chain.py's docstring):
 //   P_1 = I, L_i = P_i T_i, P_{i+1} = L_i O_i, T_tip = L_N O_tool;
 //   residuals r_i = F_i + Ad_{P_i}^T B_i, B_i = W + sum_{k >= i} w_k (w_k the link weights);
 //   D_ij = -[i = j] K_c,i + Ad_{P_i}^T E_ij Ad_{P_j},
@@ -9,8 +10,8 @@
 //   an LU of D with partial pivoting),
 //   K_tool = Ad_{T_tip}^T K_tip Ad_{T_tip}.
 // Twists [dv; dw], wrenches [f; m]; Ad_P = [[R, hat(p) R], [0, R]]. The numpy implementation in
-// chain.py stays the reference and the fallback (test/test_chain_kernel.py). The C ABI is declared
-// in include/tensegrity_stiffness/kernel.h.
+// mechanics/chain.py stays the reference and the fallback (test/kernel/test_chain_kernel.py). The
+// C ABI is declared in include/tensegrity_stiffness/kernel.h.
 
 #include "tensegrity_stiffness/kernel.h"
 

@@ -3,18 +3,19 @@
 // (eqs. 3, 4, 14-18), the string vectors s_j = p1_j - T p2_j (eq. 7), lengths, tensions (eq. 8),
 // the wrench F = sum [f_j; p1_j x f_j] (eq. 9), K = dF/dxi (eq. 10) and K_c = -dF/d[dv; dw].
 //
-// The formulas are those of tensegrity_stiffness/screw.py (_kinematics_entries) and
-// tensegrity_stiffness/joint.py (module docstring), written out per string:
+// The formulas are those of tensegrity_stiffness/geometry/screw.py (its kinematics entries) and
+// tensegrity_stiffness/mechanics/joint.py (module docstring), written out per string:
 //   A_j = df/ds = gamma s s^T + beta I,  beta = phi / l,  gamma = (phi' - beta) / l^2,
 //   H_D = sum [A; P A],  H_G = sum [A hat(q); P A hat(q)]  (P = hat(p1_j), q_j = T p2_j),
 //   K = [H_G G - H_D Q, -H_D G],  K_c = [H_D, -H_G].
 // Built on the same evaluation: the linear model of link 2's dynamics at an equilibrium
-// (dynamics.py, JointDynamics._blocks: M = J_b^T G J_b, the blocks J_l^T Pi K, -L^T C L,
+// (mechanics/dynamics.py, JointDynamics: M = J_b^T G J_b, the blocks J_l^T Pi K, -L^T C L,
 // J_l^T Pi dF/dl0, J_l^T Pi and M^-1 of them), the stiffness controller's pose terms
 // (control/controller.py, pose_terms_numpy) and exp(hat(xi)) alone.
-// The numpy implementation in joint.py stays the reference and the fallback; the tests hold this
-// kernel to it (test/test_joint_kernel.py); test/test_kernel_math.cpp to closed forms. The C ABI
-// is declared in include/tensegrity_stiffness/kernel.h (loaded with ctypes: no Python headers).
+// The numpy implementation in mechanics/joint.py stays the reference and the fallback; the tests
+// hold this kernel to it (test/kernel/test_joint_kernel.py); test/kernel/test_kernel_math.cpp to
+// closed forms. The C ABI is declared in include/tensegrity_stiffness/kernel.h (loaded with
+// ctypes: no Python headers).
 
 #include "tensegrity_stiffness/kernel.h"
 
@@ -36,7 +37,7 @@ struct Coefficients {
 };
 
 // a = sin t / t, b = (1 - cos t) / t^2, c = (t - sin t) / t^3, b1 = b' / t, c1 = c' / t; below
-// the model's series_threshold from its Taylor tables (Horner in t^2, as screw.py).
+// the model's series_threshold from its Taylor tables (Horner in t^2, as geometry/screw.py).
 Coefficients rotation_coefficients(const tsk_joint_model& model, double theta) {
   Coefficients k;
   if (theta < model.series_threshold) {
@@ -563,7 +564,8 @@ int64_t tsk_joint_linear_model(const tsk_joint_model* model, const double* inert
         Jl_out[6 * i + c] = J[i][c];
       }
     }
-    // F + W and the equilibrium test of dynamics.py (|F + W| <= tol max(max tension, 1e-300)).
+    // F + W and the equilibrium test of mechanics/dynamics.py
+    // (|F + W| <= tol max(max tension, 1e-300)).
     double top = 0.0, largest = 0.0;
     for (int64_t j = 0; j < n; ++j) {
       top = std::fmax(top, phi[j]);

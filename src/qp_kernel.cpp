@@ -5,8 +5,8 @@
 //   [[P_FF, A_F'], [A_F, 0]] [t_F; nu] = [c_F - P_FX t_X; b - A_X t_X]
 // (Gaussian elimination with partial pivoting), and the face is accepted when the solution is
 // inside the box (to a slack), satisfies A t = b and every bound of the working set has a
-// nonnegative multiplier. The numpy implementation in controller.py (warm_face_numpy) stays the
-// reference and the fallback (a singular or inaccurate KKT system goes to its least squares);
+// nonnegative multiplier. The numpy implementation in control/controller.py (warm_face_numpy)
+// stays the reference and the fallback (a singular or inaccurate KKT system goes to its least squares);
 // test/control/test_control.py holds this kernel to it. The C ABI is declared in
 // include/tensegrity_stiffness/kernel.h.
 

@@ -1,8 +1,7 @@
-"""Documented import path of :mod:`tensegrity_stiffness.mechanics.chain`
-(this name is the same module object)."""
+"""Deprecated: use :mod:`tensegrity_stiffness.mechanics.chain`
+(this name is that module itself, after a DeprecationWarning)."""
 
-import sys
-
+from tensegrity_stiffness.deprecation import replace_module
 from tensegrity_stiffness.mechanics import chain as moved
 
-sys.modules[__name__] = moved
+replace_module(__name__, moved)

@@ -36,7 +36,7 @@ inline constexpr double kSeriesThreshold = TSK_DEFAULT_SERIES_THRESHOLD;
 inline constexpr double kMinStringLength = TSK_DEFAULT_MIN_STRING_LENGTH;
 }  // namespace defaults
 
-/// Force laws (joint.py's FORCE_LAWS): Hooke k (l - l0); the paper's k (l - l0) / l.
+/// Force laws (mechanics/joint.py's FORCE_LAWS): Hooke k (l - l0); the paper's k (l - l0) / l.
 enum class ForceLaw : int64_t { kHooke = TSK_LAW_HOOKE, kPaper = TSK_LAW_PAPER };
 
 using Vector3 = std::array<double, 3>;

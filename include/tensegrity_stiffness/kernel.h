@@ -1,8 +1,9 @@
 /* The C ABI of the compiled kernel of tensegrity_stiffness (libtensegrity_stiffness_kernel.so).
  *
  * One header for the library (src/joint_kernel.cpp, src/chain_kernel.cpp include it) and for its
- * callers: tensegrity_stiffness/kernel.py mirrors it with ctypes, and test/test_kernel_abi.py holds
- * that mirror to the library (tsk_abi_version, tsk_joint_model_layout, the buffer sizes).
+ * callers: tensegrity_stiffness/mechanics/kernel.py mirrors it with ctypes, and
+ * test/kernel/test_kernel_abi.py holds that mirror to the library (tsk_abi_version,
+ * tsk_joint_model_layout, the buffer sizes).
  *
  * Conventions:
  * - every entry point returns int64_t: TSK_OK (0) or a negative TSK_ERROR_* code (sizes and the
@@ -48,11 +49,11 @@ extern "C" {
 #define TSK_MODE_STIFFNESS 1
 #define TSK_MODE_WRENCH 2
 
-/* Force laws: Hooke k (l - l0); the paper's k (l - l0) / l (joint.py's FORCE_LAWS). */
+/* Force laws: Hooke k (l - l0); the paper's k (l - l0) / l (mechanics/joint.py's FORCE_LAWS). */
 #define TSK_LAW_HOOKE 0
 #define TSK_LAW_PAPER 1
 
-/* Rows of the series table: the Taylor coefficients of a, b, c, b1, c1 (screw.py). */
+/* Rows of the series table: the Taylor coefficients of a, b, c, b1, c1 (geometry/screw.py). */
 #define TSK_SERIES_ROWS 5
 
 /* Outcomes of tsk_qp_warm_face (a value in its buffer): the face is optimal; it is not (the
@@ -76,7 +77,7 @@ typedef struct tsk_joint_model {
   int64_t law;                /* TSK_LAW_* */
   int64_t series_terms;       /* terms per row of series, >= 1 */
   const double* series;       /* TSK_SERIES_ROWS x series_terms: coefficients in theta^2 of a,
-                                 b, c, b1, c1, highest power first (screw.py's tables) */
+                                 b, c, b1, c1, highest power first (geometry/screw.py) */
   double series_threshold;    /* angles below it take the series (screw.SERIES_THRESHOLD) */
   double min_string_length;   /* shorter strings: TSK_ERROR_ZERO_LENGTH (joint.MIN_STRING_LENGTH) */
 } tsk_joint_model;
@@ -118,7 +119,7 @@ int64_t tsk_joint_measure_packed(const tsk_joint_model* model, int64_t mode, dou
  * (the same shape) and the equilibrium flag (1). */
 int64_t tsk_joint_linear_size(int64_t n_strings);
 
-/* The linear model of link 2's dynamics at one screw with zero velocity (dynamics.py,
+/* The linear model of link 2's dynamics at one screw with zero velocity (mechanics/dynamics.py,
  * JointDynamics.linearize at an equilibrium): tsk_joint_evaluate_packed (same buf; K without
  * K_c), then in lin (lin_len >= tsk_joint_linear_size(n); it holds the external wrench W, [f; m]
  * in {1}, on entry) the blocks above, with J_b = J_l(-xi), G = inertia (6 x 6 spatial inertia

@@ -1,6 +1,5 @@
-"""Figures of vibration modes (:mod:`~tensegrity_stiffness.mechanics.dynamics`): each mode drawn
-as the
-joint (or spine) displaced along its shape, next to the equilibrium, for ``tensegrity-stiffness
+"""Figures of vibration modes (:mod:`~tensegrity_stiffness.mechanics.dynamics`): each mode drawn as
+the joint (or spine) displaced along its shape, next to the equilibrium, for ``tensegrity-stiffness
 modes --plot``. matplotlib only (no rclpy)."""
 
 from __future__ import annotations

@@ -24,8 +24,7 @@ Figures (defaults are the papers' parameter sets):
   admissible tensions along a sweep of one screw coordinate
   (:mod:`tensegrity_stiffness.mechanics.design`).
 * :func:`plot_spine` -- a chain of joints (:mod:`tensegrity_stiffness.mechanics.chain`) in the
-base frame,
-  strings coloured by tension.
+  base frame, strings coloured by tension.
 """
 
 from __future__ import annotations
@@ -558,8 +557,8 @@ def plot_cartesian_stiffness(mech: PlanarMechanism, path: str | Path, *,
                              progress: ProgressCallback | None = None) -> Path:
     """Ji, Li & Lin Fig. 8: stiffness K (N m/rad) over the Cartesian workspace of D3 by exact
     inverse kinematics
-    (:func:`~tensegrity_stiffness.mechanics.planar_workspace.cartesian_stiffness_map`);
-    where two stable in-range equilibria put D3 at a point, the stiffer one is shown."""
+    (:func:`~tensegrity_stiffness.mechanics.planar_workspace.cartesian_stiffness_map`); where two
+    stable in-range equilibria put D3 at a point, the stiffer one is shown."""
     path = output_path(path)
     resolution = _check_count('resolution', resolution)
     samples = _check_count('samples', samples)
@@ -595,9 +594,8 @@ def stiffness_range_curves(model: JointModel, screw: ArrayLike, coordinate: str,
                            tension_min: float = 0.1, tension_max: float = 1.5,
                            progress: ProgressCallback | None = None
                            ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Along ``screw + offset e_coordinate``: (minimum, maximum, design) (N, 6) of the diagonal
-    of K_c (:func:`~tensegrity_stiffness.mechanics.design.stiffness_range`; ``design`` = the
-    tensions
+    """Along ``screw + offset e_coordinate``: (minimum, maximum, design) (N, 6) of the diagonal of
+    K_c (:func:`~tensegrity_stiffness.mechanics.design.stiffness_range`; ``design`` = the tensions
     closest to the middle of the limits); NaN where the request is infeasible."""
     if coordinate not in SCREW_COORDINATES:
         raise ValueError(f'coordinate must be one of {SCREW_COORDINATES}, got {coordinate!r}')

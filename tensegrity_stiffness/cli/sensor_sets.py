@@ -1,8 +1,8 @@
 """What a sensor set determines at a joint's equilibrium (``check-config --sensors``): the
 readings a set would give there, exactly, with the stds of the config's ``estimator_node``
 section (``sensors.*``, or the node's defaults), estimated by
-:func:`~tensegrity_stiffness.estimation.estimate_joint_state` from the equilibrium: whether the
-set determines the pose, what it leaves undetermined (the estimator's own words), its
+:func:`~tensegrity_stiffness.estimation.estimators.estimate_joint_state` from the equilibrium:
+whether the set determines the pose, what it leaves undetermined (the estimator's own words), its
 redundancy (whether it can check itself) and the pose's std. Before a lab builds its sensors,
 this says, for instance, that a ring joint's 12 load cells leave its spin about its axis open.
 """
@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from tensegrity_stiffness.estimation import Measurements, estimate_joint_state
+from tensegrity_stiffness.estimation.estimators import Measurements, estimate_joint_state
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.nodes.parameters import (
     ESTIMATOR_NODE_PARAMETERS,

@@ -3,13 +3,11 @@
 What a robot measures, predicted from the screw ``xi = [omega; v]`` (``T = exp(hat(xi))`` maps
 {2} into {1}, :mod:`~tensegrity_stiffness.geometry.screw`) through :meth:`JointModel.evaluate
 <tensegrity_stiffness.mechanics.joint.JointModel.evaluate>`, and the derivative of each prediction
-with
-respect to the screw through the closed-form ``dT/dxi`` of
-:mod:`~tensegrity_stiffness.geometry.screw`
-(eqs. 12-18: ``dT/dxi`` applied to a point is ``[-hat(q), I] J(xi)`` with ``J`` the SE(3) left
-Jacobian ``[[G, 0], [Q, G]]``; :func:`~tensegrity_stiffness.geometry.screw.dexp_se3` is the same
-closed
-form as a (4, 4, 6) array). Shared by the estimator and the calibration.
+with respect to the screw through the closed-form ``dT/dxi`` of
+:mod:`~tensegrity_stiffness.geometry.screw` (eqs. 12-18: ``dT/dxi`` applied to a point is
+``[-hat(q), I] J(xi)`` with ``J`` the SE(3) left Jacobian ``[[G, 0], [Q, G]]``;
+:func:`~tensegrity_stiffness.geometry.screw.dexp_se3` is the same closed form as a (4, 4, 6)
+array). Shared by the estimator and the calibration.
 
 Models (string j joins link-1 node ``p1_j`` to link-2 node ``p2_j``; ``q_j = T p2_j``,
 ``s_j = p1_j - q_j``, ``l_j = |s_j|``, ``u_j = s_j / l_j``, eq. 7):

@@ -1,6 +1,5 @@
 """Recordings for :mod:`tensegrity_stiffness.estimation.calibration`: reading a rosbag2 or a CSV
-file into
-time series, and picking the quasi-static instants that become calibration samples.
+file into time series, and picking the quasi-static instants that become calibration samples.
 
 No rclpy and no ROS message package: rosbag2 files (mcap or sqlite3) are read with ``rosbags``
 (its own message types for ROS 2 Jazzy, read by attribute) with the bag command's input checks
@@ -321,10 +320,9 @@ def read_bag(path: str | Path, n_strings: int, topics: dict[str, str | None] | N
     force then and the latest tensions, wrench and lengths no older than ``max_age`` s.
 
     ``topics`` maps ``pose``, ``rest_lengths``, ``tensions``, ``wrench``, ``lengths`` to topic
-    names
-    (default :data:`DEFAULT_TOPICS`; None leaves a signal out); ``required``: the signals whose
-    topic must be in the bag (else :class:`RecordingError` naming it); the rest lengths always
-    are. Messages that cannot be decoded or have the wrong size are skipped and counted
+    names (default :data:`DEFAULT_TOPICS`; None leaves a signal out); ``required``: the signals
+    whose topic must be in the bag (else :class:`RecordingError` naming it); the rest lengths
+    always are. Messages that cannot be decoded or have the wrong size are skipped and counted
     (``recording.source`` says how many). A bag whose storage stops being readable part way
     raises :class:`~tensegrity_stiffness.recordings.bag.DamagedBagError` saying how much was
     read, unless ``allow_damaged`` (then ``recording.source`` says it).

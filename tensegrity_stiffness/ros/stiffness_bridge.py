@@ -5,8 +5,7 @@ admittance_controller, Franka stacks); docs/controllers.md.
 Thin layer: reads ``~/input_stiffness`` (a 6x6 ``Float64MultiArray`` as ``stiffness_node``'s
 ``~/cartesian_stiffness`` or ``spine_node``'s ``~/tip_stiffness``; remap it), conditions it with
 the library (:mod:`tensegrity_stiffness.mechanics.controller_stiffness`: the controller's frame,
-the
-nearest positive definite matrix, scale, clamps, low-pass) and delivers it, rate-limited: on
+the nearest positive definite matrix, scale, clamps, low-pass) and delivers it, rate-limited: on
 ``~/output_stiffness`` in a layout (topic targets) or through the ``set_parameters`` service of
 the controller node (parameter targets: asynchronous calls, only when a value moved beyond the
 deadband; refusals are warned about with the controller's reason). ``/diagnostics`` says how far

@@ -76,16 +76,15 @@ DEFAULT_SETTLE_SPEED = 1e-6
 class StructureTwinOptions:
     """Options of a structure twin (every field has a documented default).
 
-    ``timestep`` (s, 1e-3), ``integrator`` (MuJoCo's split step: ``'implicitfast'``,
-    ``'implicit'`` or ``'Euler'``), ``node_radius`` (m, 0.005: the contact spheres),
-    ``contact_time_constant`` (s, 0.005), ``joint_damping`` (on each free-joint dof against the
-    world, N s/m and N m s/rad; default the joint twin's 1e-3: air drag's order),
-    ``string_damping`` (N s/m for strings whose config gives none; default the twin's 0.5; the
-    configured damping is kept where it is > 0), ``rest_length_rate`` (m/s, the motors' speed;
-    None: at once),
-    ``rest_length_range`` ((min, max) m for every string; None: each string's physical range,
-    :func:`~.twin.rest_length_bounds`), ``max_force`` / ``max_moment`` (N, N m, a larger load
-    or push is refused; ``inf``: only finiteness), ``string_width`` (m, drawing only)."""
+    ``timestep`` (s, 1e-3), ``integrator`` (MuJoCo's split step: ``'implicitfast'``, ``'implicit'``
+    or ``'Euler'``), ``node_radius`` (m, 0.005: the contact spheres), ``contact_time_constant`` (s,
+    0.005), ``joint_damping`` (on each free-joint dof against the world, N s/m and N m s/rad;
+    default the joint twin's 1e-3: air drag's order), ``string_damping`` (N s/m for strings whose
+    config gives none; default the twin's 0.5; the configured damping is kept where it is > 0),
+    ``rest_length_rate`` (m/s, the motors' speed; None: at once), ``rest_length_range`` ((min, max)
+    m for every string; None: each string's physical range, :func:`~.twin.rest_length_bounds`),
+    ``max_force`` / ``max_moment`` (N, N m, a larger load or push is refused; ``inf``: only
+    finiteness), ``string_width`` (m, drawing only)."""
 
     timestep: float = 1e-3
     integrator: str = 'implicitfast'

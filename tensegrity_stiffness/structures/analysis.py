@@ -220,17 +220,15 @@ class Analysis:
     """What :func:`analyse_framework` finds (module docstring).
 
     Counts: ``rank`` of the equilibrium matrix, ``self_stresses`` s, ``mechanisms`` m (rigid
-    motions removed), ``rigid_motions`` (removed: those of a free framework, none with
-    supports). ``self_stress_basis``
-    (b, s) orthonormal; ``mechanism_basis`` (D, m) orthonormal on the free coordinates,
-    orthogonal to the rigid motions. With member forces: ``force_densities`` {member: q}
-    (N/m, bars negative) and ``density_vector`` (b,) the same in member order,
-    ``stress_matrix`` (n, n) and its ascending ``stress_eigenvalues``, ``stress_nullity``,
-    ``stress_psd``, ``residual`` ``|A t|`` on the free nodes (N; zero for a self-stress),
-    ``strings_pull`` (every string tension >= 0 and bar force <= 0), ``prestress_stiffness``
-    (m,) the ascending eigenvalues of the geometric stiffness on the mechanisms (N/m),
-    ``prestress_stable``, ``super_stable`` (None with supports: Connelly's test is for free
-    frameworks) and ``conic_at_infinity``."""
+    motions removed), ``rigid_motions`` (removed: those of a free framework, none with supports).
+    ``self_stress_basis`` (b, s) orthonormal; ``mechanism_basis`` (D, m) orthonormal on the free
+    coordinates, orthogonal to the rigid motions. With member forces: ``force_densities`` {member:
+    q} (N/m, bars negative) and ``density_vector`` (b,) the same in member order, ``stress_matrix``
+    (n, n) and its ascending ``stress_eigenvalues``, ``stress_nullity``, ``stress_psd``,
+    ``residual`` ``|A t|`` on the free nodes (N; zero for a self-stress), ``strings_pull`` (every
+    string tension >= 0 and bar force <= 0), ``prestress_stiffness`` (m,) the ascending eigenvalues
+    of the geometric stiffness on the mechanisms (N/m), ``prestress_stable``, ``super_stable``
+    (None with supports: Connelly's test is for free frameworks) and ``conic_at_infinity``."""
 
     framework: Framework
     rank: int

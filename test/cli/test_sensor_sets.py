@@ -10,7 +10,7 @@ import json
 import pytest
 
 from tensegrity_stiffness.cli.parser import main
-from tensegrity_stiffness.estimation import Measurements, estimate_joint_state
+from tensegrity_stiffness.estimation.estimators import Measurements, estimate_joint_state
 from tensegrity_stiffness.mechanics.joint import JointModel
 
 SPIN = 'undetermined: rotation about (0.00, '

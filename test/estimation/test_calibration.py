@@ -1,7 +1,6 @@
 """Calibration recovers known parameters (:mod:`tensegrity_stiffness.estimation.calibration`):
-accuracy
-against the reported std, the std against the Cramer-Rao bound, identifiability of what the data
-cannot determine, robustness to gross outliers."""
+accuracy against the reported std, the std against the Cramer-Rao bound, identifiability of what
+the data cannot determine, robustness to gross outliers."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Central-difference checks of the calibration's analytic Jacobians
 (:mod:`tensegrity_stiffness.estimation.calibration`): tensions and wrench w.r.t. each string's
-stiffness and
-rest length, and every whitened residual w.r.t. the screws and the scaled parameters."""
+stiffness and rest length, and every whitened residual w.r.t. the screws and the scaled
+parameters."""
 
 from __future__ import annotations
 

@@ -9,9 +9,9 @@ from scipy.integrate import solve_ivp
 from support.estimation_trials import TENSION_STD
 
 from tensegrity_stiffness.config import packaged_config_path
-from tensegrity_stiffness.estimation import (
+from tensegrity_stiffness.estimation.chain_filter import ChainFilter
+from tensegrity_stiffness.estimation.estimators import (
     ChainEstimate,
-    ChainFilter,
     Measurements,
     estimate_chain_state,
 )

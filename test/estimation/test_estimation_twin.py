@@ -1,7 +1,6 @@
 """The estimator on the MuJoCo twin's sensors (tensegrity_stiffness.simulation.twin): the twin
-settles
-under seeded loads, its tendons' tensions and lengths, its IMU and its applied load are read
-with the issue's typical noise; the pose NEES lies in the chi-square band over 1000 trials per
+settles under seeded loads, its tendons' tensions and lengths, its IMU and its applied load are
+read with the issue's typical noise; the pose NEES lies in the chi-square band over 1000 trials per
 sensor set, errors shrink as sensors are added, and forward statics match the settled twin."""
 
 

@@ -15,7 +15,8 @@ from support.estimation_trials import TENSION_STD, nees_band
 from support.filter_trials import drive
 
 from tensegrity_stiffness.config import packaged_config_path
-from tensegrity_stiffness.estimation import ChainFilter, Measurements
+from tensegrity_stiffness.estimation.chain_filter import ChainFilter
+from tensegrity_stiffness.estimation.estimators import Measurements
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
 

@@ -10,15 +10,13 @@ from scipy.integrate import solve_ivp
 from support import REPO
 from support.estimation_trials import TENSION_STD
 
-from tensegrity_stiffness.estimation import (
+from tensegrity_stiffness.estimation import sensor_models as sm
+from tensegrity_stiffness.estimation.estimators import (
     JointEstimate,
-    JointFilter,
     Measurements,
-    ProcessNoise,
-    body_dynamics,
     estimate_joint_state,
 )
-from tensegrity_stiffness.estimation import sensor_models as sm
+from tensegrity_stiffness.estimation.joint_filter import JointFilter, ProcessNoise, body_dynamics
 from tensegrity_stiffness.geometry.screw import ScrewKinematics
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.dynamics import (

@@ -1,12 +1,11 @@
 """The joint filter's entry points of the compiled kernel (``tsk_filter_body_dynamics``,
-``tsk_filter_propagate``, ``tsk_filter_update``, ``tsk_filter_motion_rows``,
-``tsk_filter_output``) against their numpy references in ``estimation/joint_filter.py``
-(``body_dynamics``, ``JointFilter._substep``, ``kalman_update``, ``JointFilter._rows``,
-``JointFilter._output_numpy``)
-to 1e-12 of each quantity's scale, and their boundary: counts, null pointers, short buffers
-and bad arguments are refused before anything is written, and poisoned calls (every freed
-small buffer handed out again and overwritten with NaN before C runs, as
-``test_kernel_boundary.py``) give the same results."""
+``tsk_filter_propagate``, ``tsk_filter_update``, ``tsk_filter_motion_rows``, ``tsk_filter_output``)
+against their numpy references in ``estimation/joint_filter.py`` (``body_dynamics``,
+``JointFilter._substep``, ``kalman_update``, ``JointFilter._rows``, ``JointFilter._output_numpy``)
+to 1e-12 of each quantity's scale, and their boundary: counts, null pointers, short buffers and bad
+arguments are refused before anything is written, and poisoned calls (every freed small buffer
+handed out again and overwritten with NaN before C runs, as ``test_kernel_boundary.py``) give the
+same results."""
 
 import ctypes
 
@@ -226,7 +225,7 @@ def test_poisoned_calls_give_the_same_run(model, monkeypatch):
 
 
 def sm_readings(st, rng):
-    from tensegrity_stiffness.estimation import Measurements
+    from tensegrity_stiffness.estimation.estimators import Measurements
     return Measurements(tensions=st.tensions + rng.normal(scale=0.05, size=12), tension_std=0.05,
                         specific_force=-st.transform[:3, :3].T @ [0.0, -9.81, 0.0]
                         + rng.normal(scale=0.05, size=3), specific_force_std=0.05,
@@ -246,7 +245,7 @@ def test_no_ctypes_mismatch():
 
 
 def all_readings(model, rng, load):
-    from tensegrity_stiffness.estimation import Measurements
+    from tensegrity_stiffness.estimation.estimators import Measurements
     xi = model.initial_screw + rng.normal(scale=SPREAD)
     st = model.evaluate(xi)
     lengths = st.lengths + rng.normal(scale=1e-4, size=12)

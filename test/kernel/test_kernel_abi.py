@@ -1,5 +1,5 @@
-"""The ctypes mirror in ``tensegrity_stiffness/kernel.py`` against the kernel's one C header
-(``include/tensegrity_stiffness/kernel.h``) and the loaded library: version, status codes,
+"""The ctypes mirror in ``tensegrity_stiffness/mechanics/kernel.py`` against the kernel's one C
+header (``include/tensegrity_stiffness/kernel.h``) and the loaded library: version, status codes,
 modes, the ``tsk_joint_model`` struct (field names, order, size, offsets as the library reports
 them), buffer sizes, and the model constants that come from their one Python home (the series
 tables of ``screw.py``, its threshold, ``joint.MIN_STRING_LENGTH``). Also: the library checks

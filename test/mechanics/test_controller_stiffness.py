@@ -1,7 +1,7 @@
 """tensegrity_stiffness.mechanics.controller_stiffness: the frame change against central
-differences of the
-joint's wrench under small twists of the controller's frame, the projection against a numerical
-optimiser (no symmetric matrix with the eigenvalue floor is closer), clamps, layouts, low-pass."""
+differences of the joint's wrench under small twists of the controller's frame, the projection
+against a numerical optimiser (no symmetric matrix with the eigenvalue floor is closer), clamps,
+layouts, low-pass."""
 
 from __future__ import annotations
 

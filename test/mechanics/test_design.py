@@ -1,7 +1,6 @@
-"""Stiffness design (``tensegrity_stiffness.mechanics.design``): the designed rest lengths hold
-the target
-pose, the QP is solved exactly (KKT conditions, not worse than SLSQP), infeasible requests name
-their constraint, the stiffness range brackets every design, the sensitivity matches central
+"""Stiffness design (``tensegrity_stiffness.mechanics.design``): the designed rest lengths hold the
+target pose, the QP is solved exactly (KKT conditions, not worse than SLSQP), infeasible requests
+name their constraint, the stiffness range brackets every design, the sensitivity matches central
 differences; bad input; the service helpers; the ``design`` command.
 
 Every check recomputes what it tests through the joint model (``JointModel.evaluate``) or the

@@ -291,7 +291,7 @@ def test_a_spine_filter_at_rest():
     """A spine's default is the filter too (its process noise ChainFilter's defaults): stepped
     on noiseless tensions of every joint at the unloaded configuration it converges there, with
     a finite covariance; the static method is there too."""
-    from tensegrity_stiffness.estimation import DEFAULT_CHAIN_PROCESS_NOISE
+    from tensegrity_stiffness.estimation.joint_filter import DEFAULT_CHAIN_PROCESS_NOISE
     from tensegrity_stiffness.nodes.estimation_processing import (
         new_chain_filter,
         spine_filter_outputs,

@@ -1,7 +1,7 @@
 """tensegrity_stiffness.nodes.messages: the nodes' output messages built from the layouts of
 tensegrity_stiffness.nodes.layouts with rclpy's classes (tensegrity_stiffness.ros.conversions, the
-nodes) and with rosbags' types
-(the bag command) serialize to the same bytes; the readers and the pose writer check as before."""
+nodes) and with rosbags' types (the bag command) serialize to the same bytes; the readers and the
+pose writer check as before."""
 
 from __future__ import annotations
 

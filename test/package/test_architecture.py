@@ -28,6 +28,8 @@ T = 'tensegrity_stiffness.'
 LAYERS = (
     Layer('config', 0, (T + 'config',)),
     Layer('geometry', 0, (T + 'geometry',)),
+    # The deprecated paths' warnings: imports nothing of the package.
+    Layer('deprecation', 0, (T + 'deprecation',)),
     Layer('mechanics', 1, (T + 'mechanics',)),
     # Between mechanics and the rank-2 concerns, which will build on it (a structure twin, a
     # structure estimator).

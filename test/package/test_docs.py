@@ -266,3 +266,26 @@ def test_command_line_table_names_every_command():
     rows = {re.match(r'\| `([\w-]+)', row)[1] for row in table.splitlines()[2:]}
     assert rows == set(commands.choices), (sorted(set(commands.choices) - rows),
                                            sorted(rows - set(commands.choices)))
+
+
+def installed_executables() -> set[str]:
+    """Every executable the package installs: the ``name=module:function`` entries of
+    CMakeLists.txt (where ``ros2 run`` looks, and the command line) and setup.py's console
+    scripts."""
+    cmake = (REPO / 'CMakeLists.txt').read_text(encoding='utf-8')
+    names = set(re.findall(r'"([\w-]+)=tensegrity_stiffness[\w.]*:\w+"', cmake))
+    setup = (REPO / 'setup.py').read_text(encoding='utf-8')
+    names |= set(re.findall(r"'([\w-]+) = tensegrity_stiffness[\w.]*:\w+'", setup))
+    return names
+
+
+def test_readme_names_every_executable_with_one_line():
+    """The README's table of executables has one row for each executable installed (and no
+    other)."""
+    text = (REPO / 'README.md').read_text(encoding='utf-8')
+    section = text.split('## Executables', 1)[1].split('\n## ', 1)[0]
+    rows = re.findall(r'^\| `([\w-]+)` \| .+ \|$', section, re.M)
+    assert len(rows) == len(set(rows)), rows
+    expected = installed_executables()
+    assert {'stiffness_node', 'control_loop', 'structure_node', 'tensegrity-stiffness'} <= expected
+    assert set(rows) == expected

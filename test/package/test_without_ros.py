@@ -1,11 +1,10 @@
 """The library, the command line and the bag command run where no ROS is installed.
 
-Each check runs in a subprocess whose ``sitecustomize`` (first on ``PYTHONPATH``) puts a
-meta-path finder in front of every other: importing rclpy, a ROS message package, the project's
-interfaces, ``tensegrity_stiffness.ros.conversions`` or ``tensegrity_stiffness.ros`` raises
-ImportError there (and is
-reported on stderr, so an import that some code catches is seen too). The outputs are checked
-against the library in this process: every module of the library imports, two CLI commands
+Each check runs in a subprocess whose ``sitecustomize`` (first on ``PYTHONPATH``) puts a meta-path
+finder in front of every other: importing rclpy, a ROS message package, the project's interfaces,
+``tensegrity_stiffness.ros.conversions`` or ``tensegrity_stiffness.ros`` raises ImportError there
+(and is reported on stderr, so an import that some code catches is seen too). The outputs are
+checked against the library in this process: every module of the library imports, two CLI commands
 print what they print here, and the bag command writes the answers of ``test_bag``'s and
 ``test_bag_spine``'s scenarios (mcap and sqlite3), checked message by message.
 """

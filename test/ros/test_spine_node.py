@@ -2,8 +2,7 @@
 ``--ros-args --params-file config/default_spine.yaml``; a test node publishes inputs, reads every
 output and calls the service, and every value is checked against the library
 (:mod:`tensegrity_stiffness.mechanics.chain`). Ends with a shortened seeded fuzz of hostile and
-valid
-inputs on every topic and the service."""
+valid inputs on every topic and the service."""
 
 from __future__ import annotations
 

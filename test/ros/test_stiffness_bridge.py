@@ -1,10 +1,9 @@
 """stiffness_bridge across processes: a running stiffness_node (``~/cartesian_stiffness``) and
-spine_node (``~/tip_stiffness``; every parameter preset gets both) feed the installed bridge,
-which feeds a stand-in controller
-(``test/support/controller_standins.py``: real rclpy nodes in processes of their own, with the real
-controllers' parameter names, types, ranges and refusal texts; the definitions and their sources
-are cited there). Every delivered value is checked against the library
-(:mod:`tensegrity_stiffness.mechanics.controller_stiffness`)."""
+spine_node (``~/tip_stiffness``; every parameter preset gets both) feed the installed bridge, which
+feeds a stand-in controller (``test/support/controller_standins.py``: real rclpy nodes in processes
+of their own, with the real controllers' parameter names, types, ranges and refusal texts; the
+definitions and their sources are cited there). Every delivered value is checked against the
+library (:mod:`tensegrity_stiffness.mechanics.controller_stiffness`)."""
 
 from __future__ import annotations
 

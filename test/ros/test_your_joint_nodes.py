@@ -42,7 +42,7 @@ from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 from tensegrity_stiffness.mechanics.unloaded import InitialScrewWarning  # noqa: E402
 from tensegrity_stiffness.ros import conversions  # noqa: E402
-from tensegrity_stiffness.simulation import JointSimulation  # noqa: E402
+from tensegrity_stiffness.simulation.twin import JointSimulation  # noqa: E402
 
 AGREE = 1e-9
 TEMPLATES = {
