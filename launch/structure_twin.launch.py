@@ -8,8 +8,8 @@ The twin publishes the bodies' true poses on ``structure_sim_node/poses``, which
 onto the input ``~/poses`` of ``structure_node``; both nodes take their rest lengths from the one
 topic ``<namespace>/rest_lengths`` (the twin as motor commands at its rate limit, the node as
 the rest lengths it evaluates with), so a command published there (latched) drives both.
-``structure`` is a packaged example of config/examples (default ``six_bar.yaml``): the twin's
-``structure.example`` and the node's ``structure.config``. ``launch`` is not on PyPI: the test
+``structure`` is a packaged example of config/examples (default ``six_bar.yaml``): both nodes'
+``structure.config``. ``launch`` is not on PyPI: the test
 suite checks that this file compiles and names the installed executables and config.
 """
 
@@ -34,7 +34,7 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('structure', default_value=STRUCTURE,
                               description='a packaged example of config/examples'),
         Node(package=PACKAGE, executable=EXECUTABLE, name=EXECUTABLE, namespace=namespace,
-             parameters=[{'structure.example': structure}],
+             parameters=[{'structure.config': structure}],
              remappings=[('~/rest_lengths', 'rest_lengths')],
              output='screen', emulate_tty=True),
         Node(package=PACKAGE, executable=PARTNER, name=PARTNER, namespace=namespace,

@@ -22,7 +22,6 @@ world about its origin for ``push.duration`` s).
 
 from __future__ import annotations
 
-import atexit
 import math
 import sys
 import threading
@@ -49,12 +48,12 @@ from tensegrity_stiffness.nodes.structure_sim_node import (
     StructureSimSettings,
     live_line,
     loads_label,
+    resting_poses,
     structure_sim_settings,
 )
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
-from tensegrity_stiffness.ros.runtime.pacing import periods_due, wait_until
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.topics import (
     LATCHED_QOS,
@@ -62,6 +61,7 @@ from tensegrity_stiffness.ros.runtime.topics import (
     input_qos,
     output_qos,
 )
+from tensegrity_stiffness.ros.runtime.twin_stepping import SteppingTwin
 from tensegrity_stiffness.simulation.structure_gait import (
     DONE,
     REST_SPEED,
@@ -70,22 +70,12 @@ from tensegrity_stiffness.simulation.structure_gait import (
 )
 from tensegrity_stiffness.simulation.structure_twin import StructureSimulation
 from tensegrity_stiffness.simulation.twin import checked_wrench
-from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
-from tensegrity_stiffness.structures.structure import Structure
 
 #: Seconds between /diagnostics messages (and live lines).
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
-def resting_poses(structure: Structure) -> np.ndarray:
-    """Where the twin starts: the structure's equilibrium with its gravity and ground (the
-    library's, :func:`~tensegrity_stiffness.structures.equilibrium.solve_structure_equilibrium`),
-    or its configured poses when it has none."""
-    result = solve_structure_equilibrium(structure)
-    return result.poses if result.success else structure.start_poses()
-
-
-class StructureSimNode(Node):
+class StructureSimNode(SteppingTwin, Node):
     """Steps the structure twin and publishes its truth and sensors (module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -95,6 +85,8 @@ class StructureSimNode(Node):
             self, STRUCTURE_SIM_PARAMETERS, structure_sim_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
         settings: StructureSimSettings = self._binding.build(self._binding.values())
+        for line in settings.deprecations:
+            self.get_logger().warning(line)
         self._settings = settings
         values = settings.values
         structure = settings.structure
@@ -110,8 +102,6 @@ class StructureSimNode(Node):
         self._pending_loads: np.ndarray | None = None
         self._pending_pushes: list[tuple[str, np.ndarray, float]] = []
         self._pending_settings: StructureSimSettings | None = None
-        self.steps = 0
-        self.missed_steps = 0
         self.publications = 0
         self._state_line = ''
         # The gait: planned on a thread of its own (a plan takes a fraction of a second), run
@@ -150,12 +140,7 @@ class StructureSimNode(Node):
                                  input_qos(depth, 'reliable'))
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self._diagnosed = (time.perf_counter(), 0)
-        self._stop = threading.Event()
-        self.context.on_shutdown(self._stop.set)
-        self._thread = threading.Thread(target=self._run, name='structure_sim_node stepping',
-                                        daemon=True)
-        self._thread.start()
-        atexit.register(self.close)
+        self._start_stepping('structure_sim_node stepping')
         self.get_logger().info(
             f'ready: MuJoCo twin of {settings.source} ({structure.n_bodies} bodies, '
             f'{structure.n_strings} strings, {len(self._sim.imu_bodies)} IMUs), '
@@ -176,13 +161,6 @@ class StructureSimNode(Node):
         noise = settings.noise
         self._msg_imus = [conversions.imu_message(name, noise.gyro, noise.accelerometer)
                           for name in self._sim.imu_bodies]
-
-    def close(self) -> None:
-        """Stop the stepping thread (the runner calls it before the node is destroyed)."""
-        self._stop.set()
-        self._thread.join(timeout=5.0)
-        if not self._thread.is_alive():
-            atexit.unregister(self.close)
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, values: Any, names: set[str]) -> None:
@@ -247,6 +225,17 @@ class StructureSimNode(Node):
         self._pending_pushes.append((body, W, self._settings.values['push.duration']))
 
     # ------------------------------------------------------------------ stepping
+    def _advance(self, n: int) -> None:
+        """``n`` steps under the inputs taken first."""
+        self._take_inputs()
+        self._sim.step(n)
+        self.steps += n
+
+    def _publish_due(self) -> None:
+        """The gait's step, then the truth and the sensors."""
+        self._run_gait()
+        self._publish()
+
     def _take_inputs(self) -> None:
         sim = self._sim
         settings = self._pending_settings
@@ -312,35 +301,7 @@ class StructureSimNode(Node):
             self._gait_steps_left = 0 if gait.failed else self._gait_steps_left - 1
             self.gait_phase = 'failed' if gait.failed else IDLE
 
-    def _run(self) -> None:
-        """The stepping loop: real time (absolute deadlines; steps due by more than one period
-        are caught up at once and counted missed) or as fast as possible."""
-        try:
-            start = time.perf_counter()
-            while not self._stop.is_set() and self.context.ok():
-                n = 1
-                if self._real_time:
-                    now = wait_until(start + (self.steps + 1) * self._period)
-                    n = periods_due(start, self.steps, self._period, now)
-                    self.missed_steps += n - 1
-                self._take_inputs()
-                before = self.steps
-                self._sim.step(n)
-                self.steps += n
-                every = self._settings.values['sim.publish_every']
-                if self.steps // every != before // every:
-                    self._run_gait()
-                    self._publish()
-        except Exception as exc:  # the stepping thread must not die silently
-            if self.context.ok() and not self._stop.is_set():
-                self.reporter.internal_error('stepping', exc)
-
     # ------------------------------------------------------------------ outputs
-    def _stamp(self) -> Any:
-        if self._real_time:
-            return self.get_clock().now().to_msg()
-        return conversions.stamp_from_seconds(self._sim.time)
-
     def _publish(self) -> None:
         settings, sim = self._settings, self._sim
         stamp = self._stamp()
