@@ -78,7 +78,7 @@ NODE_NAME = 'structure_estimator_node'
 #: IMUs are ``~/imu/<body>`` (reading ``imu/<body>``), ``estimation.trigger: imu`` the last of
 #: ``estimation.imu_bodies`` (the twin publishes them after the arrays of a step).
 STRUCTURE_ESTIMATOR_INPUTS = ('measured_lengths', 'measured_tensions', 'measured_rest_lengths',
-                              'measured_markers')
+                              'measured_markers', 'measured_contacts')
 TRIGGERS = (*STRUCTURE_ESTIMATOR_INPUTS, 'imu')
 #: The component names of a body's pose covariance (PoseWithCovariance: position, then the
 #: turn about the world's x, y, z).
@@ -107,12 +107,13 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "'static': the robot is still: every free body's wrench balance (strings at "
                   'the encoders\' rest lengths, weight, the contacts) is a reading too'),
     ParameterSpec('estimation.contacts', 'string_array', None,
-                  'the nodes known to be on the ground (body.node; empty: those within '
-                  'estimation.contact_distance of it at the last estimate)'),
+                  'the nodes known to be on the ground (body.node; empty: those of a fresh '
+                  '~/measured_contacts, else those within estimation.contact_distance of it at '
+                  'the last estimate)'),
     ParameterSpec('estimation.contact_distance', 'double', 0.005,
-                  'with estimation.contacts empty: a node of a free body at most this far '
-                  'above the ground at the last estimate is a contact (0: no contacts), m',
-                  range=(0.0, 1.0)),
+                  'with neither estimation.contacts nor ~/measured_contacts: a node of a free '
+                  'body at most this far above the ground at the last estimate is a contact '
+                  '(0: no contacts), m', range=(0.0, 1.0)),
     ParameterSpec('estimation.imu_bodies', 'string_array', None,
                   'the bodies with an IMU on ~/imu/<body> (empty: every free bar, as the twin)',
                   read_only=True),
@@ -141,6 +142,14 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('filter.contact_velocity_std', 'double', DEFAULT_CONTACT_VELOCITY_STD,
                   "'filter': std of a contact node's velocity (it sticks), m/s",
                   range=(1e-12, 1e3)),
+    ParameterSpec('filter.max_gap', 'double', 0.2,
+                  "'filter': an estimate more than this (s) after the last starts the filter "
+                  'again from a static estimate (a prediction that long is not trusted)',
+                  range=(1e-3, 3600.0)),
+    ParameterSpec('filter.max_gated_share', 'double', 0.5,
+                  "'filter': when more than this share of an update's readings is gated out, "
+                  'the next estimate starts the filter again from a static estimate (lost)',
+                  range=(0.0, 1.0)),
 )
 
 #: Every parameter of ``structure_estimator_node``: the structure node's (the structure, its
@@ -243,8 +252,11 @@ def input_length(settings: StructureEstimatorSettings, name: str) -> int:
     """The number of values of the array input ``name``: one per string, or 3 per body node
     (``measured_markers``, the twin's node order)."""
     s = settings.structure
+    body_nodes = int(np.count_nonzero(s.node_bodies >= 0))
     if name == 'measured_markers':
-        return 3 * int(np.count_nonzero(s.node_bodies >= 0))
+        return 3 * body_nodes
+    if name == 'measured_contacts':
+        return body_nodes
     return s.n_strings
 
 
@@ -255,6 +267,12 @@ def array_reading(settings: StructureEstimatorSettings, name: str, values: Float
     arr = measured_array(values, input_length(settings, name), f'~/{name}')
     if name in ('measured_lengths', 'measured_rest_lengths') and np.any(arr <= 0.0):
         raise ValueError(f'~/{name}: lengths must be > 0 (NaN: not measured)')
+    if name == 'measured_contacts':
+        if settings.structure.ground is None:
+            raise ValueError('~/measured_contacts: the structure has no ground')
+        if not np.all(np.isnan(arr) | (arr == 0.0) | (arr == 1.0)):
+            raise ValueError('~/measured_contacts: values must be 1 (on the ground), 0 (off it) '
+                             'or NaN (not known)')
     return arr
 
 
@@ -275,13 +293,18 @@ def imu_sample(settings: StructureEstimatorSettings, body: str, specific_force: 
                      np.asarray(angular_velocity, dtype=np.float64))
 
 
-def estimate_contacts(settings: StructureEstimatorSettings, poses: FloatArray
-                      ) -> tuple[str, ...]:
-    """The ground contacts of an estimate: ``estimation.contacts``, or the nodes of free
-    bodies within ``estimation.contact_distance`` of the ground at ``poses`` (N, 4, 4)."""
+def estimate_contacts(settings: StructureEstimatorSettings, poses: FloatArray,
+                      readings: Mapping[str, Reading]) -> tuple[str, ...]:
+    """The ground contacts of an estimate: ``estimation.contacts``, or those of a fresh
+    ``measured_contacts`` reading (its ones), or the nodes of free bodies within
+    ``estimation.contact_distance`` of the ground at ``poses`` (N, 4, 4)."""
     if settings.contacts:
         return settings.contacts
     s = settings.structure
+    if 'measured_contacts' in readings:
+        names = [n for n, b in zip(s.node_names, s.node_bodies, strict=True) if b >= 0]
+        on = readings['measured_contacts'].value == 1.0
+        return tuple(n for n, c in zip(names, on, strict=True) if c)
     if s.ground is None or settings.contact_distance <= 0.0:
         return ()
     return tuple(s.node_names[j] for j in contact_nodes(s, poses, settings.contact_distance))
@@ -350,11 +373,13 @@ def new_structure_filter(settings: StructureEstimatorSettings, poses: FloatArray
 
 @dataclass
 class FilterTrack:
-    """The filter of ``estimation.method: filter`` and the time (s) of its last update (None
-    before the first)."""
+    """The filter of ``estimation.method: filter``, the time (s) of its last update (None
+    before the first) and how often it was started again (``filter.max_gap``,
+    ``filter.max_gated_share``)."""
 
     filter: StructureFilter | None = None
-    time: float | None = None
+    time: float = 0.0
+    restarts: int = 0
 
 
 # ------------------------------------------------------------------------------ outputs
@@ -365,8 +390,10 @@ class StructureEstimatorOutputs:
     redundancy), ``redundancy`` (static: measured minus determined degrees of freedom; filter:
     the degrees of freedom of the readings kept), ``chi2`` (static: of the fit; filter: the
     NIS), ``outliers`` / ``outlier_reasons``, ``gauge`` (the directions held); the ``contacts``
-    used, the ``method``, the inputs ``used`` and every input's ``ages`` (s), and ``structure``:
-    the structure node's outputs at the estimate with the rest lengths used."""
+    used, the ``method``, the inputs ``used`` and every input's ``ages`` (s), ``structure``:
+    the structure node's outputs at the estimate with the rest lengths used, and ``anchor``: the
+    poses the next estimate starts from (the estimate's, or, while a rigid motion is held, the
+    start that holds it)."""
 
     poses: FloatArray
     covariance: FloatArray
@@ -381,6 +408,7 @@ class StructureEstimatorOutputs:
     used: tuple[str, ...]
     ages: Mapping[str, float]
     structure: StructureOutputs
+    anchor: FloatArray | None = None
 
     @property
     def state(self) -> Any:
@@ -394,7 +422,7 @@ class StructureEstimatorOutputs:
 
 def _static(settings: StructureEstimatorSettings, readings: Mapping[str, Reading],
             rest: FloatArray, start: FloatArray) -> Any:
-    contacts = estimate_contacts(settings, start)
+    contacts = estimate_contacts(settings, start, readings)
     m, _ = structure_measurements(settings, readings, rest, contacts)
     est = estimate_structure_poses(settings.structure, m, start=start,
                                    hold_rigid_motion=settings.hold_rigid_motion,
@@ -407,7 +435,7 @@ def _static(settings: StructureEstimatorSettings, readings: Mapping[str, Reading
 def estimate(settings: StructureEstimatorSettings, snapshot: EstimatorInput,
              track: FilterTrack | None = None) -> StructureEstimatorOutputs:
     """One estimate of the fresh readings of ``snapshot`` (``initial_screw``: the poses the
-    static estimator starts from, the last estimate's; None: the structure's resting
+    static estimator starts from, the last estimate's ``anchor``; None: the structure's resting
     equilibrium, :func:`~tensegrity_stiffness.nodes.structure_sim_node.resting_poses`, where
     the twin starts) under ``settings.method``; the filter
     (``track``) is started from the first static estimate and then predicted to
@@ -425,24 +453,39 @@ def estimate(settings: StructureEstimatorSettings, snapshot: EstimatorInput,
         poses, covariance = est.poses, est.covariance
         trust = (est.consistent, est.redundancy, est.chi2, est.outliers, est.outlier_reasons,
                  est.gauge)
+        # A held rigid motion stays where the start has it: the next estimate starts from the
+        # same poses, so that the readings' noise does not walk it (from the last estimate,
+        # each estimate's leak along it would add up: a degree of yaw in seconds at 100 Hz).
+        anchor = start if any('whole structure' in g for g in est.gauge) else poses
     else:
+        gap = settings.values['filter.max_gap']
+        if track.filter is not None and snapshot.now - track.time > gap:
+            track.filter = None  # too long unobserved: the prediction is not to be trusted
+            track.restarts += 1
         if track.filter is None:
             est, _ = _static(settings, readings, rest, start)
             track.filter = new_structure_filter(settings, est.poses)
         elif snapshot.now > track.time:
             track.filter.predict(snapshot.now - track.time)
         track.time = snapshot.now
-        contacts = estimate_contacts(settings, track.filter.T)
+        contacts = estimate_contacts(settings, track.filter.T, readings)
         m, gyros = structure_measurements(settings, readings, rest, contacts)
         update = track.filter.update(m, gyros)
+        n_readings = (sum(len(r or {}) for r in (m.lengths, m.tensions, m.imu_gravity,
+                                                  m.markers)) + 2 * len(contacts) + len(gyros))
+        if len(update.outliers) > settings.values['filter.max_gated_share'] * n_readings:
+            track.filter = None  # lost: most readings contradict it; the next starts again
+            track.restarts += 1
         poses, covariance = update.poses, update.covariance
+        anchor = poses
         trust = (update.consistent, update.dof, update.nis, update.outliers,
                  update.outlier_reasons, ())
     with np.errstate(all='ignore'):
         outputs = structure_outputs(replace(settings.node, rest_lengths=rest), poses)
     result = StructureEstimatorOutputs(
         poses, covariance, *trust, contacts=tuple(contacts), method=settings.method,
-        used=tuple(name for name in sorted(readings)), ages=ages, structure=outputs)
+        used=tuple(name for name in sorted(readings)), ages=ages, structure=outputs,
+        anchor=anchor)
     require_all_finite(STRUCTURE_ESTIMATOR_OUTPUT_NAMES[:len(estimator_output_arrays(result))],
                        estimator_output_arrays(result))
     return result

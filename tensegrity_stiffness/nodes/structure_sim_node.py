@@ -47,6 +47,8 @@ LENGTHS_LABEL = 'measured string lengths [m], string order of the structure'
 TENSIONS_LABEL = 'measured string tensions (load cells) [N], string order of the structure'
 ENCODERS_LABEL = 'measured rest lengths (motor encoders) [m], string order of the structure'
 MARKERS_LABEL = 'measured marker positions [m] x y z per body node, node order of the structure'
+CONTACTS_LABEL = ('ground contacts: 1 on the ground, 0 off it, per body node, node order of the '
+                  'structure')
 #: The gait's phases shown when no roll runs.
 IDLE = 'idle'
 

@@ -192,8 +192,8 @@ class StructureEstimatorNode(StreamingNode):
     # ------------------------------------------------------------------ inputs
     def _store(self, name: str, value: Any, stamp: Any) -> None:
         """Keep the reading; when it is the trigger, estimate from the newest readings (started
-        at the last estimate) and publish, stamped with the trigger's header stamp or, for an
-        array (no header), the time it arrived."""
+        at the last estimate's anchor) and publish, stamped with the trigger's header stamp or,
+        for an array (no header), the time it arrived."""
         now = time.monotonic()
         self._readings[name] = Reading(value, now)
         settings = self._settings
@@ -201,10 +201,12 @@ class StructureEstimatorNode(StreamingNode):
             return
         last = self._last.outputs
         snapshot = EstimatorInput(dict(self._readings), now,
-                                  self._start_poses if last is None else last.poses)
+                                  self._start_poses if last is None else last.anchor)
         if stamp is None or not stamp_is_set(stamp):
             stamp = self._clock.now().to_msg()
-        self._compute_and_publish(snapshot, stamp, f'~/{name}')
+        # A refused estimate is counted and warned about as 'estimate', apart from the inputs'
+        # own rejections (each kind throttled on its own).
+        self._compute_and_publish(snapshot, stamp, 'estimate')
 
     def _on_array(self, name: str, msg: Float64MultiArray) -> None:
         settings = self._settings
@@ -238,6 +240,7 @@ class StructureEstimatorNode(StreamingNode):
         share = (self._consistent_estimates / self._estimates if self._estimates
                  else float('nan'))
         values += [('estimates', self._estimates), ('consistent share', share),
+                   ('filter restarts', self._track.restarts),
                    ('trigger', f'~/{settings.trigger_reading}'),
                    ('max age [s]', settings.max_age)]
         return [conversions.diagnostic_status(f'{self.get_name()}: structure estimator', level,

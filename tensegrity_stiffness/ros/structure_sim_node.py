@@ -9,8 +9,10 @@ on the inputs, and publishes the truth and the simulated sensors with their nois
 The twin starts at rest at the structure's equilibrium on its ground (:func:`resting_poses`).
 Outputs: ``~/poses`` (``geometry_msgs/PoseArray`` in ``frames.world``, the structure's body
 order), ``~/measured_lengths``, ``~/measured_tensions`` (load cells), ``~/measured_rest_lengths``
-(motor encoders; ``Float64MultiArray``, string order), ``~/imu/<bar>`` (``sensor_msgs/Imu`` in
-the bar's frame, frame_id the bar's name), ``~/measured_markers`` (with ``markers.enabled``),
+(motor encoders; ``Float64MultiArray``, string order), ``~/measured_contacts`` (1 per body
+node on the ground, 0 off it, node order; while someone subscribes), ``~/imu/<bar>``
+(``sensor_msgs/Imu`` in the bar's frame, frame_id the bar's name), ``~/measured_markers`` (with
+``markers.enabled``),
 ``/diagnostics`` (centre of mass, contact nodes, slack strings, steps and the real-time factor,
 the gait's phase). Inputs (taken by the executor, validated there, applied by the stepping
 thread before its next step; bad input: a throttled warning naming the problem, the twin keeps
@@ -38,6 +40,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness.nodes.structure_sim_node import (
+    CONTACTS_LABEL,
     ENCODERS_LABEL,
     IDLE,
     LENGTHS_LABEL,
@@ -123,6 +126,8 @@ class StructureSimNode(SteppingTwin, Node):
                                                      '~/measured_tensions', out)
         self._pub_encoders = create_output_publisher(self, Float64MultiArray,
                                                      '~/measured_rest_lengths', out)
+        self._pub_contacts = create_output_publisher(self, Float64MultiArray,
+                                                     '~/measured_contacts', out)
         self._pub_markers = create_output_publisher(self, Float64MultiArray,
                                                     '~/measured_markers', out)
         self._pub_imus = [create_output_publisher(self, Imu, f'~/imu/{name}', out)
@@ -156,6 +161,8 @@ class StructureSimNode(SteppingTwin, Node):
         self._msg_lengths = conversions.vector_to_multiarray(np.zeros(n), LENGTHS_LABEL)
         self._msg_tensions = conversions.vector_to_multiarray(np.zeros(n), TENSIONS_LABEL)
         self._msg_encoders = conversions.vector_to_multiarray(np.zeros(n), ENCODERS_LABEL)
+        self._msg_contacts = conversions.vector_to_multiarray(
+            np.zeros(len(self._sim.marker_names)), CONTACTS_LABEL)
         self._msg_markers = conversions.vector_to_multiarray(
             np.zeros(3 * len(self._sim.marker_names)), MARKERS_LABEL)
         noise = settings.noise
@@ -323,6 +330,11 @@ class StructureSimNode(SteppingTwin, Node):
             conversions.write_imu(msg, noise.add(reading.angular_velocity, 'gyro', rng),
                                   noise.add(reading.specific_force, 'accelerometer', rng), stamp)
             pub.publish(msg)
+        if self._pub_contacts.get_subscription_count():
+            touching = set(sim.contact_nodes())
+            conversions.set_multiarray_data(self._msg_contacts, [
+                float(name in touching) for name in sim.marker_names])
+            self._pub_contacts.publish(self._msg_contacts)
         if settings.values['markers.enabled']:
             conversions.set_multiarray_data(self._msg_markers,
                                             noise.add(sim.markers(), 'markers', rng).ravel())

@@ -105,7 +105,7 @@ def commands(args: argparse.Namespace, extra: list[str]) -> dict[str, list[str]]
         for kind, std in ESTIMATE_NOISE.items():
             twin += ['-p', f'noise.{kind}:={std}']
         structure = Structure.from_yaml(structure_path(source))
-        inputs = ['measured_lengths', 'measured_rest_lengths',
+        inputs = ['measured_lengths', 'measured_rest_lengths', 'measured_contacts',
                   *(f'imu/{bar}' for bar in structure.bar_names)]
         if args.markers:
             inputs.append('measured_markers')
