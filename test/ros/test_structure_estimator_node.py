@@ -36,8 +36,9 @@ EXAMPLE = 'three_bar.yaml'
 #: 2 mrad of the gravity direction).
 LENGTH_NOISE, ACCELEROMETER_NOISE, MARKER_NOISE = 1e-3, 0.02, 1e-3
 IMU_STD = 0.003
-#: "A few mm" and a degree.
-POSITION_BOUND, ANGLE_BOUND = 4e-3, np.radians(1.0)
+#: "A few mm" and a degree; 2 degrees (the issue's bound) while the turn about the vertical is
+#: held where the last estimate with markers had it (that estimate's own error, up to a degree).
+POSITION_BOUND, ANGLE_BOUND, HELD_ANGLE_BOUND = 4e-3, np.radians(1.0), np.radians(2.0)
 #: The 3-sigma bound of a body's pose as a chi-square bound of its Mahalanobis distance (the
 #: probability of |z| <= 3, over the body's determined degrees of freedom).
 THREE_SIGMA = 0.9973
@@ -128,15 +129,15 @@ def estimate_after(loop, condition=lambda trust: True, timeout: float = 30.0):
     return poses, covariance, trust
 
 
-def check_against_truth(estimate: np.ndarray, covariance: np.ndarray, truth: np.ndarray
-                        ) -> None:
-    """Every body within POSITION_BOUND / ANGLE_BOUND of the truth and the truth inside the
+def check_against_truth(estimate: np.ndarray, covariance: np.ndarray, truth: np.ndarray,
+                        angle_bound: float = ANGLE_BOUND) -> None:
+    """Every body within POSITION_BOUND / ``angle_bound`` of the truth and the truth inside the
     3-sigma bound of its covariance (over the directions the estimate determines: a held one
     has zero variance)."""
     for i in range(truth.shape[0]):
         dp = estimate[i, :3, 3] - truth[i, :3, 3]
         dw = Rotation.from_matrix(estimate[i, :3, :3] @ truth[i, :3, :3].T).as_rotvec()
-        assert np.linalg.norm(dp) < POSITION_BOUND and np.linalg.norm(dw) < ANGLE_BOUND, (i, dp,
+        assert np.linalg.norm(dp) < POSITION_BOUND and np.linalg.norm(dw) < angle_bound, (i, dp,
                                                                                          dw)
         C = covariance[6 * i:6 * i + 6, 6 * i:6 * i + 6]
         eig = np.linalg.eigvalsh(C)
@@ -168,7 +169,7 @@ def test_without_markers_the_plane_motion_is_held_and_named(loop):
         held = trust['gauge (held)']
         assert 'translation along x' in held and 'turn about z' in held, held
         assert sorted(trust['contacts'].split(', ')) == ['bar0.a', 'bar1.a', 'bar2.a']
-        check_against_truth(poses, covariance, truth)
+        check_against_truth(poses, covariance, truth, HELD_ANGLE_BOUND)
     finally:
         loop['ros'].set_parameter(loop['twin_params'], 'markers.enabled', True)
 
