@@ -8,8 +8,8 @@ The twin publishes the bodies' true poses on ``structure_sim_node/poses``, which
 onto the input ``~/poses`` of ``structure_node``; both nodes take their rest lengths from the one
 topic ``<namespace>/rest_lengths`` (the twin as motor commands at its rate limit, the node as
 the rest lengths it evaluates with), so a command published there (latched) drives both.
-``structure`` is a packaged example of config/examples (default ``six_bar.yaml``): the twin's
-``structure.example`` and the node's ``structure.config``. ``params_file`` (default none) is a
+``structure`` is a packaged example of config/examples (default ``six_bar.yaml``): both nodes'
+``structure.config``. ``params_file`` (default none) is a
 ROS parameter file for both; any parameter of either node's table (docs/parameters.md) or
 ``use_sim_time`` given as ``name:=value`` is set on each node that has it, after the file, typed
 by the table (:mod:`tensegrity_stiffness.ros.launch_parameters`). ``launch`` is not on PyPI: the
@@ -41,7 +41,7 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('params_file', default_value='',
                               description='ROS parameter file of both nodes (empty: none); '
                               'single parameters: <name>:=<value>'),
-        launch_node(EXECUTABLE, fixed=[{'structure.example': structure}],
+        launch_node(EXECUTABLE, fixed=[{'structure.config': structure}],
                     remappings=[('~/rest_lengths', 'rest_lengths')], namespace=namespace),
         launch_node(PARTNER, fixed=[{'structure.config': structure}],
                     remappings=[('~/poses', f'{EXECUTABLE}/poses'),

@@ -4,6 +4,7 @@ K_c and the conditioning of K."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,15 +19,19 @@ CHART_WARNING_MARGIN = 0.1
 
 
 @dataclass(frozen=True)
-class JointHealth:
-    """``slack`` / ``saturated`` string names, ``chart_margin`` = 2 pi - |omega| (rad),
-    ``stability_margin`` (:func:`equilibrium.stability_margin`), ``condition_number`` of K."""
+class StringHealth:
+    """The shape of every node's health record: ``slack`` / ``saturated`` string names and the
+    ``stability_margin``; stable above
+    :data:`~tensegrity_stiffness.mechanics.equilibrium.STABILITY_TOLERANCE`. A subclass adds its
+    own figures (:meth:`extra_problems`, :meth:`extra_values`) and whether the problems name the
+    strings (``NAMES_IN_PROBLEMS``)."""
 
     slack: list[str]
     saturated: list[str]
-    chart_margin: float
     stability_margin: float
-    condition_number: float
+
+    #: Whether a problem lists the strings' names after their count.
+    NAMES_IN_PROBLEMS = False
 
     @property
     def stable(self) -> bool:
@@ -34,23 +39,46 @@ class JointHealth:
 
     @property
     def problems(self) -> list[str]:
-        """What a WARN level names (empty: all strings taut, stable, inside the chart)."""
+        """What a WARN level names (empty: all strings taut, stable, and no problem of the
+        subclass)."""
         problems = []
-        if self.slack:
-            problems.append(f'{len(self.slack)} slack')
-        if self.saturated:
-            problems.append(f'{len(self.saturated)} saturated')
+        for kind, names in (('slack', self.slack), ('saturated', self.saturated)):
+            if names:
+                problems.append(f'{len(names)} {kind}' + (': ' + ' '.join(names)
+                                                         if self.NAMES_IN_PROBLEMS else ''))
         if not self.stable:
             problems.append('not stable')
-        if self.chart_margin < CHART_WARNING_MARGIN:
-            problems.append('near the chart limit |omega| = 2 pi')
-        return problems
+        return problems + self.extra_problems()
+
+    def extra_problems(self) -> list[str]:
+        """The subclass's own problems (none here)."""
+        return []
 
     def values(self) -> list[tuple[str, Any]]:
-        """``(key, value)`` pairs for a diagnostic status."""
+        """``(key, value)`` pairs for a diagnostic status: the strings, then the subclass's."""
+        return [('slack strings', self.slack or 'none'),
+                ('saturated strings', self.saturated or 'none'), *self.extra_values()]
+
+    def extra_values(self) -> list[tuple[str, Any]]:
+        """The subclass's own ``(key, value)`` pairs."""
+        return []
+
+
+@dataclass(frozen=True)
+class JointHealth(StringHealth):
+    """:class:`StringHealth` of a joint with ``chart_margin`` = 2 pi - |omega| (rad),
+    ``stability_margin`` (:func:`equilibrium.stability_margin`) and ``condition_number`` of
+    K."""
+
+    chart_margin: float = math.inf
+    condition_number: float = math.nan
+
+    def extra_problems(self) -> list[str]:
+        return (['near the chart limit |omega| = 2 pi']
+                if self.chart_margin < CHART_WARNING_MARGIN else [])
+
+    def extra_values(self) -> list[tuple[str, Any]]:
         return [
-            ('slack strings', self.slack or 'none'),
-            ('saturated strings', self.saturated or 'none'),
             ('chart margin 2pi - |omega| [rad]', self.chart_margin),
             ('stability margin (min eig of scaled sym K_c)', self.stability_margin),
             ('condition number of K', self.condition_number),

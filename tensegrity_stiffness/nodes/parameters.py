@@ -556,6 +556,9 @@ def node_tables() -> tuple[NodeTable, ...]:
     function, so that tables defined further down this module, and the controller's in
     :mod:`.control_processing` (which builds on this module), can be listed too."""
     from tensegrity_stiffness.nodes.control_processing import CONTROLLER_PARAMETERS
+    from tensegrity_stiffness.nodes.structure_estimator_node import (
+        STRUCTURE_ESTIMATOR_PARAMETERS,
+    )
     from tensegrity_stiffness.nodes.structure_node import STRUCTURE_NODE_PARAMETERS
     from tensegrity_stiffness.nodes.structure_sim_node import STRUCTURE_SIM_PARAMETERS
 
@@ -596,6 +599,10 @@ def node_tables() -> tuple[NodeTable, ...]:
                   'the MuJoCo twin of a structure on the ground: body poses, string lengths, '
                   'tensions, encoders, one IMU per bar; rest-length commands, loads, pushes and '
                   'the scripted roll', 'docs/structures.md'),
+        NodeTable('structure_estimator_node', STRUCTURE_ESTIMATOR_PARAMETERS, '',
+                  "every body's pose of a structure with its covariance from string lengths, "
+                  'load cells, encoders, per-bar IMUs and markers; the trust, the structure '
+                  "node's outputs at the estimate", 'docs/structures.md'),
     )
 
 

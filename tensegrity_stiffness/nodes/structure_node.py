@@ -31,6 +31,7 @@ from tensegrity_stiffness.geometry.quaternion import (
 from tensegrity_stiffness.geometry.screw import hat3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
 from tensegrity_stiffness.nodes.frames import FrameTransform
+from tensegrity_stiffness.nodes.health import StringHealth
 from tensegrity_stiffness.nodes.layouts import (
     FLOAT64_MULTIARRAY,
     WRENCH_LABEL,
@@ -49,7 +50,6 @@ from tensegrity_stiffness.nodes.parameters import (
     rest_length_offsets,
 )
 from tensegrity_stiffness.structures.equilibrium import (
-    STABILITY_TOLERANCE,
     Contact,
     gauge_twists,
     tangent_basis,
@@ -389,39 +389,20 @@ def body_frame_transforms(settings: StructureNodeSettings, state: StructureState
 
 # ------------------------------------------------------------------------------ health
 @dataclass(frozen=True)
-class StructureHealth:
-    """The health of one configuration: ``slack`` / ``saturated`` string names, the
-    ``contacts`` (node names), the smallest eigenvalue of the symmetric part of the total
-    stiffness on the tangent space without the gauge (``smallest_eigenvalue``; inf when no
-    motion is left) and ``stability_margin`` (it over the largest modulus)."""
+class StructureHealth(StringHealth):
+    """The health of one configuration (:class:`~tensegrity_stiffness.nodes.health.
+    StringHealth`, the problems naming the strings): the ``contacts`` (node names), the
+    smallest eigenvalue of the symmetric part of the total stiffness on the tangent space
+    without the gauge (``smallest_eigenvalue``; inf when no motion is left) and
+    ``stability_margin`` (it over the largest modulus)."""
 
-    slack: list[str]
-    saturated: list[str]
-    contacts: list[str]
-    smallest_eigenvalue: float
-    stability_margin: float
+    contacts: list[str] = field(default_factory=list)
+    smallest_eigenvalue: float = math.inf
 
-    @property
-    def stable(self) -> bool:
-        return self.stability_margin > STABILITY_TOLERANCE
+    NAMES_IN_PROBLEMS = True
 
-    @property
-    def problems(self) -> list[str]:
-        """What a WARN level names (empty: all strings taut, stable)."""
-        problems = []
-        if self.slack:
-            problems.append(f'{len(self.slack)} slack: ' + ' '.join(self.slack))
-        if self.saturated:
-            problems.append(f'{len(self.saturated)} saturated: ' + ' '.join(self.saturated))
-        if not self.stable:
-            problems.append('not stable')
-        return problems
-
-    def values(self) -> list[tuple[str, Any]]:
-        """``(key, value)`` pairs for a diagnostic status."""
+    def extra_values(self) -> list[tuple[str, Any]]:
         return [
-            ('slack strings', self.slack or 'none'),
-            ('saturated strings', self.saturated or 'none'),
             ('ground contacts', self.contacts or 'none'),
             ('smallest eigenvalue of the tangent stiffness', self.smallest_eigenvalue),
             ('stability margin (smallest / largest eigenvalue)', self.stability_margin),

@@ -2,10 +2,13 @@
 :mod:`tensegrity_stiffness.ros.structure_sim_node`): its parameter table, the settings built
 from it, the labels of its arrays, its ``--help`` text and its live line.
 
-The structure comes from ``structure.file`` (a YAML file with a ``structure:`` section: a
-structure file of ``new-config --template``, or a ROS parameter file whose
-``<node>: ros__parameters:`` holds that section) or, without one, the packaged example
-``structure.example`` (``config/examples/``, default ``six_bar.yaml``).
+The structure comes from ``structure.config``, as for every structure node
+(:func:`~tensegrity_stiffness.nodes.structure_node.structure_path`): a YAML file with a
+``structure:`` section (a structure file of ``new-config --template``, or a ROS parameter file
+whose ``<node>: ros__parameters:`` holds that section) or the name of a packaged example
+(``config/examples/``, default ``six_bar.yaml``). ``structure.file`` and ``structure.example``,
+the twin's names before, are deprecated aliases of it (:data:`DEPRECATED_ALIASES`): they still
+work, and the node warns.
 """
 
 from __future__ import annotations
@@ -19,6 +22,7 @@ import numpy as np
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.nodes.parameters import COMMON_PARAMETERS, ParameterSpec
+from tensegrity_stiffness.nodes.structure_node import STRUCTURE_PARAMETERS, structure_path
 from tensegrity_stiffness.simulation.structure_twin import StructureTwinOptions
 from tensegrity_stiffness.simulation.twin import (
     DEFAULT_JOINT_DAMPING,
@@ -27,11 +31,13 @@ from tensegrity_stiffness.simulation.twin import (
     DEFAULT_TENDON_DAMPING,
     SensorNoise,
 )
+from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
 from tensegrity_stiffness.structures.structure import Structure
 
 NODE_NAME = 'structure_sim_node'
-#: The packaged example simulated without ``structure.file``.
-DEFAULT_EXAMPLE = 'six_bar.yaml'
+#: The deprecated names of ``structure.config`` (the twin's before): alias -> what it held.
+DEPRECATED_ALIASES = {'structure.file': 'a YAML file', 'structure.example':
+                      'a packaged example of config/examples'}
 #: Sensor kinds with a noise parameter (the fields of :class:`~.twin.SensorNoise`).
 STRUCTURE_NOISE_KINDS = ('lengths', 'tensions', 'encoders', 'gyro', 'accelerometer', 'markers')
 _NOISE_UNITS = {'lengths': 'm', 'tensions': 'N', 'encoders': 'm', 'gyro': 'rad/s',
@@ -41,16 +47,16 @@ LENGTHS_LABEL = 'measured string lengths [m], string order of the structure'
 TENSIONS_LABEL = 'measured string tensions (load cells) [N], string order of the structure'
 ENCODERS_LABEL = 'measured rest lengths (motor encoders) [m], string order of the structure'
 MARKERS_LABEL = 'measured marker positions [m] x y z per body node, node order of the structure'
+CONTACTS_LABEL = ('ground contacts: 1 on the ground, 0 off it, per body node, node order of the '
+                  'structure')
 #: The gait's phases shown when no roll runs.
 IDLE = 'idle'
 
 STRUCTURE_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
-    ParameterSpec('structure.file', 'string', '',
-                  'YAML file with the structure: section (empty: structure.example)',
-                  read_only=True),
-    ParameterSpec('structure.example', 'string', DEFAULT_EXAMPLE,
-                  'packaged example of config/examples simulated without structure.file',
-                  read_only=True),
+    STRUCTURE_PARAMETERS[0],  # structure.config: the structure node's
+    *(ParameterSpec(alias, 'string', '', f'deprecated alias of structure.config ({what}; '
+                    'empty: structure.config)', read_only=True)
+      for alias, what in DEPRECATED_ALIASES.items()),
     ParameterSpec('sim.rate', 'double', 1000.0,
                   'simulation rate, Hz (the MuJoCo time step is 1 / rate)', read_only=True,
                   range=(100.0, 100_000.0)),
@@ -110,6 +116,8 @@ class StructureSimSettings:
     noise: SensorNoise
     world_frame: str
     values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    #: The warnings of deprecated parameters used (the node logs them).
+    deprecations: tuple[str, ...] = ()
 
     @property
     def gait_direction(self) -> np.ndarray:
@@ -117,18 +125,29 @@ class StructureSimSettings:
         return np.array(self.values['gait.direction'], dtype=float)
 
 
-def structure_source(values: Mapping[str, Any]) -> Path:
-    """The structure file of ``structure.file`` or the packaged ``structure.example``;
-    ValueError naming the parameter."""
-    path = values['structure.file'].strip()
-    if path:
-        if not Path(path).is_file():
-            raise ValueError(f'structure.file: no file {path!r}')
-        return Path(path)
-    try:
-        return config.example_config_path(values['structure.example'])
-    except ValueError as exc:
-        raise ValueError(f'structure.example: {exc}') from None
+def structure_source(values: Mapping[str, Any]) -> tuple[Path, tuple[str, ...]]:
+    """The structure file of ``structure.config`` or of a deprecated alias
+    (:data:`DEPRECATED_ALIASES`, used only while ``structure.config`` is at its default), and the
+    warnings of the aliases used; ValueError naming the parameter."""
+    used = [alias for alias in DEPRECATED_ALIASES if values[alias].strip()]
+    if not used:
+        return structure_path(values['structure.config']), ()
+    if len(used) > 1 or values['structure.config'] != STRUCTURE_PARAMETERS[0].default:
+        raise ValueError(f'{" and ".join(used)} (deprecated) and structure.config name the '
+                         'structure: set only structure.config')
+    alias = used[0]
+    name = values[alias].strip()
+    if alias == 'structure.file':
+        if not Path(name).is_file():
+            raise ValueError(f'structure.file: no file {name!r}')
+        path = Path(name)
+    else:
+        try:
+            path = config.example_config_path(name)
+        except ValueError as exc:
+            raise ValueError(f'structure.example: {exc}') from None
+    return path, (f'{alias} is deprecated: use structure.config:={name} (a path or a packaged '
+                  'example)',)
 
 
 def structure_sim_settings(values: Mapping[str, Any], generation: int = 0
@@ -136,7 +155,7 @@ def structure_sim_settings(values: Mapping[str, Any], generation: int = 0
     """Validate a whole parameter set of ``structure_sim_node``; ValueError names the bad field
     (``generation`` for symmetry with the other nodes' builders)."""
     checked = {spec.name: spec.check(values[spec.name]) for spec in STRUCTURE_SIM_PARAMETERS}
-    source = structure_source(checked)
+    source, deprecations = structure_source(checked)
     try:
         structure = Structure.from_yaml(source)
     except ValueError as exc:
@@ -162,7 +181,16 @@ def structure_sim_settings(values: Mapping[str, Any], generation: int = 0
         max_force=checked['limits.max_force'], max_moment=checked['limits.max_moment'])
     noise = SensorNoise(**{kind: checked[f'noise.{kind}'] for kind in STRUCTURE_NOISE_KINDS})
     return StructureSimSettings(structure, str(source), options, noise, checked['frames.world'],
-                                values=checked)
+                                values=checked, deprecations=deprecations)
+
+
+def resting_poses(structure: Structure) -> np.ndarray:
+    """Where the twin starts (and the structure estimator's first start): the structure's
+    equilibrium with its gravity and ground (the library's,
+    :func:`~tensegrity_stiffness.structures.equilibrium.solve_structure_equilibrium`), or its
+    configured poses when it has none."""
+    result = solve_structure_equilibrium(structure)
+    return result.poses if result.success else structure.start_poses()
 
 
 def loads_label(structure: Structure) -> str:

@@ -17,9 +17,7 @@ before its next step. Only the stepping thread touches the simulation.
 
 from __future__ import annotations
 
-import atexit
 import math
-import threading
 import time
 from typing import Any
 
@@ -52,11 +50,7 @@ from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
-from tensegrity_stiffness.ros.runtime.pacing import (  # noqa: F401 (SPIN_S kept)
-    SPIN_S,
-    periods_due,
-    wait_until,
-)
+from tensegrity_stiffness.ros.runtime.pacing import SPIN_S  # noqa: F401 (the name kept)
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.tf_broadcast import FrameBroadcaster
 from tensegrity_stiffness.ros.runtime.topics import (
@@ -65,6 +59,7 @@ from tensegrity_stiffness.ros.runtime.topics import (
     input_qos,
     output_qos,
 )
+from tensegrity_stiffness.ros.runtime.twin_stepping import SteppingTwin
 from tensegrity_stiffness.simulation.twin import (
     ChainSimulation,
     JointSimulation,
@@ -112,7 +107,7 @@ def swing_wrenches(gravity: np.ndarray, origin: np.ndarray) -> np.ndarray:
     return np.array([np.concatenate([e, np.cross(origin, e)]) for e in swing_plane(gravity)])
 
 
-class SimNode(Node):
+class SimNode(SteppingTwin, Node):
     """Steps the twin and publishes its truth and its sensors (see the module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -135,8 +130,6 @@ class SimNode(Node):
         self._pending_settings: tuple[SimNodeSettings, bool] | None = None
         self._topic_wrench = np.zeros(6)
         self._swing_origin = self._load_point()
-        self.steps = 0
-        self.missed_steps = 0
         self.publications = 0
 
         depth = values['qos.depth']
@@ -166,12 +159,7 @@ class SimNode(Node):
                                  LATCHED_QOS)
         self.create_subscription(WrenchStamped, '~/external_wrench', self._on_external_wrench,
                                  input_qos(depth, 'reliable'))
-        self._stop = threading.Event()
-        self.context.on_shutdown(self._stop.set)  # SIGINT shuts the context down first
-        self._thread = threading.Thread(target=self._run, name='sim_node stepping',
-                                        daemon=True)
-        self._thread.start()
-        atexit.register(self.close)  # as the fast lane's: no publishing thread at finalization
+        self._start_stepping('sim_node stepping')
         kind = f'spine of {n_joints} joints' if spine else 'joint'
         self.get_logger().info(
             f'ready: MuJoCo twin of the {kind}, {values["sim.rate"]:g} Hz '
@@ -214,14 +202,6 @@ class SimNode(Node):
         self._msg_tensions = conversions.vector_to_multiarray(np.zeros(n), TENSIONS_LABEL)
         self._msg_imu = conversions.imu_message(settings.imu_frame, self._noise.gyro,
                                               self._noise.accelerometer)
-
-    def close(self) -> None:
-        """Stop the stepping thread (called by the runner before the node is destroyed, at the
-        latest at exit, again if it outlived the join here, as the fast lane's)."""
-        self._stop.set()
-        self._thread.join(timeout=5.0)
-        if not self._thread.is_alive():
-            atexit.unregister(self.close)
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, values: Any, names: set[str]) -> None:
@@ -328,32 +308,10 @@ class SimNode(Node):
             sim.step(n)
         self.steps += n
 
-    def _run(self) -> None:
-        """The stepping loop: real time (absolute deadlines; a step whose deadline has passed by
-        a whole period is caught up at once and counted missed) or as fast as possible."""
-        try:
-            start = time.perf_counter()
-            while not self._stop.is_set() and self.context.ok():
-                n = 1
-                if self._real_time:
-                    now = wait_until(start + (self.steps + 1) * self._period)
-                    n = periods_due(start, self.steps, self._period, now)
-                    self.missed_steps += n - 1
-                before = self.steps
-                self._advance(n)
-                every = self._settings.values['sim.publish_every']
-                if self.steps // every != before // every:
-                    self._publish()
-        except Exception as exc:  # the stepping thread must not die silently
-            if self.context.ok() and not self._stop.is_set():
-                self.reporter.internal_error('stepping', exc)
+    def _publish_due(self) -> None:
+        self._publish()
 
     # ------------------------------------------------------------------ outputs
-    def _stamp(self) -> Any:
-        if self._real_time:
-            return self.get_clock().now().to_msg()
-        return conversions.stamp_from_seconds(self._sim.time)
-
     def _wanted(self) -> tuple[bool, ...]:
         """Which outputs have a subscriber, asked at most every :data:`SUBSCRIBERS_PERIOD_S`
         (each question costs microseconds; a new subscriber waits at most that long)."""

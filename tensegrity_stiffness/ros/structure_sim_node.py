@@ -9,8 +9,10 @@ on the inputs, and publishes the truth and the simulated sensors with their nois
 The twin starts at rest at the structure's equilibrium on its ground (:func:`resting_poses`).
 Outputs: ``~/poses`` (``geometry_msgs/PoseArray`` in ``frames.world``, the structure's body
 order), ``~/measured_lengths``, ``~/measured_tensions`` (load cells), ``~/measured_rest_lengths``
-(motor encoders; ``Float64MultiArray``, string order), ``~/imu/<bar>`` (``sensor_msgs/Imu`` in
-the bar's frame, frame_id the bar's name), ``~/measured_markers`` (with ``markers.enabled``),
+(motor encoders; ``Float64MultiArray``, string order), ``~/measured_contacts`` (1 per body
+node on the ground, 0 off it, node order; while someone subscribes), ``~/imu/<bar>``
+(``sensor_msgs/Imu`` in the bar's frame, frame_id the bar's name), ``~/measured_markers`` (with
+``markers.enabled``),
 ``/diagnostics`` (centre of mass, contact nodes, slack strings, steps and the real-time factor,
 the gait's phase). Inputs (taken by the executor, validated there, applied by the stepping
 thread before its next step; bad input: a throttled warning naming the problem, the twin keeps
@@ -22,7 +24,6 @@ world about its origin for ``push.duration`` s).
 
 from __future__ import annotations
 
-import atexit
 import math
 import sys
 import threading
@@ -39,6 +40,7 @@ from sensor_msgs.msg import Imu
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness.nodes.structure_sim_node import (
+    CONTACTS_LABEL,
     ENCODERS_LABEL,
     IDLE,
     LENGTHS_LABEL,
@@ -49,12 +51,12 @@ from tensegrity_stiffness.nodes.structure_sim_node import (
     StructureSimSettings,
     live_line,
     loads_label,
+    resting_poses,
     structure_sim_settings,
 )
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
-from tensegrity_stiffness.ros.runtime.pacing import periods_due, wait_until
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.topics import (
     LATCHED_QOS,
@@ -62,6 +64,7 @@ from tensegrity_stiffness.ros.runtime.topics import (
     input_qos,
     output_qos,
 )
+from tensegrity_stiffness.ros.runtime.twin_stepping import SteppingTwin
 from tensegrity_stiffness.simulation.structure_gait import (
     DONE,
     REST_SPEED,
@@ -70,22 +73,12 @@ from tensegrity_stiffness.simulation.structure_gait import (
 )
 from tensegrity_stiffness.simulation.structure_twin import StructureSimulation
 from tensegrity_stiffness.simulation.twin import checked_wrench
-from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
-from tensegrity_stiffness.structures.structure import Structure
 
 #: Seconds between /diagnostics messages (and live lines).
 DIAGNOSTICS_PERIOD_S = 1.0
 
 
-def resting_poses(structure: Structure) -> np.ndarray:
-    """Where the twin starts: the structure's equilibrium with its gravity and ground (the
-    library's, :func:`~tensegrity_stiffness.structures.equilibrium.solve_structure_equilibrium`),
-    or its configured poses when it has none."""
-    result = solve_structure_equilibrium(structure)
-    return result.poses if result.success else structure.start_poses()
-
-
-class StructureSimNode(Node):
+class StructureSimNode(SteppingTwin, Node):
     """Steps the structure twin and publishes its truth and sensors (module docstring)."""
 
     def __init__(self, **kwargs: Any) -> None:
@@ -95,6 +88,8 @@ class StructureSimNode(Node):
             self, STRUCTURE_SIM_PARAMETERS, structure_sim_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
         settings: StructureSimSettings = self._binding.build(self._binding.values())
+        for line in settings.deprecations:
+            self.get_logger().warning(line)
         self._settings = settings
         values = settings.values
         structure = settings.structure
@@ -110,8 +105,6 @@ class StructureSimNode(Node):
         self._pending_loads: np.ndarray | None = None
         self._pending_pushes: list[tuple[str, np.ndarray, float]] = []
         self._pending_settings: StructureSimSettings | None = None
-        self.steps = 0
-        self.missed_steps = 0
         self.publications = 0
         self._state_line = ''
         # The gait: planned on a thread of its own (a plan takes a fraction of a second), run
@@ -133,6 +126,8 @@ class StructureSimNode(Node):
                                                      '~/measured_tensions', out)
         self._pub_encoders = create_output_publisher(self, Float64MultiArray,
                                                      '~/measured_rest_lengths', out)
+        self._pub_contacts = create_output_publisher(self, Float64MultiArray,
+                                                     '~/measured_contacts', out)
         self._pub_markers = create_output_publisher(self, Float64MultiArray,
                                                     '~/measured_markers', out)
         self._pub_imus = [create_output_publisher(self, Imu, f'~/imu/{name}', out)
@@ -150,12 +145,7 @@ class StructureSimNode(Node):
                                  input_qos(depth, 'reliable'))
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self._diagnosed = (time.perf_counter(), 0)
-        self._stop = threading.Event()
-        self.context.on_shutdown(self._stop.set)
-        self._thread = threading.Thread(target=self._run, name='structure_sim_node stepping',
-                                        daemon=True)
-        self._thread.start()
-        atexit.register(self.close)
+        self._start_stepping('structure_sim_node stepping')
         self.get_logger().info(
             f'ready: MuJoCo twin of {settings.source} ({structure.n_bodies} bodies, '
             f'{structure.n_strings} strings, {len(self._sim.imu_bodies)} IMUs), '
@@ -171,18 +161,13 @@ class StructureSimNode(Node):
         self._msg_lengths = conversions.vector_to_multiarray(np.zeros(n), LENGTHS_LABEL)
         self._msg_tensions = conversions.vector_to_multiarray(np.zeros(n), TENSIONS_LABEL)
         self._msg_encoders = conversions.vector_to_multiarray(np.zeros(n), ENCODERS_LABEL)
+        self._msg_contacts = conversions.vector_to_multiarray(
+            np.zeros(len(self._sim.marker_names)), CONTACTS_LABEL)
         self._msg_markers = conversions.vector_to_multiarray(
             np.zeros(3 * len(self._sim.marker_names)), MARKERS_LABEL)
         noise = settings.noise
         self._msg_imus = [conversions.imu_message(name, noise.gyro, noise.accelerometer)
                           for name in self._sim.imu_bodies]
-
-    def close(self) -> None:
-        """Stop the stepping thread (the runner calls it before the node is destroyed)."""
-        self._stop.set()
-        self._thread.join(timeout=5.0)
-        if not self._thread.is_alive():
-            atexit.unregister(self.close)
 
     # ------------------------------------------------------------------ parameters
     def _apply_parameters(self, values: Any, names: set[str]) -> None:
@@ -247,6 +232,17 @@ class StructureSimNode(Node):
         self._pending_pushes.append((body, W, self._settings.values['push.duration']))
 
     # ------------------------------------------------------------------ stepping
+    def _advance(self, n: int) -> None:
+        """``n`` steps under the inputs taken first."""
+        self._take_inputs()
+        self._sim.step(n)
+        self.steps += n
+
+    def _publish_due(self) -> None:
+        """The gait's step, then the truth and the sensors."""
+        self._run_gait()
+        self._publish()
+
     def _take_inputs(self) -> None:
         sim = self._sim
         settings = self._pending_settings
@@ -312,35 +308,7 @@ class StructureSimNode(Node):
             self._gait_steps_left = 0 if gait.failed else self._gait_steps_left - 1
             self.gait_phase = 'failed' if gait.failed else IDLE
 
-    def _run(self) -> None:
-        """The stepping loop: real time (absolute deadlines; steps due by more than one period
-        are caught up at once and counted missed) or as fast as possible."""
-        try:
-            start = time.perf_counter()
-            while not self._stop.is_set() and self.context.ok():
-                n = 1
-                if self._real_time:
-                    now = wait_until(start + (self.steps + 1) * self._period)
-                    n = periods_due(start, self.steps, self._period, now)
-                    self.missed_steps += n - 1
-                self._take_inputs()
-                before = self.steps
-                self._sim.step(n)
-                self.steps += n
-                every = self._settings.values['sim.publish_every']
-                if self.steps // every != before // every:
-                    self._run_gait()
-                    self._publish()
-        except Exception as exc:  # the stepping thread must not die silently
-            if self.context.ok() and not self._stop.is_set():
-                self.reporter.internal_error('stepping', exc)
-
     # ------------------------------------------------------------------ outputs
-    def _stamp(self) -> Any:
-        if self._real_time:
-            return self.get_clock().now().to_msg()
-        return conversions.stamp_from_seconds(self._sim.time)
-
     def _publish(self) -> None:
         settings, sim = self._settings, self._sim
         stamp = self._stamp()
@@ -362,6 +330,11 @@ class StructureSimNode(Node):
             conversions.write_imu(msg, noise.add(reading.angular_velocity, 'gyro', rng),
                                   noise.add(reading.specific_force, 'accelerometer', rng), stamp)
             pub.publish(msg)
+        if self._pub_contacts.get_subscription_count():
+            touching = set(sim.contact_nodes())
+            conversions.set_multiarray_data(self._msg_contacts, [
+                float(name in touching) for name in sim.marker_names])
+            self._pub_contacts.publish(self._msg_contacts)
         if settings.values['markers.enabled']:
             conversions.set_multiarray_data(self._msg_markers,
                                             noise.add(sim.markers(), 'markers', rng).ravel())

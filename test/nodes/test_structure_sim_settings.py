@@ -1,5 +1,7 @@
-"""The ROS-free settings of structure_sim_node: the structure from structure.file or the packaged
-example, the twin's options and noise from the table, refusals naming the parameter."""
+"""The ROS-free settings of structure_sim_node: the structure from structure.config (a file or a
+packaged example, as every structure node; structure.file and structure.example deprecated
+aliases that warn), the twin's options and noise from the table, refusals naming the
+parameter."""
 
 import pytest
 
@@ -31,7 +33,7 @@ def test_the_default_is_the_packaged_six_bar():
 def test_a_file_the_rates_the_noise_and_the_range():
     path = str(config.example_config_path('three_bar.yaml'))
     settings = structure_sim_settings(values(**{
-        'structure__file': path, 'sim__rate': 500.0, 'sim__rest_length_rate': 0.0,
+        'structure__config': path, 'sim__rate': 500.0, 'sim__rest_length_rate': 0.0,
         'noise__encoders': 1e-4, 'noise__markers': 2e-3,
         'limits__rest_length_range': [0.01, 1.0]}))
     assert settings.structure.n_bodies == 3
@@ -42,8 +44,11 @@ def test_a_file_the_rates_the_noise_and_the_range():
 
 
 @pytest.mark.parametrize('changes, match', [
+    ({'structure__config': '/no/such.yaml'}, "structure.config: no file '/no/such.yaml'"),
     ({'structure__file': '/no/such.yaml'}, "structure.file: no file '/no/such.yaml'"),
     ({'structure__example': 'nine_bar.yaml'}, "structure.example: no packaged example"),
+    ({'structure__example': 'three_bar.yaml', 'structure__config': 'three_bar.yaml'},
+     'structure.example .deprecated. and structure.config name the structure'),
     ({'gait__direction': [0.0, 0.0, 0.0]}, 'gait.direction'),
     ({'gait__direction': [1.0, 0.0]}, 'gait.direction'),
     ({'limits__rest_length_range': [0.5, 0.1]}, 'limits.rest_length_range'),
@@ -60,7 +65,19 @@ def test_a_structure_file_with_an_error_names_the_file(tmp_path):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('structure:\n  bodies: []\n  strings: []\n')
     with pytest.raises(ValueError, match=f'structure {bad}'):
-        structure_sim_settings(values(structure__file=str(bad)))
+        structure_sim_settings(values(structure__config=str(bad)))
+
+
+@pytest.mark.parametrize('alias, name', [('structure.file', 'path'),
+                                         ('structure.example', 'three_bar.yaml')])
+def test_the_old_names_are_deprecated_aliases_that_warn(alias, name):
+    if name == 'path':
+        name = str(config.example_config_path('three_bar.yaml'))
+    settings = structure_sim_settings(values(**{alias.replace('.', '__'): name}))
+    assert settings.structure.n_bodies == 3
+    assert settings.deprecations == (f'{alias} is deprecated: use structure.config:={name} (a '
+                                     'path or a packaged example)',)
+    assert structure_sim_settings(values(structure__config=name)).deprecations == ()
 
 
 def test_usage_and_live_line():

@@ -187,7 +187,8 @@ def test_interface_loaded_once(srv: Any) -> None:
 
 
 @pytest.mark.parametrize('launch_file', ['stiffness_node.launch.py', 'spine_node.launch.py',
-                                         'structure_node.launch.py'])
+                                         'structure_node.launch.py',
+                                         'structure_estimator.launch.py'])
 def test_launch_file_compiles_and_names_the_installed_executable_and_config(
         prefix: Path, launch_file: str) -> None:
     """``launch`` is not on PyPI: the launch file is compiled and read, not run. It must name an

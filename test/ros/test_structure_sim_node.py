@@ -43,7 +43,7 @@ def twin(tmp_path_factory):
     structure = Structure.from_yaml(config.example_config_path(EXAMPLE))
     params = tmp_path_factory.mktemp('structure_twin') / 'params.yaml'
     params.write_text('/**:\n  ros__parameters:\n    structure:\n'
-                      f'      example: {EXAMPLE}\n    sim:\n      publish_every: 10\n'
+                      f'      config: {EXAMPLE}\n    sim:\n      publish_every: 10\n'
                       '      rest_length_rate: 0.02\n')
     ns = unique_namespace('structure_twin')
     proc = NodeProcess(ns, params, executable='structure_sim_node')
