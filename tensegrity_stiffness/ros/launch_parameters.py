@@ -19,7 +19,7 @@ use, importing ``launch`` and ``launch_ros`` when called.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any
 
 import yaml
@@ -90,20 +90,22 @@ def node_parameter_list(executable: str, configurations: Mapping[str, str],
 
 
 def launch_node(executable: str, fixed: Sequence[Any] = (), name: str | None = None,
-                remappings: Iterable[tuple[str, str]] = (), **node_arguments: Any) -> Any:
+                remappings: Iterable[tuple[str, str]] | Callable[[Any], Iterable[tuple[str, str]]]
+                = (), **node_arguments: Any) -> Any:
     """A launch action (``OpaqueFunction``) that starts ``executable`` of this package as a
     ``launch_ros`` ``Node`` named ``name`` (default the executable) with the parameters of
-    :func:`node_parameter_list`, ``remappings``, output on the screen and ``node_arguments``
-    (``namespace=LaunchConfiguration('namespace')``, ...)."""
+    :func:`node_parameter_list`, ``remappings`` (pairs, or a function of the launch context
+    returning them: remappings that depend on a launch argument), output on the screen and
+    ``node_arguments`` (``namespace=LaunchConfiguration('namespace')``, ...)."""
     from launch.actions import OpaqueFunction
     from launch_ros.actions import Node
 
-    remappings = list(remappings)
+    remap = remappings if callable(remappings) else (lambda _context, r=list(remappings): r)
 
     def start(context: Any, *args: Any, **kwargs: Any) -> list:
         parameters = node_parameter_list(executable, context.launch_configurations, fixed)
         return [Node(package=PACKAGE, executable=executable, name=name or executable,
-                     parameters=parameters, remappings=remappings, output='screen',
+                     parameters=parameters, remappings=list(remap(context)), output='screen',
                      emulate_tty=True, **node_arguments)]
 
     return OpaqueFunction(function=start)
