@@ -87,7 +87,7 @@ def run(name: str, loop: str, spin_s: float, args: argparse.Namespace,
         rng: np.random.Generator, services: bool) -> None:
     ns = unique_namespace('bench_structure')
     params = Path(os.environ.get('TMPDIR', '/tmp')) / f'bench_structure_{os.getpid()}.yaml'
-    params.write_text(f'structure_node:\n  ros__parameters:\n    structure.config: {name}\n')
+    params.write_text(f'/**:\n  ros__parameters:\n    structure.config: {name}\n')
     proc = NodeProcess(ns, params, executable='structure_node')
     ros = RosClient('bench_structure')
     gc.collect()
