@@ -72,6 +72,7 @@ from tensegrity_stiffness.structures.structure import Structure, StructureState
 
 __all__ = [
     'DEFAULT_ACCELERATION_STD',
+    'DEFAULT_ACCELEROMETER_STD',
     'DEFAULT_CONTACT_STD',
     'DEFAULT_CONTACT_VELOCITY_STD',
     'DEFAULT_GYRO_STD',
@@ -97,6 +98,7 @@ __all__ = [
     'readings_of',
     'replace_at_rest',
     'rigid_motion_basis',
+    'specific_force_model',
     'spin_basis',
     'string_model',
 ]
@@ -705,6 +707,56 @@ DEFAULT_ACCELERATION_STD = (2.0, 20.0)
 #: Default std of a gyro (rad/s) and of a contact node's velocity (m/s: it sticks).
 DEFAULT_GYRO_STD = 0.01
 DEFAULT_CONTACT_VELOCITY_STD = 2e-3
+#: Default std of an accelerometer's specific force (m/s^2 per axis): its noise and the
+#: dynamics' model error (:func:`specific_force_model`).
+DEFAULT_ACCELEROMETER_STD = 0.1
+
+
+def specific_force_model(structure: Structure, T: FloatArray, V: FloatArray, rest: FloatArray,
+                         bodies: Sequence[int]) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The accelerometers at the origins of ``bodies`` (free, each with its centre of mass at its
+    origin and no node on the ground) while the structure moves: the specific force
+    ``f_i = R_i^T (a_i - g) = R_i^T (F_i + F_d,i) / m_i`` of Newton's law for the body (gravity
+    cancels), ``F_i`` the strings' force on it at the transforms ``T`` with ``rest``
+    (``Structure.evaluate``'s wrenches) and ``F_d,i = -L_i^T c (L V)`` the strings' damping
+    (``c`` N s/m, MuJoCo's tendon damping, ``L = dl/d[dp; dw]`` of :func:`string_model`, ``V``
+    (N, 6) the bodies' ``[v; w]``). Returns ``f`` (k, 3) and its Jacobians (3k, 6N) in the
+    poses' ``[dp; dw]`` (``-K D / m`` through the strings' stiffness, ``D`` the map to ``K``'s
+    spatial twists, plus ``R^T hat(f_world)`` in the body's own ``dw``) and in ``V``
+    (``-L_i^T c L / m``; the damping's change with the pose, second order, is left out)."""
+    state = structure.evaluate_transforms(T, rest)
+    n6 = 6 * structure.n_bodies
+    idx = np.asarray(bodies, dtype=np.intp)
+    k = idx.size
+    force_rows = (6 * idx[:, None] + np.arange(3)[None, :]).ravel()
+    Kf = state.stiffness[force_rows]  # (3k, 6N) rows [f] of the bodies, spatial twists
+    dF = np.empty((3 * k, n6))
+    p = T[:, :3, 3]
+    for j in range(structure.n_bodies):  # D: dv = dp + hat(p) dw
+        lin = Kf[:, 6 * j:6 * j + 3]
+        dF[:, 6 * j:6 * j + 3] = -lin
+        dF[:, 6 * j + 3:6 * j + 6] = -(lin @ hat3(p[j]) + Kf[:, 6 * j + 3:6 * j + 6])
+    F = state.wrenches[idx, :3].copy()
+    dV = np.zeros((3 * k, n6))
+    if np.any(structure.damping > 0.0):
+        L = string_model(structure, T, rest)[2]
+        cl = structure.damping[:, None] * L
+        Lf = L[:, force_rows]  # (n, 3k)
+        F -= (Lf.T @ (cl @ V.reshape(-1))).reshape(k, 3)
+        dV = -Lf.T @ cl
+    mass = np.array([structure.bodies[i].mass for i in idx])
+    R = T[idx, :3, :3]
+    a = F / mass[:, None]
+    f = np.einsum('kji,kj->ki', R, a)
+    H_pose = np.empty((3 * k, n6))
+    H_vel = np.empty((3 * k, n6))
+    for q, i in enumerate(idx):
+        rows = slice(3 * q, 3 * q + 3)
+        Rt = R[q].T / mass[q]
+        H_pose[rows] = Rt @ dF[rows]
+        H_vel[rows] = Rt @ dV[rows]
+        H_pose[rows, 6 * i + 3:6 * i + 6] += R[q].T @ hat3(a[q])
+    return f, H_pose, H_vel
 
 
 @dataclass
@@ -734,9 +786,13 @@ class StructureFilter:
     ground and the turn about it through a roll. Each reading is gated by its own NIS
     (:func:`~tensegrity_stiffness.estimation.estimators.consistency_threshold` of its degrees
     of freedom) and a gated one is named in ``outliers`` at once (a broken length sensor, a
-    flipped IMU: in the first update that has it). The accelerometer's gravity direction is
-    used moving too, its std the caller's (a roll's accelerations, ~0.5 m/s^2 / g, belong in
-    ``imu_std``).
+    flipped IMU: in the first update that has it). An accelerometer is the dynamics'
+    (:func:`specific_force_model`: Newton's law with the strings' forces and damping at the
+    state, to ``accelerometer_std``) on a body off the ground; on a body touching it (its
+    contact force unknown) only its gravity direction ``imu_gravity`` is used, when given, its
+    std the caller's (a roll's accelerations, ~0.5 m/s^2 / g, belong in ``imu_std``). The
+    structure's string damping is the robot's (a twin's: ``StructureTwinOptions.
+    string_damping``).
 
     ``poses`` the start ((N, 4, 4) or (N, 7)); ``pose_std`` (m, rad) its std per axis."""
 
@@ -744,7 +800,8 @@ class StructureFilter:
                  = (0.01, 0.05), acceleration_std: tuple[float, float] = DEFAULT_ACCELERATION_STD,
                  gyro_std: float = DEFAULT_GYRO_STD,
                  contact_velocity_std: float = DEFAULT_CONTACT_VELOCITY_STD,
-                 gate_probability: float = CONSISTENCY_PROBABILITY) -> None:
+                 gate_probability: float = CONSISTENCY_PROBABILITY,
+                 accelerometer_std: float = DEFAULT_ACCELEROMETER_STD) -> None:
         self.structure = structure
         self.T = structure.transforms(poses)
         n = structure.n_bodies
@@ -757,6 +814,7 @@ class StructureFilter:
         self.q = np.tile([acceleration_std[0]] * 3 + [acceleration_std[1]] * 3, f // 6) ** 2
         self.gyro_std = _positive('gyro_std', gyro_std)
         self.contact_velocity_std = _positive('contact_velocity_std', contact_velocity_std)
+        self.accelerometer_std = _positive('accelerometer_std', accelerometer_std)
         self.gate_probability = gate_probability
 
     def predict(self, dt: float) -> None:
@@ -775,17 +833,22 @@ class StructureFilter:
         self.P = F @ self.P @ F.T + Q
 
     def _rows(self, measurements: StructureMeasurements,
-              gyros: Mapping[str, ArrayLike] | None
+              gyros: Mapping[str, ArrayLike] | None,
+              accelerometers: Mapping[str, ArrayLike] | None = None
               ) -> tuple[list[str], list[FloatArray], list[FloatArray], list[FloatArray],
                          list[int]]:
         """(names, residuals z - h, Jacobians in the state, stds, dofs) of every reading."""
         s = self.structure
         f = self.cols.size
         readings = readings_of(s, replace_at_rest(measurements))
+        rest = s.validate_rest_lengths(measurements.rest_lengths)
+        accel = self._accelerometers(readings, accelerometers)
+        if accel:  # an accelerometer modelled by the dynamics replaces its gravity direction
+            modelled = {f'imu[{s.body_names[i]}]' for i in accel}
+            readings = [r for r in readings if r.name not in modelled]
         names, res, jac, stds, dofs = [], [], [], [], []
         if readings:
-            h, H, std, starts = measurement_model(s, self.T, readings, s.validate_rest_lengths(
-                measurements.rest_lengths))
+            h, H, std, starts = measurement_model(s, self.T, readings, rest)
             z = np.concatenate([r.value for r in readings])
             J_all = np.zeros((h.size, 2 * f))
             J_all[:, :f] = H[:, self.cols]
@@ -826,13 +889,49 @@ class StructureFilter:
             jac.append(J)
             stds.append(np.full(3, self.gyro_std))
             dofs.append(3)
+        if accel:
+            bodies = list(accel)
+            h_a, H_p, H_v = specific_force_model(s, self.T, self.V, rest, bodies)
+            for q, i in enumerate(bodies):
+                J = np.zeros((3, 2 * f))
+                J[:, :f] = H_p[3 * q:3 * q + 3, self.cols]
+                J[:, f:] = H_v[3 * q:3 * q + 3, self.cols]
+                names.append(f'accelerometer[{s.body_names[i]}]')
+                res.append(accel[i] - h_a[q])
+                jac.append(J)
+                stds.append(np.full(3, self.accelerometer_std))
+                dofs.append(3)
         return names, res, jac, stds, dofs
 
+    def _accelerometers(self, readings: Sequence[Reading],
+                        accelerometers: Mapping[str, ArrayLike] | None) -> dict[int, FloatArray]:
+        """{body index: specific force (3,)} of the accelerometers the dynamics model
+        (:func:`specific_force_model`: a free body with mass, its centre of mass at its origin,
+        no node among the contacts); checked (ValueError naming the body)."""
+        s = self.structure
+        out: dict[int, FloatArray] = {}
+        touching = {int(s.node_bodies[r.index]) for r in readings if r.kind == 'contact'}
+        for key, value in (accelerometers or {}).items():
+            i = s.body_index(key)
+            a = finite_array(f'accelerometers[{key}]', value).reshape(-1)
+            if a.shape != (3,):
+                raise ValueError(f'accelerometers[{key}] must be 3 values (m/s^2)')
+            body = s.bodies[i]
+            if (not s.fixed[i] and body.mass > 0.0 and i not in touching
+                    and not np.any(np.asarray(body.com, dtype=float))):
+                out[i] = a
+        return out
+
     def update(self, measurements: StructureMeasurements,
-               gyros: Mapping[str, ArrayLike] | None = None) -> StructureFilterUpdate:
+               gyros: Mapping[str, ArrayLike] | None = None,
+               accelerometers: Mapping[str, ArrayLike] | None = None) -> StructureFilterUpdate:
         """Correct the state with one set of readings (``at_rest`` is ignored: the robot
-        moves) and the IMUs' ``gyros`` {body: (3,) rad/s in its frame}."""
-        names, res, jac, stds, dofs = self._rows(measurements, gyros)
+        moves), the IMUs' ``gyros`` {body: (3,) rad/s in its frame} and their
+        ``accelerometers`` {body: (3,) specific force, m/s^2 in its frame}: modelled by the
+        dynamics (:func:`specific_force_model`) on a body off the ground, in place of its
+        ``imu_gravity``; on a body touching the ground (its contact force unknown) its
+        ``imu_gravity`` is used, when given."""
+        names, res, jac, stds, dofs = self._rows(measurements, gyros, accelerometers)
         nis, dof, gated = math.nan, 0, []
         if names:
             sizes = [r.size for r in res]
