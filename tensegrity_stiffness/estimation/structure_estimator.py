@@ -79,6 +79,7 @@ __all__ = [
     'DEFAULT_IMU_STD',
     'DEFAULT_LENGTH_STD',
     'DEFAULT_MARKER_STD',
+    'DEFAULT_PIVOT_ACCELEROMETER_STD',
     'DEFAULT_TENSION_STD',
     'DEFAULT_WRENCH_STD',
     'FLIPPED_IMU_ANGLE',
@@ -710,53 +711,118 @@ DEFAULT_CONTACT_VELOCITY_STD = 2e-3
 #: Default std of an accelerometer's specific force (m/s^2 per axis): its noise and the
 #: dynamics' model error (:func:`specific_force_model`).
 DEFAULT_ACCELEROMETER_STD = 0.1
+#: Default std (m/s^2) of the dynamics' specific force on a body turning about its contact node:
+#: the contact's own error (a soft contact that gives, a node that slides: median 0.03, 10 % of
+#: the readings above 0.45 m/s^2 on the rolling twin, up to 14 at an impact; 3e-3 at rest).
+DEFAULT_PIVOT_ACCELEROMETER_STD = 3.0
 
 
 def specific_force_model(structure: Structure, T: FloatArray, V: FloatArray, rest: FloatArray,
-                         bodies: Sequence[int]) -> tuple[FloatArray, FloatArray, FloatArray]:
+                         bodies: Sequence[int], pivots: Mapping[int, int] | None = None
+                         ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The accelerometers at the origins of ``bodies`` (free, each with its centre of mass at its
-    origin and no node on the ground) while the structure moves: the specific force
-    ``f_i = R_i^T (a_i - g) = R_i^T (F_i + F_d,i) / m_i`` of Newton's law for the body (gravity
-    cancels), ``F_i`` the strings' force on it at the transforms ``T`` with ``rest``
-    (``Structure.evaluate``'s wrenches) and ``F_d,i = -L_i^T c (L V)`` the strings' damping
-    (``c`` N s/m, MuJoCo's tendon damping, ``L = dl/d[dp; dw]`` of :func:`string_model`, ``V``
-    (N, 6) the bodies' ``[v; w]``). Returns ``f`` (k, 3) and its Jacobians (3k, 6N) in the
-    poses' ``[dp; dw]`` (``-K D / m`` through the strings' stiffness, ``D`` the map to ``K``'s
-    spatial twists, plus ``R^T hat(f_world)`` in the body's own ``dw``) and in ``V``
-    (``-L_i^T c L / m``; the damping's change with the pose, second order, is left out)."""
+    origin) while the structure moves: the specific force ``f_i = R_i^T (a_i - g)`` of the
+    body's dynamics at the transforms ``T`` with ``rest``, ``V`` (N, 6) the bodies' ``[v; w]``:
+
+    * off the ground, Newton's law ``a_i = (F_i + F_d,i) / m_i + g`` (so ``f_i = R_i^T (F_i +
+      F_d,i) / m_i``), ``F_i`` the strings' force (``Structure.evaluate``'s wrenches) and
+      ``F_d,i`` their damping (the generalised force ``-L^T c (L V)``, ``c`` N s/m as MuJoCo's
+      tendon damping, ``L = dl/d[dp; dw]`` of :func:`string_model`);
+    * on one sticking node ``pivots[i]`` (``x_c``, ``r = p - x_c``), Euler's law about it (the
+      contact force has no moment there): ``I_c alpha + w x I_c w = M_c`` with ``I_c`` the
+      inertia about ``x_c`` and ``M_c`` the strings', their damping's and the weight's moment
+      about it, and ``a_i = alpha x r + w x (w x r)``.
+
+    Returns ``f`` (k, 3) and its Jacobians (3k, 6N) in the poses' ``[dp; dw]`` (through the
+    strings' stiffness ``-K D``, ``D`` the map to ``K``'s spatial twists, and the body's own
+    turn) and in ``V`` (the damping, and ``w`` in the pivot's terms); the damping's change with
+    the pose (second order) is left out."""
+    pivots = {} if pivots is None else pivots
     state = structure.evaluate_transforms(T, rest)
     n6 = 6 * structure.n_bodies
     idx = np.asarray(bodies, dtype=np.intp)
     k = idx.size
-    force_rows = (6 * idx[:, None] + np.arange(3)[None, :]).ravel()
-    Kf = state.stiffness[force_rows]  # (3k, 6N) rows [f] of the bodies, spatial twists
-    dF = np.empty((3 * k, n6))
+    rows6 = (6 * idx[:, None] + np.arange(6)[None, :]).ravel()
+    Kb = state.stiffness[rows6]  # (6k, 6N) the bodies' wrench rows, spatial twists
+    dW = np.empty((6 * k, n6))  # d[F; M0]/d[dp; dw] (about the world origin)
     p = T[:, :3, 3]
     for j in range(structure.n_bodies):  # D: dv = dp + hat(p) dw
-        lin = Kf[:, 6 * j:6 * j + 3]
-        dF[:, 6 * j:6 * j + 3] = -lin
-        dF[:, 6 * j + 3:6 * j + 6] = -(lin @ hat3(p[j]) + Kf[:, 6 * j + 3:6 * j + 6])
-    F = state.wrenches[idx, :3].copy()
-    dV = np.zeros((3 * k, n6))
+        lin = Kb[:, 6 * j:6 * j + 3]
+        dW[:, 6 * j:6 * j + 3] = -lin
+        dW[:, 6 * j + 3:6 * j + 6] = -(lin @ hat3(p[j]) + Kb[:, 6 * j + 3:6 * j + 6])
+    Wd = np.zeros((k, 6))  # the damping's [force; moment about p]
+    dWd = np.zeros((6 * k, n6))
     if np.any(structure.damping > 0.0):
         L = string_model(structure, T, rest)[2]
         cl = structure.damping[:, None] * L
-        Lf = L[:, force_rows]  # (n, 3k)
-        F -= (Lf.T @ (cl @ V.reshape(-1))).reshape(k, 3)
-        dV = -Lf.T @ cl
-    mass = np.array([structure.bodies[i].mass for i in idx])
-    R = T[idx, :3, :3]
-    a = F / mass[:, None]
-    f = np.einsum('kji,kj->ki', R, a)
+        Lb = L[:, rows6]  # (n, 6k)
+        Wd = -(Lb.T @ (cl @ V.reshape(-1))).reshape(k, 6)
+        dWd = -Lb.T @ cl
+    g = np.zeros(3) if structure.gravity is None else np.asarray(structure.gravity, float)
+    f = np.empty((k, 3))
     H_pose = np.empty((3 * k, n6))
     H_vel = np.empty((3 * k, n6))
     for q, i in enumerate(idx):
-        rows = slice(3 * q, 3 * q + 3)
-        Rt = R[q].T / mass[q]
-        H_pose[rows] = Rt @ dF[rows]
-        H_vel[rows] = Rt @ dV[rows]
-        H_pose[rows, 6 * i + 3:6 * i + 6] += R[q].T @ hat3(a[q])
+        m = structure.bodies[i].mass
+        R = T[i, :3, :3]
+        W, dWq = state.wrenches[i], dW[6 * q:6 * q + 6]
+        Fd, dFd = Wd[q, :3], dWd[6 * q:6 * q + 3]
+        own = slice(6 * i + 3, 6 * i + 6)
+        if i not in pivots:
+            a = (W[:3] + Fd) / m + g
+            Hp = dWq[:3] / m
+            Hv = dFd / m
+        else:
+            a, Hp, Hv = _pivot_acceleration(structure, T, V, i, pivots[i], W, dWq, Wd[q],
+                                            dWd[6 * q:6 * q + 6], g)
+        f[q] = R.T @ (a - g)
+        H_pose[3 * q:3 * q + 3] = R.T @ Hp
+        H_pose[3 * q:3 * q + 3, own] += R.T @ hat3(a - g)
+        H_vel[3 * q:3 * q + 3] = R.T @ Hv
     return f, H_pose, H_vel
+
+
+def _pivot_acceleration(structure: Structure, T: FloatArray, V: FloatArray, i: int, node: int,
+                        W: FloatArray, dW: FloatArray, Wd: FloatArray, dWd: FloatArray,
+                        g: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Body ``i``'s origin acceleration (3,) turning about its sticking ``node`` and its
+    Jacobians (3, 6N) in the poses and the velocities (:func:`specific_force_model`): the
+    strings' wrench ``W`` = [F; M0] about the world origin with ``dW``, the damping's ``Wd`` =
+    [F_d; M_d] about the body's origin with ``dWd`` in ``V``."""
+    body = structure.bodies[i]
+    m = body.mass
+    R, p = T[i, :3, :3], T[i, :3, 3]
+    w = V[i, 3:]
+    xc = R @ structure.node_points[node] + p
+    r = p - xc
+    Ic = R @ body.inertia @ R.T + m * (float(r @ r) * np.eye(3) - np.outer(r, r))
+    F, M0 = W[:3], W[3:]
+    Mc = M0 - np.cross(xc, F) + Wd[3:] + np.cross(r, Wd[:3]) + np.cross(r, m * g)
+    Iw = Ic @ w
+    alpha = np.linalg.solve(Ic, Mc - np.cross(w, Iw))
+    a = np.cross(alpha, r) + np.cross(w, np.cross(w, r))
+    own = slice(6 * i, 6 * i + 6)
+    # d x_c = dp + hat(r) dw, d r = -hat(r) dw, d I_c = hat(dw) I_c - I_c hat(dw) (own pose)
+    dxc = np.hstack([np.eye(3), hat3(r)])
+    dr = np.hstack([np.zeros((3, 3)), -hat3(r)])
+    dMc = dW[3:] - hat3(xc) @ dW[:3]
+    dMc[:, own] += hat3(F) @ dxc - hat3(Wd[:3]) @ dr - hat3(m * g) @ dr
+    hw = hat3(w)
+    dN = dMc.copy()  # N = M_c - w x I_c w, less dI_c alpha
+    rot = np.zeros((3, 6))
+    rot[:, 3:] = (hw @ hat3(Iw) - hw @ Ic @ hw) + hat3(Ic @ alpha) - Ic @ hat3(alpha)
+    dN[:, own] += rot
+    dalpha = np.linalg.solve(Ic, dN)
+    H_pose = -hat3(r) @ dalpha
+    H_pose[:, own] += (hat3(alpha) + hw @ hw) @ dr
+    # velocities: the damping's wrench and w (gyroscopic and centripetal terms)
+    dMc_v = dWd[3:] + hat3(r) @ dWd[:3]
+    dalpha_v = np.linalg.solve(Ic, dMc_v)
+    w_cols = slice(6 * i + 3, 6 * i + 6)
+    gyro = -(-hat3(Iw) + hw @ Ic)
+    H_vel = -hat3(r) @ dalpha_v
+    H_vel[:, w_cols] += -hat3(r) @ np.linalg.solve(Ic, gyro) - hat3(np.cross(w, r)) - hw @ hat3(r)
+    return a, H_pose, H_vel
 
 
 @dataclass
@@ -787,9 +853,10 @@ class StructureFilter:
     (:func:`~tensegrity_stiffness.estimation.estimators.consistency_threshold` of its degrees
     of freedom) and a gated one is named in ``outliers`` at once (a broken length sensor, a
     flipped IMU: in the first update that has it). An accelerometer is the dynamics'
-    (:func:`specific_force_model`: Newton's law with the strings' forces and damping at the
-    state, to ``accelerometer_std``) on a body off the ground; on a body touching it (its
-    contact force unknown) only its gravity direction ``imu_gravity`` is used, when given, its
+    (:func:`specific_force_model`): Newton's law with the strings' forces and damping at the
+    state on a body off the ground (to ``accelerometer_std``), Euler's law about its contact
+    node on a body touching the ground at one node (to ``pivot_accelerometer_std``); on a body
+    with more nodes down only its gravity direction ``imu_gravity`` is used, when given, its
     std the caller's (a roll's accelerations, ~0.5 m/s^2 / g, belong in ``imu_std``). The
     structure's string damping is the robot's (a twin's: ``StructureTwinOptions.
     string_damping``).
@@ -801,7 +868,8 @@ class StructureFilter:
                  gyro_std: float = DEFAULT_GYRO_STD,
                  contact_velocity_std: float = DEFAULT_CONTACT_VELOCITY_STD,
                  gate_probability: float = CONSISTENCY_PROBABILITY,
-                 accelerometer_std: float = DEFAULT_ACCELEROMETER_STD) -> None:
+                 accelerometer_std: float = DEFAULT_ACCELEROMETER_STD,
+                 pivot_accelerometer_std: float = DEFAULT_PIVOT_ACCELEROMETER_STD) -> None:
         self.structure = structure
         self.T = structure.transforms(poses)
         n = structure.n_bodies
@@ -815,6 +883,8 @@ class StructureFilter:
         self.gyro_std = _positive('gyro_std', gyro_std)
         self.contact_velocity_std = _positive('contact_velocity_std', contact_velocity_std)
         self.accelerometer_std = _positive('accelerometer_std', accelerometer_std)
+        self.pivot_accelerometer_std = _positive('pivot_accelerometer_std',
+                                                 pivot_accelerometer_std)
         self.gate_probability = gate_probability
 
     def predict(self, dt: float) -> None:
@@ -842,7 +912,7 @@ class StructureFilter:
         f = self.cols.size
         readings = readings_of(s, replace_at_rest(measurements))
         rest = s.validate_rest_lengths(measurements.rest_lengths)
-        accel = self._accelerometers(readings, accelerometers)
+        accel, pivots = self._accelerometers(readings, accelerometers)
         if accel:  # an accelerometer modelled by the dynamics replaces its gravity direction
             modelled = {f'imu[{s.body_names[i]}]' for i in accel}
             readings = [r for r in readings if r.name not in modelled]
@@ -891,7 +961,7 @@ class StructureFilter:
             dofs.append(3)
         if accel:
             bodies = list(accel)
-            h_a, H_p, H_v = specific_force_model(s, self.T, self.V, rest, bodies)
+            h_a, H_p, H_v = specific_force_model(s, self.T, self.V, rest, bodies, pivots)
             for q, i in enumerate(bodies):
                 J = np.zeros((3, 2 * f))
                 J[:, :f] = H_p[3 * q:3 * q + 3, self.cols]
@@ -899,18 +969,25 @@ class StructureFilter:
                 names.append(f'accelerometer[{s.body_names[i]}]')
                 res.append(accel[i] - h_a[q])
                 jac.append(J)
-                stds.append(np.full(3, self.accelerometer_std))
+                stds.append(np.full(3, self.pivot_accelerometer_std if i in pivots
+                                    else self.accelerometer_std))
                 dofs.append(3)
         return names, res, jac, stds, dofs
 
     def _accelerometers(self, readings: Sequence[Reading],
-                        accelerometers: Mapping[str, ArrayLike] | None) -> dict[int, FloatArray]:
+                        accelerometers: Mapping[str, ArrayLike] | None
+                        ) -> tuple[dict[int, FloatArray], dict[int, int]]:
         """{body index: specific force (3,)} of the accelerometers the dynamics model
         (:func:`specific_force_model`: a free body with mass, its centre of mass at its origin,
-        no node among the contacts); checked (ValueError naming the body)."""
+        at most one node among the contacts) and {body: its contact node} (its pivot);
+        checked (ValueError naming the body)."""
         s = self.structure
         out: dict[int, FloatArray] = {}
-        touching = {int(s.node_bodies[r.index]) for r in readings if r.kind == 'contact'}
+        nodes: dict[int, list[int]] = {}
+        for r in readings:
+            if r.kind == 'contact' and s.node_bodies[r.index] >= 0:
+                nodes.setdefault(int(s.node_bodies[r.index]), []).append(r.index)
+        touching = {b for b, c in nodes.items() if len(c) > 1}
         for key, value in (accelerometers or {}).items():
             i = s.body_index(key)
             a = finite_array(f'accelerometers[{key}]', value).reshape(-1)
@@ -920,7 +997,7 @@ class StructureFilter:
             if (not s.fixed[i] and body.mass > 0.0 and i not in touching
                     and not np.any(np.asarray(body.com, dtype=float))):
                 out[i] = a
-        return out
+        return out, {b: c[0] for b, c in nodes.items() if b in out}
 
     def update(self, measurements: StructureMeasurements,
                gyros: Mapping[str, ArrayLike] | None = None,
@@ -928,9 +1005,9 @@ class StructureFilter:
         """Correct the state with one set of readings (``at_rest`` is ignored: the robot
         moves), the IMUs' ``gyros`` {body: (3,) rad/s in its frame} and their
         ``accelerometers`` {body: (3,) specific force, m/s^2 in its frame}: modelled by the
-        dynamics (:func:`specific_force_model`) on a body off the ground, in place of its
-        ``imu_gravity``; on a body touching the ground (its contact force unknown) its
-        ``imu_gravity`` is used, when given."""
+        dynamics (:func:`specific_force_model`) on a body with at most one node among the
+        contacts, in place of its ``imu_gravity``; on a body with more (its contact forces
+        unknown) its ``imu_gravity`` is used, when given."""
         names, res, jac, stds, dofs = self._rows(measurements, gyros, accelerometers)
         nis, dof, gated = math.nan, 0, []
         if names:

@@ -499,9 +499,10 @@ def damped(structure: Structure, damping: float = 0.5) -> Structure:
 
 @pytest.mark.parametrize('damping', [0.0, 0.5])
 def test_specific_force_model_jacobians_match_central_differences(damping: float) -> None:
-    """The accelerometers' dynamics model: the velocity Jacobian exact, the pose Jacobian exact
-    without damping; with damping it leaves out the damping's change with the pose (second
-    order), bounded here by c |V| |dL| / m."""
+    """The accelerometers' dynamics model, off the ground (Newton) and turning about a contact
+    node (Euler about it): the velocity Jacobian exact, the pose Jacobian exact without damping;
+    with damping it leaves out the damping's change with the pose (second order, 0.25 % of the
+    largest entry here)."""
     structure, T0, _ = example('six_bar')
     structure = damped(structure, damping) if damping else structure
     rng = np.random.default_rng(15)
@@ -509,24 +510,24 @@ def test_specific_force_model_jacobians_match_central_differences(damping: float
     V = 0.1 * rng.standard_normal((6, 6))
     rest = structure.rest_lengths * 0.95
     bodies = [0, 2, 5]
-    _, H_pose, H_vel = specific_force_model(structure, T, V, rest, bodies)
+    pivots = {0: structure.node_index('x1.a'), 5: structure.node_index('z2.b')}
+    model = functools.partial(specific_force_model, structure, rest=rest, bodies=bodies,
+                              pivots=pivots)
+    _, H_pose, H_vel = model(T, V)
     num_pose, num_vel = np.zeros_like(H_pose), np.zeros_like(H_vel)
     for c in range(36):
         d = np.zeros(36)
         d[c] = STEP
         plus, minus = apply_increment(T, d), apply_increment(T, -d)
-        num_pose[:, c] = (specific_force_model(structure, plus, V, rest, bodies)[0]
-                          - specific_force_model(structure, minus, V, rest, bodies)[0]
-                          ).ravel() / (2 * STEP)
-        num_vel[:, c] = (specific_force_model(structure, T, V + d.reshape(6, 6), rest, bodies)[0]
-                         - specific_force_model(structure, T, V - d.reshape(6, 6), rest,
-                                                bodies)[0]).ravel() / (2 * STEP)
+        num_pose[:, c] = (model(plus, V)[0] - model(minus, V)[0]).ravel() / (2 * STEP)
+        num_vel[:, c] = (model(T, V + d.reshape(6, 6))[0]
+                         - model(T, V - d.reshape(6, 6))[0]).ravel() / (2 * STEP)
     scale = np.abs(H_pose).max()
     np.testing.assert_allclose(H_pose, num_pose, rtol=0, atol=(1e-8 if damping == 0 else 2e-3)
                                * scale)
     np.testing.assert_allclose(H_vel, num_vel, rtol=0, atol=1e-7 * max(1.0, np.abs(H_vel).max()))
     if damping == 0:
-        assert not H_vel.any()
+        assert not H_vel[3:6].any()  # off the ground, undamped: no velocity in Newton's law
 
 
 @functools.cache
@@ -600,19 +601,31 @@ def rms(errors: np.ndarray) -> tuple[float, float]:
             float(np.degrees(np.sqrt(np.mean(np.sum(errors[..., 3:] ** 2, axis=-1))))))
 
 
+#: The rolls tracked (structure, seconds of simulated time from the settle's start, bounds on
+#: the position (m) and angle (deg) RMS, of the shape's position RMS (m)), from the measured
+#: figures of the test's docstring.
+ROLLS = [('six_bar', 6.0, 7.5e-3, 2.0, 1.5e-3), ('three_bar', 8.0, 11e-3, 2.0, 1.5e-3)]
+
+
 @pytest.mark.slow
-def test_filter_on_the_twin_rolling_six_bar() -> None:
-    """The 6-bar twin rolled one face by the library's gait, read at 100 Hz (24 lengths, the
-    encoders, 6 IMUs' accelerometers and gyros, the contact nodes), 4 seeded noise trials. The
-    accelerometers of the bars off the ground are the dynamics' (specific_force_model, held
-    here to the twin's own IMUs at its states, 4e-3 m/s^2); none gated. Measured (4 seeds
-    pooled): 6.1 mm / 1.1 deg RMS; the shape (the plane motion aligned) 0.74 mm / 1.1 deg. The
-    rest of the position error is the twin's contacts sliding (2 .. 7 mm while in contact:
-    MuJoCo's soft friction), which no sensor of the set sees and the filter follows from the
-    contacts as sticking (the issue's 5 mm missed there by 1.1 mm); mean NEES 0.42 per dof
-    (below the band: conservative, the plane motion's variance), checked against the band's
-    upper end."""
-    structure, records, imu_bodies = rolled_twin('six_bar')
+@pytest.mark.parametrize('name, seconds, position_rms, angle_rms, shape_rms', ROLLS)
+def test_filter_on_the_twin_rolling(name: str, seconds: float, position_rms: float,
+                                    angle_rms: float, shape_rms: float) -> None:
+    """The twin rolled one face by the library's gait (``plan_roll_step`` plans the 3-bar's
+    roll from its base triangle over an edge onto a side face as it does the 6-bar's), read at
+    100 Hz: the 6-bar with 24 lengths, the 3-bar with the Rutgers/Yale set (9 lengths, the
+    encoders, an IMU per bar), both with the IMUs' accelerometers and gyros and the contact
+    nodes; 4 seeded noise trials. The accelerometers are the dynamics' (specific_force_model:
+    Newton's law off the ground, held here to the twin's own IMUs at its states to 4e-3 m/s^2;
+    Euler's about a sticking contact node). Measured (4 seeds pooled, docs/structures.md): the
+    6-bar 6.6 mm / 1.2 deg RMS, its shape (the plane motion aligned) 0.58 mm / 1.2 deg, NEES
+    0.35 per dof, 12 readings gated (of 7176 accelerometer readings: impacts); the 3-bar
+    9.3 mm / 1.8 deg, shape 0.62 mm / 1.7 deg, NEES 0.82, 36 gated. The rest of the position
+    error is the plane motion, followed from the contacts as sticking while the twin's contacts
+    slide (2 .. 7 mm while in contact: MuJoCo's soft friction), which no sensor of the set sees:
+    the issue's 5 mm is missed there. NEES checked against the band's upper end (below it:
+    conservative)."""
+    structure, records, imu_bodies = rolled_twin(name, seconds)
     assert np.linalg.norm(records[-1]['com'][:2] - records[1]['com'][:2]) > 0.03  # it rolled
     for r in records[1:]:
         touching = {structure.node_bodies[structure.node_index(c)] for c in r['contacts']}
@@ -627,13 +640,13 @@ def test_filter_on_the_twin_rolling_six_bar() -> None:
         errors.append(e)
         aligned.append(a)
         nees += float(n.sum())
-        dof += n.size * 36
+        dof += n.size * 6 * structure.n_bodies
         gated += g
     pos, ang = rms(np.array(errors))
     shape_pos, shape_ang = rms(np.array(aligned))
-    print('six_bar rolling', pos, ang, shape_pos, shape_ang, nees / dof, gated)
-    assert gated == 0
-    assert pos < 7e-3
-    assert ang < 2.0
-    assert shape_pos < 1.5e-3
+    print(name, 'rolling', pos, ang, shape_pos, shape_ang, nees / dof, gated)
+    assert gated <= 0.02 * 4 * (len(records) - 1) * structure.n_bodies  # impacts
+    assert pos < position_rms
+    assert ang < angle_rms
+    assert shape_pos < shape_rms
     assert nees <= chi2.ppf(0.975, dof)
