@@ -744,12 +744,11 @@ def specific_force_model(structure: Structure, T: FloatArray, V: FloatArray, res
     k = idx.size
     rows6 = (6 * idx[:, None] + np.arange(6)[None, :]).ravel()
     Kb = state.stiffness[rows6]  # (6k, 6N) the bodies' wrench rows, spatial twists
-    dW = np.empty((6 * k, n6))  # d[F; M0]/d[dp; dw] (about the world origin)
-    p = T[:, :3, 3]
-    for j in range(structure.n_bodies):  # D: dv = dp + hat(p) dw
-        lin = Kb[:, 6 * j:6 * j + 3]
-        dW[:, 6 * j:6 * j + 3] = -lin
-        dW[:, 6 * j + 3:6 * j + 6] = -(lin @ hat3(p[j]) + Kb[:, 6 * j + 3:6 * j + 6])
+    dW = np.empty((6 * k, structure.n_bodies, 6))  # d[F; M0]/d[dp; dw] (about the origin)
+    Kn = Kb.reshape(6 * k, structure.n_bodies, 6)
+    dW[..., :3] = -Kn[..., :3]  # D: dv = dp + hat(p) dw
+    dW[..., 3:] = -(np.einsum('rnj,njk->rnk', Kn[..., :3], hat3(T[:, :3, 3])) + Kn[..., 3:])
+    dW = dW.reshape(6 * k, n6)
     Wd = np.zeros((k, 6))  # the damping's [force; moment about p]
     dWd = np.zeros((6 * k, n6))
     if np.any(structure.damping > 0.0):
@@ -795,33 +794,30 @@ def _pivot_acceleration(structure: Structure, T: FloatArray, V: FloatArray, i: i
     w = V[i, 3:]
     xc = R @ structure.node_points[node] + p
     r = p - xc
+    F, Fd = W[:3], Wd[:3]
+    h_r, h_w, h_xc, h_F, h_Fd, h_mg = hat3(np.array([r, w, xc, F, Fd, m * g]))  # one call
     Ic = R @ body.inertia @ R.T + m * (float(r @ r) * np.eye(3) - np.outer(r, r))
-    F, M0 = W[:3], W[3:]
-    Mc = M0 - np.cross(xc, F) + Wd[3:] + np.cross(r, Wd[:3]) + np.cross(r, m * g)
+    Mc = W[3:] - h_xc @ F + Wd[3:] + h_r @ (Fd + m * g)
     Iw = Ic @ w
-    alpha = np.linalg.solve(Ic, Mc - np.cross(w, Iw))
-    a = np.cross(alpha, r) + np.cross(w, np.cross(w, r))
-    own = slice(6 * i, 6 * i + 6)
+    alpha = np.linalg.solve(Ic, Mc - h_w @ Iw)
+    wr = h_w @ r
+    a = -h_r @ alpha + h_w @ wr
+    h_Iw, h_Ia, h_alpha, h_wr = hat3(np.array([Iw, Ic @ alpha, alpha, wr]))
     # d x_c = dp + hat(r) dw, d r = -hat(r) dw, d I_c = hat(dw) I_c - I_c hat(dw) (own pose)
-    dxc = np.hstack([np.eye(3), hat3(r)])
-    dr = np.hstack([np.zeros((3, 3)), -hat3(r)])
-    dMc = dW[3:] - hat3(xc) @ dW[:3]
-    dMc[:, own] += hat3(F) @ dxc - hat3(Wd[:3]) @ dr - hat3(m * g) @ dr
-    hw = hat3(w)
-    dN = dMc.copy()  # N = M_c - w x I_c w, less dI_c alpha
-    rot = np.zeros((3, 6))
-    rot[:, 3:] = (hw @ hat3(Iw) - hw @ Ic @ hw) + hat3(Ic @ alpha) - Ic @ hat3(alpha)
-    dN[:, own] += rot
-    dalpha = np.linalg.solve(Ic, dN)
-    H_pose = -hat3(r) @ dalpha
-    H_pose[:, own] += (hat3(alpha) + hw @ hw) @ dr
+    dMc = dW[3:] - h_xc @ dW[:3]
+    dMc[:, 6 * i:6 * i + 3] += h_F
+    dMc[:, 6 * i + 3:6 * i + 6] += (h_F + h_Fd + h_mg) @ h_r
+    # N = M_c - w x I_c w, less dI_c alpha: the body's own turn
+    dMc[:, 6 * i + 3:6 * i + 6] += h_w @ h_Iw - h_w @ Ic @ h_w + h_Ia - Ic @ h_alpha
     # velocities: the damping's wrench and w (gyroscopic and centripetal terms)
-    dMc_v = dWd[3:] + hat3(r) @ dWd[:3]
-    dalpha_v = np.linalg.solve(Ic, dMc_v)
-    w_cols = slice(6 * i + 3, 6 * i + 6)
-    gyro = -(-hat3(Iw) + hw @ Ic)
-    H_vel = -hat3(r) @ dalpha_v
-    H_vel[:, w_cols] += -hat3(r) @ np.linalg.solve(Ic, gyro) - hat3(np.cross(w, r)) - hw @ hat3(r)
+    dMv = dWd[3:] + h_r @ dWd[:3]
+    dMv[:, 6 * i + 3:6 * i + 6] += h_Iw - h_w @ Ic
+    n6 = dMc.shape[1]
+    dalpha = np.linalg.solve(Ic, np.hstack([dMc, dMv]))  # one solve for both
+    H_pose = -h_r @ dalpha[:, :n6]
+    H_pose[:, 6 * i + 3:6 * i + 6] -= (h_alpha + h_w @ h_w) @ h_r
+    H_vel = -h_r @ dalpha[:, n6:]
+    H_vel[:, 6 * i + 3:6 * i + 6] -= h_wr + h_w @ h_r
     return a, H_pose, H_vel
 
 
