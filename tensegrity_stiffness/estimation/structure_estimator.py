@@ -222,13 +222,12 @@ def string_model(structure: Structure, T: FloatArray, rest: FloatArray | None = 
     L = np.zeros((structure.n_strings, 6 * n_b + 6))  # the world last, dropped
     ends = np.where(structure.string_bodies < 0, n_b, structure.string_bodies)
     p = np.concatenate([T[:, :3, 3], np.zeros((1, 3))])
-    for side, x, sign in ((0, xa, -1.0), (1, xb, 1.0)):
+    rows = np.arange(structure.n_strings)[:, None]
+    for side, x, sign in ((0, xa, -1.0), (1, xb, 1.0)):  # (string, column) unique per side
         body = ends[:, side]
         arm = np.cross(x - p[body], u)
-        for j in range(structure.n_strings):
-            c = 6 * body[j]
-            L[j, c:c + 3] += sign * u[j]
-            L[j, c + 3:c + 6] += sign * arm[j]
+        cols = 6 * body[:, None] + np.arange(6)[None, :]
+        L[rows, cols] += sign * np.hstack([u, arm])
     L = L[:, :6 * n_b]
     return lengths, phi, L, dphi[:, None] * L
 
@@ -923,38 +922,47 @@ class StructureFilter:
             jac = np.split(J_all, starts[1:])
             stds = np.split(std, starts[1:])
             dofs = [r.dof for r in readings]
-            for r in readings:
-                if r.kind != 'contact':
-                    continue
-                b = int(s.node_bodies[r.index])
-                arm = self.T[b, :3, :3] @ s.node_points[r.index]
+            contacts = [r.index for r in readings if r.kind == 'contact']
+            if contacts:  # the contacts' zero velocity, all in one pass
+                nodes = np.array(contacts)
+                b = s.node_bodies[nodes]
+                arm = np.einsum('cij,cj->ci', self.T[b, :3, :3], s.node_points[nodes])
                 w = self.V[b, 3:]
-                J = np.zeros((3, 2 * f))
-                k = int(np.searchsorted(self.cols, 6 * b))
-                J[:, f + k:f + k + 3] = np.eye(3)
-                J[:, f + k + 3:f + k + 6] = -hat3(arm)
-                J[:, k + 3:k + 6] = -hat3(w) @ hat3(arm)
-                names.append(f'contact_velocity[{s.node_names[r.index]}]')
-                res.append(-(self.V[b, :3] + np.cross(w, arm)))
-                jac.append(J)
-                stds.append(np.full(3, self.contact_velocity_std))
-                dofs.append(3)
-        for key, value in (gyros or {}).items():
-            i = s.body_index(key)
-            g = finite_array(f'gyros[{key}]', value).reshape(-1)
-            if g.shape != (3,):
-                raise ValueError(f'gyros[{key}] must be 3 values (rad/s)')
-            R = self.T[i, :3, :3]
-            w = self.V[i, 3:]
-            k = int(np.searchsorted(self.cols, 6 * i))
-            J = np.zeros((3, 2 * f))
-            J[:, f + k + 3:f + k + 6] = R.T
-            J[:, k + 3:k + 6] = R.T @ hat3(w)
-            names.append(f'gyro[{key}]')
-            res.append(g - R.T @ w)
-            jac.append(J)
-            stds.append(np.full(3, self.gyro_std))
-            dofs.append(3)
+                h_arm, h_w = hat3(arm), hat3(w)
+                k = np.searchsorted(self.cols, 6 * b)
+                J = np.zeros((nodes.size, 3, 2 * f))
+                c = np.arange(nodes.size)[:, None, None]
+                i3 = np.arange(3)[None, :, None]
+                J[c, i3, (f + k)[:, None, None] + np.arange(3)] = np.eye(3)
+                J[c, i3, (f + k + 3)[:, None, None] + np.arange(3)] = -h_arm
+                J[c, i3, (k + 3)[:, None, None] + np.arange(3)] = -h_w @ h_arm
+                v = -(self.V[b, :3] + np.einsum('cij,cj->ci', h_w, arm))
+                names += [f'contact_velocity[{s.node_names[n]}]' for n in contacts]
+                res += list(v)
+                jac += list(J)
+                stds += [np.full(3, self.contact_velocity_std)] * nodes.size
+                dofs += [3] * nodes.size
+        if gyros:  # the gyros, all in one pass
+            keys = list(gyros)
+            idx = np.array([s.body_index(key) for key in keys])
+            g = np.empty((idx.size, 3))
+            for q, key in enumerate(keys):
+                g[q] = finite_array(f'gyros[{key}]', gyros[key]).reshape(-1) \
+                    if np.size(gyros[key]) == 3 else _bad_gyro(key)
+            R = self.T[idx, :3, :3]
+            Rt = np.transpose(R, (0, 2, 1))
+            w = self.V[idx, 3:]
+            k = np.searchsorted(self.cols, 6 * idx)
+            J = np.zeros((idx.size, 3, 2 * f))
+            c = np.arange(idx.size)[:, None, None]
+            i3 = np.arange(3)[None, :, None]
+            J[c, i3, (f + k + 3)[:, None, None] + np.arange(3)] = Rt
+            J[c, i3, (k + 3)[:, None, None] + np.arange(3)] = Rt @ hat3(w)
+            names += [f'gyro[{key}]' for key in keys]
+            res += list(g - np.einsum('kij,kj->ki', Rt, w))
+            jac += list(J)
+            stds += [np.full(3, self.gyro_std)] * idx.size
+            dofs += [3] * idx.size
         if accel:
             bodies = list(accel)
             h_a, H_p, H_v = specific_force_model(s, self.T, self.V, rest, bodies, pivots)
@@ -1056,6 +1064,10 @@ class StructureFilter:
         f = self.cols.size
         C[np.ix_(self.cols, self.cols)] = self.P[:f, :f]
         return C
+
+
+def _bad_gyro(key: str) -> FloatArray:
+    raise ValueError(f'gyros[{key}] must be 3 values (rad/s)')
 
 
 def replace_at_rest(measurements: StructureMeasurements) -> StructureMeasurements:
