@@ -888,14 +888,19 @@ class StructureFilter:
         step = self.V * dt
         step[self.structure.fixed] = 0.0
         self.T = apply_increment(self.T, step.ravel())
+        # F P F^T + Q with F = [[I, dt I], [0, I]] and the white accelerations' Q, by blocks
         f = self.cols.size
-        F = np.eye(2 * f)
-        F[:f, f:] = dt * np.eye(f)
-        Q = np.zeros((2 * f, 2 * f))
-        Q[:f, :f] = np.diag(self.q) * dt ** 3 / 3.0
-        Q[:f, f:] = Q[f:, :f] = np.diag(self.q) * dt ** 2 / 2.0
-        Q[f:, f:] = np.diag(self.q) * dt
-        self.P = F @ self.P @ F.T + Q
+        P = 0.5 * (self.P + self.P.T)  # symmetric (the update's rounding removed)
+        B = P[:f, f:] + dt * P[f:, f:]
+        P[:f, :f] += dt * (P[:f, f:] + P[f:, :f]) + dt * dt * P[f:, f:]
+        P[:f, f:] = B
+        P[f:, :f] = B.T
+        i = np.arange(f)
+        P[i, i] += self.q * dt ** 3 / 3.0
+        P[i, f + i] += self.q * dt ** 2 / 2.0
+        P[f + i, i] += self.q * dt ** 2 / 2.0
+        P[f + i, f + i] += self.q * dt
+        self.P = P
 
     def _rows(self, measurements: StructureMeasurements,
               gyros: Mapping[str, ArrayLike] | None,
@@ -1033,8 +1038,10 @@ class StructureFilter:
                 rr = r_all[idx]
                 values[which] = np.einsum('ki,ki->k', rr,
                                           np.linalg.solve(blocks, rr[..., None])[..., 0])
+            thresholds = {d: consistency_threshold(d, self.gate_probability)
+                          for d in set(dofs)}
             for k in range(len(names)):
-                if values[k] > consistency_threshold(dofs[k], self.gate_probability):
+                if values[k] > thresholds[dofs[k]]:
                     gated.append((names[k], f'gated: NIS {values[k]:.4g} over {dofs[k]} dof'))
                 else:
                     keep[bounds[k]:bounds[k + 1]] = True

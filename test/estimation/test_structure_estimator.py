@@ -650,3 +650,25 @@ def test_filter_on_the_twin_rolling(name: str, seconds: float, position_rms: flo
     assert ang < angle_rms
     assert shape_pos < shape_rms
     assert nees <= chi2.ppf(0.975, dof)
+
+
+def test_filter_prediction_is_the_constant_velocity_model() -> None:
+    """predict: the poses moved by ``V dt``, the covariance ``F P F^T + Q`` (``F = [[I, dt I],
+    [0, I]]``, ``Q`` the white accelerations'), computed by blocks."""
+    from tensegrity_stiffness.estimation.structure_estimator import StructureFilter
+
+    structure, T, _ = example('three_bar')
+    rng = np.random.default_rng(16)
+    flt = StructureFilter(structure, T)
+    flt.V = rng.standard_normal((3, 6))
+    X = rng.standard_normal((36, 36))
+    flt.P = X @ X.T
+    P0, V0, dt = flt.P.copy(), flt.V.copy(), 0.01
+    flt.predict(dt)
+    F = np.eye(36)
+    F[:18, 18:] = dt * np.eye(18)
+    q = np.diag(flt.q)
+    Q = np.block([[q * dt ** 3 / 3, q * dt ** 2 / 2], [q * dt ** 2 / 2, q * dt]])
+    np.testing.assert_allclose(flt.P, F @ P0 @ F.T + Q, rtol=0, atol=1e-13 * np.abs(P0).max())
+    assert np.array_equal(flt.P, flt.P.T)
+    np.testing.assert_allclose(flt.T, apply_increment(T, (V0 * dt).ravel()), rtol=0, atol=1e-15)
