@@ -1033,6 +1033,10 @@ class StructureFilter:
                 which = np.flatnonzero(sizes_arr == size)
                 if not which.size:
                     continue
+                if size == 1:  # a scalar reading's NIS: r^2 / S_kk
+                    rows = bounds[which]
+                    values[which] = r_all[rows] ** 2 / S_all[rows, rows]
+                    continue
                 idx = bounds[which][:, None] + np.arange(size)[None, :]
                 blocks = S_all[idx[:, :, None], idx[:, None, :]]
                 rr = r_all[idx]
@@ -1048,9 +1052,10 @@ class StructureFilter:
                     dof += dofs[k]
             if keep.any():
                 H, r, S = H_all[keep], r_all[keep], S_all[np.ix_(keep, keep)]
-                K = np.linalg.solve(S, HP[keep]).T
+                solved = np.linalg.solve(S, np.column_stack([HP[keep], r]))  # one solve
+                K = solved[:, :-1].T
                 dx = K @ r
-                nis = float(r @ np.linalg.solve(S, r))
+                nis = float(r @ solved[:, -1])
                 I_KH = np.eye(self.P.shape[0]) - K @ H
                 self.P = I_KH @ self.P @ I_KH.T + K @ K.T
                 f = self.cols.size
