@@ -72,12 +72,14 @@ from tensegrity_stiffness.structures.structure import Structure, StructureState
 
 __all__ = [
     'DEFAULT_ACCELERATION_STD',
+    'DEFAULT_ACCELEROMETER_STD',
     'DEFAULT_CONTACT_STD',
     'DEFAULT_CONTACT_VELOCITY_STD',
     'DEFAULT_GYRO_STD',
     'DEFAULT_IMU_STD',
     'DEFAULT_LENGTH_STD',
     'DEFAULT_MARKER_STD',
+    'DEFAULT_PIVOT_ACCELEROMETER_STD',
     'DEFAULT_TENSION_STD',
     'DEFAULT_WRENCH_STD',
     'FLIPPED_IMU_ANGLE',
@@ -97,6 +99,7 @@ __all__ = [
     'readings_of',
     'replace_at_rest',
     'rigid_motion_basis',
+    'specific_force_model',
     'spin_basis',
     'string_model',
 ]
@@ -219,13 +222,12 @@ def string_model(structure: Structure, T: FloatArray, rest: FloatArray | None = 
     L = np.zeros((structure.n_strings, 6 * n_b + 6))  # the world last, dropped
     ends = np.where(structure.string_bodies < 0, n_b, structure.string_bodies)
     p = np.concatenate([T[:, :3, 3], np.zeros((1, 3))])
-    for side, x, sign in ((0, xa, -1.0), (1, xb, 1.0)):
+    rows = np.arange(structure.n_strings)[:, None]
+    for side, x, sign in ((0, xa, -1.0), (1, xb, 1.0)):  # (string, column) unique per side
         body = ends[:, side]
         arm = np.cross(x - p[body], u)
-        for j in range(structure.n_strings):
-            c = 6 * body[j]
-            L[j, c:c + 3] += sign * u[j]
-            L[j, c + 3:c + 6] += sign * arm[j]
+        cols = 6 * body[:, None] + np.arange(6)[None, :]
+        L[rows, cols] += sign * np.hstack([u, arm])
     L = L[:, :6 * n_b]
     return lengths, phi, L, dphi[:, None] * L
 
@@ -705,6 +707,117 @@ DEFAULT_ACCELERATION_STD = (2.0, 20.0)
 #: Default std of a gyro (rad/s) and of a contact node's velocity (m/s: it sticks).
 DEFAULT_GYRO_STD = 0.01
 DEFAULT_CONTACT_VELOCITY_STD = 2e-3
+#: Default std of an accelerometer's specific force (m/s^2 per axis): its noise and the
+#: dynamics' model error (:func:`specific_force_model`).
+DEFAULT_ACCELEROMETER_STD = 0.1
+#: Default std (m/s^2) of the dynamics' specific force on a body turning about its contact node:
+#: the contact's own error (a soft contact that gives, a node that slides: median 0.03, 10 % of
+#: the readings above 0.45 m/s^2 on the rolling twin, up to 14 at an impact; 3e-3 at rest).
+DEFAULT_PIVOT_ACCELEROMETER_STD = 3.0
+
+
+def specific_force_model(structure: Structure, T: FloatArray, V: FloatArray, rest: FloatArray,
+                         bodies: Sequence[int], pivots: Mapping[int, int] | None = None
+                         ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The accelerometers at the origins of ``bodies`` (free, each with its centre of mass at its
+    origin) while the structure moves: the specific force ``f_i = R_i^T (a_i - g)`` of the
+    body's dynamics at the transforms ``T`` with ``rest``, ``V`` (N, 6) the bodies' ``[v; w]``:
+
+    * off the ground, Newton's law ``a_i = (F_i + F_d,i) / m_i + g`` (so ``f_i = R_i^T (F_i +
+      F_d,i) / m_i``), ``F_i`` the strings' force (``Structure.evaluate``'s wrenches) and
+      ``F_d,i`` their damping (the generalised force ``-L^T c (L V)``, ``c`` N s/m as MuJoCo's
+      tendon damping, ``L = dl/d[dp; dw]`` of :func:`string_model`);
+    * on one sticking node ``pivots[i]`` (``x_c``, ``r = p - x_c``), Euler's law about it (the
+      contact force has no moment there): ``I_c alpha + w x I_c w = M_c`` with ``I_c`` the
+      inertia about ``x_c`` and ``M_c`` the strings', their damping's and the weight's moment
+      about it, and ``a_i = alpha x r + w x (w x r)``.
+
+    Returns ``f`` (k, 3) and its Jacobians (3k, 6N) in the poses' ``[dp; dw]`` (through the
+    strings' stiffness ``-K D``, ``D`` the map to ``K``'s spatial twists, and the body's own
+    turn) and in ``V`` (the damping, and ``w`` in the pivot's terms); the damping's change with
+    the pose (second order) is left out."""
+    pivots = {} if pivots is None else pivots
+    state = structure.evaluate_transforms(T, rest)
+    n6 = 6 * structure.n_bodies
+    idx = np.asarray(bodies, dtype=np.intp)
+    k = idx.size
+    rows6 = (6 * idx[:, None] + np.arange(6)[None, :]).ravel()
+    Kb = state.stiffness[rows6]  # (6k, 6N) the bodies' wrench rows, spatial twists
+    dW = np.empty((6 * k, structure.n_bodies, 6))  # d[F; M0]/d[dp; dw] (about the origin)
+    Kn = Kb.reshape(6 * k, structure.n_bodies, 6)
+    dW[..., :3] = -Kn[..., :3]  # D: dv = dp + hat(p) dw
+    dW[..., 3:] = -(np.einsum('rnj,njk->rnk', Kn[..., :3], hat3(T[:, :3, 3])) + Kn[..., 3:])
+    dW = dW.reshape(6 * k, n6)
+    Wd = np.zeros((k, 6))  # the damping's [force; moment about p]
+    dWd = np.zeros((6 * k, n6))
+    if np.any(structure.damping > 0.0):
+        L = string_model(structure, T, rest)[2]
+        cl = structure.damping[:, None] * L
+        Lb = L[:, rows6]  # (n, 6k)
+        Wd = -(Lb.T @ (cl @ V.reshape(-1))).reshape(k, 6)
+        dWd = -Lb.T @ cl
+    g = np.zeros(3) if structure.gravity is None else np.asarray(structure.gravity, float)
+    f = np.empty((k, 3))
+    H_pose = np.empty((3 * k, n6))
+    H_vel = np.empty((3 * k, n6))
+    for q, i in enumerate(idx):
+        m = structure.bodies[i].mass
+        R = T[i, :3, :3]
+        W, dWq = state.wrenches[i], dW[6 * q:6 * q + 6]
+        Fd, dFd = Wd[q, :3], dWd[6 * q:6 * q + 3]
+        own = slice(6 * i + 3, 6 * i + 6)
+        if i not in pivots:
+            a = (W[:3] + Fd) / m + g
+            Hp = dWq[:3] / m
+            Hv = dFd / m
+        else:
+            a, Hp, Hv = _pivot_acceleration(structure, T, V, i, pivots[i], W, dWq, Wd[q],
+                                            dWd[6 * q:6 * q + 6], g)
+        f[q] = R.T @ (a - g)
+        H_pose[3 * q:3 * q + 3] = R.T @ Hp
+        H_pose[3 * q:3 * q + 3, own] += R.T @ hat3(a - g)
+        H_vel[3 * q:3 * q + 3] = R.T @ Hv
+    return f, H_pose, H_vel
+
+
+def _pivot_acceleration(structure: Structure, T: FloatArray, V: FloatArray, i: int, node: int,
+                        W: FloatArray, dW: FloatArray, Wd: FloatArray, dWd: FloatArray,
+                        g: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Body ``i``'s origin acceleration (3,) turning about its sticking ``node`` and its
+    Jacobians (3, 6N) in the poses and the velocities (:func:`specific_force_model`): the
+    strings' wrench ``W`` = [F; M0] about the world origin with ``dW``, the damping's ``Wd`` =
+    [F_d; M_d] about the body's origin with ``dWd`` in ``V``."""
+    body = structure.bodies[i]
+    m = body.mass
+    R, p = T[i, :3, :3], T[i, :3, 3]
+    w = V[i, 3:]
+    xc = R @ structure.node_points[node] + p
+    r = p - xc
+    F, Fd = W[:3], Wd[:3]
+    h_r, h_w, h_xc, h_F, h_Fd, h_mg = hat3(np.array([r, w, xc, F, Fd, m * g]))  # one call
+    Ic = R @ body.inertia @ R.T + m * (float(r @ r) * np.eye(3) - np.outer(r, r))
+    Mc = W[3:] - h_xc @ F + Wd[3:] + h_r @ (Fd + m * g)
+    Iw = Ic @ w
+    alpha = np.linalg.solve(Ic, Mc - h_w @ Iw)
+    wr = h_w @ r
+    a = -h_r @ alpha + h_w @ wr
+    h_Iw, h_Ia, h_alpha, h_wr = hat3(np.array([Iw, Ic @ alpha, alpha, wr]))
+    # d x_c = dp + hat(r) dw, d r = -hat(r) dw, d I_c = hat(dw) I_c - I_c hat(dw) (own pose)
+    dMc = dW[3:] - h_xc @ dW[:3]
+    dMc[:, 6 * i:6 * i + 3] += h_F
+    dMc[:, 6 * i + 3:6 * i + 6] += (h_F + h_Fd + h_mg) @ h_r
+    # N = M_c - w x I_c w, less dI_c alpha: the body's own turn
+    dMc[:, 6 * i + 3:6 * i + 6] += h_w @ h_Iw - h_w @ Ic @ h_w + h_Ia - Ic @ h_alpha
+    # velocities: the damping's wrench and w (gyroscopic and centripetal terms)
+    dMv = dWd[3:] + h_r @ dWd[:3]
+    dMv[:, 6 * i + 3:6 * i + 6] += h_Iw - h_w @ Ic
+    n6 = dMc.shape[1]
+    dalpha = np.linalg.solve(Ic, np.hstack([dMc, dMv]))  # one solve for both
+    H_pose = -h_r @ dalpha[:, :n6]
+    H_pose[:, 6 * i + 3:6 * i + 6] -= (h_alpha + h_w @ h_w) @ h_r
+    H_vel = -h_r @ dalpha[:, n6:]
+    H_vel[:, 6 * i + 3:6 * i + 6] -= h_wr + h_w @ h_r
+    return a, H_pose, H_vel
 
 
 @dataclass
@@ -734,9 +847,14 @@ class StructureFilter:
     ground and the turn about it through a roll. Each reading is gated by its own NIS
     (:func:`~tensegrity_stiffness.estimation.estimators.consistency_threshold` of its degrees
     of freedom) and a gated one is named in ``outliers`` at once (a broken length sensor, a
-    flipped IMU: in the first update that has it). The accelerometer's gravity direction is
-    used moving too, its std the caller's (a roll's accelerations, ~0.5 m/s^2 / g, belong in
-    ``imu_std``).
+    flipped IMU: in the first update that has it). An accelerometer is the dynamics'
+    (:func:`specific_force_model`): Newton's law with the strings' forces and damping at the
+    state on a body off the ground (to ``accelerometer_std``), Euler's law about its contact
+    node on a body touching the ground at one node (to ``pivot_accelerometer_std``); on a body
+    with more nodes down only its gravity direction ``imu_gravity`` is used, when given, its
+    std the caller's (a roll's accelerations, ~0.5 m/s^2 / g, belong in ``imu_std``). The
+    structure's string damping is the robot's (a twin's: ``StructureTwinOptions.
+    string_damping``).
 
     ``poses`` the start ((N, 4, 4) or (N, 7)); ``pose_std`` (m, rad) its std per axis."""
 
@@ -744,7 +862,9 @@ class StructureFilter:
                  = (0.01, 0.05), acceleration_std: tuple[float, float] = DEFAULT_ACCELERATION_STD,
                  gyro_std: float = DEFAULT_GYRO_STD,
                  contact_velocity_std: float = DEFAULT_CONTACT_VELOCITY_STD,
-                 gate_probability: float = CONSISTENCY_PROBABILITY) -> None:
+                 gate_probability: float = CONSISTENCY_PROBABILITY,
+                 accelerometer_std: float = DEFAULT_ACCELEROMETER_STD,
+                 pivot_accelerometer_std: float = DEFAULT_PIVOT_ACCELEROMETER_STD) -> None:
         self.structure = structure
         self.T = structure.transforms(poses)
         n = structure.n_bodies
@@ -757,6 +877,9 @@ class StructureFilter:
         self.q = np.tile([acceleration_std[0]] * 3 + [acceleration_std[1]] * 3, f // 6) ** 2
         self.gyro_std = _positive('gyro_std', gyro_std)
         self.contact_velocity_std = _positive('contact_velocity_std', contact_velocity_std)
+        self.accelerometer_std = _positive('accelerometer_std', accelerometer_std)
+        self.pivot_accelerometer_std = _positive('pivot_accelerometer_std',
+                                                 pivot_accelerometer_std)
         self.gate_probability = gate_probability
 
     def predict(self, dt: float) -> None:
@@ -765,27 +888,37 @@ class StructureFilter:
         step = self.V * dt
         step[self.structure.fixed] = 0.0
         self.T = apply_increment(self.T, step.ravel())
+        # F P F^T + Q with F = [[I, dt I], [0, I]] and the white accelerations' Q, by blocks
         f = self.cols.size
-        F = np.eye(2 * f)
-        F[:f, f:] = dt * np.eye(f)
-        Q = np.zeros((2 * f, 2 * f))
-        Q[:f, :f] = np.diag(self.q) * dt ** 3 / 3.0
-        Q[:f, f:] = Q[f:, :f] = np.diag(self.q) * dt ** 2 / 2.0
-        Q[f:, f:] = np.diag(self.q) * dt
-        self.P = F @ self.P @ F.T + Q
+        P = 0.5 * (self.P + self.P.T)  # symmetric (the update's rounding removed)
+        B = P[:f, f:] + dt * P[f:, f:]
+        P[:f, :f] += dt * (P[:f, f:] + P[f:, :f]) + dt * dt * P[f:, f:]
+        P[:f, f:] = B
+        P[f:, :f] = B.T
+        i = np.arange(f)
+        P[i, i] += self.q * dt ** 3 / 3.0
+        P[i, f + i] += self.q * dt ** 2 / 2.0
+        P[f + i, i] += self.q * dt ** 2 / 2.0
+        P[f + i, f + i] += self.q * dt
+        self.P = P
 
     def _rows(self, measurements: StructureMeasurements,
-              gyros: Mapping[str, ArrayLike] | None
+              gyros: Mapping[str, ArrayLike] | None,
+              accelerometers: Mapping[str, ArrayLike] | None = None
               ) -> tuple[list[str], list[FloatArray], list[FloatArray], list[FloatArray],
                          list[int]]:
         """(names, residuals z - h, Jacobians in the state, stds, dofs) of every reading."""
         s = self.structure
         f = self.cols.size
         readings = readings_of(s, replace_at_rest(measurements))
+        rest = s.validate_rest_lengths(measurements.rest_lengths)
+        accel, pivots = self._accelerometers(readings, accelerometers)
+        if accel:  # an accelerometer modelled by the dynamics replaces its gravity direction
+            modelled = {f'imu[{s.body_names[i]}]' for i in accel}
+            readings = [r for r in readings if r.name not in modelled]
         names, res, jac, stds, dofs = [], [], [], [], []
         if readings:
-            h, H, std, starts = measurement_model(s, self.T, readings, s.validate_rest_lengths(
-                measurements.rest_lengths))
+            h, H, std, starts = measurement_model(s, self.T, readings, rest)
             z = np.concatenate([r.value for r in readings])
             J_all = np.zeros((h.size, 2 * f))
             J_all[:, :f] = H[:, self.cols]
@@ -794,45 +927,97 @@ class StructureFilter:
             jac = np.split(J_all, starts[1:])
             stds = np.split(std, starts[1:])
             dofs = [r.dof for r in readings]
-            for r in readings:
-                if r.kind != 'contact':
-                    continue
-                b = int(s.node_bodies[r.index])
-                arm = self.T[b, :3, :3] @ s.node_points[r.index]
+            contacts = [r.index for r in readings if r.kind == 'contact']
+            if contacts:  # the contacts' zero velocity, all in one pass
+                nodes = np.array(contacts)
+                b = s.node_bodies[nodes]
+                arm = np.einsum('cij,cj->ci', self.T[b, :3, :3], s.node_points[nodes])
                 w = self.V[b, 3:]
+                h_arm, h_w = hat3(arm), hat3(w)
+                k = np.searchsorted(self.cols, 6 * b)
+                J = np.zeros((nodes.size, 3, 2 * f))
+                c = np.arange(nodes.size)[:, None, None]
+                i3 = np.arange(3)[None, :, None]
+                J[c, i3, (f + k)[:, None, None] + np.arange(3)] = np.eye(3)
+                J[c, i3, (f + k + 3)[:, None, None] + np.arange(3)] = -h_arm
+                J[c, i3, (k + 3)[:, None, None] + np.arange(3)] = -h_w @ h_arm
+                v = -(self.V[b, :3] + np.einsum('cij,cj->ci', h_w, arm))
+                names += [f'contact_velocity[{s.node_names[n]}]' for n in contacts]
+                res += list(v)
+                jac += list(J)
+                stds += [np.full(3, self.contact_velocity_std)] * nodes.size
+                dofs += [3] * nodes.size
+        if gyros:  # the gyros, all in one pass
+            keys = list(gyros)
+            idx = np.array([s.body_index(key) for key in keys])
+            g = np.empty((idx.size, 3))
+            for q, key in enumerate(keys):
+                g[q] = finite_array(f'gyros[{key}]', gyros[key]).reshape(-1) \
+                    if np.size(gyros[key]) == 3 else _bad_gyro(key)
+            R = self.T[idx, :3, :3]
+            Rt = np.transpose(R, (0, 2, 1))
+            w = self.V[idx, 3:]
+            k = np.searchsorted(self.cols, 6 * idx)
+            J = np.zeros((idx.size, 3, 2 * f))
+            c = np.arange(idx.size)[:, None, None]
+            i3 = np.arange(3)[None, :, None]
+            J[c, i3, (f + k + 3)[:, None, None] + np.arange(3)] = Rt
+            J[c, i3, (k + 3)[:, None, None] + np.arange(3)] = Rt @ hat3(w)
+            names += [f'gyro[{key}]' for key in keys]
+            res += list(g - np.einsum('kij,kj->ki', Rt, w))
+            jac += list(J)
+            stds += [np.full(3, self.gyro_std)] * idx.size
+            dofs += [3] * idx.size
+        if accel:
+            bodies = list(accel)
+            h_a, H_p, H_v = specific_force_model(s, self.T, self.V, rest, bodies, pivots)
+            for q, i in enumerate(bodies):
                 J = np.zeros((3, 2 * f))
-                k = int(np.searchsorted(self.cols, 6 * b))
-                J[:, f + k:f + k + 3] = np.eye(3)
-                J[:, f + k + 3:f + k + 6] = -hat3(arm)
-                J[:, k + 3:k + 6] = -hat3(w) @ hat3(arm)
-                names.append(f'contact_velocity[{s.node_names[r.index]}]')
-                res.append(-(self.V[b, :3] + np.cross(w, arm)))
+                J[:, :f] = H_p[3 * q:3 * q + 3, self.cols]
+                J[:, f:] = H_v[3 * q:3 * q + 3, self.cols]
+                names.append(f'accelerometer[{s.body_names[i]}]')
+                res.append(accel[i] - h_a[q])
                 jac.append(J)
-                stds.append(np.full(3, self.contact_velocity_std))
+                stds.append(np.full(3, self.pivot_accelerometer_std if i in pivots
+                                    else self.accelerometer_std))
                 dofs.append(3)
-        for key, value in (gyros or {}).items():
-            i = s.body_index(key)
-            g = finite_array(f'gyros[{key}]', value).reshape(-1)
-            if g.shape != (3,):
-                raise ValueError(f'gyros[{key}] must be 3 values (rad/s)')
-            R = self.T[i, :3, :3]
-            w = self.V[i, 3:]
-            k = int(np.searchsorted(self.cols, 6 * i))
-            J = np.zeros((3, 2 * f))
-            J[:, f + k + 3:f + k + 6] = R.T
-            J[:, k + 3:k + 6] = R.T @ hat3(w)
-            names.append(f'gyro[{key}]')
-            res.append(g - R.T @ w)
-            jac.append(J)
-            stds.append(np.full(3, self.gyro_std))
-            dofs.append(3)
         return names, res, jac, stds, dofs
 
+    def _accelerometers(self, readings: Sequence[Reading],
+                        accelerometers: Mapping[str, ArrayLike] | None
+                        ) -> tuple[dict[int, FloatArray], dict[int, int]]:
+        """{body index: specific force (3,)} of the accelerometers the dynamics model
+        (:func:`specific_force_model`: a free body with mass, its centre of mass at its origin,
+        at most one node among the contacts) and {body: its contact node} (its pivot);
+        checked (ValueError naming the body)."""
+        s = self.structure
+        out: dict[int, FloatArray] = {}
+        nodes: dict[int, list[int]] = {}
+        for r in readings:
+            if r.kind == 'contact' and s.node_bodies[r.index] >= 0:
+                nodes.setdefault(int(s.node_bodies[r.index]), []).append(r.index)
+        touching = {b for b, c in nodes.items() if len(c) > 1}
+        for key, value in (accelerometers or {}).items():
+            i = s.body_index(key)
+            a = finite_array(f'accelerometers[{key}]', value).reshape(-1)
+            if a.shape != (3,):
+                raise ValueError(f'accelerometers[{key}] must be 3 values (m/s^2)')
+            body = s.bodies[i]
+            if (not s.fixed[i] and body.mass > 0.0 and i not in touching
+                    and not np.any(np.asarray(body.com, dtype=float))):
+                out[i] = a
+        return out, {b: c[0] for b, c in nodes.items() if b in out}
+
     def update(self, measurements: StructureMeasurements,
-               gyros: Mapping[str, ArrayLike] | None = None) -> StructureFilterUpdate:
+               gyros: Mapping[str, ArrayLike] | None = None,
+               accelerometers: Mapping[str, ArrayLike] | None = None) -> StructureFilterUpdate:
         """Correct the state with one set of readings (``at_rest`` is ignored: the robot
-        moves) and the IMUs' ``gyros`` {body: (3,) rad/s in its frame}."""
-        names, res, jac, stds, dofs = self._rows(measurements, gyros)
+        moves), the IMUs' ``gyros`` {body: (3,) rad/s in its frame} and their
+        ``accelerometers`` {body: (3,) specific force, m/s^2 in its frame}: modelled by the
+        dynamics (:func:`specific_force_model`) on a body with at most one node among the
+        contacts, in place of its ``imu_gravity``; on a body with more (its contact forces
+        unknown) its ``imu_gravity`` is used, when given."""
+        names, res, jac, stds, dofs = self._rows(measurements, gyros, accelerometers)
         nis, dof, gated = math.nan, 0, []
         if names:
             sizes = [r.size for r in res]
@@ -848,22 +1033,29 @@ class StructureFilter:
                 which = np.flatnonzero(sizes_arr == size)
                 if not which.size:
                     continue
+                if size == 1:  # a scalar reading's NIS: r^2 / S_kk
+                    rows = bounds[which]
+                    values[which] = r_all[rows] ** 2 / S_all[rows, rows]
+                    continue
                 idx = bounds[which][:, None] + np.arange(size)[None, :]
                 blocks = S_all[idx[:, :, None], idx[:, None, :]]
                 rr = r_all[idx]
                 values[which] = np.einsum('ki,ki->k', rr,
                                           np.linalg.solve(blocks, rr[..., None])[..., 0])
+            thresholds = {d: consistency_threshold(d, self.gate_probability)
+                          for d in set(dofs)}
             for k in range(len(names)):
-                if values[k] > consistency_threshold(dofs[k], self.gate_probability):
+                if values[k] > thresholds[dofs[k]]:
                     gated.append((names[k], f'gated: NIS {values[k]:.4g} over {dofs[k]} dof'))
                 else:
                     keep[bounds[k]:bounds[k + 1]] = True
                     dof += dofs[k]
             if keep.any():
                 H, r, S = H_all[keep], r_all[keep], S_all[np.ix_(keep, keep)]
-                K = np.linalg.solve(S, HP[keep]).T
+                solved = np.linalg.solve(S, np.column_stack([HP[keep], r]))  # one solve
+                K = solved[:, :-1].T
                 dx = K @ r
-                nis = float(r @ np.linalg.solve(S, r))
+                nis = float(r @ solved[:, -1])
                 I_KH = np.eye(self.P.shape[0]) - K @ H
                 self.P = I_KH @ self.P @ I_KH.T + K @ K.T
                 f = self.cols.size
@@ -884,6 +1076,10 @@ class StructureFilter:
         f = self.cols.size
         C[np.ix_(self.cols, self.cols)] = self.P[:f, :f]
         return C
+
+
+def _bad_gyro(key: str) -> FloatArray:
+    raise ValueError(f'gyros[{key}] must be 3 values (rad/s)')
 
 
 def replace_at_rest(measurements: StructureMeasurements) -> StructureMeasurements:

@@ -4,6 +4,7 @@ gauges and outliers (tensegrity_stiffness.estimation.structure_estimator)."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
@@ -17,6 +18,7 @@ from tensegrity_stiffness.estimation.structure_estimator import (
     length_scale,
     measurement_model,
     readings_of,
+    specific_force_model,
     string_model,
 )
 from tensegrity_stiffness.geometry.screw import exp_so3, log_so3
@@ -486,45 +488,187 @@ def test_filter_names_a_broken_length_and_a_flipped_imu_within_0_1_s(fault: str)
     assert named_at is not None and named_at - 0.3 <= 0.1
 
 
-@pytest.mark.slow
-def test_filter_on_the_twin_rolling_six_bar() -> None:
-    """The 6-bar twin rolled one face by the library's gait (simulation.structure_gait), read
-    at 100 Hz for 6 s: every bar's pose tracked through the tip and the touch-down (measured:
-    6.1 mm / 2.04 deg RMS, mean NEES 0.94 per dof; the issue's 5 mm / 2 deg missed by 1.1 mm
-    and 0.04 deg: the constant-velocity model through the fall onto the next face, where the
-    IMUs see the accelerations and are gated)."""
-    from tensegrity_stiffness.estimation.structure_estimator import StructureFilter
+def damped(structure: Structure, damping: float = 0.5) -> Structure:
+    """The structure with the twin's string damping (StructureTwinOptions.string_damping) on
+    every string whose config gives none: the robot's model of its strings."""
+    strings = [s if s.damping > 0.0 else dataclasses.replace(s, damping=damping)
+               for s in structure.strings]
+    return Structure(structure.bodies, strings, structure.world_nodes, structure.gravity,
+                     structure.ground, structure.force_law)
+
+
+@pytest.mark.parametrize('damping', [0.0, 0.5])
+def test_specific_force_model_jacobians_match_central_differences(damping: float) -> None:
+    """The accelerometers' dynamics model, off the ground (Newton) and turning about a contact
+    node (Euler about it): the velocity Jacobian exact, the pose Jacobian exact without damping;
+    with damping it leaves out the damping's change with the pose (second order, 0.25 % of the
+    largest entry here)."""
+    structure, T0, _ = example('six_bar')
+    structure = damped(structure, damping) if damping else structure
+    rng = np.random.default_rng(15)
+    T = perturbed(T0, rng)
+    V = 0.1 * rng.standard_normal((6, 6))
+    rest = structure.rest_lengths * 0.95
+    bodies = [0, 2, 5]
+    pivots = {0: structure.node_index('x1.a'), 5: structure.node_index('z2.b')}
+    model = functools.partial(specific_force_model, structure, rest=rest, bodies=bodies,
+                              pivots=pivots)
+    _, H_pose, H_vel = model(T, V)
+    num_pose, num_vel = np.zeros_like(H_pose), np.zeros_like(H_vel)
+    for c in range(36):
+        d = np.zeros(36)
+        d[c] = STEP
+        plus, minus = apply_increment(T, d), apply_increment(T, -d)
+        num_pose[:, c] = (model(plus, V)[0] - model(minus, V)[0]).ravel() / (2 * STEP)
+        num_vel[:, c] = (model(T, V + d.reshape(6, 6))[0]
+                         - model(T, V - d.reshape(6, 6))[0]).ravel() / (2 * STEP)
+    scale = np.abs(H_pose).max()
+    np.testing.assert_allclose(H_pose, num_pose, rtol=0, atol=(1e-8 if damping == 0 else 2e-3)
+                               * scale)
+    np.testing.assert_allclose(H_vel, num_vel, rtol=0, atol=1e-7 * max(1.0, np.abs(H_vel).max()))
+    if damping == 0:
+        assert not H_vel[3:6].any()  # off the ground, undamped: no velocity in Newton's law
+
+
+@functools.cache
+def rolled_twin(name: str, seconds: float = 6.0) -> tuple[Structure, list[dict], tuple[str, ...]]:
+    """The twin of the example rolled one face by the library's gait
+    (simulation.structure_gait), motors at 0.1 m/s, its noise-free sensors and truth every
+    0.01 s for at most ``seconds`` (from the start of the settle): the structure with the twin's
+    string damping, the records, the IMU bodies."""
     from tensegrity_stiffness.simulation.structure_gait import DONE, RollGait, plan_roll_step
     from tensegrity_stiffness.simulation.structure_twin import StructureSimulation
 
-    structure, T0, _ = example('six_bar')
+    structure, T0, _ = example(name)
     sim = StructureSimulation(structure, poses=T0, rest_length_rate=0.1)
     sim.settle(max_time=3.0)
-    start_com = sim.centre_of_mass()
-    rng = np.random.default_rng(14)
-    flt = StructureFilter(structure, sim.poses(), pose_std=(1e-3, 1e-2))
     gait = RollGait(plan_roll_step(structure, sim.poses(), (1.0, 0.0, 0.0)))
     sim.set_rest_lengths(gait.start(sim.time))
     every = round(0.01 / sim.model.opt.timestep)
-    errors, nees = [], []
-    while gait.phase != DONE and sim.time < 6.0:
+    records = [{'poses': sim.poses(), 'velocities': sim.velocities()}]
+    while gait.phase != DONE and sim.time < seconds:
         sim.step(every)
         contacts = sim.contact_nodes()
         command = gait.update(sim.time, contacts,
                               not sim.moving and float(np.abs(sim.data.qvel).max()) <= 1e-3)
         if command is not None:
             sim.set_rest_lengths(command)
-        m, gyros = filter_readings(sim, rng)
-        m.contacts = contacts
+        imus = sim.imus()
+        records.append({'poses': sim.poses(), 'velocities': sim.velocities(),
+                        'contacts': contacts, 'lengths': sim.string_lengths(),
+                        'encoders': np.array(sim.rest_lengths), 'com': sim.centre_of_mass(),
+                        'gyros': np.array([r.angular_velocity for r in imus]),
+                        'specific_forces': np.array([r.specific_force for r in imus])})
+    return damped(structure, sim.options.string_damping), records, tuple(sim.imu_bodies)
+
+
+def track_roll(structure: Structure, records: list[dict], imu_bodies: tuple[str, ...],
+               seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The filter through a recorded roll at 100 Hz with the twin's seeded sensor noise
+    (SensorNoise: lengths 1 mm, accelerometers 0.05 m/s^2, gyros 0.01 rad/s): the errors
+    (k, N, 6) ``[dp; dw]`` from the truth, the same after the plane motion is aligned (the
+    part no sensor determines: followed from the contacts), the NEES (k,) and the gated
+    readings."""
+    from tensegrity_stiffness.estimation.structure_estimator import StructureFilter
+    from tensegrity_stiffness.simulation.twin import SensorNoise
+
+    noise = SensorNoise(**TWIN_NOISE)
+    rng = np.random.default_rng(seed)
+    flt = StructureFilter(structure, records[0]['poses'], pose_std=(1e-3, 1e-2),
+                          accelerometer_std=TWIN_NOISE['accelerometer'])
+    errors, aligned, nees, gated = [], [], [], 0
+    for r in records[1:]:
+        forces = noise.add(r['specific_forces'], 'accelerometer', rng)
+        m = StructureMeasurements(
+            lengths=dict(zip(structure.string_names, noise.add(r['lengths'], 'lengths', rng),
+                             strict=True)),
+            rest_lengths=r['encoders'], length_std=TWIN_NOISE['lengths'],
+            contacts=r['contacts'], contact_std=1e-4)
         flt.predict(0.01)
-        u = flt.update(m, gyros)
-        e = pose_error(u.poses, sim.poses())
+        u = flt.update(m, dict(zip(imu_bodies, noise.add(r['gyros'], 'gyro', rng), strict=True)),
+                       accelerometers=dict(zip(imu_bodies, forces, strict=True)))
+        gated += len(u.outliers)
+        e = pose_error(u.poses, r['poses'])
         errors.append(e.reshape(-1, 6))
         nees.append(e @ np.linalg.solve(u.covariance, e))
-    err = np.array(errors)
-    pos = np.sqrt(np.mean(np.sum(err[:, :, :3] ** 2, axis=2)))
-    ang = np.degrees(np.sqrt(np.mean(np.sum(err[:, :, 3:] ** 2, axis=2))))
-    assert np.linalg.norm(sim.centre_of_mass()[:2] - start_com[:2]) > 0.03  # it rolled
-    assert pos < 7e-3
-    assert ang < 2.5
-    assert np.mean(nees) / 36 < 1.2
+        aligned.append(aligned_error(structure, u, r['poses'])[0].reshape(-1, 6))
+    return np.array(errors), np.array(aligned), np.array(nees), gated
+
+
+def rms(errors: np.ndarray) -> tuple[float, float]:
+    """Position (m) and angle (deg) RMS over the steps and bodies of errors (k, N, 6)."""
+    return (float(np.sqrt(np.mean(np.sum(errors[..., :3] ** 2, axis=-1)))),
+            float(np.degrees(np.sqrt(np.mean(np.sum(errors[..., 3:] ** 2, axis=-1))))))
+
+
+#: The rolls tracked (structure, seconds of simulated time from the settle's start, bounds on
+#: the position (m) and angle (deg) RMS, of the shape's position RMS (m)), from the measured
+#: figures of the test's docstring.
+ROLLS = [('six_bar', 6.0, 7.5e-3, 2.0, 1.5e-3), ('three_bar', 8.0, 11e-3, 2.0, 1.5e-3)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize('name, seconds, position_rms, angle_rms, shape_rms', ROLLS)
+def test_filter_on_the_twin_rolling(name: str, seconds: float, position_rms: float,
+                                    angle_rms: float, shape_rms: float) -> None:
+    """The twin rolled one face by the library's gait (``plan_roll_step`` plans the 3-bar's
+    roll from its base triangle over an edge onto a side face as it does the 6-bar's), read at
+    100 Hz: the 6-bar with 24 lengths, the 3-bar with the Rutgers/Yale set (9 lengths, the
+    encoders, an IMU per bar), both with the IMUs' accelerometers and gyros and the contact
+    nodes; 4 seeded noise trials. The accelerometers are the dynamics' (specific_force_model:
+    Newton's law off the ground, held here to the twin's own IMUs at its states to 4e-3 m/s^2;
+    Euler's about a sticking contact node). Measured (4 seeds pooled, docs/structures.md): the
+    6-bar 6.6 mm / 1.2 deg RMS, its shape (the plane motion aligned) 0.58 mm / 1.2 deg, NEES
+    0.35 per dof, 12 readings gated (of 7176 accelerometer readings: impacts); the 3-bar
+    9.3 mm / 1.8 deg, shape 0.62 mm / 1.7 deg, NEES 0.82, 36 gated. The rest of the position
+    error is the plane motion, followed from the contacts as sticking while the twin's contacts
+    slide (2 .. 7 mm while in contact: MuJoCo's soft friction), which no sensor of the set sees:
+    the issue's 5 mm is missed there. NEES checked against the band's upper end (below it:
+    conservative)."""
+    structure, records, imu_bodies = rolled_twin(name, seconds)
+    assert np.linalg.norm(records[-1]['com'][:2] - records[1]['com'][:2]) > 0.03  # it rolled
+    for r in records[1:]:
+        touching = {structure.node_bodies[structure.node_index(c)] for c in r['contacts']}
+        off = [i for i in range(structure.n_bodies) if i not in touching]
+        if off:
+            f = specific_force_model(structure, r['poses'], r['velocities'], r['encoders'],
+                                     off)[0]
+            np.testing.assert_allclose(f, r['specific_forces'][off], rtol=0, atol=1e-2)
+    errors, aligned, nees, dof, gated = [], [], 0.0, 0, 0
+    for seed in range(4):
+        e, a, n, g = track_roll(structure, records, imu_bodies, 100 + seed)
+        errors.append(e)
+        aligned.append(a)
+        nees += float(n.sum())
+        dof += n.size * 6 * structure.n_bodies
+        gated += g
+    pos, ang = rms(np.array(errors))
+    shape_pos, shape_ang = rms(np.array(aligned))
+    print(name, 'rolling', pos, ang, shape_pos, shape_ang, nees / dof, gated)
+    assert gated <= 0.02 * 4 * (len(records) - 1) * structure.n_bodies  # impacts
+    assert pos < position_rms
+    assert ang < angle_rms
+    assert shape_pos < shape_rms
+    assert nees <= chi2.ppf(0.975, dof)
+
+
+def test_filter_prediction_is_the_constant_velocity_model() -> None:
+    """predict: the poses moved by ``V dt``, the covariance ``F P F^T + Q`` (``F = [[I, dt I],
+    [0, I]]``, ``Q`` the white accelerations'), computed by blocks."""
+    from tensegrity_stiffness.estimation.structure_estimator import StructureFilter
+
+    structure, T, _ = example('three_bar')
+    rng = np.random.default_rng(16)
+    flt = StructureFilter(structure, T)
+    flt.V = rng.standard_normal((3, 6))
+    X = rng.standard_normal((36, 36))
+    flt.P = X @ X.T
+    P0, V0, dt = flt.P.copy(), flt.V.copy(), 0.01
+    flt.predict(dt)
+    F = np.eye(36)
+    F[:18, 18:] = dt * np.eye(18)
+    q = np.diag(flt.q)
+    Q = np.block([[q * dt ** 3 / 3, q * dt ** 2 / 2], [q * dt ** 2 / 2, q * dt]])
+    np.testing.assert_allclose(flt.P, F @ P0 @ F.T + Q, rtol=0, atol=1e-13 * np.abs(P0).max())
+    assert np.array_equal(flt.P, flt.P.T)
+    np.testing.assert_allclose(flt.T, apply_increment(T, (V0 * dt).ravel()), rtol=0, atol=1e-15)
