@@ -100,9 +100,10 @@ from tensegrity_stiffness.geometry.screw import (
     log_se3,
     log_se3_sequence,
     log_so3_batch,
+    single_screw,
 )
 from tensegrity_stiffness.geometry.transforms import adjoint, rigid_transform
-from tensegrity_stiffness.geometry.validation import finite_array, finite_scalar
+from tensegrity_stiffness.geometry.validation import finite_array, finite_scalar, per_string
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
 
@@ -265,22 +266,6 @@ class _Data:
                           np.isfinite(self.tensions), np.isfinite(self.lengths)])
 
 
-def _per_string(name: str, value: ArrayLike | None, n: int, allow_nan: bool) -> FloatArray:
-    if value is None:
-        return np.full(n, np.nan)
-    try:
-        arr = np.asarray(value, dtype=np.float64).ravel()
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f'{name} must be numeric: {exc}') from None
-    if arr.shape != (n,):
-        raise ValueError(f'{name} must have {n} values (one per string), got {arr.size}')
-    bad = np.isinf(arr) | (np.isnan(arr) if not allow_nan else False)
-    if np.any(bad):
-        raise ValueError(f'{name} must be finite{" (NaN: not measured)" if allow_nan else ""}, '
-                         f'got {arr[bad][0]} at string {int(np.flatnonzero(bad)[0])}')
-    return arr
-
-
 def _samples_data(model: JointModel, samples: Sequence[CalibrationSample]) -> _Data:
     """Validate the samples (ValueError naming ``samples[i].field``) into arrays."""
     n = model.n_strings
@@ -296,7 +281,7 @@ def _samples_data(model: JointModel, samples: Sequence[CalibrationSample]) -> _D
         where = f'samples[{i}]'
         if not isinstance(s, CalibrationSample):
             raise ValueError(f'{where} is not a CalibrationSample')
-        rest[i] = _per_string(f'{where}.rest_lengths', s.rest_lengths, n, False)
+        rest[i] = per_string(f'{where}.rest_lengths', s.rest_lengths, n)
         if np.any(rest[i] <= 0.0):
             raise ValueError(f'{where}.rest_lengths must be > 0')
         if s.pose is not None and s.screw is not None:
@@ -305,13 +290,10 @@ def _samples_data(model: JointModel, samples: Sequence[CalibrationSample]) -> _D
             poses[i] = rigid_transform(s.pose, f'{where}.pose', RECORDED_ROTATION_TOLERANCE)
             has_pose[i] = True
         elif s.screw is not None:
-            xi = as_screws(s.screw, f'{where}.screw')
-            if xi.shape != (6,):
-                raise ValueError(f'{where}.screw must have shape (6,), got {xi.shape}')
-            poses[i] = exp_se3(xi)
+            poses[i] = exp_se3(single_screw(s.screw, f'{where}.screw', in_chart=False))
             has_pose[i] = True
-        tensions[i] = _per_string(f'{where}.tensions', s.tensions, n, True)
-        lengths[i] = _per_string(f'{where}.lengths', s.lengths, n, True)
+        tensions[i] = per_string(f'{where}.tensions', s.tensions, n, not_measured=True)
+        lengths[i] = per_string(f'{where}.lengths', s.lengths, n, not_measured=True)
         if s.external_wrench is not None:
             w = finite_array(f'{where}.external_wrench', s.external_wrench)
             if w.shape != (6,):

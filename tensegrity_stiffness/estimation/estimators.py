@@ -60,7 +60,11 @@ from tensegrity_stiffness.geometry.screw import (
     log_se3,
 )
 from tensegrity_stiffness.geometry.transforms import rigid_transform
-from tensegrity_stiffness.geometry.validation import finite_array, finite_array_of_shape
+from tensegrity_stiffness.geometry.validation import (
+    finite_array,
+    finite_array_of_shape,
+    per_string,
+)
 from tensegrity_stiffness.mechanics.chain import ChainState, JointChain
 from tensegrity_stiffness.mechanics.equilibrium import (
     MAX_ROTATION_STEP,
@@ -233,18 +237,6 @@ def _covariance(name: str, value: Any, size: int) -> tuple[FloatArray, FloatArra
     return covariance, whitener
 
 
-def _per_string(name: str, value: Any, n: int) -> FloatArray:
-    arr = np.asarray(value, dtype=np.float64).ravel() if value is not None else None
-    if arr is None:
-        return np.full(n, np.nan)
-    if arr.size != n:
-        raise ValueError(f'{name} must have {n} entries (one per string, NaN = not measured), '
-                         f'got {arr.size}')
-    if np.isinf(arr).any():
-        raise ValueError(f'{name} must be finite or NaN (not measured), got inf')
-    return arr
-
-
 _NOT_MEASURED = (np.empty(0, dtype=np.intp), np.empty(0), np.empty(0))
 for _empty in _NOT_MEASURED:
     _empty.flags.writeable = False
@@ -256,7 +248,7 @@ def _string_readings(name: str, value: Any, std_name: str, std: Any, n: int
     reading (NaN = not measured; None: no string measured, std not needed)."""
     if value is None:
         return _NOT_MEASURED
-    values = _per_string(name, value, n)
+    values = per_string(name, value, n, not_measured=True)
     index = np.flatnonzero(~np.isnan(values))
     if not index.size:
         return _NOT_MEASURED
