@@ -91,6 +91,10 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import chdtri
 
+from tensegrity_stiffness.estimation.least_squares import (
+    LevenbergMarquardtDamping,
+    damped_normal_matrix,
+)
 from tensegrity_stiffness.geometry.screw import (
     as_screws,
     exp_se3,
@@ -160,6 +164,11 @@ DAMPING = 1e-3
 #: ... and of a refit from a fit's solution (the taut-branch passes: near their solution, the
 #: steps are nearly Gauss-Newton's).
 WARM_DAMPING = 1e-5
+#: The smallest Levenberg-Marquardt damping of a fit, which is also the ridge that keeps a zero
+#: diagonal entry of its normal matrices damped.
+DAMPING_FLOOR = 1e-12
+#: Rejected steps (damping grown tenfold each) before a fit stage stops at its point.
+MAX_REJECTED_STEPS = 12
 #: Levenberg-Marquardt iterations of one fit stage.
 MAX_ITERATIONS = 100
 #: A sample with a known load is at equilibrium when every component of ``F + W`` is below this
@@ -1073,7 +1082,8 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
     if ev is None:
         ev = problem.evaluate(z, xi)
     cost, weight = cost_of(ev)
-    lam = damping
+    lam = LevenbergMarquardtDamping(damping, growth=10.0, floor=DAMPING_FLOOR,
+                                    floor_from=10.0 * DAMPING_FLOOR, largest=math.inf)
     converged = False
     iterations = 0
     for iterations in range(1, max_iterations + 1):  # noqa: B007 (returned)
@@ -1082,14 +1092,12 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
         B = eq.B @ basis  # (N, 6, q)
         C = basis.T @ eq.C @ basis
         gp = basis.T @ eq.gp
-        dA = np.diagonal(A, axis1=-2, axis2=-1)
-        dC = np.diag(C).copy()
         accepted = False
-        for _ in range(12):
-            A_inv = np.linalg.inv(A + lam * (dA[..., None] * np.eye(6) + 1e-12 * np.eye(6)))
+        for _ in range(MAX_REJECTED_STEPS):
+            A_inv = np.linalg.inv(damped_normal_matrix(A, lam.value, DAMPING_FLOOR))
             Ainv_B = A_inv @ B
             Ainv_g = (A_inv @ gx[..., None])[..., 0]
-            S = C + lam * np.diag(dC + 1e-12) - _sum_of_products(B, Ainv_B)
+            S = damped_normal_matrix(C, lam.value, DAMPING_FLOOR) - _sum_of_products(B, Ainv_B)
             rhs = gp - _sum_of_products(B, Ainv_g[..., None])[:, 0]
             dy = -np.linalg.solve(S, rhs) if q else np.zeros(0)
             dxi = -(Ainv_g + Ainv_B @ dy)
@@ -1100,20 +1108,20 @@ def _solve(problem: _Problem, z0: FloatArray, basis: FloatArray, xi0: FloatArray
                     raise ValueError('no equilibrium under a known load')
                 ev_trial = problem.evaluate(z_trial, xi_trial)
             except ValueError:
-                lam *= 10.0
+                lam.rejected()
                 continue
             cost_trial, weight_trial = cost_of(ev_trial)
             if cost_trial <= cost:
                 accepted = True
                 break
-            lam *= 10.0
+            lam.rejected()
         if not accepted:
             converged = True  # no descent direction left at working precision
             break
         decrease = cost - cost_trial
         z, xi, ev, weight = z_trial, xi_trial, ev_trial, weight_trial
         cost = cost_trial
-        lam = max(lam / 10.0, 1e-12)
+        lam.accepted()
         if decrease <= tolerance * max(cost, 1.0):
             converged = True
             break
