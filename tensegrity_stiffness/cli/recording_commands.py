@@ -115,7 +115,7 @@ def _cmd_export_mjcf(args: argparse.Namespace) -> int:
 
         text = structure_mjcf(Structure.from_yaml(args.structure))
     else:
-        from tensegrity_stiffness.simulation.twin import export_mjcf
+        from tensegrity_stiffness.simulation.twin_model import export_mjcf
 
         text = export_mjcf(args.config, spine=args.spine, max_length=args.max_length)
     if args.out:
