@@ -63,8 +63,8 @@ from tensegrity_stiffness.nodes.messages import (
     pose_message_to_transform,
     stamp_nanoseconds_or,
 )
-from tensegrity_stiffness.recordings.bag import MessageReading, jazzy_typestore
 from tensegrity_stiffness.recordings.bag import check_input as check_bag_input
+from tensegrity_stiffness.recordings.bag_topics import MessageReading, jazzy_typestore
 
 FloatArray = NDArray[np.float64]
 
