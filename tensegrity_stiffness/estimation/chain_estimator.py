@@ -55,8 +55,6 @@ FloatArray = NDArray[np.float64]
 
 #: The chain's equilibria count as met when every residual is below this (N, N m).
 CHAIN_EQUILIBRIUM_TOLERANCE = 1e-9
-
-
 #: Newton corrections onto the chain's equilibria after each step.
 MAX_RESTORATION_STEPS = 8
 

@@ -48,31 +48,19 @@ FloatArray = NDArray[np.float64]
 #: units of its own std) is below this: the step left is under 0.03 standard deviations, which
 #: moves the NEES by about 1e-3 (a tracker's warm start converges in one step).
 DECREMENT_TOLERANCE = 1e-3
-
-
 #: Gauss-Newton / Levenberg-Marquardt iterations before giving up.
 MAX_ITERATIONS = 30
-
-
 #: Singular values of the scaled whitened Jacobian below this fraction of the largest count as
 #: zero (an unobservable direction).
 RANK_TOLERANCE = 1e-9
-
-
 #: A singular value of the scaled whitened Jacobian below this fraction of the largest makes
 #: the normal matrix numerically singular (condition number above 1e14): a fit that stops on
 #: it names that direction as undetermined.
 NEAR_SINGULAR_TOLERANCE = 1e-7
-
-
 #: Central-difference step (rad, m) of dK_c/dxi for the std of K_c.
 STIFFNESS_STEP = 1e-6
-
-
 #: Names of the pose coordinates in the PoseWithCovariance order.
 POSE_AXES = ('x', 'y', 'z', 'rx', 'ry', 'rz')
-
-
 #: The length (m) that scales translations against rotations is at least this: rest lengths of
 #: denormal size (a hostile ``~/rest_lengths``) would make it zero.
 MIN_LENGTH_SCALE = 1e-6

@@ -54,8 +54,6 @@ def _std(name: str, value: Any, size: int) -> FloatArray:
 #: Checked covariances and their whiteners by content: a tracker's covariances come from its
 #: settings (or a sensor's fixed covariance) and repeat every estimate. A few are kept.
 _COVARIANCES: dict[bytes, tuple[FloatArray, FloatArray]] = {}
-
-
 _COVARIANCES_KEPT = 16
 
 
@@ -234,8 +232,6 @@ def _impossible_reasons(label: str, values: FloatArray, low: FloatArray, bound: 
 #: :meth:`PreparedMeasurements.describe`'s texts by sensor pattern (a tracker's pattern rarely
 #: changes, its measurements are prepared anew for every estimate). A few are kept.
 _DESCRIPTIONS: dict[tuple, str] = {}
-
-
 _DESCRIPTIONS_KEPT = 64
 
 

@@ -21,14 +21,10 @@ FloatArray = NDArray[np.float64]
 #: the ``1 - p`` quantile of chi-square(redundancy), which a set of sound readings does once in
 #: ``1 / p`` estimates.
 CONSISTENCY_PROBABILITY = 1e-3
-
-
 #: Two suspects whose normalized residuals (Wilson-Hilferty z) are within this fraction of each
 #: other cannot be told apart (with a redundancy of 1 every reading's is the same): none is left
 #: out.
 AMBIGUITY = 0.02
-
-
 #: The most readings one estimate leaves out as contradicted. Left out only when the rest then
 #: passes the chi-square test: a set that stays inconsistent after as many (the joint moving,
 #: so that the static model fits no subset; a wrong model) keeps every reading and is reported

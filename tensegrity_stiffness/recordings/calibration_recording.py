@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tensegrity_stiffness.estimation.calibration import (
+from tensegrity_stiffness.estimation.calibration_samples import (
     RECORDED_ROTATION_TOLERANCE,
     CalibrationSample,
 )

@@ -32,54 +32,34 @@ FloatArray = NDArray[np.float64]
 
 #: Choices of ``max_length`` (see the module docstring).
 MAX_LENGTH_MODES = ('limit', 'ignore')
-
-
 #: Integrators that MuJoCo's split step (mj_step1 / mj_step2) supports.
 INTEGRATORS = ('implicitfast', 'implicit', 'Euler')
-
-
 #: Default time step (s): 1 kHz.
 DEFAULT_TIMESTEP = 1e-3
-
-
 #: Default damping of every string (N s/m): the dynamics' one value
 #: (:data:`~tensegrity_stiffness.mechanics.dynamics.DEFAULT_STRING_DAMPING`).
 DEFAULT_TENDON_DAMPING = DEFAULT_STRING_DAMPING
-
-
 #: Default damping of each free-joint dof of every link (N s/m, N m s/rad): a small damping
 #: against the world that damps the spine's slow bending mode (about 4 rad/s with 10 g links),
 #: which the strings' damping barely reaches; negligible against the joint's own modes.
 DEFAULT_JOINT_DAMPING = 1e-3
-
-
 #: Default gravity (m/s^2, base frame) of the single joint: the vertebra's axis is +y, as in
 #: ``config/default_spine.yaml``. Compensated (the library's joint has no weights); the IMU
 #: senses it.
 DEFAULT_JOINT_GRAVITY = (0.0, -9.81, 0.0)
-
-
 #: Settled: the largest link speed (m/s and rad/s) is at most this factor times ``tolerance``.
 REST_SPEED_FACTOR = 1.0
-
-
 #: The physical range of a rest length the twin takes (unless ``rest_length_range`` sets one):
 #: above this fraction of the string's configured rest length, and at most its maximum length
 #: (its configured rest length when it has none) times ``1 + REST_LENGTH_MARGIN``. Outside it a
 #: string could not be mounted (1e308, 1e6 or 5e-324 m: MuJoCo's soft length limit then drives
 #: the links far away or crushes them together, and the twin needs minutes to recover).
 MIN_REST_LENGTH_FRACTION = 0.1
-
-
 REST_LENGTH_MARGIN = 0.5
-
-
 #: The largest external force (N) and moment (N m) the twin is asked to hold by default
 #: (``max_force`` / ``max_moment``; the sim node's ``limits.max_force`` / ``limits.max_moment``):
 #: a larger wrench is refused as absurd (the default joint's strings carry about 1.5 N each).
 DEFAULT_MAX_FORCE = 100.0
-
-
 DEFAULT_MAX_MOMENT = 10.0
 
 
