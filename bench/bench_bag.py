@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT))
 from support.bag_recordings import TYPESTORE, In, multiarray, screw_stream, write_bag  # noqa: E402
 
 from tensegrity_stiffness.nodes import layouts, messages, processing  # noqa: E402
-from tensegrity_stiffness.recordings import bag  # noqa: E402
+from tensegrity_stiffness.recordings import bag, bag_writers  # noqa: E402
 
 
 def load_bag_module(checkout: Path) -> object:
@@ -123,7 +123,7 @@ def main() -> None:
         typestore = bag.jazzy_typestore()
         output_layouts = layouts.joint_output_layouts(settings.model.string_names)
         outputs_spec = bag.NODE_TOPICS['stiffness'].outputs
-        templates = {name: bag._Template(typestore, output_layouts[name],
+        templates = {name: bag_writers.OutputTemplate(typestore, output_layouts[name],
                                          settings.link1_frame) for name in bag.OUTPUT_NAMES}
         start = time.perf_counter()
         with Writer(Path(tmp) / 'w', version=9,

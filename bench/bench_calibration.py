@@ -33,6 +33,8 @@ from support.calibration_recordings import (  # noqa: E402
 )
 
 from tensegrity_stiffness.estimation import calibration as cal  # noqa: E402
+from tensegrity_stiffness.estimation.calibration_model import CalibrationProblem  # noqa: E402
+from tensegrity_stiffness.estimation.calibration_samples import samples_data  # noqa: E402
 
 TARGET_S = 5.0
 SEED = 3
@@ -59,8 +61,8 @@ def scipy_reference(model, samples) -> tuple[float, np.ndarray, int]:
     from scipy.optimize import least_squares
 
     t0 = time.perf_counter()
-    data = cal._samples_data(model, samples)
-    problem = cal._Problem(model, data, cal.CalibrationNoise())
+    data = samples_data(model, samples)
+    problem = CalibrationProblem(model, data, cal.CalibrationNoise())
     n2 = 2 * model.n_strings
     xi0 = problem.refine_screws(np.zeros(n2), cal.initial_screws(model, data))
     N = len(samples)

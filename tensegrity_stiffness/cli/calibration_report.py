@@ -23,13 +23,9 @@ import numpy as np
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.cli import plots
-from tensegrity_stiffness.estimation.calibration import (
-    RESIDUAL_KINDS,
-    RESIDUAL_UNITS,
-    SLACK_MARGIN,
-    CalibrationResult,
-    calibrate_joint,
-)
+from tensegrity_stiffness.estimation.calibration_results import CalibrationResult
+from tensegrity_stiffness.estimation.calibration_samples import RESIDUAL_KINDS, RESIDUAL_UNITS
+from tensegrity_stiffness.estimation.joint_calibration import SLACK_MARGIN, calibrate_joint
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.recordings.calibration_recording import (

@@ -115,7 +115,7 @@ def _cmd_export_mjcf(args: argparse.Namespace) -> int:
 
         text = structure_mjcf(Structure.from_yaml(args.structure))
     else:
-        from tensegrity_stiffness.simulation.twin import export_mjcf
+        from tensegrity_stiffness.simulation.twin_model import export_mjcf
 
         text = export_mjcf(args.config, spine=args.spine, max_length=args.max_length)
     if args.out:
@@ -191,7 +191,8 @@ def add_calibrate_parser(sub: Any) -> None:
                    help='nominal joint config (default: the packaged default_joint.yaml)')
     p.add_argument('--format', choices=('bag', 'csv'),
                    help='recording format (default: csv for a .csv file, else bag)')
-    from tensegrity_stiffness.estimation.calibration import FIT_KINDS, LOSSES
+    from tensegrity_stiffness.estimation.calibration_results import FIT_KINDS
+    from tensegrity_stiffness.estimation.joint_calibration import LOSSES
     from tensegrity_stiffness.recordings.calibration_recording import (
         DEFAULT_MAX_ANGULAR_SPEED,
         DEFAULT_MAX_SPEED,

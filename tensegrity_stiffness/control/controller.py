@@ -69,12 +69,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.geometry.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
-from tensegrity_stiffness.geometry.transforms import rigid_transform
+from tensegrity_stiffness.geometry.screw import exp_se3, hat3, log_se3, single_screw
+from tensegrity_stiffness.geometry.transforms import adjoint, inverse_transform, rigid_transform
 from tensegrity_stiffness.geometry.validation import (
     finite_array,
     finite_array_of_shape,
     finite_scalar,
+    per_string,
 )
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.active_set import (
@@ -165,14 +166,6 @@ CHAIN_STIFFNESS_DAMPING = 1.0
 
 
 # ---------------------------------------------------------------------------------- inputs
-def _per_string(name: str, value: ArrayLike) -> FloatArray:
-    arr = finite_array(name, value)
-    if arr.ndim > 1:
-        raise ValueError(f'{name} must be a scalar or one value per string, got shape '
-                         f'{arr.shape}')
-    return arr.copy()
-
-
 @dataclass(frozen=True)
 class ActuatorLimits:
     """Limits of the motors and strings, each a scalar or one value per string.
@@ -188,7 +181,7 @@ class ActuatorLimits:
 
     def __post_init__(self) -> None:
         names = ('rest_length_min', 'rest_length_max', 'max_rate', 'tension_min', 'tension_max')
-        values = {name: _per_string(name, getattr(self, name)) for name in names}
+        values = {name: per_string(name, getattr(self, name), None) for name in names}
         try:
             np.broadcast_shapes(*(v.shape for v in values.values()))
         except ValueError:
@@ -219,14 +212,6 @@ class ActuatorLimits:
         return tuple(out)
 
 
-def _screw(screw: ArrayLike, name: str) -> FloatArray:
-    xi = as_screws(screw, name)
-    if xi.shape != (6,):
-        raise ValueError(f'{name} must have shape (6,), got {xi.shape}')
-    check_in_chart(xi, name)
-    return xi
-
-
 @dataclass(frozen=True)
 class ControlTarget:
     """What to hold: ``pose`` (4x4 or ``[x y z qx qy qz qw]``, link 2 in {1}) or ``screw`` (6,),
@@ -247,7 +232,7 @@ class ControlTarget:
         if self.pose is not None:
             T = rigid_transform(self.pose, 'pose', POSE_ROTATION_TOLERANCE)
         else:
-            T = exp_se3(_screw(self.screw, 'screw'))
+            T = exp_se3(single_screw(self.screw))
         object.__setattr__(self, 'transform', T)
         if self.cartesian_stiffness is not None:
             object.__setattr__(self, 'cartesian_stiffness', finite_array_of_shape(
@@ -305,7 +290,7 @@ class PoseTerms:
 
 def pose_terms(model: JointModel, screw: ArrayLike) -> PoseTerms:
     """:class:`PoseTerms` of ``model`` at ``screw`` (6,) (the geometry of eqs. 7-11)."""
-    return pose_terms_at(model, exp_se3(_screw(screw, 'screw')))
+    return pose_terms_at(model, exp_se3(single_screw(screw)))
 
 
 def pose_terms_at(model: JointModel, T: FloatArray) -> PoseTerms:
@@ -603,10 +588,7 @@ def _rate_limited(previous: FloatArray, wanted: FloatArray, step: FloatArray,
 def _pose_error(target: FloatArray, measured: FloatArray) -> tuple[FloatArray, FloatArray]:
     """``e = log(T* T_m^-1)`` (screw order [omega; v]) and the ROS-order error
     ``[p* - p_m; rotation vector of R* R_m^T]``."""
-    R, p = measured[:3, :3], measured[:3, 3]
-    inverse = np.eye(4)
-    inverse[:3, :3], inverse[:3, 3] = R.T, -R.T @ p
-    E = target @ inverse
+    E = target @ inverse_transform(measured)
     e = log_se3(E)
     ros = np.concatenate([target[:3, 3] - measured[:3, 3], e[:3]])
     return e, ros
@@ -650,7 +632,7 @@ def _measured(pose: ArrayLike | None, screw: ArrayLike | None,
     if pose is not None:
         return rigid_transform(pose, 'pose', POSE_ROTATION_TOLERANCE)
     if screw is not None:
-        return _exp(kn, _screw(screw, 'screw'))
+        return _exp(kn, single_screw(screw))
     return None
 
 
@@ -968,14 +950,9 @@ class StiffnessController(_PoseFeedback):
 
 
 # ---------------------------------------------------------------------------------- spine
-def adjoint_twist(T: FloatArray) -> FloatArray:
-    """Ad_T for twists ``[dv; dw]``: ``[[R, hat(p) R], [0, R]]``."""
-    R, p = T[:3, :3], T[:3, 3]
-    out = np.zeros((6, 6))
-    out[:3, :3] = R
-    out[:3, 3:] = hat3(p) @ R
-    out[3:, 3:] = R
-    return out
+#: Ad_T for twists ``[dv; dw]``: ``[[R, hat(p) R], [0, R]]`` (the one adjoint,
+#: :func:`~tensegrity_stiffness.geometry.transforms.adjoint`, under the controller's name).
+adjoint_twist = adjoint
 
 
 @dataclass(frozen=True)

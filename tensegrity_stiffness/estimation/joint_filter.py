@@ -58,17 +58,18 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.estimation import sensor_models as sm
-from tensegrity_stiffness.estimation.estimators import (
-    CONSISTENCY_PROBABILITY,
-    MAX_CONTRADICTED,
+from tensegrity_stiffness.estimation.joint_estimator import (
     JointEstimate,
-    Measurements,
-    PreparedMeasurements,
-    consistency_threshold,
     entry_std,
     estimate_joint_state,
     missing_message,
     stiffness_jacobian_near,
+)
+from tensegrity_stiffness.estimation.measurements import Measurements, PreparedMeasurements
+from tensegrity_stiffness.estimation.trust import (
+    CONSISTENCY_PROBABILITY,
+    MAX_CONTRADICTED,
+    consistency_threshold,
     wilson_hilferty,
 )
 from tensegrity_stiffness.geometry.screw import (

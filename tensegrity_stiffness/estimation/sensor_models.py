@@ -43,10 +43,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.geometry.screw import (
     ScrewKinematics,
-    as_screws,
     hat3,
     left_jacobian_so3_inverse,
     log_so3,
+    single_screw,
 )
 from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape
@@ -59,13 +59,6 @@ GRAVITY_DOF = 2
 #: A gravity direction (or its reference) shorter than this cannot be normalised.
 MIN_GRAVITY_NORM = 1e-9
 _EYE3 = np.eye(3)
-
-
-def _screw(xi: ArrayLike) -> FloatArray:
-    arr = as_screws(xi, 'screw')
-    if arr.shape != (6,):
-        raise ValueError(f'screw must have shape (6,), got {arr.shape}')
-    return arr
 
 
 def unit_vector(value: ArrayLike, name: str) -> FloatArray:
@@ -116,7 +109,8 @@ def string_predictions(model: JointModel, xi: ArrayLike,
     evaluation). ``dl_j/dxi = -[(q_j x u_j)^T, u_j^T] J`` (``u_j^T ds_j/dxi`` with
     ``ds_j/dxi = -dq_j/dxi``), ``dphi_j/dxi = phi_j'(l_j) dl_j/dxi`` (eq. 8)."""
     return string_predictions_unchecked(
-        model, _screw(xi), model.validate_rest_lengths(rest_lengths, batched=False))
+        model, single_screw(xi, in_chart=False),
+        model.validate_rest_lengths(rest_lengths, batched=False))
 
 
 _UNIT_ROWS: weakref.WeakKeyDictionary[JointModel, FloatArray] = weakref.WeakKeyDictionary()
@@ -219,7 +213,7 @@ def string_parameter_jacobians(model: JointModel, xi: ArrayLike,
                                rest_lengths: ArrayLike | None = None
                                ) -> StringParameterJacobians:
     """:class:`StringParameterJacobians` at screw ``xi`` with rest lengths ``rest_lengths``."""
-    xi = _screw(xi)
+    xi = single_screw(xi, in_chart=False)
     rest = model.validate_rest_lengths(rest_lengths, batched=False)
     state = model.evaluate(xi, rest)
     lengths, phi = state.lengths, state.tensions
@@ -250,7 +244,7 @@ def pose_jacobian(xi: ArrayLike, kinematics: ScrewKinematics | None = None) -> F
     """``d[dp; dtheta]/dxi = [[D, G], [G, 0]]`` (6, 6): the change of the pose of {2} in {1}, in
     the PoseWithCovariance convention, per change of screw coordinates (``D = dt/domega``,
     eqs. 15-17; ``G`` the SO(3) left Jacobian, eq. 4)."""
-    kin = ScrewKinematics(_screw(xi)) if kinematics is None else kinematics
+    kin = ScrewKinematics(single_screw(xi, in_chart=False)) if kinematics is None else kinematics
     if type(kin) is KernelKinematics:  # the kernel's twin of the lines below
         return kin.pose_jacobian.copy()
     tx, ty, tz = kin.t.tolist()
@@ -280,7 +274,7 @@ def pose_residual(xi: ArrayLike, measured: ArrayLike) -> tuple[FloatArray, Float
     ``dr/dxi = [[I, 0], [0, Jl^-1(E)]] [[D, G], [G, 0]]`` with ``E = log(R R_m^T)`` and ``Jl``
     the SO(3) left Jacobian (``exp(hat(d)) exp(hat(E)) = exp(hat(E + Jl^-1(E) d))``).
     """
-    xi = _screw(xi)
+    xi = single_screw(xi, in_chart=False)
     kin = ScrewKinematics(xi)
     r, J = pose_residual_unchecked(kin.T, rigid_transform(measured, 'measured pose'),
                                    pose_jacobian(xi, kin))
@@ -308,7 +302,7 @@ def predicted_gravity(xi: ArrayLike, gravity_base: ArrayLike,
     ``gravity_base`` normalised, in {1}) and ``dg_2/dxi = [R^T hat(g_1) G, 0]`` (3, 6)
     (``R -> exp(hat(G domega)) R``, eq. 4)."""
     g1 = unit_vector(gravity_base, 'gravity_base')
-    kin = ScrewKinematics(_screw(xi)) if kinematics is None else kinematics
+    kin = ScrewKinematics(single_screw(xi, in_chart=False)) if kinematics is None else kinematics
     return gravity_prediction_unchecked(kin, g1)
 
 
@@ -329,7 +323,7 @@ def equilibrium_residual(model: JointModel, xi: ArrayLike, external_wrench: Arra
                          ) -> tuple[FloatArray, FloatArray]:
     """Quasi-static residual ``e = F(xi) + W`` (6,) [N; N m] (Section VI) and its Jacobian with
     respect to ``[xi; W]``, ``[K, I]`` (6, 12) (K = dF/dxi, eq. 10)."""
-    xi = _screw(xi)
+    xi = single_screw(xi, in_chart=False)
     W = finite_array_of_shape('external_wrench', external_wrench, (6,))
     state = model.evaluate(xi, model.validate_rest_lengths(rest_lengths, batched=False))
     J = np.zeros((6, 12))

@@ -32,12 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.estimation.calibration import (
-    OFFSET_UNIT,
-    STIFFNESS_UNIT,
-    CalibrationNoise,
-    identifiability,
-)
+from tensegrity_stiffness.estimation.calibration_model import OFFSET_UNIT, STIFFNESS_UNIT
+from tensegrity_stiffness.estimation.calibration_results import identifiability
+from tensegrity_stiffness.estimation.calibration_samples import CalibrationNoise
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.joint import string_forces
 from tensegrity_stiffness.structures.structure import Structure

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.geometry.errors import OutsideChartError
+from tensegrity_stiffness.geometry.validation import finite_array
 
 FloatArray = NDArray[np.float64]
 
@@ -163,6 +164,18 @@ def as_screws(xi: ArrayLike, name: str = 'xi') -> FloatArray:
     return arr
 
 
+def single_screw(xi: ArrayLike, name: str = 'screw', in_chart: bool = True) -> FloatArray:
+    """One screw ``[omega; v]`` (6,) as float64: ValueError naming ``name`` when it is not six
+    finite numbers and, when ``in_chart``, :class:`~.errors.OutsideChartError` when
+    ``|omega| >= CHART_LIMIT``. The one check of a single screw."""
+    x = finite_array(name, xi)
+    if x.shape != (6,):
+        raise ValueError(f'{name} must have 6 values [wx wy wz vx vy vz], got shape {x.shape}')
+    if in_chart:
+        check_in_chart(x, name)
+    return x
+
+
 def hat3(w: ArrayLike) -> FloatArray:
     """so(3) hat: ``(..., 3) -> (..., 3, 3)`` with ``hat3(a) @ b == cross(a, b)``."""
     w = np.asarray(w, dtype=np.float64)
@@ -191,6 +204,18 @@ def hat(xi: ArrayLike) -> FloatArray:
     out = np.zeros(xi.shape[:-1] + (4, 4))
     out[..., :3, :3] = hat3(xi[..., :3])
     out[..., :3, 3] = xi[..., 3:]
+    return out
+
+
+def small_adjoint(V: ArrayLike) -> FloatArray:
+    """``ad_V = [[hat(w), 0], [hat(v), hat(w)]]`` (6, 6) of a twist ``V = [w; v]`` (6,) in the
+    screws' order: ``hat(ad_V U) = [hat(V), hat(U)]``."""
+    V = np.asarray(V, dtype=np.float64)
+    out = np.zeros((6, 6))
+    hw = hat3(V[:3])
+    out[:3, :3] = hw
+    out[3:, 3:] = hw
+    out[3:, :3] = hat3(V[3:])
     return out
 
 

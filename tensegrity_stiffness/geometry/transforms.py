@@ -1,5 +1,6 @@
 """Rigid transforms: the one parser of a pose given as a (4, 4) matrix or ``[x y z qx qy qz qw]``
-(metres, unit quaternion in ROS order) and the adjoint of a pose.
+(metres, unit quaternion in ROS order), the inverse of a rigid transform and the adjoint of a
+pose in both twist orders.
 
 Every pose the library takes (link offsets, tool frames, measured poses, recorded poses, the
 controllers' frames) goes through :func:`rigid_transform`, so it is checked the same way.
@@ -60,4 +61,24 @@ def adjoint(P: FloatArray) -> FloatArray:
     out[..., :3, :3] = R
     out[..., 3:, 3:] = R
     out[..., :3, 3:] = hat3(P[..., :3, 3]) @ R
+    return out
+
+
+def adjoint_screw_order(T: FloatArray) -> FloatArray:
+    """``Ad_T = [[R, 0], [hat(p) R, R]]`` (6, 6) of a (4, 4) pose for twists ``[w; v]`` in the
+    screws' order (:func:`adjoint` with both 3-blocks swapped)."""
+    R = T[:3, :3]
+    out = np.zeros((6, 6))
+    out[:3, :3] = R
+    out[3:, 3:] = R
+    out[3:, :3] = hat3(T[:3, 3]) @ R
+    return out
+
+
+def inverse_transform(T: FloatArray) -> FloatArray:
+    """``T^-1 = [[R^T, -R^T p], [0, 1]]`` of a rigid transform (4, 4), exact (no LU)."""
+    R = T[:3, :3]
+    out = np.eye(4)
+    out[:3, :3] = R.T
+    out[:3, 3] = -R.T @ T[:3, 3]
     return out

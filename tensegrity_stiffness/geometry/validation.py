@@ -50,6 +50,43 @@ def finite_array_of_shape(name: str, value: ArrayLike, shape: tuple[int, ...] | 
     return arr
 
 
+def per_string(name: str, value: ArrayLike | None, n: int | None, *, repeat_one: bool = False,
+               not_measured: bool = False, finite: bool = True) -> NDArray[np.float64]:
+    """One value per string: ``n`` finite values (flattened, float64), or ValueError naming
+    ``name``. The one check of per-string arrays (rest lengths, stiffnesses, limits, readings).
+
+    ``repeat_one``: a single value is given to every string. ``not_measured``: NaN marks a
+    string that is not measured (inf is still refused) and None is every string unmeasured.
+    ``n`` None: a scalar or one value per string of any count, kept as given (the caller
+    checks the count once it knows it). ``finite`` False: the values are not looked at (the
+    caller checks them, e.g. a config's ``max_lengths`` where inf is no limit)."""
+    if value is None and not_measured and n is not None:
+        return np.full(n, np.nan)
+    arr = _as_float_array(name, value)
+    if n is None:
+        if arr.ndim > 1:
+            raise ValueError(f'{name} must be a scalar or one value per string, got shape '
+                             f'{arr.shape}')
+        arr = arr.copy()
+    else:
+        arr = arr.ravel()
+        if repeat_one and arr.size == 1:
+            arr = np.full(n, arr[0])
+        if arr.size != n:
+            unmeasured = ', NaN = not measured' if not_measured else ''
+            or_one = ' (or one value for all)' if repeat_one else ''
+            raise ValueError(f'{name} must have {n} values (one per string{unmeasured}), '
+                             f'got {arr.size}{or_one}')
+    if not finite:
+        return arr
+    bad = np.isinf(arr) if not_measured else ~np.isfinite(arr)
+    if bad.any():
+        where = f' at string {int(np.flatnonzero(bad)[0])}' if arr.ndim else ''
+        allowed = ' or NaN (not measured)' if not_measured else ''
+        raise NotFiniteError(f'{name} must be finite{allowed}, got {arr[bad].ravel()[0]}{where}')
+    return arr
+
+
 def optional_vector(name: str, value: ArrayLike | None, size: int = 6) -> NDArray[np.float64]:
     """A finite ``(size,)`` array (a wrench, a screw rate), zeros when ``value`` is None;
     ValueError naming ``name`` when an entry is not finite or the shape is another."""

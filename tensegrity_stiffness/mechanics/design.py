@@ -69,7 +69,14 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.geometry.components import TWIST_NAMES
 from tensegrity_stiffness.geometry.quaternion import quaternion_to_rotation
-from tensegrity_stiffness.geometry.screw import as_screws, check_in_chart, exp_se3, hat3, log_se3
+from tensegrity_stiffness.geometry.screw import (
+    as_screws,
+    check_in_chart,
+    exp_se3,
+    hat3,
+    log_se3,
+    single_screw,
+)
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape, finite_scalar
 from tensegrity_stiffness.mechanics import plausibility
 from tensegrity_stiffness.mechanics.active_set import (  # noqa: F401 (re-exported)
@@ -335,10 +342,7 @@ def _caps_text(model: JointModel, pose: _Pose, strings: NDArray[np.intp]) -> str
 def _validate(model: JointModel, screw: ArrayLike, external_wrench: ArrayLike | None,
               tension_min: float, tension_max: float, length_scale: float | None
               ) -> tuple[FloatArray, FloatArray, float, float, float]:
-    xi = as_screws(screw, 'screw')
-    if xi.shape != (6,):
-        raise ValueError(f'screw must have shape (6,), got {xi.shape}')
-    check_in_chart(xi, 'screw')
+    xi = single_screw(screw)
     W = np.zeros(6) if external_wrench is None else finite_array_of_shape(
         'external_wrench', external_wrench, (6,))
     t_min = finite_scalar('tension_min', tension_min)
@@ -498,10 +502,7 @@ def rest_length_sensitivity(model: JointModel, screw: ArrayLike, rest_lengths: A
                             ) -> RestLengthSensitivity:
     """Analytic dK_c/dl0 (n, 6, 6) and dF/dl0 (6, n) at ``screw`` with ``rest_lengths`` (n,)
     (any rest lengths, not only a design; slack strings give 0)."""
-    xi = as_screws(screw, 'screw')
-    if xi.shape != (6,):
-        raise ValueError(f'screw must have shape (6,), got {xi.shape}')
-    check_in_chart(xi, 'screw')
+    xi = single_screw(screw)
     rest = model.validate_rest_lengths(rest_lengths, batched=False)
     lengths, X, ZE = _geometry(model, xi)
     _, b, dt_dl0 = _law(model, lengths)

@@ -68,11 +68,20 @@ from tensegrity_stiffness.geometry.screw import (
     BLOCK_SWAP,
     ScrewKinematics,
     check_in_chart,
-    hat,
     hat3,
-    vee,
+    single_screw,
+    small_adjoint,
 )
-from tensegrity_stiffness.geometry.transforms import adjoint
+from tensegrity_stiffness.geometry.screw_jacobians import (  # noqa: F401 (body_jacobian: public here)
+    body_jacobian,
+    body_jacobian_rate,
+    jacobian_derivatives,
+)
+from tensegrity_stiffness.geometry.transforms import (
+    adjoint,
+    adjoint_screw_order,
+    inverse_transform,
+)
 from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.chain import JointChain
@@ -104,109 +113,6 @@ REAL_TOLERANCE = 1e-9
 SCREW_LABELS = SCREW_NAMES
 
 _EYE3 = np.eye(3)
-
-
-# ---------------------------------------------------------------------------- small algebra
-def _ad(V: FloatArray) -> FloatArray:
-    """``ad_V = [[hat(w), 0], [hat(v), hat(w)]]`` for a twist ``[w; v]`` (6,)."""
-    out = np.zeros((6, 6))
-    hw = hat3(V[:3])
-    out[:3, :3] = hw
-    out[3:, 3:] = hw
-    out[3:, :3] = hat3(V[3:])
-    return out
-
-
-def _adjoint_wv(T: FloatArray) -> FloatArray:
-    """``Ad_T = [[R, 0], [hat(p) R, R]]`` for twists ``[w; v]``."""
-    R, p = T[:3, :3], T[:3, 3]
-    out = np.zeros((6, 6))
-    out[:3, :3] = R
-    out[3:, 3:] = R
-    out[3:, :3] = hat3(p) @ R
-    return out
-
-
-def _inverse_se3(T: FloatArray) -> FloatArray:
-    out = np.eye(4)
-    R = T[:3, :3]
-    out[:3, :3] = R.T
-    out[:3, 3] = -R.T @ T[:3, 3]
-    return out
-
-
-def _screw(xi: ArrayLike, name: str = 'xi') -> FloatArray:
-    x = finite_array(name, xi)
-    if x.shape != (6,):
-        raise ValueError(f'{name} must have 6 values [wx wy wz vx vy vz], got shape {x.shape}')
-    check_in_chart(x, name)
-    return x
-
-
-def body_jacobian(xi: ArrayLike) -> FloatArray:
-    """``J_b(xi) = J_l(-xi)`` (6, 6): ``xi_dot`` to link 2's body twist ``[w; v]`` in {2}
-    (``hat(V_b) = T^-1 dT/dt``). Exact at every angle (closed form with series branch)."""
-    return ScrewKinematics(-_screw(xi)).J
-
-
-def _block_exponential(xi: FloatArray, rate: FloatArray) -> tuple[FloatArray, ...]:
-    """``T``, ``dT/dt`` and ``d^2 T / dt^2 / 2`` along ``xi + t rate`` at t = 0: blocks of the
-    exponential of ``[[X, E, 0], [0, X, E], [0, 0, X]]`` (``X = hat(xi)``, ``E = hat(rate)``)."""
-    X, E = hat(xi), hat(rate)
-    big = np.zeros((12, 12))
-    for k in range(3):
-        big[4 * k:4 * k + 4, 4 * k:4 * k + 4] = X
-    big[:4, 4:8] = E
-    big[4:8, 8:] = E
-    P = scipy.linalg.expm(big)
-    return P[:4, :4], P[:4, 4:8], P[:4, 8:]
-
-
-def body_jacobian_rate(xi: ArrayLike, xi_dot: ArrayLike) -> FloatArray:
-    """``(d J_b / dt) xi_dot`` (6,) along ``xi + t xi_dot``: ``vee(T^-1 Tddot - hat(V_b)^2)``
-    with ``Tddot`` the second derivative of ``exp`` (the Coriolis part of the body
-    acceleration, ``V_b_dot = J_b xi_ddot + Jdot_b xi_dot``)."""
-    x, r = _screw(xi), optional_vector('xi_dot', xi_dot)
-    T, T1, S = _block_exponential(x, r)
-    Ti = _inverse_se3(T)
-    Vh = Ti @ T1
-    return vee(Ti @ (2.0 * S) - Vh @ Vh)
-
-
-def _second_derivatives(xi: FloatArray) -> FloatArray:
-    """All mixed second derivatives ``d^2 T / dxi_i dxi_k`` (6, 6, 4, 4) by polarization of
-    ``D^2 exp[E, E] = 2 S(E)`` (21 block exponentials)."""
-    E = np.eye(6)
-    S = np.empty((6, 4, 4))
-    for i in range(6):
-        S[i] = _block_exponential(xi, E[i])[2]
-    out = np.empty((6, 6, 4, 4))
-    for i in range(6):
-        out[i, i] = 2.0 * S[i]
-        for k in range(i + 1, 6):
-            mixed = _block_exponential(xi, E[i] + E[k])[2] - S[i] - S[k]
-            out[i, k] = out[k, i] = mixed
-    return out
-
-
-def jacobian_derivatives(xi: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """``dJ_l/dxi_i`` and ``dJ_b/dxi_i`` (each (6, 6, 6), index i first), from the mixed second
-    derivatives of ``exp``: column k of ``J_l`` is ``vee(dT/dxi_k T^-1)``, of ``J_b``
-    ``vee(T^-1 dT/dxi_k)``."""
-    x = _screw(xi)
-    T, _, _ = _block_exponential(x, np.zeros(6))
-    Ti = _inverse_se3(T)
-    first = np.empty((6, 4, 4))
-    for k in range(6):
-        first[k] = _block_exponential(x, np.eye(6)[k])[1]
-    second = _second_derivatives(x)
-    dJl = np.empty((6, 6, 6))
-    dJb = np.empty((6, 6, 6))
-    for i in range(6):
-        for k in range(6):
-            dJl[i, :, k] = vee(second[i, k] @ Ti - first[k] @ Ti @ first[i] @ Ti)
-            dJb[i, :, k] = vee(Ti @ second[i, k] - Ti @ first[i] @ Ti @ first[k])
-    return dJl, dJb
 
 
 # ---------------------------------------------------------------------------- inertia
@@ -582,19 +488,19 @@ class JointDynamics:
     def _kinematics(self, xi: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
         """(T, J_l, J_b) at ``xi``."""
         kin = ScrewKinematics(xi)
-        Jb = _adjoint_wv(_inverse_se3(kin.T)) @ kin.J
+        Jb = adjoint_screw_order(inverse_transform(kin.T)) @ kin.J
         return kin.T, kin.J, Jb
 
     def mass_matrix(self, xi: ArrayLike) -> FloatArray:
         """``M(xi) = J_b^T G J_b`` (6, 6), symmetric positive definite: the kinetic energy of
         link 2 is ``1/2 xi_dot^T M xi_dot``."""
-        Jb = ScrewKinematics(-_screw(xi)).J
+        Jb = ScrewKinematics(-single_screw(xi, 'xi')).J
         M = Jb.T @ self.spatial_inertia @ Jb
         return 0.5 * (M + M.T)
 
     def string_length_jacobian(self, xi: ArrayLike) -> FloatArray:
         """``L = dl/dxi`` (n, 6): ``L_j = -w_j^T Pi J_l``, ``w_j`` string j's unit wrench."""
-        x = _screw(xi)
+        x = single_screw(xi, 'xi')
         state = self.model.evaluate(x)
         return self._length_jacobian(state.string_vectors, state.lengths,
                                      ScrewKinematics(x).J)
@@ -616,7 +522,7 @@ class JointDynamics:
     def coriolis(self, xi: ArrayLike, xi_dot: ArrayLike) -> FloatArray:
         """``J_b^T (G Jdot_b xi_dot - ad_{V_b}^T G V_b)`` (6,): the velocity-product terms of the
         Euler-Lagrange equations (``= dM/dt xi_dot - 1/2 d(xi_dot^T M xi_dot)/dxi``)."""
-        x, r = _screw(xi), optional_vector('xi_dot', xi_dot)
+        x, r = single_screw(xi, 'xi'), optional_vector('xi_dot', xi_dot)
         Jb = ScrewKinematics(-x).J
         return self._coriolis(x, r, Jb)
 
@@ -626,13 +532,13 @@ class JointDynamics:
         G = self.spatial_inertia
         V = Jb @ r
         a = body_jacobian_rate(x, r)
-        return Jb.T @ (G @ a - _ad(V).T @ (G @ V))
+        return Jb.T @ (G @ a - small_adjoint(V).T @ (G @ V))
 
     def generalized_force(self, xi: ArrayLike, xi_dot: ArrayLike | None = None,
                           rest_lengths: ArrayLike | None = None,
                           external_wrench: ArrayLike | None = None) -> FloatArray:
         """``Q = J_l^T Pi (F + W) - L^T C L xi_dot`` (6,)."""
-        x = _screw(xi)
+        x = single_screw(xi, 'xi')
         r = optional_vector('xi_dot', xi_dot)
         W = optional_vector('external_wrench', external_wrench)
         state = self.model.evaluate(x, self._rest(rest_lengths))
@@ -651,7 +557,7 @@ class JointDynamics:
                      external_wrench: ArrayLike | None = None) -> FloatArray:
         """``xi_ddot`` (6,) from ``M xi_ddot + coriolis = Q`` (module docstring); the external
         wrench ``W`` on link 2 in {1} about its origin ``[f; m]``, constant in {1}."""
-        x, r = _screw(xi), optional_vector('xi_dot', xi_dot)
+        x, r = single_screw(xi, 'xi'), optional_vector('xi_dot', xi_dot)
         W = optional_vector('external_wrench', external_wrench)
         state = self.model.evaluate(x, self._rest(rest_lengths))
         _, Jl, Jb = self._kinematics(x)
@@ -682,7 +588,7 @@ class JointDynamics:
         (12), inputs ``[d l0 (n); dW (6)]`` (module docstring). Exact at any ``xi``; at an
         equilibrium (:data:`EQUILIBRIUM_TOLERANCE`) without the derivatives of ``J`` and ``M``
         (they multiply ``F + W = 0``)."""
-        x = _screw(xi)
+        x = single_screw(xi, 'xi')
         W = optional_vector('external_wrench', external_wrench)
         rest = self._rest(rest_lengths)
         blocks = self._blocks(x, rest, W, inputs=True)
@@ -775,7 +681,7 @@ class JointDynamics:
               external_wrench: ArrayLike | None = None) -> JointModes:
         """The 6 modes of :meth:`linearize` at ``xi`` (an equilibrium of ``rest_lengths`` and
         ``external_wrench``): see :class:`JointModes`; twists ``Pi J_l shape`` in {1}."""
-        x = _screw(xi)
+        x = single_screw(xi, 'xi')
         W = optional_vector('external_wrench', external_wrench)
         A21, A22, _, Jl = self._blocks(x, self._rest(rest_lengths), W, inputs=False)
         if not self.damped:
@@ -792,7 +698,7 @@ class JointDynamics:
         ``W = -F(xi)`` (every pose is the equilibrium of that load): what a node streaming
         measured poses can publish at the cost of an equilibrium (no derivatives of ``J`` and
         ``M``). Returns the modes and that wrench (6,) ``[f; m]`` in {1}."""
-        x = _screw(xi)
+        x = single_screw(xi, 'xi')
         rest = self._rest(rest_lengths)
         W = -self.model.evaluate(x, rest).wrench
         return self.modes(x, rest, W), W
@@ -803,7 +709,7 @@ class JointDynamics:
         """(F, 6, 6) complex compliance from a wrench ``dW`` ([f; m], {1}) to the spatial
         displacement twist ``[dv; dw]`` of link 2 in {1} at each frequency (Hz); at 0 Hz the
         inverse of ``K_c`` at an equilibrium."""
-        x = _screw(xi)
+        x = single_screw(xi, 'xi')
         A, B = self.linearize(x, rest_lengths, external_wrench)
         Jl = ScrewKinematics(x).J
         C = np.zeros((6, 12))
@@ -911,9 +817,9 @@ class ChainDynamics:
         n = self.n_joints
         out = np.zeros((n, 6, 6 * n))
         for i, kin in enumerate(kins):
-            Jb = _adjoint_wv(_inverse_se3(kin.T)) @ kin.J
+            Jb = adjoint_screw_order(inverse_transform(kin.T)) @ kin.J
             if i:
-                out[i] = _adjoint_wv(_inverse_se3(X[i])) @ out[i - 1]
+                out[i] = adjoint_screw_order(inverse_transform(X[i])) @ out[i - 1]
             out[i, :, 6 * i:6 * i + 6] = Jb
         return out
 
@@ -940,14 +846,14 @@ class ChainDynamics:
         V = np.zeros((n, 6))
         Vd = np.zeros((n, 6))
         for i, kin in enumerate(kins):
-            Jb = _adjoint_wv(_inverse_se3(kin.T)) @ kin.J
+            Jb = adjoint_screw_order(inverse_transform(kin.T)) @ kin.J
             rel = Jb @ r[i]
-            Ad = _adjoint_wv(_inverse_se3(X[i]))
+            Ad = adjoint_screw_order(inverse_transform(X[i]))
             prev_V = V[i - 1] if i else np.zeros(6)
             prev_A = Vd[i - 1] if i else np.zeros(6)
             V[i] = Ad @ prev_V + rel
             rate = body_jacobian_rate(xi[i], r[i]) if np.any(r[i]) else np.zeros(6)
-            Vd[i] = Ad @ prev_A + _ad(V[i]) @ rel + Jb @ a[i] + rate
+            Vd[i] = Ad @ prev_A + small_adjoint(V[i]) @ rel + Jb @ a[i] + rate
         return V, Vd
 
     def generalized_force(self, screws: ArrayLike, rates: ArrayLike | None = None,
@@ -988,7 +894,7 @@ class ChainDynamics:
         V, Vd = self._velocities(xi, r, np.zeros_like(r), kins, X)
         bias = np.zeros(6 * self.n_joints)
         for i in range(self.n_joints):
-            bias += Jc[i].T @ (G[i] @ Vd[i] - _ad(V[i]).T @ (G[i] @ V[i]))
+            bias += Jc[i].T @ (G[i] @ Vd[i] - small_adjoint(V[i]).T @ (G[i] @ V[i]))
         Q = self._force(xi, r, rest_lengths, W)
         return np.linalg.solve(M, Q - bias).reshape(self.n_joints, 6)
 

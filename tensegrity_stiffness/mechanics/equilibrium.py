@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -24,8 +25,10 @@ from scipy.optimize import least_squares
 
 from tensegrity_stiffness.geometry.screw import CHART_LIMIT, as_screws, log_se3
 from tensegrity_stiffness.mechanics import plausibility
-from tensegrity_stiffness.mechanics.joint import JointModel, JointState
 from tensegrity_stiffness.mechanics.newton import damped_newton, solve_deadline
+
+if TYPE_CHECKING:  # types only: joint reads its config through this module (no import circle)
+    from tensegrity_stiffness.mechanics.joint import JointModel, JointState
 
 FloatArray = NDArray[np.float64]
 

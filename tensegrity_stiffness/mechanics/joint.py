@@ -53,8 +53,9 @@ from tensegrity_stiffness.geometry.screw import (
     exp_se3,
     hat3,
 )
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, per_string
 from tensegrity_stiffness.mechanics import kernel
+from tensegrity_stiffness.mechanics.unloaded import resolve_initial_screw
 
 FloatArray = NDArray[np.float64]
 
@@ -72,8 +73,9 @@ JOINT_KEYS = ('node_names', 'link1_nodes', 'link2_nodes', 'link2_node_names', 's
 #: a value out and compute another joint's stiffness): refused with the nearest name.
 JOINT_SECTION_KEYS = JOINT_KEYS + ('link2_mass', 'link2_com', 'link2_inertia',
                                    'rest_length_offsets')
-#: Strings shorter than this (m) have no defined direction: evaluation raises ValueError.
-MIN_STRING_LENGTH = 1e-12
+#: Strings shorter than this (m) have no defined direction: evaluation raises ValueError (its
+#: home is the kernel's module, whose constants the compiled kernel is built with).
+MIN_STRING_LENGTH = kernel.MIN_STRING_LENGTH
 #: Screws per chunk of the numpy evaluation of a batch (bounds its temporaries to a few MB).
 BATCH_CHUNK = 1024
 #: Default central-difference step of :meth:`JointModel.numerical_stiffness` (eq. 21).
@@ -234,17 +236,11 @@ def _config_connections(section: Mapping[str, Any], names1: list[str], names2: l
 
 def _config_per_string(key: str, value: Any, n: int, allow_empty: bool = False
                        ) -> FloatArray | None:
-    """``n`` values of ``key`` (one for all is repeated); None for an empty one when
-    ``allow_empty``."""
-    arr = np.asarray(value, dtype=np.float64).ravel()
-    if arr.size == 0 and allow_empty:
+    """``n`` values of ``key`` (one for all is repeated; the constructor checks the values);
+    None for an empty one when ``allow_empty``."""
+    if allow_empty and np.size(value) == 0:
         return None
-    if arr.size == 1:
-        arr = np.full(n, arr[0])
-    if arr.size != n:
-        raise ValueError(f'joint.{key} must have {n} values (one per string), '
-                         f'got {arr.size}')
-    return arr
+    return per_string(f'joint.{key}', value, n, repeat_one=True, finite=False)
 
 
 def _refuse_duplicates(key: str, names: Sequence[str]) -> None:
@@ -444,8 +440,6 @@ class JointModel:
         except ValueError as exc:
             raise ValueError(f'joint.{exc}') from None
         # The one rule for a missing or non-equilibrium initial_screw (mechanics.unloaded).
-        from tensegrity_stiffness.mechanics.unloaded import resolve_initial_screw
-
         model.initial_screw = resolve_initial_screw(model, raw_x0 if raw_x0.size else None)
         return model
 

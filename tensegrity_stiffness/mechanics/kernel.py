@@ -33,6 +33,9 @@ from numpy.typing import NDArray
 
 from tensegrity_stiffness.geometry import screw
 
+#: Strings shorter than this (m) have no defined direction: evaluation raises ValueError (the
+#: kernel's zero-length status, the numpy path's check; ``joint.MIN_STRING_LENGTH``).
+MIN_STRING_LENGTH = 1e-12
 #: Environment variable naming the library (a path) or ``off`` for the numpy path.
 KERNEL_ENV = 'TENSEGRITY_STIFFNESS_KERNEL'
 #: File name of the library under ``<prefix>/lib``.
@@ -355,14 +358,12 @@ def qp_face_size(n: int, m: int) -> int:
 
 def defaults_header() -> str:
     """Text of ``kernel_defaults.h``: the constants every model of this package passes to the
-    kernel (:data:`SERIES`, ``screw.SERIES_THRESHOLD``, ``joint.MIN_STRING_LENGTH``) as exact
+    kernel (:data:`SERIES`, ``screw.SERIES_THRESHOLD``, :data:`MIN_STRING_LENGTH`) as exact
     hexadecimal C literals, for C and C++ callers (``joint_kernel.hpp``).
 
     The build writes it from this function (``cmake/kernel_defaults.py``), so the values have
     their one home in the Python modules that the numpy path reads as well.
     """
-    from tensegrity_stiffness.mechanics.joint import MIN_STRING_LENGTH  # joint imports kernel
-
     rows, terms = SERIES.shape
     values = [float(x).hex() for x in SERIES.ravel()]
     table = ',\\\n'.join('  ' + ', '.join(values[i:i + 4]) for i in range(0, len(values), 4))

@@ -31,13 +31,16 @@ from __future__ import annotations
 import math
 import weakref
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape
-from tensegrity_stiffness.mechanics.joint import JointModel
+
+if TYPE_CHECKING:  # types only: joint reads its config through this module (no import circle)
+    from tensegrity_stiffness.mechanics.joint import JointModel
 
 FloatArray = NDArray[np.float64]
 

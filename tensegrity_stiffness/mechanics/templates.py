@@ -42,6 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3
+from tensegrity_stiffness.geometry.validation import per_string
 from tensegrity_stiffness.mechanics.chain import MAX_JOINTS, JointChain
 from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS, JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium, stability_margin
@@ -172,15 +173,6 @@ def _ring(choices: JointChoices) -> _Layout:
                    gap, tensions)
 
 
-def _per_string(name: str, value: Any, n: int) -> FloatArray:
-    arr = np.atleast_1d(np.asarray(value, dtype=np.float64)).ravel()
-    if arr.size == 1:
-        arr = np.full(n, arr[0])
-    if arr.size != n:
-        raise ValueError(f'{name} must have 1 or {n} values (one per string), got {arr.size}')
-    return arr
-
-
 def joint_section(choices: JointChoices) -> dict[str, Any]:
     """The ``joint`` section of a starter config (keys of ``config/default_joint.yaml``) with
     the unloaded equilibrium as ``initial_screw``; ValueError names a bad choice or says that no
@@ -208,13 +200,13 @@ def starter_joint(choices: JointChoices) -> tuple[dict[str, Any], JointModel, Fl
                              'link2_inertia': list(choices.link2_inertia)})
     layout = _vertebra(choices) if choices.template == 'vertebra' else _ring(choices)
     n = len(layout.strings)
-    k = _per_string('stiffness', choices.stiffness, n)
+    k = per_string('stiffness', choices.stiffness, n, repeat_one=True)
     ends = np.array([[layout.names.index(a), layout.names.index(b)]
                      for _, a, b in layout.strings])
     design = JointModel(layout.nodes, ends, k, np.ones(n), use_kernel=False)
     lengths = design.evaluate(layout.design_screw).lengths
     if choices.rest_lengths is not None:
-        rest = _per_string('rest_lengths', choices.rest_lengths, n)
+        rest = per_string('rest_lengths', choices.rest_lengths, n, repeat_one=True)
     elif layout.tensions is not None:
         rest = lengths - layout.tensions / k
     elif choices.pretension is not None:

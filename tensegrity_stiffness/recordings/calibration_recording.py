@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tensegrity_stiffness.estimation.calibration import (
+from tensegrity_stiffness.estimation.calibration_samples import (
     RECORDED_ROTATION_TOLERANCE,
     CalibrationSample,
 )
@@ -62,8 +62,8 @@ from tensegrity_stiffness.nodes.messages import (
     pose_message_to_transform,
     stamp_nanoseconds_or,
 )
-from tensegrity_stiffness.recordings.bag import MessageReading, jazzy_typestore
 from tensegrity_stiffness.recordings.bag import check_input as check_bag_input
+from tensegrity_stiffness.recordings.bag_topics import MessageReading, jazzy_typestore
 
 FloatArray = NDArray[np.float64]
 

@@ -40,19 +40,18 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.validation import finite_array
-from tensegrity_stiffness.simulation.twin import (
+from tensegrity_stiffness.simulation.twin import import_mujoco
+from tensegrity_stiffness.simulation.twin_model import (
     DEFAULT_JOINT_DAMPING,
     DEFAULT_MAX_FORCE,
     DEFAULT_MAX_MOMENT,
     DEFAULT_TENDON_DAMPING,
     INTEGRATORS,
-    ImuReading,
-    SensorNoise,
     checked_wrench,
-    import_mujoco,
     rate_limited,
     rest_length_bounds,
 )
+from tensegrity_stiffness.simulation.twin_sensors import ImuReading, SensorNoise
 from tensegrity_stiffness.structures.elements import WORLD
 from tensegrity_stiffness.structures.equilibrium import structure_loads
 from tensegrity_stiffness.structures.mjcf import StructureMjcfOptions, structure_mjcf

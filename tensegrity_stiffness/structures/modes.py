@@ -35,7 +35,7 @@ import scipy.linalg
 from numpy.typing import NDArray
 
 from tensegrity_stiffness.geometry.screw import BLOCK_SWAP
-from tensegrity_stiffness.geometry.transforms import adjoint
+from tensegrity_stiffness.geometry.transforms import adjoint, inverse_transform
 from tensegrity_stiffness.mechanics.dynamics import state_matrix_modes
 from tensegrity_stiffness.structures.equilibrium import StructureEquilibrium, gauge_kind
 from tensegrity_stiffness.structures.structure import Structure
@@ -55,7 +55,7 @@ def mass_matrix(structure: Structure, T: FloatArray) -> FloatArray:
         if body.mass == 0.0:
             continue
         G = body.link_inertia.spatial_inertia(body.node_array)[np.ix_(BLOCK_SWAP, BLOCK_SWAP)]
-        inverse = np.linalg.inv(adjoint(T[i]))
+        inverse = adjoint(inverse_transform(T[i]))
         M[6 * i:6 * i + 6, 6 * i:6 * i + 6] = inverse.T @ G @ inverse
     return M
 

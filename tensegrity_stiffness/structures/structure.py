@@ -59,6 +59,10 @@ from tensegrity_stiffness.structures.elements import (
     Ground,
     StringSpec,
 )
+from tensegrity_stiffness.structures.joint_parts import (
+    chain_structure_arguments,
+    joint_structure_arguments,
+)
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
@@ -245,24 +249,25 @@ class Structure:
                                          self.gravity, self.ground, self.force_law)
 
     @classmethod
-    def from_joint(cls, model: Any, pose: ArrayLike | None = None, **kwargs: Any) -> Structure:
-        """A joint (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`) as a structure:
-        ``link1`` fixed at the world origin, ``link2`` at ``pose`` (default ``exp(hat(xi0))``
-        of the model's ``initial_screw``): :func:`~tensegrity_stiffness.structures.joints.
-        structure_from_joint`."""
-        from tensegrity_stiffness.structures.joints import structure_from_joint
-
-        return structure_from_joint(model, pose, **kwargs)
+    def from_joint(cls, model: Any, pose: ArrayLike | None = None, inertia: Any = None,
+                   string_damping: ArrayLike = 0.0, use_kernel: bool = True) -> Structure:
+        """A joint (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`) as a structure
+        (:mod:`~tensegrity_stiffness.structures.joints`): ``link1`` fixed at the world origin,
+        ``link2`` at ``pose`` (default ``exp(hat(xi0))`` of the model's ``initial_screw``);
+        ``inertia``: link 2's :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`
+        (default massless); ``string_damping`` (N s/m, one for all or one per string)."""
+        return cls(**joint_structure_arguments(model, pose, inertia, string_damping),
+                   use_kernel=use_kernel)
 
     @classmethod
-    def from_chain(cls, chain: Any, screws: ArrayLike | None = None, **kwargs: Any
-                   ) -> Structure:
-        """A spine (:class:`~tensegrity_stiffness.mechanics.chain.JointChain`) as a structure:
-        ``link0`` (the base) fixed at the world origin: :func:`~tensegrity_stiffness.
-        structures.joints.structure_from_chain`."""
-        from tensegrity_stiffness.structures.joints import structure_from_chain
-
-        return structure_from_chain(chain, screws, **kwargs)
+    def from_chain(cls, chain: Any, screws: ArrayLike | None = None, inertias: Any = None,
+                   string_damping: ArrayLike = 0.0, use_kernel: bool = True) -> Structure:
+        """A spine (:class:`~tensegrity_stiffness.mechanics.chain.JointChain`) as a structure
+        (:mod:`~tensegrity_stiffness.structures.joints`): ``link0`` (the base) fixed at the
+        world origin, the links at the frames of ``screws`` (default the unloaded screws);
+        ``inertias``, ``string_damping``: :func:`~.joint_parts.chain_structure_arguments`."""
+        return cls(**chain_structure_arguments(chain, screws, inertias, string_damping),
+                   use_kernel=use_kernel)
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickled without the compiled kernel's handle (a structure sent to another process

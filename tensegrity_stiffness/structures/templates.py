@@ -50,6 +50,7 @@ from tensegrity_stiffness.geometry.quaternion import (
     quaternion_to_rotation,
     rotation_to_quaternion,
 )
+from tensegrity_stiffness.geometry.validation import per_string
 from tensegrity_stiffness.mechanics.design import rest_from_tensions
 from tensegrity_stiffness.structures.analysis import Framework, analyse_framework
 
@@ -235,15 +236,6 @@ class _Law:
     k: FloatArray
 
 
-def _per_string(name: str, value: Any, n: int) -> FloatArray:
-    arr = np.atleast_1d(np.asarray(value, dtype=np.float64)).reshape(-1)
-    if arr.size == 1:
-        arr = np.full(n, arr[0])
-    if arr.size != n or not np.all(np.isfinite(arr)) or np.any(arr <= 0.0):
-        raise ValueError(f'{name} must be one positive value or {n} (one per string)')
-    return arr
-
-
 def structure_document_of_layout(layout: Layout, stiffness: ArrayLike = DEFAULT_STIFFNESS,
                                  pretension: float = DEFAULT_PRETENSION,
                                  bar_mass: float = DEFAULT_BAR_MASS, force_law: str = 'hooke',
@@ -263,7 +255,9 @@ def structure_document_of_layout(layout: Layout, stiffness: ArrayLike = DEFAULT_
     if force_law not in ('hooke', 'paper'):
         raise ValueError(f"force_law must be 'hooke' or 'paper', got {force_law!r}")
     n_s = len(layout.strings)
-    k = _per_string('stiffness', stiffness, n_s)
+    k = per_string('stiffness', stiffness, n_s, repeat_one=True)
+    if np.any(k <= 0.0):
+        raise ValueError(f'stiffness must be one positive value or {n_s} (one per string)')
     if tensions is None:
         t = self_stress_tensions(layout, pretension)
     else:

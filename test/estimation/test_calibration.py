@@ -14,6 +14,7 @@ from support.calibration_recordings import (
 )
 
 from tensegrity_stiffness.estimation import calibration as cal
+from tensegrity_stiffness.geometry.screw import log_se3
 
 SEED = 11
 #: Every identifiable parameter within this many reported std of the truth ...
@@ -68,7 +69,7 @@ def test_pose_and_wrench(truth):
     errors = {}
     for name, m, offsets in (('nominal', model, np.zeros(model.n_strings)),
                              ('calibrated', result.model, result.offsets)):
-        err = np.array([m.wrench(cal.log_se3(s.pose, reference=x), s.rest_lengths + offsets)
+        err = np.array([m.wrench(log_se3(s.pose, reference=x), s.rest_lengths + offsets)
                         + s.external_wrench for s, x in zip(held_out, states.screws[200:],
                                                              strict=True)])
         errors[name] = np.sqrt(np.mean(err[:, :3] ** 2)), np.sqrt(np.mean(err[:, 3:] ** 2))

@@ -11,6 +11,8 @@ import pytest
 from tensegrity_stiffness.config import packaged_config_path
 from tensegrity_stiffness.estimation import calibration as cal
 from tensegrity_stiffness.estimation import sensor_models
+from tensegrity_stiffness.estimation.calibration_model import CalibrationProblem
+from tensegrity_stiffness.estimation.calibration_samples import samples_data
 from tensegrity_stiffness.geometry.screw import exp_se3, exp_so3
 from tensegrity_stiffness.mechanics.joint import JointModel
 
@@ -89,7 +91,7 @@ def test_batched_models_equal_sensor_models_sample_by_sample():
 
 
 def _problem(rng: np.random.Generator, count: int = 3, force_law: str = 'hooke'
-             ) -> tuple[cal._Problem, np.ndarray]:
+             ) -> tuple[CalibrationProblem, np.ndarray]:
     """Samples with every kind of measurement (some strings slack, some tensions and lengths
     missing) around the nominal unloaded equilibrium."""
     model = _model(force_law)
@@ -106,7 +108,7 @@ def _problem(rng: np.random.Generator, count: int = 3, force_law: str = 'hooke'
         samples.append(cal.CalibrationSample(
             rest_lengths=model.rest_lengths + rng.uniform(-4e-3, 4e-3, n), pose=T,
             tensions=tensions, lengths=lengths, external_wrench=rng.normal(0.0, 0.2, 6)))
-    problem = cal._Problem(model, cal._samples_data(model, samples), cal.CalibrationNoise())
+    problem = CalibrationProblem(model, samples_data(model, samples), cal.CalibrationNoise())
     return problem, xi
 
 

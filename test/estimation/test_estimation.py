@@ -25,6 +25,7 @@ from support.estimation_trials import (
 )
 
 from tensegrity_stiffness.estimation import estimators as estimation
+from tensegrity_stiffness.estimation import joint_estimator
 from tensegrity_stiffness.estimation import sensor_models as sm
 from tensegrity_stiffness.estimation.estimators import (
     STIFFNESS_JACOBIAN_REUSE,
@@ -194,7 +195,7 @@ def test_estimate_fields_and_stiffness_std(model):
     # dK_c/dxi may be the one of an estimate within STIFFNESS_JACOBIAN_REUSE of this one
     np.testing.assert_allclose(est.cartesian_stiffness_std, expected,
                                rtol=5 * STIFFNESS_JACOBIAN_REUSE)
-    estimation._STIFFNESS_JACOBIANS.clear()  # computed afresh: exactly the definition
+    joint_estimator._STIFFNESS_JACOBIANS.clear()  # computed afresh: exactly the definition
     again = estimate_joint_state(model, measure(truth, SENSOR_SETS['12 tensions'], rng),
                                  initial_screw=xi)
     G = cartesian_stiffness_jacobian(model, again.screw)

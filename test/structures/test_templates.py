@@ -69,8 +69,10 @@ def test_pretensions_the_strings_cannot_carry_are_refused():
         templates.prism_document(3, stiffness=10.0, pretension=1000.0)
     with pytest.raises(ValueError, match='pretension must be finite and > 0'):
         templates.prism_document(3, pretension=-1.0)
-    with pytest.raises(ValueError, match='stiffness must be one positive value or 9'):
+    with pytest.raises(ValueError, match=r'stiffness must have 9 values \(one per string\)'):
         templates.prism_document(3, stiffness=[1.0, 2.0])
+    with pytest.raises(ValueError, match='stiffness must be one positive value or 9'):
+        templates.prism_document(3, stiffness=[1.0] * 8 + [0.0])
     with pytest.raises(ValueError, match='bars must be an integer >= 3'):
         templates.prism_document(2)
 
