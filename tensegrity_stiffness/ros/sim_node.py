@@ -38,17 +38,19 @@ from tensegrity_stiffness.nodes.frames import (
     spine_frame_transforms,
     spine_tool_transform,
 )
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.parameter_specs import by_name
+from tensegrity_stiffness.nodes.shared_parameters import (
     CHAIN_PARAMETERS,
-    SIM_PARAMETERS,
-    SimNodeSettings,
-    by_name,
     link2_inertia_from_values,
     rest_length_offsets,
+)
+from tensegrity_stiffness.nodes.sim_node import (
+    SIM_PARAMETERS,
+    SimNodeSettings,
     sim_node_parameters,
     sim_node_settings,
 )
-from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input
+from tensegrity_stiffness.nodes.spine_node import rest_lengths_input
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding

@@ -31,15 +31,13 @@ from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.health import joint_health
 from tensegrity_stiffness.nodes.layouts import joint_output_layouts
 from tensegrity_stiffness.nodes.messages import stamp_is_set
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
+from tensegrity_stiffness.nodes.stiffness_node import (
     STIFFNESS_NODE_PARAMETERS,
     JointNodeSettings,
-    ParameterSpec,
-    joint_node_settings,
-)
-from tensegrity_stiffness.nodes.processing import (
     JointOutputs,
     frequency_report,
+    joint_node_settings,
     joint_outputs,
     pose_input,
     screw_input,

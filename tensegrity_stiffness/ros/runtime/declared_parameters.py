@@ -20,11 +20,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from tensegrity_stiffness.mechanics.unloaded import InitialScrewWarning
-from tensegrity_stiffness.nodes.parameters import (
-    STRICT_PARAMETERS,
-    ParameterSpec,
-    refuse_unknown_parameters,
-)
+from tensegrity_stiffness.nodes.parameter_specs import STRICT_PARAMETERS, ParameterSpec
+from tensegrity_stiffness.nodes.registry import refuse_unknown_parameters
 from tensegrity_stiffness.ros.runtime.rclpy_internals import parameter_override_names
 
 _ROS_TYPES = {

@@ -31,7 +31,7 @@ from visualization_msgs.msg import MarkerArray
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.interpretation import principal_stiffnesses
 from tensegrity_stiffness.nodes.layouts import STIFFNESS_EIGENVALUES_LABEL
-from tensegrity_stiffness.nodes.parameters import ParameterSpec
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
 from tensegrity_stiffness.ros.runtime.draining_subscription import (

@@ -31,7 +31,7 @@ from tensegrity_stiffness.mechanics.plausibility import (
     check_screw,
     check_wrench,
 )
-from tensegrity_stiffness.nodes.parameters import JointNodeSettings
+from tensegrity_stiffness.nodes.stiffness_node import JointNodeSettings
 from tensegrity_stiffness.ros import conversions
 
 FloatArray = NDArray[np.float64]
