@@ -39,7 +39,7 @@ from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.mechanics.design import design_rest_lengths
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.ros import conversions
-from tensegrity_stiffness.ros.twin_demo import (
+from tensegrity_stiffness.ros.demo_processes import (
     NAMESPACE,
     BackgroundSpin,
     node_executable,
