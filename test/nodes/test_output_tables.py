@@ -1,0 +1,43 @@
+"""The output tables of the joint and the spine (``nodes/layouts``: one row of name, layout and
+value per output): the names are the rows' in order, each value's array fills its layout, and
+the node modules' ``output_arrays`` are the tables' values. No ROS."""
+
+from __future__ import annotations
+
+import numpy as np
+from support import JOINT_CONFIG, SPINE_CONFIG
+
+from tensegrity_stiffness.mechanics.chain import JointChain
+from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.nodes import layouts, spine_node, stiffness_node
+
+
+def test_the_joints_table_names_its_outputs_and_fills_their_layouts() -> None:
+    model = JointModel.from_yaml(JOINT_CONFIG)
+    outputs = stiffness_node.joint_outputs(model, model.initial_screw)
+    assert layouts.JOINT_OUTPUTS == tuple(row.name for row in layouts.JOINT_OUTPUT_TABLE)
+    arrays = stiffness_node.output_arrays(outputs)
+    state = outputs.state
+    expected = (state.wrench, state.stiffness, state.cartesian_stiffness, state.tensions,
+                outputs.interpretation)
+    assert all(a is b for a, b in zip(arrays, expected, strict=True))
+    table = layouts.joint_array_layouts(model.string_names)
+    assert tuple(table) == layouts.JOINT_OUTPUTS
+    for (name, layout), values in zip(table.items(), arrays, strict=True):
+        assert np.asarray(values).size == layout.size, name
+
+
+def test_the_spines_table_names_its_outputs_and_fills_their_layouts() -> None:
+    chain = JointChain.from_yaml(SPINE_CONFIG)
+    screws = np.array([m.initial_screw for m in chain.joints])
+    outputs = spine_node.spine_outputs(chain, screws)
+    assert layouts.SPINE_OUTPUTS == tuple(row.name for row in layouts.SPINE_OUTPUT_TABLE)
+    arrays = spine_node.output_arrays(outputs)
+    state = outputs.state
+    expected = (state.wrenches, state.stiffness, state.cartesian_stiffness, state.tip_transform,
+                outputs.tip_wrench, outputs.tip_stiffness_tool, outputs.tip_stiffness_base)
+    assert all(a is b for a, b in zip(arrays, expected, strict=True))
+    table = layouts.spine_array_layouts(chain.n_joints)
+    assert tuple(table) == layouts.SPINE_OUTPUTS
+    for (name, layout), values in zip(table.items(), arrays, strict=True):
+        assert np.asarray(values).size == layout.size, name
