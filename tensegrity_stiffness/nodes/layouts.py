@@ -224,6 +224,19 @@ SPINE_OUTPUT_TABLE: tuple[OutputRow, ...] = (
 #: The names of :data:`SPINE_OUTPUT_TABLE`, in its order.
 SPINE_OUTPUTS = tuple(row.name for row in SPINE_OUTPUT_TABLE)
 
+#: Label of ``stiffness_controller``'s ``~/rest_lengths`` (motor commands, ``true - offset``).
+REST_LENGTHS_LABEL = 'rest lengths [m] (motor commands), string order of the config'
+#: ``stiffness_controller``'s outputs, likewise (layouts of the string count n, values of a
+#: :class:`~tensegrity_stiffness.control.controller.ControlCommand`; ``rest_lengths`` also of
+#: the controller itself, its first command).
+CONTROLLER_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('rest_lengths', lambda n: _array(vector_dims(n, REST_LENGTHS_LABEL)),
+              'rest_lengths'),
+    OutputRow('predicted_stiffness', _joint_matrix(CARTESIAN_STIFFNESS_COL_LABEL),
+              'predicted_cartesian_stiffness'),
+)
+#: The names of :data:`CONTROLLER_OUTPUT_TABLE`, in its order.
+CONTROLLER_OUTPUTS = tuple(row.name for row in CONTROLLER_OUTPUT_TABLE)
 #: The stamped matrices published beside ``stiffness_node``'s arrays (name -> the array it
 #: carries), after :data:`JOINT_OUTPUTS`: a subscriber pairs each with its input by stamp.
 JOINT_STAMPED_OUTPUTS = {'stiffness_stamped': 'stiffness',
@@ -261,3 +274,8 @@ def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
 def spine_array_layouts(n_joints: int) -> dict[str, OutputLayout]:
     """The outputs of :data:`SPINE_OUTPUT_TABLE` alone (one array each)."""
     return {row.name: row.layout(n_joints) for row in SPINE_OUTPUT_TABLE}
+
+
+def controller_output_layouts(n_strings: int) -> dict[str, OutputLayout]:
+    """``stiffness_controller``'s outputs by topic, in :data:`CONTROLLER_OUTPUT_TABLE` order."""
+    return {row.name: row.layout(n_strings) for row in CONTROLLER_OUTPUT_TABLE}

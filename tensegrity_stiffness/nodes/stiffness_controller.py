@@ -41,7 +41,6 @@ DEFAULT_RANGE = (0.5, 1.2)
 #: tensions at ``initial_screw`` with the config's rest lengths), as fractions of the smallest
 #: and the largest of them, widened to :data:`DEFAULT_TENSION_MIN` / ``MAX`` (issue #39).
 PRETENSION_RANGE = (0.5, 2.0)
-REST_LENGTHS_LABEL = 'rest lengths [m] (motor commands), string order of the config'
 
 CONTROL_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('limits.rest_length_min', 'double_array', None,

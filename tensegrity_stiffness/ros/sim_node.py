@@ -5,7 +5,7 @@ own (paced by the wall clock, or as fast as possible publishing ``/clock``), val
 on the inputs, and publishes the truth in exactly the input formats of ``stiffness_node``
 (``~/screw``, ``~/pose``) or ``spine_node`` (``~/screws``, ``~/poses``) and the simulated sensors
 with their noise (``~/measured_lengths``, ``~/measured_tensions``, ``~/imu``). Parameters:
-:func:`tensegrity_stiffness.nodes.parameters.sim_node_parameters` (``sim.*``, ``load.*``,
+:func:`tensegrity_stiffness.nodes.sim_node.sim_node_parameters` (``sim.*``, ``load.*``,
 ``noise.*``,
 ``limits.*`` and the model's own, from the same config files as the other nodes).
 

@@ -3,9 +3,9 @@
 A spine is a :class:`~tensegrity_stiffness.mechanics.chain.JointChain` (conventions, frames and
 loads in
 :mod:`tensegrity_stiffness.mechanics.chain`; parameters in
-:mod:`tensegrity_stiffness.nodes.parameters`; topics,
+:mod:`tensegrity_stiffness.nodes.spine_node`; topics,
 services and QoS in docs/nodes.md). Thin layer: validate
-(:mod:`tensegrity_stiffness.nodes.spine_processing`), convert
+(:mod:`tensegrity_stiffness.nodes.spine_node`), convert
 (:mod:`tensegrity_stiffness.ros.conversions`), call the library,
 publish all of an input's outputs or none.
 

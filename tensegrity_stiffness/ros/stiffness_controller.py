@@ -37,20 +37,20 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness.control.controller import ControlTarget
-from tensegrity_stiffness.geometry.validation import require_frame
+from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
 from tensegrity_stiffness.mechanics.plausibility import (
     check_target_stiffness,
     check_translation,
     check_wrench,
 )
 from tensegrity_stiffness.nodes.layouts import (
-    CARTESIAN_STIFFNESS_COL_LABEL,
+    CONTROLLER_OUTPUT_TABLE,
     ESTIMATOR_OUTPUTS,
-    STIFFNESS_ROW_LABEL,
+    controller_output_layouts,
 )
+from tensegrity_stiffness.nodes.messages import multiarray
 from tensegrity_stiffness.nodes.stiffness_controller import (
     CONTROLLER_PARAMETERS,
-    REST_LENGTHS_LABEL,
     STAMP_WINDOW,
     ControllerSettings,
     ControllerTicks,
@@ -60,6 +60,7 @@ from tensegrity_stiffness.nodes.stiffness_controller import (
 )
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
+from tensegrity_stiffness.ros.conversions.outputs import RCLPY_TYPES, output_topics
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
 from tensegrity_stiffness.ros.runtime.draining_subscription import SkippedCounts
@@ -105,10 +106,11 @@ class StiffnessControllerNode(Node):
                                        1.0 / values['control.rate'])
         self._commands = RateCounter()
         self.skipped = SkippedCounts()
-        self._pub_rest = create_output_publisher(self, Float64MultiArray, '~/rest_lengths',
-                                                 LATCHED_QOS)
-        self._pub_stiffness = create_output_publisher(self, Float64MultiArray,
-                                                      '~/predicted_stiffness', 10)
+        # one publisher per row of the output table: the commands latched
+        self._pub_rest, self._pub_stiffness = self._output_publishers = tuple(
+            create_output_publisher(self, msg_type, topic, qos) for (msg_type, topic), qos in zip(
+                output_topics(controller_output_layouts(self._settings.model.n_strings)),
+                (LATCHED_QOS, 10), strict=True))
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics',
                                                         10)
         qos = input_qos(values['qos.depth'], 'reliable')
@@ -123,7 +125,7 @@ class StiffnessControllerNode(Node):
                                            self._on_wrench_estimate, qos, self.skipped)
         self._lane.create_subscription(WrenchStamped, '~/external_wrench',
                                        self._on_external_wrench, qos, self.skipped)
-        self._publish_rest(self._ticker.controller.rest_lengths)
+        self._publish_output(0, self._ticker.controller)
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
         self._loop = PacedLoop(values['control.rate'], self._tick,
                                lambda exc: self.reporter.internal_error('tick', exc),
@@ -262,17 +264,21 @@ class StiffnessControllerNode(Node):
         if cmd is None:
             return
         if cmd.feasible:
-            self._publish_rest(cmd.rest_lengths)
+            self._publish_output(0, cmd)
             self._commands.record()
             if self._pub_stiffness.get_subscription_count():
-                self._pub_stiffness.publish(conversions.matrix_to_multiarray(
-                    cmd.predicted_cartesian_stiffness, STIFFNESS_ROW_LABEL,
-                    CARTESIAN_STIFFNESS_COL_LABEL))
+                self._publish_output(1, cmd)
         else:
             self.reporter.warn('target', cmd.message)
 
-    def _publish_rest(self, rest: np.ndarray) -> None:
-        self._pub_rest.publish(conversions.vector_to_multiarray(rest, REST_LENGTHS_LABEL))
+    def _publish_output(self, k: int, source: Any) -> None:
+        """Publish output ``k`` of the output table (its row's value of ``source``: a command,
+        or the controller's first one) in the row's layout; ValueError when not finite."""
+        row = CONTROLLER_OUTPUT_TABLE[k]
+        values = np.asarray(row.of(source), dtype=np.float64)
+        require_all_finite((row.name,), (values,))
+        self._output_publishers[k].publish(multiarray(row.layout(values.shape[0]).dims,
+                                               values.ravel(), RCLPY_TYPES))
 
     @guarded('/diagnostics')
     def _publish_diagnostics(self) -> None:

@@ -1,10 +1,10 @@
 """``stiffness_node``: real-time wrench and stiffness of a tensegrity joint over ROS 2.
 
 Thin layer: validate, convert with :mod:`tensegrity_stiffness.ros.conversions`, call the library
-(:mod:`tensegrity_stiffness.nodes.processing`), publish. Topics, services, parameters and QoS are
-documented in docs/nodes.md; the conventions (frames, orderings, signs) in
+(:mod:`tensegrity_stiffness.nodes.stiffness_node`), publish. Topics, services, parameters and
+QoS are documented in docs/nodes.md; the conventions (frames, orderings, signs) in
 :mod:`tensegrity_stiffness.mechanics.joint`; the parameters in
-:mod:`tensegrity_stiffness.nodes.parameters`.
+:mod:`tensegrity_stiffness.nodes.stiffness_node`.
 
 Built on :class:`.StreamingNode` (:mod:`.node_base`: concurrency, the settings swap, the
 publication under one lock); ``~/screw`` and ``~/pose`` are its streamed inputs, the equilibrium

@@ -41,3 +41,32 @@ def test_the_spines_table_names_its_outputs_and_fills_their_layouts() -> None:
     assert tuple(table) == layouts.SPINE_OUTPUTS
     for (name, layout), values in zip(table.items(), arrays, strict=True):
         assert np.asarray(values).size == layout.size, name
+
+
+def test_the_controllers_table_names_its_outputs_and_fills_their_layouts() -> None:
+    from tensegrity_stiffness.nodes.parameter_specs import defaults
+    from tensegrity_stiffness.nodes.stiffness_controller import (
+        CONTROLLER_PARAMETERS,
+        ControllerTicks,
+        controller_settings,
+        new_controller,
+    )
+
+    settings = controller_settings(defaults(CONTROLLER_PARAMETERS))
+    model = settings.model
+    ticker = ControllerTicks(settings, new_controller(settings), 0.002)
+    pose = model.evaluate(model.initial_screw).transform
+    ticker.target_pose = pose
+    ticker.take_state(pose, received=0.0, stamp_ns=0)
+    cmd = ticker.tick(0.0, 0).command
+    assert layouts.CONTROLLER_OUTPUTS == ('rest_lengths', 'predicted_stiffness')
+    table = layouts.controller_output_layouts(model.n_strings)
+    assert tuple(table) == layouts.CONTROLLER_OUTPUTS
+    arrays = layouts.table_arrays(layouts.CONTROLLER_OUTPUT_TABLE, cmd)
+    assert arrays[0] is cmd.rest_lengths and arrays[1] is cmd.predicted_cartesian_stiffness
+    for (name, layout), values in zip(table.items(), arrays, strict=True):
+        assert np.asarray(values).size == layout.size, name
+    assert table['rest_lengths'].dims[0][0] == layouts.REST_LENGTHS_LABEL
+    # the controller's first command is published by the same row
+    np.testing.assert_array_equal(layouts.CONTROLLER_OUTPUT_TABLE[0].of(ticker.controller),
+                                  ticker.controller.rest_lengths)

@@ -1,7 +1,6 @@
-"""Declare a node's parameters from the table of :mod:`tensegrity_stiffness.nodes.parameters` and
-keep
-its settings in step with them: a change is validated as a whole before it is accepted, and the
-settings are rebuilt and swapped as one object after it."""
+"""Declare a node's parameters from its table (:mod:`tensegrity_stiffness.nodes.parameter_specs`)
+and keep its settings in step with them: a change is validated as a whole before it is
+accepted, and the settings are rebuilt and swapped as one object after it."""
 
 from __future__ import annotations
 
