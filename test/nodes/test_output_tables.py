@@ -12,35 +12,35 @@ from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes import layouts, spine_node, stiffness_node
 
 
+def check_table(rows, names, layouts_by_name, arrays, expected) -> None:
+    """The table's names are ``names`` in row order, its arrays the ``expected`` objects, each
+    filling its layout."""
+    assert names == tuple(row.name for row in rows) == tuple(layouts_by_name)
+    assert all(a is b for a, b in zip(arrays, expected, strict=True))
+    for (name, layout), values in zip(layouts_by_name.items(), arrays, strict=True):
+        assert np.asarray(values).size == layout.size, name
+
+
 def test_the_joints_table_names_its_outputs_and_fills_their_layouts() -> None:
     model = JointModel.from_yaml(JOINT_CONFIG)
     outputs = stiffness_node.joint_outputs(model, model.initial_screw)
-    assert layouts.JOINT_OUTPUTS == tuple(row.name for row in layouts.JOINT_OUTPUT_TABLE)
-    arrays = stiffness_node.output_arrays(outputs)
     state = outputs.state
-    expected = (state.wrench, state.stiffness, state.cartesian_stiffness, state.tensions,
-                outputs.interpretation)
-    assert all(a is b for a, b in zip(arrays, expected, strict=True))
-    table = layouts.joint_array_layouts(model.string_names)
-    assert tuple(table) == layouts.JOINT_OUTPUTS
-    for (name, layout), values in zip(table.items(), arrays, strict=True):
-        assert np.asarray(values).size == layout.size, name
+    check_table(layouts.JOINT_OUTPUT_TABLE, layouts.JOINT_OUTPUTS,
+                layouts.joint_array_layouts(model.string_names),
+                stiffness_node.output_arrays(outputs),
+                (state.wrench, state.stiffness, state.cartesian_stiffness, state.tensions,
+                 outputs.interpretation))
 
 
 def test_the_spines_table_names_its_outputs_and_fills_their_layouts() -> None:
     chain = JointChain.from_yaml(SPINE_CONFIG)
-    screws = np.array([m.initial_screw for m in chain.joints])
-    outputs = spine_node.spine_outputs(chain, screws)
-    assert layouts.SPINE_OUTPUTS == tuple(row.name for row in layouts.SPINE_OUTPUT_TABLE)
-    arrays = spine_node.output_arrays(outputs)
+    outputs = spine_node.spine_outputs(chain, np.array([m.initial_screw for m in chain.joints]))
     state = outputs.state
-    expected = (state.wrenches, state.stiffness, state.cartesian_stiffness, state.tip_transform,
-                outputs.tip_wrench, outputs.tip_stiffness_tool, outputs.tip_stiffness_base)
-    assert all(a is b for a, b in zip(arrays, expected, strict=True))
-    table = layouts.spine_array_layouts(chain.n_joints)
-    assert tuple(table) == layouts.SPINE_OUTPUTS
-    for (name, layout), values in zip(table.items(), arrays, strict=True):
-        assert np.asarray(values).size == layout.size, name
+    check_table(layouts.SPINE_OUTPUT_TABLE, layouts.SPINE_OUTPUTS,
+                layouts.spine_array_layouts(chain.n_joints), spine_node.output_arrays(outputs),
+                (state.wrenches, state.stiffness, state.cartesian_stiffness,
+                 state.tip_transform, outputs.tip_wrench, outputs.tip_stiffness_tool,
+                 outputs.tip_stiffness_base))
 
 
 def test_the_controllers_table_names_its_outputs_and_fills_their_layouts() -> None:
@@ -61,11 +61,9 @@ def test_the_controllers_table_names_its_outputs_and_fills_their_layouts() -> No
     cmd = ticker.tick(0.0, 0).command
     assert layouts.CONTROLLER_OUTPUTS == ('rest_lengths', 'predicted_stiffness')
     table = layouts.controller_output_layouts(model.n_strings)
-    assert tuple(table) == layouts.CONTROLLER_OUTPUTS
-    arrays = layouts.table_arrays(layouts.CONTROLLER_OUTPUT_TABLE, cmd)
-    assert arrays[0] is cmd.rest_lengths and arrays[1] is cmd.predicted_cartesian_stiffness
-    for (name, layout), values in zip(table.items(), arrays, strict=True):
-        assert np.asarray(values).size == layout.size, name
+    check_table(layouts.CONTROLLER_OUTPUT_TABLE, layouts.CONTROLLER_OUTPUTS, table,
+                layouts.table_arrays(layouts.CONTROLLER_OUTPUT_TABLE, cmd),
+                (cmd.rest_lengths, cmd.predicted_cartesian_stiffness))
     assert table['rest_lengths'].dims[0][0] == layouts.REST_LENGTHS_LABEL
     # the controller's first command is published by the same row
     np.testing.assert_array_equal(layouts.CONTROLLER_OUTPUT_TABLE[0].of(ticker.controller),
