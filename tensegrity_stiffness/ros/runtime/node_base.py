@@ -54,7 +54,7 @@ from tensegrity_stiffness.ros.runtime.worker_calls import (
     WorkerCalls,
     answer_worker_failure,
 )
-from tensegrity_stiffness.ros.services.joint_services import fail
+from tensegrity_stiffness.ros.services.responses import fail
 
 #: A streamed input: message type, topic, handler (called on the fast lane's thread or by the
 #: executor).

@@ -22,7 +22,7 @@ from tensegrity_stiffness.nodes.spine_node import (
     screws_input,
 )
 from tensegrity_stiffness.ros import conversions
-from tensegrity_stiffness.ros.services.joint_services import fail
+from tensegrity_stiffness.ros.services.responses import fail
 
 FloatArray = NDArray[np.float64]
 
