@@ -54,7 +54,7 @@ from support.ros_harness import (  # noqa: E402
 
 from tensegrity_stiffness.mechanics.controller_stiffness import Conditioner, to_layout  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
-from tensegrity_stiffness.nodes.parameters import BRIDGE_PRESETS  # noqa: E402
+from tensegrity_stiffness.nodes.stiffness_bridge import BRIDGE_PRESETS  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_joint.yaml'
 POSE = [0.02, 0.0, 0.01, 0.0, 0.0, math.sin(math.pi / 12), math.cos(math.pi / 12)]

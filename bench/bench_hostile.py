@@ -34,11 +34,11 @@ from tensegrity_stiffness.mechanics.plausibility import (  # noqa: E402
     check_translation,
     joint_size,
 )
-from tensegrity_stiffness.nodes.control_processing import (  # noqa: E402
+from tensegrity_stiffness.nodes.stiffness_controller import (  # noqa: E402
     CONTROLLER_PARAMETERS,
     controller_settings,
 )
-from tensegrity_stiffness.nodes.processing import joint_outputs  # noqa: E402
+from tensegrity_stiffness.nodes.stiffness_node import joint_outputs  # noqa: E402
 
 
 def hostile_stiffness(rng: np.random.Generator, reachable: np.ndarray) -> np.ndarray:

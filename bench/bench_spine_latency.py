@@ -46,7 +46,7 @@ from support.ros_harness import (  # noqa: E402
 from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
 
 from tensegrity_stiffness.nodes import parameters  # noqa: E402
-from tensegrity_stiffness.nodes.spine_processing import spine_outputs  # noqa: E402
+from tensegrity_stiffness.nodes.spine_node import spine_outputs  # noqa: E402
 from tensegrity_stiffness.ros import conversions  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_spine.yaml'

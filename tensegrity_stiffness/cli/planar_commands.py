@@ -22,10 +22,10 @@ from tensegrity_stiffness.cli.common import (
     yes,
 )
 from tensegrity_stiffness.mechanics.planar import SINGULARITY_DESCRIPTIONS, PlanarMechanism
-from tensegrity_stiffness.nodes import parameters
+from tensegrity_stiffness.nodes.stiffness_node import PLANAR_PARAMETERS
 
 #: Keys of the planar mechanism (the node's ``planar.*`` parameters without the prefix).
-PLANAR_KEYS = tuple(spec.name[len('planar.'):] for spec in parameters.PLANAR_PARAMETERS)
+PLANAR_KEYS = tuple(spec.name[len('planar.'):] for spec in PLANAR_PARAMETERS)
 #: Defaults of the commands' mechanism options (the help text).
 CONFIG_DEFAULTS = "the config's planar section (L = 1, K1 = 100, K2 = 10)"
 
@@ -46,7 +46,7 @@ def planar_config(args: argparse.Namespace) -> dict[str, float]:
     path = Path(args.config) if args.config else config.packaged_config_path()
     section = config.load_section(path, 'planar', required=False)
     params = {}
-    for spec in parameters.PLANAR_PARAMETERS:
+    for spec in PLANAR_PARAMETERS:
         key = spec.name[len('planar.'):]
         try:
             params[key] = spec.check(section.get(key, spec.default))

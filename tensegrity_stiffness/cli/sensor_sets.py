@@ -18,12 +18,12 @@ from numpy.typing import ArrayLike
 
 from tensegrity_stiffness.estimation.estimators import Measurements, estimate_joint_state
 from tensegrity_stiffness.geometry.screw import exp_se3
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATOR_NODE_PARAMETERS,
     EstimatorNodeSettings,
     estimator_node_settings,
-    values_from_config,
 )
+from tensegrity_stiffness.nodes.registry import values_from_config
 
 #: The sensors a set may name: load cells, string lengths, an IMU on link 2 (the direction of
 #: gravity), a motion-capture pose, a force-torque sensor (the load measured).

@@ -35,13 +35,12 @@ from tensegrity_stiffness.mechanics.chain import ChainState
 from tensegrity_stiffness.mechanics.dynamics import chain_link_inertias
 from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.mechanics.plausibility import check_translation, check_wrench
+from tensegrity_stiffness.nodes.estimator_node import ESTIMATOR_INPUTS, EstimatorNodeSettings
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS, SPINE_ESTIMATOR_OUTPUTS
-from tensegrity_stiffness.nodes.parameters import (
-    ESTIMATOR_INPUTS,
+from tensegrity_stiffness.nodes.shared_parameters import link2_inertia_from_values
+from tensegrity_stiffness.nodes.spine_estimator_node import (
     SPINE_ESTIMATOR_INPUTS,
-    EstimatorNodeSettings,
     SpineEstimatorNodeSettings,
-    link2_inertia_from_values,
 )
 
 FloatArray = NDArray[np.float64]

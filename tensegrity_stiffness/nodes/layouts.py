@@ -11,8 +11,10 @@ a matrix of shape (rows, cols) has ``dim[0] = (row_label, rows, rows*cols)`` and
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from operator import attrgetter
+from typing import Any
 
 from tensegrity_stiffness.geometry.components import (
     BLOCK_NAMES,
@@ -151,15 +153,90 @@ def with_stamped_matrices(arrays: dict[str, OutputLayout], stamped: Mapping[str,
                          for name, of in stamped.items()}}
 
 
-#: ``stiffness_node``'s per-input outputs, topic names relative to the node, in the order they
-#: are computed, filled and published (:func:`processing.output_arrays`): the one home of
-#: their names and order, read by the node, the bag command and the message builders.
-JOINT_OUTPUTS = ('wrench', 'stiffness', 'cartesian_stiffness', 'string_tensions',
-                 'stiffness_interpretation')
-#: ``spine_node``'s per-input outputs, likewise (:func:`spine_processing.output_arrays`).
-SPINE_OUTPUTS = ('joint_wrenches', 'joint_stiffness', 'joint_cartesian_stiffness', 'tip_pose',
-                 'tip_wrench', 'tip_stiffness', 'tip_stiffness_base')
+@dataclass(frozen=True)
+class OutputRow:
+    """One per-input output of a streaming node, one row of its output table: the topic
+    ``name`` (relative to the node), its ``layout`` (a function of the node's sizes: the
+    joint's string names, the spine's joint count) and ``value``, the dotted attribute of the
+    node's outputs object that holds its array (``'state.wrench'`` of
+    :class:`~tensegrity_stiffness.nodes.stiffness_node.JointOutputs`)."""
 
+    name: str
+    layout: Callable[[Any], OutputLayout]
+    value: str
+    of: Callable[[Any], Any] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, 'of', attrgetter(self.value))
+
+
+def table_arrays(table: Sequence[OutputRow], outputs: Any) -> tuple[Any, ...]:
+    """The arrays of ``outputs`` in the order of ``table`` (one per row)."""
+    return tuple(row.of(outputs) for row in table)
+
+
+def _joint_matrix(col_label: str) -> Callable[[Any], OutputLayout]:
+    return lambda names: _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL, col_label))
+
+
+def _spine_stack(col_label: str) -> Callable[[int], OutputLayout]:
+    return lambda n: _array(stacked_matrix_dims(n, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL,
+                                                col_label))
+
+
+#: ``stiffness_node``'s per-input outputs (topic names relative to the node), in the order they
+#: are computed, filled and published: one row each (name, layout of the string names, value of
+#: :class:`~tensegrity_stiffness.nodes.stiffness_node.JointOutputs`). Adding or reordering an
+#: output is one row here; the node, the bag command and the message builders read it.
+JOINT_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('wrench', lambda names: OutputLayout(WRENCH_STAMPED), 'state.wrench'),
+    OutputRow('stiffness', _joint_matrix(STIFFNESS_COL_LABEL), 'state.stiffness'),
+    OutputRow('cartesian_stiffness', _joint_matrix(CARTESIAN_STIFFNESS_COL_LABEL),
+              'state.cartesian_stiffness'),
+    OutputRow('string_tensions',
+              lambda names: _array(vector_dims(len(names), tensions_label(names))),
+              'state.tensions'),
+    OutputRow('stiffness_interpretation',
+              lambda names: _array(vector_dims(INTERPRETATION_SIZE, INTERPRETATION_LABEL)),
+              'interpretation'),
+)
+#: The names of :data:`JOINT_OUTPUT_TABLE`, in its order: the one home of the joint's output
+#: names and order.
+JOINT_OUTPUTS = tuple(row.name for row in JOINT_OUTPUT_TABLE)
+#: ``spine_node``'s per-input outputs, likewise (layouts of the joint count N, values of
+#: :class:`~tensegrity_stiffness.nodes.spine_node.SpineOutputs`).
+SPINE_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('joint_wrenches', lambda n: _array(matrix_dims(n, 6, JOINTS_LABEL, WRENCH_LABEL)),
+              'state.wrenches'),
+    OutputRow('joint_stiffness', _spine_stack(STIFFNESS_COL_LABEL),
+              'state.stiffness'),
+    OutputRow('joint_cartesian_stiffness',
+              _spine_stack(CARTESIAN_STIFFNESS_COL_LABEL),
+              'state.cartesian_stiffness'),
+    OutputRow('tip_pose', lambda n: OutputLayout(POSE_STAMPED), 'state.tip_transform'),
+    OutputRow('tip_wrench', lambda n: OutputLayout(WRENCH_STAMPED), 'tip_wrench'),
+    OutputRow('tip_stiffness', lambda n: _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['tool'])),
+              'tip_stiffness_tool'),
+    OutputRow('tip_stiffness_base',
+              lambda n: _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['base'])),
+              'tip_stiffness_base'),
+)
+#: The names of :data:`SPINE_OUTPUT_TABLE`, in its order.
+SPINE_OUTPUTS = tuple(row.name for row in SPINE_OUTPUT_TABLE)
+
+#: Label of ``stiffness_controller``'s ``~/rest_lengths`` (motor commands, ``true - offset``).
+REST_LENGTHS_LABEL = 'rest lengths [m] (motor commands), string order of the config'
+#: ``stiffness_controller``'s outputs, likewise (layouts of the string count n, values of a
+#: :class:`~tensegrity_stiffness.control.controller.ControlCommand`; ``rest_lengths`` also of
+#: the controller itself, its first command).
+CONTROLLER_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('rest_lengths', lambda n: _array(vector_dims(n, REST_LENGTHS_LABEL)),
+              'rest_lengths'),
+    OutputRow('predicted_stiffness', _joint_matrix(CARTESIAN_STIFFNESS_COL_LABEL),
+              'predicted_cartesian_stiffness'),
+)
+#: The names of :data:`CONTROLLER_OUTPUT_TABLE`, in its order.
+CONTROLLER_OUTPUTS = tuple(row.name for row in CONTROLLER_OUTPUT_TABLE)
 #: The stamped matrices published beside ``stiffness_node``'s arrays (name -> the array it
 #: carries), after :data:`JOINT_OUTPUTS`: a subscriber pairs each with its input by stamp.
 JOINT_STAMPED_OUTPUTS = {'stiffness_stamped': 'stiffness',
@@ -184,15 +261,8 @@ def joint_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]
 
 
 def joint_array_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
-    """The outputs of :data:`JOINT_OUTPUTS` alone (one array each)."""
-    n = len(string_names)
-    return dict(zip(JOINT_OUTPUTS, (
-        OutputLayout(WRENCH_STAMPED),
-        _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
-        _array(matrix_dims(6, 6, STIFFNESS_ROW_LABEL, CARTESIAN_STIFFNESS_COL_LABEL)),
-        _array(vector_dims(n, tensions_label(string_names))),
-        _array(vector_dims(INTERPRETATION_SIZE, INTERPRETATION_LABEL)),
-    ), strict=True))
+    """The outputs of :data:`JOINT_OUTPUT_TABLE` alone (one array each)."""
+    return {row.name: row.layout(string_names) for row in JOINT_OUTPUT_TABLE}
 
 
 def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
@@ -202,15 +272,10 @@ def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
 
 
 def spine_array_layouts(n_joints: int) -> dict[str, OutputLayout]:
-    """The outputs of :data:`SPINE_OUTPUTS` alone (one array each)."""
-    return dict(zip(SPINE_OUTPUTS, (
-        _array(matrix_dims(n_joints, 6, JOINTS_LABEL, WRENCH_LABEL)),
-        _array(stacked_matrix_dims(
-            n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, STIFFNESS_COL_LABEL)),
-        _array(stacked_matrix_dims(
-            n_joints, 6, 6, JOINTS_LABEL, STIFFNESS_ROW_LABEL, CARTESIAN_STIFFNESS_COL_LABEL)),
-        OutputLayout(POSE_STAMPED),
-        OutputLayout(WRENCH_STAMPED),
-        _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['tool'])),
-        _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['base'])),
-    ), strict=True))
+    """The outputs of :data:`SPINE_OUTPUT_TABLE` alone (one array each)."""
+    return {row.name: row.layout(n_joints) for row in SPINE_OUTPUT_TABLE}
+
+
+def controller_output_layouts(n_strings: int) -> dict[str, OutputLayout]:
+    """``stiffness_controller``'s outputs by topic, in :data:`CONTROLLER_OUTPUT_TABLE` order."""
+    return {row.name: row.layout(n_strings) for row in CONTROLLER_OUTPUT_TABLE}

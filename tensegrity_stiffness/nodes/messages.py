@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -36,17 +36,25 @@ from tensegrity_stiffness.geometry.quaternion import (
     quaternion_to_rotation,
     rotation_to_quaternion,
 )
-from tensegrity_stiffness.geometry.validation import finite_array_of_shape
-from tensegrity_stiffness.nodes import processing, spine_processing
+from tensegrity_stiffness.geometry.validation import finite_array_of_shape, require_all_finite
 from tensegrity_stiffness.nodes.layouts import (
     FLOAT64_MULTIARRAY,
+    JOINT_OUTPUT_TABLE,
+    JOINT_OUTPUTS,
     POSE_STAMPED,
+    SPINE_OUTPUT_TABLE,
+    SPINE_OUTPUTS,
     STAMPED_MATRIX,
     WRENCH_STAMPED,
     OutputLayout,
     joint_output_layouts,
     spine_output_layouts,
+    table_arrays,
 )
+
+if TYPE_CHECKING:  # the outputs' types (the node modules are not loaded for them)
+    from tensegrity_stiffness.nodes.spine_node import SpineOutputs
+    from tensegrity_stiffness.nodes.stiffness_node import JointOutputs
 
 FloatArray = NDArray[np.float64]
 
@@ -351,12 +359,13 @@ class JointOutputMessages(OutputMessages):
          self.interpretation, self.stiffness_stamped,
          self.cartesian_stiffness_stamped) = self._messages
 
-    def fill(self, outputs: processing.JointOutputs, stamp: Any, frame_id: str,
+    def fill(self, outputs: JointOutputs, stamp: Any, frame_id: str,
              wanted: Sequence[bool] | None = None) -> None:
         """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
         order; default all); ValueError if any output is not finite (then none is set)."""
-        processing.require_finite(outputs)
-        self.fill_arrays(processing.output_arrays(outputs), stamp, frame_id, wanted)
+        arrays = table_arrays(JOINT_OUTPUT_TABLE, outputs)
+        require_all_finite(JOINT_OUTPUTS, arrays)
+        self.fill_arrays(arrays, stamp, frame_id, wanted)
 
 
 class SpineOutputMessages(OutputMessages):
@@ -374,12 +383,13 @@ class SpineOutputMessages(OutputMessages):
          self.tip_pose, self.tip_wrench, self.tip_stiffness, self.tip_stiffness_base,
          self.tip_stiffness_stamped, self.tip_stiffness_base_stamped) = self._messages
 
-    def fill(self, outputs: spine_processing.SpineOutputs, stamp: Any, base_frame: str,
+    def fill(self, outputs: SpineOutputs, stamp: Any, base_frame: str,
              wanted: Sequence[bool] | None = None) -> None:
         """Set the messages from ``outputs`` (those flagged in ``wanted``, in :meth:`messages`
         order; default all); ValueError if any output is not finite (then none is set), or if
         the tip transform's rotation block is not a rotation. The stamped matrices carry
         ``base_frame``, the tool-frame tip stiffness :attr:`tool_frame`."""
-        spine_processing.require_finite(outputs)
-        self.fill_arrays(spine_processing.output_arrays(outputs), stamp, base_frame, wanted)
+        arrays = table_arrays(SPINE_OUTPUT_TABLE, outputs)
+        require_all_finite(SPINE_OUTPUTS, arrays)
+        self.fill_arrays(arrays, stamp, base_frame, wanted)
         self.tip_stiffness_stamped.header.frame_id = self.tool_frame

@@ -51,11 +51,9 @@ from tensegrity_stiffness.nodes.estimation_processing import (
 )
 from tensegrity_stiffness.nodes.layouts import FLOAT64_MULTIARRAY, OutputLayout, matrix_dims
 from tensegrity_stiffness.nodes.messages import MessageTypes, OutputMessages
-from tensegrity_stiffness.nodes.parameters import (
-    ESTIMATION_METHODS,
-    ParameterSpec,
-    rest_length_offsets,
-)
+from tensegrity_stiffness.nodes.estimator_node import ESTIMATION_METHODS
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
+from tensegrity_stiffness.nodes.shared_parameters import rest_length_offsets
 from tensegrity_stiffness.nodes.structure_node import (
     STRUCTURE_NODE_PARAMETERS,
     STRUCTURE_OUTPUTS,

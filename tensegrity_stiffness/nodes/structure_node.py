@@ -41,11 +41,11 @@ from tensegrity_stiffness.nodes.layouts import (
     vector_dims,
 )
 from tensegrity_stiffness.nodes.messages import MessageTypes, OutputMessages
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
+from tensegrity_stiffness.nodes.shared_parameters import (
     COMMON_PARAMETERS,
     REST_LENGTH_OFFSET_PARAMETERS,
     TF_PARAMETERS,
-    ParameterSpec,
     marker_period,
     rest_length_offsets,
 )

@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.nodes.parameters import COMMON_PARAMETERS, ParameterSpec
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
+from tensegrity_stiffness.nodes.shared_parameters import COMMON_PARAMETERS
 from tensegrity_stiffness.nodes.structure_node import STRUCTURE_PARAMETERS, structure_path
 from tensegrity_stiffness.simulation.structure_twin import StructureTwinOptions
 from tensegrity_stiffness.simulation.twin import (

@@ -28,11 +28,9 @@ from std_msgs.msg import Float64MultiArray
 from tensegrity_stiffness import config
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
 from tensegrity_stiffness.mechanics.joint import JointModel
-from tensegrity_stiffness.nodes.parameters import (
-    STIFFNESS_NODE_PARAMETERS,
-    rest_length_offsets,
-    values_from_config,
-)
+from tensegrity_stiffness.nodes.registry import values_from_config
+from tensegrity_stiffness.nodes.shared_parameters import rest_length_offsets
+from tensegrity_stiffness.nodes.stiffness_node import STIFFNESS_NODE_PARAMETERS
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime.topics import LATCHED_QOS, input_qos
 

@@ -46,7 +46,7 @@ from tensegrity_stiffness.control.controller import (
 from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.ros import conversions
-from tensegrity_stiffness.ros.twin_demo import (
+from tensegrity_stiffness.ros.demo_processes import (
     NAMESPACE,
     BackgroundSpin,
     node_executable,

@@ -49,14 +49,14 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     measured_array,
     new_joint_filter,
 )
-from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
-from tensegrity_stiffness.nodes.messages import stamp_is_set
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATOR_NODE_PARAMETERS,
     EstimatorNodeSettings,
-    ParameterSpec,
     estimator_node_settings,
 )
+from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
+from tensegrity_stiffness.nodes.messages import stamp_is_set
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.runtime import runner

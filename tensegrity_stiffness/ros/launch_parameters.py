@@ -24,7 +24,8 @@ from typing import Any
 
 import yaml
 
-from tensegrity_stiffness.nodes.parameters import ParameterSpec, by_name, node_tables
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name
+from tensegrity_stiffness.nodes.registry import node_tables
 
 PACKAGE = 'tensegrity_stiffness'
 #: The launch argument of the ROS parameter file every launch file takes (empty: none).

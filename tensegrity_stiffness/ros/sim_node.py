@@ -5,7 +5,7 @@ own (paced by the wall clock, or as fast as possible publishing ``/clock``), val
 on the inputs, and publishes the truth in exactly the input formats of ``stiffness_node``
 (``~/screw``, ``~/pose``) or ``spine_node`` (``~/screws``, ``~/poses``) and the simulated sensors
 with their noise (``~/measured_lengths``, ``~/measured_tensions``, ``~/imu``). Parameters:
-:func:`tensegrity_stiffness.nodes.parameters.sim_node_parameters` (``sim.*``, ``load.*``,
+:func:`tensegrity_stiffness.nodes.sim_node.sim_node_parameters` (``sim.*``, ``load.*``,
 ``noise.*``,
 ``limits.*`` and the model's own, from the same config files as the other nodes).
 
@@ -36,17 +36,19 @@ from tensegrity_stiffness.nodes.frames import (
     spine_frame_transforms,
     spine_tool_transform,
 )
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.parameter_specs import by_name
+from tensegrity_stiffness.nodes.shared_parameters import (
     CHAIN_PARAMETERS,
-    SIM_PARAMETERS,
-    SimNodeSettings,
-    by_name,
     link2_inertia_from_values,
     rest_length_offsets,
+)
+from tensegrity_stiffness.nodes.sim_node import (
+    SIM_PARAMETERS,
+    SimNodeSettings,
     sim_node_parameters,
     sim_node_settings,
 )
-from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input
+from tensegrity_stiffness.nodes.spine_node import rest_lengths_input
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding

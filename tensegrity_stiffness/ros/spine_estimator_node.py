@@ -32,10 +32,10 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     spine_estimator_outputs,
     spine_filter_outputs,
 )
+from tensegrity_stiffness.nodes.estimator_node import EstimatorNodeSettings
 from tensegrity_stiffness.nodes.layouts import SPINE_ESTIMATOR_OUTPUTS
-from tensegrity_stiffness.nodes.parameters import (
-    EstimatorNodeSettings,
-    ParameterSpec,
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
+from tensegrity_stiffness.nodes.spine_estimator_node import (
     SpineEstimatorNodeSettings,
     spine_estimator_node_parameters,
     spine_estimator_node_settings,

@@ -3,9 +3,9 @@
 A spine is a :class:`~tensegrity_stiffness.mechanics.chain.JointChain` (conventions, frames and
 loads in
 :mod:`tensegrity_stiffness.mechanics.chain`; parameters in
-:mod:`tensegrity_stiffness.nodes.parameters`; topics,
+:mod:`tensegrity_stiffness.nodes.spine_node`; topics,
 services and QoS in docs/nodes.md). Thin layer: validate
-(:mod:`tensegrity_stiffness.nodes.spine_processing`), convert
+(:mod:`tensegrity_stiffness.nodes.spine_node`), convert
 (:mod:`tensegrity_stiffness.ros.conversions`), call the library,
 publish all of an input's outputs or none.
 
@@ -30,19 +30,16 @@ from visualization_msgs.msg import MarkerArray
 from tensegrity_stiffness.mechanics.chain import ChainState, solve_chain_equilibrium
 from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL, spine_output_layouts
 from tensegrity_stiffness.nodes.messages import stamp_is_set
-from tensegrity_stiffness.nodes.parameters import (
-    CHAIN_PARAMETERS,
-    ParameterSpec,
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name
+from tensegrity_stiffness.nodes.shared_parameters import CHAIN_PARAMETERS
+from tensegrity_stiffness.nodes.spine_node import (
     SpineNodeSettings,
-    by_name,
-    spine_node_parameters,
-    spine_node_settings,
-)
-from tensegrity_stiffness.nodes.spine_processing import (
     SpineOutputs,
     joint_health_in_chain,
     poses_input,
     screws_input,
+    spine_node_parameters,
+    spine_node_settings,
     spine_outputs,
 )
 from tensegrity_stiffness.ros import conversions

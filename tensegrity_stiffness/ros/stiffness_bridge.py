@@ -38,7 +38,7 @@ from tensegrity_stiffness.mechanics.controller_stiffness import (
     moved_beyond,
     to_layout,
 )
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.stiffness_bridge import (
     BRIDGE_PARAMETERS,
     BridgeSettings,
     bridge_settings,

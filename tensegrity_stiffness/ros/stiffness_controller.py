@@ -17,8 +17,9 @@ the last command is kept. In one process with the estimator (``control_loop``) t
 handed over directly (:meth:`StiffnessControllerNode.take_state`), not over topics.
 
 Built from the shared parts (:mod:`.runtime.declared_parameters`, :mod:`.runtime.reporting`,
-:mod:`.runtime.topics`, :mod:`.runtime.runner`); the parameter table and the settings are
-:mod:`tensegrity_stiffness.nodes.control_processing`'s.
+:mod:`.runtime.topics`, :mod:`.runtime.runner`); the parameter table, the settings and the tick
+rule (:class:`~tensegrity_stiffness.nodes.stiffness_controller.ControllerTicks`) are
+:mod:`tensegrity_stiffness.nodes.stiffness_controller`'s.
 """
 
 from __future__ import annotations
@@ -35,31 +36,31 @@ from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped, WrenchStam
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
-from tensegrity_stiffness.control.controller import (
-    ControlCommand,
-    ControlTarget,
-    StiffnessController,
-)
-from tensegrity_stiffness.geometry.validation import require_frame
+from tensegrity_stiffness.control.controller import ControlTarget
+from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
 from tensegrity_stiffness.mechanics.plausibility import (
     check_target_stiffness,
     check_translation,
     check_wrench,
 )
-from tensegrity_stiffness.nodes.control_processing import (
-    CONTROLLER_PARAMETERS,
-    REST_LENGTHS_LABEL,
-    ControllerSettings,
-    controller_settings,
-    stiffness_target,
-)
 from tensegrity_stiffness.nodes.layouts import (
-    CARTESIAN_STIFFNESS_COL_LABEL,
+    CONTROLLER_OUTPUT_TABLE,
     ESTIMATOR_OUTPUTS,
-    STIFFNESS_ROW_LABEL,
+    controller_output_layouts,
+)
+from tensegrity_stiffness.nodes.messages import multiarray
+from tensegrity_stiffness.nodes.stiffness_controller import (
+    CONTROLLER_PARAMETERS,
+    STAMP_WINDOW,
+    ControllerSettings,
+    ControllerTicks,
+    controller_settings,
+    new_controller,
+    stiffness_target,
 )
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
+from tensegrity_stiffness.ros.conversions.outputs import RCLPY_TYPES, output_topics
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
 from tensegrity_stiffness.ros.runtime.draining_subscription import SkippedCounts
@@ -72,13 +73,6 @@ from tensegrity_stiffness.ros.runtime.topics import LATCHED_QOS, create_output_p
 POSE_ESTIMATE, WRENCH_ESTIMATE = (f'~/{name}' for name in ESTIMATOR_OUTPUTS[:2])
 
 NODE_NAME = 'stiffness_controller'
-#: A reading's stamp counts into the latency only within this window of the node's clock (s):
-#: at most this far in the future (clock offsets between machines) and at most
-#: ``STAMP_WINDOW[1]`` in the past. A stamp outside it (1 s after the epoch, a day ahead) is
-#: counted on /diagnostics, the reading used (its arrival is what ages it).
-STAMP_WINDOW = (0.01, 10.0)
-#: Ticks over which /diagnostics reports the tick time and the latency (median, p99).
-STATISTICS_WINDOW = 2000
 #: The /diagnostics key of the readings whose stamp is outside :data:`STAMP_WINDOW`.
 STAMPS_KEY = (f'stamps outside -{STAMP_WINDOW[1]:g} s .. +{STAMP_WINDOW[0]:g} s of the clock '
               '(left out of the latency)')
@@ -98,41 +92,25 @@ class StiffnessControllerNode(Node):
         self.reporter = Reporter(self.get_logger(), context=self.context)
         # The tick (its own thread) against parameter changes and targets (the executor).
         self._lock = threading.Lock()
-        self._controller: StiffnessController | None = None
+        self._ticker: ControllerTicks | None = None
         self._binding = ParameterBinding(
             self, CONTROLLER_PARAMETERS, self._checked_settings, self._apply_parameters,
             lambda reason: self.reporter.warn('parameter change', reason))
         self._settings = self._binding.build(self._binding.values())
-        self._controller = self._new_controller(self._settings, None)
         if self._settings.start_warning:
             self.get_logger().warning(self._settings.start_warning)
-        self._stamps_out_of_window = 0
-        # (T, arrival time.monotonic, the reading's stamp ns, sequence number): one reference,
-        # replaced as a whole by the state's thread
-        self._pose: tuple[np.ndarray, float, int, int] | None = None
-        self._state_count = 0
-        self._commanded_state = 0  # the sequence number of the last state a command came from
-        self._tick_times: deque[float] = deque(maxlen=STATISTICS_WINDOW)
-        self._latencies: deque[float] = deque(maxlen=STATISTICS_WINDOW)
-        self._old_state_ticks = 0
-        self._wrench: np.ndarray | None = None
-        self._known_wrench: np.ndarray | None = None
-        self._target_pose: np.ndarray | None = None
-        self._target_stiffness: np.ndarray | None = None
-        self._last: ControlCommand | None = None
-        self._ticks = self._held = 0
-        self._tick_time = 0.0
-        self._state_age = float('nan')
-        self._hold_reason = 'no target yet'
+        values = self._settings.values
+        # the state, targets and counters of the ticks (the state replaced as a whole by the
+        # state's thread)
+        self._ticker = ControllerTicks(self._settings, new_controller(self._settings, None),
+                                       1.0 / values['control.rate'])
         self._commands = RateCounter()
         self.skipped = SkippedCounts()
-        values = self._settings.values
-        self._period = 1.0 / values['control.rate']
-        self._last_tick: float | None = None
-        self._pub_rest = create_output_publisher(self, Float64MultiArray, '~/rest_lengths',
-                                                 LATCHED_QOS)
-        self._pub_stiffness = create_output_publisher(self, Float64MultiArray,
-                                                      '~/predicted_stiffness', 10)
+        # one publisher per row of the output table: the commands latched
+        self._pub_rest, self._pub_stiffness = self._output_publishers = tuple(
+            create_output_publisher(self, msg_type, topic, qos) for (msg_type, topic), qos in zip(
+                output_topics(controller_output_layouts(self._settings.model.n_strings)),
+                (LATCHED_QOS, 10), strict=True))
         self._pub_diagnostics = create_output_publisher(self, DiagnosticArray, '/diagnostics',
                                                         10)
         qos = input_qos(values['qos.depth'], 'reliable')
@@ -147,7 +125,7 @@ class StiffnessControllerNode(Node):
                                            self._on_wrench_estimate, qos, self.skipped)
         self._lane.create_subscription(WrenchStamped, '~/external_wrench',
                                        self._on_external_wrench, qos, self.skipped)
-        self._publish_rest(self._controller.rest_lengths)
+        self._publish_output(0, self._ticker.controller)
         self.create_timer(values['diagnostics.period'], self._publish_diagnostics)
         self._loop = PacedLoop(values['control.rate'], self._tick,
                                lambda exc: self.reporter.internal_error('tick', exc),
@@ -163,23 +141,14 @@ class StiffnessControllerNode(Node):
         self._loop.stop()
         self._lane.stop()
 
-    def _new_controller(self, settings: ControllerSettings, rest: np.ndarray | None
-                        ) -> StiffnessController:
-        values = settings.values
-        start = settings.start if rest is None else rest
-        return StiffnessController(settings.model, settings.limits, start,
-                                   integral_gain=values['control.integral_gain'],
-                                   proportional_gain=values['control.proportional_gain'],
-                                   rest_length_offsets=settings.offsets)
-
     def _checked_settings(self, values: Mapping[str, Any]) -> ControllerSettings:
         """The settings of a parameter set, refused (ValueError) when a controller of them
         cannot take over from the present command (new offsets that make a true rest length
         <= 0): a change applies whole or not at all."""
         settings = controller_settings(values)
-        if self._controller is not None:
+        if self._ticker is not None:
             try:
-                self._new_controller(settings, self._controller.rest_lengths)
+                new_controller(settings, self._ticker.controller.rest_lengths)
             except ValueError as exc:
                 raise ValueError(f'from the present command: {exc}') from None
         return settings
@@ -190,8 +159,8 @@ class StiffnessControllerNode(Node):
         try:
             settings = self._binding.build(values)
             with self._lock:
-                present = self._controller.rest_lengths
-                self._controller = self._new_controller(settings, present)
+                present = self._ticker.controller.rest_lengths
+                self._ticker.reconfigure(settings, new_controller(settings, present))
                 self._settings = settings
         except Exception as exc:  # validated before: only a bug gets here
             self.reporter.internal_error('parameters', exc)
@@ -216,7 +185,7 @@ class StiffnessControllerNode(Node):
         except ValueError as exc:
             self.reporter.reject('~/target_pose', str(exc))
             return
-        self._target_pose = T
+        self._ticker.target_pose = T
 
     @guarded('~/target_stiffness')
     def _on_target_stiffness(self, msg: Float64MultiArray) -> None:
@@ -225,13 +194,15 @@ class StiffnessControllerNode(Node):
                 msg, max_length=self._settings.values['limits.max_array_length'])
             K = stiffness_target(values, tuple(d.size for d in msg.layout.dim))
             if K is not None:
-                load = self._known_wrench if self._wrench is None else self._wrench
+                ticker = self._ticker
+                load = ticker.known_wrench if ticker.wrench_estimate is None else \
+                    ticker.wrench_estimate
                 check_target_stiffness(self._settings.model, K, 'target_stiffness',
-                                       length_scale=self._controller.length_scale, wrench=load)
+                                       length_scale=ticker.controller.length_scale, wrench=load)
         except ValueError as exc:
             self.reporter.reject('~/target_stiffness', str(exc))
             return
-        self._target_stiffness = K
+        self._ticker.target_stiffness = K
 
     def take_state(self, T: np.ndarray, stamp_ns: int, wrench: np.ndarray | None = None
                    ) -> None:
@@ -244,10 +215,7 @@ class StiffnessControllerNode(Node):
         except ValueError as exc:
             self.reporter.reject(POSE_ESTIMATE, str(exc))
             return
-        self._state_count += 1
-        self._pose = (T, time.monotonic(), stamp_ns, self._state_count)
-        if wrench is not None:
-            self._wrench = wrench
+        self._ticker.take_state(T, time.monotonic(), stamp_ns, wrench)
 
     @guarded(POSE_ESTIMATE)
     def _on_pose_estimate(self, msg: PoseWithCovarianceStamped) -> None:
@@ -273,13 +241,13 @@ class StiffnessControllerNode(Node):
     def _on_wrench_estimate(self, msg: WrenchStamped) -> None:
         W = self._wrench_input(WRENCH_ESTIMATE, msg)
         if W is not None:
-            self._wrench = W
+            self._ticker.wrench_estimate = W
 
     @guarded('~/external_wrench')
     def _on_external_wrench(self, msg: WrenchStamped) -> None:
         W = self._wrench_input('~/external_wrench', msg)
         if W is not None:
-            self._known_wrench = W
+            self._ticker.known_wrench = W
 
     # ------------------------------------------------------------------ the tick
     def _tick(self, due: int = 1) -> None:
@@ -288,90 +256,57 @@ class StiffnessControllerNode(Node):
             self._tick_locked()
 
     def _tick_locked(self) -> None:
-        now = time.monotonic()
-        dt = self._period if self._last_tick is None else min(now - self._last_tick,
-                                                                 10 * self._period)
-        self._last_tick = now
-        if self._target_pose is None:
-            self._hold_reason = 'no target yet'
+        outcome = self._ticker.tick(time.monotonic(), self.get_clock().now().nanoseconds)
+        if outcome.error:
+            self.reporter.reject('tick', outcome.error)
             return
-        values = self._settings.values
-        pose = None
-        state = self._pose
-        if state is not None:
-            self._state_age = now - state[1]
-            if self._state_age <= values['control.max_state_age']:
-                pose = state[0]
-        if pose is None:
-            self._held += 1
-            self._hold_reason = (f'no pose estimate within control.max_state_age = '
-                                 f'{values["control.max_state_age"]:g} s: last command held')
+        cmd = outcome.command
+        if cmd is None:
             return
-        load = self._known_wrench
-        if values['control.use_wrench_estimate'] and self._wrench is not None:
-            load = self._wrench
-        try:
-            target = ControlTarget(pose=self._target_pose,
-                                   cartesian_stiffness=self._target_stiffness)
-            start = time.perf_counter()
-            cmd = self._controller.update(dt, target, pose=pose, external_wrench=load)
-            self._tick_time = time.perf_counter() - start
-            self._tick_times.append(self._tick_time)
-        except ValueError as exc:
-            self.reporter.reject('tick', str(exc))
-            return
-        self._ticks += 1
-        self._hold_reason = ''
-        self._last = cmd
-        if self._state_age > self._period:
-            self._old_state_ticks += 1
         if cmd.feasible:
-            self._publish_rest(cmd.rest_lengths)
+            self._publish_output(0, cmd)
             self._commands.record()
-            # the latency of a reading: to the first command computed from it
-            if state[2] and state[3] != self._commanded_state:
-                latency = 1e-9 * (self.get_clock().now().nanoseconds - state[2])
-                if -STAMP_WINDOW[0] <= latency <= STAMP_WINDOW[1]:
-                    self._latencies.append(latency)
-                else:
-                    self._stamps_out_of_window += 1
-            self._commanded_state = state[3]
             if self._pub_stiffness.get_subscription_count():
-                self._pub_stiffness.publish(conversions.matrix_to_multiarray(
-                    cmd.predicted_cartesian_stiffness, STIFFNESS_ROW_LABEL,
-                    CARTESIAN_STIFFNESS_COL_LABEL))
+                self._publish_output(1, cmd)
         else:
             self.reporter.warn('target', cmd.message)
 
-    def _publish_rest(self, rest: np.ndarray) -> None:
-        self._pub_rest.publish(conversions.vector_to_multiarray(rest, REST_LENGTHS_LABEL))
+    def _publish_output(self, k: int, source: Any) -> None:
+        """Publish output ``k`` of the output table (its row's value of ``source``: a command,
+        or the controller's first one) in the row's layout; ValueError when not finite."""
+        row = CONTROLLER_OUTPUT_TABLE[k]
+        values = np.asarray(row.of(source), dtype=np.float64)
+        require_all_finite((row.name,), (values,))
+        self._output_publishers[k].publish(multiarray(row.layout(values.shape[0]).dims,
+                                               values.ravel(), RCLPY_TYPES))
 
     @guarded('/diagnostics')
     def _publish_diagnostics(self) -> None:
-        cmd = self._last
+        ticker = self._ticker
+        cmd = ticker.last
         values: list[tuple[str, Any]] = [
             *self._loop.statistics(), ('command rate [Hz]', self._commands.rate()),
-            ('commands computed', self._ticks), ('held ticks (stale state)', self._held),
-            ('tick time [ms]', 1e3 * self._tick_time),
-            *_statistics('tick time', self._tick_times),
-            *_statistics('latency from the reading', self._latencies),
-            (STAMPS_KEY, self._stamps_out_of_window),
-            ('ticks on a state older than one period', self._old_state_ticks),
-            ('age of the state used [s]', self._state_age),
+            ('commands computed', ticker.ticks), ('held ticks (stale state)', ticker.held),
+            ('tick time [ms]', 1e3 * ticker.tick_time),
+            *_statistics('tick time', ticker.tick_times),
+            *_statistics('latency from the reading', ticker.latencies),
+            (STAMPS_KEY, ticker.stamps_out_of_window),
+            ('ticks on a state older than one period', ticker.old_state_ticks),
+            ('age of the state used [s]', ticker.state_age),
             (self.SKIPPED_KEY, self.skipped.counts() or 0),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0)]
-        level, message = 'WARN', self._hold_reason or 'no command yet'
+        level, message = 'WARN', ticker.hold_reason or 'no command yet'
         if cmd is not None:
             margins = np.minimum(cmd.tensions - self._settings.limits.tension_min,
                                  self._settings.limits.tension_max - cmd.tensions)
             values += [('feasible', cmd.feasible),
-                       ('stiffness target', 'none' if self._target_stiffness is None
+                       ('stiffness target', 'none' if ticker.target_stiffness is None
                         else 'set'), ('stiffness error', cmd.stiffness_error),
                        ('saturated strings', int(cmd.saturated.sum())),
                        ('smallest tension margin [N]', float(np.min(margins))),
                        ('pose error [m, rad]', cmd.pose_error.tolist())]
-            level = 'OK' if cmd.feasible and not self._hold_reason else 'WARN'
-            message = self._hold_reason or cmd.message
+            level = 'OK' if cmd.feasible and not ticker.hold_reason else 'WARN'
+            message = ticker.hold_reason or cmd.message
         name = f'{self.get_fully_qualified_name()}: controller'
         self._pub_diagnostics.publish(conversions.diagnostic_array(
             [conversions.diagnostic_status(name, level, message, values,

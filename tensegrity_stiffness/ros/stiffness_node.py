@@ -1,10 +1,10 @@
 """``stiffness_node``: real-time wrench and stiffness of a tensegrity joint over ROS 2.
 
 Thin layer: validate, convert with :mod:`tensegrity_stiffness.ros.conversions`, call the library
-(:mod:`tensegrity_stiffness.nodes.processing`), publish. Topics, services, parameters and QoS are
-documented in docs/nodes.md; the conventions (frames, orderings, signs) in
+(:mod:`tensegrity_stiffness.nodes.stiffness_node`), publish. Topics, services, parameters and
+QoS are documented in docs/nodes.md; the conventions (frames, orderings, signs) in
 :mod:`tensegrity_stiffness.mechanics.joint`; the parameters in
-:mod:`tensegrity_stiffness.nodes.parameters`.
+:mod:`tensegrity_stiffness.nodes.stiffness_node`.
 
 Built on :class:`.StreamingNode` (:mod:`.node_base`: concurrency, the settings swap, the
 publication under one lock); ``~/screw`` and ``~/pose`` are its streamed inputs, the equilibrium
@@ -31,15 +31,13 @@ from tensegrity_stiffness.mechanics.joint import JointState
 from tensegrity_stiffness.nodes.health import joint_health
 from tensegrity_stiffness.nodes.layouts import joint_output_layouts
 from tensegrity_stiffness.nodes.messages import stamp_is_set
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
+from tensegrity_stiffness.nodes.stiffness_node import (
     STIFFNESS_NODE_PARAMETERS,
     JointNodeSettings,
-    ParameterSpec,
-    joint_node_settings,
-)
-from tensegrity_stiffness.nodes.processing import (
     JointOutputs,
     frequency_report,
+    joint_node_settings,
     joint_outputs,
     pose_input,
     screw_input,

@@ -25,7 +25,7 @@ from tensegrity_stiffness.cli.common import jsonable
 from tensegrity_stiffness.mechanics.templates import pose_vector
 from tensegrity_stiffness.nodes import structure_node as processing
 from tensegrity_stiffness.nodes.messages import stamp_is_set
-from tensegrity_stiffness.nodes.parameters import ParameterSpec
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.structure_node import (
     NODE_NAME,
     STRUCTURE_NODE_PARAMETERS,

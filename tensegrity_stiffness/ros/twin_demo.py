@@ -30,17 +30,20 @@ from typing import Any
 import numpy as np
 import rclpy
 from geometry_msgs.msg import PoseArray, PoseStamped, WrenchStamped
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.nodes.messages import stamp_nanoseconds
-from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros import control_demo, conversions
+from tensegrity_stiffness.ros.demo_processes import (
+    NAMESPACE,
+    BackgroundSpin,
+    node_executable,
+    stop_process,
+)
 from tensegrity_stiffness.ros.runtime.draining_subscription import create_draining_subscription
 from tensegrity_stiffness.ros.runtime.topics import output_qos
 
-PACKAGE = 'tensegrity_stiffness'
-NAMESPACE = '/twin'
 #: Default swinging load: amplitude (N) and period (s) for the joint and the spine.
 JOINT_SWING = (0.1, 10.0)
 SPINE_SWING = (0.01, 10.0)
@@ -53,18 +56,6 @@ SPINE_PUBLISH_EVERY = 5
 JOINT_PUBLISH_EVERY = 5
 #: The live line calls the node behind when it answers less than this share of its inputs.
 ANSWERED_SHARE_BEHIND = 0.95
-#: Seconds a node gets to stop after SIGINT before it is killed.
-STOP_TIMEOUT_S = 10.0
-
-
-def node_executable(name: str) -> str:
-    """The installed executable ``name`` of the package (where ``ros2 run`` looks)."""
-    from ament_index_python.packages import get_package_prefix
-
-    path = Path(get_package_prefix(PACKAGE)) / 'lib' / PACKAGE / name
-    if not os.access(path, os.X_OK):
-        raise SystemExit(f'twin_demo: {path} is not an executable (run scripts/setup_env.sh)')
-    return str(path)
 
 
 def subscribe(node: Any, msg_type: Any, topic: str, callback: Any, qos: Any) -> Any:
@@ -190,18 +181,6 @@ def summary_line(elapsed: float, input_rate: float, pose: np.ndarray | None,
     return '  '.join(parts)
 
 
-def stop_process(process: subprocess.Popen) -> int:
-    """SIGINT, then a wait (killed after :data:`STOP_TIMEOUT_S`); the exit status."""
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait(STOP_TIMEOUT_S)
-    return process.returncode
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The demo's command line."""
     parser = argparse.ArgumentParser(
@@ -308,8 +287,6 @@ def main(argv: list[str] | None = None) -> int:
     own, extra = split_node_arguments(list(sys.argv[1:] if argv is None else argv))
     args = parser.parse_args(own)
     if args.control:
-        from tensegrity_stiffness.ros import control_demo
-
         if args.spine:
             parser.error('--control drives the joint (the spine controller is library-only)')
         if args.config is not None and not Path(args.config).is_file():
@@ -367,34 +344,6 @@ def run_demo(setup: DemoSetup) -> int:
     print(f'twin_demo: stopped ({stiffness} exit {codes[0]}, sim_node exit {codes[1]})',
           flush=True)
     return code or int(any(codes))
-
-
-class BackgroundSpin:
-    """A demo's monitor node spun on a thread of its own until ``stop`` is set; :meth:`close`
-    ends the thread, the executor, the node and rclpy."""
-
-    def __init__(self, node: Any, stop: threading.Event) -> None:
-        self.node = node
-        self.executor = SingleThreadedExecutor()
-        self.executor.add_node(node)
-        self.thread = threading.Thread(target=spin_until_stopped, args=(self.executor, stop),
-                                       daemon=True)
-        self.thread.start()
-
-    def close(self) -> None:
-        self.thread.join(timeout=2.0)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown()
-
-
-def spin_until_stopped(executor: SingleThreadedExecutor, stop: threading.Event) -> None:
-    """Spin ``executor`` until ``stop`` is set or the context shuts down."""
-    try:
-        while not stop.is_set():
-            executor.spin_once(timeout_sec=0.1)
-    except (ExternalShutdownException, Exception):
-        pass
 
 
 if __name__ == '__main__':

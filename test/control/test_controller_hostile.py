@@ -12,7 +12,7 @@ from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics.design import DEFAULT_TENSION_MAX, DEFAULT_TENSION_MIN
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.mechanics.plausibility import check_target_stiffness
-from tensegrity_stiffness.nodes.control_processing import (
+from tensegrity_stiffness.nodes.stiffness_controller import (
     CONTROLLER_PARAMETERS,
     PRETENSION_RANGE,
     controller_settings,

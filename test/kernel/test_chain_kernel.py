@@ -20,7 +20,7 @@ from support import REPO
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
-from tensegrity_stiffness.nodes.spine_processing import spine_outputs
+from tensegrity_stiffness.nodes.spine_node import spine_outputs
 
 REPO = REPO
 GRAVITY = np.array([0.0, -9.81, 0.0])

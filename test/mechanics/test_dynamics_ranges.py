@@ -11,7 +11,7 @@ from support import REPO
 from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes.layouts import NATURAL_FREQUENCIES_LABEL
-from tensegrity_stiffness.nodes.processing import frequency_report
+from tensegrity_stiffness.nodes.stiffness_node import frequency_report
 
 CONFIG = REPO / 'config' / 'default_joint.yaml'
 

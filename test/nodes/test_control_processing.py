@@ -11,7 +11,7 @@ from support import JOINT_CONFIG
 
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes import parameters
-from tensegrity_stiffness.nodes.control_processing import (
+from tensegrity_stiffness.nodes.stiffness_controller import (
     CONTROLLER_PARAMETERS,
     DEFAULT_RANGE,
     controller_settings,

@@ -23,7 +23,7 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     measured_array,
     measurements,
 )
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATOR_NODE_PARAMETERS,
     estimator_node_settings,
 )
@@ -175,7 +175,7 @@ def test_spine_settings_and_outputs():
     """spine_estimator_node's settings (no IMU trigger) and one estimate of a 3-joint spine's
     tensions, split per joint from the joint-major array."""
     from tensegrity_stiffness.nodes.estimation_processing import spine_estimator_outputs
-    from tensegrity_stiffness.nodes.parameters import (
+    from tensegrity_stiffness.nodes.spine_estimator_node import (
         spine_estimator_node_parameters,
         spine_estimator_node_settings,
     )

@@ -12,7 +12,7 @@ import sys
 from support import REPO
 
 from tensegrity_stiffness.nodes import parameter_docs, parameters
-from tensegrity_stiffness.nodes.parameters import NodeTable, ParameterSpec
+from tensegrity_stiffness.nodes.parameter_specs import NodeTable, ParameterSpec
 
 REPO = REPO
 PAGE = REPO / 'docs' / 'parameters.md'

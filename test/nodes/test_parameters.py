@@ -13,11 +13,11 @@ from support import REPO
 from tensegrity_stiffness import config
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes import parameters
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
+from tensegrity_stiffness.nodes.registry import values_from_config
+from tensegrity_stiffness.nodes.stiffness_node import (
     STIFFNESS_NODE_PARAMETERS,
-    ParameterSpec,
     joint_node_settings,
-    values_from_config,
 )
 
 REPO = REPO
@@ -150,7 +150,7 @@ def test_every_packaged_config_is_strictly_sound():
     from pathlib import Path
 
     from tensegrity_stiffness import config
-    from tensegrity_stiffness.nodes.parameters import node_tables
+    from tensegrity_stiffness.nodes.registry import node_tables
     from tensegrity_stiffness.structures.schema import is_structure_document
 
     root = Path(__file__).resolve().parents[2] / 'config'
@@ -177,12 +177,10 @@ def test_unknown_parameters_under_a_nodes_own_sections_are_named_with_the_neares
     """Misspelt names under the node's own sections are named with the nearest parameter (a
     spine's joint_<i> overrides for any i); another node's parameters (a shared file), names
     outside the node's sections and names without a section are no mistake."""
-    from tensegrity_stiffness.nodes.parameters import (
-        BRIDGE_PARAMETERS,
-        STIFFNESS_NODE_PARAMETERS,
-        spine_node_parameters,
-        unknown_parameter_messages,
-    )
+    from tensegrity_stiffness.nodes.registry import unknown_parameter_messages
+    from tensegrity_stiffness.nodes.spine_node import spine_node_parameters
+    from tensegrity_stiffness.nodes.stiffness_bridge import BRIDGE_PARAMETERS
+    from tensegrity_stiffness.nodes.stiffness_node import STIFFNESS_NODE_PARAMETERS
 
     given = ['joint.stifness', 'joint.stiffness', 'limits.max_force', 'use_sim_time',
              'qos_overrides./x.publisher.depth', 'other_package.anything', 'planar.LL',

@@ -15,7 +15,7 @@ from support import REPO
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium
 from tensegrity_stiffness.nodes import parameters as params
-from tensegrity_stiffness.nodes.spine_processing import (
+from tensegrity_stiffness.nodes.spine_node import (
     joint_health_in_chain,
     poses_input,
     rest_lengths_input,
@@ -212,7 +212,7 @@ def test_service_job_and_response(settings, loaded):
 def test_require_finite_names_the_output(settings, loaded):
     from dataclasses import replace
 
-    from tensegrity_stiffness.nodes.spine_processing import require_finite
+    from tensegrity_stiffness.nodes.spine_node import require_finite
 
     out = spine_outputs(settings.chain, loaded.screws)
     require_finite(out)

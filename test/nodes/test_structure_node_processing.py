@@ -9,7 +9,7 @@ import pytest
 
 from tensegrity_stiffness.mechanics.templates import pose_vector
 from tensegrity_stiffness.nodes import structure_node as sn
-from tensegrity_stiffness.nodes.parameters import defaults
+from tensegrity_stiffness.nodes.parameter_specs import defaults
 from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
 from tensegrity_stiffness.structures.structure import twist_exp
 

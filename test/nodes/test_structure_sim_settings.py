@@ -7,7 +7,7 @@ import pytest
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.nodes.parameter_docs import node_usage
-from tensegrity_stiffness.nodes.parameters import defaults
+from tensegrity_stiffness.nodes.parameter_specs import defaults
 from tensegrity_stiffness.nodes.structure_sim_node import (
     STRUCTURE_SIM_PARAMETERS,
     live_line,

@@ -346,22 +346,10 @@ def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
     return circles
 
 
-#: TEMPORARY: circles that another branch of this wave removes (h-nodes, #40 items 1-2): the
-#: registry of ``nodes/parameters.py``, which imports the nodes' tables whose modules import it
-#: (``control_processing``, the structure nodes, ``estimation_processing``): any circle inside
-#: ``nodes/``; and ``ros/control_demo.py`` with ``ros/twin_demo.py``. The lead deletes this
-#: allowance when the branches are merged.
-CIRCLES_REMOVED_ELSEWHERE = (
-    lambda circle: all(m.startswith(T + 'nodes.') for m in circle),
-    lambda circle: set(circle) <= {T + 'ros.control_demo', T + 'ros.twin_demo'},
-)
-
-
 def test_no_import_circle() -> None:
     """No module imports itself through others, deferred (function-level) imports counted:
     every import of the package is a path down the layers or within one, never back."""
-    circles = [c for c in import_circles(import_graph())
-               if not any(allowed(c) for allowed in CIRCLES_REMOVED_ELSEWHERE)]
+    circles = import_circles(import_graph())
     assert not circles, 'import circles:\n' + '\n'.join(' <-> '.join(c) for c in circles)
 
 

@@ -18,7 +18,7 @@ import pytest
 from support import REPO
 
 from tensegrity_stiffness.nodes.parameter_docs import asks_for_help, node_usage
-from tensegrity_stiffness.nodes.parameters import node_tables
+from tensegrity_stiffness.nodes.registry import node_tables
 
 PACKAGE = 'tensegrity_stiffness'
 #: A domain id rcl refuses: any rclpy.init fails on it (importing rclpy does not).

@@ -243,7 +243,7 @@ def test_bridge_launch_file_names_the_executable_and_its_arguments(prefix: Path)
     knows, every argument the per-preset files and docs/controllers.md use."""
     import ast
 
-    from tensegrity_stiffness.nodes.parameters import BRIDGE_PRESETS
+    from tensegrity_stiffness.nodes.stiffness_bridge import BRIDGE_PRESETS
 
     source, tree, constants = _launch_tree(prefix, 'stiffness_bridge.launch.py')
     assert constants['PACKAGE'] == PACKAGE
@@ -259,7 +259,7 @@ def test_bridge_launch_file_names_the_executable_and_its_arguments(prefix: Path)
 
 def _bridge_presets() -> list[str]:
     try:
-        from tensegrity_stiffness.nodes.parameters import BRIDGE_PRESETS
+        from tensegrity_stiffness.nodes.stiffness_bridge import BRIDGE_PRESETS
     except ImportError:  # outside the set-up environment: the tests below skip anyway
         return []
     return sorted(BRIDGE_PRESETS)

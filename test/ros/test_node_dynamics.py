@@ -67,7 +67,7 @@ def test_natural_frequencies_are_the_library_s_modes_at_each_input() -> None:
 
 def test_dynamics_are_built_only_when_enabled() -> None:
     """The node creates ``~/natural_frequencies`` only for settings with dynamics."""
-    from tensegrity_stiffness.nodes.parameters import (
+    from tensegrity_stiffness.nodes.stiffness_node import (
         STIFFNESS_NODE_PARAMETERS,
         joint_node_settings,
     )

@@ -13,7 +13,7 @@ pytestmark = pytest.mark.ros
 from rclpy.context import Context  # noqa: E402
 from rclpy.parameter import Parameter  # noqa: E402
 
-from tensegrity_stiffness.nodes.parameters import STIFFNESS_NODE_PARAMETERS  # noqa: E402
+from tensegrity_stiffness.nodes.stiffness_node import STIFFNESS_NODE_PARAMETERS  # noqa: E402
 from tensegrity_stiffness.ros.stiffness_node import StiffnessNode  # noqa: E402
 
 

@@ -8,10 +8,10 @@ import pytest
 from support import REPO
 
 from tensegrity_stiffness.mechanics.joint import JointModel
-from tensegrity_stiffness.nodes.parameters import (
+from tensegrity_stiffness.nodes.shared_parameters import rest_length_offsets
+from tensegrity_stiffness.nodes.stiffness_node import (
     STIFFNESS_NODE_PARAMETERS,
     joint_node_settings,
-    rest_length_offsets,
 )
 
 CONFIG = REPO / 'config' / 'default_joint.yaml'

@@ -45,7 +45,7 @@ from tensegrity_stiffness.nodes.layouts import (  # noqa: E402
     TIP_STIFFNESS_LABELS,
     WRENCH_LABEL,
 )
-from tensegrity_stiffness.nodes.spine_processing import (  # noqa: E402
+from tensegrity_stiffness.nodes.spine_node import (  # noqa: E402
     poses_input,
     rest_lengths_input,
     screws_input,

@@ -22,7 +22,7 @@ from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.interpretation import principal_stiffnesses
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes.layouts import STIFFNESS_EIGENVALUES_LABEL
-from tensegrity_stiffness.nodes.spine_processing import spine_outputs
+from tensegrity_stiffness.nodes.spine_node import spine_outputs
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

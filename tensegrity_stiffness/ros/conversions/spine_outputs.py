@@ -5,9 +5,9 @@
 One preallocated message per topic, its layout labelled once from
 :func:`tensegrity_stiffness.nodes.layouts.spine_output_layouts`; per input only the data and the
 headers are refilled, after one finite check of every output
-(:func:`spine_processing.require_finite`: ValueError naming the output, and nothing is
-published). The messages are :class:`tensegrity_stiffness.nodes.messages.SpineOutputMessages` with
-rclpy's classes.
+(:func:`tensegrity_stiffness.nodes.spine_node.require_finite`: ValueError naming the output,
+and nothing is published). The messages are
+:class:`tensegrity_stiffness.nodes.messages.SpineOutputMessages` with rclpy's classes.
 """
 
 from __future__ import annotations

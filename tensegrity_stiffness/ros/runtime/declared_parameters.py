@@ -1,7 +1,6 @@
-"""Declare a node's parameters from the table of :mod:`tensegrity_stiffness.nodes.parameters` and
-keep
-its settings in step with them: a change is validated as a whole before it is accepted, and the
-settings are rebuilt and swapped as one object after it."""
+"""Declare a node's parameters from its table (:mod:`tensegrity_stiffness.nodes.parameter_specs`)
+and keep its settings in step with them: a change is validated as a whole before it is
+accepted, and the settings are rebuilt and swapped as one object after it."""
 
 from __future__ import annotations
 
@@ -20,11 +19,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from tensegrity_stiffness.mechanics.unloaded import InitialScrewWarning
-from tensegrity_stiffness.nodes.parameters import (
-    STRICT_PARAMETERS,
-    ParameterSpec,
-    refuse_unknown_parameters,
-)
+from tensegrity_stiffness.nodes.parameter_specs import STRICT_PARAMETERS, ParameterSpec
+from tensegrity_stiffness.nodes.registry import refuse_unknown_parameters
 from tensegrity_stiffness.ros.runtime.rclpy_internals import parameter_override_names
 
 _ROS_TYPES = {

@@ -31,7 +31,7 @@ from visualization_msgs.msg import MarkerArray
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.interpretation import principal_stiffnesses
 from tensegrity_stiffness.nodes.layouts import STIFFNESS_EIGENVALUES_LABEL
-from tensegrity_stiffness.nodes.parameters import ParameterSpec
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.runtime.declared_parameters import ParameterBinding
 from tensegrity_stiffness.ros.runtime.draining_subscription import (
@@ -54,7 +54,7 @@ from tensegrity_stiffness.ros.runtime.worker_calls import (
     WorkerCalls,
     answer_worker_failure,
 )
-from tensegrity_stiffness.ros.services.joint_services import fail
+from tensegrity_stiffness.ros.services.responses import fail
 
 #: A streamed input: message type, topic, handler (called on the fast lane's thread or by the
 #: executor).

@@ -9,8 +9,8 @@ from typing import Any
 
 from std_msgs.msg import Float64MultiArray
 
-from tensegrity_stiffness.nodes.parameters import rest_length_offsets
-from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input
+from tensegrity_stiffness.nodes.shared_parameters import rest_length_offsets
+from tensegrity_stiffness.nodes.spine_node import rest_lengths_input
 from tensegrity_stiffness.ros import conversions
 
 

@@ -1,2 +1,3 @@
 """The services' request handling: :mod:`.joint_services` (stiffness_node: equilibrium, design,
-planar kinematics) and :mod:`.spine_services` (spine_node: the chain equilibrium)."""
+planar kinematics), :mod:`.spine_services` (spine_node: the chain equilibrium) and what they
+share (:mod:`.responses`)."""

@@ -31,8 +31,9 @@ from tensegrity_stiffness.mechanics.plausibility import (
     check_screw,
     check_wrench,
 )
-from tensegrity_stiffness.nodes.parameters import JointNodeSettings
+from tensegrity_stiffness.nodes.stiffness_node import JointNodeSettings
 from tensegrity_stiffness.ros import conversions
+from tensegrity_stiffness.ros.services.responses import fail
 
 FloatArray = NDArray[np.float64]
 
@@ -189,13 +190,6 @@ def fill_design(response: Any, result: DesignResult) -> Any:
     """Fill a ``DesignRestLengths`` response from a design result."""
     for name, value in design_response_fields(result).items():
         setattr(response, name, value)
-    return response
-
-
-def fail(response: Any, message: str) -> Any:
-    """``success: false`` with ``message``."""
-    response.success = False
-    response.message = message
     return response
 
 

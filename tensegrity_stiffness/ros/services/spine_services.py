@@ -16,10 +16,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness.mechanics.chain import ChainEquilibriumResult
-from tensegrity_stiffness.nodes.parameters import SpineNodeSettings
-from tensegrity_stiffness.nodes.spine_processing import rest_lengths_input, screws_input
+from tensegrity_stiffness.nodes.spine_node import (
+    SpineNodeSettings,
+    rest_lengths_input,
+    screws_input,
+)
 from tensegrity_stiffness.ros import conversions
-from tensegrity_stiffness.ros.services.joint_services import fail
+from tensegrity_stiffness.ros.services.responses import fail
 
 FloatArray = NDArray[np.float64]
 
