@@ -4,7 +4,7 @@
 Run by hand after ``source scripts/env.sh`` (uses the environment's ROS_DOMAIN_ID):
 
     python bench/bench_loop.py [--seconds 20] [--repeats 2] [--rate 500] [--publish-every 1]
-                               [--method filter]
+                               [--method filter] [--kinds three,one]
 
 Each repeat runs, alternately, the three-process loop (``sim_node`` -> ``estimator_node`` (12
 load cells + IMU) -> ``stiffness_controller`` -> ``sim_node``) and the one-process loop
@@ -52,6 +52,8 @@ from tensegrity_stiffness.ros.control_demo import (  # noqa: E402
     targets,
 )
 
+#: ``--kinds``' names of the two loops.
+KINDS = {'three': 'three processes', 'one': 'one process'}
 PHASES = ('hold', 'pose step', 'stiffness step', 'load swing')
 CONTROLLER_KEYS = (('tick rate [Hz]', 'asked'), ('achieved tick rate [Hz]', 'achieved'),
                    ('command rate [Hz]', 'commands'), ('missed ticks', 'missed'),
@@ -162,10 +164,13 @@ def main() -> None:
     parser.add_argument('--rate', type=float, default=500.0)
     parser.add_argument('--publish-every', type=int, default=1)
     parser.add_argument('--method', default='filter', choices=('filter', 'static'))
+    parser.add_argument('--kinds', default='three,one',
+                        help='which loops, comma-separated: three (processes), one (process)')
     args = parser.parse_args()
+    kinds = [KINDS[k.strip()] for k in args.kinds.split(',')]
     print(f'start: {uptime()}')
     for _ in range(args.repeats):
-        for kind in ('three processes', 'one process'):
+        for kind in kinds:
             run(kind, args.seconds, args.rate, args.publish_every, args.method)
     print(f'end: {uptime()}')
 
