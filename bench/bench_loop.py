@@ -14,7 +14,9 @@ a pose step, a stiffness step (the design at tensions in [0.5, 1.5] N), a load s
 nodes' ``/diagnostics``: the controller's tick rate asked and achieved, its command rate and
 missed ticks, the latency from a reading to the first command computed from it (median, p99 of
 its last 2000 ticks), ticks held on a stale state; the estimator's input rate, the readings it
-passed over for newer ones and its consistent share; the twin's achieved step rate. With
+passed over for newer ones and its consistent share; the twin's achieved step rate; the CPU time
+of the estimator's process per estimate over the phase (``cpu/est``, ms, from ``/proc``; with
+the controller's in the one process): the figure the machine's load moves least. With
 ``--publish-every 1`` the twin publishes both inputs (load cells, IMU) at 1 kHz. Goals: commands
 at >= 95 % of ``control.rate``, latency median <= 3 ms and p99 <= 10 ms (three processes),
 median <= 1.5 ms (one process). Numbers only, no assertions; ``uptime`` first and last.
@@ -91,6 +93,13 @@ def start(kind: str, ns: str, rate: float, publish_every: int, method: str) -> l
     return procs
 
 
+def process_cpu_s(pid: int) -> float:
+    """User and system CPU time of process ``pid`` and its threads (s, /proc/<pid>/stat)."""
+    with open(f'/proc/{pid}/stat') as f:
+        fields = f.read().rpartition(')')[2].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
 def newest(diagnostics, suffix: str) -> dict[str, str]:
     for array in reversed(diagnostics.messages):
         for status in array.status:
@@ -120,6 +129,8 @@ def run(kind: str, seconds: float, rate: float, publish_every: int, method: str)
             time.sleep(0.2)
         print(f'{kind} ({method}, control.rate {rate:g} Hz, readings at '
               f'{1000 / publish_every:g} Hz, {uptime()}):')
+        estimator_pid = procs[1].pid
+        last_cpu, last_count = process_cpu_s(estimator_pid), None
         start_t = time.monotonic()
         per_phase = seconds / len(PHASES)
         for i, phase in enumerate(PHASES):
@@ -142,6 +153,12 @@ def run(kind: str, seconds: float, rate: float, publish_every: int, method: str)
             cells = [f'{label} {c.get(key, "-")}' for key, label in CONTROLLER_KEYS]
             cells += [f'{label} {e.get(key, "-")}' for key, label in ESTIMATOR_KEYS]
             cells.append(f'twin {s.get("achieved step rate [Hz]", "-")} Hz')
+            # CPU time of the estimator's process per estimate over the phase (with the
+            # controller's for one process): a figure the machine's load hardly moves
+            cpu, count = process_cpu_s(estimator_pid), int(e.get('estimates', 0))
+            if last_count is not None and count > last_count:
+                cells.append(f'cpu/est[ms] {1e3 * (cpu - last_cpu) / (count - last_count)}')
+            last_cpu, last_count = cpu, count
             print(f'  {phase:<15} ' + '  '.join(_short(x) for x in cells), flush=True)
     finally:
         ros.close()
