@@ -17,9 +17,9 @@ its last 2000 ticks), ticks held on a stale state; the estimator's input rate, t
 passed over for newer ones and its consistent share; the twin's achieved step rate; the CPU time
 of the estimator's process per estimate from the end of the hold (``cpu/est``, ms, from
 ``/proc``; with the controller's in the one process): the figure the machine's load moves
-least. With ``--publish-every 1`` the twin publishes both inputs (load cells, IMU) at 1 kHz. Goals: commands
-at >= 95 % of ``control.rate``, latency median <= 3 ms and p99 <= 10 ms (three processes),
-median <= 1.5 ms (one process). Numbers only, no assertions; ``uptime`` first and last.
+least. With ``--publish-every 1`` the twin publishes both inputs (load cells, IMU) at 1 kHz.
+Goals: commands at >= 95 % of ``control.rate``, latency median <= 3 ms and p99 <= 10 ms (three
+processes), median <= 1.5 ms (one process). Numbers only, no assertions; ``uptime`` first and last.
 """
 
 from __future__ import annotations
