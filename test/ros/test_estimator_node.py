@@ -218,12 +218,20 @@ def test_parameters_and_diagnostics(loop) -> None:
     count = len(loop['pose'])
     loop['pose'].wait_for(count + 20, timeout=10.0)
     status = loop['diagnostics'].wait_until(
-        lambda m: any(s.name == f"{loop['est_base']}: estimator" and s.level == b'\x00'
-                      for s in m.status), timeout=5.0)  # the name carries the namespace
+        lambda m: any(s.name.endswith('estimator_node: estimator') and s.level == b'\x00'
+                      for s in m.status), timeout=5.0)
     values = {kv.key: kv.value for s in status.status for kv in s.values}
     assert values['inputs used'] == 'measured_tensions, imu'
     assert float(values['rank']) == 6 and 'chi2/dof' in values and 'age of imu [ms]' in values
 
+
+
+def test_the_diagnostics_status_is_named_with_the_namespace(loop) -> None:
+    """``<namespace>/estimator_node: estimator``: two estimators in two namespaces report
+    apart (as stiffness_node's ``<namespace>/stiffness_node: joint``)."""
+    name = f"{loop['est_base']}: estimator"
+    loop['diagnostics'].wait_until(lambda m: any(s.name == name for s in m.status),
+                                   timeout=10.0)
 
 
 def test_the_stamped_cartesian_stiffness_is_the_estimates(loop) -> None:
