@@ -4,7 +4,7 @@
 Run by hand after ``source scripts/env.sh`` (uses the environment's ROS_DOMAIN_ID):
 
     python bench/bench_loop.py [--seconds 20] [--repeats 2] [--rate 500] [--publish-every 1]
-                               [--method filter]
+                               [--method filter] [--kinds three,one]
 
 Each repeat runs, alternately, the three-process loop (``sim_node`` -> ``estimator_node`` (12
 load cells + IMU) -> ``stiffness_controller`` -> ``sim_node``) and the one-process loop
@@ -14,10 +14,12 @@ a pose step, a stiffness step (the design at tensions in [0.5, 1.5] N), a load s
 nodes' ``/diagnostics``: the controller's tick rate asked and achieved, its command rate and
 missed ticks, the latency from a reading to the first command computed from it (median, p99 of
 its last 2000 ticks), ticks held on a stale state; the estimator's input rate, the readings it
-passed over for newer ones and its consistent share; the twin's achieved step rate. With
-``--publish-every 1`` the twin publishes both inputs (load cells, IMU) at 1 kHz. Goals: commands
-at >= 95 % of ``control.rate``, latency median <= 3 ms and p99 <= 10 ms (three processes),
-median <= 1.5 ms (one process). Numbers only, no assertions; ``uptime`` first and last.
+passed over for newer ones and its consistent share; the twin's achieved step rate; the CPU time
+of the estimator's process per estimate from the end of the hold (``cpu/est``, ms, from
+``/proc``; with the controller's in the one process): the figure the machine's load moves
+least. With ``--publish-every 1`` the twin publishes both inputs (load cells, IMU) at 1 kHz.
+Goals: commands at >= 95 % of ``control.rate``, latency median <= 3 ms and p99 <= 10 ms (three
+processes), median <= 1.5 ms (one process). Numbers only, no assertions; ``uptime`` first and last.
 """
 
 from __future__ import annotations
@@ -52,6 +54,8 @@ from tensegrity_stiffness.ros.control_demo import (  # noqa: E402
     targets,
 )
 
+#: ``--kinds``' names of the two loops.
+KINDS = {'three': 'three processes', 'one': 'one process'}
 PHASES = ('hold', 'pose step', 'stiffness step', 'load swing')
 CONTROLLER_KEYS = (('tick rate [Hz]', 'asked'), ('achieved tick rate [Hz]', 'achieved'),
                    ('command rate [Hz]', 'commands'), ('missed ticks', 'missed'),
@@ -89,6 +93,13 @@ def start(kind: str, ns: str, rate: float, publish_every: int, method: str) -> l
     return procs
 
 
+def process_cpu_s(pid: int) -> float:
+    """User and system CPU time of process ``pid`` and its threads (s, /proc/<pid>/stat)."""
+    with open(f'/proc/{pid}/stat') as f:
+        fields = f.read().rpartition(')')[2].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
 def newest(diagnostics, suffix: str) -> dict[str, str]:
     for array in reversed(diagnostics.messages):
         for status in array.status:
@@ -118,6 +129,8 @@ def run(kind: str, seconds: float, rate: float, publish_every: int, method: str)
             time.sleep(0.2)
         print(f'{kind} ({method}, control.rate {rate:g} Hz, readings at '
               f'{1000 / publish_every:g} Hz, {uptime()}):')
+        estimator_pid = procs[1].pid
+        last_cpu, last_count = 0.0, None
         start_t = time.monotonic()
         per_phase = seconds / len(PHASES)
         for i, phase in enumerate(PHASES):
@@ -140,6 +153,15 @@ def run(kind: str, seconds: float, rate: float, publish_every: int, method: str)
             cells = [f'{label} {c.get(key, "-")}' for key, label in CONTROLLER_KEYS]
             cells += [f'{label} {e.get(key, "-")}' for key, label in ESTIMATOR_KEYS]
             cells.append(f'twin {s.get("achieved step rate [Hz]", "-")} Hz')
+            # CPU time of the estimator's process per estimate over the phase (with the
+            # controller's for one process): a figure the machine's load hardly moves
+            # (since the end of the hold: /diagnostics' count is up to a second old, a
+            # longer window makes that small)
+            cpu, count = process_cpu_s(estimator_pid), int(e.get('estimates', 0))
+            if last_count is None:
+                last_cpu, last_count = cpu, count
+            elif count > last_count:
+                cells.append(f'cpu/est[ms] {1e3 * (cpu - last_cpu) / (count - last_count)}')
             print(f'  {phase:<15} ' + '  '.join(_short(x) for x in cells), flush=True)
     finally:
         ros.close()
@@ -162,10 +184,13 @@ def main() -> None:
     parser.add_argument('--rate', type=float, default=500.0)
     parser.add_argument('--publish-every', type=int, default=1)
     parser.add_argument('--method', default='filter', choices=('filter', 'static'))
+    parser.add_argument('--kinds', default='three,one',
+                        help='which loops, comma-separated: three (processes), one (process)')
     args = parser.parse_args()
+    kinds = [KINDS[k.strip()] for k in args.kinds.split(',')]
     print(f'start: {uptime()}')
     for _ in range(args.repeats):
-        for kind in ('three processes', 'one process'):
+        for kind in kinds:
             run(kind, args.seconds, args.rate, args.publish_every, args.method)
     print(f'end: {uptime()}')
 

@@ -65,6 +65,8 @@ from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, LinkInertia
 __all__ = ['ChainFilter']
 
 FloatArray = NDArray[np.float64]
+#: Sensor patterns whose readings :meth:`ChainFilter._readings` keeps (then it starts over).
+MAX_PATTERNS = 64
 
 
 
@@ -110,6 +112,7 @@ class ChainFilter(FilterTrack):
         self._rate_q = np.tile(process_noise.twist_density(), n)
         self._load_q = process_noise.load_density()
         self._gravity = self.chain.resolved_gravity(None)
+        self._patterns: dict[Any, tuple[list[tuple[str, NDArray[np.intp], int]], int]] = {}
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -353,55 +356,85 @@ class ChainFilter(FilterTrack):
               pose_T: FloatArray | None, pose_whitener: FloatArray | None,
               W_m: FloatArray | None, W_whitener: FloatArray | None
               ) -> tuple[FloatArray, FloatArray, list[tuple[str, NDArray[np.intp], int]]]:
+        """The whitened residuals ``r``, their Jacobian ``H`` and the readings (name, rows,
+        dof) in row order: each joint's tensions, lengths and pose, the tip pose, the tip load;
+        one block per joint and kind of reading (the readings kept per sensor pattern)."""
         n, size = self.n, self.size
         x = self._x
-        rows_r: list[FloatArray] = []
-        rows_H: list[FloatArray] = []
-        readings: list[tuple[str, NDArray[np.intp], int]] = []
+        load_rows = W_m is not None and size > 12 * n
+        readings, count = self._readings(preps, pose_T is not None, load_rows)
+        r = np.empty(count)
+        H = np.zeros((count, size))
         row = 0
-
-        def add(name: str, r: FloatArray, H: FloatArray, dof: int) -> None:
-            nonlocal row
-            rows_r.append(r)
-            rows_H.append(H)
-            readings.append((name, np.arange(row, row + r.size), dof))
-            row += r.size
-
-        for i, (model, p, pred) in enumerate(zip(self.chain.joints, preps, lin['preds'],
-                                                 strict=True)):
+        for i, (p, pred) in enumerate(zip(preps, lin['preds'], strict=True)):
             if p is None:
                 continue
             cols = slice(6 * i, 6 * i + 6)
-            for label, index, values, weight, h, dh in (
-                    ('tension', p.tension_index, p.tensions, p.tension_weight, pred.tensions,
+            for index, values, weight, h, dh in (
+                    (p.tension_index, p.tensions, p.tension_weight, pred.tensions,
                      pred.tension_jacobian),
-                    ('length', p.length_index, p.lengths, p.length_weight, pred.lengths,
+                    (p.length_index, p.lengths, p.length_weight, pred.lengths,
                      pred.length_jacobian)):
-                for k, j in enumerate(index.tolist()):
-                    H = np.zeros((1, size))
-                    H[0, cols] = dh[j] * weight[k]
-                    add(f'joint {i + 1} {label}[{model.string_names[j]}]',
-                        np.array([(h[j] - values[k]) * weight[k]]), H, 1)
+                k = index.size
+                if k:
+                    block = slice(row, row + k)
+                    r[block] = (h[index] - values) * weight
+                    H[block, cols] = dh[index] * np.reshape(weight, (-1, 1))
+                    row += k
             if p.pose is not None:
                 kin = pred.kinematics
                 res, jac = sm.pose_residual_unchecked(kin.T, p.pose,
                                                       sm.pose_jacobian(x[cols], kin))
-                H = np.zeros((6, size))
-                H[:, cols] = p.pose_whitener @ jac
-                add(f'joint {i + 1} pose', p.pose_whitener @ res, H, 6)
+                r[row:row + 6] = p.pose_whitener @ res
+                H[row:row + 6, cols] = p.pose_whitener @ jac
+                row += 6
         if pose_T is not None:
             T = lin['state'].tip_transform
             jac = np.zeros((6, size))
             jac[:, :6 * n] = tip_pose_jacobian(self.chain, x[:6 * n].reshape(n, 6), T)
             res, jac = sm.pose_residual_unchecked(T, pose_T, jac)
-            add('pose', pose_whitener @ res, pose_whitener @ jac, 6)
-        if W_m is not None and size > 12 * n:
-            H = np.zeros((6, size))
-            H[:, 12 * n:] = W_whitener
-            add('wrench', W_whitener @ (x[12 * n:] - W_m), H, 6)
-        if not rows_r:
-            return np.empty(0), np.empty((0, size)), readings
-        return np.concatenate(rows_r), np.vstack(rows_H), readings
+            r[row:row + 6] = pose_whitener @ res
+            H[row:row + 6] = pose_whitener @ jac
+            row += 6
+        if load_rows:
+            r[row:row + 6] = W_whitener @ (x[12 * n:] - W_m)
+            H[row:row + 6, 12 * n:] = W_whitener
+        return r, H, readings
+
+    def _readings(self, preps: list[PreparedMeasurements | None], tip_pose: bool,
+                  tip_load: bool) -> tuple[list[tuple[str, NDArray[np.intp], int]], int]:
+        """The readings of a sensor pattern (name, rows, dof) in :meth:`_rows`' order and the
+        row count, kept per pattern (a tracker's pattern rarely changes)."""
+        key = (tuple(None if p is None else (p.tension_index.tobytes(),
+                                             p.length_index.tobytes(), p.pose is not None)
+                     for p in preps), tip_pose, tip_load)
+        kept = self._patterns.get(key)
+        if kept is not None:
+            return kept
+        readings: list[tuple[str, NDArray[np.intp], int]] = []
+        row = 0
+
+        def add(name: str, dof: int) -> None:
+            nonlocal row
+            readings.append((name, np.arange(row, row + dof), dof))
+            row += dof
+
+        for i, (model, p) in enumerate(zip(self.chain.joints, preps, strict=True)):
+            if p is None:
+                continue
+            for label, index in (('tension', p.tension_index), ('length', p.length_index)):
+                for j in index.tolist():
+                    add(f'joint {i + 1} {label}[{model.string_names[j]}]', 1)
+            if p.pose is not None:
+                add(f'joint {i + 1} pose', 6)
+        if tip_pose:
+            add('pose', 6)
+        if tip_load:
+            add('wrench', 6)
+        if len(self._patterns) >= MAX_PATTERNS:
+            self._patterns.clear()
+        self._patterns[key] = kept = (readings, row)
+        return kept
 
     # ------------------------------------------------------------------ (re)starts, output
     def _static_start(self, args: tuple, warm: FloatArray | None) -> ChainEstimate:

@@ -49,9 +49,9 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     gravity_reading,
     measured_array,
 )
+from tensegrity_stiffness.nodes.estimator_node import ESTIMATION_METHODS
 from tensegrity_stiffness.nodes.layouts import FLOAT64_MULTIARRAY, OutputLayout, matrix_dims
 from tensegrity_stiffness.nodes.messages import MessageTypes, OutputMessages
-from tensegrity_stiffness.nodes.estimator_node import ESTIMATION_METHODS
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.shared_parameters import rest_length_offsets
 from tensegrity_stiffness.nodes.structure_node import (

@@ -23,7 +23,6 @@ from tensegrity_stiffness.nodes.messages import (
     pose_message_to_transform,
     stamp_nanoseconds_or,
 )
-from tensegrity_stiffness.nodes.parameters import JointNodeSettings, SpineNodeSettings
 from tensegrity_stiffness.nodes.processing import (
     JointOutputs,
     finite_rows,
@@ -35,6 +34,8 @@ from tensegrity_stiffness.nodes.processing import (
     screw_inputs,
     with_rest_lengths,
 )
+from tensegrity_stiffness.nodes.spine_node import SpineNodeSettings
+from tensegrity_stiffness.nodes.stiffness_node import JointNodeSettings
 from tensegrity_stiffness.recordings.bag_topics import CHUNK_SIZE, jazzy_typestore, rosbags_types
 from tensegrity_stiffness.recordings.screw_cdr import (
     PLAIN_SCREW_HEAD,

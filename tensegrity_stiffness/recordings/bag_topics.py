@@ -20,7 +20,8 @@ from tensegrity_stiffness.nodes.layouts import FLOAT64_MULTIARRAY
 from tensegrity_stiffness.nodes.messages import (
     MessageTypes,
 )
-from tensegrity_stiffness.nodes.parameters import JointNodeSettings, SpineNodeSettings
+from tensegrity_stiffness.nodes.spine_node import SpineNodeSettings
+from tensegrity_stiffness.nodes.stiffness_node import JointNodeSettings
 from tensegrity_stiffness.structures.schema import is_structure_document
 
 FloatArray = NDArray[np.float64]

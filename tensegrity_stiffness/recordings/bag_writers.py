@@ -20,7 +20,8 @@ from tensegrity_stiffness.nodes.messages import (
     new_message,
     output_writer,
 )
-from tensegrity_stiffness.nodes.parameters import JointNodeSettings, SpineNodeSettings
+from tensegrity_stiffness.nodes.spine_node import SpineNodeSettings
+from tensegrity_stiffness.nodes.stiffness_node import JointNodeSettings
 from tensegrity_stiffness.recordings.bag_processors import (
     Answers,
     Processor,

@@ -54,7 +54,6 @@ from tensegrity_stiffness.nodes.estimator_node import (
     EstimatorNodeSettings,
     estimator_node_settings,
 )
-from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.ros import conversions
@@ -69,12 +68,13 @@ NODE_NAME = 'estimator_node'
 
 
 class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
-    """Publishes the pose (with covariance), load, screw, K, K_c, its std and the tensions of
-    every estimate; markers and diagnostics."""
+    """Publishes the pose (with covariance), load, screw, K, K_c, the tensions, the std of K_c
+    and K and K_c stamped (``msg/StampedMatrix``) of every estimate
+    (:func:`.conversions.estimation.estimator_output_table`); markers and diagnostics."""
 
-    OUTPUT_TOPICS = tuple(zip(
-        (PoseWithCovarianceStamped, WrenchStamped, *[Float64MultiArray] * 5),
-        (f'~/{name}' for name in ESTIMATOR_OUTPUTS), strict=True))
+    OUTPUT_TOPICS = estimation_msgs.table_topics(estimation_msgs.estimator_output_table(()))
+    #: The output computed only while someone subscribes to it (most of an estimate's time).
+    STIFFNESS_STD_OUTPUT = f'~/{estimation_msgs.CARTESIAN_STIFFNESS_STD}'
     SERVES_SOLVES = False  # no services: no worker process
     #: Sensor readings: only the newest of each input's queue is taken (the others are counted
     #: on /diagnostics), so that an estimate that takes longer than a reading's period passes
@@ -132,21 +132,29 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
                          ) -> estimation_msgs.EstimatorOutputMessages:
         return estimation_msgs.EstimatorOutputMessages(tuple(settings.model.string_names))
 
-    def _wanted_outputs(self, settings: EstimatorNodeSettings) -> tuple[bool, ...]:
-        """As every node's (a subscriber), and the std of the stiffness (the last output) only
-        with ``estimation.stiffness_std``."""
+    def stiffness_std_index(self) -> int:
+        """Where :attr:`STIFFNESS_STD_OUTPUT` is among ``OUTPUT_TOPICS``."""
+        return [topic for _, topic in self.OUTPUT_TOPICS].index(self.STIFFNESS_STD_OUTPUT)
+
+    def _wanted_outputs(self, settings: Any) -> tuple[bool, ...]:
+        """As every node's (a subscriber), and the std of the stiffness
+        (:attr:`STIFFNESS_STD_OUTPUT`) only with ``estimation.stiffness_std``."""
         wanted = super()._wanted_outputs(settings)
-        return wanted if settings.stiffness_std else (*wanted[:-1], False)
+        if self._options(settings).stiffness_std:
+            return wanted
+        k = self.stiffness_std_index()
+        return (*wanted[:k], False, *wanted[k + 1:])
 
     def _outputs(self, settings: EstimatorNodeSettings, snapshot: EstimatorInput,
                  wanted: tuple[bool, ...]) -> EstimatorOutputs:
         # the std of K_c (most of an estimate's time) only when it is wanted
+        std = wanted[self.stiffness_std_index()]
         if settings.method == 'filter':
             if self._track is None:
                 self._track = new_joint_filter(settings)
-            outputs = filter_outputs(settings, snapshot, self._track, wanted[-1])
+            outputs = filter_outputs(settings, snapshot, self._track, std)
         else:
-            outputs = estimator_outputs(settings, snapshot, wanted[-1])
+            outputs = estimator_outputs(settings, snapshot, std)
         self._count(outputs)
         return outputs
 
@@ -257,8 +265,9 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
                    ('load', options.load_mode), ('trigger', f'~/{options.trigger}'),
                    ('max age [s]', options.max_age),
                    ('consistency probability', options.consistency_probability)]
-        return [conversions.diagnostic_status(f'{self.get_name()}: estimator', level, message,
-                                            values, hardware_id=self._output_frame(settings))]
+        return [conversions.diagnostic_status(
+            f'{self.get_fully_qualified_name()}: estimator', level, message, values,
+            hardware_id=self._output_frame(settings))]
 
 
 def main(args: list[str] | None = None) -> None:

@@ -20,8 +20,6 @@ from operator import attrgetter
 from typing import Any
 
 import numpy as np
-from geometry_msgs.msg import PoseWithCovarianceStamped, WrenchStamped
-from std_msgs.msg import Float64MultiArray
 from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.mechanics.chain import solve_chain_equilibrium
@@ -33,7 +31,6 @@ from tensegrity_stiffness.nodes.estimation_processing import (
     spine_filter_outputs,
 )
 from tensegrity_stiffness.nodes.estimator_node import EstimatorNodeSettings
-from tensegrity_stiffness.nodes.layouts import SPINE_ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.spine_estimator_node import (
     SpineEstimatorNodeSettings,
@@ -53,12 +50,14 @@ NODE_NAME = 'spine_estimator_node'
 
 
 class SpineEstimatorNode(SpineFrames, SpineRestLengthTopic, EstimatorNode):
-    """Publishes the screws, the tip pose (with covariance), the tip load and the tip stiffness
-    with its std per estimate; markers and diagnostics."""
+    """Publishes the screws, the tip pose (with covariance), the tip load, the tip stiffness
+    with its std and the tip stiffness stamped (``msg/StampedMatrix``) per estimate
+    (:func:`.conversions.estimation.spine_estimator_output_table`); markers and
+    diagnostics."""
 
-    OUTPUT_TOPICS = tuple(zip(
-        (Float64MultiArray, PoseWithCovarianceStamped, WrenchStamped, Float64MultiArray,
-         Float64MultiArray), (f'~/{name}' for name in SPINE_ESTIMATOR_OUTPUTS), strict=True))
+    OUTPUT_TOPICS = estimation_msgs.table_topics(
+        estimation_msgs.spine_estimator_output_table(1))
+    STIFFNESS_STD_OUTPUT = f'~/{estimation_msgs.TIP_STIFFNESS_BASE_STD}'
     INPUT_FRAME_NAME = 'the base frame'
     _build_settings = staticmethod(spine_estimator_node_settings)
     _output_frame = attrgetter('base_frame')
@@ -98,12 +97,13 @@ class SpineEstimatorNode(SpineFrames, SpineRestLengthTopic, EstimatorNode):
     def _outputs(self, settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
                  wanted: tuple[bool, ...]) -> SpineEstimatorOutputs:
         # the std of the tip stiffness only when it is wanted (EstimatorNode._wanted_outputs)
+        std = wanted[self.stiffness_std_index()]
         if settings.estimator.method == 'filter':
             if self._track is None:
                 self._track = new_chain_filter(settings)
-            outputs = spine_filter_outputs(settings, snapshot, self._track, wanted[-1])
+            outputs = spine_filter_outputs(settings, snapshot, self._track, std)
         else:
-            outputs = spine_estimator_outputs(settings, snapshot, wanted[-1])
+            outputs = spine_estimator_outputs(settings, snapshot, std)
         self._count(outputs)
         return outputs
 

@@ -27,6 +27,7 @@ from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATOR_NODE_PARAMETERS,
     estimator_node_settings,
 )
+from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.conversions.geometry import transform_to_pose
 
@@ -142,7 +143,17 @@ def test_output_messages(settings):
     messages = estimation_msgs.EstimatorOutputMessages(tuple(settings.model.string_names))
     stamp = PoseWithCovarianceStamped().header.stamp
     messages.fill(out, stamp, 'link1')
-    pose, wrench, screw, K, Kc, tensions, Kc_std = messages.messages()
+    pose, wrench, screw, K, Kc, tensions, Kc_std, K_stamped, Kc_stamped = messages.messages()
+    # the stamped K and K_c: the estimate's stamp and frame, the arrays' labels and data
+    for stamped, plain in ((K_stamped, K), (Kc_stamped, Kc)):
+        assert stamped.header.frame_id == 'link1' and stamped.header.stamp == stamp
+        assert (stamped.row_label, stamped.column_label, stamped.rows, stamped.cols) == (
+            plain.layout.dim[0].label, plain.layout.dim[1].label, 6, 6)
+        np.testing.assert_array_equal(stamped.data, plain.data)
+    topics = estimation_msgs.table_topics(messages.table)
+    assert [topic for _, topic in topics] == [
+        *(f'~/{name}' for name in ESTIMATOR_OUTPUTS), '~/stiffness_stamped',
+        '~/cartesian_stiffness_stamped']
     T, cov = estimation_msgs.pose_with_covariance_to_arrays(pose.pose)
     np.testing.assert_allclose(T, out.estimate.transform, atol=1e-12)
     np.testing.assert_allclose(cov, out.estimate.covariance)
@@ -197,7 +208,9 @@ def test_spine_settings_and_outputs():
     np.testing.assert_allclose(out.estimate.tip_wrench, 0.0, atol=1e-7)
     messages = estimation_msgs.SpineEstimatorOutputMessages(3)
     messages.fill(out, PoseWithCovarianceStamped().header.stamp, 'spine_base')
-    screws_msg, pose, wrench, K, K_std = messages.messages()
+    screws_msg, pose, wrench, K, K_std, K_stamped = messages.messages()
+    assert K_stamped.header.frame_id == 'spine_base'
+    np.testing.assert_array_equal(K_stamped.data, K.data)
     np.testing.assert_allclose(np.reshape(screws_msg.data, (3, 6)), out.estimate.screws)
     np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.estimate.tip_stiffness)
     assert pose.header.frame_id == wrench.header.frame_id == 'spine_base'

@@ -37,6 +37,7 @@ from support.ros_harness import (  # noqa: E402
     wait_settled,
     wrench_stamped,
 )
+from tensegrity_stiffness.msg import StampedMatrix  # noqa: E402
 
 from tensegrity_stiffness.estimation import sensor_models as sm  # noqa: E402
 from tensegrity_stiffness.geometry.screw import exp_se3  # noqa: E402
@@ -87,12 +88,13 @@ def loop():
         '-r', f'{est_base}/imu:={sim_base}/imu'])
     ros = RosClient('estimator_test')
     out = {
-        'ns': ns, 'sim': sim, 'estimator': estimator, 'ros': ros,
+        'ns': ns, 'est_base': est_base, 'sim': sim, 'estimator': estimator, 'ros': ros,
         'screw': ros.subscribe(Float64MultiArray, f'{sim_base}/screw'),
         'pose': ros.subscribe(PoseWithCovarianceStamped, f'{est_base}/pose_estimate'),
         'wrench': ros.subscribe(WrenchStamped, f'{est_base}/wrench_estimate'),
         'kc': ros.subscribe(Float64MultiArray, f'{est_base}/cartesian_stiffness'),
         'kc_std': ros.subscribe(Float64MultiArray, f'{est_base}/cartesian_stiffness_std'),
+        'kc_stamped': ros.subscribe(StampedMatrix, f'{est_base}/cartesian_stiffness_stamped'),
         'diagnostics': ros.subscribe(DiagnosticArray, '/diagnostics'),
         'load_pub': ros.publisher(WrenchStamped, f'{sim_base}/external_wrench'),
         'tensions_pub': ros.publisher(Float64MultiArray, f'{sim_base}/measured_tensions'),
@@ -226,6 +228,33 @@ def test_parameters_and_diagnostics(loop) -> None:
     values = {kv.key: kv.value for s in status.status for kv in s.values}
     assert float(values['rank']) == 6 and 'chi2/dof' in values and 'age of imu [ms]' in values
 
+
+
+def test_the_diagnostics_status_is_named_with_the_namespace(loop) -> None:
+    """``<namespace>/estimator_node: estimator``: two estimators in two namespaces report
+    apart (as stiffness_node's ``<namespace>/stiffness_node: joint``)."""
+    name = f"{loop['est_base']}: estimator"
+    loop['diagnostics'].wait_until(lambda m: any(s.name == name for s in m.status),
+                                   timeout=10.0)
+
+
+def test_the_stamped_cartesian_stiffness_is_the_estimates(loop) -> None:
+    """``~/cartesian_stiffness_stamped`` (issue 39): K_c of an estimate stamped with the
+    estimate's stamp and frame (its pose estimate's header), labelled as
+    ``~/cartesian_stiffness``, with the same data as the K_c array published with it."""
+    stamped = loop['kc_stamped']
+    last = stamped.wait_for(len(stamped) + 20, timeout=20.0)[-1]
+    stamp = (last.header.stamp.sec, last.header.stamp.nanosec)
+    # the pose estimate and the K_c array of the same estimate (on their own topics: waited
+    # for, as they may arrive after it)
+    pose = loop['pose'].wait_until(
+        lambda p: (p.header.stamp.sec, p.header.stamp.nanosec) == stamp, timeout=5.0)
+    assert last.header.frame_id == pose.header.frame_id == 'tensegrity_link1'
+    data = np.asarray(last.data, dtype=np.float64)
+    kc = loop['kc'].wait_until(
+        lambda m: np.array_equal(np.asarray(m.data, dtype=np.float64), data), timeout=5.0)
+    assert (last.row_label, last.column_label, last.rows, last.cols) == (
+        kc.layout.dim[0].label, kc.layout.dim[1].label, 6, 6)
 
 
 def test_the_estimator_runs_no_worker_process(loop) -> None:

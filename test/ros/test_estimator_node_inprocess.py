@@ -47,7 +47,8 @@ def test_std_of_the_cartesian_stiffness_only_for_a_subscriber():
             scale=TENSION_STD, size=model.n_strings)
         snapshot = EstimatorInput({'measured_tensions': Reading(tensions, now)}, now,
                                   truth.screw)
-        std_publisher = node._output_publishers[-1]
+        k = node.stiffness_std_index()  # the std among the outputs (stamped K, K_c after it)
+        std_publisher = node._output_publishers[k]
         assert std_publisher.topic_name.endswith('/cartesian_stiffness_std')
 
         unheard = node._outputs(settings, snapshot, node._wanted_outputs(settings))
@@ -61,9 +62,9 @@ def test_std_of_the_cartesian_stiffness_only_for_a_subscriber():
         heard = node._outputs(settings, snapshot, wanted)
         assert heard.stiffness_std
         assert np.all(np.isfinite(heard.estimate.cartesian_stiffness_std))
-        assert wanted[-1]
+        assert wanted[k]
         # with estimation.stiffness_std off: neither computed nor published, subscriber or not
-        assert not node._wanted_outputs(replace(settings, stiffness_std=False))[-1]
+        assert not node._wanted_outputs(replace(settings, stiffness_std=False))[k]
 
         listener.destroy_subscription(subscription)
         wait_for_count(std_publisher, 0)

@@ -98,7 +98,7 @@ def test_a_burst_of_readings_is_answered_by_its_newest(executable):
         repeat_until(lambda: readings.publish(pose_reading(T, 1, frame)),
                      lambda: estimates.messages[-1] if estimates.messages else None,
                      explain=node.log)
-        name = f'{executable}: estimator'
+        name = f'{base}: estimator'
         sent = 1
         for burst in range(1, 4):
             estimates.clear()

@@ -3,7 +3,8 @@
 The twin of the default spine (5 joints) publishes every string's load cell with noise;
 ``spine_estimator_node`` (unknown tip load) is remapped to them. Once the twin has settled under a
 tip wrench, the estimated tip pose and tip load lie within 3 sigma of the twin's, and the mean tip
-stiffness within its published std of the library's exact one at the truth.
+stiffness within its published std of the library's exact one at the truth; the stamped tip
+stiffness carries the estimate's stamp and frame.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ pytestmark = pytest.mark.ros
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped, WrenchStamped  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from support.ros_harness import REPO, NodeProcess, RosClient, unique_namespace  # noqa: E402
+from tensegrity_stiffness.msg import StampedMatrix  # noqa: E402
 from test_estimator_node import (  # noqa: E402
     TENSION_NOISE,
     THREE_SIGMA_6D,
@@ -57,6 +59,7 @@ def test_spine_twin_drives_spine_estimator_node() -> None:
         tip_wrench = ros.subscribe(WrenchStamped, f'{est_base}/tip_wrench_estimate')
         tip_k = ros.subscribe(Float64MultiArray, f'{est_base}/tip_stiffness_base')
         tip_k_std = ros.subscribe(Float64MultiArray, f'{est_base}/tip_stiffness_base_std')
+        tip_k_stamped = ros.subscribe(StampedMatrix, f'{est_base}/tip_stiffness_base_stamped')
         load_pub = ros.publisher(WrenchStamped, f'{sim_base}/external_wrench')
         ros.wait_for_subscribers(load_pub)
         tip_pose.wait_for(1, timeout=60.0)
@@ -94,6 +97,18 @@ def test_spine_twin_drives_spine_estimator_node() -> None:
         K_true = chain.tip_stiffness(x, tip_wrench=W_SPINE)
         relevant = std > 1e-6 * np.abs(K_true).max()
         assert np.all(np.abs(K - K_true)[relevant] <= std[relevant])
+        # the stamped tip stiffness (issue 39): the estimate's stamp and frame (its tip pose
+        # estimate's header) and the data of the array published with it
+        last = tip_k_stamped.wait_for(1, timeout=10.0)[-1]
+        stamp = (last.header.stamp.sec, last.header.stamp.nanosec)
+        pose = tip_pose.wait_until(
+            lambda p: (p.header.stamp.sec, p.header.stamp.nanosec) == stamp, timeout=5.0)
+        assert last.header.frame_id == pose.header.frame_id == 'spine_base'
+        data = np.asarray(last.data, dtype=np.float64)
+        plain = tip_k.wait_until(
+            lambda m: np.array_equal(np.asarray(m.data, dtype=np.float64), data), timeout=5.0)
+        assert (last.row_label, last.column_label, last.rows, last.cols) == (
+            plain.layout.dim[0].label, plain.layout.dim[1].label, 6, 6)
     finally:
         ros.close()
         codes = sim.stop(), estimator.stop()
