@@ -384,9 +384,10 @@ def diagnostic_summary(outputs: EstimatorOutputs | SpineEstimatorOutputs
 # ---------------------------------------------------------------------------------- spines
 @dataclass(frozen=True)
 class SpineEstimatorOutputs:
-    """One spine estimate (:class:`~tensegrity_stiffness.estimation.ChainEstimate`), the inputs
-    used, every input's age (s) and whether the std of the tip stiffness was computed (else it
-    is NaN and not published)."""
+    """One spine estimate
+    (:class:`~tensegrity_stiffness.estimation.chain_estimator.ChainEstimate`), the inputs used,
+    every input's age (s) and whether the std of the tip stiffness was computed (else it is NaN
+    and not published)."""
 
     estimate: ChainEstimate
     used: tuple[str, ...]

@@ -35,11 +35,13 @@ ESTIMATOR_INPUTS = ('measured_tensions', 'measured_lengths', 'measured_pose', 'i
                     'measured_wrench')
 
 #: What ``estimation.method`` selects: the recursive filter on the joint's dynamics
-#: (:class:`~tensegrity_stiffness.estimation.JointFilter`) or the quasi-static estimate of each
-#: reading set (:func:`~tensegrity_stiffness.estimation.estimate_joint_state`).
+#: (:class:`~tensegrity_stiffness.estimation.joint_filter.JointFilter`) or the quasi-static
+#: estimate of each reading set
+#: (:func:`~tensegrity_stiffness.estimation.joint_estimator.estimate_joint_state`).
 ESTIMATION_METHODS = ('filter', 'static')
 #: The filter's process noise densities, by parameter (``filter.<field>``: the fields of
-#: :class:`~tensegrity_stiffness.estimation.ProcessNoise`, whose defaults are the one home).
+#: :class:`~tensegrity_stiffness.estimation.joint_filter.ProcessNoise`, whose defaults are the
+#: one home).
 PROCESS_NOISE_UNITS = {'angular_acceleration': 'rad/s^2 sqrt(s)',
                        'linear_acceleration': 'm/s^2 sqrt(s)', 'force_rate': 'N/s sqrt(s)',
                        'moment_rate': 'N m/s sqrt(s)'}

@@ -33,7 +33,7 @@ SPINE_ESTIMATOR_INPUTS = ('measured_tensions', 'measured_lengths', 'measured_pos
 
 
 #: The filter's process noise of a spine (``ChainFilter``'s defaults,
-#: :data:`~tensegrity_stiffness.estimation.DEFAULT_CHAIN_PROCESS_NOISE`).
+#: :data:`~tensegrity_stiffness.estimation.joint_filter.DEFAULT_CHAIN_PROCESS_NOISE`).
 SPINE_PROCESS_NOISE_PARAMETERS = tuple(
     replace(spec, default=getattr(DEFAULT_CHAIN_PROCESS_NOISE, spec.name[len('filter.'):]))
     for spec in ESTIMATION_PARAMETERS if spec.name.startswith('filter.'))

@@ -3,12 +3,11 @@ estimated from what the robot measures (load cells, string lengths, an IMU, moti
 force-torque sensor).
 
 Thin layer: decode with :mod:`conversions.estimation`, keep the latest reading of each input,
-estimate with :mod:`tensegrity_stiffness.nodes.estimation_processing` (the library's
-:func:`~tensegrity_stiffness.estimation.estimate_joint_state`, warm-started from the last
-estimate) when a message of the trigger input (``estimation.trigger``) arrives, using the latest
-of the others no older than ``estimation.max_age``; publish. Parameters in
-:mod:`tensegrity_stiffness.nodes.parameters` (section estimator_node), the method and conventions
-in
+estimate with :mod:`tensegrity_stiffness.nodes.estimation_processing` (the library's filter or
+:func:`~tensegrity_stiffness.estimation.joint_estimator.estimate_joint_state`, warm-started from
+the last estimate) when a message of the trigger input (``estimation.trigger``) arrives, using
+the latest of the others no older than ``estimation.max_age``; publish. Parameters in
+:mod:`tensegrity_stiffness.nodes.estimator_node`, the method and conventions in
 ``docs/estimation.md``.
 
 Built on :class:`.StreamingNode` (:mod:`.node_base`): the inputs are its streams (on the fast

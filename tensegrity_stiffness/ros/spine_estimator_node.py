@@ -3,15 +3,15 @@ stiffness of a spine with their uncertainty, estimated from per-joint load cells
 lengths, a motion-capture tip pose or a force-torque reading of the tip load.
 
 :class:`.EstimatorNode` on a :class:`~tensegrity_stiffness.mechanics.chain.JointChain`: the same
-inputs and
-triggering (``~/measured_tensions`` / ``~/measured_lengths`` hold every joint's strings,
-joint-major, NaN = not measured; ``~/measured_pose`` is the tool frame in the base;
+inputs and triggering (``~/measured_tensions`` / ``~/measured_lengths`` hold every joint's
+strings, joint-major, NaN = not measured; ``~/measured_pose`` is the tool frame in the base;
 ``~/measured_wrench`` the tip load in the base; no IMU), the library's
-:class:`~tensegrity_stiffness.estimation.ChainFilter` (``estimation.method: filter``, the
-default: on the spine's dynamics) or
-:func:`~tensegrity_stiffness.estimation.estimate_chain_state` (``static``: the equilibria exact,
-the tip load shared by every joint, warm-started from the last estimate). The spine's
-parameters and ``~/rest_lengths`` are ``spine_node``'s; the estimator's are ``estimator_node``'s.
+:class:`~tensegrity_stiffness.estimation.chain_filter.ChainFilter` (``estimation.method:
+filter``, the default: on the spine's dynamics) or
+:func:`~tensegrity_stiffness.estimation.chain_estimator.estimate_chain_state` (``static``: the
+equilibria exact, the tip load shared by every joint, warm-started from the last estimate).
+The spine's parameters and ``~/rest_lengths`` are ``spine_node``'s; the estimator's are
+``estimator_node``'s.
 """
 
 from __future__ import annotations

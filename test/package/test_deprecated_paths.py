@@ -143,28 +143,6 @@ OLD_PATHS_ON_PURPOSE = {'tensegrity_stiffness/deprecation.py', 'docs/architectur
     f'tensegrity_stiffness/{old}.py' for old in MOVED_MODULES} | {
     f'tensegrity_stiffness/{package}/__init__.py' for package in MOVED_NAMES}
 
-#: Docstring mentions of old paths in files other work in progress rewrites (issue #40 items 1-2
-#: and #37: the nodes' files are being split, the estimator nodes reworked); the fix is the
-#: module path (``estimation.estimators.estimate_joint_state``, ``control.controller.
-#: StiffnessController``, ...) once those files settle, then this set goes.
-IN_PROGRESS = {
-    ('tensegrity_stiffness/nodes/control_processing.py', f'{T}.control.StiffnessController'),
-    ('tensegrity_stiffness/nodes/estimation_processing.py', f'{T}.estimation.ChainEstimate'),
-    ('tensegrity_stiffness/nodes/parameters.py', f'{T}.estimation.JointFilter'),
-    ('tensegrity_stiffness/nodes/parameters.py', f'{T}.estimation.estimate_joint_state'),
-    ('tensegrity_stiffness/nodes/parameters.py', f'{T}.estimation.ProcessNoise'),
-    ('tensegrity_stiffness/nodes/parameters.py', f'{T}.estimation.DEFAULT_CHAIN_PROCESS_NOISE'),
-    ('tensegrity_stiffness/ros/conversions/imu.py', f'{T}.simulation.ImuReading'),
-    ('tensegrity_stiffness/ros/estimator_node.py', f'{T}.estimation.estimate_joint_state'),
-    ('tensegrity_stiffness/ros/spine_estimator_node.py', f'{T}.estimation.ChainFilter'),
-    ('tensegrity_stiffness/ros/spine_estimator_node.py', f'{T}.estimation.estimate_chain_state'),
-    # where h-nodes moves the estimators' tables
-    ('tensegrity_stiffness/nodes/estimator_node.py', f'{T}.estimation.JointFilter'),
-    ('tensegrity_stiffness/nodes/estimator_node.py', f'{T}.estimation.estimate_joint_state'),
-    ('tensegrity_stiffness/nodes/estimator_node.py', f'{T}.estimation.ProcessNoise'),
-    ('tensegrity_stiffness/nodes/spine_estimator_node.py',
-     f'{T}.estimation.DEFAULT_CHAIN_PROCESS_NOISE'),
-}
 
 
 def old_path_uses(text: str) -> list[str]:
@@ -198,6 +176,5 @@ def test_nothing_here_uses_an_old_path() -> None:
                     relative in OLD_PATHS_ON_PURPOSE or path.suffix in ('.png', '.svg', '.so'):
                 continue
             text = path.read_text(encoding='utf-8', errors='replace')
-            wrong += [f'{relative}: {use}' for use in old_path_uses(text)
-                      if (relative, use) not in IN_PROGRESS]
+            wrong += [f'{relative}: {use}' for use in old_path_uses(text)]
     assert not wrong, '\n'.join(wrong)

@@ -1,10 +1,11 @@
 """``sensor_msgs/Imu`` <-> numpy: angular velocity and specific force of a link (no orientation).
 
-The twin's IMU (:class:`tensegrity_stiffness.simulation.ImuReading`) measures in the link's own
-frame: ``angular_velocity`` (rad/s) and ``linear_acceleration`` = the specific force (m/s^2,
-acceleration minus gravity, as a real accelerometer). It gives no orientation estimate, so
-``orientation_covariance[0] = -1`` (the message's convention for "no orientation"); the other
-two covariances are diagonal with the noise variances (0: not known to be noisy).
+The twin's IMU (:class:`tensegrity_stiffness.simulation.twin_sensors.ImuReading`) measures in
+the link's own frame: ``angular_velocity`` (rad/s) and ``linear_acceleration`` = the specific
+force (m/s^2, acceleration minus gravity, as a real accelerometer). It gives no orientation
+estimate, so ``orientation_covariance[0] = -1`` (the message's convention for "no
+orientation"); the other two covariances are diagonal with the noise variances (0: not known to
+be noisy).
 """
 
 from __future__ import annotations
