@@ -15,6 +15,7 @@ Imports nothing of the package: any layer may use it.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 import warnings
 from collections.abc import Mapping, Sequence
@@ -69,6 +70,12 @@ class MovedNames:
         names = self.modules[relative]
         return module, module.__all__ if names is None else names
 
+    def is_submodule(self, name: str) -> bool:
+        """Whether ``name`` is a module of the subpackage (``from package import submodule``
+        asks the package for it first): answered without importing the moved names' modules,
+        which may be the very ones importing it, part-way through their own import."""
+        return importlib.util.find_spec(f'{self.package}.{name}') is not None
+
     def names(self) -> list[str]:
         """Every moved name, in the order of ``modules``."""
         return [name for relative in self.modules for name in self.module_names(relative)[1]]
@@ -76,7 +83,7 @@ class MovedNames:
     def __call__(self, name: str) -> object:
         if name == '__all__':
             return self.names()
-        if not name.startswith('_'):
+        if not name.startswith('_') and not self.is_submodule(name):
             for relative in self.modules:
                 module, names = self.module_names(relative)
                 if name in names:

@@ -1,8 +1,9 @@
 """``spine_estimator_node``'s parameters without ROS
 (:mod:`tensegrity_stiffness.ros.spine_estimator_node` runs the chain estimators with them): its
 table (:func:`spine_estimator_node_parameters`: the spine's and the estimator's) and its settings
-(:func:`spine_estimator_node_settings`). What it does with one input is
-:mod:`.estimation_processing`'s. No ROS import.
+(:func:`spine_estimator_node_settings`); and what it does with one input: the chain filter or
+the static chain estimator on the readings :mod:`.estimator_node` keeps (its readings, their
+freshness and the shared diagnostics). No ROS import.
 """
 
 from __future__ import annotations
@@ -11,13 +12,29 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
+import numpy as np
+from numpy.typing import NDArray
+
+from tensegrity_stiffness.estimation.chain_estimator import ChainEstimate, estimate_chain_state
+from tensegrity_stiffness.estimation.chain_filter import ChainFilter
 from tensegrity_stiffness.estimation.joint_filter import DEFAULT_CHAIN_PROCESS_NOISE
+from tensegrity_stiffness.estimation.measurements import Measurements
+from tensegrity_stiffness.geometry.validation import require_all_finite
+from tensegrity_stiffness.mechanics.chain import ChainState
+from tensegrity_stiffness.mechanics.dynamics import chain_link_inertias
 from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATION_PARAMETERS,
     ESTIMATOR_NODE_PARAMETERS,
+    EstimatorInput,
     EstimatorNodeSettings,
+    Reading,
     estimator_node_settings,
+    load_measurement,
+    pose_reading,
+    require_success,
+    usable_readings,
 )
+from tensegrity_stiffness.nodes.layouts import SPINE_ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name, defaults
 from tensegrity_stiffness.nodes.shared_parameters import COMMON_PARAMETERS, JOINT_PARAMETERS
 from tensegrity_stiffness.nodes.spine_node import (
@@ -79,3 +96,134 @@ def spine_estimator_node_settings(values: Mapping[str, Any], generation: int = 0
     inherited['values'] = spine.values | {
         spec.name: estimator.values[spec.name] for spec in ESTIMATION_PARAMETERS}
     return SpineEstimatorNodeSettings(**inherited, estimator=estimator)
+
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class SpineEstimatorOutputs:
+    """One spine estimate
+    (:class:`~tensegrity_stiffness.estimation.chain_estimator.ChainEstimate`), the inputs used,
+    every input's age (s) and whether the std of the tip stiffness was computed (else it is NaN
+    and not published)."""
+
+    estimate: ChainEstimate
+    used: tuple[str, ...]
+    ages: Mapping[str, float] = field(default_factory=dict)
+    stiffness_std: bool = True
+
+    @property
+    def state(self) -> ChainState:
+        return self.estimate.state
+
+    @property
+    def screw(self) -> tuple[FloatArray, FloatArray]:
+        """The warm start of the next estimate: (screws, tip wrench)."""
+        return self.estimate.screws, self.estimate.tip_wrench
+
+
+#: Names of the spine's published arrays, in :func:`spine_output_arrays` order.
+SPINE_OUTPUT_NAMES = (*SPINE_ESTIMATOR_OUTPUTS[:2], 'tip pose covariance',
+                      *SPINE_ESTIMATOR_OUTPUTS[2:])
+
+
+def spine_output_arrays(outputs: SpineEstimatorOutputs) -> tuple[FloatArray, ...]:
+    """The published arrays in :data:`SPINE_OUTPUT_NAMES` order."""
+    est = outputs.estimate
+    return (est.screws, est.tip_transform, est.tip_pose_covariance, est.tip_wrench,
+            est.tip_stiffness, est.tip_stiffness_std)
+
+
+def spine_joint_measurements(settings: SpineEstimatorNodeSettings,
+                             readings: Mapping[str, Reading]) -> list[Measurements | None]:
+    """Each joint's :class:`Measurements` of the fresh per-string arrays (joint-major; None for
+    a joint with nothing measured)."""
+    options = settings.estimator
+    bounds = np.cumsum([0, *settings.n_strings])
+    joints: list[Measurements | None] = []
+    for i in range(settings.n_joints):
+        part = slice(bounds[i], bounds[i + 1])
+        kw: dict[str, Any] = {}
+        for name, key, std in (('measured_tensions', 'tensions', options.tension_std),
+                               ('measured_lengths', 'lengths', options.length_std)):
+            if name in readings:
+                values = readings[name].value[part]
+                if not np.all(np.isnan(values)):
+                    kw.update({key: values, f'{key[:-1]}_std': std})
+        joints.append(Measurements(**kw) if kw else None)
+    return joints
+
+
+def new_chain_filter(settings: SpineEstimatorNodeSettings) -> ChainFilter:
+    """The spine's filter of a parameter set (as :func:`new_joint_filter`): the links'
+    inertias (``chain.link_inertias``), ``dynamics.string_damping``, ``filter.*``, a tip load
+    that is a state unless ``estimation.external_wrench`` is 'zero'."""
+    values, options = settings.values, settings.estimator
+    return ChainFilter(settings.chain, chain_link_inertias(settings.chain,
+                                                           values['chain.link_inertias']),
+                       options.process_noise,
+                       load='known' if options.load_mode == 'zero' else 'unknown',
+                       string_damping=values['dynamics.string_damping'],
+                       consistency_probability=options.consistency_probability,
+                       stiffness_std=options.stiffness_std)
+
+
+def spine_filter_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
+                         chain_filter: ChainFilter, stiffness_std: bool | None = None
+                         ) -> SpineEstimatorOutputs:
+    """``chain_filter`` stepped to ``snapshot.now`` (s) with the rest lengths in force and
+    updated with the fresh readings (as :func:`spine_estimator_outputs`); ValueError as
+    there."""
+    options = settings.estimator
+    if stiffness_std is None:
+        stiffness_std = options.stiffness_std
+    readings, ages = usable_readings(snapshot, options.max_age)
+    tip_pose, tip_cov = pose_reading(options, readings)
+    load, load_covariance = load_measurement(options, readings)
+    chain_filter.stiffness_std = stiffness_std
+    est = chain_filter.step(snapshot.now, spine_joint_measurements(settings, readings),
+                            settings.current_rest_lengths(), tip_pose, tip_cov,
+                            None if options.load_mode == 'zero' else load,
+                            None if options.load_mode == 'zero' else load_covariance)
+    return _checked_spine_outputs(est, snapshot, readings, ages, options.max_age,
+                                  stiffness_std)
+
+
+def _checked_spine_outputs(est: ChainEstimate, snapshot: EstimatorInput,
+                           readings: Mapping[str, Reading], ages: Mapping[str, float],
+                           max_age: float, stiffness_std: bool) -> SpineEstimatorOutputs:
+    """The outputs of a successful spine estimate with finite values; ValueError otherwise."""
+    require_success(est, snapshot, readings, max_age)
+    outputs = SpineEstimatorOutputs(
+        est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages,
+        stiffness_std)
+    arrays = spine_output_arrays(outputs)
+    count = len(arrays) if stiffness_std else len(arrays) - 1
+    require_all_finite(SPINE_OUTPUT_NAMES[:count], arrays[:count])
+    return outputs
+
+
+def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
+                            stiffness_std: bool | None = None) -> SpineEstimatorOutputs:
+    """The static spine estimate of the fresh readings of ``snapshot`` (per-string arrays of
+    every joint, joint-major; ``measured_pose`` the tool frame in the base;
+    ``measured_wrench`` the tip load), with the std of the tip stiffness when
+    ``stiffness_std`` (None: the settings'); ValueError (nothing is published) as
+    :func:`estimator_outputs`."""
+    options = settings.estimator
+    if stiffness_std is None:
+        stiffness_std = options.stiffness_std
+    readings, ages = usable_readings(snapshot, options.max_age)
+    tip_pose, tip_cov = pose_reading(options, readings)
+    load, load_covariance = load_measurement(options, readings)
+    initial_screws = initial_wrench = None
+    if snapshot.initial_screw is not None:
+        initial_screws, initial_wrench = snapshot.initial_screw
+    est = estimate_chain_state(
+        settings.chain, spine_joint_measurements(settings, readings), tip_pose, tip_cov, load,
+        load_covariance, rest_lengths=settings.current_rest_lengths(),
+        initial_screws=initial_screws, initial_tip_wrench=initial_wrench,
+        stiffness_std=stiffness_std, consistency_probability=options.consistency_probability)
+    return _checked_spine_outputs(est, snapshot, readings, ages, options.max_age,
+                                  stiffness_std)

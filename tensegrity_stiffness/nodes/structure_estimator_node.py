@@ -42,14 +42,14 @@ from tensegrity_stiffness.estimation.structure_estimator import (
     estimate_structure_poses,
 )
 from tensegrity_stiffness.geometry.validation import require_all_finite
-from tensegrity_stiffness.nodes.estimation_processing import (
+from tensegrity_stiffness.nodes.estimator_node import (
+    ESTIMATION_METHODS,
     EstimatorInput,
     Reading,
     fresh_readings,
     gravity_reading,
     measured_array,
 )
-from tensegrity_stiffness.nodes.estimator_node import ESTIMATION_METHODS
 from tensegrity_stiffness.nodes.layouts import FLOAT64_MULTIARRAY, OutputLayout, matrix_dims
 from tensegrity_stiffness.nodes.messages import MessageTypes, OutputMessages
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
@@ -277,7 +277,7 @@ def array_reading(settings: StructureEstimatorSettings, name: str, values: Float
 def imu_sample(settings: StructureEstimatorSettings, body: str, specific_force: FloatArray,
                angular_velocity: FloatArray | None) -> ImuSample:
     """A checked IMU reading of ``body``: the static estimator takes it only at rest
-    (:func:`~tensegrity_stiffness.nodes.estimation_processing.gravity_reading`); ValueError
+    (:func:`~tensegrity_stiffness.nodes.estimator_node.gravity_reading`); ValueError
     naming ``~/imu/<body>``."""
     try:
         if settings.method == 'static':

@@ -54,7 +54,7 @@ from tensegrity_stiffness.estimation.calibration_samples import (
 )
 from tensegrity_stiffness.geometry.screw import log_so3_batch
 from tensegrity_stiffness.geometry.transforms import rigid_transform
-from tensegrity_stiffness.nodes.estimation_processing import measured_array
+from tensegrity_stiffness.nodes.estimator_node import measured_array
 from tensegrity_stiffness.nodes.messages import (
     DEFAULT_MAX_LENGTH,
     multiarray_payload,

@@ -3,7 +3,7 @@ estimated from what the robot measures (load cells, string lengths, an IMU, moti
 force-torque sensor).
 
 Thin layer: decode with :mod:`conversions.estimation`, keep the latest reading of each input,
-estimate with :mod:`tensegrity_stiffness.nodes.estimation_processing` (the library's filter or
+estimate with :mod:`tensegrity_stiffness.nodes.estimator_node` (the library's filter or
 :func:`~tensegrity_stiffness.estimation.joint_estimator.estimate_joint_state`, warm-started from
 the last estimate) when a message of the trigger input (``estimation.trigger``) arrives, using
 the latest of the others no older than ``estimation.max_age``; publish. Parameters in
@@ -35,23 +35,21 @@ from tensegrity_stiffness.estimation.chain_filter import ChainFilter
 from tensegrity_stiffness.estimation.joint_filter import JointFilter
 from tensegrity_stiffness.geometry.validation import require_frame
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium
-from tensegrity_stiffness.nodes.estimation_processing import (
+from tensegrity_stiffness.nodes.estimator_node import (
+    ESTIMATOR_NODE_PARAMETERS,
     EstimatorInput,
+    EstimatorNodeSettings,
     EstimatorOutputs,
     Reading,
     check_reading,
     diagnostic_summary,
     diagnostic_values,
+    estimator_node_settings,
     estimator_outputs,
     filter_outputs,
     imu_reading,
     measured_array,
     new_joint_filter,
-)
-from tensegrity_stiffness.nodes.estimator_node import (
-    ESTIMATOR_NODE_PARAMETERS,
-    EstimatorNodeSettings,
-    estimator_node_settings,
 )
 from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec

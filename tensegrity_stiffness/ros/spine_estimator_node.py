@@ -23,19 +23,16 @@ import numpy as np
 from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.mechanics.chain import solve_chain_equilibrium
-from tensegrity_stiffness.nodes.estimation_processing import (
-    EstimatorInput,
-    SpineEstimatorOutputs,
-    new_chain_filter,
-    spine_estimator_outputs,
-    spine_filter_outputs,
-)
-from tensegrity_stiffness.nodes.estimator_node import EstimatorNodeSettings
+from tensegrity_stiffness.nodes.estimator_node import EstimatorInput, EstimatorNodeSettings
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.spine_estimator_node import (
     SpineEstimatorNodeSettings,
+    SpineEstimatorOutputs,
+    new_chain_filter,
     spine_estimator_node_parameters,
     spine_estimator_node_settings,
+    spine_estimator_outputs,
+    spine_filter_outputs,
 )
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs

@@ -28,7 +28,7 @@ from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.geometry.validation import require_frame
 from tensegrity_stiffness.nodes import structure_node
-from tensegrity_stiffness.nodes.estimation_processing import EstimatorInput, Reading
+from tensegrity_stiffness.nodes.estimator_node import EstimatorInput, Reading
 from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.structure_estimator_node import (

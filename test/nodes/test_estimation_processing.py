@@ -13,19 +13,17 @@ from support.estimation_trials import GRAVITY_BASE, TENSION_STD, truth_from_mode
 
 from tensegrity_stiffness.estimation.estimators import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.nodes import parameters
-from tensegrity_stiffness.nodes.estimation_processing import (
+from tensegrity_stiffness.nodes.estimator_node import (
+    ESTIMATOR_NODE_PARAMETERS,
     EstimatorInput,
     Reading,
     diagnostic_summary,
     diagnostic_values,
+    estimator_node_settings,
     estimator_outputs,
     gravity_reading,
     measured_array,
     measurements,
-)
-from tensegrity_stiffness.nodes.estimator_node import (
-    ESTIMATOR_NODE_PARAMETERS,
-    estimator_node_settings,
 )
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
@@ -185,10 +183,10 @@ def test_the_std_of_the_cartesian_stiffness_only_when_asked(settings):
 def test_spine_settings_and_outputs():
     """spine_estimator_node's settings (no IMU trigger) and one estimate of a 3-joint spine's
     tensions, split per joint from the joint-major array."""
-    from tensegrity_stiffness.nodes.estimation_processing import spine_estimator_outputs
     from tensegrity_stiffness.nodes.spine_estimator_node import (
         spine_estimator_node_parameters,
         spine_estimator_node_settings,
+        spine_estimator_outputs,
     )
 
     values = parameters.defaults(spine_estimator_node_parameters(3))
@@ -257,7 +255,7 @@ def test_the_filter_at_rest_agrees_with_the_static_estimate(settings):
     filter and the direction of gravity for the static estimator, which refuses an accelerating
     one."""
     from tensegrity_stiffness.estimation import sensor_models as sm
-    from tensegrity_stiffness.nodes.estimation_processing import (
+    from tensegrity_stiffness.nodes.estimator_node import (
         ImuReading,
         filter_outputs,
         imu_reading,
@@ -305,7 +303,7 @@ def test_a_spine_filter_at_rest():
     on noiseless tensions of every joint at the unloaded configuration it converges there, with
     a finite covariance; the static method is there too."""
     from tensegrity_stiffness.estimation.joint_filter import DEFAULT_CHAIN_PROCESS_NOISE
-    from tensegrity_stiffness.nodes.estimation_processing import (
+    from tensegrity_stiffness.nodes.spine_estimator_node import (
         new_chain_filter,
         spine_filter_outputs,
     )

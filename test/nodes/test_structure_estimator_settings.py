@@ -7,7 +7,7 @@ import time
 import numpy as np
 import pytest
 
-from tensegrity_stiffness.nodes.estimation_processing import EstimatorInput, Reading
+from tensegrity_stiffness.nodes.estimator_node import EstimatorInput, Reading
 from tensegrity_stiffness.nodes.parameters import defaults
 from tensegrity_stiffness.nodes.structure_estimator_node import (
     STRUCTURE_ESTIMATOR_PARAMETERS,

@@ -18,7 +18,7 @@ from rclpy.context import Context  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from support.estimation_trials import TENSION_STD, truth_from_model  # noqa: E402
 
-from tensegrity_stiffness.nodes.estimation_processing import EstimatorInput, Reading  # noqa: E402
+from tensegrity_stiffness.nodes.estimator_node import EstimatorInput, Reading  # noqa: E402
 from tensegrity_stiffness.ros.estimator_node import EstimatorNode  # noqa: E402
 
 #: Seconds to wait for the middleware to match (or unmatch) a subscription.

@@ -40,7 +40,7 @@ from test_estimator_node import THREE_SIGMA_6D  # noqa: E402
 from tensegrity_stiffness.estimation import sensor_models as sm  # noqa: E402
 from tensegrity_stiffness.mechanics.chain import JointChain, solve_chain_equilibrium  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
-from tensegrity_stiffness.nodes.estimation_processing import STANDARD_GRAVITY  # noqa: E402
+from tensegrity_stiffness.nodes.estimator_node import STANDARD_GRAVITY  # noqa: E402
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs  # noqa: E402
 
 JOINT_CONFIG = REPO / 'config' / 'default_joint.yaml'
