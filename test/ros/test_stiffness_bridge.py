@@ -673,13 +673,14 @@ def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, 
     accepted = world.ros.subscribe(Float64MultiArray, f'{target}/accepted_stiffness')
     ctrl = world.start(StandIn('cartesian_controllers', world.ns, name=name))
     K0 = world.model.cartesian_stiffness(world.model.initial_screw)
-    wanted = [np.diag(expected(K0 * (1.0 + 0.01 * k))) for k in range(2000)]
+    wanted = np.array([np.diag(expected(K0 * (1.0 + 0.01 * k))) for k in range(2000)])
     def whole(message) -> set[int]:
         """The inputs whose output the controller holds whole (all six values; it publishes
         after each of the six parameters of a set: the first five mix old and new, and a
         value clipped at a bound repeats, so one update can match several messages)."""
         values = np.diag(np.asarray(message.data).reshape(6, 6))
-        return {i for i, w in enumerate(wanted) if np.allclose(values, w, rtol=1e-9, atol=0)}
+        held = np.all(np.abs(wanted - values) <= 1e-9 * np.abs(wanted), axis=1)
+        return set(np.flatnonzero(held).tolist())
 
     k = seen = 0
     updates: set[int] = set()  # distinct inputs held whole: one per update the bridge sent
