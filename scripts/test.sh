@@ -3,7 +3,7 @@
 #   bash scripts/test.sh [extra pytest args]
 # Runs scripts/setup_env.sh, sources scripts/env.sh, then `ruff check .` and the tests in two
 # passes (always all three):
-#   1. parallel: every test not marked `serial`, `python -m pytest test -n 2 --dist loadfile`
+#   1. parallel: every test not marked `serial`, `python -m pytest test -n 3 --dist loadfile`
 #      (pytest-xdist; a file's tests on one worker, so module fixtures start their nodes once;
 #      each worker in its own ROS domain; the longest files first: test/conftest.py);
 #   2. serial: the tests marked `serial` (they time something: deadlines, rates, latencies, a
@@ -42,7 +42,9 @@ domain_is_taken() {
   return 1
 }
 
-WORKERS="${TENSEGRITY_TEST_WORKERS:-2}"
+# Three workers on 2 cores: most tests wait on nodes (with two, a third of the CPU sat idle:
+# 936 s of CPU in 689 s on two cores); docs/validation.md has the figures.
+WORKERS="${TENSEGRITY_TEST_WORKERS:-3}"
 if ! [[ "$WORKERS" =~ ^[0-9]+$ ]]; then
   echo "[test.sh] TENSEGRITY_TEST_WORKERS must be a number of workers, got '$WORKERS'" >&2
   exit 2

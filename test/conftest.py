@@ -13,7 +13,7 @@ with its reason (``[tests] skipped: 0``).
 
 The tiers: tests that time something (deadlines, rates, latencies, a control loop's ticks) carry
 ``@pytest.mark.serial`` and run alone; the rest can run in parallel (pytest-xdist). scripts/test.sh
-runs ``TENSEGRITY_TIER=parallel`` (every test not marked serial, ``-n 2``), then
+runs ``TENSEGRITY_TIER=parallel`` (every test not marked serial, ``-n 3``), then
 ``TENSEGRITY_TIER=serial`` (the serial ones, one process); without the variable every test runs.
 The tier is chosen here rather than by ``-m`` so that a caller's own ``-m``/``-k`` still applies.
 Each xdist worker takes its own ROS domain (``ROS_DOMAIN_ID`` + its index, reserved by
@@ -54,25 +54,30 @@ def own_domain_per_worker() -> None:
 own_domain_per_worker()
 
 
-#: The files of the parallel pass that take longest (seconds of a whole run, measured on the
-#: 2-core machine), started first so that no long file is left for the end of the pass while the
-#: other worker idles (xdist hands out whole files in collection order with
-#: ``--no-loadscope-reorder``). Files not listed follow in their usual order.
+#: The files of the parallel pass that take longest (seconds of a whole run: a fresh clone's
+#: ``.ci/run`` with three workers on the 2-core machine, durations summed per file), started
+#: first so that no long file is left for the end of the pass while the other workers idle
+#: (xdist hands out whole files in collection order with ``--no-loadscope-reorder``). Files not
+#: listed follow in their usual order.
 LONGEST_FIRST = (
-    'test/ros/test_stiffness_bridge.py',     # 114 s
-    'test/package/test_workspace_build.py',  # 81 s: a colcon build of a fresh clone
-    'test/mechanics/test_dynamics_twin.py',  # 81 s: spine twin rung for 400 periods
-    'test/ros/test_spine_node.py',           # 53 s
-    'test/ros/test_sim_node.py',             # 42 s
-    'test/ros/test_tf.py',                   # 34 s: builds tf2_msgs
-    'test/ros/test_your_joint_nodes.py',     # 33 s
-    'test/ros/test_record.py',               # 29 s
-    'test/ros/test_robustness.py',           # 28 s
-    'test/package/test_benches.py',          # 25 s
-    'test/ros/test_estimator_trust.py',      # 22 s
-    'test/control/test_control_twin.py',     # 21 s
+    'test/package/test_workspace_build.py',  # 111 s: a colcon build of a fresh clone
+    'test/ros/test_stiffness_bridge.py',     # 134 s
+    'test/ros/test_spine_node.py',           # 59 s
+    'test/ros/test_sim_node.py',             # 46 s
+    'test/estimation/test_filter_twin.py',   # 40 s
+    'test/ros/test_control_demo_joints.py',  # 37 s
+    'test/ros/test_robustness.py',           # 37 s
+    'test/estimation/test_structure_estimator.py',  # 36 s
+    'test/ros/test_structure_sim_node.py',   # 33 s
+    'test/ros/test_record.py',               # 32 s
+    'test/ros/test_node_lifecycle.py',       # 27 s
+    'test/cli/test_your_joint.py',           # 27 s
+    'test/estimation/test_calibration.py',   # 26 s
+    'test/ros/test_estimator_trust.py',      # 26 s
+    'test/package/test_benches.py',          # 23 s
+    'test/ros/test_your_joint_nodes.py',     # 21 s
     'test/ros/test_estimator_node.py',       # 21 s
-    'test/estimation/test_calibration.py',   # 19 s
+    'test/ros/test_tf.py',                   # 20 s: builds tf2_msgs
 )
 
 

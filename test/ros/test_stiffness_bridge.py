@@ -624,6 +624,10 @@ def test_hostile_burst_then_the_right_output(world, loaded_screw, record_propert
         if i % 25 == 0:
             pub.publish(big)
             sent['invalid'] += 1
+    # an oversized input warned about (in a burst, a keep-last history may replace the 8 MB
+    # message before it is delivered: sent until its warning comes)
+    repeat_until(lambda: pub.publish(big), lambda: True if 'too large to condition' in
+                 bridge.log() else None, explain=lambda: bridge.log()[-2000:])
     K = world.model.cartesian_stiffness(loaded_screw)
     want = expected(K)
     got = repeat_until(
@@ -664,9 +668,11 @@ def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, 
     source = f'{bridge_ns}/input'
     name = f'late_compliance_{run}'
     target = f'{world.ns}/{name}'
+    # target.timeout 3 s: a call answered late on a loaded machine (three test workers on 2
+    # cores: over the default 1 s) is the controller's pace, not the discovery stall tested here.
     bridge = world.start(start_bridge(world.tmp, bridge_ns, source, {
         'preset': 'cartesian_controllers', 'target.node': target, 'output.pose': POSE,
-        'output.min_eigenvalue': MIN_EIGENVALUE}))
+        'output.min_eigenvalue': MIN_EIGENVALUE, 'target.timeout': 3.0}))
     world.bridge_status(bridge_ns)  # running
     pub = world.ros.publisher(Float64MultiArray, source)
     world.ros.wait_for_subscribers(pub)

@@ -628,6 +628,14 @@ class StreamMatcher:
                 self._cond.wait(left)
             return True
 
+    def restart(self) -> None:
+        """Forget every expectation and count (after a :meth:`NodeFuzzer.prime`)."""
+        with self._cond:
+            self._expected.clear()
+            self.received = self.matched = self.missing = self.wrong = 0
+            self.skipped.clear()
+            self.wrong_examples.clear()
+
     def give_up(self, keep: int = 0) -> int:
         """Count the oldest open expectations beyond ``keep`` as missing; returns how many."""
         with self._cond:
@@ -706,6 +714,7 @@ class NodeFuzzer:
         self.wrong_answer_examples: list[str] = []
         self.generator_errors: list[str] = []  # must_reject cases the oracle accepts
         self.sync_timeouts = 0
+        self.primed = 0  # inputs sent by prime(), not counted
 
     def _matched(self, seq: int, arrived: float) -> None:
         sent = self.sent_at.pop(seq, None)
@@ -757,6 +766,30 @@ class NodeFuzzer:
             elif self.oracle.model is not before:  # state changed, nothing to wait for
                 time.sleep(0.05)
         return out is not None
+
+    def prime(self, cases: Iterator[Any], timeout: float = 60.0, quiet: float = 0.3) -> None:
+        """Before anything is counted: send ``cases`` (valid screws) until both outputs answered
+        one, then until none came for ``quiet`` s, and start every count afresh. A fresh node
+        fills a topic only while it sees a subscriber, and its view of the graph can lag this
+        client's by seconds: its first answers may never be sent."""
+        deadline = time.monotonic() + timeout
+        while self.stiffness.received == 0 or self.wrench.received == 0:
+            if time.monotonic() > deadline:
+                raise AssertionError(f'no answer within {timeout:g} s: {self.proc.log()[-1500:]}')
+            self.send(next(cases))
+            self.primed += 1
+            time.sleep(0.05)
+        last = -1
+        while last != (self.stiffness.received, self.wrench.received):
+            last = (self.stiffness.received, self.wrench.received)
+            time.sleep(quiet)
+        for matcher in (self.stiffness, self.wrench):
+            matcher.restart()
+        self.sent.clear()
+        self.kinds.clear()
+        self.case_of.clear()
+        self.sent_at.clear()
+        self.latencies.clear()
 
     def run_topics(self, cases: Iterable[Any]) -> None:
         for case in cases:
