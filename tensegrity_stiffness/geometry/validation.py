@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -21,6 +22,18 @@ def finite_scalar(name: str, value: float) -> float:
     if not math.isfinite(v):
         raise NotFiniteError(f'{name} must be finite, got {v}')
     return v
+
+
+def positive_number(name: str, value: Any, allow_zero: bool = False,
+                    allow_inf: bool = False) -> None:
+    """ValueError naming ``name`` unless ``value`` is a real number (not a bool) > 0 (>= 0 with
+    ``allow_zero``), finite or, with ``allow_inf``, inf: an option of the twins."""
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and \
+        (math.isfinite(value) or (allow_inf and value == math.inf)) and \
+        (value >= 0.0 if allow_zero else value > 0.0)
+    if not ok:
+        bound = ('>= 0' if allow_zero else '> 0') + (' or inf' if allow_inf else '')
+        raise ValueError(f'{name} must be a finite number {bound}, got {value!r}')
 
 
 def _as_float_array(name: str, value: ArrayLike) -> NDArray[np.float64]:

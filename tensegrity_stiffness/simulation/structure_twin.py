@@ -39,7 +39,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, positive_number
 from tensegrity_stiffness.simulation.twin import import_mujoco
 from tensegrity_stiffness.simulation.twin_model import (
     DEFAULT_JOINT_DAMPING,
@@ -99,13 +99,7 @@ class StructureTwinOptions:
 
     def __post_init__(self) -> None:
         def number(name: str, allow_zero: bool = False, allow_inf: bool = False) -> None:
-            value = getattr(self, name)
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and \
-                (math.isfinite(value) or (allow_inf and value == math.inf)) and \
-                (value >= 0.0 if allow_zero else value > 0.0)
-            if not ok:
-                bound = ('>= 0' if allow_zero else '> 0') + (' or inf' if allow_inf else '')
-                raise ValueError(f'{name} must be a finite number {bound}, got {value!r}')
+            positive_number(name, getattr(self, name), allow_zero, allow_inf)
 
         for name in ('timestep', 'node_radius', 'contact_time_constant', 'string_width'):
             number(name)

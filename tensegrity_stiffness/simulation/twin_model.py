@@ -18,7 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, positive_number
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
     DEFAULT_LINK_MASS,
@@ -103,22 +103,13 @@ class SimulationOptions:
     max_moment: float = DEFAULT_MAX_MOMENT
 
     def __post_init__(self) -> None:
-        def positive(name: str, value: Any, allow_zero: bool = False,
-                     allow_inf: bool = False) -> None:
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool) and \
-                (math.isfinite(value) or (allow_inf and value == math.inf)) and \
-                (value >= 0.0 if allow_zero else value > 0.0)
-            if not ok:
-                bound = ('>= 0' if allow_zero else '> 0') + (' or inf' if allow_inf else '')
-                raise ValueError(f'{name} must be a finite number {bound}, got {value!r}')
-
-        positive('timestep', self.timestep)
-        positive('tendon_damping', self.tendon_damping, allow_zero=True)
-        positive('joint_damping', self.joint_damping, allow_zero=True)
-        positive('link_mass', self.link_mass)
-        positive('string_width', self.string_width)
-        positive('max_force', self.max_force, allow_inf=True)
-        positive('max_moment', self.max_moment, allow_inf=True)
+        positive_number('timestep', self.timestep)
+        positive_number('tendon_damping', self.tendon_damping, allow_zero=True)
+        positive_number('joint_damping', self.joint_damping, allow_zero=True)
+        positive_number('link_mass', self.link_mass)
+        positive_number('string_width', self.string_width)
+        positive_number('max_force', self.max_force, allow_inf=True)
+        positive_number('max_moment', self.max_moment, allow_inf=True)
         if self.rest_length_range is not None:
             bounds = finite_array('rest_length_range', self.rest_length_range)
             if bounds.shape != (2,) or not 0.0 < bounds[0] < bounds[1]:
@@ -131,7 +122,7 @@ class SimulationOptions:
             raise ValueError(f'max_length must be one of {MAX_LENGTH_MODES}, got '
                              f'{self.max_length!r}')
         if self.rest_length_rate is not None:
-            positive('rest_length_rate', self.rest_length_rate)
+            positive_number('rest_length_rate', self.rest_length_rate)
         if self.link_inertia is not None:
             inertia = finite_array('link_inertia', self.link_inertia)
             if inertia.shape != (3,) or np.any(inertia <= 0.0):
