@@ -50,9 +50,12 @@ from tensegrity_stiffness.nodes.estimator_node import (
     gravity_reading,
     measured_array,
 )
+from tensegrity_stiffness.nodes.estimator_node import (
+    ESTIMATION_PARAMETERS as JOINT_ESTIMATION_PARAMETERS,
+)
 from tensegrity_stiffness.nodes.layouts import FLOAT64_MULTIARRAY, OutputLayout, matrix_dims
 from tensegrity_stiffness.nodes.messages import MessageTypes, OutputMessages
-from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
+from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name
 from tensegrity_stiffness.nodes.shared_parameters import rest_length_offsets
 from tensegrity_stiffness.nodes.structure_node import (
     STRUCTURE_NODE_PARAMETERS,
@@ -82,6 +85,9 @@ TRIGGERS = (*STRUCTURE_ESTIMATOR_INPUTS, 'imu')
 #: turn about the world's x, y, z).
 POSE_COMPONENTS = ('x', 'y', 'z', 'rx', 'ry', 'rz')
 
+#: The joint's estimator's parameters by name (the ones both estimators share).
+JOINT_ESTIMATION = by_name(JOINT_ESTIMATION_PARAMETERS)
+
 ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('estimation.method', 'string', 'filter',
                   "'filter' (recursive on every body's pose and velocity: a rolling robot) or "
@@ -91,9 +97,7 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'the input whose messages trigger an estimate (with the latest of the others '
                   "no older than estimation.max_age); 'imu': the last IMU of "
                   'estimation.imu_bodies', choices=TRIGGERS),
-    ParameterSpec('estimation.max_age', 'double', 0.05,
-                  'inputs older than this (s, by arrival) are left out of an estimate',
-                  range=(0.0, 3600.0)),
+    JOINT_ESTIMATION['estimation.max_age'],  # one home: the joint's estimator's
     ParameterSpec('estimation.consistency_probability', 'double', CONSISTENCY_PROBABILITY,
                   'probability of the chi-square test of each estimate (and of the filter\'s '
                   'gate of each reading)', range=(1e-15, 0.5)),
