@@ -36,6 +36,15 @@ def positive_number(name: str, value: Any, allow_zero: bool = False,
         raise ValueError(f'{name} must be a finite number {bound}, got {value!r}')
 
 
+def positive_interval(name: str, value: ArrayLike) -> tuple[float, float]:
+    """``(min, max)`` of ``value`` with 0 < min < max; ValueError naming ``name`` otherwise (a
+    range of the twins' rest lengths, m)."""
+    bounds = finite_array(name, value)
+    if bounds.shape != (2,) or not 0.0 < bounds[0] < bounds[1]:
+        raise ValueError(f'{name} must be (min, max) with 0 < min < max (m), got {value!r}')
+    return float(bounds[0]), float(bounds[1])
+
+
 def _as_float_array(name: str, value: ArrayLike) -> NDArray[np.float64]:
     try:
         return np.asarray(value, dtype=np.float64)

@@ -169,6 +169,17 @@ def new_chain_filter(settings: SpineEstimatorNodeSettings) -> ChainFilter:
                        stiffness_std=options.stiffness_std)
 
 
+def _spine_readings(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput
+                    ) -> tuple[dict[str, Reading], dict[str, float], Any, Any, Any, Any]:
+    """The fresh readings and their ages, the tip pose and its covariance, the tip load and
+    its covariance of ``snapshot`` (each None when absent); ValueError when none is fresh."""
+    options = settings.estimator
+    readings, ages = usable_readings(snapshot, options.max_age)
+    tip_pose, tip_cov = pose_reading(options, readings)
+    load, load_covariance = load_measurement(options, readings)
+    return readings, ages, tip_pose, tip_cov, load, load_covariance
+
+
 def spine_filter_outputs(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput,
                          chain_filter: ChainFilter, stiffness_std: bool | None = None
                          ) -> SpineEstimatorOutputs:
@@ -176,11 +187,8 @@ def spine_filter_outputs(settings: SpineEstimatorNodeSettings, snapshot: Estimat
     updated with the fresh readings (as :func:`spine_estimator_outputs`); ValueError as
     there."""
     options = settings.estimator
-    if stiffness_std is None:
-        stiffness_std = options.stiffness_std
-    readings, ages = usable_readings(snapshot, options.max_age)
-    tip_pose, tip_cov = pose_reading(options, readings)
-    load, load_covariance = load_measurement(options, readings)
+    stiffness_std = options.stiffness_std if stiffness_std is None else stiffness_std
+    readings, ages, tip_pose, tip_cov, load, load_covariance = _spine_readings(settings, snapshot)
     chain_filter.stiffness_std = stiffness_std
     est = chain_filter.step(snapshot.now, spine_joint_measurements(settings, readings),
                             settings.current_rest_lengths(), tip_pose, tip_cov,
@@ -212,11 +220,8 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
     ``stiffness_std`` (None: the settings'); ValueError (nothing is published) as
     :func:`estimator_outputs`."""
     options = settings.estimator
-    if stiffness_std is None:
-        stiffness_std = options.stiffness_std
-    readings, ages = usable_readings(snapshot, options.max_age)
-    tip_pose, tip_cov = pose_reading(options, readings)
-    load, load_covariance = load_measurement(options, readings)
+    stiffness_std = options.stiffness_std if stiffness_std is None else stiffness_std
+    readings, ages, tip_pose, tip_cov, load, load_covariance = _spine_readings(settings, snapshot)
     initial_screws = initial_wrench = None
     if snapshot.initial_screw is not None:
         initial_screws, initial_wrench = snapshot.initial_screw

@@ -22,7 +22,6 @@ published. Ctrl-C (or
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import tempfile
 import threading
@@ -50,6 +49,7 @@ from tensegrity_stiffness.ros.demo_processes import (
     NAMESPACE,
     BackgroundSpin,
     node_executable,
+    stop_on_signals,
     stop_process,
 )
 
@@ -209,9 +209,7 @@ def run(config_path: Path | None, duration: float | None, extra: list[str] = ())
     logs = Path(tempfile.mkdtemp(prefix='control_demo_'))
     print(f'control_demo: sim_node -> estimator_node -> stiffness_controller in {NAMESPACE} '
           f'(ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}); logs in {logs}', flush=True)
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = stop_on_signals()
     processes = []
     for name, args in _node_args(params, extra):
         with (logs / f'{name}.log').open('w') as out:

@@ -42,6 +42,15 @@ def stop_process(process: subprocess.Popen) -> int:
     return process.returncode
 
 
+def stop_on_signals() -> threading.Event:
+    """An event that SIGINT or SIGTERM sets (a demo's Ctrl-C, or its supervisor's stop): the
+    demo's loop ends at it and stops its nodes."""
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    return stop
+
+
 class BackgroundSpin:
     """A demo's monitor node spun on a thread of its own until ``stop`` is set; :meth:`close`
     ends the thread, the executor, the node and rclpy."""

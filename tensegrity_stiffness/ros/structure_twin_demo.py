@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import signal
 import subprocess
 import sys
 import tempfile
@@ -36,13 +35,14 @@ from tensegrity_stiffness.nodes.messages import stamp_nanoseconds
 from tensegrity_stiffness.nodes.structure_estimator_node import pose_errors, pose_rms
 from tensegrity_stiffness.nodes.structure_node import structure_path
 from tensegrity_stiffness.ros import conversions
-from tensegrity_stiffness.ros.runtime.topics import output_qos
-from tensegrity_stiffness.ros.twin_demo import (
+from tensegrity_stiffness.ros.demo_processes import (
     BackgroundSpin,
     node_executable,
-    split_node_arguments,
+    stop_on_signals,
     stop_process,
 )
+from tensegrity_stiffness.ros.runtime.topics import output_qos
+from tensegrity_stiffness.ros.twin_demo import split_node_arguments
 from tensegrity_stiffness.structures.structure import Structure
 
 NAMESPACE = '/twin'
@@ -208,9 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     logs = Path(tempfile.mkdtemp(prefix='structure_twin_'))
     print(f'run_twin.sh --structure: {" + ".join(lines)} in {NAMESPACE} (ROS_DOMAIN_ID='
           f'{os.environ.get("ROS_DOMAIN_ID", "0")}); logs in {logs}', flush=True)
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = stop_on_signals()
     processes = {}
     for name, command in lines.items():
         with (logs / f'{name}.log').open('w') as out:

@@ -16,7 +16,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import signal
 import statistics
 import subprocess
 import sys
@@ -39,6 +38,7 @@ from tensegrity_stiffness.ros.demo_processes import (
     NAMESPACE,
     BackgroundSpin,
     node_executable,
+    stop_on_signals,
     stop_process,
 )
 from tensegrity_stiffness.ros.runtime.draining_subscription import create_draining_subscription
@@ -305,9 +305,7 @@ def run_demo(setup: DemoSetup) -> int:
           f'{os.environ.get("ROS_DOMAIN_ID", "0")}), swinging {setup.amplitude:g} N every '
           f'{setup.period:g} s; logs in {logs}', flush=True)
 
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop = stop_on_signals()
     processes = []
     for exe_args, log in ((node_args, logs / f'{stiffness}.log'),
                           (sim_args, logs / 'sim_node.log')):

@@ -39,7 +39,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
-from tensegrity_stiffness.geometry.validation import finite_array, positive_number
+from tensegrity_stiffness.geometry.validation import (
+    positive_interval,
+    positive_number,
+)
 from tensegrity_stiffness.simulation.twin import import_mujoco
 from tensegrity_stiffness.simulation.twin_model import (
     DEFAULT_JOINT_DAMPING,
@@ -112,11 +115,8 @@ class StructureTwinOptions:
         if self.integrator not in INTEGRATORS:
             raise ValueError(f'integrator must be one of {INTEGRATORS}, got {self.integrator!r}')
         if self.rest_length_range is not None:
-            bounds = finite_array('rest_length_range', self.rest_length_range)
-            if bounds.shape != (2,) or not 0.0 < bounds[0] < bounds[1]:
-                raise ValueError(f'rest_length_range must be (min, max) with 0 < min < max (m), '
-                                 f'got {self.rest_length_range!r}')
-            object.__setattr__(self, 'rest_length_range', (float(bounds[0]), float(bounds[1])))
+            object.__setattr__(self, 'rest_length_range',
+                               positive_interval('rest_length_range', self.rest_length_range))
 
     @property
     def mjcf(self) -> StructureMjcfOptions:

@@ -18,7 +18,11 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness import config
 from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3
-from tensegrity_stiffness.geometry.validation import finite_array, positive_number
+from tensegrity_stiffness.geometry.validation import (
+    finite_array,
+    positive_interval,
+    positive_number,
+)
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain
 from tensegrity_stiffness.mechanics.dynamics import (
     DEFAULT_LINK_MASS,
@@ -111,11 +115,8 @@ class SimulationOptions:
         positive_number('max_force', self.max_force, allow_inf=True)
         positive_number('max_moment', self.max_moment, allow_inf=True)
         if self.rest_length_range is not None:
-            bounds = finite_array('rest_length_range', self.rest_length_range)
-            if bounds.shape != (2,) or not 0.0 < bounds[0] < bounds[1]:
-                raise ValueError(f'rest_length_range must be (min, max) with 0 < min < max (m), '
-                                 f'got {self.rest_length_range!r}')
-            object.__setattr__(self, 'rest_length_range', (float(bounds[0]), float(bounds[1])))
+            object.__setattr__(self, 'rest_length_range',
+                               positive_interval('rest_length_range', self.rest_length_range))
         if self.integrator not in INTEGRATORS:
             raise ValueError(f'integrator must be one of {INTEGRATORS}, got {self.integrator!r}')
         if self.max_length not in MAX_LENGTH_MODES:
