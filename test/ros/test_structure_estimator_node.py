@@ -129,21 +129,31 @@ def estimate_after(loop, condition=lambda trust: True, timeout: float = 30.0):
     return poses, covariance, trust
 
 
+#: The components of a body's error ([dp; dw]) that a held plane motion of the whole
+#: structure (along x and y, the turn about z) leaves alone: z, the turns about x and y.
+OFF_THE_PLANE = [2, 3, 4]
+
+
 def check_against_truth(estimate: np.ndarray, covariance: np.ndarray, truth: np.ndarray,
-                        angle_bound: float = ANGLE_BOUND) -> None:
+                        angle_bound: float = ANGLE_BOUND, judged: list[int] | None = None
+                        ) -> None:
     """Every body within POSITION_BOUND / ``angle_bound`` of the truth and the truth inside the
     3-sigma bound of its covariance (over the directions the estimate determines: a held one
-    has zero variance)."""
+    has zero variance), on the components ``judged`` (all by default; with a held plane motion
+    :data:`OFF_THE_PLANE`: where it is held, the anchor's own error, which no reading of this
+    estimate carries, is not in the covariance: seen 1.7 deg of held turn against a std of
+    0.4 deg)."""
     for i in range(truth.shape[0]):
         dp = estimate[i, :3, 3] - truth[i, :3, 3]
         dw = Rotation.from_matrix(estimate[i, :3, :3] @ truth[i, :3, :3].T).as_rotvec()
         assert np.linalg.norm(dp) < POSITION_BOUND and np.linalg.norm(dw) < angle_bound, (i, dp,
                                                                                          dw)
-        C = covariance[6 * i:6 * i + 6, 6 * i:6 * i + 6]
+        keep = list(range(6)) if judged is None else judged
+        C = covariance[6 * i:6 * i + 6, 6 * i:6 * i + 6][np.ix_(keep, keep)]
         eig = np.linalg.eigvalsh(C)
         assert eig[0] > -1e-12 * eig[-1]
         kept = eig > 1e-9 * eig[-1]
-        e = np.concatenate([dp, dw])
+        e = np.concatenate([dp, dw])[keep]
         d2 = e @ np.linalg.pinv(C, rcond=1e-9, hermitian=True) @ e
         assert d2 <= chi2.ppf(THREE_SIGMA, int(kept.sum())), (i, d2, e, np.sqrt(np.diag(C)))
 
@@ -169,7 +179,7 @@ def test_without_markers_the_plane_motion_is_held_and_named(loop):
         held = trust['gauge (held)']
         assert 'translation along x' in held and 'turn about z' in held, held
         assert sorted(trust['contacts'].split(', ')) == ['bar0.a', 'bar1.a', 'bar2.a']
-        check_against_truth(poses, covariance, truth, HELD_ANGLE_BOUND)
+        check_against_truth(poses, covariance, truth, HELD_ANGLE_BOUND, OFF_THE_PLANE)
     finally:
         loop['ros'].set_parameter(loop['twin_params'], 'markers.enabled', True)
 
