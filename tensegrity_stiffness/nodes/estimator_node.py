@@ -15,7 +15,7 @@ estimator (``static``, :func:`estimator_outputs`). Decoding a message into numbe
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -533,14 +533,22 @@ def diagnostic_summary(outputs: EstimatorOutputs | SpineEstimatorOutputs
     est = outputs.estimate
     message = (f'estimating from {", ".join(outputs.used)}; chi2/dof {est.chi2:.3g}/{est.dof}, '
                f'rank {est.rank}')
+    return trust_level(message, est.outliers, est.consistent)
+
+
+def trust_level(message: str, outliers: Sequence[str], consistent: bool | None
+                ) -> tuple[str, str]:
+    """(level, message) of an estimate's trust, for every estimator node: WARN when it left
+    ``outliers`` out (named) or is not ``consistent``, OK otherwise; ``consistent`` None (no
+    redundancy) is said in the message."""
     level = 'OK'
-    if est.outliers:
+    if outliers:
         level = 'WARN'
-        message += f'; left out {", ".join(est.outliers)}'
-    if est.consistent is False:
+        message += f'; left out {", ".join(outliers)}'
+    if consistent is False:
         level = 'WARN'
         message += '; inconsistent: the readings contradict each other'
-    elif est.consistent is None:
+    elif consistent is None:
         message += '; no redundancy: the readings cannot check themselves'
     return level, message
 

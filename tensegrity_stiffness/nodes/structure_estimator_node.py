@@ -49,6 +49,7 @@ from tensegrity_stiffness.nodes.estimator_node import (
     fresh_readings,
     gravity_reading,
     measured_array,
+    trust_level,
 )
 from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATION_PARAMETERS as JOINT_ESTIMATION_PARAMETERS,
@@ -540,16 +541,7 @@ def trust_summary(outputs: StructureEstimatorOutputs) -> tuple[str, str]:
     message names them), OK otherwise; without redundancy the message says so."""
     message = (f'{outputs.method} estimate from {", ".join(outputs.used)}; chi2 '
                f'{outputs.chi2:.3g}, redundancy {outputs.redundancy}')
-    level = 'OK'
-    if outputs.outliers:
-        level = 'WARN'
-        message += f'; left out {", ".join(outputs.outliers)}'
-    if outputs.consistent is False:
-        level = 'WARN'
-        message += '; inconsistent: the readings contradict each other'
-    elif outputs.consistent is None:
-        message += '; no redundancy: the readings cannot check themselves'
-    return level, message
+    return trust_level(message, outputs.outliers, outputs.consistent)
 
 
 def trust_values(outputs: StructureEstimatorOutputs) -> list[tuple[str, Any]]:
