@@ -1,7 +1,7 @@
 """structure_estimator_node over the real middleware, across processes: the MuJoCo twin of the
 3-bar (structure_sim_node, with sensor noise) feeds the installed estimator node its string
 lengths, encoders, per-bar IMUs and markers. At rest every bar's estimated pose is within a few
-mm of the twin's truth and the truth inside the 3-sigma bound of each body's covariance: with
+mm of the twin's truth and the truth inside the 5-sigma bound of each body's covariance: with
 markers (everything determined), then without them (the Rutgers/Yale set: the motion along the
 ground held, named), then by the filter; bad input is refused with a log line and the node keeps
 estimating."""
@@ -39,9 +39,13 @@ IMU_STD = 0.003
 #: "A few mm" and a degree; 2 degrees (the issue's bound) while the turn about the vertical is
 #: held where the last estimate with markers had it (that estimate's own error, up to a degree).
 POSITION_BOUND, ANGLE_BOUND, HELD_ANGLE_BOUND = 4e-3, np.radians(1.0), np.radians(2.0)
-#: The 3-sigma bound of a body's pose as a chi-square bound of its Mahalanobis distance (the
-#: probability of |z| <= 3, over the body's determined degrees of freedom).
-THREE_SIGMA = 0.9973
+#: The 5-sigma bound of a body's pose as a chi-square bound of its Mahalanobis distance (the
+#: probability of |z| <= 5, over the body's determined degrees of freedom). One estimate checked
+#: body by body catches a covariance grossly too small; its calibration is proven statistically
+#: in test/estimation/test_structure_estimator.py (NEES over seeded trials). At 3 sigma these
+#: twelve single draws (four estimates, three bodies), whose readings depend on the machine's
+#: timing, would fail about one run in thirty with a calibrated covariance.
+FIVE_SIGMA = 1.0 - 5.733e-7
 
 
 def poses_of(msg: PoseArray) -> np.ndarray:
@@ -138,7 +142,7 @@ def check_against_truth(estimate: np.ndarray, covariance: np.ndarray, truth: np.
                         angle_bound: float = ANGLE_BOUND, judged: list[int] | None = None
                         ) -> None:
     """Every body within POSITION_BOUND / ``angle_bound`` of the truth and the truth inside the
-    3-sigma bound of its covariance (over the directions the estimate determines: a held one
+    5-sigma bound of its covariance (over the directions the estimate determines: a held one
     has zero variance), on the components ``judged`` (all by default; with a held plane motion
     :data:`OFF_THE_PLANE`: where it is held, the anchor's own error, which no reading of this
     estimate carries, is not in the covariance: seen 1.7 deg of held turn against a std of
@@ -155,7 +159,7 @@ def check_against_truth(estimate: np.ndarray, covariance: np.ndarray, truth: np.
         kept = eig > 1e-9 * eig[-1]
         e = np.concatenate([dp, dw])[keep]
         d2 = e @ np.linalg.pinv(C, rcond=1e-9, hermitian=True) @ e
-        assert d2 <= chi2.ppf(THREE_SIGMA, int(kept.sum())), (i, d2, e, np.sqrt(np.diag(C)))
+        assert d2 <= chi2.ppf(FIVE_SIGMA, int(kept.sum())), (i, d2, e, np.sqrt(np.diag(C)))
 
 
 def test_with_markers_every_pose_is_the_twin_s_within_its_covariance(loop):
