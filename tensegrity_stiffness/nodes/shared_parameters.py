@@ -122,13 +122,18 @@ LINK2_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "link 2's inertia about its centre of mass in {2}'s axes: 3 principal moments "
                   'or 9 values row-major, kg m^2 (empty: the twin\'s default m r^2 / 2)'),
 )
+#: The strings' damping: one value for the modes the nodes compute and the twin's tendon
+#: damping (sim_node reads it too, read-only there), so that the modes predict the ringing the
+#: twin shows.
+STRING_DAMPING_PARAMETER = ParameterSpec(
+    'dynamics.string_damping', 'double', DEFAULT_STRING_DAMPING,
+    "damping of every string along its length, N s/m (one value: the modes' and the twin's)",
+    range=(0.0, 1e9))
 JOINT_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = LINK2_PARAMETERS + (
     ParameterSpec('dynamics.enabled', 'bool', False,
                   'publish ~/natural_frequencies of every input (the modes of the joint held '
                   'at its pose by the load that balances it there)', read_only=True),
-    ParameterSpec('dynamics.string_damping', 'double', DEFAULT_STRING_DAMPING,
-                  "damping of every string along its length, N s/m (default: the twin's)",
-                  range=(0.0, 1e9)),
+    STRING_DAMPING_PARAMETER,
 )
 
 def joint_from_values(values: Mapping[str, Any]) -> JointModel:

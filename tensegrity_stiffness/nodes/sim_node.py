@@ -5,12 +5,12 @@ or a spine's, then the twin's own) and its settings (:func:`sim_node_settings`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from tensegrity_stiffness.mechanics.chain import JointChain
-from tensegrity_stiffness.mechanics.dynamics import DEFAULT_STRING_DAMPING
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes.frames import spine_link_frame
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name
@@ -22,10 +22,12 @@ from tensegrity_stiffness.nodes.shared_parameters import (
     LINK2_PARAMETERS,
     REST_LENGTH_OFFSET_PARAMETERS,
     SPINE_FRAME_PARAMETERS,
+    STRING_DAMPING_PARAMETER,
     TF_PARAMETERS,
     chain_document,
     joint_from_values,
     joint_override_parameters,
+    link2_inertia_from_values,
 )
 from tensegrity_stiffness.simulation.twin import (
     DEFAULT_MAX_FORCE,
@@ -52,10 +54,7 @@ SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('sim.max_length', 'string', 'limit',
                   "strings past their maximum length: 'limit' an inextensible stop, 'ignore' "
                   "Hooke's law goes on", read_only=True, choices=('limit', 'ignore')),
-    ParameterSpec('sim.tendon_damping', 'double', DEFAULT_STRING_DAMPING,
-                  'damping of every string, N s/m (the dynamics\' dynamics.string_damping '
-                  'default: one value)',
-                  read_only=True, range=(0.0, 1e6)),
+    replace(STRING_DAMPING_PARAMETER, read_only=True),
     ParameterSpec('sim.joint_damping', 'double', 1e-3,
                   'damping of each free-joint dof of every link against the world, N s/m and '
                   'N m s/rad', read_only=True, range=(0.0, 1e6)),
@@ -137,6 +136,24 @@ class SimNodeSettings:
         """``limits.rest_length_range`` as ``(min, max)`` (None: the twin's physical range)."""
         bounds = self.values['limits.rest_length_range']
         return (bounds[0], bounds[1]) if bounds else None
+
+    def twin_options(self) -> dict[str, Any]:
+        """The twin's :class:`~tensegrity_stiffness.simulation.twin.SimulationOptions` as
+        keywords: time step, string stop, the strings' damping (``dynamics.string_damping``,
+        the value the modes use), the links' damping and mass, the rest-length range. The
+        node checks every wrench against its own ``limits.*`` (changeable at run time, the
+        swinging load added), so the twin's own wrench bound is off. For the joint, also
+        ``link2`` (``joint.link2_*``)."""
+        values = self.values
+        options = {'timestep': 1.0 / values['sim.rate'], 'max_length': values['sim.max_length'],
+                   'tendon_damping': values[STRING_DAMPING_PARAMETER.name],
+                   'joint_damping': values['sim.joint_damping'],
+                   'link_mass': values['sim.link_mass'],
+                   'rest_length_range': self.rest_length_range,
+                   'max_force': math.inf, 'max_moment': math.inf}
+        if self.chain is None:
+            options['link2'] = link2_inertia_from_values(values)
+        return options
 
 
 def sim_node_settings(values: Mapping[str, Any], generation: int = 0) -> SimNodeSettings:

@@ -39,7 +39,6 @@ from tensegrity_stiffness.nodes.frames import (
 from tensegrity_stiffness.nodes.parameter_specs import by_name
 from tensegrity_stiffness.nodes.shared_parameters import (
     CHAIN_PARAMETERS,
-    link2_inertia_from_values,
     rest_length_offsets,
 )
 from tensegrity_stiffness.nodes.sim_node import (
@@ -173,22 +172,13 @@ class SimNode(SteppingTwin, Node):
     def _build_twin(self, settings: SimNodeSettings, screws: np.ndarray | None) -> None:
         """The twin at ``screws`` (None: its unloaded configuration); the swinging load's
         wrench directions follow its gravity at the next swing step."""
-        values = settings.values
-        # The node checks every wrench against its own limits.* (changeable at run time, the
-        # swinging load added): the twin's own bound would only repeat that check.
-        options = {'timestep': 1.0 / values['sim.rate'], 'max_length': values['sim.max_length'],
-                   'tendon_damping': values['sim.tendon_damping'],
-                   'joint_damping': values['sim.joint_damping'],
-                   'link_mass': values['sim.link_mass'],
-                   'rest_length_range': settings.rest_length_range,
-                   'max_force': math.inf, 'max_moment': math.inf}
+        options = settings.twin_options()
         if settings.chain is not None:
             self._sim: JointSimulation | ChainSimulation = ChainSimulation(
                 settings.chain, initial_screws=screws, **options)
         else:
             self._sim = JointSimulation(settings.model, initial_screw=None if screws is None
-                                        else screws[0], link2=link2_inertia_from_values(values),
-                                        **options)
+                                        else screws[0], **options)
         self._swing_wrenches: np.ndarray | None = None
         self._held_wrench: np.ndarray | None = None  # the topic's wrench object the twin holds
 
