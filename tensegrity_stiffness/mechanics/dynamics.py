@@ -413,7 +413,8 @@ def _undamped_modes(A21: FloatArray, twist_map: FloatArray, screw: FloatArray) -
         shapes = shapes * (np.abs(big) / big)[:, None]
         stable = bool((np.abs(mu.imag) <= REAL_TOLERANCE * np.abs(mu)).all() and
                       mu.real.max() < 0.0)
-    return JointModes(w / (2.0 * math.pi), -lam.real / w, lam, shapes,
+    # + 0.0: a ratio of a conservative mode is 0, not -0 (-lam.real of Re lambda = 0).
+    return JointModes(w / (2.0 * math.pi), -lam.real / w + 0.0, lam, shapes,
                       (twist_map @ shapes.T).real.T, stable, screw)
 
 
@@ -1016,8 +1017,10 @@ def modes_report(modes: JointModes, inertias: Sequence[LinkInertia] | None = Non
 def format_modes(modes: JointModes) -> str:
     """A text table of the modes (frequency, damping ratio, dominant twist component)."""
     names = ('dv_x', 'dv_y', 'dv_z', 'dw_x', 'dw_y', 'dw_z')
+    # Rounded first, + 0.0: a ratio of rounding noise (-1e-17) prints 0.0000, not -0.0000.
+    ratios = np.round(modes.damping_ratios, 4) + 0.0
     lines = ['mode  frequency (Hz)  damping ratio  dominant twist component',
-             *(f'{k + 1:4d}  {modes.frequencies[k]:14.4f}  {modes.damping_ratios[k]:13.4f}  '
+             *(f'{k + 1:4d}  {modes.frequencies[k]:14.4f}  {ratios[k]:13.4f}  '
                f'{_dominant(modes.twists[k], names)}' for k in range(len(modes.frequencies))),
              f'stable: {"yes" if modes.stable else "NO"}']
     return '\n'.join(lines)

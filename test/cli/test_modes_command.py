@@ -4,7 +4,9 @@ modes_from_config`."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 import struct
 from pathlib import Path
 
@@ -64,6 +66,29 @@ def test_modes_of_the_spine_with_string_damping(capsys):
     assert any(m['damping_ratio'] > 0.0 for m in report['modes'])
     code, out, _ = run(capsys, 'modes', '--spine')
     assert code == EXIT_OK and 'joint 1' in out
+
+
+@pytest.mark.parametrize('spine', [False, True])
+def test_undamped_modes_print_a_damping_ratio_of_zero(capsys, spine):
+    """``--string-damping 0``: every ratio is 0.0000 in the table and 0 (not -0) in the JSON
+    (docs/dynamics.md shows the command)."""
+    flag = ('--spine',) if spine else ()
+    code, out, err = run(capsys, 'modes', *flag, '--string-damping', '0')
+    assert code == EXIT_OK, err
+    rows = [line.split() for line in out.splitlines()[1:-1]]
+    assert rows and all(row[2] == '0.0000' for row in rows), out
+    assert '-0.0' not in out
+    code, out, err = run(capsys, 'modes', *flag, '--string-damping', '0', '--json')
+    assert code == EXIT_OK, err
+    ratios = [m['damping_ratio'] for m in json.loads(out)['modes']]
+    assert all(r == 0.0 and math.copysign(1.0, r) == 1.0 for r in ratios), ratios
+
+
+def test_a_ratio_of_rounding_noise_prints_zero():
+    _, modes, _ = dynamics.modes_from_config(None, False, 0.0)
+    noisy = dataclasses.replace(modes, damping_ratios=np.full(6, -1e-17))
+    assert '-0.0000' not in dynamics.format_modes(noisy)
+    assert dynamics.format_modes(noisy) == dynamics.format_modes(modes)
 
 
 def test_modes_plot_writes_the_figure(capsys, tmp_path):
