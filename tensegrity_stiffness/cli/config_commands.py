@@ -36,6 +36,7 @@ from tensegrity_stiffness.cli.sensor_sets import (
 from tensegrity_stiffness.mechanics import templates
 from tensegrity_stiffness.mechanics.chain import MAX_JOINTS
 from tensegrity_stiffness.mechanics.joint import MAX_STRINGS
+from tensegrity_stiffness.nodes.registry import unknown_config_parameters
 from tensegrity_stiffness.structures import templates as structure_templates
 
 
@@ -158,9 +159,18 @@ def _cmd_check_config(args: argparse.Namespace) -> int:
         raise ValueError('give a config FILE or --example NAME (one of them)')
     path = Path(args.file) if args.file else config.example_config_path(args.example)
     sensor_sets = [parse_sensor_set(text) for text in args.sensors or []]
-    report = templates.check_config(config.load_yaml(path))
+    document = config.load_yaml(path)
+    report = templates.check_config(document)
     report['config'] = str(path)
-    if sensor_sets and report['converged']:
+    # The node sections (limits.*, estimation.*, sim.*, ...) as the nodes judge them: a key
+    # no node has makes a node refuse to start (strict_parameters: false, warn and run).
+    unknown, strict = unknown_config_parameters(document)
+    if strict:
+        report['problems'] += unknown
+    else:
+        report['notes'] += [f'{line}: ignored (strict_parameters: false)' for line in unknown]
+    report['sound'] = not report['problems']
+    if sensor_sets and report['converged'] and not (strict and unknown):
         settings = estimator_settings(path)
         report['sensor_sets'] = [sensor_set_report(settings, report['screw'], sensors)
                                  for sensors in sensor_sets]
@@ -264,8 +274,10 @@ def add_check_config_parser(sub: Any) -> None:
                        description='Validate a joint (or spine) config and report its unloaded '
                                    'equilibrium (residual), stability (K_c positive definite), '
                                    'slack and saturated strings, the modes, and whether the '
-                                   'written joint.initial_screw is an equilibrium. Exit 0 when '
-                                   'the file is sound, 2 with the reason on stderr.')
+                                   'written joint.initial_screw is an equilibrium; a key of a '
+                                   "node's section (limits, sensors, sim, ...) that no node has "
+                                   'is named with the nearest. Exit 0 when the file is sound, 2 '
+                                   'with the reason on stderr.')
     p.add_argument('file', nargs='?', metavar='FILE', help='the config (YAML)')
     p.add_argument('--example', metavar='NAME',
                    help='a packaged example of config/examples instead of FILE (its path is '

@@ -99,6 +99,10 @@ DEFAULT_LINK_MASS = 0.01
 #: ringing the twin shows. It settles the default joint (10 g links) in about 0.3 s, near
 #: critical damping of its stiffest and softest modes.
 DEFAULT_STRING_DAMPING = 0.5
+#: Every key a config's ``dynamics`` section may hold: ``string_damping`` (read here) and the
+#: nodes' ``enabled`` switch. Any other key is a mistake (``string_dampin: 0`` would leave the
+#: damping at its default): refused with the nearest name.
+DYNAMICS_SECTION_KEYS = ('enabled', 'string_damping')
 #: Floor of the squared radius of gyration (m^2) in the default inertia (a link whose nodes all
 #: sit at its centre of mass still gets a positive inertia).
 MIN_GYRATION_SQUARED = 1e-8
@@ -264,8 +268,11 @@ def chain_link_inertias(chain: JointChain, link_inertias: ArrayLike) -> list[Lin
 
 def _config_damping(document: Any) -> Any:
     """``dynamics.string_damping`` of a config document (N s/m), :data:`DEFAULT_STRING_DAMPING`
-    when absent."""
-    value = config.section(document, 'dynamics', required=False).get('string_damping')
+    when absent; a key of ``dynamics`` outside :data:`DYNAMICS_SECTION_KEYS` is refused
+    (ValueError) with the nearest name."""
+    section = config.section(document, 'dynamics', required=False)
+    config.check_keys(section, DYNAMICS_SECTION_KEYS, 'dynamics')
+    value = section.get('string_damping')
     if value is None or (isinstance(value, Sequence) and not isinstance(value, str) and
                          len(value) == 0):
         return DEFAULT_STRING_DAMPING
@@ -468,10 +475,12 @@ class JointDynamics:
                     ) -> JointDynamics:
         """From a joint config document (``config/default_joint.yaml``): the ``joint``
         section's model and :meth:`LinkInertia.from_config`; ``string_damping`` (N s/m) default:
-        ``dynamics.string_damping`` (scalar or one per string) or 0."""
+        ``dynamics.string_damping`` (scalar or one per string), else
+        :data:`DEFAULT_STRING_DAMPING`."""
         section = config.section(document, 'joint')
+        damping = _config_damping(document)  # the section's keys checked even when given
         if string_damping is None:
-            string_damping = _config_damping(document)
+            string_damping = damping
         return cls(JointModel.from_dict(section), LinkInertia.from_config(section),
                    string_damping)
 
@@ -773,9 +782,10 @@ class ChainDynamics:
     def from_config(cls, document: Any, string_damping: Any = None) -> ChainDynamics:
         """From a spine config document (``config/default_spine.yaml``): the chain,
         :func:`chain_inertias_from_config`, ``string_damping`` default ``dynamics.string_damping``
-        (a scalar) or 0."""
+        (a scalar), else :data:`DEFAULT_STRING_DAMPING`."""
+        damping = _config_damping(document)  # the section's keys checked even when given
         if string_damping is None:
-            string_damping = _config_damping(document)
+            string_damping = damping
         return cls(JointChain.from_dict(document), chain_inertias_from_config(document),
                    string_damping)
 

@@ -1,7 +1,8 @@
 """The registry of the package's nodes (:func:`node_tables`: every node's parameter table, in
 the order of ``docs/parameters.md``) and the rules that need it: an unknown parameter of a
 node's own sections is one that no node of the package has (:func:`unknown_parameter_messages`,
-:func:`refuse_unknown_parameters`), and :func:`values_from_config` reads a config file as a node
+:func:`refuse_unknown_parameters`; a whole config file:
+:func:`unknown_config_parameters`), and :func:`values_from_config` reads a config file as a node
 reads its parameter file. The node modules are imported when :func:`node_tables` is first
 called (and only by the unknown-parameter rules when a name is not in the node's own table), so
 that importing this module loads no node. No ROS import.
@@ -118,6 +119,19 @@ def unknown_parameter_messages(given: Iterable[str], table: Iterable[ParameterSp
         keys = [n.split('.', 1)[1] for n in own if n.startswith(generic_section + '.')]
         lines += config.unknown_key_messages({key: None}, keys, section)
     return lines
+
+
+def unknown_config_parameters(document: Any) -> tuple[list[str], bool]:
+    """The unknown parameters of every node section of a config document (a ROS parameter file
+    or a plain config), judged with every node's table at once (:func:`node_tables`; a file
+    shared by several nodes holds each one's parameters), in the one format of
+    :func:`unknown_parameter_messages`; and whether the file is strict (its
+    ``strict_parameters``, default true: a node refuses to start on them, else warns and
+    runs). ValueError when ``strict_parameters`` is not a bool."""
+    given = flatten(config.parameters(document))
+    strict = bool(STRICT_PARAMETERS.check(given.get(STRICT_PARAMETERS.name, True)))
+    table = [spec for t in node_tables() for spec in t.parameters]
+    return unknown_parameter_messages(given, table), strict
 
 
 def refuse_unknown_parameters(given: Iterable[str], table: Iterable[ParameterSpec],

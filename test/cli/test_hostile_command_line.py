@@ -193,6 +193,56 @@ def test_check_config_fails_on_strings_saturated_at_the_design_pose(ring_documen
     assert 'strings at their maximum length at the unloaded equilibrium' in err
 
 
+def packaged_with(tmp_path: Path, section: str, key: str, value: object,
+                  strict: bool | None = None) -> Path:
+    """The packaged default_joint.yaml (node sections and all) with ``section.key`` set."""
+    document = config.load_yaml(config.packaged_config_path())
+    params = config.parameters(document)
+    params.setdefault(section, {})[key] = value
+    if strict is not None:
+        params['strict_parameters'] = strict
+    return write(tmp_path, document)
+
+
+def test_check_config_names_a_misspelt_node_key_with_the_nearest(tmp_path, capsys):
+    """A key of a node's section no node has: the node would refuse to start, so the file is
+    not sound (issue #39: it said ``sound: yes``)."""
+    path = packaged_with(tmp_path, 'limits', 'tension_maxx', 3.0)
+    code, out, err = run(capsys, 'check-config', path)
+    assert code == 2 and 'sound: no' in out, err
+    assert err.strip() == ('tensegrity-stiffness: error: limits.tension_maxx: unknown key '
+                           '(did you mean limits.tension_max?)')
+    code, out, err = run(capsys, 'check-config', path, '--sensors', 'tensions,imu', '--json')
+    assert code == 2 and json.loads(out)['sound'] is False
+    assert 'limits.tension_maxx: unknown key (did you mean limits.tension_max?)' in err
+
+
+def test_check_config_with_strict_parameters_false_notes_a_node_key(tmp_path, capsys):
+    path = packaged_with(tmp_path, 'limits', 'tension_maxx', 3.0, strict=False)
+    code, out, err = run(capsys, 'check-config', path)
+    assert code == 0 and 'sound: yes' in out, err
+    assert ('note: limits.tension_maxx: unknown key (did you mean limits.tension_max?): '
+            'ignored (strict_parameters: false)') in out
+
+
+def test_check_config_accepts_every_node_s_parameters_in_one_file(tmp_path, capsys):
+    """A file shared by several nodes: each one's parameters are no mistake."""
+    document = config.load_yaml(config.packaged_config_path())
+    params = config.parameters(document)
+    params.setdefault('limits', {}).update(tension_max=3.0, max_force=50.0)
+    params.setdefault('sim', {})['rate'] = 500.0
+    code, out, err = run(capsys, 'check-config', write(tmp_path, document))
+    assert code == 0 and 'sound: yes' in out, err
+
+
+def test_a_misspelt_dynamics_key_is_refused_with_the_nearest(tmp_path, capsys):
+    path = packaged_with(tmp_path, 'dynamics', 'string_dampin', 0.0)
+    expected = 'dynamics.string_dampin: unknown key (did you mean dynamics.string_damping?)'
+    for argv in (('check-config', path), ('modes', '--config', path),
+                 ('modes', '--config', path, '--string-damping', '0')):
+        assert refused(capsys, *argv).endswith(expected)
+
+
 # ------------------------------------------------------------------------------ modes
 def test_modes_of_a_spine_with_link_masses(tmp_path, capsys):
     path = tmp_path / 'spine.yaml'

@@ -467,6 +467,20 @@ def test_link_inertia_rejects_bad_values(kwargs: dict, match: str) -> None:
         LinkInertia(**kwargs)
 
 
+@pytest.mark.parametrize('given', [None, 0.0])
+def test_an_unknown_dynamics_key_is_refused_with_the_nearest(given) -> None:
+    """``dynamics.string_dampin: 0`` is not left out (the damping staying at its default):
+    refused, as the joint's and chain's unknown keys are, even when the damping is given."""
+    import yaml
+
+    expected = r'dynamics\.string_dampin: unknown key \(did you mean dynamics\.string_damping\?\)'
+    for path, cls in ((JOINT_CONFIG, JointDynamics), (SPINE_CONFIG, ChainDynamics)):
+        document = yaml.safe_load(path.read_text())
+        document['/**']['ros__parameters']['dynamics'] = {'string_dampin': 0.0, 'enabled': True}
+        with pytest.raises(ValueError, match=expected):
+            cls.from_config(document, given)
+
+
 def test_bad_inputs_name_the_argument() -> None:
     dyn = JointDynamics(MODEL)
     with pytest.raises(ValueError, match='model'):

@@ -166,6 +166,41 @@ def test_every_packaged_config_is_strictly_sound():
                 assert 'unknown key' not in str(exc), f'{path}: {exc}'
 
 
+def test_every_packaged_config_has_no_unknown_node_parameter():
+    """check-config's judgement of the node sections (every node's table at once) finds
+    nothing in the packaged configs and examples; the library's ``dynamics`` keys are the
+    nodes' ``dynamics.*`` parameters."""
+    from pathlib import Path
+
+    from tensegrity_stiffness import config
+    from tensegrity_stiffness.mechanics.dynamics import DYNAMICS_SECTION_KEYS
+    from tensegrity_stiffness.nodes.registry import node_tables, unknown_config_parameters
+    from tensegrity_stiffness.structures.schema import is_structure_document
+
+    root = Path(__file__).resolve().parents[2] / 'config'
+    for path in sorted(root.rglob('*.yaml')):
+        document = config.load_yaml(path)
+        if not is_structure_document(document):
+            assert unknown_config_parameters(document)[0] == [], path
+    dynamics = {spec.name.split('.', 1)[1] for table in node_tables()
+                for spec in table.parameters if spec.name.startswith('dynamics.')}
+    assert dynamics == set(DYNAMICS_SECTION_KEYS)
+
+
+def test_unknown_config_parameters_judges_every_node_section_at_once():
+    from tensegrity_stiffness.nodes.registry import unknown_config_parameters
+
+    document = {'/**': {'ros__parameters': {
+        'limits': {'tension_max': 3.0, 'max_force': 50.0, 'tension_maxx': 3.0},
+        'sim': {'rate': 500.0, 'rat': 1.0}, 'use_sim_time': True}}}
+    assert unknown_config_parameters(document) == ([
+        'limits.tension_maxx: unknown key (did you mean limits.tension_max?)',
+        'sim.rat: unknown key (did you mean sim.rate?)'], True)
+    plain = {'strict_parameters': False, 'sensors': {'tension_stdd': 0.1}}
+    lines, strict = unknown_config_parameters(plain)
+    assert not strict and lines[0].startswith('sensors.tension_stdd: unknown key (did you mean')
+
+
 def test_the_cli_planar_defaults_are_the_table():
     from tensegrity_stiffness.cli.planar_commands import PLANAR_KEYS
 
