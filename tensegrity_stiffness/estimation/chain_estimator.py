@@ -19,11 +19,14 @@ from tensegrity_stiffness.estimation.joint_estimator import (
     DECREMENT_TOLERANCE,
     MAX_ITERATIONS,
     MIN_LENGTH_SCALE,
+    NEAR_SINGULAR_TOLERANCE,
     RANK_TOLERANCE,
     STIFFNESS_STEP,
     EstimatorFit,
     JointProblem,
+    axis_words,
     better_fit,
+    describe_direction,
     entry_std,
     nan_array,
     outlier_fields,
@@ -295,16 +298,36 @@ def _chain_information(problem: _ChainProblem, J: FloatArray, Jc: FloatArray,
     return 0.5 * (C + C.T), rank, cond, np.empty((0, problem.size))
 
 
-def _chainmissing_message(null: FloatArray, n: int, inputs: str, rank: int) -> str:
-    weight = np.zeros(n + 1)
+def _load_words(load: FloatArray, length_scale: float) -> str:
+    """A tip-load direction ``[f; m]`` in words: the force or moment that dominates (moments
+    over ``length_scale``)."""
+    f, m = load[:3], load[3:]
+    if np.linalg.norm(m) >= np.linalg.norm(f) * length_scale:
+        return f'moment about {axis_words(m / np.linalg.norm(m))}'
+    return f'force along {axis_words(f / np.linalg.norm(f))}'
+
+
+def _chain_missing_message(problem: _ChainProblem, z: FloatArray, null: FloatArray,
+                           inputs: str, rank: int) -> str:
+    """Why the readings leave ``6 - rank`` of the unknowns open: each undetermined direction
+    (a row of ``null``, in z) by the joints it moves, each joint's part in the joint
+    estimator's words (:func:`describe_direction`, its link's pose change in {1}_i), and the
+    tip load's part."""
+    n = problem.n
+    xi = z[:6 * n].reshape(n, 6)
+    words = []
     for v in null:
-        weight += np.sqrt(np.sum(v.reshape(n + 1, 6) ** 2, axis=1))
-    involved = [f'joint {i + 1}' for i in range(n) if weight[i] > 0.1 * weight.max()]
-    if weight[n] > 0.1 * weight.max():
-        involved.append('the tip load')
+        weight = np.linalg.norm((v / problem.scale).reshape(n + 1, 6), axis=1)
+        involved = weight > 0.1 * weight.max()
+        parts = [f'joint {i + 1} ' + describe_direction(
+            sm.pose_jacobian(xi[i]) @ v[6 * i:6 * i + 6], problem.length_scale)
+            for i in range(n) if involved[i]]
+        if involved[n]:
+            parts.append(f'the tip load ({_load_words(v[6 * n:], problem.length_scale)})')
+        words.append(' with '.join(parts))
     return (f'{inputs}: with the equilibria they determine only {rank} of the 6 remaining '
             f'unknowns (the tip load, or the configuration it implies); undetermined: '
-            f'{", ".join(involved)}. Add string tensions or lengths on those joints, a joint or '
+            f'{"; ".join(words)}. Add string tensions or lengths on those joints, a joint or '
             f'tip pose, or the tip load (tip_wrench)')
 
 
@@ -608,9 +631,19 @@ def _chain_estimate(chain: JointChain, inputs: _ChainInputs, fit: _ChainFit, res
     r, _, _, _, state = ev
     C, rank, cond = fit.C, fit.rank, fit.cond
     if rank < 6:
-        return _failed_chain(_chainmissing_message(fit.null, n, inputs.text, rank), n,
-                             measured, dropped, False, rank, cond, iterations)
+        return _failed_chain(_chain_missing_message(fit.problem, z, fit.null, inputs.text,
+                                                    rank), n, measured, dropped, False, rank,
+                             cond, iterations)
     if not fit.converged:
+        if fit.why == SINGULAR_NORMAL_MATRIX:
+            # Rank 6 at the rank tolerance, but too weakly determined to solve for: named as
+            # the undetermined directions are (as the joint estimator does).
+            _, near, _, null = _chain_information(fit.problem, ev[1], ev[3],
+                                                  NEAR_SINGULAR_TOLERANCE)
+            if near < 6:
+                return _failed_chain(_chain_missing_message(fit.problem, z, null, inputs.text,
+                                                            near), n, measured, dropped,
+                                     False, near, cond, iterations)
         return _failed_chain(f'{inputs.text}: {fit.why}', n, measured, dropped, True, rank,
                              cond, iterations)
     g, rest = inputs.gravity, inputs.rest

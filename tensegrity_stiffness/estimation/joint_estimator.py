@@ -220,16 +220,27 @@ def _scaled_svd(J: FloatArray, length_scale: float) -> tuple[FloatArray, FloatAr
     return s, Vt * scale
 
 
-def _describe_direction(pose_change: FloatArray, length_scale: float) -> str:
-    """A pose change [dp; dtheta] in words: the translation or rotation that dominates."""
+def describe_direction(pose_change: FloatArray, length_scale: float) -> str:
+    """A pose change [dp; dtheta] in words, the translation or rotation that dominates
+    (``length_scale`` m per rad): how every estimator names an undetermined direction."""
     dp, dth = pose_change[:3], pose_change[3:]
     if np.linalg.norm(dth) * length_scale >= np.linalg.norm(dp):
-        axis = dth / np.linalg.norm(dth)
         kind = 'rotation about'
+        axis = dth / np.linalg.norm(dth)
     else:
-        axis = dp / np.linalg.norm(dp)
         kind = 'translation along'
-    return f'{kind} ({axis[0]:.2f}, {axis[1]:.2f}, {axis[2]:.2f})'
+        axis = dp / np.linalg.norm(dp)
+    return f'{kind} {axis_words(axis)}'
+
+
+def axis_words(axis: FloatArray) -> str:
+    """An undetermined direction's unit axis (3,) as ``(x, y, z)`` to 2 decimals, its sign
+    chosen so that the largest component is positive (the direction's sign is arbitrary) and
+    no ``-0.00``."""
+    if axis[np.argmax(np.abs(axis))] < 0.0:
+        axis = -axis
+    x, y, z = np.round(axis, 2) + 0.0
+    return f'({x:.2f}, {y:.2f}, {z:.2f})'
 
 
 def missing_message(prep: PreparedMeasurements, names: Sequence[str], rank: int,
@@ -264,7 +275,7 @@ def _observability(problem: JointProblem, J: FloatArray, state: JointState,
         return rank, cond, s, ''
     P = sm.pose_jacobian(state.screw, kin)
     null = Vt[rank:]
-    words = [_describe_direction(P @ v, problem.length_scale) for v in null]
+    words = [describe_direction(P @ v, problem.length_scale) for v in null]
     slack = [problem.model.string_names[i] for i in prep.tension_index if state.slack[i]]
     return rank, cond, s, missing_message(prep, problem.model.string_names, rank, words,
                                                 slack)
