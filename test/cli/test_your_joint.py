@@ -44,6 +44,45 @@ def test_every_command_of_the_page_runs(tmp_path, monkeypatch, capsys):
         assert (tmp_path / name).read_text() == (EXAMPLES / name).read_text(), name
 
 
+def _section(number: int) -> str:
+    """The text of the page's section ``number`` (``## <number>.`` to the next ``## ``)."""
+    text = PAGE.read_text(encoding='utf-8')
+    start = text.index(f'\n## {number}. ')
+    end = text.find('\n## ', start + 1)
+    return text[start:] if end < 0 else text[start:end]
+
+
+def test_section_6_states_what_check_config_sensors_prints(tmp_path, monkeypatch, capsys):
+    """The results section 6 states for its ``check-config --sensors`` commands (the quoted
+    ``undetermined: ...`` and ``determined: ...`` in the page's order, the pose std to the
+    digits shown) are what the commands print: read from the page, so the two cannot drift."""
+    section = _section(6)
+    commands = [shlex.split(line)[1:] for block in re.findall(r'```bash\n(.*?)```', section,
+                                                               re.S)
+                for line in block.splitlines() if line.startswith('tensegrity-stiffness ')]
+    sensor_runs = [argv for argv in commands if argv[0] == 'check-config' and '--sensors' in argv]
+    stated = re.findall(r'`((?:un)?determined: [^`]*)`', section)
+    assert len(sensor_runs) >= 2 and len(stated) == len(sensor_runs), (sensor_runs, stated)
+    monkeypatch.chdir(tmp_path)
+    lines = []
+    for argv in commands:
+        assert main(argv) == 0, argv
+        out = capsys.readouterr().out
+        if argv in sensor_runs:
+            found = [line for line in out.splitlines() if line.startswith('sensors ')]
+            assert len(found) == 1, out
+            lines.append(found[0])
+    for expected, line in zip(stated, lines, strict=True):
+        assert expected in line, (expected, line)
+    std = re.search(r'pose std ([0-9.]+) mm / ([0-9.]+) deg', section)
+    printed = re.search(r'pose std ([0-9.]+) mm / ([0-9.]+) deg', ' '.join(lines))
+    assert std and printed, (section, lines)
+    for shown, value in zip(std.groups(), printed.groups(), strict=True):
+        digits = len(shown.partition('.')[2])
+        assert float(shown) == pytest.approx(float(value), abs=0.5 * 10.0 ** -digits), \
+            (shown, value)
+
+
 def test_example_paths_and_check_config_example(capsys):
     path = config.example_config_path('ring8_joint.yaml')
     assert path.is_file() and path.parent.name == 'examples'
