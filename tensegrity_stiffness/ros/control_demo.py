@@ -42,8 +42,9 @@ from tensegrity_stiffness.control.controller import (
     ControlTarget,
     StiffnessController,
 )
-from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
+from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.nodes.control_demo_line import control_line, pose_error
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.demo_processes import (
     NAMESPACE,
@@ -112,47 +113,14 @@ class ControlMonitor:
         return pose_error(target, T)
 
     def line(self, t: float) -> str:
+        """The live line at ``t`` s (:func:`~tensegrity_stiffness.nodes.control_demo_line.
+        control_line`)."""
         with self._lock:
             v = dict(self._values)
             e = dict(self._estimator)
             message = self._message
-        head = f't {t:5.1f} s  {phase_at(t):15s}'
-        if 'pose error [m, rad]' not in v:  # no state yet: nothing to show
-            return head
-        # [dx dy dz rx ry rz]: metres, then radians
-        error = np.array(v['pose error [m, rad]'].strip('[]').replace(',', ' ').split(), float)
-        rotation_deg = np.degrees(np.linalg.norm(error[3:]))
-        kc_error = v.get('stiffness error', '-') if v.get('stiffness target') == 'set' else '-'
-        true = self.true_error()
-        true_text = '-' if true is None else \
-            f'{1e3 * true[0]:.3f} mm {np.degrees(true[1]):.3f} deg'
-        feasible = v.get('feasible', '-')
-        why = f' ({message})' if feasible == 'false' and message else ''
-        return (f'{head}  pose error {1e3 * np.linalg.norm(error[:3]):.3f} mm '
-                f'{rotation_deg:.3f} deg (true {true_text})  K_c error {kc_error}  '
-                f'saturated {v.get("saturated strings", "-")}  feasible {feasible}{why}'
-                f'  tick {_number(v.get("tick time [ms]"))} ms  rate '
-                f'{_number(v.get("achieved tick rate [Hz]"), "4.0f")}/'
-                f'{_number(v.get("tick rate [Hz]"), ".0f")} Hz  missed '
-                f'{v.get("missed ticks", "-")}  latency '
-                f'{_number(v.get("latency from the reading median [ms]"))}/'
-                f'{_number(v.get("latency from the reading p99 [ms]"))} ms  consistent '
-                f'{_number(e.get("consistent share"), ".1%")}')
-
-
-def pose_error(target: np.ndarray, pose: np.ndarray) -> tuple[float, float]:
-    """(|p - p_target| m, rotation angle of R_target^T R rad) of two (4, 4) poses."""
-    position = float(np.linalg.norm(pose[:3, 3] - target[:3, 3]))
-    rotation = float(np.linalg.norm(log_se3(np.linalg.inv(target) @ pose)[:3]))
-    return position, rotation
-
-
-def _number(value: str | None, spec: str = '.3g') -> str:
-    """A diagnostic value formatted, '-' when absent or not a number."""
-    try:
-        return format(float(value), spec)
-    except (TypeError, ValueError):
-        return '-'
+        return control_line(f't {t:5.1f} s  {phase_at(t):15s}', v, message, e,
+                            self.true_error())
 
 
 def stiffness_design(model: JointModel, screw: np.ndarray) -> ControlCommand:

@@ -29,6 +29,7 @@ NEEDS = {
     'parameter_specs': set(),
     'shared_parameters': set(),
     'registry': set(),
+    'control_demo_line': set(),  # the control demo's live line, ROS-free
 }
 
 SCRIPT = """
