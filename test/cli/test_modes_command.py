@@ -109,6 +109,29 @@ def test_modes_plot_writes_the_figure(capsys, tmp_path):
     assert png_header_size(spine) == DEFAULT_SIZE
 
 
+@pytest.mark.parametrize(('example', 'up'), [('ring8_joint.yaml', 'z'), (None, 'y')])
+def test_the_mode_figure_stands_the_joint_on_its_own_axis(capsys, tmp_path, monkeypatch,
+                                                          example, up):
+    """#39: a +z ring joint's figure is drawn with z up (it lay on its side), the +y vertebra
+    with y up: every panel's view takes the joint's axis as vertical."""
+    pytest.importorskip('matplotlib')
+    from mpl_toolkits.mplot3d import Axes3D
+
+    seen = []
+    view_init = Axes3D.view_init
+
+    def recorded(self, *args, **kwargs):
+        if 'vertical_axis' in kwargs:  # the figure's own views (matplotlib's default: z)
+            seen.append(kwargs['vertical_axis'])
+        return view_init(self, *args, **kwargs)
+
+    monkeypatch.setattr(Axes3D, 'view_init', recorded)
+    path = config.example_config_path(example) if example else config.packaged_config_path()
+    code, _, err = run(capsys, 'modes', '--config', path, '--plot', tmp_path / 'modes.png')
+    assert code == EXIT_OK, err
+    assert seen == [up] * 6
+
+
 def test_modes_bad_input_is_exit_2(capsys, tmp_path):
     joint = dict(config.load_section(config.packaged_config_path(), 'joint'), link2_mass=-1.0)
     bad = tmp_path / 'bad.yaml'
