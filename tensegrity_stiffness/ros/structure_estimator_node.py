@@ -47,7 +47,6 @@ from tensegrity_stiffness.nodes.structure_estimator_node import (
     trust_summary,
     trust_values,
 )
-from tensegrity_stiffness.nodes.structure_sim_node import resting_poses
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.conversions.outputs import RCLPY_TYPES, output_topics
@@ -55,6 +54,7 @@ from tensegrity_stiffness.ros.conversions.structure_outputs import structure_mar
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded
+from tensegrity_stiffness.structures.equilibrium import resting_poses
 from tensegrity_stiffness.structures.structure import Structure
 
 

@@ -6,7 +6,8 @@ own (paced by the wall clock, or as fast as possible publishing ``/clock``), val
 on the inputs, and publishes the truth and the simulated sensors with their noise. Parameters:
 :data:`tensegrity_stiffness.nodes.structure_sim_node.STRUCTURE_SIM_PARAMETERS`.
 
-The twin starts at rest at the structure's equilibrium on its ground (:func:`resting_poses`).
+The twin starts at rest at the structure's equilibrium on its ground
+(:func:`~tensegrity_stiffness.structures.equilibrium.resting_poses`).
 Outputs: ``~/poses`` (``geometry_msgs/PoseArray`` in ``frames.world``, the structure's body
 order), ``~/measured_lengths``, ``~/measured_tensions`` (load cells), ``~/measured_rest_lengths``
 (motor encoders; ``Float64MultiArray``, string order), ``~/measured_contacts`` (1 per body
@@ -51,7 +52,6 @@ from tensegrity_stiffness.nodes.structure_sim_node import (
     StructureSimSettings,
     live_line,
     loads_label,
-    resting_poses,
     structure_sim_settings,
 )
 from tensegrity_stiffness.ros import conversions
@@ -73,6 +73,7 @@ from tensegrity_stiffness.simulation.structure_gait import (
 )
 from tensegrity_stiffness.simulation.structure_twin import StructureSimulation
 from tensegrity_stiffness.simulation.twin import checked_wrench
+from tensegrity_stiffness.structures.equilibrium import resting_poses
 
 #: Seconds between /diagnostics messages (and live lines).
 DIAGNOSTICS_PERIOD_S = 1.0
