@@ -137,7 +137,7 @@ class StructureEstimatorNode(StreamingNode):
     def _output_messages(self, settings: StructureEstimatorSettings
                          ) -> StructureEstimatorMessages:
         return StructureEstimatorMessages(settings.structure,
-                                          f'{self.get_name()}: estimate')
+                                          f'{self.get_fully_qualified_name()}: estimate')
 
     def _outputs(self, settings: StructureEstimatorSettings, snapshot: EstimatorInput,
                  wanted: tuple[bool, ...]) -> StructureEstimatorOutputs:
@@ -243,8 +243,8 @@ class StructureEstimatorNode(StreamingNode):
                    ('filter restarts', self._track.restarts),
                    ('trigger', f'~/{settings.trigger_reading}'),
                    ('max age [s]', settings.max_age)]
-        return [conversions.diagnostic_status(f'{self.get_name()}: structure estimator', level,
-                                              message, values,
+        name = f'{self.get_fully_qualified_name()}: structure estimator'
+        return [conversions.diagnostic_status(name, level, message, values,
                                               hardware_id=settings.world_frame)]
 
 

@@ -366,9 +366,10 @@ class StructureSimNode(SteppingTwin, Node):
                   ('real-time factor', factor), ('gait phase', self.gait_phase),
                   ('gait steps done', self.gait_steps_done),
                   ('rejected inputs', self.reporter.rejected or 0)]
+        name = f'{self.get_fully_qualified_name()}: structure twin'
         self._pub_diagnostics.publish(conversions.diagnostic_array(
-            [conversions.diagnostic_status(f'{self.get_name()}: structure twin', level, line,
-                                           values, hardware_id=self._settings.world_frame)],
+            [conversions.diagnostic_status(name, level, line, values,
+                                           hardware_id=self._settings.world_frame)],
             self.get_clock().now().to_msg()))
         if LIVE:
             print(line, flush=True)
