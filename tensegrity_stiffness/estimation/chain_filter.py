@@ -58,7 +58,7 @@ from tensegrity_stiffness.estimation.joint_filter import (
 )
 from tensegrity_stiffness.geometry.screw import BLOCK_SWAP, ScrewKinematics, check_in_chart
 from tensegrity_stiffness.geometry.transforms import rigid_transform
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, LinkInertia
 
@@ -183,9 +183,7 @@ class ChainFilter(FilterTrack):
             pose_whitener = _whitener('tip_pose_covariance', tip_pose_covariance)
         W_m = W_whitener = None
         if tip_wrench is not None:
-            W_m = finite_array('tip_wrench', tip_wrench)
-            if W_m.shape != (6,):
-                raise ValueError(f'tip_wrench must have shape (6,), got {W_m.shape}')
+            W_m = optional_vector('tip_wrench', tip_wrench)
             W_whitener = _whitener('tip_wrench_covariance', tip_wrench_covariance)
         load = self._known(known_load, W_m)
         measured = sum(p.dof for p in preps if p is not None) + 6 * (pose_T is not None) + \

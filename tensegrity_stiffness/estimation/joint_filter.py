@@ -76,8 +76,9 @@ from tensegrity_stiffness.geometry.screw import (
     BLOCK_SWAP,
     ScrewKinematics,
     check_in_chart,
+    single_screw,
 )
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
@@ -464,25 +465,17 @@ class JointFilter(FilterTrack):
         if estimate is not None:
             self._start_from(estimate)
         elif screw is not None:
-            xi = finite_array('screw', screw)
-            if xi.shape != (6,):
-                raise ValueError(f'screw must have shape (6,), got {xi.shape}')
-            check_in_chart(xi, 'screw')
+            xi = single_screw(screw)
             x = np.zeros(self.size)
             x[:6] = xi
             if twist is not None:
-                tw = finite_array('twist', twist)
-                if tw.shape != (6,):
-                    raise ValueError(f'twist must have shape (6,), got {tw.shape}')
+                tw = optional_vector('twist', twist)
                 R = ScrewKinematics(xi).R
                 x[6:9], x[9:12] = R.T @ tw[3:], R.T @ tw[:3]
             if load is not None:
                 if self.size != 18:
                     raise ValueError("load: a filter with load='known' has no load state")
-                W = finite_array('load', load)
-                if W.shape != (6,):
-                    raise ValueError(f'load must have shape (6,), got {W.shape}')
-                x[12:] = W
+                x[12:] = optional_vector('load', load)
             if covariance is None:
                 P = np.diag(np.r_[[1e-6] * 3, [1e-10] * 3, self._initial_twist_variance(),
                                   [1.0] * 3 * (self.size == 18), [1e-4] * 3 * (self.size == 18)])
