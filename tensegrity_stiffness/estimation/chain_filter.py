@@ -32,11 +32,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.estimation import sensor_models as sm
-from tensegrity_stiffness.estimation.estimators import (
-    CONSISTENCY_PROBABILITY,
+from tensegrity_stiffness.estimation.chain_estimator import (
     ChainEstimate,
-    Measurements,
-    PreparedMeasurements,
     estimate_chain_state,
     tip_pose_jacobian,
     tip_stiffness_std,
@@ -56,6 +53,8 @@ from tensegrity_stiffness.estimation.joint_filter import (
     resolved_load,
     validated_filter_options,
 )
+from tensegrity_stiffness.estimation.measurements import Measurements, PreparedMeasurements
+from tensegrity_stiffness.estimation.trust import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.geometry.screw import BLOCK_SWAP, ScrewKinematics, check_in_chart
 from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array, optional_vector

@@ -27,7 +27,7 @@ from tensegrity_stiffness.nodes.shared_parameters import (
     joint_from_values,
     joint_override_parameters,
 )
-from tensegrity_stiffness.simulation.twin import (
+from tensegrity_stiffness.simulation.twin_model import (
     DEFAULT_MAX_FORCE,
     DEFAULT_MAX_MOMENT,
     SimulationOptions,

@@ -27,7 +27,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness.estimation import sensor_models as sm
-from tensegrity_stiffness.estimation.estimators import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.estimation.structure_estimator import (
     DEFAULT_ACCELERATION_STD,
     DEFAULT_CONTACT_STD,
@@ -41,6 +40,7 @@ from tensegrity_stiffness.estimation.structure_estimator import (
     StructureMeasurements,
     estimate_structure_poses,
 )
+from tensegrity_stiffness.estimation.trust import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATION_METHODS,

@@ -25,13 +25,13 @@ from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.shared_parameters import COMMON_PARAMETERS
 from tensegrity_stiffness.nodes.structure_node import STRUCTURE_PARAMETERS, structure_path
 from tensegrity_stiffness.simulation.structure_twin import StructureTwinOptions
-from tensegrity_stiffness.simulation.twin import (
+from tensegrity_stiffness.simulation.twin_model import (
     DEFAULT_JOINT_DAMPING,
     DEFAULT_MAX_FORCE,
     DEFAULT_MAX_MOMENT,
     DEFAULT_TENDON_DAMPING,
-    SensorNoise,
 )
+from tensegrity_stiffness.simulation.twin_sensors import SensorNoise
 from tensegrity_stiffness.structures.structure import Structure
 
 NODE_NAME = 'structure_sim_node'

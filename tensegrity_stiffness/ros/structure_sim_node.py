@@ -72,7 +72,7 @@ from tensegrity_stiffness.simulation.structure_gait import (
     plan_roll_step,
 )
 from tensegrity_stiffness.simulation.structure_twin import StructureSimulation
-from tensegrity_stiffness.simulation.twin import checked_wrench
+from tensegrity_stiffness.simulation.twin_model import checked_wrench
 from tensegrity_stiffness.structures.equilibrium import resting_poses
 
 #: Seconds between /diagnostics messages (and live lines).
