@@ -4,10 +4,11 @@ covariance, from what the robot measures; the rclpy node is
 :class:`~tensegrity_stiffness.estimation.structure_estimator.StructureMeasurements` of the latest
 readings, one estimate (``estimation.method``: ``static``, each reading set on its own with
 :func:`~tensegrity_stiffness.estimation.structure_estimator.estimate_structure_poses`, or
-``filter``, the recursive :class:`~tensegrity_stiffness.estimation.structure_estimator.
-StructureFilter`), the outputs of it (the structure node's at the estimated poses:
-:func:`tensegrity_stiffness.nodes.structure_node.structure_outputs`), their names and layouts,
-and the values of its ``/diagnostics`` and ``~/trust``.
+``filter``, the recursive
+:class:`~tensegrity_stiffness.estimation.structure_estimator.StructureFilter`), the outputs of it
+(the structure node's at the estimated poses:
+:func:`tensegrity_stiffness.nodes.structure_node.structure_outputs`), their names and layouts, and
+the values of its ``/diagnostics`` and ``~/trust``.
 
 Inputs as ``structure_sim_node`` publishes them (:data:`STRUCTURE_ESTIMATOR_INPUTS`, each
 ``Float64MultiArray`` in the structure's string or node order, NaN: not measured; one

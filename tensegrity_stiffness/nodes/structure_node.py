@@ -406,11 +406,11 @@ def body_frame_transforms(settings: StructureNodeSettings, state: StructureState
 # ------------------------------------------------------------------------------ health
 @dataclass(frozen=True)
 class StructureHealth(StringHealth):
-    """The health of one configuration (:class:`~tensegrity_stiffness.nodes.health.
-    StringHealth`, the problems naming the strings): the ``contacts`` (node names), the
-    smallest eigenvalue of the symmetric part of the total stiffness on the tangent space
-    without the gauge (``smallest_eigenvalue``; inf when no motion is left) and
-    ``stability_margin`` (it over the largest modulus)."""
+    """The health of one configuration (:class:`~tensegrity_stiffness.nodes.health.StringHealth`,
+    the problems naming the strings): the ``contacts`` (node names), the smallest eigenvalue of the
+    symmetric part of the total stiffness on the tangent space without the gauge
+    (``smallest_eigenvalue``; inf when no motion is left) and ``stability_margin`` (it over the
+    largest modulus)."""
 
     contacts: list[str] = field(default_factory=list)
     smallest_eigenvalue: float = math.inf
