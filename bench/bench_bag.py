@@ -7,11 +7,12 @@ joint's unloaded equilibrium) to a temporary folder, then measures side by side 
 * end to end: :func:`tensegrity_stiffness.recordings.bag.process_bag` (read, decode and validate as
   the node does, batched evaluation, write five outputs per input), in inputs per second, best of R
   runs; with ``--baseline CHECKOUT`` (a checkout of another commit, e.g. a ``git worktree``) that
-  checkout's ``tensegrity_stiffness/bag.py`` too, on this checkout's library, its runs interleaved
-  with this one's, and the ratio;
+  checkout's ``tensegrity_stiffness/recordings/bag.py`` (``tensegrity_stiffness/bag.py`` before
+  the subpackages) too, on this checkout's library (the parts it imports included), its runs
+  interleaved with this one's, and the ratio;
 * its parts, with the command's own pieces: reading and decoding (rosbags ``Reader.messages``,
   plain screws decoded in blocks with ``plain_screw_values`` and checked with
-  ``processing.screw_inputs``); the library (``processing.joint_outputs_batch`` and
+  ``stiffness_node.screw_inputs``); the library (``stiffness_node.joint_outputs_batch`` and
   ``finite_rows`` in the command's chunks, OpenBLAS on one thread as in the command);
   writing (the output templates' rows and ``write_blocks``: rosbags' ``Writer.write``, five
   messages per input); each part timed on its own (on a loaded machine they need not add up to
@@ -38,14 +39,18 @@ sys.path.insert(0, str(ROOT))
 
 from support.bag_recordings import TYPESTORE, In, multiarray, screw_stream, write_bag  # noqa: E402
 
-from tensegrity_stiffness.nodes import layouts, messages, processing  # noqa: E402
-from tensegrity_stiffness.recordings import bag, bag_writers  # noqa: E402
+from tensegrity_stiffness.nodes import layouts, messages, stiffness_node  # noqa: E402
+from tensegrity_stiffness.recordings import bag, bag_topics, bag_writers, screw_cdr  # noqa: E402
 
 
 def load_bag_module(checkout: Path) -> object:
-    """``tensegrity_stiffness/bag.py`` of another checkout as a module of its own (it imports
-    this checkout's library)."""
-    path = checkout / 'tensegrity_stiffness' / 'bag.py'
+    """The bag command's module of another checkout (``tensegrity_stiffness/recordings/bag.py``,
+    or ``tensegrity_stiffness/bag.py`` in a checkout of the flat layout) as a module of its own
+    (it imports this checkout's library, its parts included)."""
+    package = checkout / 'tensegrity_stiffness'
+    path = package / 'recordings' / 'bag.py'
+    if not path.is_file():
+        path = package / 'bag.py'  # the flat layout before the subpackages
     spec = importlib.util.spec_from_file_location('baseline_bag', path)
     if spec is None or spec.loader is None:
         raise SystemExit(f'{path}: cannot load')
@@ -59,15 +64,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--n', type=int, default=100_000, help='screws in the bag')
     parser.add_argument('--repeat', type=int, default=3, help='end-to-end runs of each')
-    parser.add_argument('--storage', choices=bag.STORAGES, default='mcap',
+    parser.add_argument('--storage', choices=bag_topics.STORAGES, default='mcap',
                         help="the input's storage (the output's follows)")
     parser.add_argument('--baseline', type=Path, metavar='CHECKOUT',
                         help="another checkout whose bag.py runs side by side")
     args = parser.parse_args()
     baseline = load_bag_module(args.baseline) if args.baseline else None
-    n, chunk = args.n, bag.CHUNK_SIZE
+    n, chunk = args.n, bag_topics.CHUNK_SIZE
     screws = screw_stream(n, seed=0)
-    settings = bag.node_settings()
+    settings = bag_topics.node_settings()
     from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 
     with tempfile.TemporaryDirectory() as tmp:
@@ -94,52 +99,53 @@ def main() -> None:
             raws = [raw for _, _, raw in reader.messages()]
         iterate = time.perf_counter() - start
         start = time.perf_counter()
-        decoded = [processing.screw_inputs(bag.plain_screw_values(raws[k:k + chunk]))
+        decoded = [stiffness_node.screw_inputs(screw_cdr.plain_screw_values(raws[k:k + chunk]))
                    for k in range(0, n, chunk)]
         decode = time.perf_counter() - start
         assert all(ok.all() for ok, _ in decoded)
         start = time.perf_counter()
         for raw in raws:
             messages.multiarray_to_array(TYPESTORE.deserialize_cdr(
-                raw, bag.FLOAT64_MULTIARRAY), expected_length=6, max_length=1024)
+                raw, layouts.FLOAT64_MULTIARRAY), expected_length=6, max_length=1024)
         decode_each = time.perf_counter() - start
 
-        def evaluate_all() -> list[processing.JointOutputs]:
+        def evaluate_all() -> list[stiffness_node.JointOutputs]:
             outputs = []
             for k in range(0, n, chunk):
-                out = processing.joint_outputs_batch(settings.model, screws[k:k + chunk])
-                assert processing.finite_rows(out).all()
+                out = stiffness_node.joint_outputs_batch(settings.model, screws[k:k + chunk])
+                assert stiffness_node.finite_rows(out).all()
                 outputs.append(out)
             return outputs
 
         start = time.perf_counter()
-        with bag.single_threaded_blas():
+        with bag_topics.single_threaded_blas():
             outputs = evaluate_all()
         library = time.perf_counter() - start
         start = time.perf_counter()
         evaluate_all()
         library_threads = time.perf_counter() - start
 
-        typestore = bag.jazzy_typestore()
+        typestore = bag_topics.jazzy_typestore()
         output_layouts = layouts.joint_output_layouts(settings.model.string_names)
-        outputs_spec = bag.NODE_TOPICS['stiffness'].outputs
+        outputs_spec = bag_topics.NODE_TOPICS['stiffness'].outputs
         templates = {name: bag_writers.OutputTemplate(typestore, output_layouts[name],
-                                         settings.link1_frame) for name in bag.OUTPUT_NAMES}
+                                         settings.link1_frame) for name in bag_topics.OUTPUT_NAMES}
         start = time.perf_counter()
         with Writer(Path(tmp) / 'w', version=9,
                     storage_plugin=StoragePlugin[args.storage.upper()]) as writer:
-            conns = [writer.add_connection(f'/t/{name}', outputs_spec[name],
-                                           typestore=typestore) for name in bag.OUTPUT_NAMES]
+            conns = [writer.add_connection(f'/t/{name}', outputs_spec[name], typestore=typestore)
+                     for name in bag_topics.OUTPUT_NAMES]
             for b, out in enumerate(outputs):
                 times = np.arange(b * chunk, b * chunk + len(out.screw), dtype=np.int64) + 1
                 s = out.state
                 payloads = dict(zip(layouts.JOINT_OUTPUTS, (
                     s.wrench, s.stiffness, s.cartesian_stiffness, s.tensions,
                     out.interpretation), strict=True))
-                bag.write_blocks(writer, conns, times, [  # the stamped matrices: their source's
+                # the stamped matrices: their source's payload
+                bag_writers.write_blocks(writer, conns, times, [
                     templates[name].rows(payloads[output_layouts[name].source or name],
                                          times if templates[name].stamped else None)
-                    for name in bag.OUTPUT_NAMES])
+                    for name in bag_topics.OUTPUT_NAMES])
         write = time.perf_counter() - start
 
     rate = n / end_to_end

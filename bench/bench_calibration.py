@@ -32,15 +32,23 @@ from support.calibration_recordings import (  # noqa: E402
     true_parameters,
 )
 
-from tensegrity_stiffness.estimation import calibration as cal  # noqa: E402
 from tensegrity_stiffness.estimation.calibration_model import CalibrationProblem  # noqa: E402
-from tensegrity_stiffness.estimation.calibration_samples import samples_data  # noqa: E402
+from tensegrity_stiffness.estimation.calibration_results import CalibrationResult  # noqa: E402
+from tensegrity_stiffness.estimation.calibration_samples import (  # noqa: E402
+    CalibrationNoise,
+    samples_data,
+)
+from tensegrity_stiffness.estimation.joint_calibration import (  # noqa: E402
+    calibrate_joint,
+    cramer_rao_std,
+    initial_screws,
+)
 
 TARGET_S = 5.0
 SEED = 3
 
 
-def accuracy(result: cal.CalibrationResult, k: np.ndarray, d: np.ndarray,
+def accuracy(result: CalibrationResult, k: np.ndarray, d: np.ndarray,
              crb: np.ndarray) -> str:
     truth = np.concatenate([k, d])
     fitted = np.array([result.parameters[name] for name in result.names])
@@ -62,9 +70,9 @@ def scipy_reference(model, samples) -> tuple[float, np.ndarray, int]:
 
     t0 = time.perf_counter()
     data = samples_data(model, samples)
-    problem = CalibrationProblem(model, data, cal.CalibrationNoise())
+    problem = CalibrationProblem(model, data, CalibrationNoise())
     n2 = 2 * model.n_strings
-    xi0 = problem.refine_screws(np.zeros(n2), cal.initial_screws(model, data))
+    xi0 = problem.refine_screws(np.zeros(n2), initial_screws(model, data))
     N = len(samples)
     sample_of_row, row_of = np.nonzero(problem.mask)
     M, width = sample_of_row.size, n2 + 6
@@ -101,17 +109,17 @@ def main() -> None:
     k, d = true_parameters(model, SEED)
     started = time.perf_counter()
     states = configurations(model, k, d, args.samples, SEED, backend='library')
-    samples = measure(model, states, SEED, cal.CalibrationNoise())
+    samples = measure(model, states, SEED, CalibrationNoise())
     print(f'{args.samples} samples (library equilibria, made in '
           f'{time.perf_counter() - started:.1f} s), 24 parameters; kernel: '
           f'{model.uses_kernel}; machine shared: timings are noisy')
     for count in (200, args.samples):
-        crb = cal.cramer_rao_std(model, k, d, states.screws[:count], samples[:count])
+        crb = cramer_rao_std(model, k, d, states.screws[:count], samples[:count])
         for loss in ('soft_l1', 'linear'):
             times = []
             for _ in range(args.repeats):
                 t0 = time.perf_counter()
-                result = cal.calibrate_joint(model, samples[:count], loss=loss)
+                result = calibrate_joint(model, samples[:count], loss=loss)
                 times.append(time.perf_counter() - t0)
             best, median = min(times), float(np.median(times))
             verdict = ''
@@ -125,7 +133,7 @@ def main() -> None:
     if args.scipy_samples:
         count = args.scipy_samples
         t0 = time.perf_counter()
-        ours = cal.calibrate_joint(model, samples[:count], loss='linear')
+        ours = calibrate_joint(model, samples[:count], loss='linear')
         mine = time.perf_counter() - t0
         seconds, fitted, nfev = scipy_reference(model, samples[:count])
         values = np.array([ours.parameters[name] for name in ours.names])

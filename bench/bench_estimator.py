@@ -49,7 +49,7 @@ from support.estimation_trials import (  # noqa: E402
     truth_from_model,
 )
 
-from tensegrity_stiffness.estimation.estimators import estimate_joint_state  # noqa: E402
+from tensegrity_stiffness.estimation.joint_estimator import estimate_joint_state  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_joint.yaml'

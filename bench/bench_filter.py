@@ -39,13 +39,11 @@ from support.estimation_trials import GRAVITY_STD, TENSION_STD, TRUTH_SPREAD  # 
 
 from tensegrity_stiffness.config import packaged_config_path  # noqa: E402
 from tensegrity_stiffness.estimation import sensor_models as sm  # noqa: E402
+from tensegrity_stiffness.estimation.chain_estimator import estimate_chain_state  # noqa: E402
 from tensegrity_stiffness.estimation.chain_filter import ChainFilter  # noqa: E402
-from tensegrity_stiffness.estimation.estimators import (  # noqa: E402
-    Measurements,
-    estimate_chain_state,
-    estimate_joint_state,
-)
+from tensegrity_stiffness.estimation.joint_estimator import estimate_joint_state  # noqa: E402
 from tensegrity_stiffness.estimation.joint_filter import JointFilter  # noqa: E402
+from tensegrity_stiffness.estimation.measurements import Measurements  # noqa: E402
 from tensegrity_stiffness.mechanics import kernel  # noqa: E402
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402

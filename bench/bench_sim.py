@@ -79,9 +79,9 @@ def node_in_process(name: str, params_file: Path, spine: bool, seconds: float) -
     rclpy.init()
     overrides = [Parameter('sim.real_time', value=False)]
     # Parameters of the config file, as --params-file would give them.
-    from tensegrity_stiffness.nodes import parameters
-    values = parameters.values_from_config(params_file,
-                                           parameters.sim_node_parameters(spine, 5))
+    from tensegrity_stiffness.nodes.registry import values_from_config
+    from tensegrity_stiffness.nodes.sim_node import sim_node_parameters
+    values = values_from_config(params_file, sim_node_parameters(spine, 5))
     values['sim.spine'] = spine
     values['sim.real_time'] = False
     overrides = [Parameter(k, value=v) for k, v in values.items()

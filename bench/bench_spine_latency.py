@@ -45,8 +45,13 @@ from support.ros_harness import (  # noqa: E402
 )
 from tensegrity_stiffness.srv import SolveChainEquilibrium  # noqa: E402
 
-from tensegrity_stiffness.nodes import parameters  # noqa: E402
-from tensegrity_stiffness.nodes.spine_node import spine_outputs  # noqa: E402
+from tensegrity_stiffness.nodes.registry import values_from_config  # noqa: E402
+from tensegrity_stiffness.nodes.spine_node import (  # noqa: E402
+    SpineNodeSettings,
+    spine_node_parameters,
+    spine_node_settings,
+    spine_outputs,
+)
 from tensegrity_stiffness.ros import conversions  # noqa: E402
 
 CONFIG = ROOT / 'config' / 'default_spine.yaml'
@@ -60,10 +65,10 @@ CONFIG = ROOT / 'config' / 'default_spine.yaml'
 TIP_ERROR = np.array([1e-4, -2e-4, 1e-4, 1e-3, 0.0, -1e-3])
 
 
-def settings_for(n_joints: int) -> parameters.SpineNodeSettings:
-    values = parameters.values_from_config(CONFIG, parameters.spine_node_parameters(n_joints))
+def settings_for(n_joints: int) -> SpineNodeSettings:
+    values = values_from_config(CONFIG, spine_node_parameters(n_joints))
     values['chain.n_joints'] = n_joints
-    return parameters.spine_node_settings(values)
+    return spine_node_settings(values)
 
 
 def stream(ros: RosClient, base: str, n_joints: int, rate: float, seconds: float,

@@ -30,7 +30,8 @@ from support.calibration_recordings import (  # noqa: E402
     true_parameters,
 )
 
-from tensegrity_stiffness.estimation import calibration as cal  # noqa: E402
+from tensegrity_stiffness.estimation.calibration_samples import CalibrationNoise  # noqa: E402
+from tensegrity_stiffness.estimation.joint_calibration import cramer_rao_std  # noqa: E402
 
 SEED = 7
 FOUR = (0, 3, 5, 10)
@@ -50,7 +51,7 @@ CASES = (
 
 
 def states_for(model, k, d, motion: str, count: int):
-    noise = cal.CalibrationNoise()
+    noise = CalibrationNoise()
     if motion == 'loads only':
         return configurations(model, k, d, count, SEED, rest_spread=1e-12, backend='library')
     if motion.startswith('small loads'):
@@ -69,7 +70,7 @@ def main() -> None:
     model = nominal_model()
     n = model.n_strings
     k, d = true_parameters(model, SEED)
-    noise = cal.CalibrationNoise()
+    noise = CalibrationNoise()
     print('| sensors | motion | samples | stiffness std, median (worst) | '
           'offset std, median (worst) |')
     print('| --- | --- | ---: | ---: | ---: |')
@@ -87,7 +88,7 @@ def main() -> None:
                 basis = np.linalg.svd(np.eye(P) - np.outer(held, held))[0][:, :P - 1]
             else:
                 basis = None
-            std = cal.cramer_rao_std(model, k, d, states.screws, samples, noise=noise,
+            std = cramer_rao_std(model, k, d, states.screws, samples, noise=noise,
                                      basis=basis)
             idx = np.arange(n) if strings is None else np.array(strings)
             ks = 100 * std[idx] / k[idx]

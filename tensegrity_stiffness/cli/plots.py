@@ -355,8 +355,9 @@ def plot_actuator_workspace(mech: PlanarMechanism, path: str | Path, *,
                             width: int = DEFAULT_SIZES['actuator-workspace'][0],
                             height: int = DEFAULT_SIZES['actuator-workspace'][1]) -> Path:
     """Ji, Li & Lin Fig. 2: the actuator workspace (theta1, L3) with the singular curves i-v
-    and the actuator limit vi (:func:`~tensegrity_stiffness.mechanics.planar_workspace.
-    actuator_workspace_curves`), shaded inside the ranges."""
+    and the actuator limit vi
+    (:func:`~tensegrity_stiffness.mechanics.planar_workspace.actuator_workspace_curves`), shaded
+    inside the ranges."""
     path = output_path(path)
     samples = _check_count('samples', samples)
     fig = new_figure(width, height)
@@ -404,8 +405,9 @@ def plot_cartesian_workspace(mech: PlanarMechanism, path: str | Path, *,
                              progress: ProgressCallback | None = None) -> Path:
     """Ji, Li & Lin Fig. 3: the Cartesian workspace of D3 (shaded: points with a stable
     equilibrium inside the actuator ranges, on a ``resolution`` x ``resolution`` grid) and the
-    images of the curves i-vi (:func:`~tensegrity_stiffness.mechanics.planar_workspace.
-    cartesian_workspace_curves`; curve i is a single point on the stable branch)."""
+    images of the curves i-vi
+    (:func:`~tensegrity_stiffness.mechanics.planar_workspace.cartesian_workspace_curves`; curve i
+    is a single point on the stable branch)."""
     path = output_path(path)
     samples = _check_count('samples', samples)
     resolution = _check_count('resolution', resolution)

@@ -16,7 +16,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from tensegrity_stiffness.estimation.estimators import Measurements, estimate_joint_state
+from tensegrity_stiffness.estimation.joint_estimator import estimate_joint_state
+from tensegrity_stiffness.estimation.measurements import Measurements
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATOR_NODE_PARAMETERS,

@@ -53,9 +53,9 @@ def plot_structure(structure: Any, state: Any, path: str | Path, *,
                    width: int = STRUCTURE_FIGURE_SIZE[0],
                    height: int = STRUCTURE_FIGURE_SIZE[1], title: str | None = None,
                    elevation: float = 22.0, azimuth: float = -60.0) -> Path:
-    """The structure at ``state`` (a :class:`~tensegrity_stiffness.structures.structure.
-    StructureState`, e.g. of an equilibrium) with its ``contacts`` {node: force (3,)} (module
-    docstring) as a PNG at ``path``."""
+    """The structure at ``state`` (a
+    :class:`~tensegrity_stiffness.structures.structure.StructureState`, e.g. of an equilibrium)
+    with its ``contacts`` {node: force (3,)} (module docstring) as a PNG at ``path``."""
     path = output_path(path)
     fig = new_figure(width, height)
     from matplotlib import colormaps

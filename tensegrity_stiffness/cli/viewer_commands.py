@@ -2,9 +2,9 @@
 ``foxglove/``; docs/viewers.md) written for a joint or spine config and a namespace: every topic
 under the namespace the nodes run in, the fixed frame the config's, the grid in the plane across
 the joint's own axis (+y for the vertebra, +z for a ring: the axis along which link 2 stands
-off link 1 at the unloaded equilibrium, :func:`~tensegrity_stiffness.cli.dynamics_plots.
-vertical_axis`) and the view centred on link 2. The packaged files are the default joint's in
-the twin demo's namespace ``/twin``."""
+off link 1 at the unloaded equilibrium,
+:func:`~tensegrity_stiffness.cli.dynamics_plots.vertical_axis`) and the view centred on link 2. The
+packaged files are the default joint's in the twin demo's namespace ``/twin``."""
 
 from __future__ import annotations
 

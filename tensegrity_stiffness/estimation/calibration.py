@@ -17,10 +17,11 @@ measurement gives whitened residuals (measurement noise std ``sigma`` from
   for ``F``); no residual when the load is unknown. With a known load the sample's own unknown
   is its true load ``W = -F(xi)`` instead of its screw
   (:meth:`~.calibration_model.CalibrationProblem.normal_equations`: the screw is the equilibrium
-  under ``W``, solved by Newton after every step, :meth:`~.calibration_model.CalibrationProblem.
-  advance`), so that a precise reading converges; an **exact** load (zeros, or every known load
-  when the load noise is 0: :attr:`CalibrationNoise.exact_loads`) is no unknown: the
-  equilibrium under it is a constraint and its rows are no residuals;
+  under ``W``, solved by Newton after every step,
+  :meth:`~.calibration_model.CalibrationProblem.advance`), so that a precise reading converges; an
+  **exact** load (zeros, or every known load when the load noise is 0:
+  :attr:`CalibrationNoise.exact_loads`) is no unknown: the equilibrium under it is a constraint and
+  its rows are no residuals;
 * load cells: ``(phi_j(xi; theta) - t_j) / sigma`` for every measured string (eq. 8, the
   model's force law);
 * string lengths: ``(l_j(xi) - l_m) / sigma`` (eq. 7).

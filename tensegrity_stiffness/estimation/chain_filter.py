@@ -5,21 +5,20 @@ docs/estimation.md#spines-chainfilter).
 
 State ``x = [xi (6N); xi_dot (6N); W (6)]``: every joint's screw and screw rate (joint-major)
 and, with ``load='unknown'``, the tip wrench ``W`` (base frame, about its origin) as a random
-walk. Prediction: ``M xi_ddot = Q`` with :meth:`ChainDynamics.mass_matrix
-<tensegrity_stiffness.mechanics.dynamics.ChainDynamics.mass_matrix>` and
+walk. Prediction: ``M xi_ddot = Q`` with
+:meth:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics.mass_matrix` and
 :meth:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics.generalized_force` (strings,
 string damping, the links' weights, the tip load); the velocity-product terms of
-``ChainDynamics.acceleration`` (quadratic in the rates: a spine moves slowly; they cost one
-12x12 matrix exponential per joint) are left to the process noise. Integrated as the joint
-filter does
+``ChainDynamics.acceleration`` (quadratic in the rates: a spine moves slowly; they cost one 12x12
+matrix exponential per joint) are left to the process noise. Integrated as the joint filter does
 (one linearly implicit trapezoidal step per at most
-:data:`~tensegrity_stiffness.estimation.joint_filter.MAX_SUBSTEP`), with the Jacobian of the
-linear model of ``ChainDynamics`` (``M^-1 diag(J_l^T Pi) dr/dxi``, ``-M^-1 L^T C L``,
-``M^-1 diag(J_l^T Pi) Ad^T``; the derivatives of ``J_l`` and ``M`` off the equilibria left out,
-as there). Updates: each joint's tensions, lengths and pose, the tip pose and, with an unknown
-load, a measured tip load; the trust rules are the joint filter's
-(:func:`~tensegrity_stiffness.estimation.joint_filter.kalman_update`), a lost track restarts
-from :func:`~tensegrity_stiffness.estimation.estimators.estimate_chain_state`.
+:data:`~tensegrity_stiffness.estimation.joint_filter.MAX_SUBSTEP`), with the Jacobian of the linear
+model of ``ChainDynamics`` (``M^-1 diag(J_l^T Pi) dr/dxi``, ``-M^-1 L^T C L``,
+``M^-1 diag(J_l^T Pi) Ad^T``; the derivatives of ``J_l`` and ``M`` off the equilibria left out, as
+there). Updates: each joint's tensions, lengths and pose, the tip pose and, with an unknown load, a
+measured tip load; the trust rules are the joint filter's
+(:func:`~tensegrity_stiffness.estimation.joint_filter.kalman_update`), a lost track restarts from
+:func:`~tensegrity_stiffness.estimation.estimators.estimate_chain_state`.
 """
 
 from __future__ import annotations
@@ -32,11 +31,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.estimation import sensor_models as sm
-from tensegrity_stiffness.estimation.estimators import (
-    CONSISTENCY_PROBABILITY,
+from tensegrity_stiffness.estimation.chain_estimator import (
     ChainEstimate,
-    Measurements,
-    PreparedMeasurements,
     estimate_chain_state,
     tip_pose_jacobian,
     tip_stiffness_std,
@@ -56,9 +52,11 @@ from tensegrity_stiffness.estimation.joint_filter import (
     resolved_load,
     validated_filter_options,
 )
+from tensegrity_stiffness.estimation.measurements import Measurements, PreparedMeasurements
+from tensegrity_stiffness.estimation.trust import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.geometry.screw import BLOCK_SWAP, ScrewKinematics, check_in_chart
 from tensegrity_stiffness.geometry.transforms import rigid_transform
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, LinkInertia
 
@@ -79,8 +77,8 @@ class ChainFilter(FilterTrack):
     ``process_noise`` a :class:`~tensegrity_stiffness.estimation.joint_filter.ProcessNoise`
     (its accelerations act on each joint's ``xi_ddot``, its rates on the tip load; default
     :data:`~tensegrity_stiffness.estimation.joint_filter.DEFAULT_CHAIN_PROCESS_NOISE`);
-    ``load`` ``'unknown'`` or ``'known'``; the rest as :class:`~tensegrity_stiffness.estimation.
-    joint_filter.JointFilter`'s."""
+    ``load`` ``'unknown'`` or ``'known'``; the rest as
+    :class:`~tensegrity_stiffness.estimation.joint_filter.JointFilter`'s."""
 
     def __init__(self, chain: JointChain | ChainDynamics,
                  inertias: Sequence[LinkInertia] | None = None,
@@ -183,9 +181,7 @@ class ChainFilter(FilterTrack):
             pose_whitener = _whitener('tip_pose_covariance', tip_pose_covariance)
         W_m = W_whitener = None
         if tip_wrench is not None:
-            W_m = finite_array('tip_wrench', tip_wrench)
-            if W_m.shape != (6,):
-                raise ValueError(f'tip_wrench must have shape (6,), got {W_m.shape}')
+            W_m = optional_vector('tip_wrench', tip_wrench)
             W_whitener = _whitener('tip_wrench_covariance', tip_wrench_covariance)
         load = self._known(known_load, W_m)
         measured = sum(p.dof for p in preps if p is not None) + 6 * (pose_T is not None) + \

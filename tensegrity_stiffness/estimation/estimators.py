@@ -1,11 +1,11 @@
 """Pose, load and stiffness of a tensegrity joint (or a spine) estimated from what robots
 measure, with their uncertainty (no rclpy).
 
-Measurements (:class:`Measurements`, models and Jacobians in :mod:`~tensegrity_stiffness.
-sensor_models`): string tensions (load cells), string lengths (stretch sensors), a pose (motion
-capture), the direction of gravity in link 2 (an accelerometer at rest) and the external wrench
-(known, e.g. zero, or measured by a force-torque sensor; ``None`` = unknown). Rest lengths
-(motor encoders) are known inputs of the model.
+Measurements (:class:`Measurements`, models and Jacobians in
+:mod:`~tensegrity_stiffness.estimation.sensor_models`): string tensions (load cells), string
+lengths (stretch sensors), a pose (motion capture), the direction of gravity in link 2 (an
+accelerometer at rest) and the external wrench (known, e.g. zero, or measured by a force-torque
+sensor; ``None`` = unknown). Rest lengths (motor encoders) are known inputs of the model.
 
 Method: weighted nonlinear least squares over the screw ``xi`` (Gauss-Newton with Levenberg-
 Marquardt damping, analytic Jacobians), warm-started. Each measurement ``z`` with covariance
@@ -18,9 +18,9 @@ recovered as ``W = -F(xi)`` with covariance ``K C K^T`` (``K = dF/dxi``, eq. 10)
 Uncertainty: the screw covariance is the inverse of the weighted normal matrix ``C = (J^T J)^-1``
 at the estimate (the Cramer-Rao bound of the linearised problem); the pose covariance follows the
 ROS ``PoseWithCovariance`` convention (``[dp; dtheta]`` in {1}, ``p -> p + dp``,
-``R -> exp(hat(dtheta)) R``): ``P C P^T`` with ``P`` = :func:`~tensegrity_stiffness.
-sensor_models.pose_jacobian`. ``K_c``'s std is the first-order propagation of ``C`` through
-central differences of ``K_c(xi)``.
+``R -> exp(hat(dtheta)) R``): ``P C P^T`` with ``P`` =
+:func:`~tensegrity_stiffness.estimation.sensor_models.pose_jacobian`. ``K_c``'s std is the
+first-order propagation of ``C`` through central differences of ``K_c(xi)``.
 
 Observability: the rank and condition number of the whitened Jacobian with the translation
 columns scaled by the mean rest length (so that radians and metres weigh alike). A set that

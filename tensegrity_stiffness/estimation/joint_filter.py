@@ -34,10 +34,10 @@ a gyro (link 2's angular velocity) and, with an unknown load, a measured wrench.
 
 Trust: ``consistent`` is the normalised innovation squared (NIS) test of each update at
 ``consistency_probability``; while it fails, the reading whose innovation a broken sensor
-explains best (the drop of NIS when it is left out, as :func:`~tensegrity_stiffness.
-estimation.estimators.suspect_reading` does for residuals) is left out, at most
-:data:`~tensegrity_stiffness.estimation.estimators.MAX_CONTRADICTED`, and only when the rest
-then passes. :data:`LOST_TRACK_STEPS` inconsistent updates in a row (or a gap longer than
+explains best (the drop of NIS when it is left out, as
+:func:`~tensegrity_stiffness.estimation.estimators.suspect_reading` does for residuals) is left
+out, at most :data:`~tensegrity_stiffness.estimation.estimators.MAX_CONTRADICTED`, and only when
+the rest then passes. :data:`LOST_TRACK_STEPS` inconsistent updates in a row (or a gap longer than
 :data:`MAX_PREDICTION`) restart the filter from
 :func:`~tensegrity_stiffness.estimation.estimators.estimate_joint_state`.
 
@@ -76,8 +76,9 @@ from tensegrity_stiffness.geometry.screw import (
     BLOCK_SWAP,
     ScrewKinematics,
     check_in_chart,
+    single_screw,
 )
-from tensegrity_stiffness.geometry.validation import finite_array
+from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics import kernel
 from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
@@ -168,10 +169,11 @@ class ProcessNoise:
 
 #: The joint filter's defaults (the one home of their values: :class:`ProcessNoise`'s fields).
 DEFAULT_PROCESS_NOISE = ProcessNoise()
-#: The spine filter's defaults (:class:`~tensegrity_stiffness.estimation.chain_filter.
-#: ChainFilter`): its prediction leaves out the velocity-product terms and each joint's
-#: acceleration carries the others' motion, so its accelerations are 8x the joint's (tuned on
-#: the twin's moving spine, docs/estimation.md#spines-chainfilter).
+#: The spine filter's defaults
+#: (:class:`~tensegrity_stiffness.estimation.chain_filter.ChainFilter`): its prediction leaves out
+#: the velocity-product terms and each joint's acceleration carries the others' motion, so its
+#: accelerations are 8x the joint's (tuned on the twin's moving spine,
+#: docs/estimation.md#spines-chainfilter).
 DEFAULT_CHAIN_PROCESS_NOISE = ProcessNoise(angular_acceleration=48.0, linear_acceleration=0.12)
 
 
@@ -197,9 +199,10 @@ class BodyDynamics:
     ``screw_rate`` (6,) ``dxi/dt = J_b^-1 V``; ``twist_rate`` (6,) ``dV/dt``; ``body_inverse``
     (6, 6) ``J_b^-1``; Jacobians of ``dV/dt``: ``d_screw`` (6, 6) (the string damping's change
     with the pose left out: it is ``c |V|`` per rad), ``d_twist`` (6, 6), ``d_load`` (6, 6);
-    ``prediction`` the strings' :class:`~tensegrity_stiffness.estimation.sensor_models.
-    StringPrediction` it was computed from; ``packed`` the compiled kernel's buffer the arrays
-    are views of (``tsk_filter_body_dynamics``' layout), None from the numpy path."""
+    ``prediction`` the strings'
+    :class:`~tensegrity_stiffness.estimation.sensor_models.StringPrediction` it was computed from;
+    ``packed`` the compiled kernel's buffer the arrays are views of (``tsk_filter_body_dynamics``'
+    layout), None from the numpy path."""
 
     screw_rate: FloatArray
     twist_rate: FloatArray
@@ -378,13 +381,12 @@ class JointFilter(FilterTrack):
 
     ``model``: a :class:`~tensegrity_stiffness.mechanics.joint.JointModel` (with ``inertia``,
     link 2's :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`, and
-    ``string_damping`` N s/m) or a :class:`~tensegrity_stiffness.mechanics.dynamics.
-    JointDynamics`; ``process_noise`` a :class:`ProcessNoise` (default
-    :data:`DEFAULT_PROCESS_NOISE`); ``load`` ``'unknown'`` (a state) or ``'known'`` (given to
-    :meth:`step`); ``gravity`` (3,) m/s^2 in {1} for the accelerometer;
-    ``consistency_probability`` of the NIS test; ``stiffness_std`` whether estimates carry the
-    std of ``K_c``; ``reject_outliers`` whether contradicted readings are left out;
-    ``use_kernel`` the prediction's and the update's linear algebra in the compiled kernel
+    ``string_damping`` N s/m) or a :class:`~tensegrity_stiffness.mechanics.dynamics.JointDynamics`;
+    ``process_noise`` a :class:`ProcessNoise` (default :data:`DEFAULT_PROCESS_NOISE`); ``load``
+    ``'unknown'`` (a state) or ``'known'`` (given to :meth:`step`); ``gravity`` (3,) m/s^2 in {1}
+    for the accelerometer; ``consistency_probability`` of the NIS test; ``stiffness_std`` whether
+    estimates carry the std of ``K_c``; ``reject_outliers`` whether contradicted readings are left
+    out; ``use_kernel`` the prediction's and the update's linear algebra in the compiled kernel
     when it is loaded (``tsk_filter_*``; the numpy lines here are the reference, equal to
     rounding).
 
@@ -464,25 +466,17 @@ class JointFilter(FilterTrack):
         if estimate is not None:
             self._start_from(estimate)
         elif screw is not None:
-            xi = finite_array('screw', screw)
-            if xi.shape != (6,):
-                raise ValueError(f'screw must have shape (6,), got {xi.shape}')
-            check_in_chart(xi, 'screw')
+            xi = single_screw(screw)
             x = np.zeros(self.size)
             x[:6] = xi
             if twist is not None:
-                tw = finite_array('twist', twist)
-                if tw.shape != (6,):
-                    raise ValueError(f'twist must have shape (6,), got {tw.shape}')
+                tw = optional_vector('twist', twist)
                 R = ScrewKinematics(xi).R
                 x[6:9], x[9:12] = R.T @ tw[3:], R.T @ tw[:3]
             if load is not None:
                 if self.size != 18:
                     raise ValueError("load: a filter with load='known' has no load state")
-                W = finite_array('load', load)
-                if W.shape != (6,):
-                    raise ValueError(f'load must have shape (6,), got {W.shape}')
-                x[12:] = W
+                x[12:] = optional_vector('load', load)
             if covariance is None:
                 P = np.diag(np.r_[[1e-6] * 3, [1e-10] * 3, self._initial_twist_variance(),
                                   [1.0] * 3 * (self.size == 18), [1e-4] * 3 * (self.size == 18)])

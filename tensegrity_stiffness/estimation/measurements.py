@@ -124,12 +124,12 @@ class Measurements:
     ``wrench_covariance`` (6, 6): a known (zeros with a small covariance for "unloaded") or
     measured (force-torque) load; ``None`` for an unknown load.
 
-    For the recursive filter (:class:`~tensegrity_stiffness.estimation.joint_filter.
-    JointFilter`; the static estimator does not read them): ``specific_force`` (3,) m/s^2 the
-    accelerometer's raw specific force in {2} (acceleration minus gravity, modelled with the
-    link's acceleration) with ``specific_force_std`` (m/s^2, a scalar or (3,)), and
-    ``angular_velocity`` (3,) rad/s a gyro's reading of link 2's angular velocity in {2} with
-    ``angular_velocity_std`` (rad/s, a scalar or (3,)).
+    For the recursive filter (:class:`~tensegrity_stiffness.estimation.joint_filter.JointFilter`;
+    the static estimator does not read them): ``specific_force`` (3,) m/s^2 the accelerometer's raw
+    specific force in {2} (acceleration minus gravity, modelled with the link's acceleration) with
+    ``specific_force_std`` (m/s^2, a scalar or (3,)), and ``angular_velocity`` (3,) rad/s a gyro's
+    reading of link 2's angular velocity in {2} with ``angular_velocity_std`` (rad/s, a scalar or
+    (3,)).
     """
 
     tensions: ArrayLike | None = None

@@ -1,9 +1,9 @@
 """Measurement models of a tensegrity joint's sensors, with analytic Jacobians (no rclpy).
 
 What a robot measures, predicted from the screw ``xi = [omega; v]`` (``T = exp(hat(xi))`` maps
-{2} into {1}, :mod:`~tensegrity_stiffness.geometry.screw`) through :meth:`JointModel.evaluate
-<tensegrity_stiffness.mechanics.joint.JointModel.evaluate>`, and the derivative of each prediction
-with respect to the screw through the closed-form ``dT/dxi`` of
+{2} into {1}, :mod:`~tensegrity_stiffness.geometry.screw`) through
+:meth:`JointModel.evaluate <tensegrity_stiffness.mechanics.joint.JointModel.evaluate>`, and the
+derivative of each prediction with respect to the screw through the closed-form ``dT/dxi`` of
 :mod:`~tensegrity_stiffness.geometry.screw` (eqs. 12-18: ``dT/dxi`` applied to a point is
 ``[-hat(q), I] J(xi)`` with ``J`` the SE(3) left Jacobian ``[[G, 0], [Q, G]]``;
 :func:`~tensegrity_stiffness.geometry.screw.dexp_se3` is the same closed form as a (4, 4, 6)

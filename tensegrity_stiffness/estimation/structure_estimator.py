@@ -57,14 +57,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from tensegrity_stiffness.estimation.estimators import (
+from tensegrity_stiffness.estimation.joint_estimator import MAX_ITERATIONS
+from tensegrity_stiffness.estimation.sensor_models import unit_vector
+from tensegrity_stiffness.estimation.trust import (
     CONSISTENCY_PROBABILITY,
     MAX_CONTRADICTED,
-    MAX_ITERATIONS,
     consistency_threshold,
     suspect_reading,
 )
-from tensegrity_stiffness.estimation.sensor_models import unit_vector
 from tensegrity_stiffness.geometry.screw import exp_so3, hat3
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.joint import string_forces

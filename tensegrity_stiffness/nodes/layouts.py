@@ -12,7 +12,7 @@ a matrix of shape (rows, cols) has ``dim[0] = (row_label, rows, rows*cols)`` and
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from operator import attrgetter
 from typing import Any
 
@@ -162,17 +162,34 @@ class OutputRow:
     :class:`~tensegrity_stiffness.nodes.stiffness_node.JointOutputs`)."""
 
     name: str
-    layout: Callable[[Any], OutputLayout]
+    layout: Callable[[Any], OutputLayout | None]
     value: str
+    #: An output that only some nodes publish (a structure's contact forces: only with a
+    #: ground): where it is absent, its layout is None and its value is None.
+    optional: bool = False
     of: Callable[[Any], Any] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'of', attrgetter(self.value))
 
+    def within(self, attribute: str) -> OutputRow:
+        """This row for outputs that hold this row's outputs as ``attribute`` (the structure
+        estimator's ``structure``: its value ``'<attribute>.<value>'``)."""
+        return replace(self, value=f'{attribute}.{self.value}')
+
 
 def table_arrays(table: Sequence[OutputRow], outputs: Any) -> tuple[Any, ...]:
-    """The arrays of ``outputs`` in the order of ``table`` (one per row)."""
-    return tuple(row.of(outputs) for row in table)
+    """The arrays of ``outputs`` in the order of ``table`` (one per row; none for an absent
+    optional row)."""
+    arrays = ((row, row.of(outputs)) for row in table)
+    return tuple(value for row, value in arrays if not (row.optional and value is None))
+
+
+def table_layouts(table: Sequence[OutputRow], sizes: Any) -> dict[str, OutputLayout]:
+    """The layouts of ``table``'s outputs by name, in its order, for a node of ``sizes``
+    (none for an absent optional row)."""
+    layouts = {row.name: row.layout(sizes) for row in table}
+    return {name: layout for name, layout in layouts.items() if layout is not None}
 
 
 def _joint_matrix(col_label: str) -> Callable[[Any], OutputLayout]:
@@ -262,7 +279,7 @@ def joint_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]
 
 def joint_array_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
     """The outputs of :data:`JOINT_OUTPUT_TABLE` alone (one array each)."""
-    return {row.name: row.layout(string_names) for row in JOINT_OUTPUT_TABLE}
+    return table_layouts(JOINT_OUTPUT_TABLE, string_names)
 
 
 def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
@@ -273,9 +290,9 @@ def spine_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
 
 def spine_array_layouts(n_joints: int) -> dict[str, OutputLayout]:
     """The outputs of :data:`SPINE_OUTPUT_TABLE` alone (one array each)."""
-    return {row.name: row.layout(n_joints) for row in SPINE_OUTPUT_TABLE}
+    return table_layouts(SPINE_OUTPUT_TABLE, n_joints)
 
 
 def controller_output_layouts(n_strings: int) -> dict[str, OutputLayout]:
     """``stiffness_controller``'s outputs by topic, in :data:`CONTROLLER_OUTPUT_TABLE` order."""
-    return {row.name: row.layout(n_strings) for row in CONTROLLER_OUTPUT_TABLE}
+    return table_layouts(CONTROLLER_OUTPUT_TABLE, n_strings)

@@ -29,7 +29,7 @@ from tensegrity_stiffness.nodes.shared_parameters import (
     joint_override_parameters,
     link2_inertia_from_values,
 )
-from tensegrity_stiffness.simulation.twin import (
+from tensegrity_stiffness.simulation.twin_model import (
     DEFAULT_MAX_FORCE,
     DEFAULT_MAX_MOMENT,
     SimulationOptions,

@@ -23,6 +23,7 @@ from tensegrity_stiffness.control.controller import (
     ControlTarget,
     StiffnessController,
 )
+from tensegrity_stiffness.geometry.validation import per_string
 from tensegrity_stiffness.mechanics.design import DEFAULT_TENSION_MAX, DEFAULT_TENSION_MIN
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name
@@ -135,21 +136,17 @@ def controller_settings(values: Mapping[str, Any]) -> ControllerSettings:
     model = joint_from_values(checked)
     n = model.n_strings
 
-    def per_string(name: str, default: np.ndarray) -> np.ndarray:
-        raw = checked[name]
-        if not raw:
-            return default
-        if len(raw) not in (1, n):
-            raise ValueError(f'{name} must have 1 or {n} values, got {len(raw)}')
-        return np.broadcast_to(np.asarray(raw, float), (n,)).copy()
+    def limit(name: str, default: np.ndarray) -> np.ndarray:
+        """A per-string limit: one value for all or one per string; empty: ``default``."""
+        return per_string(name, checked[name], n, repeat_one=True) if checked[name] else default
 
     if not checked['frames.link1'].strip():
         raise ValueError('frames.link1 must not be empty')
     offsets = rest_length_offsets(checked, n)
     t_min, t_max = default_tension_limits(model)
     limits = ActuatorLimits(
-        per_string('limits.rest_length_min', DEFAULT_RANGE[0] * model.rest_lengths),
-        per_string('limits.rest_length_max', DEFAULT_RANGE[1] * model.rest_lengths),
+        limit('limits.rest_length_min', DEFAULT_RANGE[0] * model.rest_lengths),
+        limit('limits.rest_length_max', DEFAULT_RANGE[1] * model.rest_lengths),
         checked['limits.max_rate'], checked['limits.tension_min'] or t_min,
         checked['limits.tension_max'] or t_max)
     start, warning = start_command(model, limits, offsets)

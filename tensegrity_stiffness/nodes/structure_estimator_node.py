@@ -4,10 +4,11 @@ covariance, from what the robot measures; the rclpy node is
 :class:`~tensegrity_stiffness.estimation.structure_estimator.StructureMeasurements` of the latest
 readings, one estimate (``estimation.method``: ``static``, each reading set on its own with
 :func:`~tensegrity_stiffness.estimation.structure_estimator.estimate_structure_poses`, or
-``filter``, the recursive :class:`~tensegrity_stiffness.estimation.structure_estimator.
-StructureFilter`), the outputs of it (the structure node's at the estimated poses:
-:func:`tensegrity_stiffness.nodes.structure_node.structure_outputs`), their names and layouts,
-and the values of its ``/diagnostics`` and ``~/trust``.
+``filter``, the recursive
+:class:`~tensegrity_stiffness.estimation.structure_estimator.StructureFilter`), the outputs of it
+(the structure node's at the estimated poses:
+:func:`tensegrity_stiffness.nodes.structure_node.structure_outputs`), their names and layouts, and
+the values of its ``/diagnostics`` and ``~/trust``.
 
 Inputs as ``structure_sim_node`` publishes them (:data:`STRUCTURE_ESTIMATOR_INPUTS`, each
 ``Float64MultiArray`` in the structure's string or node order, NaN: not measured; one
@@ -27,7 +28,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness.estimation import sensor_models as sm
-from tensegrity_stiffness.estimation.estimators import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.estimation.structure_estimator import (
     DEFAULT_ACCELERATION_STD,
     DEFAULT_CONTACT_STD,
@@ -41,6 +41,7 @@ from tensegrity_stiffness.estimation.structure_estimator import (
     StructureMeasurements,
     estimate_structure_poses,
 )
+from tensegrity_stiffness.estimation.trust import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATION_METHODS,
@@ -54,23 +55,28 @@ from tensegrity_stiffness.nodes.estimator_node import (
 from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATION_PARAMETERS as JOINT_ESTIMATION_PARAMETERS,
 )
-from tensegrity_stiffness.nodes.layouts import FLOAT64_MULTIARRAY, OutputLayout, matrix_dims
+from tensegrity_stiffness.nodes.layouts import (
+    FLOAT64_MULTIARRAY,
+    OutputLayout,
+    OutputRow,
+    matrix_dims,
+    table_arrays,
+    table_layouts,
+)
 from tensegrity_stiffness.nodes.messages import MessageTypes, OutputMessages
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name
 from tensegrity_stiffness.nodes.shared_parameters import rest_length_offsets
 from tensegrity_stiffness.nodes.structure_node import (
     STRUCTURE_NODE_PARAMETERS,
-    STRUCTURE_OUTPUTS,
+    STRUCTURE_OUTPUT_TABLE,
     StructureNodeSettings,
     StructureOutputs,
     body_components,
     contact_nodes,
-    output_arrays,
     structure_node_settings,
-    structure_output_layouts,
     structure_outputs,
 )
-from tensegrity_stiffness.nodes.structure_sim_node import resting_poses
+from tensegrity_stiffness.structures.equilibrium import resting_poses
 from tensegrity_stiffness.structures.structure import Structure
 
 FloatArray = NDArray[np.float64]
@@ -439,7 +445,7 @@ def estimate(settings: StructureEstimatorSettings, snapshot: EstimatorInput,
              track: FilterTrack | None = None) -> StructureEstimatorOutputs:
     """One estimate of the fresh readings of ``snapshot`` (``initial_screw``: the poses the
     static estimator starts from, the last estimate's ``anchor``; None: the structure's resting
-    equilibrium, :func:`~tensegrity_stiffness.nodes.structure_sim_node.resting_poses`, where
+    equilibrium, :func:`~tensegrity_stiffness.structures.equilibrium.resting_poses`, where
     the twin starts) under ``settings.method``; the filter
     (``track``) is started from the first static estimate and then predicted to
     ``snapshot.now`` and updated. ValueError (nothing is published) when no reading is fresh,
@@ -489,20 +495,9 @@ def estimate(settings: StructureEstimatorSettings, snapshot: EstimatorInput,
         poses, covariance, *trust, contacts=tuple(contacts), method=settings.method,
         used=tuple(name for name in sorted(readings)), ages=ages, structure=outputs,
         anchor=anchor)
-    require_all_finite(STRUCTURE_ESTIMATOR_OUTPUT_NAMES[:len(estimator_output_arrays(result))],
-                       estimator_output_arrays(result))
+    arrays = estimator_output_arrays(result)
+    require_all_finite(STRUCTURE_ESTIMATOR_OUTPUT_NAMES[:len(arrays)], arrays)
     return result
-
-
-#: The estimator's array outputs (topic ``~/<name>``) after ``~/poses`` and ``~/trust``: the
-#: covariance, then the structure node's outputs at the estimate.
-STRUCTURE_ESTIMATOR_OUTPUT_NAMES = ('poses', 'pose_covariance', *STRUCTURE_OUTPUTS)
-
-
-def estimator_output_arrays(outputs: StructureEstimatorOutputs) -> tuple[FloatArray, ...]:
-    """The published arrays in :data:`STRUCTURE_ESTIMATOR_OUTPUT_NAMES` order (the poses'
-    transforms first; the contact forces only with a ground)."""
-    return (outputs.poses, outputs.covariance, *output_arrays(outputs.structure))
 
 
 def covariance_labels(body_names: Sequence[str]) -> tuple[str, str]:
@@ -512,14 +507,37 @@ def covariance_labels(body_names: Sequence[str]) -> tuple[str, str]:
     return 'rows: ' + label, 'cols: ' + label
 
 
-def estimator_array_layouts(structure: Structure) -> dict[str, OutputLayout]:
-    """The array outputs by topic: ``pose_covariance`` (6N, 6N), then the structure node's
-    (:func:`~tensegrity_stiffness.nodes.structure_node.structure_output_layouts`)."""
-    rows, cols = covariance_labels(structure.body_names)
+def _covariance_layout(structure: Structure) -> OutputLayout:
     n6 = 6 * structure.n_bodies
-    return {'pose_covariance': OutputLayout(FLOAT64_MULTIARRAY,
-                                            tuple(matrix_dims(n6, n6, rows, cols))),
-            **structure_output_layouts(structure)}
+    return OutputLayout(FLOAT64_MULTIARRAY, tuple(matrix_dims(
+        n6, n6, *covariance_labels(structure.body_names))))
+
+
+#: The estimator's array outputs (topic ``~/<name>``), published after ``~/poses`` and
+#: ``~/trust``: one row each (name, layout of the structure, value of
+#: :class:`StructureEstimatorOutputs`; :class:`~tensegrity_stiffness.nodes.layouts.OutputRow`):
+#: the covariance (6N, 6N), then the structure node's outputs at the estimate
+#: (:data:`~tensegrity_stiffness.nodes.structure_node.STRUCTURE_OUTPUT_TABLE`).
+STRUCTURE_ESTIMATOR_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('pose_covariance', _covariance_layout, 'covariance'),
+    *(row.within('structure') for row in STRUCTURE_OUTPUT_TABLE),
+)
+#: The names of the arrays :func:`estimate` checks: the poses' transforms (``~/poses``), then
+#: :data:`STRUCTURE_ESTIMATOR_OUTPUT_TABLE`'s.
+STRUCTURE_ESTIMATOR_OUTPUT_NAMES = ('poses',
+                                    *(row.name for row in STRUCTURE_ESTIMATOR_OUTPUT_TABLE))
+
+
+def estimator_output_arrays(outputs: StructureEstimatorOutputs) -> tuple[FloatArray, ...]:
+    """The published arrays in :data:`STRUCTURE_ESTIMATOR_OUTPUT_NAMES` order (the poses'
+    transforms first; the contact forces only with a ground)."""
+    return (outputs.poses, *table_arrays(STRUCTURE_ESTIMATOR_OUTPUT_TABLE, outputs))
+
+
+def estimator_array_layouts(structure: Structure) -> dict[str, OutputLayout]:
+    """The array outputs of ``structure`` by topic, in :data:`STRUCTURE_ESTIMATOR_OUTPUT_TABLE`
+    order."""
+    return table_layouts(STRUCTURE_ESTIMATOR_OUTPUT_TABLE, structure)
 
 
 class StructureEstimatorArrayMessages(OutputMessages):
@@ -532,7 +550,8 @@ class StructureEstimatorArrayMessages(OutputMessages):
     def fill(self, outputs: StructureEstimatorOutputs, stamp: Any, frame_id: str,
              wanted: Sequence[bool] | None = None) -> None:
         """Set the messages flagged in ``wanted`` (default all) from ``outputs``."""
-        self.fill_arrays(estimator_output_arrays(outputs)[1:], stamp, frame_id, wanted)
+        self.fill_arrays(table_arrays(STRUCTURE_ESTIMATOR_OUTPUT_TABLE, outputs), stamp,
+                         frame_id, wanted)
 
 
 # ------------------------------------------------------------------------------ trust

@@ -1,7 +1,7 @@
 """What ``structure_node`` does with each input, without ROS: its parameter table and settings,
 the checks of the bodies' poses and the rest lengths, the outputs of one set of poses of a
 :class:`~tensegrity_stiffness.structures.structure.Structure` (conventions in
-docs/structures.md), their names, layouts and order (one table: :func:`structure_output_layouts`),
+docs/structures.md), their names, layouts and order (one table: :data:`STRUCTURE_OUTPUT_TABLE`),
 its output messages for any message implementation, and the health it reports in
 ``/diagnostics``. The ROS twin is :mod:`tensegrity_stiffness.ros.structure_node`.
 
@@ -36,7 +36,10 @@ from tensegrity_stiffness.nodes.layouts import (
     FLOAT64_MULTIARRAY,
     WRENCH_LABEL,
     OutputLayout,
+    OutputRow,
     matrix_dims,
+    table_arrays,
+    table_layouts,
     tensions_label,
     vector_dims,
 )
@@ -209,11 +212,6 @@ def with_commanded_rest_lengths(settings: StructureNodeSettings, commanded: Floa
 
 
 # ------------------------------------------------------------------------------ outputs
-#: ``structure_node``'s per-input outputs, topic names relative to the node, in the order they
-#: are computed, filled and published (:func:`output_arrays`); ``contact_forces`` only when the
-#: config has a ground.
-STRUCTURE_OUTPUTS = ('body_wrenches', 'stiffness', 'string_tensions', 'bar_forces',
-                     'contact_forces')
 #: The label prefix of the bar forces and of the contact forces' rows.
 BAR_FORCES_LABEL_PREFIX = 'bar compressions [N], compression positive, bars in config order: '
 CONTACT_FORCES_ROW_PREFIX = ('rows: the ground\'s force on each node [N] (zero: not a contact), '
@@ -240,31 +238,53 @@ def body_nodes(structure: Structure) -> list[str]:
             if b >= 0]
 
 
-def structure_output_layouts(structure: Structure) -> dict[str, OutputLayout]:
-    """``structure_node``'s per-input outputs by topic, in :data:`STRUCTURE_OUTPUTS` order:
-    the body wrenches (N, 6), the stiffness (6N, 6N), the tensions (n), the bar forces and,
-    with a ground, every body node's contact force (n_nodes, 3)."""
-    names = structure.body_names
-    rows, cols = stiffness_labels(names)
-    n = structure.n_bodies
-    layouts = {
-        'body_wrenches': _array(matrix_dims(n, 6, 'bodies: ' + ' '.join(names),
-                                            WRENCH_LABEL + ' in the world about its origin')),
-        'stiffness': _array(matrix_dims(6 * n, 6 * n, rows, cols)),
-        'string_tensions': _array(vector_dims(structure.n_strings,
-                                              tensions_label(structure.string_names))),
-        'bar_forces': _array(vector_dims(len(structure.bar_names), BAR_FORCES_LABEL_PREFIX
-                                         + ' '.join(structure.bar_names))),
-    }
-    if structure.ground is not None:
-        nodes = body_nodes(structure)
-        layouts['contact_forces'] = _array(matrix_dims(
-            len(nodes), 3, CONTACT_FORCES_ROW_PREFIX + ' '.join(nodes), 'cols: [fx fy fz]'))
-    return layouts
-
-
 def _array(dims: Sequence[tuple[str, int, int]]) -> OutputLayout:
     return OutputLayout(FLOAT64_MULTIARRAY, tuple(dims))
+
+
+def _body_wrenches_layout(structure: Structure) -> OutputLayout:
+    return _array(matrix_dims(structure.n_bodies, 6, 'bodies: ' + ' '.join(structure.body_names),
+                              WRENCH_LABEL + ' in the world about its origin'))
+
+
+def _stiffness_layout(structure: Structure) -> OutputLayout:
+    n6 = 6 * structure.n_bodies
+    return _array(matrix_dims(n6, n6, *stiffness_labels(structure.body_names)))
+
+
+def _contact_forces_layout(structure: Structure) -> OutputLayout | None:
+    if structure.ground is None:
+        return None
+    nodes = body_nodes(structure)
+    return _array(matrix_dims(len(nodes), 3, CONTACT_FORCES_ROW_PREFIX + ' '.join(nodes),
+                              'cols: [fx fy fz]'))
+
+
+#: ``structure_node``'s per-input outputs (topic names relative to the node), in the order they
+#: are computed, filled and published: one row each (name, layout of the
+#: :class:`~tensegrity_stiffness.structures.structure.Structure`, value of
+#: :class:`StructureOutputs`; :class:`~tensegrity_stiffness.nodes.layouts.OutputRow`): the body
+#: wrenches (N, 6), the stiffness (6N, 6N), the tensions (n), the bar forces and, only with a
+#: ground, every body node's contact force (n_nodes, 3). Adding or reordering an output is one
+#: row here; the node, the structure estimator, the bag command and the messages read it.
+STRUCTURE_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('body_wrenches', _body_wrenches_layout, 'state.wrenches'),
+    OutputRow('stiffness', _stiffness_layout, 'state.stiffness'),
+    OutputRow('string_tensions', lambda s: _array(vector_dims(
+        s.n_strings, tensions_label(s.string_names))), 'state.tensions'),
+    OutputRow('bar_forces', lambda s: _array(vector_dims(
+        len(s.bar_names), BAR_FORCES_LABEL_PREFIX + ' '.join(s.bar_names))), 'state.bar_forces'),
+    OutputRow('contact_forces', _contact_forces_layout, 'contact_forces', optional=True),
+)
+#: The names of :data:`STRUCTURE_OUTPUT_TABLE`, in its order (``contact_forces`` only when the
+#: config has a ground).
+STRUCTURE_OUTPUTS = tuple(row.name for row in STRUCTURE_OUTPUT_TABLE)
+
+
+def structure_output_layouts(structure: Structure) -> dict[str, OutputLayout]:
+    """``structure_node``'s per-input outputs of ``structure`` by topic, in
+    :data:`STRUCTURE_OUTPUT_TABLE` order."""
+    return table_layouts(STRUCTURE_OUTPUT_TABLE, structure)
 
 
 @dataclass(frozen=True)
@@ -350,13 +370,9 @@ def outputs_of_state(settings: StructureNodeSettings, state: StructureState
 
 
 def output_arrays(outputs: StructureOutputs) -> tuple[FloatArray, ...]:
-    """The published arrays of ``outputs``, in the order of :data:`STRUCTURE_OUTPUTS` (the
+    """The published arrays of ``outputs``, in the order of :data:`STRUCTURE_OUTPUT_TABLE` (the
     contact forces only with a ground)."""
-    state = outputs.state
-    arrays = (state.wrenches, state.stiffness, state.tensions, state.bar_forces)
-    if outputs.contact_forces is None:
-        return arrays
-    return (*arrays, outputs.contact_forces)
+    return table_arrays(STRUCTURE_OUTPUT_TABLE, outputs)
 
 
 def require_finite(outputs: StructureOutputs) -> None:
@@ -390,11 +406,11 @@ def body_frame_transforms(settings: StructureNodeSettings, state: StructureState
 # ------------------------------------------------------------------------------ health
 @dataclass(frozen=True)
 class StructureHealth(StringHealth):
-    """The health of one configuration (:class:`~tensegrity_stiffness.nodes.health.
-    StringHealth`, the problems naming the strings): the ``contacts`` (node names), the
-    smallest eigenvalue of the symmetric part of the total stiffness on the tangent space
-    without the gauge (``smallest_eigenvalue``; inf when no motion is left) and
-    ``stability_margin`` (it over the largest modulus)."""
+    """The health of one configuration (:class:`~tensegrity_stiffness.nodes.health.StringHealth`,
+    the problems naming the strings): the ``contacts`` (node names), the smallest eigenvalue of the
+    symmetric part of the total stiffness on the tangent space without the gauge
+    (``smallest_eigenvalue``; inf when no motion is left) and ``stability_margin`` (it over the
+    largest modulus)."""
 
     contacts: list[str] = field(default_factory=list)
     smallest_eigenvalue: float = math.inf

@@ -25,14 +25,13 @@ from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.shared_parameters import COMMON_PARAMETERS
 from tensegrity_stiffness.nodes.structure_node import STRUCTURE_PARAMETERS, structure_path
 from tensegrity_stiffness.simulation.structure_twin import StructureTwinOptions
-from tensegrity_stiffness.simulation.twin import (
+from tensegrity_stiffness.simulation.twin_model import (
     DEFAULT_JOINT_DAMPING,
     DEFAULT_MAX_FORCE,
     DEFAULT_MAX_MOMENT,
     DEFAULT_TENDON_DAMPING,
-    SensorNoise,
 )
-from tensegrity_stiffness.structures.equilibrium import solve_structure_equilibrium
+from tensegrity_stiffness.simulation.twin_sensors import SensorNoise
 from tensegrity_stiffness.structures.structure import Structure
 
 NODE_NAME = 'structure_sim_node'
@@ -183,15 +182,6 @@ def structure_sim_settings(values: Mapping[str, Any], generation: int = 0
     noise = SensorNoise(**{kind: checked[f'noise.{kind}'] for kind in STRUCTURE_NOISE_KINDS})
     return StructureSimSettings(structure, str(source), options, noise, checked['frames.world'],
                                 values=checked, deprecations=deprecations)
-
-
-def resting_poses(structure: Structure) -> np.ndarray:
-    """Where the twin starts (and the structure estimator's first start): the structure's
-    equilibrium with its gravity and ground (the library's,
-    :func:`~tensegrity_stiffness.structures.equilibrium.solve_structure_equilibrium`), or its
-    configured poses when it has none."""
-    result = solve_structure_equilibrium(structure)
-    return result.poses if result.success else structure.start_poses()
 
 
 def loads_label(structure: Structure) -> str:

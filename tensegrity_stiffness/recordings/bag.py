@@ -13,8 +13,9 @@ input, written at the log time of the input it answers.
 The node's behaviour, input by input, with the node's functions: inputs are decoded with
 :mod:`tensegrity_stiffness.nodes.messages` (the node's readers: they read messages by attribute,
 so rosbags' messages do as well as rclpy's), checked and computed with
-:mod:`tensegrity_stiffness.nodes.processing` (``spine_processing`` for the spine), configured
-from the node's parameter table (:mod:`tensegrity_stiffness.nodes.parameters`). A bad input is
+:mod:`tensegrity_stiffness.nodes.stiffness_node` (:mod:`~tensegrity_stiffness.nodes.spine_node`
+for the spine), configured from the node's parameter table
+(:mod:`tensegrity_stiffness.nodes.registry`). A bad input is
 skipped and counted by kind (the ``kind`` of the node's typed ValueError,
 :mod:`tensegrity_stiffness.geometry.errors`), with the node's text as the example. A pose is
 turned into a screw on the branch nearest the last answered screw (the config's initial screw
@@ -29,8 +30,9 @@ deserialized and handed to the node kind's processor (:class:`StiffnessProcessor
 are written by the node kind's writer and the CSV sink; :data:`NODE_KINDS` holds what differs.
 
 ``stiffness_node`` is answered in chunks with one batched evaluation
-(:func:`processing.joint_outputs_batch`, BLAS on one thread through ``threadpoolctl``); a
-screw of the plain layout is decoded with its chunk in one ``frombuffer``; an output message is
+(:func:`~tensegrity_stiffness.nodes.stiffness_node.joint_outputs_batch`, BLAS on one thread
+through ``threadpoolctl``); a screw of the plain layout is decoded with its chunk in one
+``frombuffer``; an output message is
 a serialized template (the node's message of :func:`layouts.joint_output_layouts`, built and
 filled once with rosbags' types by :mod:`tensegrity_stiffness.nodes.messages` and serialized by
 rosbags) whose payload bytes are replaced; a chunk's messages are written with rosbags' public
@@ -54,7 +56,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness import config
-from tensegrity_stiffness.nodes import layouts, parameters
+from tensegrity_stiffness.nodes import layouts
+from tensegrity_stiffness.nodes.registry import node_tables
 from tensegrity_stiffness.recordings.bag_processors import (  # noqa: F401 (public here)
     Answers,
     Processor,
@@ -115,7 +118,7 @@ def publisher_prefix(prefix: str, node: str) -> str:
     by the node's own name (``/twin/stiffness_node``)."""
     head, _, last = prefix.rpartition('/')
     own = DEFAULT_NAMESPACES[node].strip('/')
-    others = {table.node for table in parameters.node_tables()} - {own}
+    others = {table.node for table in node_tables()} - {own}
     return f'{head}/{own}' if last in others else prefix
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from tensegrity_stiffness.geometry.errors import INVALID, SingularStiffnessError, error_kind
-from tensegrity_stiffness.nodes import spine_processing, structure_node
+from tensegrity_stiffness.nodes import spine_node, structure_node
 from tensegrity_stiffness.nodes.layouts import FLOAT64_MULTIARRAY
 from tensegrity_stiffness.nodes.messages import (
     SpineOutputMessages,
@@ -23,7 +23,9 @@ from tensegrity_stiffness.nodes.messages import (
     pose_message_to_transform,
     stamp_nanoseconds_or,
 )
-from tensegrity_stiffness.nodes.processing import (
+from tensegrity_stiffness.nodes.spine_node import SpineNodeSettings
+from tensegrity_stiffness.nodes.stiffness_node import (
+    JointNodeSettings,
     JointOutputs,
     finite_rows,
     joint_outputs,
@@ -34,8 +36,6 @@ from tensegrity_stiffness.nodes.processing import (
     screw_inputs,
     with_rest_lengths,
 )
-from tensegrity_stiffness.nodes.spine_node import SpineNodeSettings
-from tensegrity_stiffness.nodes.stiffness_node import JointNodeSettings
 from tensegrity_stiffness.recordings.bag_topics import CHUNK_SIZE, jazzy_typestore, rosbags_types
 from tensegrity_stiffness.recordings.screw_cdr import (
     PLAIN_SCREW_HEAD,
@@ -350,7 +350,7 @@ class SpineAnswer:
     log_time: int
     source: str
     stamp: int
-    outputs: spine_processing.SpineOutputs
+    outputs: spine_node.SpineOutputs
     messages: tuple[Any, ...]
 
 
@@ -381,7 +381,7 @@ class SpineProcessor(Processor):
         node stamps the time of computation."""
         settings = self.settings
         try:
-            xi = spine_processing.screws_input(multiarray_to_array(
+            xi = spine_node.screws_input(multiarray_to_array(
                 msg, max_length=settings.max_array_length), settings.n_joints)
         except ValueError as exc:
             self.reject('screws', exc)
@@ -395,7 +395,7 @@ class SpineProcessor(Processor):
         try:
             reference = self._last_screws if self._last_screws is not None else np.array(
                 [model.initial_screw for model in settings.chain.joints])
-            xi = spine_processing.poses_input(msg.header.frame_id, msg.poses,
+            xi = spine_node.poses_input(msg.header.frame_id, msg.poses,
                                               settings.base_frame, reference,
                                               pose_message_to_transform)
         except ValueError as exc:
@@ -408,7 +408,7 @@ class SpineProcessor(Processor):
         time on; the last answer is re-published under it, with that answer's stamp."""
         settings = self.settings
         try:
-            rest = spine_processing.rest_lengths_input(multiarray_to_array(
+            rest = spine_node.rest_lengths_input(multiarray_to_array(
                 msg, max_length=settings.max_array_length), settings.chain)
         except ValueError as exc:
             self.reject('rest_lengths', exc)
@@ -421,7 +421,7 @@ class SpineProcessor(Processor):
     def _compute(self, xi: FloatArray, log_time: int, stamp: int, source: str) -> None:
         settings = self.settings
         try:
-            outputs = spine_processing.spine_outputs(settings.chain, xi, settings.rest_lengths)
+            outputs = spine_node.spine_outputs(settings.chain, xi, settings.rest_lengths)
             self.messages.fill(outputs, self.types.time(stamp), settings.base_frame)
         except ValueError as exc:
             self.reject(source, exc, exc.kind if isinstance(exc, SingularStiffnessError)

@@ -15,13 +15,24 @@ from numpy.typing import NDArray
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG
-from tensegrity_stiffness.nodes import layouts, parameters, structure_node
+from tensegrity_stiffness.nodes import layouts, structure_node
 from tensegrity_stiffness.nodes.layouts import FLOAT64_MULTIARRAY
 from tensegrity_stiffness.nodes.messages import (
     MessageTypes,
 )
-from tensegrity_stiffness.nodes.spine_node import SpineNodeSettings
-from tensegrity_stiffness.nodes.stiffness_node import JointNodeSettings
+from tensegrity_stiffness.nodes.parameter_specs import defaults
+from tensegrity_stiffness.nodes.registry import values_from_config
+from tensegrity_stiffness.nodes.shared_parameters import CHAIN_PARAMETERS
+from tensegrity_stiffness.nodes.spine_node import (
+    SpineNodeSettings,
+    spine_node_parameters,
+    spine_node_settings,
+)
+from tensegrity_stiffness.nodes.stiffness_node import (
+    STIFFNESS_NODE_PARAMETERS,
+    JointNodeSettings,
+    joint_node_settings,
+)
 from tensegrity_stiffness.structures.schema import is_structure_document
 
 FloatArray = NDArray[np.float64]
@@ -55,7 +66,7 @@ NODE_TOPICS: dict[str, NodeTopics] = {
                 'rest_lengths': FLOAT64_MULTIARRAY},
         outputs={name: layout.msgtype for name, layout in
                  layouts.joint_output_layouts(()).items()}),
-    # spine_node's per-input outputs, in the order of spine_processing.OUTPUT_NAMES.
+    # spine_node's per-input outputs, in the order of spine_node.OUTPUT_NAMES.
     'spine': NodeTopics(
         inputs={'screws': FLOAT64_MULTIARRAY, 'poses': POSE_ARRAY,
                 'rest_lengths': FLOAT64_MULTIARRAY},
@@ -128,11 +139,12 @@ class MessageReading:
 def node_settings(path: str | Path | None = None) -> JointNodeSettings:
     """The settings ``stiffness_node`` runs with for ``--params-file path`` (model, frames,
     limits): the parameter table's defaults, overridden by the file's parameters
-    (:func:`parameters.values_from_config`); BagError names the file and the field."""
+    (:func:`~tensegrity_stiffness.nodes.registry.values_from_config`); BagError names the file
+    and the field."""
     try:
-        values = (parameters.defaults(parameters.STIFFNESS_NODE_PARAMETERS) if path is None
-                  else parameters.values_from_config(path, parameters.STIFFNESS_NODE_PARAMETERS))
-        return parameters.joint_node_settings(values)
+        values = (defaults(STIFFNESS_NODE_PARAMETERS) if path is None
+                  else values_from_config(path, STIFFNESS_NODE_PARAMETERS))
+        return joint_node_settings(values)
     except ValueError as exc:
         text = str(exc)
         raise BagError(text if path is None or str(path) in text else f'config {path}: {text}'
@@ -145,9 +157,9 @@ def spine_settings(path: str | Path | None = None) -> SpineNodeSettings:
     overridden by the file's parameters; BagError names the file and the field."""
     path = config.packaged_config_path(DEFAULT_SPINE_CONFIG) if path is None else path
     try:
-        n = parameters.values_from_config(path, parameters.CHAIN_PARAMETERS)['chain.n_joints']
-        values = parameters.values_from_config(path, parameters.spine_node_parameters(n))
-        return parameters.spine_node_settings(values)
+        n = values_from_config(path, CHAIN_PARAMETERS)['chain.n_joints']
+        values = values_from_config(path, spine_node_parameters(n))
+        return spine_node_settings(values)
     except ValueError as exc:
         text = str(exc)
         raise BagError(text if str(path) in text else f'config {path}: {text}') from None
@@ -161,11 +173,11 @@ def structure_settings(path: str | Path | None = None) -> structure_node.Structu
     table = structure_node.STRUCTURE_NODE_PARAMETERS
     try:
         if path is None:
-            return structure_node.structure_node_settings(parameters.defaults(table))
+            return structure_node.structure_node_settings(defaults(table))
         if is_structure_document(config.load_yaml(path)):  # the structure itself
-            values = {**parameters.defaults(table), 'structure.config': str(path)}
+            values = {**defaults(table), 'structure.config': str(path)}
         else:
-            values = parameters.values_from_config(path, table)
+            values = values_from_config(path, table)
         return structure_node.structure_node_settings(values)
     except ValueError as exc:
         text = str(exc)

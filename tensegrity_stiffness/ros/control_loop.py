@@ -1,7 +1,8 @@
 """``control_loop``: ``estimator_node`` and ``stiffness_controller`` in one process, for a robot
 where both run on one computer: each estimate goes to the controller as the Python objects it is
-(no message, no serialisation, no middleware in between; :meth:`.StiffnessControllerNode.
-take_state`), the controller ticks on its own thread as in its own process.
+(no message, no serialisation, no middleware in between;
+:meth:`.StiffnessControllerNode.take_state`), the controller ticks on its own thread as in its own
+process.
 
 The same parameters and topics as the two nodes: two nodes named ``estimator_node`` and
 ``stiffness_controller`` (a parameter file's sections apply as they would to the processes), the

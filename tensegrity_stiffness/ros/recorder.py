@@ -43,7 +43,8 @@ from tensegrity_stiffness.cli.record_command import (
     add_record_arguments,
     check_record_options,
 )
-from tensegrity_stiffness.recordings.bag import BagError, clear_output, jazzy_typestore
+from tensegrity_stiffness.recordings.bag import clear_output
+from tensegrity_stiffness.recordings.bag_topics import BagError, jazzy_typestore
 
 #: Seconds between readings of the graph (new topics, new publishers).
 DISCOVERY_PERIOD_S = 0.2

@@ -61,12 +61,9 @@ from tensegrity_stiffness.ros.runtime.topics import (
     output_qos,
 )
 from tensegrity_stiffness.ros.runtime.twin_stepping import SteppingTwin
-from tensegrity_stiffness.simulation.twin import (
-    ChainSimulation,
-    JointSimulation,
-    SensorNoise,
-    checked_wrench,
-)
+from tensegrity_stiffness.simulation.twin import ChainSimulation, JointSimulation
+from tensegrity_stiffness.simulation.twin_model import checked_wrench
+from tensegrity_stiffness.simulation.twin_sensors import SensorNoise
 
 NODE_NAME = 'sim_node'
 #: Seconds between the questions which outputs have a subscriber (outputs nobody reads are

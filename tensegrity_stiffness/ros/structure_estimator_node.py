@@ -47,7 +47,6 @@ from tensegrity_stiffness.nodes.structure_estimator_node import (
     trust_summary,
     trust_values,
 )
-from tensegrity_stiffness.nodes.structure_sim_node import resting_poses
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.conversions.outputs import RCLPY_TYPES, output_topics
@@ -55,6 +54,7 @@ from tensegrity_stiffness.ros.conversions.structure_outputs import structure_mar
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded
+from tensegrity_stiffness.structures.equilibrium import resting_poses
 from tensegrity_stiffness.structures.structure import Structure
 
 
@@ -137,7 +137,7 @@ class StructureEstimatorNode(StreamingNode):
     def _output_messages(self, settings: StructureEstimatorSettings
                          ) -> StructureEstimatorMessages:
         return StructureEstimatorMessages(settings.structure,
-                                          f'{self.get_name()}: estimate')
+                                          f'{self.get_fully_qualified_name()}: estimate')
 
     def _outputs(self, settings: StructureEstimatorSettings, snapshot: EstimatorInput,
                  wanted: tuple[bool, ...]) -> StructureEstimatorOutputs:
@@ -243,8 +243,8 @@ class StructureEstimatorNode(StreamingNode):
                    ('filter restarts', self._track.restarts),
                    ('trigger', f'~/{settings.trigger_reading}'),
                    ('max age [s]', settings.max_age)]
-        return [conversions.diagnostic_status(f'{self.get_name()}: structure estimator', level,
-                                              message, values,
+        name = f'{self.get_fully_qualified_name()}: structure estimator'
+        return [conversions.diagnostic_status(name, level, message, values,
                                               hardware_id=settings.world_frame)]
 
 

@@ -212,7 +212,7 @@ class StructureNode(StreamingNode):
     def _diagnostic_statuses(self, settings: StructureNodeSettings,
                              outputs: StructureOutputs | None,
                              values: list[tuple[str, Any]]) -> list[Any]:
-        name = self.get_name()
+        name = self.get_fully_qualified_name()
         s = settings.structure
         values = [('bodies', s.n_bodies), ('strings', s.n_strings), *values]
         if outputs is None:

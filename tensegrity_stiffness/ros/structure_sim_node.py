@@ -6,7 +6,8 @@ own (paced by the wall clock, or as fast as possible publishing ``/clock``), val
 on the inputs, and publishes the truth and the simulated sensors with their noise. Parameters:
 :data:`tensegrity_stiffness.nodes.structure_sim_node.STRUCTURE_SIM_PARAMETERS`.
 
-The twin starts at rest at the structure's equilibrium on its ground (:func:`resting_poses`).
+The twin starts at rest at the structure's equilibrium on its ground
+(:func:`~tensegrity_stiffness.structures.equilibrium.resting_poses`).
 Outputs: ``~/poses`` (``geometry_msgs/PoseArray`` in ``frames.world``, the structure's body
 order), ``~/measured_lengths``, ``~/measured_tensions`` (load cells), ``~/measured_rest_lengths``
 (motor encoders; ``Float64MultiArray``, string order), ``~/measured_contacts`` (1 per body
@@ -51,7 +52,6 @@ from tensegrity_stiffness.nodes.structure_sim_node import (
     StructureSimSettings,
     live_line,
     loads_label,
-    resting_poses,
     structure_sim_settings,
 )
 from tensegrity_stiffness.ros import conversions
@@ -72,7 +72,8 @@ from tensegrity_stiffness.simulation.structure_gait import (
     plan_roll_step,
 )
 from tensegrity_stiffness.simulation.structure_twin import StructureSimulation
-from tensegrity_stiffness.simulation.twin import checked_wrench
+from tensegrity_stiffness.simulation.twin_model import checked_wrench
+from tensegrity_stiffness.structures.equilibrium import resting_poses
 
 #: Seconds between /diagnostics messages (and live lines).
 DIAGNOSTICS_PERIOD_S = 1.0
@@ -365,9 +366,10 @@ class StructureSimNode(SteppingTwin, Node):
                   ('real-time factor', factor), ('gait phase', self.gait_phase),
                   ('gait steps done', self.gait_steps_done),
                   ('rejected inputs', self.reporter.rejected or 0)]
+        name = f'{self.get_fully_qualified_name()}: structure twin'
         self._pub_diagnostics.publish(conversions.diagnostic_array(
-            [conversions.diagnostic_status(f'{self.get_name()}: structure twin', level, line,
-                                           values, hardware_id=self._settings.world_frame)],
+            [conversions.diagnostic_status(name, level, line, values,
+                                           hardware_id=self._settings.world_frame)],
             self.get_clock().now().to_msg()))
         if LIVE:
             print(line, flush=True)

@@ -8,12 +8,13 @@ The gait, one step
    over is the face's edge whose outward normal in the ground plane is nearest the wanted
    ``direction``; the next face is the face of the nodes' convex hull across that edge. Each
    string is probed: its rest length shortened by ``probe`` (a fraction), the equilibrium on the
-   ground with the same contacts (:func:`~tensegrity_stiffness.structures.equilibrium.
-   solve_structure_equilibrium`, no roll-over) moves the centre of mass towards that edge by
-   some distance; the ``n_strings`` strings that move it most are the tipping strings. Their
-   contraction is the smallest on a grid of ``CONTRACTION_STEP`` whose equilibrium on the
-   support face has the centre of mass past the edge by ``TIP_MARGIN`` of the face's inradius
-   (the structure then has no equilibrium there: it tips), at most ``max_contraction``.
+   ground with the same contacts
+   (:func:`~tensegrity_stiffness.structures.equilibrium.solve_structure_equilibrium`, no roll-over)
+   moves the centre of mass towards that edge by some distance; the ``n_strings`` strings that move
+   it most are the tipping strings. Their contraction is the smallest on a grid of
+   ``CONTRACTION_STEP`` whose equilibrium on the support face has the centre of mass past the edge
+   by ``TIP_MARGIN`` of the face's inradius (the structure then has no equilibrium there: it tips),
+   at most ``max_contraction``.
 2. **Tip** (:class:`RollGait`): command the tipping rest lengths (the motors move at their
    rate limit) until the next face's new node touches the ground.
 3. **Recover**: command the nominal rest lengths again and wait until the motors have arrived

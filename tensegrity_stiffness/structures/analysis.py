@@ -332,11 +332,11 @@ def product_forces(analysis: Analysis) -> FloatArray:
 
 
 def framework_of(structure: Any, poses: ArrayLike | None = None) -> Framework:
-    """The pin-jointed framework of a :class:`~tensegrity_stiffness.structures.structure.
-    Structure` at ``poses`` (None: its start), with the member forces of its evaluation
-    (strings' tensions, minus the bars' compressions). The nodes of fixed bodies and of the
-    world are supports; every free body must be a bar (ValueError naming the first that is
-    not: a body of more nodes is no pin-jointed member)."""
+    """The pin-jointed framework of a :class:`~tensegrity_stiffness.structures.structure.Structure`
+    at ``poses`` (None: its start), with the member forces of its evaluation (strings' tensions,
+    minus the bars' compressions). The nodes of fixed bodies and of the world are supports; every
+    free body must be a bar (ValueError naming the first that is not: a body of more nodes is no
+    pin-jointed member)."""
     for body in structure.bodies:
         if not body.fixed and body.kind != BAR:
             raise ValueError(f"bodies: '{body.name}' is a free {body.kind} of "

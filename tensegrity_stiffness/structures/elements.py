@@ -129,8 +129,8 @@ class Body:
 
     @property
     def link_inertia(self) -> LinkInertia:
-        """The body's mass properties as the dynamics' :class:`~tensegrity_stiffness.mechanics.
-        dynamics.LinkInertia` (mass > 0 needed)."""
+        """The body's mass properties as the dynamics'
+        :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` (mass > 0 needed)."""
         return LinkInertia(self.mass, self.com, self.inertia)
 
 

@@ -606,6 +606,14 @@ def solve_structure_equilibrium(structure: Structure, loads: Any = None,
     return result
 
 
+def resting_poses(structure: Structure) -> FloatArray:
+    """Where a structure rests: its equilibrium with its gravity and ground
+    (:func:`solve_structure_equilibrium`), or its configured poses when it has none. The
+    structure twin starts there, and the structure estimator's first estimate."""
+    result = solve_structure_equilibrium(structure)
+    return result.poses if result.success else structure.start_poses()
+
+
 def _settle(structure: Structure, W: FloatArray, rest: FloatArray, T0: FloatArray,
             contacts: list[Contact], tolerance: float, max_iterations: int, deadline: float,
             iterations: int) -> StructureEquilibrium:

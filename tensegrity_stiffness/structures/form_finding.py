@@ -269,8 +269,8 @@ class ShapeDesign:
 def tension_caps(structure: Any, lengths: FloatArray) -> FloatArray:
     """(n,) the largest tension each string can hold at ``lengths`` with a positive rest
     length and below its maximum length (``lmax - l0`` kept, as the joint's design keeps it):
-    ``hooke`` ``min(k l, k m)``, ``paper`` ``min(k, k m / l)``, less :data:`~tensegrity_stiffness.
-    mechanics.design.BOUND_MARGIN`` of it."""
+    ``hooke`` ``min(k l, k m)``, ``paper`` ``min(k, k m / l)``, less
+    :data:`~tensegrity_stiffness.mechanics.design.BOUND_MARGIN` of it."""
     k, m = structure.k, structure.max_stretch
     if structure.force_law == 'hooke':
         cap = np.minimum(k * lengths, k * m)
@@ -349,10 +349,10 @@ def design_rest_lengths_for_shape(structure: Any, poses: ArrayLike | None = None
 
 def joint_model_of(structure: Any) -> tuple[Any, FloatArray]:
     """A structure of two bodies, one fixed at the world origin (identity pose) and one free,
-    joined only by strings, as the joint (:class:`~tensegrity_stiffness.mechanics.joint.
-    JointModel`: link 1 the fixed body, link 2 the free one) and the screw of the free body's
-    pose: the structure's form where the joint's stiffness design applies (ValueError
-    naming what does not fit)."""
+    joined only by strings, as the joint
+    (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`: link 1 the fixed body, link 2 the
+    free one) and the screw of the free body's pose: the structure's form where the joint's
+    stiffness design applies (ValueError naming what does not fit)."""
     from tensegrity_stiffness.geometry.screw import log_se3
     from tensegrity_stiffness.mechanics.joint import JointModel
 
@@ -383,12 +383,13 @@ def joint_model_of(structure: Any) -> tuple[Any, FloatArray]:
 
 def design_joint_stiffness(structure: Any, target_stiffness: ArrayLike, t_min: float = 1.0,
                            t_max: float = 100.0) -> Any:
-    """The joint's stiffness design (:func:`~tensegrity_stiffness.mechanics.design.
-    design_rest_lengths`: rest lengths holding the pose with tensions in the band and ``K_c``
-    closest to ``target_stiffness``) for a structure of the joint's form
-    (:func:`joint_model_of`), under the free body's weight when the structure has gravity.
-    Returns the joint design's :class:`~tensegrity_stiffness.mechanics.design.DesignResult`
-    (rest lengths in the structure's string order)."""
+    """The joint's stiffness design
+    (:func:`~tensegrity_stiffness.mechanics.design.design_rest_lengths`: rest lengths holding the
+    pose with tensions in the band and ``K_c`` closest to ``target_stiffness``) for a structure of
+    the joint's form (:func:`joint_model_of`), under the free body's weight when the structure has
+    gravity. Returns the joint design's
+    :class:`~tensegrity_stiffness.mechanics.design.DesignResult` (rest lengths in the structure's
+    string order)."""
     from tensegrity_stiffness.mechanics.design import design_rest_lengths
 
     model, screw = joint_model_of(structure)

@@ -52,8 +52,9 @@ def joint_structure_arguments(model: JointModel, pose: ArrayLike | None = None,
     """The ``Structure`` arguments (bodies, strings, force law) of the joint as a structure
     (:mod:`.joints`); ``pose`` of ``link2`` (default
     ``exp(hat(initial_screw))``); ``inertia``: link 2's mass properties (default massless: the
-    joint has no weights; give the dynamics' :class:`~tensegrity_stiffness.mechanics.dynamics.
-    LinkInertia` for its modes); ``string_damping`` (N s/m, one for all or one per string)."""
+    joint has no weights; give the dynamics'
+    :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` for its modes);
+    ``string_damping`` (N s/m, one for all or one per string)."""
     _check_names(list(model.node_names) + list(model.link2_node_names), 'joint')
     T = exp_se3(model.initial_screw) if pose is None else pose
     link1 = Body.rigid(JOINT_BODIES[0], dict(zip(model.node_names, model.link1_nodes,

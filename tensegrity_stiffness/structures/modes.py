@@ -4,9 +4,10 @@ The dynamics' method (:mod:`~tensegrity_stiffness.mechanics.dynamics`) in the st
 coordinates, the stacked spatial twists ``delta`` ([dv; dw] in the world) of the bodies:
 
 * Mass matrix ``M = blockdiag(Ad_i^-T G_i Ad_i^-1)``: ``G_i`` the body's spatial inertia about
-  its origin in its frame (:meth:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia.
-  spatial_inertia`, in [v; w] order here) and ``Ad_i`` the adjoint of its pose, so that the
-  kinetic energy is ``1/2 delta_dot^T M delta_dot``.
+  its origin in its frame
+  (:meth:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia.spatial_inertia`, in [v; w] order
+  here) and ``Ad_i`` the adjoint of its pose, so that the kinetic energy is
+  ``1/2 delta_dot^T M delta_dot``.
 * Stiffness: the equilibrium's tangent stiffness ``K_total`` (strings, weights, contact forces;
   :attr:`~tensegrity_stiffness.structures.equilibrium.StructureEquilibrium.tangent_stiffness`).
 * String damping ``C = L^T diag(c) L`` with ``L = dl/d(delta)`` (n, 6N), a force ``-c_j dl_j/dt``

@@ -358,9 +358,10 @@ def six_bar_document(bar_length: float = DEFAULT_BAR_LENGTH, ground: bool = Fals
 def config_structure_document(document: Any) -> dict[str, Any]:
     """The structure of a joint or a spine config document (module docstring): a spine when
     the document has a ``chain`` section, a joint otherwise, with the config's dynamics (the
-    links' inertias, the strings' damping: :meth:`~tensegrity_stiffness.mechanics.dynamics.
-    JointDynamics.from_config`, :meth:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics.
-    from_config`) so that the modes have masses."""
+    links' inertias, the strings' damping:
+    :meth:`~tensegrity_stiffness.mechanics.dynamics.JointDynamics.from_config`,
+    :meth:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics.from_config`) so that the modes
+    have masses."""
     from tensegrity_stiffness import config
     from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, JointDynamics
     from tensegrity_stiffness.structures.structure import Structure

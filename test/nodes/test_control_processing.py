@@ -72,7 +72,9 @@ def test_per_string_limits_one_value_or_one_per_string(defaults, model):
     per = controller_settings({**defaults, 'limits.rest_length_min': each.tolist()})
     np.testing.assert_array_equal(per.limits.rest_length_min, each)
     for bad in ([0.01, 0.02], [0.01] * (n + 1)):
-        with pytest.raises(ValueError, match=r'limits\.rest_length_min must have 1 or'):
+        # the shared per-string rule's text (geometry/validation.per_string)
+        with pytest.raises(ValueError, match=rf'limits\.rest_length_min must have {n} values '
+                           r'\(one per string\), got \d+ \(or one value for all\)'):
             controller_settings({**defaults, 'limits.rest_length_min': bad})
 
 

@@ -25,6 +25,7 @@ NEEDS = {
     'stiffness_bridge': set(),
     'structure_node': set(),
     'structure_sim_node': {TWIN, 'mujoco'},
+    'structure_estimator_node': set(),
     # the machinery, the shared sections and the registry load no node
     'parameter_specs': set(),
     'shared_parameters': set(),

@@ -1,15 +1,27 @@
-"""The output tables of the joint and the spine (``nodes/layouts``: one row of name, layout and
-value per output): the names are the rows' in order, each value's array fills its layout, and
+"""The output tables of the streaming nodes (``nodes/layouts.OutputRow``: one row of name, layout
+and value per output): the names are the rows' in order, each value's array fills its layout, and
 the node modules' ``output_arrays`` are the tables' values. No ROS."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+import pytest
 from support import JOINT_CONFIG, SPINE_CONFIG
 
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
-from tensegrity_stiffness.nodes import layouts, spine_node, stiffness_node
+from tensegrity_stiffness.nodes import (
+    layouts,
+    spine_node,
+    stiffness_node,
+    structure_estimator_node,
+    structure_node,
+)
+from tensegrity_stiffness.nodes.parameter_specs import defaults
+from tensegrity_stiffness.structures.structure import Structure
+from tensegrity_stiffness.structures.templates import six_bar_document
 
 
 def check_table(rows, names, layouts_by_name, arrays, expected) -> None:
@@ -68,3 +80,34 @@ def test_the_controllers_table_names_its_outputs_and_fills_their_layouts() -> No
     # the controller's first command is published by the same row
     np.testing.assert_array_equal(layouts.CONTROLLER_OUTPUT_TABLE[0].of(ticker.controller),
                                   ticker.controller.rest_lengths)
+
+
+@pytest.mark.parametrize('ground', [True, False])
+def test_the_structures_tables_name_their_outputs_and_fill_their_layouts(ground: bool) -> None:
+    """structure_node's table and the structure estimator's (the covariance, then the structure
+    node's rows): the contact forces only with a ground."""
+    structure = Structure.from_dict(six_bar_document(ground=ground))
+    settings = replace(structure_node.structure_node_settings(
+        defaults(structure_node.STRUCTURE_NODE_PARAMETERS)), structure=structure,
+        rest_lengths=structure.rest_lengths)
+    outputs = structure_node.structure_outputs(settings, structure.start_poses())
+    state = outputs.state
+    names = structure_node.STRUCTURE_OUTPUTS[:5 if ground else 4]
+    expected = (state.wrenches, state.stiffness, state.tensions, state.bar_forces,
+                *((outputs.contact_forces,) if ground else ()))
+    table = structure_node.STRUCTURE_OUTPUT_TABLE
+    assert structure_node.STRUCTURE_OUTPUTS == tuple(row.name for row in table)
+    check_table(table[:len(names)], names, structure_node.structure_output_layouts(structure),
+                structure_node.output_arrays(outputs), expected)
+
+    n6 = 6 * structure.n_bodies
+    estimate = structure_estimator_node.StructureEstimatorOutputs(
+        state.poses, np.eye(n6), None, 0, 0.0, (), (), (), (), 'static', (), {}, outputs)
+    table = structure_estimator_node.STRUCTURE_ESTIMATOR_OUTPUT_TABLE
+    names = ('pose_covariance', *names)
+    assert structure_estimator_node.STRUCTURE_ESTIMATOR_OUTPUT_NAMES == (
+        'poses', *(row.name for row in table))
+    check_table(table[:len(names)], names,
+                structure_estimator_node.estimator_array_layouts(structure),
+                structure_estimator_node.estimator_output_arrays(estimate)[1:],
+                (estimate.covariance, *expected))

@@ -21,7 +21,7 @@ from tensegrity_stiffness.nodes.structure_estimator_node import (
     pose_errors,
     structure_estimator_settings,
 )
-from tensegrity_stiffness.nodes.structure_sim_node import resting_poses
+from tensegrity_stiffness.structures.equilibrium import resting_poses
 
 
 def values(**changes):

@@ -113,6 +113,63 @@ def test_no_module_imports_from_a_layer_above_or_a_sibling() -> None:
     assert not wrong, '\n'.join(wrong)
 
 
+#: The modules split along their seams that keep their names as faces re-exporting their parts
+#: (docs/architecture.md, "Import paths"): code inside the package imports the parts.
+FACES = tuple(T + name for name in (
+    'nodes.parameters', 'nodes.processing', 'nodes.spine_processing', 'nodes.control_processing',
+    'nodes.estimation_processing', 'estimation.estimators', 'estimation.calibration',
+    'simulation.twin', 'recordings.bag'))
+
+
+def face_imports(tree: ast.AST, faces: dict[str, ast.Module]) -> list[tuple[int, str]]:
+    """(line, what) of each import through a face: a name it re-exports (``from face import
+    name``), or the face itself when it defines no function or class of its own
+    (``from package import face``)."""
+    found = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.ImportFrom) or not node.module:
+            continue
+        for alias in node.names:
+            face = faces.get(node.module)
+            if face is not None and alias.name in reexported_names(face):
+                found.append((node.lineno, f'{node.module}.{alias.name}'))
+            whole = faces.get(f'{node.module}.{alias.name}')
+            if whole is not None and not any(isinstance(n, (ast.FunctionDef, ast.ClassDef))
+                                             for n in whole.body):
+                found.append((node.lineno, f'{node.module}.{alias.name}'))
+    return found
+
+
+def reexported_names(face: ast.Module) -> set[str]:
+    """The names a module binds by importing them from the package (at its top level)."""
+    return {a.asname or a.name for n in face.body if isinstance(n, ast.ImportFrom)
+            and (n.module or '').startswith('tensegrity_stiffness') for a in n.names}
+
+
+def test_code_inside_the_package_imports_the_parts_not_the_faces() -> None:
+    faces = {face: ast.parse((REPO / (face.replace('.', '/') + '.py')).read_text(
+        encoding='utf-8')) for face in FACES}
+    wrong = []
+    for path in MODULES:
+        module = dotted(path)
+        if module in faces or layer_of(module).alias:  # a face's own imports; the old paths
+            continue
+        wrong += [f'{path.relative_to(REPO)}:{line} imports {what} through its face'
+                  for line, what in face_imports(ast.parse(path.read_text(encoding='utf-8')),
+                                                 faces)]
+    assert not wrong, '\n'.join(wrong)
+
+
+def test_face_imports_are_found() -> None:
+    faces = {T + 'nodes.processing': ast.parse(
+        'from tensegrity_stiffness.nodes.stiffness_node import joint_outputs\n')}
+    code = ('from tensegrity_stiffness.nodes.processing import joint_outputs\n'
+            'from tensegrity_stiffness.nodes import processing\n'
+            'from tensegrity_stiffness.nodes.stiffness_node import joint_outputs\n')
+    assert face_imports(ast.parse(code), faces) == [
+        (1, T + 'nodes.processing.joint_outputs'), (2, T + 'nodes.processing')]
+
+
 def test_only_the_ros_layer_imports_rclpy_or_message_packages() -> None:
     wrong = []
     for path in MODULES:

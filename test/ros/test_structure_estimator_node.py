@@ -86,6 +86,7 @@ def loop(tmp_path_factory):
     ros = RosClient('structure_estimator_test')
     out = {
         'structure': structure, 'twin': twin, 'estimator': estimator, 'ros': ros,
+        'base': est_base,
         'truth': ros.subscribe(PoseArray, f'{sim_base}/poses'),
         'poses': ros.subscribe(PoseArray, f'{est_base}/poses'),
         'covariance': ros.subscribe(Float64MultiArray, f'{est_base}/pose_covariance'),
@@ -171,6 +172,8 @@ def test_with_markers_every_pose_is_the_twin_s_within_its_covariance(loop):
     names = loop['structure'].body_names
     labels = loop['covariance'].wait_for(1, 10.0)[-1].layout.dim[0].label
     assert labels.startswith('rows: [dp; dw] of each body') and f'{names[0]}.rx' in labels
+    # the trust's status is named by the node's full name, its namespace with it
+    assert loop['trust'].wait_for(1, 10.0)[-1].status[0].name == f"{loop['base']}: estimate"
 
 
 def test_without_markers_the_plane_motion_is_held_and_named(loop):

@@ -303,8 +303,9 @@ def test_diagnostics_name_stability_and_the_tangent_eigenvalue(harness, equilibr
     harness.send_values(np.array([pose_vector(P) for P in equilibrium.poses]))
 
     def values_of(msg):
+        # the status is named by the node's full name, its namespace with it
         return next(({k.key: k.value for k in s.values} for s in msg.status
-                     if s.name.endswith('structure')), {})
+                     if s.name == f'{harness.base}: structure'), {})
 
     def of_this_input(msg):
         # The report of the poses sent here (an earlier test's input may be reported first):

@@ -191,7 +191,7 @@ def test_the_node_rolls_the_six_bar_with_the_gait(tmp_path):
 
         def values(msg):
             for s in msg.status:
-                if s.name == 'structure_sim_node: structure twin':
+                if s.name == f'{ns}/structure_sim_node: structure twin':  # its full name
                     return {kv.key: kv.value for kv in s.values}
             return None
 

@@ -16,10 +16,10 @@ from tensegrity_stiffness.ros import conversions
 
 class JointRestLengthTopic:
     """Commanded rest lengths of one joint (n values, config order) on a topic, the model's
-    rest lengths after ``joint.rest_length_offsets`` (:func:`~tensegrity_stiffness.nodes.
-    parameters.rest_length_offsets`); settings with a ``model``
-    (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`), ``max_array_length`` and
-    ``values``."""
+    rest lengths after ``joint.rest_length_offsets``
+    (:func:`~tensegrity_stiffness.nodes.shared_parameters.rest_length_offsets`); settings with a
+    ``model`` (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`), ``max_array_length``
+    and ``values``."""
 
     def _keep_topic_rest_lengths(self, old: Any, settings: Any, names: set[str]) -> Any:
         rest = old.model.rest_lengths

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from tensegrity_stiffness.geometry.screw import CHART_LIMIT
+from tensegrity_stiffness.geometry.screw import single_screw
 from tensegrity_stiffness.mechanics.design import (
     DesignResult,
     design_request_from_service,
@@ -127,14 +127,10 @@ def equilibrium_job(request: Any, settings: JointNodeSettings,
     W = check_wrench(model, conversions.msg_to_wrench(request.external_wrench),
                      rest_lengths=rest)
     if len(request.initial_screw):
-        x0 = np.asarray(request.initial_screw, dtype=np.float64)
-        if x0.shape != (6,):
-            raise ValueError(f'initial_screw must have 6 values, got {x0.size}')
+        x0 = request.initial_screw
     else:
         x0 = last_solution if last_solution is not None else model.initial_screw
-    x0 = np.asarray(x0, dtype=np.float64)
-    if not np.isfinite(x0).all() or np.linalg.norm(x0[:3]) >= CHART_LIMIT:
-        raise ValueError('initial_screw must have finite values and |omega| < 2 pi')
+    x0 = single_screw(x0, 'initial_screw')
     check_screw(model, x0, 'initial_screw')
     return EquilibriumJob(W, rest, x0, settings.equilibrium_time_budget,
                           settings.equilibrium_max_iterations)
