@@ -21,7 +21,7 @@ Subcommands (``tensegrity-stiffness <command> --help`` for every option):
   CSV), with identifiability and std (:mod:`tensegrity_stiffness.cli.calibration_report`)
 * ``record``       a rosbag2 of a running node's topics (:mod:`.record_command`; rclpy, in a
   child process)
-* ``export-mjcf``  the digital twin's MuJoCo model of the joint or the spine
+* ``export-mjcf``  the digital twin's MuJoCo model of the joint, the spine or a structure
 * ``new-config``   a starter joint (or spine) config from a template, its unloaded equilibrium
   written as ``initial_screw`` (:mod:`tensegrity_stiffness.mechanics.templates`)
 * ``check-config`` a config's unloaded equilibrium, stability, strings, modes and whether its

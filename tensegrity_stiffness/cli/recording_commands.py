@@ -237,17 +237,22 @@ def add_calibrate_parser(sub: Any) -> None:
 
 def add_export_mjcf_parser(sub: Any) -> None:
     """``export-mjcf``."""
-    p = sub.add_parser('export-mjcf', help="MuJoCo model (MJCF) of the joint or the spine",
+    p = sub.add_parser('export-mjcf',
+                       help='MuJoCo model (MJCF) of the joint, the spine or a structure',
                        description="Write the MuJoCo model of the digital twin "
-                                   "(tensegrity_stiffness.simulation.twin) built from a config; "
-                                   "open it with: python -m mujoco.viewer --mjcf FILE.xml")
+                                   "(tensegrity_stiffness.simulation.twin) built from a joint or "
+                                   "spine config, or with --structure of a structure file "
+                                   "(tensegrity_stiffness.structures.mjcf); open it with: "
+                                   "python -m mujoco.viewer --mjcf FILE.xml")
     p.add_argument('--config', metavar='YAML', help='config file (default: the packaged '
                    'default_joint.yaml, or default_spine.yaml with --spine)')
     p.add_argument('--spine', action='store_true', help='the spine (a chain config)')
     p.add_argument('--structure', metavar='YAML', help='a structure file (docs/structures.md): '
-                   'its bodies, strings and ground instead of the joint or the spine')
+                   'its bodies, strings and ground instead of the joint or the spine '
+                   '(--config, --spine and --max-length do not apply)')
     p.add_argument('--out', metavar='FILE.xml', help='output file (default: standard output)')
     p.add_argument('--max-length', choices=('limit', 'ignore'), default='limit',
-                   help="strings past lmax: 'limit' an inextensible stop (default), 'ignore' "
-                        "Hooke's law goes on (docs/simulation.md)")
+                   help="the joint's or spine's strings past lmax: 'limit' an inextensible "
+                        "stop (default), 'ignore' Hooke's law goes on (docs/simulation.md); a "
+                        "structure's are always limited")
     p.set_defaults(handler=_cmd_export_mjcf)

@@ -1,8 +1,9 @@
 """Form-finding against the published forms: the force density method finds the regular p-prism at
 90 - 180/p degrees from a start at any twist (Schek 1974; Tibert & Pellegrino 2003); kinematic
 form-finding lengthens the unit-string p-prism's bars to sqrt(1 + 1/sin(pi/p)) (p = 3: 1.4679,
-Tibert & Pellegrino's triangular prism) and the equal-string 6-bar's to sqrt(8/3); rest lengths
-designed for a target shape hold it (wrenches zero) with tensions in the band."""
+Tibert & Pellegrino's triangular prism; p = 6: sqrt(3), the flat limit) and the equal-string
+6-bar's to sqrt(8/3); rest lengths designed for a target shape hold it (wrenches zero) with
+tensions in the band."""
 
 import math
 
@@ -106,7 +107,7 @@ def test_force_densities_that_hold_no_form_are_refused():
         force_density_form(anchored, [1.0, 0.0])
 
 
-@pytest.mark.parametrize('p', (3, 4, 5))
+@pytest.mark.parametrize('p', (3, 4, 5))  # p = 6 is flat: its own test below
 def test_kinematic_form_finding_of_the_unit_string_prism(p):
     """Strings of unit length, bars lengthened to their maximum: the bar of Tibert & Pellegrino
     (p = 3: sqrt(1 + 2/sqrt 3) = 1.4679), the twist 90 - 180/p, and one self-stress."""
@@ -124,6 +125,34 @@ def test_kinematic_form_finding_of_the_unit_string_prism(p):
                                                       abs=KINEMATIC_ANGLE_TOL)
     a = analyse_framework(fw)
     assert a.self_stresses == 1 and a.prestress_stable
+
+
+def test_kinematic_form_finding_of_the_unit_string_hexagonal_prism_is_flat():
+    """p = 6: the bar sqrt(1 + 1/sin(pi/6)) = sqrt(3) = 1.7321 at the twist 60 degrees. The
+    unit-string prism's height h^2 = 1 - (2 R sin(alpha/2))^2 (R = 1 / (2 sin(pi/p)) the
+    polygons' radius, alpha the twist) is zero at p = 6: the form is the flat hexagram (the bar
+    the chord of 120 degrees of the unit hexagon), with one self-stress and an unfolding out of
+    the plane that no prestress stiffens."""
+    p = 6
+    side = 2.0 * math.sin(math.pi / p)
+    radius = 1.0 / side
+    alpha = templates.prism_twist(p)
+    assert 1.0 - (2.0 * radius * math.sin(alpha / 2.0)) ** 2 == pytest.approx(0.0, abs=1e-15)
+    start = templates.prism_layout(p, radius, 1.0, twist=alpha + 0.3)
+    result = kinematic_form(start.framework(), string_lengths=np.ones(3 * p))
+    assert result.success, result.message
+    assert result.info['bar_length'] == pytest.approx(math.sqrt(3.0), rel=KINEMATIC_LENGTH_RTOL)
+    assert round(result.info['bar_length'], 4) == 1.7321
+    fw = result.framework
+    np.testing.assert_allclose(fw.lengths[:3 * p], 1.0, rtol=1e-12)
+    assert twist_of(fw.positions, p) == pytest.approx(alpha, abs=KINEMATIC_ANGLE_TOL)
+    # Flat: the lengths change as h^2, so SLSQP finds h to about the square root of its
+    # precision (measured 9e-6).
+    X = fw.positions
+    assert abs(X[p:, 2].mean() - X[:p, 2].mean()) < 1e-4
+    a = analyse_framework(fw)
+    assert a.self_stresses == 1 and a.strings_pull
+    assert not a.prestress_stable and abs(a.prestress_stiffness[0]) < 1e-6
 
 
 def test_kinematic_form_finding_of_the_equal_string_six_bar():

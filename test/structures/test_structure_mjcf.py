@@ -90,3 +90,10 @@ def test_export_mjcf_takes_a_structure_file(tmp_path, capsys):
     assert main(['export-mjcf', '--structure', str(HERE / SIXBAR), '--out', str(out)]) == 0
     model = mujoco.MjModel.from_xml_path(str(out))
     assert model.ntendon == 24 and model.nbody == 7
+    capsys.readouterr()
+    # The help names what it exports: the joint, the spine or a structure.
+    assert main(['--help']) == 0
+    assert 'MuJoCo model (MJCF) of the joint, the spine or a structure' in ' '.join(
+        capsys.readouterr().out.split())
+    assert main(['export-mjcf', '--help']) == 0
+    assert 'or with --structure of a structure file' in ' '.join(capsys.readouterr().out.split())

@@ -1,7 +1,8 @@
 """Modes and the linear model of structures: the mass matrix against the kinetic energy, a bar
 hanging from two strings against its closed-form frequencies (bounce sqrt(2k/m), the pendulum
 sqrt(g/l) both ways, tilt and yaw) and damping ratio, and the zero modes of free structures
-counted and named (rigid motions, bar spins, no mechanism of a prestress-stable 6-bar)."""
+counted and named (rigid motions, bar spins, no mechanism of a prestress-stable 6-bar; the plane
+motions of the 6-bar on a frictionless ground; the mechanism of a body held on a line)."""
 
 import math
 
@@ -87,6 +88,96 @@ def test_a_free_six_bar_has_rigid_motions_and_spins_as_its_zero_modes():
         f'spin of {b}' for b in structure.bar_names)
     assert len(modes.frequencies) == 36 - 12 and np.all(modes.frequencies > 0)
     assert modes.stable
+
+
+@pytest.mark.parametrize('friction', [0.0, 0.8])
+def test_on_a_frictionless_ground_the_plane_motions_are_zero_modes(friction):
+    """The 6-bar resting on a face: frictionless, it slides and turns freely along the ground
+    (3 plane motions beside the 6 spins); with friction the contacts hold (the spins only)."""
+    from test_structure_equilibrium import on_the_ground
+
+    structure, start = on_the_ground(friction)
+    result = solve_structure_equilibrium(structure, start=start)
+    assert result.success and result.stable, result.message
+    modes = structure_modes(structure, result)
+    planes = 3 if friction == 0.0 else 0
+    assert modes.counts == {'rigid': planes, 'spins': 6, 'mechanisms': 0}
+    assert modes.zero_modes.count('plane motion') == planes
+    assert 'rigid motion' not in modes.zero_modes and 'mechanism' not in modes.zero_modes
+    # Three contacts hold 3 coordinates each, frictionless only the normal one.
+    held = 3 * (1 if friction == 0.0 else 3)
+    assert modes.basis.shape[1] == 36 - held
+    assert len(modes.frequencies) == 36 - held - 6 - planes and np.all(modes.frequencies > 0)
+    T, K = result.poses, result.tangent_stiffness
+    X = structure.node_positions(T)
+    body_of = [structure.body_index(n.split('.')[0]) for n in structure.node_names]
+    shapes = modes.zero_shapes[[k for k, n in enumerate(modes.zero_modes)
+                                if n == 'plane motion']]
+    for shape in shapes:
+        twist = shape.reshape(-1, 6)
+        assert np.abs(K @ shape).max() < 1e-9 * np.abs(K).max()
+        # Every node moves along the ground, as one rigid motion of the whole (a bar's spin
+        # mixed in moves none of its nodes).
+        dx = np.array([twist[b, :3] + np.cross(twist[b, 3:], x) for b, x in zip(body_of, X,
+                                                                                 strict=True)])
+        np.testing.assert_allclose(dx[:, 2], 0.0, atol=1e-12)
+        n = len(X)
+        rigid = np.zeros((2 * n, 3))  # (vx, vy, w): dx = v + w e_z x x
+        rigid[0::2, 0], rigid[1::2, 1] = 1.0, 1.0
+        rigid[0::2, 2], rigid[1::2, 2] = -X[:, 1], X[:, 0]
+        fit = np.linalg.lstsq(rigid, dx[:, :2].ravel(), rcond=None)[0]
+        np.testing.assert_allclose(rigid @ fit, dx[:, :2].ravel(), atol=1e-12)
+    if planes:
+        # Together they are the two translations and the turn about the normal.
+        plane = np.zeros((3, 6 * structure.n_bodies))
+        plane[0, 0::6], plane[1, 1::6], plane[2, 5::6] = 1.0, 1.0, 1.0
+        span = modes.zero_shapes.T
+        coefficients = np.linalg.lstsq(span, plane.T, rcond=None)[0]
+        np.testing.assert_allclose(span @ coefficients, plane.T, atol=1e-12)
+
+
+def held_on_a_line(kind):
+    """A ``kind`` (general body or bar) held along z between two world anchors by two strings
+    on one line, no gravity: tension T = k (l - l0) = 10 N in strings of length l = 0.3 m."""
+    body = {'name': 'hub', 'type': kind, 'mass': M, 'pose': [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0]}
+    if kind == 'body':
+        body.update(nodes={'a': [0.0, 0.0, -0.1], 'b': [0.0, 0.0, 0.1]},
+                    inertia=[1e-3, 1e-3, 2e-4])
+    else:
+        body['length'] = 0.2
+    return Structure.from_dict({'structure': {
+        'bodies': [body],
+        'world_nodes': {'below': [0.0, 0.0, -0.4], 'above': [0.0, 0.0, 0.4]},
+        'strings': [
+            {'from': 'world.below', 'to': 'hub.a', 'stiffness': K, 'rest_length': 0.2},
+            {'from': 'hub.b', 'to': 'world.above', 'stiffness': K, 'rest_length': 0.2}]}})
+
+
+def test_a_body_held_on_a_line_has_its_turn_about_it_as_a_mechanism():
+    """A general body whose two strings lie on one line: its turn about that line moves no node
+    (no string and no prestress resists it), a mechanism; sideways it is held by the prestress
+    (T / l per string), along the line by the strings' stiffness, its tilt by both."""
+    structure = held_on_a_line('body')
+    result = solve_structure_equilibrium(structure)
+    assert result.success, result.message
+    assert not result.stable  # the mechanism has no stiffness
+    modes = structure_modes(structure, result)
+    assert modes.zero_modes == ('mechanism',)
+    assert modes.counts == {'rigid': 0, 'spins': 0, 'mechanisms': 1}
+    turn = modes.zero_shapes[0] * np.sign(modes.zero_shapes[0][5])
+    np.testing.assert_allclose(turn, [0, 0, 0, 0, 0, 1.0], atol=1e-12)
+    tension, length, arm, inertia = K * 0.1, 0.3, 0.1, 1e-3
+    sideways = math.sqrt(2 * tension / (length * M))
+    tilt = math.sqrt(2 * tension * arm * (1 + arm / length) / inertia)
+    np.testing.assert_allclose(modes.frequencies * 2 * math.pi,
+                               sorted([sideways, sideways, math.sqrt(2 * K / M), tilt, tilt]),
+                               rtol=1e-9)
+    assert modes.stable  # no mode with negative stiffness
+    # The same held bar: the motion is its spin, a gauge, not a mechanism.
+    bar = held_on_a_line('bar')
+    bar_modes = structure_modes(bar, solve_structure_equilibrium(bar))
+    assert bar_modes.zero_modes == ('spin of hub',)
+    assert bar_modes.counts == {'rigid': 0, 'spins': 1, 'mechanisms': 0}
 
 
 def test_massless_free_bodies_are_refused():
