@@ -511,9 +511,6 @@ class JointSimulation(_Twin):
 
     def __init__(self, model: JointModel, options: SimulationOptions | None = None, *,
                  initial_screw: ArrayLike | None = None, **overrides: Any) -> None:
-        if model.force_law != 'hooke':
-            raise ValueError(f"force_law: the twin simulates Hooke's law only (MuJoCo tendons), "
-                             f'got {model.force_law!r}')
         self.joint_model = model
         self.options = resolved_options(options, overrides)
         layout = joint_layout(model, self.options)
@@ -601,10 +598,6 @@ class ChainSimulation(_Twin):
 
     def __init__(self, chain: JointChain, options: SimulationOptions | None = None, *,
                  initial_screws: ArrayLike | None = None, **overrides: Any) -> None:
-        for i, model in enumerate(chain.joints):
-            if model.force_law != 'hooke':
-                raise ValueError(f"joint {i + 1} force_law: the twin simulates Hooke's law only, "
-                                 f'got {model.force_law!r}')
         self.chain = chain
         self.options = resolved_options(options, overrides)
         layout = chain_layout(chain, self.options)

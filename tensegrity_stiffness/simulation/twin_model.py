@@ -188,18 +188,27 @@ class TwinLayout:
 
 def joint_layout(model: JointModel, options: SimulationOptions) -> TwinLayout:
     """The layout of the joint's twin (N = 1, gravity :data:`DEFAULT_JOINT_GRAVITY` unless the
-    options give one)."""
+    options give one). ValueError for a force law other than Hooke's (MuJoCo's tendon springs):
+    the twin and its exported MJCF would simulate another joint."""
     if not isinstance(model, JointModel):
         raise ValueError(f'model must be a JointModel, got {type(model).__name__}')
+    if model.force_law != 'hooke':
+        raise ValueError(f"force_law: the twin simulates Hooke's law only (MuJoCo tendons), "
+                         f'got {model.force_law!r}')
     g = np.array(DEFAULT_JOINT_GRAVITY if options.gravity is None else options.gravity)
     return TwinLayout([model], np.zeros((0, 4, 4)), np.zeros(1), np.zeros((1, 3)), g,
                    model.initial_screw[None].copy(), True, [list(model.string_names)])
 
 
 def chain_layout(chain: JointChain, options: SimulationOptions) -> TwinLayout:
-    """The layout of the spine's twin (its joints, link offsets, masses and gravity)."""
+    """The layout of the spine's twin (its joints, link offsets, masses and gravity);
+    ValueError for a force law other than Hooke's, as :func:`joint_layout`."""
     if not isinstance(chain, JointChain):
         raise ValueError(f'chain must be a JointChain, got {type(chain).__name__}')
+    for i, model in enumerate(chain.joints):
+        if model.force_law != 'hooke':
+            raise ValueError(f"joint {i + 1} force_law: the twin simulates Hooke's law only, "
+                             f'got {model.force_law!r}')
     g = np.array(chain.gravity if options.gravity is None else options.gravity, dtype=float)
     names = [[f'j{i + 1}_{s}' for s in m.string_names] for i, m in enumerate(chain.joints)]
     return TwinLayout(list(chain.joints), chain.link_offsets.copy(), chain.link_masses.copy(),

@@ -117,6 +117,11 @@ def test_bad_options_and_models_are_named(model: JointModel) -> None:
                        force_law='paper')
     with pytest.raises(ValueError, match='force_law'):
         JointSimulation(paper)
+    # the exported model too (it wrote the paper's joint as Hooke springs without a word)
+    with pytest.raises(ValueError, match="force_law: the twin simulates Hooke's law only"):
+        joint_mjcf(paper)
+    with pytest.raises(ValueError, match="joint 1 force_law"):
+        chain_mjcf(JointChain([paper]))
     sim = JointSimulation(model)
     with pytest.raises(ValueError, match='rest_lengths'):
         sim.set_rest_lengths(model.rest_lengths[:5])
