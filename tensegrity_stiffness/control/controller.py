@@ -37,11 +37,16 @@ The math (notation of :mod:`tensegrity_stiffness.mechanics.design`)
   feedforward) or the pose cannot be held, and clamped to ``integral_limit``. So that the
   integral cannot sit at its clamp without a limit binding (issue #42: a target turned by
   180 deg needs the same rest lengths, no limit binds, and the clamped correction of that
-  target stayed on after it), two rules: the error integrated per tick is at most the clamp
-  (rotation and translation parts scaled down as the clamp is), and ``z`` restarts from 0
-  when the target pose moves by more than the clamp (a correction learned at one target says
-  nothing about another far from it). A pose error that is not finite (a pose turned by
-  about 180 deg from the target, where the error has no direction) is refused by name.
+  target stayed on after it, also when the target came back in steps smaller than the clamp),
+  the integral's reset rule: (1) ``z`` restarts from 0 when the target pose moves by more than
+  the clamp in one tick; (2) a pose error beyond the clamp (its rotation or translation part
+  larger than that part's clamp: a transient or a pose the correction cannot reach) is not
+  integrated: ``z`` leaks toward 0 instead, ``z *= exp(-k_i dt)``; (3) an integral that stays
+  at its clamp with no limit binding for longer than its time constant ``1 / k_i`` (the pose
+  error did not answer it) rests: it leaks the same way and integrates nothing until the
+  target moves by more than the clamp from where it came to rest. The error integrated per
+  tick is at most the clamp. A pose error that is not finite (a pose turned by about 180 deg
+  from the target, where the error has no direction) is refused by name.
 * **Directions the strings do not hold** (issue #39). Where ``S B`` at the joint's unloaded
   pose has singular values below ``UNHELD_DIRECTION_TOLERANCE`` of its largest
   (:func:`unheld_count`: a ring's spin about its axis, about which no string has a moment),
@@ -620,6 +625,23 @@ def _target_moved(previous: FloatArray | None, target: FloatArray,
     return angle > limit[0] or float(np.linalg.norm(target[:3, 3] - previous[:3, 3])) > limit[1]
 
 
+def _beyond_clamp(e: FloatArray, limit: tuple[float, float]) -> bool:
+    """True when a part of the pose error ``e`` (rotation, translation) is larger than that
+    part's clamp (a part whose clamp is 0 is not integrated anyway and does not count)."""
+    return any(lim > 0.0 and float(np.linalg.norm(e[part])) > lim
+               for part, lim in ((slice(0, 3), limit[0]), (slice(3, 6), limit[1])))
+
+
+def _rest_anchor(anchor: FloatArray | None, previous: FloatArray | None, target: FloatArray,
+                 limit: tuple[float, float]) -> FloatArray | None:
+    """The integral's rest anchor after a tick at ``target``: ``anchor`` unless the target
+    moved by more than the clamp from it or from the ``previous`` tick's target."""
+    if anchor is None or _target_moved(anchor, target, limit) or _target_moved(
+            previous, target, limit):
+        return None
+    return anchor
+
+
 def _exp(kn: kernel.JointKernel | None, xi: FloatArray) -> FloatArray:
     """``exp_se3`` of one finite screw, in the compiled kernel when there is one."""
     return exp_se3(xi) if kn is None else kn.exp_se3(xi)
@@ -723,6 +745,11 @@ class _PoseFeedback:
     _z: FloatArray
     #: The target pose of the last committed tick (the integral restarts when it moves far).
     _target_transform: FloatArray | None = None
+    #: The target pose at which the integral came to rest (rule 3 of the module docstring:
+    #: it sat at its clamp with no limit binding), or None while it integrates.
+    _rest_anchor: FloatArray | None = None
+    #: How long (s) the committed integral has been at its clamp with no limit binding.
+    _clamped_time: float = 0.0
     #: The compiled kernel of the exp maps of the feedback (a joint model's), or None.
     _exp_kernel: kernel.JointKernel | None = None
 
@@ -746,12 +773,49 @@ class _PoseFeedback:
         else:
             e, error = np.zeros(6), np.zeros(6)
         e = self._held_error(e)
+        limit = self.integral_limit
         z0 = self._z
-        if _target_moved(self._target_transform, target.transform, self.integral_limit):
-            z0 = np.zeros(6)  # a new target far from the last: restart the integral
-        step = _clamp_integral(self.integral_gain * dt * e, self.integral_limit)
-        z = _clamp_integral(z0 + step, self.integral_limit)
+        if _target_moved(self._target_transform, target.transform, limit):
+            z0 = np.zeros(6)  # rule 1: a new target far from the last restarts the integral
+        resting = _rest_anchor(self._rest_anchor, self._target_transform, target.transform,
+                               limit) is not None
+        if resting or _beyond_clamp(e, limit):  # rules 3 and 2: leak, integrate nothing
+            z = z0 * math.exp(-self.integral_gain * dt)
+        else:
+            step = _clamp_integral(self.integral_gain * dt * e, limit)
+            z = _clamp_integral(z0 + step, limit)
         return dt, W, e, error, z
+
+    def _commit_integral(self, dt: float, target: FloatArray, z: FloatArray,
+                         limit_binds: bool) -> None:
+        """Commit the integral ``z`` of a tick held at ``target`` (4, 4): frozen while a limit
+        binds (anti-windup; a far move of the target still restarts it), and the rest of rule 3
+        (module docstring) kept up to date."""
+        limit = self.integral_limit
+        anchor = _rest_anchor(self._rest_anchor, self._target_transform, target, limit)
+        if not limit_binds:
+            self._z = z
+        elif _target_moved(self._target_transform, target, limit):
+            self._z = np.zeros(6)
+        if limit_binds or anchor is not None or not _at_clamp(self._z, limit):
+            self._clamped_time = 0.0
+        else:
+            self._clamped_time += dt
+            if self._clamped_time * self.integral_gain > 1.0:
+                anchor, self._clamped_time = target, 0.0
+        self._rest_anchor = anchor
+        self._target_transform = target
+
+    def _integral_note(self) -> str:
+        """What the tick's message says about the committed integral ('' when nothing)."""
+        if self._rest_anchor is not None:
+            return ('integral correction at rest: it sat at its clamp with no limit binding '
+                    '(the pose error did not answer it) and decays to 0; it restarts when the '
+                    'target moves by more than the clamp')
+        if _at_clamp(self._z, self.integral_limit):
+            return ('integral correction at its clamp with no limit binding (it comes to rest '
+                    'after 1 / integral_gain if the pose error does not answer it)')
+        return ''
 
     def _held_error(self, e: FloatArray) -> FloatArray:
         """The pose error ``e`` (6,) on the directions the strings hold (all by default)."""
@@ -842,6 +906,8 @@ class StiffnessController(_PoseFeedback):
         self._z = np.zeros(6)
         self._t = None
         self._target_transform = None
+        self._rest_anchor = None
+        self._clamped_time = 0.0
         self._at_lo = np.zeros(n, bool)
         self._at_hi = np.zeros(n, bool)
 
@@ -908,6 +974,7 @@ class StiffnessController(_PoseFeedback):
             err = 0.0
         else:
             err = relative_stiffness_error(Kc, target.cartesian_stiffness, self.length_scale)
+        self._commit_integral(dt, target.transform, z, bool(saturated.any()))
         messages = []
         if target.cartesian_stiffness is not None and err > STIFFNESS_MET_TOLERANCE:
             at = int(np.count_nonzero(sol.at_lo | sol.at_hi))
@@ -915,20 +982,12 @@ class StiffnessController(_PoseFeedback):
                             f'relative error {err:.3g} ({at} strings at a tension bound)')
         if saturated.any():
             messages.append(f'{int(saturated.sum())} strings at the rate or range limit')
-        elif _at_clamp(z, self.integral_limit):
-            messages.append('integral correction at its clamp with no limit binding (the '
-                            'pose error does not answer the correction; a new target restarts '
-                            'it)')
+        elif self._integral_note():
+            messages.append(self._integral_note())
         if self.unheld_count:
             free = ', '.join(unheld_twist_text(u) for u in self._unheld)
             messages.append(f'the strings hold {6 - self.unheld_count} of 6 directions: '
                             f'{free} not held (it settles where the strings balance)')
-        # Commit: anti-windup keeps z while a limit binds (a moved target restarts it anyway).
-        if not saturated.any():
-            self._z = z
-        elif _target_moved(self._target_transform, target.transform, self.integral_limit):
-            self._z = np.zeros(6)
-        self._target_transform = target.transform
         self._command = command
         self._t, self._at_lo, self._at_hi = t, sol.at_lo, sol.at_hi
         return ControlCommand(command.copy(), True, err, Kc, t.copy(), saturated,
@@ -1041,6 +1100,9 @@ class ChainStiffnessController(_PoseFeedback):
         for j, r in zip(self.joints, rows, strict=True):
             j.reset(r)
         self._z = np.zeros(6)
+        self._target_transform = None
+        self._rest_anchor = None
+        self._clamped_time = 0.0
         self._xi = self.reference_screws.copy()
 
     def _screws_for(self, T_d: FloatArray) -> FloatArray:
@@ -1144,8 +1206,8 @@ class ChainStiffnessController(_PoseFeedback):
             commands = self._shape_tip(dt, target, state.transforms, loads, state.joint_frames)
         feasible = all(c.feasible for c in commands)
         saturated = np.array([c.saturated for c in commands])
-        if feasible and not saturated.any():
-            self._z = z
+        if feasible:
+            self._commit_integral(dt, target.transform, z, bool(saturated.any()))
         self._xi = xi
         if feasible:
             designed = [rest_from_tensions(ctl.model, pose_terms(ctl.model, x).lengths,
@@ -1164,6 +1226,8 @@ class ChainStiffnessController(_PoseFeedback):
         if target.cartesian_stiffness is not None and feasible and \
                 err > STIFFNESS_MET_TOLERANCE:
             msgs.insert(0, f'tip stiffness target not met: relative error {err:.3g}')
+        if feasible and not saturated.any() and self._integral_note():
+            msgs.append('tip ' + self._integral_note())
         return ChainControlCommand(np.array([c.rest_lengths for c in commands]), feasible, err,
                                    K_tip, np.array([c.tensions for c in commands]), saturated,
                                    '; '.join(msgs) or 'ok', xi, error, tuple(commands))

@@ -262,8 +262,11 @@ _GRAVITY = 9.80665
 
 
 def check_dynamics(model: JointModel, mass: float, com: ArrayLike,
-                   string_damping: ArrayLike) -> None:
-    """ValueError naming the field when link 2's dynamics are outside the joint's range
+                   string_damping: ArrayLike,
+                   names: tuple[str, str, str] = ('link mass', 'link com', 'string_damping')
+                   ) -> None:
+    """ValueError naming the field (``names`` of mass, com and damping: a node passes its
+    parameters') when link 2's dynamics are outside the joint's range
     (issue #42): ``mass`` (kg) from :data:`MIN_LINK_MASS` to ``PLAUSIBILITY_MARGIN`` times the
     weight its strings can hold (capacity / g); ``com`` (3,) m within ``REACH_MARGIN`` sizes of
     link 2's origin; each ``string_damping`` (N s/m) at most ``PLAUSIBILITY_MARGIN ** 2`` times
@@ -271,16 +274,16 @@ def check_dynamics(model: JointModel, mass: float, com: ArrayLike,
     ranges = joint_ranges(model)
     heaviest = PLAUSIBILITY_MARGIN * ranges.capacity / _GRAVITY
     if not MIN_LINK_MASS <= mass <= heaviest:
-        raise ValueError(f'link mass: {mass:.4g} kg is outside the range of this joint '
+        raise ValueError(f'{names[0]}: {mass:.4g} kg is outside the range of this joint '
                          f'({MIN_LINK_MASS:g} to {heaviest:.4g} kg: {PLAUSIBILITY_MARGIN:g} x '
                          'the weight its strings can hold)')
     offset = _norm(np.asarray(com, dtype=np.float64))
     if not offset <= REACH_MARGIN * ranges.size:
-        raise _range_error('link com', offset, REACH_MARGIN * ranges.size,
+        raise _range_error(names[1], offset, REACH_MARGIN * ranges.size,
                            "m from link 2's origin", f'{REACH_MARGIN:g} x its size')
     critical = 2.0 * math.sqrt(ranges.stiffness_scale * mass)
     damping = float(np.max(np.asarray(string_damping, dtype=np.float64), initial=0.0))
     if not damping <= PLAUSIBILITY_MARGIN ** 2 * critical:
-        raise _range_error('string_damping', damping, PLAUSIBILITY_MARGIN ** 2 * critical,
+        raise _range_error(names[2], damping, PLAUSIBILITY_MARGIN ** 2 * critical,
                            'N s/m', f"{PLAUSIBILITY_MARGIN ** 2:g} x link 2's critical damping "
                            '2 sqrt(stiffness scale x mass)')

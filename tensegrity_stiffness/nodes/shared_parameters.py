@@ -10,6 +10,7 @@ import.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -22,6 +23,7 @@ from tensegrity_stiffness.mechanics.dynamics import (
     LinkInertia,
 )
 from tensegrity_stiffness.mechanics.joint import FORCE_LAWS, JointModel
+from tensegrity_stiffness.mechanics.plausibility import MIN_LINK_MASS, PLAUSIBILITY_MARGIN
 from tensegrity_stiffness.nodes.parameter_specs import RELIABILITIES, ParameterSpec
 
 #: The default joint: the sub-vertebra of the authors' published code (docs/conventions.md, "The
@@ -115,7 +117,9 @@ REST_LENGTH_OFFSET_PARAMETERS: tuple[ParameterSpec, ...] = (
 #: link 2's inertia (the twin's default when left at the defaults) and the strings' damping.
 LINK2_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('joint.link2_mass', 'double', DEFAULT_LINK_MASS,
-                  "link 2's mass, kg", range=(1e-12, 1e9)),
+                  f"link 2's mass, kg; at most {PLAUSIBILITY_MARGIN:g} x the weight the joint's "
+                  "strings can hold (the joint's range: mechanics.plausibility.check_dynamics)",
+                  range=(MIN_LINK_MASS, math.inf)),
     ParameterSpec('joint.link2_com', 'double_array', [0.0, 0.0, 0.0],
                   "link 2's centre of mass in {2}, [x y z], m"),
     ParameterSpec('joint.link2_inertia', 'double_array', None,
@@ -127,8 +131,9 @@ LINK2_PARAMETERS: tuple[ParameterSpec, ...] = (
 #: twin shows.
 STRING_DAMPING_PARAMETER = ParameterSpec(
     'dynamics.string_damping', 'double', DEFAULT_STRING_DAMPING,
-    "damping of every string along its length, N s/m (one value: the modes' and the twin's)",
-    range=(0.0, 1e9))
+    "damping of every string along its length, N s/m (one value: the modes' and the twin's); "
+    f"at most {PLAUSIBILITY_MARGIN ** 2:g} x link 2's critical damping (the joint's range: "
+    'mechanics.plausibility.check_dynamics)', range=(0.0, math.inf))
 JOINT_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = LINK2_PARAMETERS + (
     ParameterSpec('dynamics.enabled', 'bool', False,
                   'publish ~/natural_frequencies of every input (the modes of the joint held '

@@ -27,7 +27,12 @@ from tensegrity_stiffness.mechanics.dynamics import JointDynamics, JointModes
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
-from tensegrity_stiffness.mechanics.plausibility import check_screw, check_translation
+from tensegrity_stiffness.mechanics.plausibility import (
+    check_dynamics,
+    check_rest_lengths,
+    check_screw,
+    check_translation,
+)
 from tensegrity_stiffness.nodes.layouts import (
     JOINT_OUTPUT_TABLE,
     JOINT_OUTPUTS,
@@ -105,14 +110,22 @@ class JointNodeSettings:
     values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
 
+#: The parameters of link 2's dynamics, in :func:`check_dynamics`' order (mass, com, damping).
+DYNAMICS_PARAMETER_NAMES = ('joint.link2_mass', 'joint.link2_com', 'dynamics.string_damping')
+
+
 def joint_dynamics_from_values(model: JointModel, values: Mapping[str, Any]
                                ) -> JointDynamics | None:
     """The joint's dynamics from checked values (None unless ``dynamics.enabled``); errors
-    name the parameter."""
+    name the parameter. The values are judged against the joint's range
+    (:func:`~tensegrity_stiffness.mechanics.plausibility.check_dynamics`, the library's) also
+    when the dynamics are off, so a parameter the library would refuse is never set."""
+    inertia = link2_inertia_from_values(values)
+    damping = values['dynamics.string_damping']
+    check_dynamics(model, inertia.mass, inertia.com, damping, DYNAMICS_PARAMETER_NAMES)
     if not values['dynamics.enabled']:
         return None
-    return JointDynamics(model, link2_inertia_from_values(values),
-                         values['dynamics.string_damping'])
+    return JointDynamics(model, inertia, damping)
 
 
 
@@ -161,10 +174,12 @@ def pose_input(frame_id: str, transform: ArrayLike, link1_frame: str,
 
 def with_rest_lengths(model: JointModel, rest_lengths: FloatArray) -> JointModel:
     """``model`` with the rest lengths of a ``~/rest_lengths`` message's finite values;
-    :class:`~tensegrity_stiffness.geometry.errors.BadRestLengthsError` (the model's text) when
-    the model refuses them (not positive, or no room for the maximum stretch)."""
+    :class:`~tensegrity_stiffness.geometry.errors.BadRestLengthsError` (the model's or the
+    range's text) when they are below the joint's range
+    (:func:`~tensegrity_stiffness.mechanics.plausibility.check_rest_lengths`, the range the
+    equilibrium service uses) or the model refuses them (no room for the maximum stretch)."""
     try:
-        return model.with_rest_lengths(rest_lengths)
+        return model.with_rest_lengths(check_rest_lengths(model, rest_lengths))
     except BadRestLengthsError:
         raise
     except ValueError as exc:

@@ -7,7 +7,11 @@ import numpy as np
 import pytest
 from support import REPO
 
-from tensegrity_stiffness.control.controller import ControlTarget, StiffnessController
+from tensegrity_stiffness.control.controller import (
+    ControlCommand,
+    ControlTarget,
+    StiffnessController,
+)
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics.design import DEFAULT_TENSION_MAX, DEFAULT_TENSION_MIN
 from tensegrity_stiffness.mechanics.joint import JointModel
@@ -84,19 +88,77 @@ def test_stiffness_targets_refused_with_the_reason() -> None:
             check_target_stiffness(model, K)
 
 
-def test_the_integral_restarts_when_the_target_moves_far() -> None:
-    """The issue's: a target turned by 180 deg about the joint's axis needs the same rest
-    lengths, no limit binds and the integral sat at its clamp; back at the first target the
-    commands stayed off. Now: the integral restarts there, and the clamp is reported."""
+def _turned(angle: float) -> np.ndarray:
+    """A turn by ``angle`` about link 2's y axis (the joint's), as a 4x4 on the right."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0.0, s, 0.0], [0.0, 1.0, 0.0, 0.0], [-s, 0.0, c, 0.0],
+                     [0.0, 0.0, 0.0, 1.0]])
+
+
+DT = 0.002
+
+
+def _run(ctl: StiffnessController, T0: np.ndarray, angles: list[float],
+         integrals: list[float] | None = None) -> list[ControlCommand]:
+    """Ticks of ``ctl`` at the targets ``T0 @ _turned(a)``, the estimate at ``T0`` throughout
+    (the issue's open loop); the commands, and each tick's integral rotation (rad) appended to
+    ``integrals``."""
+    out = []
+    for a in angles:
+        out.append(ctl.update(DT, ControlTarget(pose=T0 @ _turned(a)), pose=T0))
+        if integrals is not None:
+            integrals.append(float(np.linalg.norm(ctl.integral[:3])))
+    return out
+
+
+def _at_first_target() -> tuple[StiffnessController, StiffnessController, np.ndarray]:
+    """Two controllers of the default settings held at the unloaded pose T0 with a good
+    estimate: the one the test drives and the reference that stays there."""
     settings = controller_settings(defaults())
     model = settings.model
-    ctl = StiffnessController(model, settings.limits, settings.start)
     T0 = exp_se3(model.initial_screw)
-    turn = np.diag([-1.0, 1.0, -1.0, 1.0])  # 180 deg about link 2's y axis (the joint's)
-    for _ in range(200):
-        cmd = ctl.update(0.002, ControlTarget(pose=T0 @ turn), pose=T0)
-    assert np.isclose(np.linalg.norm(ctl.integral[:3]), ctl.integral_limit[0])
-    assert 'integral correction at its clamp' in cmd.message
-    cmd = ctl.update(0.002, ControlTarget(pose=T0), pose=T0)
-    assert np.all(ctl.integral == 0.0)
-    assert np.all(np.isfinite(cmd.rest_lengths))
+    ctl = StiffnessController(model, settings.limits, settings.start)
+    reference = StiffnessController(model, settings.limits, settings.start)
+    for c in (ctl, reference):
+        _run(c, T0, [0.0] * 300)
+    return ctl, reference, T0
+
+
+def test_the_integral_does_not_wind_up_at_a_turned_target() -> None:
+    """The issue's: a target turned by 180 deg about the joint's axis needs the same rest
+    lengths, so no limit binds; the integral ran to its clamp and sat there. Now the error,
+    beyond the clamp, is not integrated, and back at the first target the commands are the
+    first target's."""
+    ctl, reference, T0 = _at_first_target()
+    commands = _run(ctl, T0, [np.pi] * 200)
+    assert not commands[-1].saturated.any()
+    assert np.linalg.norm(ctl.integral[:3]) < 1e-3 * ctl.integral_limit[0]
+    back = _run(ctl, T0, [0.0] * 300)[-1]
+    expected = _run(reference, T0, [0.0] * 500)[-1]
+    np.testing.assert_allclose(back.rest_lengths, expected.rest_lengths, rtol=0, atol=1e-6)
+
+
+def test_the_integral_does_not_sit_at_its_clamp_under_a_ramped_target() -> None:
+    """A target ramped away by 0.3 rad in steps of 1 mrad (each well below the clamp, so the
+    one-tick restart never fires; no limit binds) and back, the estimate at the first target:
+    the integral reaches its clamp, rests within 1 / k_i and decays, and back at the first
+    target the commands are the first target's (3.3 mm off before the rule)."""
+    ctl, reference, T0 = _at_first_target()
+    ramp = list(np.linspace(0.0, 0.3, 300))
+    integrals: list[float] = []
+    commands = _run(ctl, T0, ramp + [0.3] * 300 + ramp[::-1] + [0.0] * 600, integrals)
+    assert not any(c.saturated.any() or not c.feasible for c in commands)
+    clamp = ctl.integral_limit[0]
+    runs = ''.join('x' if z >= clamp * (1 - 1e-9) else ' ' for z in integrals).split()
+    assert runs and max(map(len, runs)) <= 1.0 / (ctl.integral_gain * DT) + 1
+    assert any('integral correction at its clamp' in c.message for c in commands)
+    assert 'integral correction at rest' in commands[-1].message
+    expected = _run(reference, T0, [0.0] * 1500)[-1]
+    np.testing.assert_allclose(commands[-1].rest_lengths, expected.rest_lengths, rtol=0,
+                               atol=1e-6)
+    # a target farther than the clamp from where it came to rest (about 0.06 rad, on the way
+    # back) with an error within the clamp: the integral runs again
+    moved = _run(ctl, T0, list(np.linspace(0.0, -0.19, 190)))
+    assert 'at rest' not in moved[-1].message
+    assert np.linalg.norm(ctl.integral[:3]) > 1e-3
+

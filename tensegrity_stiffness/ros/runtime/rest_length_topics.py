@@ -11,15 +11,17 @@ from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness.nodes.shared_parameters import rest_length_offsets
 from tensegrity_stiffness.nodes.spine_node import rest_lengths_input
+from tensegrity_stiffness.nodes.stiffness_node import with_rest_lengths
 from tensegrity_stiffness.ros import conversions
 
 
 class JointRestLengthTopic:
     """Commanded rest lengths of one joint (n values, config order) on a topic, the model's
     rest lengths after ``joint.rest_length_offsets``
-    (:func:`~tensegrity_stiffness.nodes.shared_parameters.rest_length_offsets`); settings with a
-    ``model`` (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`), ``max_array_length``
-    and ``values``."""
+    (:func:`~tensegrity_stiffness.nodes.shared_parameters.rest_length_offsets`), within the
+    joint's range (:func:`~tensegrity_stiffness.nodes.stiffness_node.with_rest_lengths`);
+    settings with a ``model`` (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`),
+    ``max_array_length`` and ``values``."""
 
     def _keep_topic_rest_lengths(self, old: Any, settings: Any, names: set[str]) -> Any:
         rest = old.model.rest_lengths
@@ -32,7 +34,7 @@ class JointRestLengthTopic:
         commanded = conversions.multiarray_to_array(msg, expected_length=n,
                                                     max_length=settings.max_array_length)
         rest = commanded + rest_length_offsets(settings.values, n)
-        return replace(settings, model=settings.model.with_rest_lengths(rest))
+        return replace(settings, model=with_rest_lengths(settings.model, rest))
 
 
 class SpineRestLengthTopic:
