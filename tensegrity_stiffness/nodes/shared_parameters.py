@@ -134,6 +134,10 @@ STRING_DAMPING_PARAMETER = ParameterSpec(
     "damping of every string along its length, N s/m (one value: the modes' and the twin's); "
     f"at most {PLAUSIBILITY_MARGIN ** 2:g} x link 2's critical damping (the joint's range: "
     'mechanics.plausibility.check_dynamics)', range=(0.0, math.inf))
+#: The parameters of link 2's dynamics, in
+#: :func:`~tensegrity_stiffness.mechanics.plausibility.check_dynamics`' order (mass, com,
+#: damping).
+DYNAMICS_PARAMETER_NAMES = ('joint.link2_mass', 'joint.link2_com', STRING_DAMPING_PARAMETER.name)
 JOINT_DYNAMICS_PARAMETERS: tuple[ParameterSpec, ...] = LINK2_PARAMETERS + (
     ParameterSpec('dynamics.enabled', 'bool', False,
                   'publish ~/natural_frequencies of every input (the modes of the joint held '

@@ -10,13 +10,17 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import numpy as np
+
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.plausibility import check_dynamics
 from tensegrity_stiffness.nodes.frames import spine_link_frame
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name
 from tensegrity_stiffness.nodes.shared_parameters import (
     CHAIN_PARAMETERS,
     COMMON_PARAMETERS,
+    DYNAMICS_PARAMETER_NAMES,
     FRAME_PARAMETERS,
     JOINT_PARAMETERS,
     LINK2_PARAMETERS,
@@ -168,6 +172,10 @@ def sim_node_settings(values: Mapping[str, Any], generation: int = 0) -> SimNode
             if not checked[name].strip():
                 raise ValueError(f'{name} must not be empty')
         chain = JointChain.from_dict(chain_document(checked))
+        for joint in chain.joints:  # each link as the twin builds it: sim.link_mass at its origin
+            check_dynamics(joint, checked['sim.link_mass'], np.zeros(3),
+                           checked[STRING_DAMPING_PARAMETER.name],
+                           ('sim.link_mass', 'link com', STRING_DAMPING_PARAMETER.name))
         base, child = checked['frames.base'], checked['frames.tool']
         imu = checked['frames.imu'] or spine_link_frame(base, n)
         model = None
@@ -177,6 +185,9 @@ def sim_node_settings(values: Mapping[str, Any], generation: int = 0) -> SimNode
             if not checked[name].strip():
                 raise ValueError(f'{name} must not be empty')
         model, chain = joint_from_values(checked), None
+        inertia = link2_inertia_from_values(checked)
+        check_dynamics(model, inertia.mass, inertia.com, checked[STRING_DAMPING_PARAMETER.name],
+                       DYNAMICS_PARAMETER_NAMES)
         base, child = checked['frames.link1'], checked['frames.link2']
         imu = checked['frames.imu'] or child
         longest = max(6, model.n_strings)

@@ -42,6 +42,7 @@ from tensegrity_stiffness.nodes.layouts import (
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.shared_parameters import (
     COMMON_PARAMETERS,
+    DYNAMICS_PARAMETER_NAMES,
     FRAME_PARAMETERS,
     JOINT_DYNAMICS_PARAMETERS,
     JOINT_PARAMETERS,
@@ -108,10 +109,6 @@ class JointNodeSettings:
     dynamics: JointDynamics | None = None
     generation: int = 0
     values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
-
-
-#: The parameters of link 2's dynamics, in :func:`check_dynamics`' order (mass, com, damping).
-DYNAMICS_PARAMETER_NAMES = ('joint.link2_mass', 'joint.link2_com', 'dynamics.string_damping')
 
 
 def joint_dynamics_from_values(model: JointModel, values: Mapping[str, Any]
