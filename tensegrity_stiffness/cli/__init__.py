@@ -4,7 +4,8 @@ joint, equilibrium, design; :mod:`.planar_commands`: planar-fk, planar-ik; :mod:
 chain; :mod:`.figure_commands`: plot, figures; :mod:`.recording_commands`: bag, calibrate,
 export-mjcf; :mod:`.dynamics_commands`: modes), what they share (:mod:`.common`: exit codes,
 number parsing, tables, JSON; :mod:`.progress`: progress bars), the figures (:mod:`.plots`,
-:mod:`.dynamics_plots`) and the calibration report (:mod:`.calibration_report`).
+:mod:`.dynamics_plots`) and the calibration reports (:mod:`.calibration_report`; a structure's:
+:mod:`.structure_calibration_report`).
 
 May import: every library layer (recordings, nodes, control, estimation, simulation, mechanics,
 geometry, config); no rclpy.

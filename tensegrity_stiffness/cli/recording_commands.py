@@ -74,9 +74,47 @@ def _noise_option(text: str) -> tuple[str, float]:
     return kind.strip(), parse_number(value)
 
 
+#: ``calibrate`` options for a joint only (not with ``--structure``).
+_JOINT_ONLY = ('config', 'pose_topic', 'wrench_topic', 'plot')
+
+
+def _cmd_calibrate_structure(args: argparse.Namespace) -> int:
+    from tensegrity_stiffness.cli import structure_calibration_report
+    from tensegrity_stiffness.estimation.calibration_results import FIT_KINDS
+
+    given = [name for name in _JOINT_ONLY if getattr(args, name) is not None]
+    given += [name for name, default in (('fit', list(FIT_KINDS)), ('loss', 'soft_l1'))
+              if getattr(args, name) != default]
+    if given:
+        raise ValueError(f"{' '.join('--' + name.replace('_', '-') for name in given)}: not "
+                         "for a structure (--structure fits every string's stiffness and "
+                         'offset from its lengths, load cells and encoders)')
+    topics = {name: topic for name, topic in (
+        ('rest_lengths', args.rest_lengths_topic), ('tensions', args.tensions_topic),
+        ('lengths', args.lengths_topic)) if topic is not None}
+    bar = ProgressBar('calibrate: read')
+    try:
+        _, report, lines = structure_calibration_report.run(
+            args.recording, args.structure, fmt=args.format, topics=topics,
+            noise=dict(args.noise or []),
+            rule={'window': args.window, 'max_speed': args.max_speed}, max_age=args.max_age,
+            out=args.out, progress=bar, allow_damaged=args.allow_damaged)
+    except ImportError as exc:  # rosbags not installed
+        raise ValueError(f'reading a bag needs rosbags ({exc})') from None
+    finally:
+        bar.finish()
+    if args.json:
+        print_json(report)
+    else:
+        print('\n'.join(lines))
+    return EXIT_OK
+
+
 def _cmd_calibrate(args: argparse.Namespace) -> int:
     from tensegrity_stiffness.cli import calibration_report
 
+    if args.structure:
+        return _cmd_calibrate_structure(args)
     bars: list[ProgressBar] = []
 
     def progress(label: str) -> ProgressBar:
@@ -189,6 +227,13 @@ def add_calibrate_parser(sub: Any) -> None:
                    help='rosbag2 folder (or .mcap / .db3 file), or a .csv file')
     p.add_argument('--config', metavar='YAML',
                    help='nominal joint config (default: the packaged default_joint.yaml)')
+    p.add_argument('--structure', metavar='FILE',
+                   help='calibrate this structure (a structure file or a packaged example, '
+                        'docs/structures.md) from its string lengths, load cells and encoders '
+                        '(default topics /structure_sim_node/measured_lengths, '
+                        'measured_tensions, measured_rest_lengths; in a CSV the length_j, '
+                        'tension_j and rest_length_j columns): each string\'s stiffness and '
+                        'offset; --out writes the calibrated structure file')
     p.add_argument('--format', choices=('bag', 'csv'),
                    help='recording format (default: csv for a .csv file, else bag)')
     from tensegrity_stiffness.estimation.calibration_results import FIT_KINDS
@@ -207,7 +252,12 @@ def add_calibrate_parser(sub: Any) -> None:
         p.add_argument(f'--{name}-topic', metavar='TOPIC',
                        help=f"{text} (default {DEFAULT_TOPICS[name.replace('-', '_')]}"
                             + ('' if name == 'rest-lengths' else ', used when present')
-                            + '; given: required)')
+                            + '; given: required'
+                            + ('' if name in ('pose', 'wrench') else
+                               '; --structure: /structure_sim_node/'
+                               + {'rest-lengths': 'measured_rest_lengths (the encoders)',
+                                  'tensions': 'measured_tensions',
+                                  'lengths': 'measured_lengths'}[name]) + ')')
     p.add_argument('--fit', nargs='+', choices=FIT_KINDS, default=list(FIT_KINDS),
                    help='parameters to fit (default both)')
     p.add_argument('--noise', nargs='+', type=_noise_option, metavar='KIND=STD',
