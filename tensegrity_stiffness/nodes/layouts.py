@@ -106,6 +106,9 @@ def stacked_matrix_dims(n: int, rows: int, cols: int, stack_label: str, row_labe
 FLOAT64_MULTIARRAY = 'std_msgs/msg/Float64MultiArray'
 WRENCH_STAMPED = 'geometry_msgs/msg/WrenchStamped'
 POSE_STAMPED = 'geometry_msgs/msg/PoseStamped'
+#: The estimators' poses: a (4, 4) transform and the (6, 6) covariance of ``[dp; dtheta]``
+#: (ROS's ``PoseWithCovariance`` convention, row-major, both in the header's frame).
+POSE_WITH_COVARIANCE_STAMPED = 'geometry_msgs/msg/PoseWithCovarianceStamped'
 #: The package's stamped matrix (``msg/StampedMatrix.msg``: header with the input's stamp and
 #: the frame, row and column labels and counts, row-major data).
 STAMPED_MATRIX = 'tensegrity_stiffness/msg/StampedMatrix'
@@ -118,9 +121,9 @@ STAMPED_MATRIX_DEFINITION = 'msg/StampedMatrix.msg'
 class OutputLayout:
     """One output message of a node: its type and, for a ``Float64MultiArray``, its layout
     ``dims`` ((label, size, stride) each; the payload holds ``dims[0][2]`` values). A stamped
-    message (``WrenchStamped``, ``PoseStamped``) carries the frame id the node is configured
-    with (``link1_frame`` of ``stiffness_node``, ``base_frame`` of ``spine_node``), given when
-    it is filled."""
+    message (``WrenchStamped``, ``PoseStamped``, ``PoseWithCovarianceStamped``) carries the
+    frame id the node is configured with (``link1_frame`` of ``stiffness_node``,
+    ``base_frame`` of ``spine_node``), given when it is filled."""
 
     msgtype: str
     dims: tuple[tuple[str, int, int], ...] = ()
@@ -130,10 +133,12 @@ class OutputLayout:
 
     @property
     def size(self) -> int:
-        """Values in the payload (6 for a wrench, 16 for a pose's (4, 4) transform)."""
+        """Values in the payload (6 for a wrench, 16 for a pose's (4, 4) transform, 16 + 36
+        with its (6, 6) covariance)."""
         if self.msgtype in (FLOAT64_MULTIARRAY, STAMPED_MATRIX):
             return self.dims[0][2]
-        return 6 if self.msgtype == WRENCH_STAMPED else 16
+        return {WRENCH_STAMPED: 6, POSE_STAMPED: 16, POSE_WITH_COVARIANCE_STAMPED: 16 + 36}[
+            self.msgtype]
 
     @property
     def stamped(self) -> bool:
@@ -159,23 +164,28 @@ class OutputRow:
     ``name`` (relative to the node), its ``layout`` (a function of the node's sizes: the
     joint's string names, the spine's joint count) and ``value``, the dotted attribute of the
     node's outputs object that holds its array (``'state.wrench'`` of
-    :class:`~tensegrity_stiffness.nodes.stiffness_node.JointOutputs`)."""
+    :class:`~tensegrity_stiffness.nodes.stiffness_node.JointOutputs`), or a tuple of them for a
+    message that carries several arrays (an estimated pose and its covariance: its value the
+    tuple of their arrays)."""
 
     name: str
     layout: Callable[[Any], OutputLayout | None]
-    value: str
+    value: str | tuple[str, ...]
     #: An output that only some nodes publish (a structure's contact forces: only with a
     #: ground): where it is absent, its layout is None and its value is None.
     optional: bool = False
     of: Callable[[Any], Any] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, 'of', attrgetter(self.value))
+        values = (self.value,) if isinstance(self.value, str) else self.value
+        object.__setattr__(self, 'of', attrgetter(*values))
 
     def within(self, attribute: str) -> OutputRow:
         """This row for outputs that hold this row's outputs as ``attribute`` (the structure
         estimator's ``structure``: its value ``'<attribute>.<value>'``)."""
-        return replace(self, value=f'{attribute}.{self.value}')
+        if isinstance(self.value, str):
+            return replace(self, value=f'{attribute}.{self.value}')
+        return replace(self, value=tuple(f'{attribute}.{value}' for value in self.value))
 
 
 def table_arrays(table: Sequence[OutputRow], outputs: Any) -> tuple[Any, ...]:
@@ -201,18 +211,31 @@ def _spine_stack(col_label: str) -> Callable[[int], OutputLayout]:
                                                 col_label))
 
 
-#: ``stiffness_node``'s per-input outputs (topic names relative to the node), in the order they
-#: are computed, filled and published: one row each (name, layout of the string names, value of
-#: :class:`~tensegrity_stiffness.nodes.stiffness_node.JointOutputs`). Adding or reordering an
-#: output is one row here; the node, the bag command and the message builders read it.
-JOINT_OUTPUT_TABLE: tuple[OutputRow, ...] = (
-    OutputRow('wrench', lambda names: OutputLayout(WRENCH_STAMPED), 'state.wrench'),
+#: K, K_c and the tensions of a joint's state (``state.*``), published by ``stiffness_node``
+#: and, on the same names so that one remap serves both, by ``estimator_node``.
+_JOINT_STATE_ROWS = (
     OutputRow('stiffness', _joint_matrix(STIFFNESS_COL_LABEL), 'state.stiffness'),
     OutputRow('cartesian_stiffness', _joint_matrix(CARTESIAN_STIFFNESS_COL_LABEL),
               'state.cartesian_stiffness'),
     OutputRow('string_tensions',
               lambda names: _array(vector_dims(len(names), tensions_label(names))),
               'state.tensions'),
+)
+
+
+def _tip_stiffness_base(n_joints: int) -> OutputLayout:
+    """The layout of a spine's tip stiffness in the base frame (``spine_node``'s and the
+    spine estimator's ``~/tip_stiffness_base``, and its std)."""
+    return _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['base']))
+
+
+#: ``stiffness_node``'s per-input outputs (topic names relative to the node), in the order they
+#: are computed, filled and published: one row each (name, layout of the string names, value of
+#: :class:`~tensegrity_stiffness.nodes.stiffness_node.JointOutputs`). Adding or reordering an
+#: output is one row here; the node, the bag command and the message builders read it.
+JOINT_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('wrench', lambda names: OutputLayout(WRENCH_STAMPED), 'state.wrench'),
+    *_JOINT_STATE_ROWS,
     OutputRow('stiffness_interpretation',
               lambda names: _array(vector_dims(INTERPRETATION_SIZE, INTERPRETATION_LABEL)),
               'interpretation'),
@@ -234,9 +257,7 @@ SPINE_OUTPUT_TABLE: tuple[OutputRow, ...] = (
     OutputRow('tip_wrench', lambda n: OutputLayout(WRENCH_STAMPED), 'tip_wrench'),
     OutputRow('tip_stiffness', lambda n: _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['tool'])),
               'tip_stiffness_tool'),
-    OutputRow('tip_stiffness_base',
-              lambda n: _array(matrix_dims(6, 6, *TIP_STIFFNESS_LABELS['base'])),
-              'tip_stiffness_base'),
+    OutputRow('tip_stiffness_base', _tip_stiffness_base, 'tip_stiffness_base'),
 )
 #: The names of :data:`SPINE_OUTPUT_TABLE`, in its order.
 SPINE_OUTPUTS = tuple(row.name for row in SPINE_OUTPUT_TABLE)
@@ -262,13 +283,50 @@ JOINT_STAMPED_OUTPUTS = {'stiffness_stamped': 'stiffness',
 SPINE_STAMPED_OUTPUTS = {'tip_stiffness_stamped': 'tip_stiffness',
                          'tip_stiffness_base_stamped': 'tip_stiffness_base'}
 
-#: ``estimator_node``'s per-estimate outputs, likewise (K, K_c and the tensions on the names of
-#: ``stiffness_node``'s, so that one remap serves both).
-ESTIMATOR_OUTPUTS = ('pose_estimate', 'wrench_estimate', 'screw_estimate', 'stiffness',
-                     'cartesian_stiffness', 'string_tensions', 'cartesian_stiffness_std')
-#: ``spine_estimator_node``'s, likewise (the tip stiffness on ``spine_node``'s name).
-SPINE_ESTIMATOR_OUTPUTS = ('screws_estimate', 'tip_pose_estimate', 'tip_wrench_estimate',
-                           'tip_stiffness_base', 'tip_stiffness_base_std')
+#: The output ``estimator_node`` computes only while someone subscribes to it (the std of
+#: K_c, labelled as K_c); ``spine_estimator_node``'s (the std of the tip stiffness).
+ESTIMATOR_STD_OUTPUT = 'cartesian_stiffness_std'
+SPINE_ESTIMATOR_STD_OUTPUT = 'tip_stiffness_base_std'
+#: ``estimator_node``'s per-estimate outputs, likewise (layouts of the string names, values of
+#: :class:`~tensegrity_stiffness.nodes.estimator_node.EstimatorOutputs`): the pose with its
+#: covariance, the load, the screw, then K, K_c and the tensions on the names of
+#: ``stiffness_node``'s (so that one remap serves both), the std of K_c.
+ESTIMATOR_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('pose_estimate', lambda names: OutputLayout(POSE_WITH_COVARIANCE_STAMPED),
+              ('estimate.transform', 'estimate.covariance')),
+    OutputRow('wrench_estimate', lambda names: OutputLayout(WRENCH_STAMPED),
+              'estimate.external_wrench'),
+    OutputRow('screw_estimate', lambda names: _array(vector_dims(6, SCREW_LABEL)),
+              'estimate.screw'),
+    *_JOINT_STATE_ROWS,
+    OutputRow(ESTIMATOR_STD_OUTPUT, _joint_matrix(CARTESIAN_STIFFNESS_COL_LABEL),
+              'estimate.cartesian_stiffness_std'),
+)
+#: The names of :data:`ESTIMATOR_OUTPUT_TABLE`, in its order.
+ESTIMATOR_OUTPUTS = tuple(row.name for row in ESTIMATOR_OUTPUT_TABLE)
+#: ``spine_estimator_node``'s, likewise (layouts of the joint count N, values of
+#: :class:`~tensegrity_stiffness.nodes.spine_estimator_node.SpineEstimatorOutputs`): the
+#: screws (joint-major), the tip pose (the tool frame in the base) with its covariance, the
+#: tip load (base, about its origin), the tip stiffness in the base (on ``spine_node``'s name)
+#: and its std (labelled as it).
+SPINE_ESTIMATOR_OUTPUT_TABLE: tuple[OutputRow, ...] = (
+    OutputRow('screws_estimate', lambda n: _array(matrix_dims(n, 6, JOINTS_LABEL, SCREW_LABEL)),
+              'estimate.screws'),
+    OutputRow('tip_pose_estimate', lambda n: OutputLayout(POSE_WITH_COVARIANCE_STAMPED),
+              ('estimate.tip_transform', 'estimate.tip_pose_covariance')),
+    OutputRow('tip_wrench_estimate', lambda n: OutputLayout(WRENCH_STAMPED),
+              'estimate.tip_wrench'),
+    OutputRow('tip_stiffness_base', _tip_stiffness_base, 'estimate.tip_stiffness'),
+    OutputRow(SPINE_ESTIMATOR_STD_OUTPUT, _tip_stiffness_base, 'estimate.tip_stiffness_std'),
+)
+#: The names of :data:`SPINE_ESTIMATOR_OUTPUT_TABLE`, in its order.
+SPINE_ESTIMATOR_OUTPUTS = tuple(row.name for row in SPINE_ESTIMATOR_OUTPUT_TABLE)
+#: The stamped matrices published after the estimators' outputs: ``stiffness_node``'s (K and
+#: K_c) and those of ``spine_node``'s that the spine estimator publishes (the tip stiffness in
+#: the base frame), stamped with the estimate's stamp and frame.
+ESTIMATOR_STAMPED_OUTPUTS = JOINT_STAMPED_OUTPUTS
+SPINE_ESTIMATOR_STAMPED_OUTPUTS = {name: of for name, of in SPINE_STAMPED_OUTPUTS.items()
+                                   if of in SPINE_ESTIMATOR_OUTPUTS}
 
 
 def joint_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
@@ -296,3 +354,17 @@ def spine_array_layouts(n_joints: int) -> dict[str, OutputLayout]:
 def controller_output_layouts(n_strings: int) -> dict[str, OutputLayout]:
     """``stiffness_controller``'s outputs by topic, in :data:`CONTROLLER_OUTPUT_TABLE` order."""
     return table_layouts(CONTROLLER_OUTPUT_TABLE, n_strings)
+
+
+def estimator_output_layouts(string_names: Sequence[str]) -> dict[str, OutputLayout]:
+    """``estimator_node``'s per-estimate outputs by topic, in :data:`ESTIMATOR_OUTPUTS` order,
+    then :data:`ESTIMATOR_STAMPED_OUTPUTS`."""
+    return with_stamped_matrices(table_layouts(ESTIMATOR_OUTPUT_TABLE, string_names),
+                                 ESTIMATOR_STAMPED_OUTPUTS)
+
+
+def spine_estimator_output_layouts(n_joints: int) -> dict[str, OutputLayout]:
+    """``spine_estimator_node``'s per-estimate outputs by topic, in
+    :data:`SPINE_ESTIMATOR_OUTPUTS` order, then :data:`SPINE_ESTIMATOR_STAMPED_OUTPUTS`."""
+    return with_stamped_matrices(table_layouts(SPINE_ESTIMATOR_OUTPUT_TABLE, n_joints),
+                                 SPINE_ESTIMATOR_STAMPED_OUTPUTS)

@@ -9,11 +9,13 @@ float64 payload).
 
 Inputs: :func:`multiarray_to_array` (the validated payload of a ``Float64MultiArray``) and
 :func:`pose_message_to_transform` (a ``Pose``). Outputs: :class:`OutputMessages`, preallocated
-messages
-of :class:`~tensegrity_stiffness.nodes.layouts.OutputLayout` s refilled per input, and the two
-nodes'
-per-input outputs :class:`JointOutputMessages` and :class:`SpineOutputMessages` (one finite
-check of every output, then each message gets its array without a second check).
+messages of :class:`~tensegrity_stiffness.nodes.layouts.OutputLayout` s refilled per input
+(one writer per message type, :func:`output_writer`); the per-input outputs of
+``stiffness_node`` and ``spine_node``, :class:`JointOutputMessages` and
+:class:`SpineOutputMessages` (one finite check of every output, then each message gets its
+array without a second check), and the per-estimate outputs of the estimators,
+:class:`EstimatorOutputMessages` and :class:`SpineEstimatorOutputMessages` (checked by their
+processing), each filled from its node's output table.
 """
 
 from __future__ import annotations
@@ -35,24 +37,32 @@ from tensegrity_stiffness.geometry.quaternion import (
     ROTATION_TOLERANCE,
     quaternion_to_rotation,
     rotation_to_quaternion,
+    rotation_to_quaternion_unchecked,
 )
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape, require_all_finite
 from tensegrity_stiffness.nodes.layouts import (
+    ESTIMATOR_OUTPUT_TABLE,
     FLOAT64_MULTIARRAY,
     JOINT_OUTPUT_TABLE,
     JOINT_OUTPUTS,
     POSE_STAMPED,
+    POSE_WITH_COVARIANCE_STAMPED,
+    SPINE_ESTIMATOR_OUTPUT_TABLE,
     SPINE_OUTPUT_TABLE,
     SPINE_OUTPUTS,
     STAMPED_MATRIX,
     WRENCH_STAMPED,
     OutputLayout,
+    estimator_output_layouts,
     joint_output_layouts,
+    spine_estimator_output_layouts,
     spine_output_layouts,
     table_arrays,
 )
 
 if TYPE_CHECKING:  # the outputs' types (the node modules are not loaded for them)
+    from tensegrity_stiffness.nodes.estimator_node import EstimatorOutputs
+    from tensegrity_stiffness.nodes.spine_estimator_node import SpineEstimatorOutputs
     from tensegrity_stiffness.nodes.spine_node import SpineOutputs
     from tensegrity_stiffness.nodes.stiffness_node import JointOutputs
 
@@ -213,7 +223,8 @@ MESSAGE_CLASS_NAMES = (
     'builtin_interfaces/msg/Time', 'std_msgs/msg/Header', 'std_msgs/msg/MultiArrayDimension',
     'std_msgs/msg/MultiArrayLayout', FLOAT64_MULTIARRAY, 'geometry_msgs/msg/Vector3',
     'geometry_msgs/msg/Wrench', WRENCH_STAMPED, 'geometry_msgs/msg/Point',
-    'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Pose', POSE_STAMPED, STAMPED_MATRIX)
+    'geometry_msgs/msg/Quaternion', 'geometry_msgs/msg/Pose', POSE_STAMPED, STAMPED_MATRIX,
+    'geometry_msgs/msg/PoseWithCovariance', POSE_WITH_COVARIANCE_STAMPED)
 
 
 def multiarray(dims: Sequence[tuple[str, int, int]], values: FloatArray,
@@ -232,8 +243,8 @@ def multiarray(dims: Sequence[tuple[str, int, int]], values: FloatArray,
 
 def new_message(layout: OutputLayout, types: MessageTypes) -> Any:
     """A message of ``layout`` with every field set: a ``Float64MultiArray`` with the layout's
-    dimensions and a zero payload, or a stamped wrench / pose of zeros (identity orientation)
-    with a zero stamp and an empty frame id."""
+    dimensions and a zero payload, or a stamped wrench / pose (with covariance) of zeros
+    (identity orientation) with a zero stamp and an empty frame id."""
     c = types.classes
     if layout.msgtype == FLOAT64_MULTIARRAY:
         return multiarray(layout.dims, np.zeros(layout.size), types)
@@ -246,10 +257,15 @@ def new_message(layout: OutputLayout, types: MessageTypes) -> Any:
         vector3 = c['geometry_msgs/msg/Vector3']
         return c[WRENCH_STAMPED](header=header, wrench=c['geometry_msgs/msg/Wrench'](
             force=vector3(x=0.0, y=0.0, z=0.0), torque=vector3(x=0.0, y=0.0, z=0.0)))
+    pose = c['geometry_msgs/msg/Pose'](
+        position=c['geometry_msgs/msg/Point'](x=0.0, y=0.0, z=0.0),
+        orientation=c['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0))
     if layout.msgtype == POSE_STAMPED:
-        return c[POSE_STAMPED](header=header, pose=c['geometry_msgs/msg/Pose'](
-            position=c['geometry_msgs/msg/Point'](x=0.0, y=0.0, z=0.0),
-            orientation=c['geometry_msgs/msg/Quaternion'](x=0.0, y=0.0, z=0.0, w=1.0)))
+        return c[POSE_STAMPED](header=header, pose=pose)
+    if layout.msgtype == POSE_WITH_COVARIANCE_STAMPED:
+        # a float64[36] field: a numpy array, as both implementations hold it
+        return c[POSE_WITH_COVARIANCE_STAMPED](header=header, pose=c[
+            'geometry_msgs/msg/PoseWithCovariance'](pose=pose, covariance=np.zeros(36)))
     raise ValueError(f'no output message of type {layout.msgtype}')
 
 
@@ -272,6 +288,23 @@ def write_pose_stamped(msg: Any, values: FloatArray, stamp: Any, frame_id: str) 
     msg.header.frame_id = frame_id
 
 
+def write_pose_with_covariance_stamped(msg: Any, values: tuple[FloatArray, FloatArray],
+                                       stamp: Any, frame_id: str) -> None:
+    """A PoseWithCovarianceStamped's header, pose of a (4, 4) transform and (6, 6) covariance
+    (row-major), ``values = (transform, covariance)``. The transform is an estimate's (a
+    rotation by construction, checked finite): its rotation is not checked again."""
+    transform, covariance = values
+    msg.header.stamp = stamp
+    msg.header.frame_id = frame_id
+    pose = msg.pose.pose
+    pose.position.x, pose.position.y, pose.position.z = transform[:3, 3].tolist()
+    o = pose.orientation
+    o.x, o.y, o.z, o.w = rotation_to_quaternion_unchecked(transform[:3, :3]).tolist()
+    # A float64[36] field takes a numpy array of 36 as it is (rclpy checks any other sequence
+    # value by value): a copy, as the message keeps it.
+    msg.pose.covariance = np.array(covariance, dtype=np.float64).reshape(36)
+
+
 def stamped_matrix_writer(types: MessageTypes) -> Writer:
     """The :data:`Writer` of a ``StampedMatrix``: its header and data (labels and counts,
     set once, stay)."""
@@ -292,6 +325,8 @@ def output_writer(layout: OutputLayout, types: MessageTypes) -> Writer:
         return write_wrench_stamped
     if layout.msgtype == POSE_STAMPED:
         return write_pose_stamped
+    if layout.msgtype == POSE_WITH_COVARIANCE_STAMPED:
+        return write_pose_with_covariance_stamped
     if layout.msgtype == STAMPED_MATRIX:
         return stamped_matrix_writer(types)
     return payload_writer(types)
@@ -393,3 +428,39 @@ class SpineOutputMessages(OutputMessages):
         require_all_finite(SPINE_OUTPUTS, arrays)
         self.fill_arrays(arrays, stamp, base_frame, wanted)
         self.tip_stiffness_stamped.header.frame_id = self.tool_frame
+
+
+class EstimatorOutputMessages(OutputMessages):
+    """``estimator_node``'s nine per-estimate output messages (seven of
+    :data:`~tensegrity_stiffness.nodes.layouts.ESTIMATOR_OUTPUT_TABLE`, two stamped matrices)
+    (:func:`~tensegrity_stiffness.nodes.layouts.estimator_output_layouts`), refilled by
+    :meth:`fill`."""
+
+    def __init__(self, string_names: Sequence[str], types: MessageTypes) -> None:
+        self.string_names = tuple(string_names)
+        super().__init__(estimator_output_layouts(self.string_names), types)
+
+    def fill(self, outputs: EstimatorOutputs, stamp: Any, frame_id: str,
+             wanted: Sequence[bool] | None = None) -> None:
+        """Set the messages flagged in ``wanted`` (default all, :meth:`messages` order) from
+        ``outputs``, whose arrays the processing checked finite (the std of K_c only when it
+        was computed: else it is NaN and not wanted)."""
+        self.fill_arrays(table_arrays(ESTIMATOR_OUTPUT_TABLE, outputs), stamp, frame_id, wanted)
+
+
+class SpineEstimatorOutputMessages(OutputMessages):
+    """``spine_estimator_node``'s six per-estimate output messages (five of
+    :data:`~tensegrity_stiffness.nodes.layouts.SPINE_ESTIMATOR_OUTPUT_TABLE`, the stamped tip
+    stiffness) of a spine of ``n_joints``
+    (:func:`~tensegrity_stiffness.nodes.layouts.spine_estimator_output_layouts`), refilled by
+    :meth:`fill`."""
+
+    def __init__(self, n_joints: int, types: MessageTypes) -> None:
+        self.n_joints = n_joints
+        super().__init__(spine_estimator_output_layouts(n_joints), types)
+
+    def fill(self, outputs: SpineEstimatorOutputs, stamp: Any, frame_id: str,
+             wanted: Sequence[bool] | None = None) -> None:
+        """As :meth:`EstimatorOutputMessages.fill` (the std of the tip stiffness likewise)."""
+        self.fill_arrays(table_arrays(SPINE_ESTIMATOR_OUTPUT_TABLE, outputs), stamp, frame_id,
+                         wanted)

@@ -51,10 +51,12 @@ from tensegrity_stiffness.nodes.estimator_node import (
     measured_array,
     new_joint_filter,
 )
+from tensegrity_stiffness.nodes.layouts import ESTIMATOR_STD_OUTPUT, estimator_output_layouts
 from tensegrity_stiffness.nodes.messages import stamp_is_set
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
+from tensegrity_stiffness.ros.conversions.outputs import output_topics
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream, StreamingNode
 from tensegrity_stiffness.ros.runtime.reporting import guarded
@@ -67,11 +69,12 @@ NODE_NAME = 'estimator_node'
 class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     """Publishes the pose (with covariance), load, screw, K, K_c, the tensions, the std of K_c
     and K and K_c stamped (``msg/StampedMatrix``) of every estimate
-    (:func:`.conversions.estimation.estimator_output_table`); markers and diagnostics."""
+    (:data:`~tensegrity_stiffness.nodes.layouts.ESTIMATOR_OUTPUT_TABLE`); markers and
+    diagnostics."""
 
-    OUTPUT_TOPICS = estimation_msgs.table_topics(estimation_msgs.estimator_output_table(()))
+    OUTPUT_TOPICS = output_topics(estimator_output_layouts(()))
     #: The output computed only while someone subscribes to it (most of an estimate's time).
-    STIFFNESS_STD_OUTPUT = f'~/{estimation_msgs.CARTESIAN_STIFFNESS_STD}'
+    STIFFNESS_STD_OUTPUT = f'~/{ESTIMATOR_STD_OUTPUT}'
     SERVES_SOLVES = False  # no services: no worker process
     #: Sensor readings: only the newest of each input's queue is taken (the others are counted
     #: on /diagnostics), so that an estimate that takes longer than a reading's period passes

@@ -24,6 +24,10 @@ from visualization_msgs.msg import MarkerArray
 
 from tensegrity_stiffness.mechanics.chain import solve_chain_equilibrium
 from tensegrity_stiffness.nodes.estimator_node import EstimatorInput, EstimatorNodeSettings
+from tensegrity_stiffness.nodes.layouts import (
+    SPINE_ESTIMATOR_STD_OUTPUT,
+    spine_estimator_output_layouts,
+)
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.spine_estimator_node import (
     SpineEstimatorNodeSettings,
@@ -36,6 +40,7 @@ from tensegrity_stiffness.nodes.spine_estimator_node import (
 )
 from tensegrity_stiffness.ros import conversions
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
+from tensegrity_stiffness.ros.conversions.outputs import output_topics
 from tensegrity_stiffness.ros.estimator_node import EstimatorNode
 from tensegrity_stiffness.ros.runtime import runner
 from tensegrity_stiffness.ros.runtime.node_base import Stream
@@ -49,12 +54,11 @@ NODE_NAME = 'spine_estimator_node'
 class SpineEstimatorNode(SpineFrames, SpineRestLengthTopic, EstimatorNode):
     """Publishes the screws, the tip pose (with covariance), the tip load, the tip stiffness
     with its std and the tip stiffness stamped (``msg/StampedMatrix``) per estimate
-    (:func:`.conversions.estimation.spine_estimator_output_table`); markers and
+    (:data:`~tensegrity_stiffness.nodes.layouts.SPINE_ESTIMATOR_OUTPUT_TABLE`); markers and
     diagnostics."""
 
-    OUTPUT_TOPICS = estimation_msgs.table_topics(
-        estimation_msgs.spine_estimator_output_table(1))
-    STIFFNESS_STD_OUTPUT = f'~/{estimation_msgs.TIP_STIFFNESS_BASE_STD}'
+    OUTPUT_TOPICS = output_topics(spine_estimator_output_layouts(1))
+    STIFFNESS_STD_OUTPUT = f'~/{SPINE_ESTIMATOR_STD_OUTPUT}'
     INPUT_FRAME_NAME = 'the base frame'
     _build_settings = staticmethod(spine_estimator_node_settings)
     _output_frame = attrgetter('base_frame')

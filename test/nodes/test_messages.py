@@ -93,6 +93,40 @@ def test_spine_messages_of_rclpy_and_rosbags_are_the_same() -> None:
                                atol=1e-12)
 
 
+def test_estimator_messages_of_rclpy_and_rosbags_are_the_same() -> None:
+    """estimator_node's messages (the pose with its covariance among them) through the shared
+    output code: the same bytes with both implementations, the pose's covariance row-major;
+    an output not wanted is left as it was."""
+    from support.estimation_trials import truth_from_model
+
+    from tensegrity_stiffness.nodes import estimator_node as en
+    from tensegrity_stiffness.nodes.parameter_specs import defaults
+    from tensegrity_stiffness.ros.conversions import estimation
+
+    settings = en.estimator_node_settings(defaults(en.ESTIMATOR_NODE_PARAMETERS))
+    model = settings.model
+    truth = truth_from_model(model, model.initial_screw)
+    outputs = en.estimator_outputs(settings, en.EstimatorInput(
+        {'measured_tensions': en.Reading(truth.tensions, 1.0),
+         'imu': en.Reading(truth.gravity, 1.0)}, 1.0, truth.screw))
+    node = estimation.EstimatorOutputMessages(tuple(model.string_names))
+    offline = messages.EstimatorOutputMessages(model.string_names, rosbags_types())
+    wanted = [True] * len(node.messages())
+    wanted[list(node.layouts).index(layouts.ESTIMATOR_STD_OUTPUT)] = False
+    node.fill(outputs, conversions.stamp_from_nanoseconds(STAMP_NS), 'link_a', wanted)
+    offline.fill(outputs, offline.types.time(STAMP_NS), 'link_a', wanted)
+    for (name, layout), mine, theirs in zip(node.layouts.items(), offline.messages(),
+                                            node.messages(), strict=True):
+        assert same_bytes(theirs, mine, layout.msgtype), name
+    pose = node.messages()[0]
+    assert pose.header.frame_id == 'link_a'
+    np.testing.assert_array_equal(np.reshape(pose.pose.covariance, (6, 6)),
+                                  outputs.estimate.covariance)
+    np.testing.assert_allclose(messages.pose_message_to_transform(pose.pose.pose),
+                               outputs.estimate.transform, atol=1e-12)
+    assert not np.any(node.messages()[list(node.layouts).index('cartesian_stiffness_std')].data)
+
+
 def test_pose_writer_refuses_a_non_rotation_and_writes_nothing() -> None:
     msg = messages.new_message(layouts.OutputLayout(layouts.POSE_STAMPED), rosbags_types())
     T = np.eye(4)

@@ -1,24 +1,31 @@
 """The output tables of the streaming nodes (``nodes/layouts.OutputRow``: one row of name, layout
-and value per output): the names are the rows' in order, each value's array fills its layout, and
-the node modules' ``output_arrays`` are the tables' values. No ROS."""
+and value per output), the estimators' included: the names are the rows' in order, each value's
+arrays fill its layout (an estimated pose: its transform and covariance), and the node modules'
+``output_arrays`` are the tables' values. No ROS."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import replace
+from typing import Any
 
 import numpy as np
 import pytest
 from support import JOINT_CONFIG, SPINE_CONFIG
+from support.estimation_trials import truth_from_model
 
 from tensegrity_stiffness.mechanics.chain import JointChain
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.nodes import (
+    estimator_node,
     layouts,
+    spine_estimator_node,
     spine_node,
     stiffness_node,
     structure_estimator_node,
     structure_node,
 )
+from tensegrity_stiffness.nodes.estimator_node import EstimatorInput, Reading
 from tensegrity_stiffness.nodes.parameter_specs import defaults
 from tensegrity_stiffness.structures.structure import Structure
 from tensegrity_stiffness.structures.templates import six_bar_document
@@ -28,9 +35,16 @@ def check_table(rows, names, layouts_by_name, arrays, expected) -> None:
     """The table's names are ``names`` in row order, its arrays the ``expected`` objects, each
     filling its layout."""
     assert names == tuple(row.name for row in rows) == tuple(layouts_by_name)
-    assert all(a is b for a, b in zip(arrays, expected, strict=True))
+    assert all(a is b for a, b in zip(flattened(arrays), flattened(expected), strict=True))
     for (name, layout), values in zip(layouts_by_name.items(), arrays, strict=True):
-        assert np.asarray(values).size == layout.size, name
+        parts = values if isinstance(values, tuple) else (values,)
+        assert sum(np.asarray(part).size for part in parts) == layout.size, name
+
+
+def flattened(arrays: Sequence[Any]) -> tuple[Any, ...]:
+    """A table's arrays with a pose's (transform, covariance) as two."""
+    return tuple(a for values in arrays
+                 for a in (values if isinstance(values, tuple) else (values,)))
 
 
 def test_the_joints_table_names_its_outputs_and_fills_their_layouts() -> None:
@@ -111,3 +125,56 @@ def test_the_structures_tables_name_their_outputs_and_fill_their_layouts(ground:
                 structure_estimator_node.estimator_array_layouts(structure),
                 structure_estimator_node.estimator_output_arrays(estimate)[1:],
                 (estimate.covariance, *expected))
+
+
+def test_the_estimators_table_names_its_outputs_and_fills_their_layouts() -> None:
+    """estimator_node's table: the pose and its covariance in one row, K, K_c and the tensions
+    on stiffness_node's names and rows; its processing checks the same arrays; the stamped K
+    and K_c follow, as stiffness_node's."""
+    settings = estimator_node.estimator_node_settings(
+        defaults(estimator_node.ESTIMATOR_NODE_PARAMETERS))
+    model = settings.model
+    truth = truth_from_model(model, model.initial_screw)
+    outputs = estimator_node.estimator_outputs(settings, EstimatorInput(
+        {'measured_tensions': Reading(truth.tensions, 1.0), 'imu': Reading(truth.gravity, 1.0)},
+        1.0, truth.screw))
+    est = outputs.estimate
+    table = layouts.ESTIMATOR_OUTPUT_TABLE
+    arrays = layouts.table_arrays(table, outputs)
+    check_table(table, layouts.ESTIMATOR_OUTPUTS,
+                layouts.table_layouts(table, model.string_names), arrays,
+                ((est.transform, est.covariance), est.external_wrench, est.screw,
+                 est.state.stiffness, est.state.cartesian_stiffness, est.state.tensions,
+                 est.cartesian_stiffness_std))
+    assert [row for row in table if row.name in layouts.JOINT_OUTPUTS] == [
+        row for row in layouts.JOINT_OUTPUT_TABLE if row.name in layouts.ESTIMATOR_OUTPUTS]
+    assert layouts.ESTIMATOR_STD_OUTPUT in layouts.ESTIMATOR_OUTPUTS
+    assert all(a is b for a, b in zip(estimator_node.output_arrays(outputs), flattened(arrays),
+                                      strict=True))
+    assert tuple(layouts.estimator_output_layouts(model.string_names)) == (
+        *layouts.ESTIMATOR_OUTPUTS, *layouts.JOINT_STAMPED_OUTPUTS)
+
+
+def test_the_spine_estimators_table_names_its_outputs_and_fills_their_layouts() -> None:
+    """spine_estimator_node's table (the tip stiffness on spine_node's name and layout), its
+    processing's arrays, then the stamped tip stiffness in the base frame."""
+    values = defaults(spine_estimator_node.spine_estimator_node_parameters(3))
+    values['chain.n_joints'] = 3
+    settings = spine_estimator_node.spine_estimator_node_settings(values)
+    screws = settings.chain.unloaded_screws()
+    tensions = np.concatenate(list(settings.chain.evaluate(screws).tensions))
+    outputs = spine_estimator_node.spine_estimator_outputs(settings, EstimatorInput(
+        {'measured_tensions': Reading(tensions, 1.0)}, 1.0, (screws, np.zeros(6))))
+    est = outputs.estimate
+    table = layouts.SPINE_ESTIMATOR_OUTPUT_TABLE
+    arrays = layouts.table_arrays(table, outputs)
+    found = layouts.table_layouts(table, 3)
+    check_table(table, layouts.SPINE_ESTIMATOR_OUTPUTS, found, arrays,
+                (est.screws, (est.tip_transform, est.tip_pose_covariance), est.tip_wrench,
+                 est.tip_stiffness, est.tip_stiffness_std))
+    assert found['tip_stiffness_base'] == layouts.spine_output_layouts(3)['tip_stiffness_base']
+    assert layouts.SPINE_ESTIMATOR_STD_OUTPUT in layouts.SPINE_ESTIMATOR_OUTPUTS
+    assert all(a is b for a, b in zip(spine_estimator_node.spine_output_arrays(outputs),
+                                      flattened(arrays), strict=True))
+    assert tuple(layouts.spine_estimator_output_layouts(3)) == (
+        *layouts.SPINE_ESTIMATOR_OUTPUTS, 'tip_stiffness_base_stamped')

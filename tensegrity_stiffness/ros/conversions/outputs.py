@@ -11,7 +11,17 @@ from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point, Pose, PoseStamped, Quaternion, Vector3, Wrench, WrenchStamped
+from geometry_msgs.msg import (
+    Point,
+    Pose,
+    PoseStamped,
+    PoseWithCovariance,
+    PoseWithCovarianceStamped,
+    Quaternion,
+    Vector3,
+    Wrench,
+    WrenchStamped,
+)
 from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension, MultiArrayLayout
 
@@ -41,7 +51,8 @@ def payload(arr: NDArray[np.float64]) -> array.array:
 RCLPY_TYPES = MessageTypes(
     classes=dict(zip(MESSAGE_CLASS_NAMES, (
         Time, Header, MultiArrayDimension, MultiArrayLayout, Float64MultiArray, Vector3, Wrench,
-        WrenchStamped, Point, Quaternion, Pose, PoseStamped, StampedMatrix), strict=True)),
+        WrenchStamped, Point, Quaternion, Pose, PoseStamped, StampedMatrix, PoseWithCovariance,
+        PoseWithCovarianceStamped), strict=True)),
     payload=payload)
 
 #: Writes an array into a ``Float64MultiArray`` of rclpy (:func:`fill_outputs`' writer form).
