@@ -82,6 +82,45 @@ def test_more_strings_than_a_joint_may_have_are_refused(ring_document, tmp_path)
 
 
 # ------------------------------------------------------------------------------ names and keys
+def test_a_config_of_20000_strings_of_unknown_nodes_is_refused_in_a_short_line(
+        ring_document, tmp_path, capsys):
+    """A file near the size limit with 20,000 strings between nodes that do not exist: the
+    count is judged before any name is looked up, and the line stays short (it listed every
+    unknown name: 660 KB for 1e5 strings)."""
+    document = yaml.safe_load(yaml.safe_dump(ring_document))
+    joint = joint_of(document)
+    n = 20_000
+    joint.update(string_link1_nodes=[f'no_node_{i:05d}' for i in range(n)],
+                 string_link2_nodes=[f'nor_this_{i:05d}' for i in range(n)])
+    path = write(tmp_path, document)
+    assert 0.5 * config.MAX_CONFIG_BYTES < path.stat().st_size <= config.MAX_CONFIG_BYTES
+    line = refused(capsys, 'check-config', path)
+    assert f'{n} strings, more than the {MAX_STRINGS}' in line
+    assert len(line) < 300, len(line)
+
+
+def test_many_unknown_or_repeated_names_are_named_first_few_and_counted(ring_document,
+                                                                        tmp_path, capsys):
+    document = yaml.safe_load(yaml.safe_dump(ring_document))
+    joint = joint_of(document)
+    n = MAX_STRINGS
+    joint.update(string_link1_nodes=[f'no_such_node_{i:06d}' for i in range(n)],
+                 string_link2_nodes=[joint['string_link2_nodes'][0]] * n,
+                 string_names=[], stiffness=[77.0], rest_lengths=[0.02], max_lengths=[],
+                 initial_screw=[])
+    line = refused(capsys, 'check-config', write(tmp_path, document))
+    assert "unknown nodes ['no_such_node_000000', " in line
+    assert f'and {n - 5} more ({n} in all)' in line and len(line) < 400, line
+    path = tmp_path / 'ring40.yaml'
+    assert main(['new-config', '--template', 'ring', '--strings', '40', '--out', str(path)]) == 0
+    capsys.readouterr()
+    document = config.load_yaml(path)
+    joint_of(document)['string_names'] = [f'pair_{i // 2}' for i in range(40)]
+    line = refused(capsys, 'check-config', write(tmp_path, document))
+    assert "got ['pair_0', 'pair_1', 'pair_10', " in line and '(20 in all)' in line, line
+    assert len(line) < 400, line
+
+
 def test_duplicate_string_names_are_named(ring_document, tmp_path, capsys):
     document = yaml.safe_load(yaml.safe_dump(ring_document))
     names = joint_of(document)['string_names']
