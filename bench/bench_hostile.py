@@ -3,11 +3,15 @@
 ``python3 bench/bench_hostile.py [--n N] [--seed S]``.
 
 Seeded; no node. For the controller: N random targets (half absurd: huge, indefinite,
-antisymmetric, zero, poses far away or turned by 180 deg), each refused by the door's checks or
-ticked; the refusals counted by reason and the worst tick time of the accepted ones against the
-median of the plain ticks (a ratio: accepted input must not cost more per tick). For the
-checks themselves, their cost per message side by side with the work they guard (ratios,
-alternating repeats). For the estimator's door: N readings, half bad, each judged alone.
+antisymmetric, zero stiffnesses with pose estimates far away or turned by 180 deg about a random
+axis), each refused by the door's checks or ticked; the refusals counted by reason and the worst
+tick time of the accepted ones against the median of the plain ticks (a ratio: accepted input
+must not cost more per tick). For the checks themselves, their cost per message side by side
+with the work they guard (ratios, alternating repeats). For the estimator's door (ROS-free, the
+nodes' ``check_reading`` / ``check_spine_reading``): N readings of a joint and of a 3-joint
+spine, half bad (a negative length, an asymmetric pose covariance, a pose 1 m .. 1e308 m away,
+a load of 1e9 N), each judged alone on arrival; the refusals counted by reason, the check's
+cost per reading against one static estimate on the readings kept.
 """
 
 from __future__ import annotations
@@ -27,12 +31,26 @@ from tensegrity_stiffness.control.controller import (  # noqa: E402
     ControlTarget,
     StiffnessController,
 )
-from tensegrity_stiffness.geometry.screw import exp_se3  # noqa: E402
+from tensegrity_stiffness.geometry.screw import exp_se3, exp_so3  # noqa: E402
 from tensegrity_stiffness.mechanics.plausibility import (  # noqa: E402
     check_screw,
     check_target_stiffness,
     check_translation,
     joint_size,
+)
+from tensegrity_stiffness.nodes.estimator_node import (  # noqa: E402
+    ESTIMATOR_NODE_PARAMETERS,
+    EstimatorInput,
+    Reading,
+    check_reading,
+    estimator_node_settings,
+    estimator_outputs,
+)
+from tensegrity_stiffness.nodes.parameter_specs import defaults  # noqa: E402
+from tensegrity_stiffness.nodes.spine_estimator_node import (  # noqa: E402
+    check_spine_reading,
+    spine_estimator_node_parameters,
+    spine_estimator_node_settings,
 )
 from tensegrity_stiffness.nodes.stiffness_controller import (  # noqa: E402
     CONTROLLER_PARAMETERS,
@@ -50,7 +68,8 @@ def hostile_stiffness(rng: np.random.Generator, reachable: np.ndarray) -> np.nda
 
 
 REASONS = ('layout', 'zero', 'antisymmetric', 'not positive semidefinite', 'too large',
-           'largest eigenvalue', 'from link 1')
+           'largest eigenvalue', 'from link 1', 'from the base', 'symmetric', 'force',
+           'must be > 0', 'positive')
 
 
 def reason_of(message: str) -> str:
@@ -72,9 +91,12 @@ def controller_run(n: int, rng: np.random.Generator) -> None:
         pose = T0
         if i % 2:
             K = hostile_stiffness(rng, reachable)
-            far = T0.copy()
-            far[:3, 3] += rng.normal(size=3) * 10.0 ** rng.uniform(-5, 3)
-            pose = far
+            pose = T0.copy()
+            if i % 4 == 1:  # far away
+                pose[:3, 3] += rng.normal(size=3) * 10.0 ** rng.uniform(-5, 3)
+            else:  # turned by 180 deg about a random axis
+                axis = rng.normal(size=3)
+                pose[:3, :3] = exp_so3(np.pi * axis / np.linalg.norm(axis)) @ pose[:3, :3]
         try:
             if K is not None:
                 check_target_stiffness(model, K, length_scale=ctl.length_scale)
@@ -128,6 +150,87 @@ def check_costs(n: int, rng: np.random.Generator) -> None:
           f'{100 * best["check_screw"] / best["joint_outputs"]:.1f} % of the work it guards')
 
 
+def hostile_reading(rng: np.random.Generator, i: int, name: str, good: dict, far: float
+                    ) -> object:
+    """``good[name]``, or for odd ``i`` a bad one: a negative length, an asymmetric pose
+    covariance or a pose ``far`` .. 1e308 m away, a load of 1e9 N."""
+    if i % 2 == 0:
+        return good[name]
+    if name == 'measured_lengths':
+        bad = np.full(good['measured_tensions'].size, np.nan)
+        bad[rng.integers(bad.size)] = -0.01
+        return bad
+    if name == 'measured_pose':
+        T = good['measured_pose'][0].copy()
+        if rng.integers(2):
+            cov = np.diag([1e-6] * 6)
+            cov[0, 1] = 5e-7
+            return T, cov
+        T[:3, 3] += rng.normal(size=3) * 10.0 ** rng.uniform(np.log10(far), 308)
+        return T, None
+    if name == 'measured_wrench':
+        return np.array([1e9, 0.0, 0.0, 0.0, 0.0, 0.0])
+    return good[name]
+
+
+def judged(check, settings, n: int, rng: np.random.Generator, good: dict, far: float
+           ) -> tuple[Counter[str], float]:
+    """Judge ``n`` readings (half bad) with ``check``: (refusals by reason, best time per
+    reading of 3 repeats, s)."""
+    names = ('measured_lengths', 'measured_pose', 'measured_wrench')
+    readings = [(names[i % 3], hostile_reading(rng, i, names[i % 3], good, far))
+                for i in range(n)]
+    refusals: Counter[str] = Counter()
+    best = np.inf
+    for repeat in range(3):
+        start = time.perf_counter()
+        for name, value in readings:
+            try:
+                check(settings, name, value)
+            except ValueError as exc:
+                if repeat == 0:
+                    text = str(exc).split(': ', 1)[1].split(' (this reading dropped')[0]
+                    refusals[reason_of(text)] += 1
+        best = min(best, (time.perf_counter() - start) / n)
+    return refusals, best
+
+
+def estimator_run(n: int, rng: np.random.Generator) -> None:
+    settings = estimator_node_settings({**defaults(ESTIMATOR_NODE_PARAMETERS),
+                                        'estimation.method': 'static'})
+    model = settings.model
+    state = joint_outputs(model, model.initial_screw).state
+    good = {'measured_tensions': state.tensions, 'measured_lengths': state.lengths,
+            'measured_pose': (exp_se3(model.initial_screw), None),
+            'measured_wrench': np.zeros(6)}
+    values = defaults(spine_estimator_node_parameters(3))
+    values.update({'chain.n_joints': 3, 'estimation.method': 'static'})
+    spine = spine_estimator_node_settings(values)
+    screws = spine.chain.unloaded_screws()
+    chain_state = spine.chain.evaluate(screws)
+    spine_good = {'measured_tensions': np.concatenate(list(chain_state.tensions)),
+                  'measured_pose': (spine.chain.tip_transform(screws), None),
+                  'measured_wrench': np.zeros(6)}
+    spine_good['measured_lengths'] = np.concatenate(list(chain_state.lengths))
+    for what, check, node_settings, readings in (
+            ('joint', check_reading, settings, good),
+            ('3-joint spine', check_spine_reading, spine, spine_good)):
+        refusals, per_reading = judged(check, node_settings, n, rng, readings, 1.0)
+        print(f'estimator door, {what}: {n} readings (half bad), {sum(refusals.values())} '
+              f'dropped alone, {1e6 * per_reading:.1f} us per reading (best of 3)')
+        for reason, count in refusals.most_common():
+            print(f'  dropped {count:5d}  {reason}')
+    now = 0.0
+    snapshot = EstimatorInput({'measured_tensions': Reading(good['measured_tensions'], now)},
+                              now)
+    start = time.perf_counter()
+    repeats = max(1, n // 100)
+    for _ in range(repeats):
+        estimator_outputs(settings, snapshot, False)
+    estimate = (time.perf_counter() - start) / repeats
+    print(f'  one static joint estimate on the readings kept: {1e3 * estimate:.2f} ms')
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument('--n', type=int, default=4000)
@@ -136,6 +239,7 @@ def main() -> None:
     rng = np.random.default_rng(args.seed)
     controller_run(args.n, rng)
     check_costs(args.n, rng)
+    estimator_run(args.n, rng)
 
 
 if __name__ == '__main__':

@@ -68,7 +68,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -156,6 +156,8 @@ DEFAULT_INTEGRAL_LIMIT = (0.2, 0.01)
 POSE_ROTATION_TOLERANCE = 1e-6
 #: Iterations of a warm-started active set before it is redone cold.
 WARM_ACTIVE_SET_ITERATIONS = 100
+#: Iterations of the QP's last resort (scipy's SLSQP) per tick.
+SLSQP_MAX_ITERATIONS = 500
 #: A stiffness target counts as met when the relative scaled error is at most this.
 STIFFNESS_MET_TOLERANCE = 1e-3
 #: A command is "saturated" when it differs from the feedforward by more than this (m).
@@ -379,7 +381,9 @@ def tension_bounds(model: JointModel, lengths: FloatArray, rest_min: FloatArray,
 @dataclass
 class QPResult:
     """``t`` (n,), the working set ``at_lo`` / ``at_hi`` (n,), ``iterations``, ``converged``,
-    ``warm`` (the start face was optimal: one KKT solve)."""
+    ``warm`` (the start face was optimal: one KKT solve); ``reason`` why it stopped short of the
+    optimum (an iteration limit hit, SLSQP's message; with ``converged`` a feasible point SLSQP
+    left short of it), empty otherwise."""
 
     t: FloatArray
     at_lo: BoolArray
@@ -387,6 +391,7 @@ class QPResult:
     iterations: int
     converged: bool
     warm: bool
+    reason: str = ''
 
 
 #: A face's KKT solution counts as accurate when its residual is at most this times
@@ -473,7 +478,8 @@ def warm_face_numpy(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray,
 
 def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
                  hi: FloatArray, t_start: FloatArray, at_lo: BoolArray | None = None,
-                 at_hi: BoolArray | None = None, use_kernel: bool = True) -> QPResult:
+                 at_hi: BoolArray | None = None, use_kernel: bool = True,
+                 max_iterations: int = MAX_ACTIVE_SET_ITERATIONS) -> QPResult:
     """``min 1/2 t'Pt - c't`` s.t. ``A t = b``, ``lo <= t <= hi`` (P positive semidefinite) by a
     primal active-set method, warm-started from ``t_start`` and the working set ``at_lo`` /
     ``at_hi`` of the last solve. First the start face alone (optimal in steady state:
@@ -481,9 +487,11 @@ def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo:
     feasible start: ``t_start`` projected onto ``A t = b`` over its free strings, or if that
     leaves the box, the box least squares ``min |A t - b|`` from it; then the active set.
     ``converged`` is False when no feasible point exists (residual above
-    :data:`FEASIBILITY_TOLERANCE`) or the iteration limit is hit. ``use_kernel``: the first
-    step in the compiled kernel when it is loaded (the controllers pass their model's
-    ``uses_kernel``)."""
+    :data:`FEASIBILITY_TOLERANCE`) or the iteration limit is hit (``reason`` says which).
+    ``use_kernel``: the first step in the compiled kernel when it is loaded (the controllers
+    pass their model's ``uses_kernel``). ``max_iterations`` bounds each active-set phase (the
+    warm one at :data:`WARM_ACTIVE_SET_ITERATIONS`) and the SLSQP last resort (at
+    :data:`SLSQP_MAX_ITERATIONS`): no input makes a tick unbounded."""
     n = lo.size
     wl = np.zeros(n, bool) if at_lo is None else at_lo.copy()
     wh = np.zeros(n, bool) if at_hi is None else (at_hi & ~wl)
@@ -505,38 +513,46 @@ def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo:
             t = trial
         else:
             AtA, Atb = A.T @ A, A.T @ b
-            phase1 = _active_set(AtA, Atb, np.zeros((0, n)), np.zeros(0), lo, hi, t)
+            phase1 = _active_set(AtA, Atb, np.zeros((0, n)), np.zeros(0), lo, hi, t,
+                                 max_iterations)
             t = phase1.t
             if np.linalg.norm(A @ t - b) > FEASIBILITY_TOLERANCE:
-                return QPResult(t, phase1.at_lo, phase1.at_hi, phase1.iterations, False, False)
+                return replace(phase1, converged=False)
     # 3. The active set; a warm start that stalls (cycling on a degenerate face) is redone cold
     # from the box least squares started at the middle, as the design does.
-    sol = _active_set(P, c, A, b, lo, hi, t, WARM_ACTIVE_SET_ITERATIONS)
+    sol = _active_set(P, c, A, b, lo, hi, t, min(WARM_ACTIVE_SET_ITERATIONS, max_iterations))
     if sol.converged:
         return sol
     middle = 0.5 * (lo + hi)
-    phase1 = _active_set(A.T @ A, A.T @ b, np.zeros((0, n)), np.zeros(0), lo, hi, middle)
+    phase1 = _active_set(A.T @ A, A.T @ b, np.zeros((0, n)), np.zeros(0), lo, hi, middle,
+                         max_iterations)
     if np.linalg.norm(A @ phase1.t - b) > FEASIBILITY_TOLERANCE:
-        return QPResult(phase1.t, phase1.at_lo, phase1.at_hi, phase1.iterations, False, False)
-    cold = _active_set(P, c, A, b, lo, hi, phase1.t)
+        return replace(phase1, converged=False)
+    cold = _active_set(P, c, A, b, lo, hi, phase1.t, max_iterations)
     cold.iterations += sol.iterations + phase1.iterations
     if cold.converged:
         return cold
-    return _slsqp(P, c, A, b, lo, hi, phase1.t, cold.iterations)
+    last = _slsqp(P, c, A, b, lo, hi, phase1.t, cold.iterations,
+                  min(SLSQP_MAX_ITERATIONS, max_iterations))
+    if last.reason:
+        last.reason = f'{cold.reason}, then {last.reason}'
+    return last
 
 
 def _slsqp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
-           hi: FloatArray, t0: FloatArray, iterations: int) -> QPResult:
+           hi: FloatArray, t0: FloatArray, iterations: int,
+           max_iterations: int = SLSQP_MAX_ITERATIONS) -> QPResult:
     """Last resort for a degenerate face on which the active set cycles (seen on the spine's
-    60-string QP with more active bounds than free dofs): scipy's SLSQP from a feasible point,
-    then the equality restored exactly on the strings off their bounds."""
+    60-string QP with more active bounds than free dofs): scipy's SLSQP from a feasible point
+    (at most ``max_iterations``), then the equality restored exactly on the strings off their
+    bounds."""
     from scipy.optimize import minimize
 
     res = minimize(lambda t: 0.5 * t @ P @ t - c @ t, t0, jac=lambda t: P @ t - c,
                    bounds=list(zip(lo, hi, strict=True)), method='SLSQP',
                    constraints=[{'type': 'eq', 'fun': lambda t: A @ t - b,
                                  'jac': lambda t: A}],
-                   options={'ftol': 1e-14, 'maxiter': 500})
+                   options={'ftol': 1e-14, 'maxiter': max_iterations})
     t = np.clip(res.x, lo, hi)
     span = 1e-9 * np.maximum(1.0, hi - lo)
     at_lo, at_hi = t - lo <= span, hi - t <= span
@@ -545,8 +561,12 @@ def _slsqp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: Float
         t[free] += np.linalg.lstsq(A[:, free], b - A @ t, rcond=None)[0]
     ok = bool(np.all(t >= lo - span) and np.all(t <= hi + span)
               and np.linalg.norm(A @ t - b) <= FEASIBILITY_TOLERANCE)
+    # A feasible point is kept even when SLSQP stopped short (the equilibrium holds; only the
+    # stiffness may be off the optimum): its reason says so.
+    reason = '' if res.success else (f'SLSQP stopped after {int(res.nit)} of at most '
+                                     f'{max_iterations} iterations: {res.message}')
     return QPResult(np.clip(t, lo, hi), at_lo, at_hi & ~at_lo, iterations + int(res.nit), ok,
-                    False)
+                    False, reason)
 
 
 def _active_set(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
@@ -561,7 +581,9 @@ def _active_set(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: 
                              else nu)
 
     sol = active_set(P, c, A, lo, hi, t0, face, max_iterations)
-    return QPResult(sol.t, sol.at_lo, sol.at_hi, sol.iterations, sol.converged, False)
+    reason = '' if sol.converged else (
+        f'the active-set method stopped at its limit of {max_iterations} iterations')
+    return QPResult(sol.t, sol.at_lo, sol.at_hi, sol.iterations, sol.converged, False, reason)
 
 
 def _objective(pose: PoseTerms, target: ControlTarget, S: FloatArray, middle: FloatArray
@@ -728,7 +750,11 @@ def unheld_twist_text(twist: FloatArray) -> str:
 
 
 def _failure(A: FloatArray, b: FloatArray, sol: QPResult) -> str:
+    """Why a tick's QP failed: an iteration limit it hit (its reason), else no feasible
+    point (the closest residual)."""
     residual = float(np.linalg.norm(A @ sol.t - b))
+    if sol.reason:
+        return f'infeasible: {sol.reason} (closest residual so far {residual:.3g} N)'
     if residual > FEASIBILITY_TOLERANCE:
         return ('infeasible: the pose cannot be held under this load within the limits '
                 f'(closest residual {residual:.3g} N)')

@@ -218,20 +218,38 @@ def _config_nodes(section: Mapping[str, Any]
 def _config_connections(section: Mapping[str, Any], names1: list[str], names2: list[str]
                         ) -> NDArray[np.int_]:
     """The strings' (n, 2) node indices on link 1 and link 2 from ``string_link1_nodes`` and
-    ``string_link2_nodes`` (node names)."""
+    ``string_link2_nodes`` (node names): their count judged against :data:`MAX_STRINGS` first,
+    then each name looked up once (a hostile file of many strings costs its length, and its
+    error names the first few)."""
     ends1 = [str(x) for x in _config_value(section, 'string_link1_nodes')]
     ends2 = [str(x) for x in _config_value(section, 'string_link2_nodes')]
     if len(ends1) != len(ends2) or not ends1:
         raise ValueError('joint.string_link1_nodes and joint.string_link2_nodes must be '
                          f'non-empty and of equal length, got {len(ends1)} and {len(ends2)}')
-    try:
-        return np.array([[names1.index(a), names2.index(b)]
-                         for a, b in zip(ends1, ends2, strict=True)])
-    except ValueError:
-        unknown = sorted({a for a in ends1 if a not in names1}
-                         | {b for b in ends2 if b not in names2})
-        raise ValueError(f'joint.string_link1_nodes / string_link2_nodes name unknown '
-                         f'nodes {unknown}') from None
+    if len(ends1) > MAX_STRINGS:
+        raise ValueError(f'joint.string_link1_nodes: {len(ends1)} strings, more than the '
+                         f'{MAX_STRINGS} a joint may have (MAX_STRINGS)')
+    index1 = {name: i for i, name in enumerate(names1)}
+    index2 = {name: i for i, name in enumerate(names2)}
+    unknown = sorted({a for a in ends1 if a not in index1} | {b for b in ends2 if b not in index2})
+    if unknown:
+        raise ValueError('joint.string_link1_nodes / string_link2_nodes name unknown nodes '
+                         f'{few_names(unknown)}')
+    return np.array([[index1[a], index2[b]] for a, b in zip(ends1, ends2, strict=True)])
+
+
+#: How many names an error lists before it only counts the rest (:func:`few_names`).
+NAMES_SHOWN = 5
+
+
+def few_names(names: Sequence[str]) -> str:
+    """``names`` for an error: all of them up to :data:`NAMES_SHOWN`, else the first few and
+    the count (a hostile file's error stays a line), each name cut to 40 characters."""
+    shown = [repr(name if len(name) <= 40 else name[:37] + '...')
+             for name in names[:NAMES_SHOWN]]
+    more = f' and {len(names) - NAMES_SHOWN} more ({len(names)} in all)' if (
+        len(names) > NAMES_SHOWN) else ''
+    return f'[{", ".join(shown)}]{more}'
 
 
 def _config_per_string(key: str, value: Any, n: int, allow_empty: bool = False
@@ -248,7 +266,7 @@ def _refuse_duplicates(key: str, names: Sequence[str]) -> None:
     seen: set[str] = set()
     repeated = sorted({name for name in names if name in seen or seen.add(name)})
     if repeated:
-        raise ValueError(f'{key} must be unique, got {repeated} more than once')
+        raise ValueError(f'{key} must be unique, got {few_names(repeated)} more than once')
 
 
 def _unique(names: list[str]) -> list[str]:

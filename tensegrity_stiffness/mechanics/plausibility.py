@@ -24,6 +24,11 @@ The ranges (:data:`PLAUSIBILITY_MARGIN` = 10 on forces and stiffnesses and :data
   semidefinite symmetric part (to a relative 1e-9) and an antisymmetric part no larger than
   that part and what the load explains; its size is bounded by what the strings can give,
   ``MARGIN`` times :func:`stiffness_scale` (N/m, with moments over the size).
+* **a spine's tip** (:func:`chain_reach`, :func:`check_chain_translation`,
+  :func:`check_chain_wrench`): the tool frame can be no farther from the base than the joints'
+  reaches, the links' offsets and the tool's translation end to end; every joint carries the
+  whole tip force, so the weakest joint's capacity bounds it, and the moment is bounded by that
+  force at the spine's reach.
 """
 
 from __future__ import annotations
@@ -40,6 +45,7 @@ from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.geometry.validation import finite_array_of_shape
 
 if TYPE_CHECKING:  # types only: joint reads its config through this module (no import circle)
+    from tensegrity_stiffness.mechanics.chain import JointChain
     from tensegrity_stiffness.mechanics.joint import JointModel
 
 FloatArray = NDArray[np.float64]
@@ -147,8 +153,9 @@ def _norm(v: FloatArray) -> float:
     return top * float(np.linalg.norm(v / top)) if 0.0 < top < math.inf else top
 
 
-def _range_error(name: str, value: float, limit: float, unit: str, what: str) -> ValueError:
-    return ValueError(f'{name}: {value:.4g} {unit} is outside the range of this joint '
+def _range_error(name: str, value: float, limit: float, unit: str, what: str,
+                 of: str = 'this joint') -> ValueError:
+    return ValueError(f'{name}: {value:.4g} {unit} is outside the range of {of} '
                       f'(at most {limit:.4g} {unit}: {what})')
 
 
@@ -208,6 +215,44 @@ def check_wrench(model: JointModel, wrench: ArrayLike, name: str = 'external_wre
         raise _range_error(f'{name} moment', moment, capacity * arm, 'N m',
                            f'{PLAUSIBILITY_MARGIN:g} x what all its strings can pull at its '
                            'reach')
+    return W
+
+
+def chain_reach(chain: JointChain) -> float:
+    """How far a spine's tool frame can be from its base (m): ``REACH_MARGIN`` times each
+    joint's :func:`reach` plus the links' offsets and the tool's translation, end to end."""
+    joints = sum(REACH_MARGIN * reach(model) for model in chain.joints)
+    offsets = float(np.linalg.norm(chain.link_offsets[:, :3, 3], axis=1).sum())
+    return joints + offsets + float(np.linalg.norm(chain.tool[:3, 3]))
+
+
+def check_chain_translation(chain: JointChain, translation: ArrayLike, name: str) -> None:
+    """ValueError when a spine's tool frame at ``translation`` (3,) m from the base is beyond
+    :func:`chain_reach`."""
+    distance = _norm(np.asarray(translation, dtype=np.float64))
+    limit = chain_reach(chain)
+    if not distance <= limit:
+        raise _range_error(name, distance, limit, 'm from the base',
+                           f"its joints' reaches end to end ({REACH_MARGIN:g} x each)",
+                           'this spine')
+
+
+def check_chain_wrench(chain: JointChain, wrench: ArrayLike, name: str = 'tip_wrench'
+                       ) -> FloatArray:
+    """A spine's tip load ``wrench`` (6,) ``[f; m]`` finite, with ``|f|`` at most
+    ``PLAUSIBILITY_MARGIN`` times the weakest joint's :func:`string_capacity` (each joint
+    carries all of it) and ``|m|`` that force at :func:`chain_reach`; ValueError otherwise."""
+    W = finite_array_of_shape(name, wrench, (6,))
+    capacity = PLAUSIBILITY_MARGIN * min(string_capacity(model) for model in chain.joints)
+    force, moment = _norm(W[:3]), _norm(W[3:])
+    if not force <= capacity:
+        raise _range_error(f'{name} force', force, capacity, 'N',
+                           f'{PLAUSIBILITY_MARGIN:g} x what the strings of its weakest joint '
+                           'can pull', 'this spine')
+    arm = chain_reach(chain)
+    if not moment <= capacity * arm:
+        raise _range_error(f'{name} moment', moment, capacity * arm, 'N m',
+                           'that force at its reach', 'this spine')
     return W
 
 

@@ -342,16 +342,20 @@ def measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading
                         wrench_covariance=covariance)
 
 
-def check_reading(settings: Any, name: str, value: Any) -> None:
+def dropped_reading(name: str, exc: ValueError) -> ValueError:
+    """The error of a reading on ``~/name`` judged unusable on arrival (:func:`check_reading`,
+    a spine's ``check_spine_reading``): the input named, the reading dropped."""
+    return ValueError(f'~/{name}: {exc} (this reading dropped, the others kept)')
+
+
+def check_reading(settings: EstimatorNodeSettings, name: str, value: Any) -> None:
     """ValueError naming ``~/name`` when one reading cannot be used on its own (issue #42: a bad
     reading spoils only itself, it is dropped at arrival instead of failing every estimate
     until it ages out): validated as the estimator validates it (lengths > 0, a symmetric
     positive definite pose covariance, ...) and, for a pose, within the joint's reach
     (:func:`~tensegrity_stiffness.mechanics.plausibility.check_translation`), for a wrench
-    within its strings' capacity (``check_wrench``). A spine's readings (settings without one
-    joint model) are judged at the estimate."""
-    if not isinstance(settings, EstimatorNodeSettings):
-        return
+    within its strings' capacity (``check_wrench``). A spine's readings:
+    :func:`~tensegrity_stiffness.nodes.spine_estimator_node.check_spine_reading`."""
     model = settings.model
     try:
         if name == 'measured_wrench':
@@ -362,7 +366,7 @@ def check_reading(settings: Any, name: str, value: Any) -> None:
         if name == 'measured_pose':
             check_translation(model, np.asarray(value[0])[:3, 3], 'measured_pose')
     except ValueError as exc:
-        raise ValueError(f'~/{name}: {exc} (this reading dropped, the others kept)') from None
+        raise dropped_reading(name, exc) from None
 
 
 def sensor_measurements(settings: EstimatorNodeSettings, readings: Mapping[str, Reading]

@@ -3,7 +3,8 @@
 table (:func:`spine_estimator_node_parameters`: the spine's and the estimator's) and its settings
 (:func:`spine_estimator_node_settings`); and what it does with one input: the chain filter or
 the static chain estimator on the readings :mod:`.estimator_node` keeps (its readings, their
-freshness and the shared diagnostics). No ROS import.
+freshness and the shared diagnostics), each judged on arrival (:func:`check_spine_reading`).
+No ROS import.
 """
 
 from __future__ import annotations
@@ -22,12 +23,17 @@ from tensegrity_stiffness.estimation.measurements import Measurements
 from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.mechanics.chain import ChainState
 from tensegrity_stiffness.mechanics.dynamics import chain_link_inertias
+from tensegrity_stiffness.mechanics.plausibility import (
+    check_chain_translation,
+    check_chain_wrench,
+)
 from tensegrity_stiffness.nodes.estimator_node import (
     ESTIMATION_PARAMETERS,
     ESTIMATOR_NODE_PARAMETERS,
     EstimatorInput,
     EstimatorNodeSettings,
     Reading,
+    dropped_reading,
     estimator_node_settings,
     load_measurement,
     pose_reading,
@@ -153,6 +159,37 @@ def spine_joint_measurements(settings: SpineEstimatorNodeSettings,
                     kw.update({key: values, f'{key[:-1]}_std': std})
         joints.append(Measurements(**kw) if kw else None)
     return joints
+
+
+def check_spine_reading(settings: SpineEstimatorNodeSettings, name: str, value: Any) -> None:
+    """ValueError naming ``~/name`` when one reading of the spine cannot be used on its own,
+    judged on arrival as :func:`~tensegrity_stiffness.nodes.estimator_node.check_reading`
+    judges a joint's (issue #42: a bad reading spoils only itself, not every estimate until it
+    ages out): each joint's part of a per-string array validated as that joint's estimator
+    validates it (the error names the joint), a tip pose's covariance likewise and its
+    translation within the spine's reach
+    (:func:`~tensegrity_stiffness.mechanics.plausibility.check_chain_translation`), a tip load
+    within what the weakest joint can carry (``check_chain_wrench``)."""
+    try:
+        if name == 'measured_wrench':
+            check_chain_wrench(settings.chain, value, 'measured_wrench')
+        elif name == 'measured_pose':
+            transform, covariance = pose_reading(settings.estimator, {name: Reading(value, 0.0)})
+            Measurements(pose=transform, pose_covariance=covariance).prepared(
+                settings.n_strings[0])
+            check_chain_translation(settings.chain, np.asarray(transform)[:3, 3],
+                                    'measured_pose')
+        else:
+            for i, joint in enumerate(spine_joint_measurements(settings,
+                                                               {name: Reading(value, 0.0)})):
+                if joint is None:
+                    continue
+                try:
+                    joint.prepared(settings.n_strings[i])
+                except ValueError as exc:
+                    raise ValueError(f'joint {i + 1}: {exc}') from None
+    except ValueError as exc:
+        raise dropped_reading(name, exc) from None
 
 
 def new_chain_filter(settings: SpineEstimatorNodeSettings) -> ChainFilter:

@@ -441,13 +441,15 @@ def _bag_recording(path: Path, series: dict[str, list[tuple[float, Any]]], use: 
                    absent: dict[str, str], required: Sequence[str], skipped: int,
                    n_strings: int, max_age: float, damage: str = '') -> Recording:
     """The instants of the read ``series`` (:func:`_align`); a topic without a valid message is
-    absent, or a :class:`RecordingError` when it is needed."""
+    absent, or a :class:`RecordingError` when it is needed (saying how much of a damaged bag
+    was read: ``damage``)."""
     for signal, items in series.items():
         if not items:  # the topic is there, without a (valid) message
             if _needed(signal, required):
                 raise RecordingError(f'{path}: no valid message on the {signal} topic '
                                      f'{use[signal]} in the bag'
-                                     + (f' ({skipped} bad messages skipped)' if skipped else ''))
+                                     + (f' ({skipped} bad messages skipped)' if skipped else '')
+                                     + (f' ({damage})' if damage else ''))
             absent[signal] = use[signal]
     recording = _align(series, n_strings, max_age,
                        f'{path} ({", ".join(f"{s} {len(v)}" for s, v in series.items())}'

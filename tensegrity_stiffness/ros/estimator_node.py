@@ -80,6 +80,8 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     #: on /diagnostics), so that an estimate that takes longer than a reading's period passes
     #: over the backlog instead of turning it into latency.
     NEWEST_INPUT_ONLY = True
+    #: Judges one reading on arrival (ValueError naming the input: the reading is dropped).
+    _check_reading = staticmethod(check_reading)
     #: What the frame of ~/measured_pose and ~/measured_wrench is called in warnings.
     INPUT_FRAME_NAME = "link 1's frame"
     _build_settings = staticmethod(estimator_node_settings)
@@ -186,7 +188,7 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
         stamp or, for an input without a header (the measured arrays), the time it arrived: the
         controller's latency from a reading to its command starts there."""
         try:
-            check_reading(self._settings, name, value)
+            self._check_reading(self._settings, name, value)
         except ValueError as exc:
             self.reporter.reject(f'~/{name}', str(exc))
             return

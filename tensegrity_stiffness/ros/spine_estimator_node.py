@@ -32,6 +32,7 @@ from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.spine_estimator_node import (
     SpineEstimatorNodeSettings,
     SpineEstimatorOutputs,
+    check_spine_reading,
     new_chain_filter,
     spine_estimator_node_parameters,
     spine_estimator_node_settings,
@@ -61,6 +62,7 @@ class SpineEstimatorNode(SpineFrames, SpineRestLengthTopic, EstimatorNode):
     STIFFNESS_STD_OUTPUT = f'~/{SPINE_ESTIMATOR_STD_OUTPUT}'
     INPUT_FRAME_NAME = 'the base frame'
     _build_settings = staticmethod(spine_estimator_node_settings)
+    _check_reading = staticmethod(check_spine_reading)
     _output_frame = attrgetter('base_frame')
     _settings: SpineEstimatorNodeSettings
     # The spine's rest lengths are kept and set as spine_node's (settings.rest_lengths).

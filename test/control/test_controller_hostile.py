@@ -11,6 +11,7 @@ from tensegrity_stiffness.control.controller import (
     ControlCommand,
     ControlTarget,
     StiffnessController,
+    solve_box_qp,
 )
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics.design import DEFAULT_TENSION_MAX, DEFAULT_TENSION_MIN
@@ -162,3 +163,30 @@ def test_the_integral_does_not_sit_at_its_clamp_under_a_ramped_target() -> None:
     assert 'at rest' not in moved[-1].message
     assert np.linalg.norm(ctl.integral[:3]) > 1e-3
 
+
+
+def test_the_qp_stops_at_its_iteration_limit_and_says_so() -> None:
+    """issue #42 item 2: every phase of the tick's QP (the active set, SLSQP's last resort) is
+    bounded by ``max_iterations``; a solve that hits the bound is unconverged and its reason
+    names the limit (with 1 iteration), where the same QP converges under the default."""
+    rng = np.random.default_rng(42)
+    n = 12
+    G = rng.normal(size=(20, n))
+    P, c = G.T @ G, 10.0 * G.T @ rng.normal(size=20)
+    A, b = rng.normal(size=(3, n)), rng.normal(size=3)
+    lo, hi = np.zeros(n), np.ones(n)
+    middle = 0.5 * (lo + hi)
+    b = A @ middle  # feasible at the middle: every phase up to SLSQP runs
+    full = solve_box_qp(P, c, A, b, lo, hi, middle)
+    assert full.converged and full.reason == ''
+    assert full.iterations > 2  # the optimum is not the start's face
+    capped = solve_box_qp(P, c, A, b, lo, hi, middle, max_iterations=1)
+    assert capped.iterations <= 4  # one per phase (SLSQP's feasible point is kept)
+    assert capped.reason.startswith('the active-set method stopped at its limit of 1 '
+                                    'iterations, then SLSQP stopped after 1 of at most 1 '
+                                    'iterations: '), capped.reason
+    b_far = A @ rng.uniform(0.2, 0.8, size=n)  # the middle infeasible: the box least squares
+    capped = solve_box_qp(P, c, A, b_far, lo, hi, middle, max_iterations=1)
+    assert not capped.converged
+    assert capped.reason == 'the active-set method stopped at its limit of 1 iterations'
+    assert solve_box_qp(P, c, A, b_far, lo, hi, middle).converged

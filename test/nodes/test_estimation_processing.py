@@ -325,3 +325,51 @@ def test_a_spine_filter_at_rest():
     assert np.all(np.isfinite(outputs.estimate.screws))
     static = parameters.spine_estimator_node_settings({**values, 'estimation.method': 'static'})
     assert static.estimator.method == 'static'
+
+
+def test_a_spine_reading_is_judged_on_arrival():
+    """issue #42 on a spine: each reading is judged when it arrives (check_spine_reading), the
+    error naming the input and the joint, so a bad one is dropped alone; the readings kept
+    still estimate, where the bad one in the set fails the estimate."""
+    from tensegrity_stiffness.nodes.spine_estimator_node import (
+        check_spine_reading,
+        spine_estimator_node_parameters,
+        spine_estimator_node_settings,
+        spine_estimator_outputs,
+    )
+
+    values = parameters.defaults(spine_estimator_node_parameters(3))
+    values['chain.n_joints'] = 3
+    settings = spine_estimator_node_settings({**values, 'estimation.method': 'static'})
+    chain = settings.chain
+    screws = chain.unloaded_screws()
+    state = chain.evaluate(screws)
+    tensions = np.concatenate(list(state.tensions))
+    T = chain.tip_transform(screws)
+    good = {'measured_tensions': tensions}
+    check_spine_reading(settings, 'measured_tensions', tensions)
+    lengths = np.full(tensions.size, np.nan)
+    lengths[14] = -0.01  # joint 2's third string
+    with pytest.raises(ValueError, match=r'~/measured_lengths: joint 2: .*dropped'):
+        check_spine_reading(settings, 'measured_lengths', lengths)
+    asymmetric = np.diag([1e-6] * 6)
+    asymmetric[0, 1] = 5e-7
+    with pytest.raises(ValueError, match=r'~/measured_pose: .*covariance'):
+        check_spine_reading(settings, 'measured_pose', (T, asymmetric))
+    for distance in (10.0, 1e308):
+        far = T.copy()
+        far[0, 3] += distance
+        with pytest.raises(ValueError, match=r'~/measured_pose: measured_pose: .* this spine'):
+            check_spine_reading(settings, 'measured_pose', (far, None))
+    with pytest.raises(ValueError, match=r'~/measured_wrench: measured_wrench force: .* spine'):
+        check_spine_reading(settings, 'measured_wrench', np.array([1e9, 0, 0, 0, 0, 0]))
+    check_spine_reading(settings, 'measured_wrench', np.array([0.05, 0, 0, 0, 0, 0.001]))
+    check_spine_reading(settings, 'measured_pose', (T, None))
+    now = time.monotonic()
+    kept = spine_estimator_outputs(settings, EstimatorInput(
+        {name: Reading(value, now) for name, value in good.items()}, now))
+    assert kept.estimate.success
+    with pytest.raises(ValueError):  # the bad reading in the set: no estimate (before #42)
+        spine_estimator_outputs(settings, EstimatorInput(
+            {'measured_tensions': Reading(tensions, now),
+             'measured_lengths': Reading(lengths, now)}, now))

@@ -66,3 +66,48 @@ def test_one_bad_reading_spoils_only_itself() -> None:
         node.close()
         node.destroy_node()
         rclpy.shutdown(context=context)
+
+
+def test_one_bad_reading_spoils_only_itself_on_a_spine() -> None:
+    """The same on spine_estimator_node (its readings judged on arrival by
+    check_spine_reading): a negative length of one joint, an asymmetric tip pose covariance and
+    tip poses out of the spine's reach are dropped by name; every later estimate is made."""
+    from tensegrity_stiffness.ros.spine_estimator_node import SpineEstimatorNode
+
+    context = Context()
+    rclpy.init(context=context)
+    node = SpineEstimatorNode(context=context)
+    try:
+        chain = node._settings.chain
+        frame = node._settings.base_frame
+        screws = chain.unloaded_screws()
+        tensions = np.concatenate(list(chain.evaluate(screws).tensions))
+        rng = np.random.default_rng(7)
+
+        def measured() -> None:
+            noisy = tensions + rng.normal(scale=TENSION_STD, size=tensions.size)
+            node._on_tensions(Float64MultiArray(data=noisy.tolist()))
+
+        measured()
+        assert node._estimates == 1, node.reporter.rejected
+        lengths = np.full(tensions.size, np.nan)
+        lengths[-1] = -0.01  # the last joint's last string
+        node._on_lengths(Float64MultiArray(data=lengths.tolist()))
+        assert node.reporter.rejected.get('~/measured_lengths') == 1
+        T = chain.tip_transform(screws)
+        asymmetric = np.diag([1e-6] * 6)
+        asymmetric[0, 1] = 5e-7
+        node._on_pose(pose_message(T, asymmetric, frame))
+        for distance in (10.0, 1e308):
+            far = T.copy()
+            far[0, 3] += distance
+            node._on_pose(pose_message(far, np.diag([1e-6] * 6), frame))
+        assert node.reporter.rejected.get('~/measured_pose') == 3
+        for _ in range(3):
+            measured()
+        assert node._estimates == 4, node.reporter.rejected
+        assert '~/measured_tensions' not in node.reporter.rejected
+    finally:
+        node.close()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
