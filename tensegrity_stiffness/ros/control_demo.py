@@ -112,32 +112,42 @@ class ControlMonitor:
         return pose_error(target, T)
 
     def line(self, t: float) -> str:
+        """The live line at ``t`` s (:func:`control_line` of the last values)."""
         with self._lock:
             v = dict(self._values)
             e = dict(self._estimator)
             message = self._message
-        head = f't {t:5.1f} s  {phase_at(t):15s}'
-        if 'pose error [m, rad]' not in v:  # no state yet: nothing to show
-            return head
-        # [dx dy dz rx ry rz]: metres, then radians
-        error = np.array(v['pose error [m, rad]'].strip('[]').replace(',', ' ').split(), float)
-        rotation_deg = np.degrees(np.linalg.norm(error[3:]))
-        kc_error = v.get('stiffness error', '-') if v.get('stiffness target') == 'set' else '-'
-        true = self.true_error()
-        true_text = '-' if true is None else \
-            f'{1e3 * true[0]:.3f} mm {np.degrees(true[1]):.3f} deg'
-        feasible = v.get('feasible', '-')
-        why = f' ({message})' if feasible == 'false' and message else ''
-        return (f'{head}  pose error {1e3 * np.linalg.norm(error[:3]):.3f} mm '
-                f'{rotation_deg:.3f} deg (true {true_text})  K_c error {kc_error}  '
-                f'saturated {v.get("saturated strings", "-")}  feasible {feasible}{why}'
-                f'  tick {_number(v.get("tick time [ms]"))} ms  rate '
-                f'{_number(v.get("achieved tick rate [Hz]"), "4.0f")}/'
-                f'{_number(v.get("tick rate [Hz]"), ".0f")} Hz  missed '
-                f'{v.get("missed ticks", "-")}  latency '
-                f'{_number(v.get("latency from the reading median [ms]"))}/'
-                f'{_number(v.get("latency from the reading p99 [ms]"))} ms  consistent '
-                f'{_number(e.get("consistent share"), ".1%")}')
+        return control_line(t, v, e, message, self.true_error())
+
+
+def control_line(t: float, controller: dict[str, str], estimator: dict[str, str],
+                 message: str = '', true_error: tuple[float, float] | None = None) -> str:
+    """The demo's live line at ``t`` s from the controller's and the estimator's last
+    ``/diagnostics`` values (key -> value), the controller's status message and the twin's true
+    pose error (m, rad; None: unknown): only the time and the phase until the controller has a
+    state."""
+    v, e = controller, estimator
+    head = f't {t:5.1f} s  {phase_at(t):15s}'
+    if 'pose error [m, rad]' not in v:  # no state yet: nothing to show
+        return head
+    # [dx dy dz rx ry rz]: metres, then radians
+    error = np.array(v['pose error [m, rad]'].strip('[]').replace(',', ' ').split(), float)
+    rotation_deg = np.degrees(np.linalg.norm(error[3:]))
+    kc_error = v.get('stiffness error', '-') if v.get('stiffness target') == 'set' else '-'
+    true_text = '-' if true_error is None else \
+        f'{1e3 * true_error[0]:.3f} mm {np.degrees(true_error[1]):.3f} deg'
+    feasible = v.get('feasible', '-')
+    why = f' ({message})' if feasible == 'false' and message else ''
+    return (f'{head}  pose error {1e3 * np.linalg.norm(error[:3]):.3f} mm '
+            f'{rotation_deg:.3f} deg (true {true_text})  K_c error {kc_error}  '
+            f'saturated {v.get("saturated strings", "-")}  feasible {feasible}{why}'
+            f'  tick {_number(v.get("tick time [ms]"))} ms  rate '
+            f'{_number(v.get("achieved tick rate [Hz]"), "4.0f")}/'
+            f'{_number(v.get("tick rate [Hz]"), ".0f")} Hz  missed '
+            f'{v.get("missed ticks", "-")}  latency '
+            f'{_number(v.get("latency from the reading median [ms]"))}/'
+            f'{_number(v.get("latency from the reading p99 [ms]"))} ms  consistent '
+            f'{_number(e.get("consistent share"), ".1%")}')
 
 
 def pose_error(target: np.ndarray, pose: np.ndarray) -> tuple[float, float]:
