@@ -53,16 +53,22 @@ POSE = [0.02, 0.0, 0.01, 0.0, 0.0, math.sin(math.pi / 12), math.cos(math.pi / 12
 MIN_EIGENVALUE = 1e-3
 QUIET_S = 0.4
 #: Issue 37, item 7: a controller started after the bridge gets its first update within this
-#: long (s) of being ready. Measured (2026-12-04, load 4-8, 9 runs each): 0.18-0.44 s with the
-#: nodes' profile (0.74-2.8 s after the launch: the stand-in's own start-up varies with the
-#: load); with Fast DDS's default 3 s announcement (FASTRTPS_DEFAULT_PROFILES_FILE set to a
-#: profile of defaults: the nodes then leave Fast DDS alone) 0.06-3.4 s, over 1 s in 5 of 9.
-FIRST_UPDATE_S = 1.0
+#: long (s) of being ready. Measured in this module (2026-12-04), with the nodes' profile: this
+#: test alone (beside the world's two nodes, load 2-8) 0.18-0.59 s in 12 runs; the whole file
+#: (the earlier tests' bridges and stand-ins still running, load 1-8) 0.03-2.0 s, 1.2-2.0 s in 7
+#: of 19 (a residual delay the profile does not remove). With Fast DDS's default 3 s
+#: announcement (FASTRTPS_DEFAULT_PROFILES_FILE set to a profile of defaults: the nodes then leave
+#: Fast DDS alone; this test alone) at load 4-8: 0.06-3.4 s, over 2.5 s in 9 of 22 (five runs
+#: all pass about one time in 14). The stall needs load and company: at load 1, 0.11-0.70 s in 5
+#: of 5 with the defaults; with only the client, the bridge and the controller in the domain
+#: (load 2-4), 0.16-0.33 s in 10 of 10.
+FIRST_UPDATE_S = 2.5
 #: ... and at least MIN_WINDOW_UPDATES in the UPDATE_WINDOW_S (s) from its being ready, at most
-#: the parameter rate limit's worth. Measured: 78-99 with the nodes' profile; 0-32 with Fast
-#: DDS's default announcement where the first update came after 1 s (the issue: 1-5 in 3 s).
+#: the parameter rate limit's worth. Measured with the profile: 78-99 alone, 22-81 in the whole
+#: file (29 after a 1.3 s delay); with Fast DDS's default announcement (load 4-8) 0-84, under 15
+#: in 6 of 16 (the issue: 1-5 in 3 s, about 55 without the stall).
 UPDATE_WINDOW_S = 3.0
-MIN_WINDOW_UPDATES = 30
+MIN_WINDOW_UPDATES = 15
 #: The late controller's bridge's /diagnostics period (s): its first update timed to this.
 BRIDGE_DIAGNOSTICS_S = 0.05
 
@@ -678,7 +684,7 @@ def test_hostile_burst_then_the_right_output(world, loaded_screw, record_propert
     assert rss_after - rss_before < 5 * 2**20, figures
 
 
-@pytest.mark.parametrize('run', range(3))
+@pytest.mark.parametrize('run', range(5))
 def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, run):
     """Issue 37, item 7, in repeated runs: the bridge runs first, then its controller starts,
     and K_c streams at 100 Hz (1 % apart: every input outside the deadband). The controller's
