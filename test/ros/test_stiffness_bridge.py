@@ -59,9 +59,9 @@ QUIET_S = 0.4
 #: of 19 (a residual delay the profile does not remove). With Fast DDS's default 3 s
 #: announcement (FASTRTPS_DEFAULT_PROFILES_FILE set to a profile of defaults: the nodes then leave
 #: Fast DDS alone; this test alone) at load 4-8: 0.06-3.4 s, over 2.5 s in 9 of 22 (five runs
-#: all pass about one time in 14). The stall needs load and company: at load 1, 0.11-0.70 s in 5
-#: of 5 with the defaults; with only the client, the bridge and the controller in the domain
-#: (load 2-4), 0.16-0.33 s in 10 of 10.
+#: all pass about one time in 14). The stall needs load: at load 1, 0.11-0.70 s in 5 of 5 with
+#: the defaults; with only the client, the bridge and the controller in the domain (load
+#: 1.6-2.4), 0.16-0.33 s in 10 of 10.
 FIRST_UPDATE_S = 2.5
 #: ... and at least MIN_WINDOW_UPDATES in the UPDATE_WINDOW_S (s) from its being ready, at most
 #: the parameter rate limit's worth. Measured with the profile: 78-99 alone, 22-81 in the whole
