@@ -5,7 +5,8 @@ that
 declare the controller's stiffness parameters with the same names, types, defaults and ranges and
 refuse what the controller would refuse, with the controller's own reason text. Each publishes
 every stiffness it accepted on ``~/accepted_stiffness`` (36 values, row-major, diagonal for
-diagonal forms) so that a test can count and time the updates. ``--slow S`` (after KIND): every
+diagonal forms) so that a test can count and time the updates, and prints ``READY`` and the wall
+time (s) once its node and its parameter services exist. ``--slow S`` (after KIND): every
 parameter set takes S seconds (a controller that answers late).
 
 Where each definition comes from (read with the ``fetch`` tool on 2026-12-01):
@@ -50,6 +51,10 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
+
+#: What the stand-in prints, then the wall time (``time.time()``, s), once its node and its
+#: parameter services exist (before it spins).
+READY = 'stand-in ready at'
 
 #: Node names of the controllers (what their controller_manager entries usually are).
 NODE_NAMES = {
@@ -217,6 +222,7 @@ def main(argv: list[str] | None = None) -> None:
         del argv[1:3]
     rclpy.init(args=argv)
     node = make_node(kind)
+    print(f'{READY} {time.time():.6f}', flush=True)
     try:
         rclpy.spin(node)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
