@@ -61,8 +61,10 @@ QUIET_S = 0.4
 #: Fast DDS alone; this test alone) at load 4-8: 0.06-3.4 s, over 2.5 s in 9 of 22 (five runs
 #: all pass about one time in 14). The stall needs load: at load 1, 0.11-0.70 s in 5 of 5 with
 #: the defaults; with only the client, the bridge and the controller in the domain (load
-#: 1.6-2.4), 0.16-0.33 s in 10 of 10.
-FIRST_UPDATE_S = 2.5
+#: 1.6-2.4), 0.16-0.33 s in 10 of 10. In the serial pass (2026-12-07, five runs): 0.27-1.48 s.
+#: The bound sits below the default 3 s period with room for the residual delay: a stall of the
+#: default announcement (2.2-3.4 s under load) fails one of five runs about three times in four.
+FIRST_UPDATE_S = 2.8
 #: ... and at least MIN_WINDOW_UPDATES in the UPDATE_WINDOW_S (s) from its being ready, at most
 #: the parameter rate limit's worth. Measured with the profile: 78-99 alone, 22-81 in the whole
 #: file (29 after a 1.3 s delay); with Fast DDS's default announcement (load 4-8) 0-84, under 15
@@ -684,6 +686,7 @@ def test_hostile_burst_then_the_right_output(world, loaded_screw, record_propert
     assert rss_after - rss_before < 5 * 2**20, figures
 
 
+@pytest.mark.serial  # a deadline and a count per window of wall time: nothing beside it
 @pytest.mark.parametrize('run', range(5))
 def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, run):
     """Issue 37, item 7, in repeated runs: the bridge runs first, then its controller starts,
