@@ -152,7 +152,7 @@ def targets(model: JointModel, frame_id: str = 'tensegrity_link1'
     return pose, Float64MultiArray(data=K.ravel().tolist()), ''
 
 
-def _node_args(params: Path, extra: list[str] = ()) -> list[tuple[str, list[str]]]:
+def node_command_lines(params: Path, extra: list[str] = ()) -> list[tuple[str, list[str]]]:
     """The three nodes' command lines; ``extra`` (ROS arguments: ``-p name:=value``) goes to
     each after the demo's own, so it overrides them."""
     sim, est, ctl = 'sim_node', 'estimator_node', 'stiffness_controller'
@@ -179,7 +179,7 @@ def run(config_path: Path | None, duration: float | None, extra: list[str] = ())
           f'(ROS_DOMAIN_ID={os.environ.get("ROS_DOMAIN_ID", "0")}); logs in {logs}', flush=True)
     stop = stop_on_signals()
     processes = []
-    for name, args in _node_args(params, extra):
+    for name, args in node_command_lines(params, extra):
         with (logs / f'{name}.log').open('w') as out:
             processes.append(subprocess.Popen([node_executable(name), *args], stdout=out,
                                               stderr=subprocess.STDOUT, env=os.environ.copy(),
@@ -230,7 +230,7 @@ def run(config_path: Path | None, duration: float | None, extra: list[str] = ())
         codes = [stop_process(p) for p in processes]
         spin.close()
     print('control_demo: stopped (' + ', '.join(
-        f'{name} exit {c}' for (name, _), c in zip(_node_args(params, extra), codes,
+        f'{name} exit {c}' for (name, _), c in zip(node_command_lines(params, extra), codes,
                                                     strict=True))
         + ')', flush=True)
     return code or int(any(codes))

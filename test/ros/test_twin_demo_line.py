@@ -116,3 +116,28 @@ def test_control_demo_designs_a_stiffness_step_for_a_ring_and_the_design_for_a_v
     tensions = stiffness_design(ring, xi).tensions
     assert np.all(tensions >= STIFFNESS_TENSIONS[0] - 1e-12)
     assert np.all(tensions <= STIFFNESS_TENSIONS[1] + 1e-12)
+
+
+def test_arguments_after_the_double_dash_reach_every_node_last() -> None:
+    """#39 item 1: ``run_twin.sh --control --config FILE -- -p limits.tension_max:=3`` passes
+    the ROS arguments after ``--`` to each of the three nodes, after the demo's own (a later
+    ``-p`` of the same name wins in ROS 2), so they override the demo's settings."""
+    from pathlib import Path
+
+    from tensegrity_stiffness.ros.control_demo import node_command_lines
+    from tensegrity_stiffness.ros.twin_demo import split_node_arguments
+
+    argv = ['--control', '--config', 'lab.yaml', '--', '-p', 'limits.tension_max:=3.0',
+            '-p', 'control.integral_gain:=1.0']
+    own, extra = split_node_arguments(argv)
+    assert own == ['--control', '--config', 'lab.yaml']
+    assert extra == ['-p', 'limits.tension_max:=3.0', '-p', 'control.integral_gain:=1.0']
+    assert split_node_arguments(['--control']) == (['--control'], [])
+    lines = node_command_lines(Path('lab.yaml'), extra)
+    assert [name for name, _ in lines] == ['sim_node', 'estimator_node', 'stiffness_controller']
+    for _, args in lines:
+        assert args[0] == '--ros-args' and args[-len(extra):] == extra
+    controller = lines[2][1]
+    # the demo's own integral gain comes first, the user's after it
+    assert controller.index('control.integral_gain:=4.0') < controller.index(
+        'control.integral_gain:=1.0')
