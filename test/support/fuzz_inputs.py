@@ -303,7 +303,8 @@ class InputFuzzer:
         return Case('rest_lengths', 'valid', {'data': self.valid_rest_lengths()})
 
     def rest_case(self) -> Case:
-        """Hostile rest lengths (most invalid; tiny and huge positive ones valid)."""
+        """Hostile rest lengths (most invalid, tiny positive ones too: below the joint's range;
+        huge positive ones valid unless they leave no room for the maximum stretch)."""
         n = self.model.n_strings
         rest = self.valid_rest_lengths()
         kind = self._choice(['length', 'length', 'negative', 'zero', 'nan', 'inf',
@@ -320,9 +321,8 @@ class InputFuzzer:
                      'inf': self._choice([math.inf, -math.inf])}[kind]
             idx = self.rng.choice(n, size=int(self.rng.integers(1, n + 1)), replace=False)
             data[idx] = value
-        elif kind == 'denormal':  # > 0 and finite: valid (every string taut, huge tension)
+        elif kind == 'denormal':  # > 0 and finite, but below the joint's range (#42)
             data = np.full(n, self._choice([5e-324, 1e-310, 1e-300]))
-            must_reject = False
         elif kind == 'huge':  # finite: valid, every string slack (K = 0)
             data = np.full(n, self._choice([1e308, 1.0, 1e6]))
             must_reject = False
@@ -611,7 +611,7 @@ class TopicOracle:
         try:
             rest = conversions.multiarray_to_array(msg, expected_length=self.model.n_strings,
                                                  max_length=self.max_array_length)
-            self.model = self.model.with_rest_lengths(rest)
+            self.model = self.model.with_rest_lengths(check_rest_lengths(self.model, rest))
         except ValueError:
             return None
         return None if self.last_screw is None else self.evaluate(self.last_screw)
