@@ -50,7 +50,11 @@ class Harness:
         params = tmp_path / 'structure_node.yaml'
         params.write_text('structure_node:\n  ros__parameters:\n'
                           '    structure.config: six_bar.yaml\n    markers.max_rate: 0.0\n'
-                          '    diagnostics.period: 0.2\n')
+                          '    diagnostics.period: 0.2\n'
+                          # the solves' correctness is tested, not their speed: a budget that
+                          # three test workers on 2 cores do not exhaust (a fresh-clone run: the
+                          # ground's equilibrium stopped after 2 iterations)
+                          '    equilibrium.time_budget: 5.0\n')
         self.proc = NodeProcess(self.ns, params, executable=EXECUTABLE)
         self.ros = RosClient('structure_test')
         self.base = base = f'{self.ns}/structure_node'
