@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from support.cli_runs import run
-from support.structure_recordings import perturbed, twin_series, write_bag
+from support.structure_recordings import perturbed_strings, twin_series, write_bag
 
 from tensegrity_stiffness import config
 from tensegrity_stiffness.recordings import calibration_recording as rec
@@ -33,7 +33,7 @@ pytest.importorskip('mujoco')
 @pytest.fixture(scope='module')
 def recording():
     nominal = Structure.from_yaml(config.example_config_path('three_bar.yaml'))
-    truth, k, d = perturbed(nominal, SEED)
+    truth, k, d = perturbed_strings(nominal, np.random.default_rng(SEED))
     return nominal, k, d, twin_series(truth, d, HOLDS, SEED, LENGTH_NOISE, TENSION_NOISE)
 
 

@@ -3,10 +3,9 @@ recording made by the MuJoCo twin (tensegrity_stiffness.estimation.structure_cal
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
+from support.structure_recordings import perturbed_strings
 
 from tensegrity_stiffness.estimation.calibration import CalibrationNoise
 from tensegrity_stiffness.estimation.structure_calibration import (
@@ -71,12 +70,7 @@ def twin_recording(truth: Structure, offsets: np.ndarray, rng: np.random.Generat
 def test_recovers_the_twins_stiffness_and_offsets() -> None:
     nominal = three_bar()
     rng = np.random.default_rng(1)
-    k_true = nominal.k * (1 + 0.1 * rng.standard_normal(nominal.n_strings))
-    offsets = 3e-3 * rng.uniform(-1, 1, nominal.n_strings)
-    truth = Structure(nominal.bodies,
-                      [dataclasses.replace(s, stiffness=float(k)) for s, k in
-                       zip(nominal.strings, k_true, strict=True)],
-                      nominal.world_nodes, nominal.gravity, nominal.ground, nominal.force_law)
+    truth, k_true, offsets = perturbed_strings(nominal, rng)
     samples = twin_recording(truth, offsets, rng)
     cal = calibrate_structure(nominal, samples, NOISE)
     assert cal.unidentifiable == ()

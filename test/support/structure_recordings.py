@@ -23,10 +23,10 @@ MOTOR_SPEED = 0.02
 SPREAD = 0.03
 
 
-def perturbed(nominal: Structure, seed: int) -> tuple[Structure, np.ndarray, np.ndarray]:
-    """(the true structure, its stiffnesses, the encoders' offsets): stiffness 10 % off nominal
-    (normal), offsets within +-3 mm."""
-    rng = np.random.default_rng(seed)
+def perturbed_strings(nominal: Structure, rng: np.random.Generator
+                      ) -> tuple[Structure, np.ndarray, np.ndarray]:
+    """(the true structure, its stiffnesses, the encoders' offsets), drawn from ``rng``:
+    stiffness 10 % off nominal (normal), offsets within +-3 mm."""
     k = nominal.k * (1 + 0.1 * rng.standard_normal(nominal.n_strings))
     offsets = 3e-3 * rng.uniform(-1, 1, nominal.n_strings)
     truth = Structure(nominal.bodies,
