@@ -13,7 +13,7 @@ work, and the node warns.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -190,7 +190,22 @@ def loads_label(structure: Structure) -> str:
             f'order: {" ".join(structure.body_names)}')
 
 
-def live_line(time: float, com: np.ndarray, contacts: list[str], slack: list[str],
+@dataclass(frozen=True)
+class TwinReport:
+    """What /diagnostics and the live line report of the twin, taken by the node's stepping
+    thread at a publication (the only thread that touches MuJoCo's data)."""
+
+    time: float
+    """Simulated time (s)."""
+    centre_of_mass: np.ndarray
+    """(3,) the structure's centre of mass in the world (m)."""
+    contact_nodes: tuple[str, ...]
+    """The nodes touching the ground (config order)."""
+    slack_strings: tuple[str, ...]
+    """The strings at or below their rest length."""
+
+
+def live_line(time: float, com: np.ndarray, contacts: Sequence[str], slack: Sequence[str],
               phase: str, factor: float, missed: int = 0) -> str:
     """One line of the twin's state: simulated time, centre of mass (m), contact nodes, slack
     strings, the gait's phase, the real-time factor and the steps missed so far."""

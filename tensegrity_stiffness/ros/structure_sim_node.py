@@ -50,6 +50,7 @@ from tensegrity_stiffness.nodes.structure_sim_node import (
     STRUCTURE_SIM_PARAMETERS,
     TENSIONS_LABEL,
     StructureSimSettings,
+    TwinReport,
     live_line,
     loads_label,
     structure_sim_settings,
@@ -108,6 +109,10 @@ class StructureSimNode(SteppingTwin, Node):
         self._pending_settings: StructureSimSettings | None = None
         self.publications = 0
         self._state_line = ''
+        # What /diagnostics reports of the twin, taken by the stepping thread at each
+        # publication: only that thread touches MuJoCo's data (a contact force runs
+        # mj_forwardSkip, which must not run beside mj_step).
+        self._twin_report = self._report_of_twin()
         # The gait: planned on a thread of its own (a plan takes a fraction of a second), run
         # by the stepping thread on the twin's contacts.
         self._gait: RollGait | None = None
@@ -331,8 +336,9 @@ class StructureSimNode(SteppingTwin, Node):
             conversions.write_imu(msg, noise.add(reading.angular_velocity, 'gyro', rng),
                                   noise.add(reading.specific_force, 'accelerometer', rng), stamp)
             pub.publish(msg)
+        report = self._twin_report = self._report_of_twin()
         if self._pub_contacts.get_subscription_count():
-            touching = set(sim.contact_nodes())
+            touching = set(report.contact_nodes)
             conversions.set_multiarray_data(self._msg_contacts, [
                 float(name in touching) for name in sim.marker_names])
             self._pub_contacts.publish(self._msg_contacts)
@@ -342,27 +348,33 @@ class StructureSimNode(SteppingTwin, Node):
             self._pub_markers.publish(self._msg_markers)
         self.publications += 1
 
+    def _report_of_twin(self) -> TwinReport:
+        """The twin's state /diagnostics reports (the stepping thread, or ``__init__`` before
+        it starts)."""
+        sim = self._sim
+        slack = tuple(name for name, s in zip(sim.structure.string_names, sim.slack(),
+                                              strict=True) if s)
+        return TwinReport(sim.time, sim.centre_of_mass(), tuple(sim.contact_nodes()), slack)
+
     @guarded('diagnostics')
     def _publish_diagnostics(self) -> None:
         """Centre of mass, contact nodes, slack strings, steps and the real-time factor, the
-        gait's phase (and a live line with ``--live``)."""
-        sim = self._sim
+        gait's phase (and a live line with ``--live``), from the stepping thread's last
+        report (this timer never touches the twin)."""
         now, steps = time.perf_counter(), self.steps
         then, steps_then = self._diagnosed
         self._diagnosed = (now, steps)
         factor = (steps - steps_then) * self._period / (now - then) if now > then else 0.0
-        com = sim.centre_of_mass()
-        contacts = sim.contact_nodes()
-        slack = [name for name, s in zip(sim.structure.string_names, sim.slack(), strict=True)
-                 if s]
-        line = live_line(sim.time, com, contacts, slack, self.gait_phase, factor,
+        report = self._twin_report
+        com, contacts, slack = report.centre_of_mass, report.contact_nodes, report.slack_strings
+        line = live_line(report.time, com, contacts, slack, self.gait_phase, factor,
                          self.missed_steps)
         self._state_line = line
         level = 'WARN' if (self.missed_steps and self._real_time) or slack else 'OK'
         values = [('centre of mass', ' '.join(f'{v:.6g}' for v in com)),
                   ('contact nodes', ' '.join(contacts)), ('slack strings', ' '.join(slack)),
                   ('steps', steps), ('missed steps', self.missed_steps),
-                  ('publications', self.publications), ('simulated time', sim.time),
+                  ('publications', self.publications), ('simulated time', report.time),
                   ('real-time factor', factor), ('gait phase', self.gait_phase),
                   ('gait steps done', self.gait_steps_done),
                   ('rejected inputs', self.reporter.rejected or 0)]
