@@ -9,6 +9,9 @@ whose ``<node>: ros__parameters:`` holds that section) or the name of a packaged
 (``config/examples/``, default ``six_bar.yaml``). ``structure.file`` and ``structure.example``,
 the twin's names before, are deprecated aliases of it (:data:`DEPRECATED_ALIASES`): they still
 work, and the node warns.
+
+``faults.*`` injects sensor faults into the published readings at run time (:class:`SensorFaults`:
+a broken length sensor, a flipped IMU), for proving that an estimator names them.
 """
 
 from __future__ import annotations
@@ -101,14 +104,72 @@ STRUCTURE_SIM_PARAMETERS: tuple[ParameterSpec, ...] = (
                   '[min, max] of the rest lengths the twin takes, m (empty: each string\'s '
                   'physical range)', read_only=True),
     ParameterSpec('frames.world', 'string', 'world', 'frame_id of the poses and markers'),
+    ParameterSpec('faults.broken_length', 'string', '',
+                  "the string whose length sensor is broken: ~/measured_lengths reads it "
+                  "faults.length_offset off ('': none); an estimator names it length[<string>]"),
+    ParameterSpec('faults.length_offset', 'double', 0.02,
+                  "what the broken length sensor reads over the string's length, m (not 0)",
+                  range=(-1.0, 1.0)),
+    ParameterSpec('faults.flipped_imu', 'string', '',
+                  "the bar whose IMU is flipped: its accelerometer and gyro read every axis "
+                  "with the wrong sign ('': none); an estimator names it imu[<bar>]"),
     *(s for s in COMMON_PARAMETERS if s.name in ('qos.depth', 'limits.max_array_length')),
 )
 
 
 @dataclass(frozen=True)
+class SensorFaults:
+    """The sensor faults injected into the twin's published readings (``faults.*``): the
+    string whose length sensor reads ``length_offset`` (m) off (``broken_length``, '' none) and
+    the bar whose IMU reads every axis with the wrong sign (``flipped_imu``, '' none)."""
+
+    broken_length: str = ''
+    length_offset: float = 0.0
+    flipped_imu: str = ''
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The faulty sensors as the structure estimator names its readings
+        (``length[<string>]``, ``imu[<bar>]``)."""
+        return ((f'length[{self.broken_length}]',) if self.broken_length else ()) + (
+            (f'imu[{self.flipped_imu}]',) if self.flipped_imu else ())
+
+    def lengths(self, structure: Structure, values: np.ndarray) -> np.ndarray:
+        """The string lengths ``values`` (string order) as the sensors read them."""
+        if not self.broken_length:
+            return values
+        out = np.array(values, dtype=float)
+        out[list(structure.string_names).index(self.broken_length)] += self.length_offset
+        return out
+
+    def imu_sign(self, body: str) -> float:
+        """-1 for the flipped IMU's readings, else 1."""
+        return -1.0 if body == self.flipped_imu else 1.0
+
+
+def sensor_faults(structure: Structure, values: Mapping[str, Any]) -> SensorFaults:
+    """The :class:`SensorFaults` of checked ``faults.*`` values; ValueError naming the parameter
+    and the names it may take (the structure's strings; the bars with an IMU: every free bar)."""
+    broken = values['faults.broken_length'].strip()
+    if broken and broken not in structure.string_names:
+        raise ValueError(f'faults.broken_length: no string {broken!r} (the strings: '
+                         f'{", ".join(structure.string_names)})')
+    offset = values['faults.length_offset']
+    if broken and offset == 0.0:
+        raise ValueError('faults.length_offset must not be 0 while faults.broken_length is set')
+    flipped = values['faults.flipped_imu'].strip()
+    imus = [structure.body_names[i] for i in structure.bar_indices if not structure.fixed[i]]
+    if flipped and flipped not in imus:
+        raise ValueError(f'faults.flipped_imu: no IMU on {flipped!r} (the IMUs: '
+                         f'{", ".join(imus)})')
+    return SensorFaults(broken, offset if broken else 0.0, flipped)
+
+
+@dataclass(frozen=True)
 class StructureSimSettings:
     """Everything ``structure_sim_node`` needs: the ``structure`` (and where it came from),
-    the twin's ``options``, the ``noise``, the world frame, and the checked ``values``."""
+    the twin's ``options``, the ``noise``, the world frame, the checked ``values`` and the
+    injected ``faults``."""
 
     structure: Structure
     source: str
@@ -116,6 +177,8 @@ class StructureSimSettings:
     noise: SensorNoise
     world_frame: str
     values: Mapping[str, Any] = field(default_factory=dict, repr=False, compare=False)
+    #: The sensor faults injected into the published readings (``faults.*``).
+    faults: SensorFaults = SensorFaults()
     #: The warnings of deprecated parameters used (the node logs them).
     deprecations: tuple[str, ...] = ()
 
@@ -181,7 +244,8 @@ def structure_sim_settings(values: Mapping[str, Any], generation: int = 0
         max_force=checked['limits.max_force'], max_moment=checked['limits.max_moment'])
     noise = SensorNoise(**{kind: checked[f'noise.{kind}'] for kind in STRUCTURE_NOISE_KINDS})
     return StructureSimSettings(structure, str(source), options, noise, checked['frames.world'],
-                                values=checked, deprecations=deprecations)
+                                values=checked, faults=sensor_faults(structure, checked),
+                                deprecations=deprecations)
 
 
 def loads_label(structure: Structure) -> str:
@@ -203,6 +267,12 @@ class TwinReport:
     """The nodes touching the ground (config order)."""
     slack_strings: tuple[str, ...]
     """The strings at or below their rest length."""
+    faults: tuple[str, ...] = ()
+    """The faulty sensors of the published readings (:attr:`SensorFaults.names`)."""
+    faults_since: float | None = None
+    """Simulated time (s) of the first publication with ``faults`` (None: no fault)."""
+    faults_stamp: str = ''
+    """Its header stamp, ``sec.nanosec`` ('' no fault)."""
 
 
 def live_line(time: float, com: np.ndarray, contacts: Sequence[str], slack: Sequence[str],

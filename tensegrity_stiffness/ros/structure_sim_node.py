@@ -21,6 +21,11 @@ its state): ``~/rest_lengths`` (``Float64MultiArray``, latched; the motors' targ
 ``~/loads`` (``Float64MultiArray`` of 6 values per body: constant wrenches in the world about its
 origin), ``~/push`` (``WrenchStamped``, ``header.frame_id`` the body's name, the wrench in the
 world about its origin for ``push.duration`` s).
+
+Sensor faults (``faults.*``, at run time: a broken length sensor, a flipped IMU) are staged by the
+parameter callback and put into the readings by the stepping thread from its next publication
+on; the first publication with them is logged and reported on /diagnostics (``faults``,
+``faults since [s]`` in simulated time, ``faults since stamp``: its header stamp).
 """
 
 from __future__ import annotations
@@ -107,6 +112,9 @@ class StructureSimNode(SteppingTwin, Node):
         self._pending_loads: np.ndarray | None = None
         self._pending_pushes: list[tuple[str, np.ndarray, float]] = []
         self._pending_settings: StructureSimSettings | None = None
+        # The faults in the published readings: (names, simulated time, stamp) of the first
+        # publication with them (the stepping thread's).
+        self._faults: tuple[tuple[str, ...], float | None, str] = ((), None, '')
         self.publications = 0
         self._state_line = ''
         # What /diagnostics reports of the twin, taken by the stepping thread at each
@@ -318,7 +326,12 @@ class StructureSimNode(SteppingTwin, Node):
     def _publish(self) -> None:
         settings, sim = self._settings, self._sim
         stamp = self._stamp()
-        noise, rng = settings.noise, self._rng
+        noise, rng, faults = settings.noise, self._rng, settings.faults
+        if faults.names != self._faults[0]:
+            self._faults = (faults.names, sim.time, f'{stamp.sec}.{stamp.nanosec:09d}')
+            self.get_logger().info(
+                f'sensor faults: {", ".join(faults.names) or "none"} from the publication at '
+                f'simulated time {sim.time:.4f} s (stamp {self._faults[2]})')
         if self._pub_clock is not None:
             self._pub_clock.publish(Clock(clock=stamp))
         poses = PoseArray()
@@ -327,14 +340,18 @@ class StructureSimNode(SteppingTwin, Node):
         poses.poses = [conversions.transform_to_pose(T) for T in sim.poses()]
         self._pub_poses.publish(poses)
         for msg, pub, kind, values in (
-                (self._msg_lengths, self._pub_lengths, 'lengths', sim.string_lengths()),
+                (self._msg_lengths, self._pub_lengths, 'lengths',
+                 faults.lengths(settings.structure, sim.string_lengths())),
                 (self._msg_tensions, self._pub_tensions, 'tensions', sim.tensions()),
                 (self._msg_encoders, self._pub_encoders, 'encoders', sim.rest_lengths)):
             conversions.set_multiarray_data(msg, noise.add(values, kind, rng))
             pub.publish(msg)
-        for msg, pub, reading in zip(self._msg_imus, self._pub_imus, sim.imus(), strict=True):
-            conversions.write_imu(msg, noise.add(reading.angular_velocity, 'gyro', rng),
-                                  noise.add(reading.specific_force, 'accelerometer', rng), stamp)
+        for msg, pub, reading, body in zip(self._msg_imus, self._pub_imus, sim.imus(),
+                                           sim.imu_bodies, strict=True):
+            sign = faults.imu_sign(body)
+            conversions.write_imu(msg, sign * noise.add(reading.angular_velocity, 'gyro', rng),
+                                  sign * noise.add(reading.specific_force, 'accelerometer', rng),
+                                  stamp)
             pub.publish(msg)
         report = self._twin_report = self._report_of_twin()
         if self._pub_contacts.get_subscription_count():
@@ -354,7 +371,8 @@ class StructureSimNode(SteppingTwin, Node):
         sim = self._sim
         slack = tuple(name for name, s in zip(sim.structure.string_names, sim.slack(),
                                               strict=True) if s)
-        return TwinReport(sim.time, sim.centre_of_mass(), tuple(sim.contact_nodes()), slack)
+        return TwinReport(sim.time, sim.centre_of_mass(), tuple(sim.contact_nodes()), slack,
+                          *self._faults)
 
     @guarded('diagnostics')
     def _publish_diagnostics(self) -> None:
@@ -370,14 +388,19 @@ class StructureSimNode(SteppingTwin, Node):
         line = live_line(report.time, com, contacts, slack, self.gait_phase, factor,
                          self.missed_steps)
         self._state_line = line
-        level = 'WARN' if (self.missed_steps and self._real_time) or slack else 'OK'
+        level = ('WARN' if (self.missed_steps and self._real_time) or slack or report.faults
+                 else 'OK')
         values = [('centre of mass', ' '.join(f'{v:.6g}' for v in com)),
                   ('contact nodes', ' '.join(contacts)), ('slack strings', ' '.join(slack)),
                   ('steps', steps), ('missed steps', self.missed_steps),
                   ('publications', self.publications), ('simulated time', report.time),
                   ('real-time factor', factor), ('gait phase', self.gait_phase),
                   ('gait steps done', self.gait_steps_done),
-                  ('rejected inputs', self.reporter.rejected or 0)]
+                  ('rejected inputs', self.reporter.rejected or 0),
+                  ('faults', ', '.join(report.faults) or 'none'),
+                  ('faults since [s]', '' if report.faults_since is None or not report.faults
+                   else f'{report.faults_since:.4f}'),
+                  ('faults since stamp', report.faults_stamp if report.faults else '')]
         name = f'{self.get_fully_qualified_name()}: structure twin'
         self._pub_diagnostics.publish(conversions.diagnostic_array(
             [conversions.diagnostic_status(name, level, line, values,

@@ -86,3 +86,31 @@ def test_usage_and_live_line():
     line = live_line(1.5, [0.01, -0.02, 0.125], ['x1.a', 'y2.a'], [], 'tip', 1.0, 3)
     assert 'com [+0.010 -0.020 +0.125] m' in line and 'contacts x1.a,y2.a' in line
     assert 'slack -' in line and 'gait tip' in line and line.endswith('missed 3')
+
+
+def test_sensor_faults_are_named_and_put_into_the_readings():
+    import numpy as np
+
+    settings = structure_sim_settings(values())
+    assert settings.faults.names == ()
+    s = settings.structure
+    string, bar = s.string_names[3], s.bar_names[2]
+    faults = structure_sim_settings(values(faults__broken_length=string,
+                                           faults__flipped_imu=bar)).faults
+    assert faults.names == (f'length[{string}]', f'imu[{bar}]')
+    lengths = np.linspace(0.1, 0.2, s.n_strings)
+    read = faults.lengths(s, lengths)
+    np.testing.assert_allclose(read - lengths, np.eye(s.n_strings)[3] * 0.02, rtol=0, atol=1e-15)
+    assert faults.imu_sign(bar) == -1.0 and faults.imu_sign(s.bar_names[0]) == 1.0
+
+
+@pytest.mark.parametrize('changes, match', [
+    ({'faults__broken_length': 'nope'}, "faults.broken_length: no string 'nope' .the strings: "),
+    ({'faults__flipped_imu': 'x1.a'}, r"faults.flipped_imu: no IMU on 'x1.a' \(the IMUs: x1, "),
+    ({'faults__broken_length': 'x1b-y1a', 'faults__length_offset': 0.0},
+     'faults.length_offset must not be 0'),
+    ({'faults__length_offset': 2.0}, r'faults.length_offset = 2 is outside \[-1, 1\]'),
+])
+def test_unknown_faulty_sensors_are_refused_by_name(changes, match):
+    with pytest.raises(ValueError, match=match):
+        structure_sim_settings(values(**changes))
