@@ -331,7 +331,8 @@ class StructureSimNode(SteppingTwin, Node):
             self._faults = (faults.names, sim.time, f'{stamp.sec}.{stamp.nanosec:09d}')
             self.get_logger().info(
                 f'sensor faults: {", ".join(faults.names) or "none"} from the publication at '
-                f'simulated time {sim.time:.4f} s (stamp {self._faults[2]})')
+                f'simulated time {sim.time:.4f} s (stamp {self._faults[2]}, gait phase '
+                f'{self.gait_phase})')
         if self._pub_clock is not None:
             self._pub_clock.publish(Clock(clock=stamp))
         poses = PoseArray()
