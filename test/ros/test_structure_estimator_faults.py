@@ -156,3 +156,15 @@ def test_a_fault_set_while_rolling_is_named_within_0_1_s(rolling, parameter, val
         assert not others, trust_of(named)
     finally:
         ros.set_parameter(rolling['twin_params'], parameter, '')
+
+
+def test_an_unknown_faulty_sensor_is_refused_by_name(rolling):
+    ros = rolling['ros']
+    for parameter, value, reason in (
+            ('faults.broken_length', 'nope', "faults.broken_length: no string 'nope' (the "
+             'strings: x1a-y2a, '),
+            ('faults.flipped_imu', 'x1.a', "faults.flipped_imu: no IMU on 'x1.a' (the IMUs: "
+             'x1, x2, y1, y2, z1, z2)')):
+        result = ros.set_parameter(rolling['twin_params'], parameter, value)
+        assert not result.successful and reason in result.reason, result.reason
+    assert rolling['twin'].alive()
