@@ -4,14 +4,18 @@
 
 Seeded; no node. For the controller: N random targets (half absurd: huge, indefinite,
 antisymmetric, zero stiffnesses with pose estimates far away or turned by 180 deg about a random
-axis), each refused by the door's checks or ticked; the refusals counted by reason and the worst
-tick time of the accepted ones against the median of the plain ticks (a ratio: accepted input
-must not cost more per tick). For the checks themselves, their cost per message side by side
+axis), each refused by the door's checks or ticked, by the controller the node builds (its
+``control.time_budget``: one period) and, on the same inputs, by one without a budget; the
+refusals and the held ticks counted by reason, the tick times of the plain and the accepted
+hostile inputs (median, p99, worst) and the slowest accepted input (its kind and values) against
+the plain median and the node's period (ratios: accepted input must not cost more than a period
+per tick). For the checks themselves, their cost per message side by side
 with the work they guard (ratios, alternating repeats). For the estimator's door (ROS-free, the
 nodes' ``check_reading`` / ``check_spine_reading``): N readings of a joint and of a 3-joint
 spine, half bad (a negative length, an asymmetric pose covariance, a pose 1 m .. 1e308 m away,
 a load of 1e9 N), each judged alone on arrival; the refusals counted by reason, the check's
-cost per reading against one static estimate on the readings kept.
+cost per reading (median, and the slowest accepted reading: its kind and values) against one
+static estimate on the readings kept and the stream's period (1 kHz, docs/estimation.md).
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import argparse
 import sys
 import time
 from collections import Counter
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +33,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from tensegrity_stiffness.control.controller import (  # noqa: E402
+    OUT_OF_TIME,
     ControlTarget,
-    StiffnessController,
 )
 from tensegrity_stiffness.geometry.screw import exp_se3, exp_so3  # noqa: E402
 from tensegrity_stiffness.mechanics.plausibility import (  # noqa: E402
@@ -55,16 +60,27 @@ from tensegrity_stiffness.nodes.spine_estimator_node import (  # noqa: E402
 from tensegrity_stiffness.nodes.stiffness_controller import (  # noqa: E402
     CONTROLLER_PARAMETERS,
     controller_settings,
+    new_controller,
 )
 from tensegrity_stiffness.nodes.stiffness_node import joint_outputs  # noqa: E402
 
+#: The stream period of the estimator nodes' readings (s): 1 kHz, the rate they are
+#: documented and benchmarked at (docs/estimation.md).
+STREAM_PERIOD_S = 1e-3
 
-def hostile_stiffness(rng: np.random.Generator, reachable: np.ndarray) -> np.ndarray:
+
+def hostile_stiffness(rng: np.random.Generator, reachable: np.ndarray
+                      ) -> tuple[np.ndarray, str]:
     """One of: a diagonal of 0.1 .. 1e13, negative definite, antisymmetric, zero, 1e308
-    everywhere, or a plausible one (``reachable`` scaled by 0.5 .. 2)."""
+    everywhere, or a plausible one (``reachable`` scaled by 0.5 .. 2); and what it is."""
     A = rng.standard_normal((6, 6))
-    return [np.diag(10.0 ** rng.uniform(-1, 13, 6)), -A @ A.T, A - A.T, np.zeros((6, 6)),
-            np.full((6, 6), 1e308), reachable * rng.uniform(0.5, 2.0)][rng.integers(6)]
+    diagonal = 10.0 ** rng.uniform(-1, 13, 6)
+    scale = rng.uniform(0.5, 2.0)
+    kinds = [(np.diag(diagonal), f'diagonal {diagonal.min():.2g} .. {diagonal.max():.2g}'),
+             (-A @ A.T, 'negative definite'), (A - A.T, 'antisymmetric'),
+             (np.zeros((6, 6)), 'zero'), (np.full((6, 6), 1e308), '1e308 everywhere'),
+             (reachable * scale, f'plausible: {scale:.3g} x the unloaded joint\'s')]
+    return kinds[rng.integers(6)]
 
 
 REASONS = ('layout', 'zero', 'antisymmetric', 'not positive semidefinite', 'too large',
@@ -78,49 +94,110 @@ def reason_of(message: str) -> str:
     return f'{message.split(":")[0]}: {kind}'
 
 
+def controller_inputs(n: int, rng: np.random.Generator, model, T0: np.ndarray,
+                      reachable: np.ndarray) -> list[tuple[np.ndarray | None, np.ndarray, str]]:
+    """``n`` inputs ``(K*, pose estimate, what they are)``: every even one plain (the unloaded
+    pose, no stiffness target), every odd one hostile; then the known stall (issue #42): the
+    unloaded joint's own K* after 3 times it (unreachable), whose warm start the active set
+    cycles on (about 630 iterations without a budget)."""
+    inputs = []
+    for i in range(n):
+        if not i % 2:
+            inputs.append((None, T0, 'plain'))
+            continue
+        K, kind = hostile_stiffness(rng, reachable)
+        pose = T0.copy()
+        if i % 4 == 1:  # far away
+            shift = rng.normal(size=3) * 10.0 ** rng.uniform(-5, 3)
+            pose[:3, 3] += shift
+            where = f'pose {np.linalg.norm(shift):.2g} m away'
+        else:  # turned by 180 deg about a random axis
+            axis = rng.normal(size=3)
+            axis /= np.linalg.norm(axis)
+            pose[:3, :3] = exp_so3(np.pi * axis) @ pose[:3, :3]
+            where = 'pose turned 180 deg about ({:.2f}, {:.2f}, {:.2f})'.format(*axis)
+        inputs.append((K, pose, f'K* {kind}, {where}'))
+    inputs += [(3.0 * reachable, T0, "K* 3 x the unloaded joint's (unreachable)"),
+               (reachable, T0, "K* the unloaded joint's (reachable; a stalling warm start)")]
+    return inputs
+
+
 def controller_run(n: int, rng: np.random.Generator) -> None:
     settings = controller_settings({s.name: s.default for s in CONTROLLER_PARAMETERS})
     model = settings.model
-    ctl = StiffnessController(model, settings.limits, settings.start)
+    period = 1.0 / settings.values['control.rate']
     T0 = exp_se3(model.initial_screw)
     reachable = joint_outputs(model, model.initial_screw).state.cartesian_stiffness
-    refusals: Counter[str] = Counter()
-    plain, accepted = [], []
-    for i in range(n):
-        K = None
-        pose = T0
-        if i % 2:
-            K = hostile_stiffness(rng, reachable)
-            pose = T0.copy()
-            if i % 4 == 1:  # far away
-                pose[:3, 3] += rng.normal(size=3) * 10.0 ** rng.uniform(-5, 3)
-            else:  # turned by 180 deg about a random axis
-                axis = rng.normal(size=3)
-                pose[:3, :3] = exp_so3(np.pi * axis / np.linalg.norm(axis)) @ pose[:3, :3]
-        try:
-            if K is not None:
-                check_target_stiffness(model, K, length_scale=ctl.length_scale)
-            check_translation(model, pose[:3, 3], 'pose_estimate')
-        except ValueError as exc:
-            refusals[reason_of(str(exc))] += 1
+    inputs = controller_inputs(n, rng, model, T0, reachable)
+    for budgeted in (True, False):
+        ctl = new_controller(settings)
+        if not budgeted:
+            ctl.time_budget = None
+        refusals: Counter[str] = Counter()
+        held: Counter[str] = Counter()
+        times: dict[str, list[float]] = {'plain': [], 'accepted hostile': []}
+        slowest: tuple[float, str, int] = (0.0, '', 0)
+        cpu: tuple[float, str, int] = (0.0, '', 0)  # by the thread's CPU time (no load)
+        plain_cpu: list[float] = []
+        previous = 'none'
+        for K, pose, what in inputs:
+            try:
+                if K is not None:
+                    check_target_stiffness(model, K, length_scale=ctl.length_scale)
+                check_translation(model, pose[:3, 3], 'pose_estimate')
+            except ValueError as exc:
+                refusals[reason_of(str(exc))] += 1
+                previous = f'refused ({what})'
+                continue
+            start, cpu_start = time.perf_counter(), time.thread_time()
+            try:
+                cmd = ctl.update(period, ControlTarget(pose=T0, cartesian_stiffness=K),
+                                 pose=pose)
+            except ValueError as exc:
+                refusals['tick: ' + str(exc)[:40]] += 1
+                previous = f'refused ({what})'
+                continue
+            elapsed = time.perf_counter() - start
+            spent = time.thread_time() - cpu_start
+            if cmd.out_of_time:
+                held[OUT_OF_TIME] += 1
+            elif not cmd.feasible:
+                held[cmd.message.split(':')[0]] += 1
+            times['plain' if K is None else 'accepted hostile'].append(elapsed)
+            if K is None:
+                plain_cpu.append(spent)
+            if elapsed > slowest[0]:
+                slowest = (elapsed, f'{what} (after {previous}): {cmd.message[:90]}',
+                           cmd.iterations)
+            if spent > cpu[0]:
+                cpu = (spent, f'{what} (after {previous}): {cmd.message[:90]}',
+                       cmd.iterations)
+            previous = what
+        budget = ('no time budget' if ctl.time_budget is None else
+                  f'control.time_budget {1e3 * ctl.time_budget:g} ms (one period)')
+        print(f'controller, {budget}: {n} inputs, {len(times["plain"])} plain ticks, '
+              f'{len(times["accepted hostile"])} hostile accepted, '
+              f'{sum(refusals.values())} refused, {sum(held.values())} ticks held')
+        if budgeted:
+            for reason, count in refusals.most_common():
+                print(f'  refused {count:5d}  {reason}')
+        for reason, count in held.most_common():
+            print(f'  held    {count:5d}  {reason}')
+        if not times['plain']:
             continue
-        start = time.perf_counter()
-        try:
-            ctl.update(0.002, ControlTarget(pose=T0, cartesian_stiffness=K), pose=pose)
-        except ValueError as exc:
-            refusals['tick: ' + str(exc)[:40]] += 1
-            continue
-        (accepted if i % 2 else plain).append(time.perf_counter() - start)
-    print(f'controller: {n} inputs, {len(plain)} plain ticks, {len(accepted)} hostile accepted,'
-          f' {sum(refusals.values())} refused')
-    for reason, count in refusals.most_common():
-        print(f'  refused {count:5d}  {reason}')
-    if plain and accepted:
-        ms = {name: 1e3 * np.percentile(v, [50, 99, 100]) for name, v in
-              (('plain', plain), ('accepted hostile', accepted))}
-        for name, (median, p99, worst) in ms.items():
-            print(f'  tick {name}: median {median:.3f} ms, p99 {p99:.3f} ms, worst {worst:.3f} '
-                  f'ms ({worst / ms["plain"][0]:.1f} x the plain median)')
+        plain = float(np.median(times['plain']))
+        for name, values in times.items():
+            if values:
+                median, p99, worst = 1e3 * np.percentile(values, [50, 99, 100])
+                print(f'  tick {name}: median {median:.3f} ms, p99 {p99:.3f} ms, worst '
+                      f'{worst:.3f} ms ({1e-3 * worst / plain:.1f} x the plain median, '
+                      f'{1e-3 * worst / period:.2f} x the period {1e3 * period:g} ms)')
+        medians = {'wall': plain, 'CPU': float(np.median(plain_cpu))}
+        for label, (elapsed, what, iterations) in (('wall', slowest), ('CPU', cpu)):
+            print(f'  slowest accepted input ({label} time): {1e3 * elapsed:.3f} ms = '
+                  f'{elapsed / medians[label]:.1f} x the plain median '
+                  f'({1e3 * medians[label]:.3f} ms) = {elapsed / period:.2f} x the period; '
+                  f'{iterations} QP iterations; {what}')
 
 
 def check_costs(n: int, rng: np.random.Generator) -> None:
@@ -173,26 +250,60 @@ def hostile_reading(rng: np.random.Generator, i: int, name: str, good: dict, far
     return good[name]
 
 
+def summary(value: object) -> str:
+    """A reading's values in a few words (shape, range, what is not finite)."""
+    if isinstance(value, tuple):
+        T, cov = value
+        text = f'pose at {np.linalg.norm(T[:3, 3]):.3g} m'
+        return text + ('' if cov is None else ', covariance given')
+    a = np.asarray(value, dtype=np.float64)
+    finite = a[np.isfinite(a)]
+    span = f'{finite.min():.3g} .. {finite.max():.3g}' if finite.size else 'none finite'
+    return f'{a.size} values {span}' + (f', {a.size - finite.size} NaN'
+                                        if finite.size < a.size else '')
+
+
+@dataclass
+class Judged:
+    """What :func:`judged` found: refusals by reason, the best time per reading of 3 repeats
+    (s), the median and the slowest accepted reading's time (s) and what it was."""
+
+    refusals: Counter[str]
+    per_reading: float
+    accepted_median: float
+    slowest: float
+    slowest_reading: str
+
+
 def judged(check, settings, n: int, rng: np.random.Generator, good: dict, far: float
-           ) -> tuple[Counter[str], float]:
-    """Judge ``n`` readings (half bad) with ``check``: (refusals by reason, best time per
-    reading of 3 repeats, s)."""
+           ) -> Judged:
+    """Judge ``n`` readings (half bad) with ``check``, each timed alone (its best of 3
+    repeats)."""
     names = ('measured_lengths', 'measured_pose', 'measured_wrench')
     readings = [(names[i % 3], hostile_reading(rng, i, names[i % 3], good, far))
                 for i in range(n)]
     refusals: Counter[str] = Counter()
-    best = np.inf
+    best = np.full(n, np.inf)
+    accepted = np.zeros(n, bool)
     for repeat in range(3):
-        start = time.perf_counter()
-        for name, value in readings:
+        for k, (name, value) in enumerate(readings):
+            start = time.perf_counter()
             try:
                 check(settings, name, value)
+                ok = True
             except ValueError as exc:
+                ok = False
                 if repeat == 0:
                     text = str(exc).split(': ', 1)[1].split(' (this reading dropped')[0]
                     refusals[reason_of(text)] += 1
-        best = min(best, (time.perf_counter() - start) / n)
-    return refusals, best
+            best[k] = min(best[k], time.perf_counter() - start)
+            accepted[k] = ok
+    kept = np.flatnonzero(accepted)
+    worst = int(kept[np.argmax(best[kept])]) if kept.size else 0
+    name, value = readings[worst]
+    return Judged(refusals, float(best.mean()),
+                  float(np.median(best[kept])) if kept.size else np.nan,
+                  float(best[worst]) if kept.size else np.nan, f'{name}: {summary(value)}')
 
 
 def estimator_run(n: int, rng: np.random.Generator) -> None:
@@ -213,13 +324,17 @@ def estimator_run(n: int, rng: np.random.Generator) -> None:
                   'measured_wrench': np.zeros(6)}
     spine_good['measured_lengths'] = np.concatenate(list(chain_state.lengths))
     for what, check, node_settings, readings in (
-            ('joint', check_reading, settings, good),
-            ('3-joint spine', check_spine_reading, spine, spine_good)):
-        refusals, per_reading = judged(check, node_settings, n, rng, readings, 1.0)
-        print(f'estimator door, {what}: {n} readings (half bad), {sum(refusals.values())} '
-              f'dropped alone, {1e6 * per_reading:.1f} us per reading (best of 3)')
-        for reason, count in refusals.most_common():
+            ('joint (estimator_node)', check_reading, settings, good),
+            ('3-joint spine (spine_estimator_node)', check_spine_reading, spine, spine_good)):
+        j = judged(check, node_settings, n, rng, readings, 1.0)
+        print(f'estimator door, {what}: {n} readings (half bad), {sum(j.refusals.values())} '
+              f'dropped alone, {1e6 * j.per_reading:.1f} us per reading (best of 3)')
+        for reason, count in j.refusals.most_common():
             print(f'  dropped {count:5d}  {reason}')
+        print(f'  slowest accepted reading: {1e6 * j.slowest:.1f} us = '
+              f'{j.slowest / j.accepted_median:.1f} x the accepted median '
+              f'({1e6 * j.accepted_median:.1f} us) = {j.slowest / STREAM_PERIOD_S:.3f} x the '
+              f'stream period {1e3 * STREAM_PERIOD_S:g} ms; {j.slowest_reading}')
     now = 0.0
     snapshot = EstimatorInput({'measured_tensions': Reading(good['measured_tensions'], now)},
                               now)
@@ -228,7 +343,8 @@ def estimator_run(n: int, rng: np.random.Generator) -> None:
     for _ in range(repeats):
         estimator_outputs(settings, snapshot, False)
     estimate = (time.perf_counter() - start) / repeats
-    print(f'  one static joint estimate on the readings kept: {1e3 * estimate:.2f} ms')
+    print(f'  one static joint estimate on the readings kept: {1e3 * estimate:.2f} ms = '
+          f'{estimate / STREAM_PERIOD_S:.2f} x the stream period')
 
 
 def main() -> None:

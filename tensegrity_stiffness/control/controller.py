@@ -67,6 +67,7 @@ The math (notation of :mod:`tensegrity_stiffness.mechanics.design`)
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -112,6 +113,8 @@ __all__ = [
     'FACE_RESIDUAL_TOLERANCE',
     'FEASIBILITY_TOLERANCE',
     'MAX_ACTIVE_SET_ITERATIONS',
+    'MIN_QP_ITERATIONS',
+    'OUT_OF_TIME',
     'POSE_ROTATION_TOLERANCE',
     'SATURATION_TOLERANCE',
     'STIFFNESS_MET_TOLERANCE',
@@ -158,6 +161,13 @@ POSE_ROTATION_TOLERANCE = 1e-6
 WARM_ACTIVE_SET_ITERATIONS = 100
 #: Iterations of the QP's last resort (scipy's SLSQP) per tick.
 SLSQP_MAX_ITERATIONS = 500
+#: Iterations of a tick's QP (all phases) done before its deadline is looked at: a joint's
+#: tick, warm or cold, converges in at most about 15 (bench/bench_hostile.py), so only a QP
+#: that stalls (a degenerate face the active set cycles on: 600 iterations, 90 ms) meets the
+#: deadline, however loaded the machine.
+MIN_QP_ITERATIONS = 20
+#: The reason of a QP or a tick stopped at its deadline (the start of its message).
+OUT_OF_TIME = 'time budget exhausted'
 #: A stiffness target counts as met when the relative scaled error is at most this.
 STIFFNESS_MET_TOLERANCE = 1e-3
 #: A command is "saturated" when it differs from the feedforward by more than this (m).
@@ -265,7 +275,8 @@ class ControlCommand:
     strings held by a rate or range limit this tick; ``message`` why a target is not met;
     ``design_pose`` (4, 4) the pose designed for (target shifted by the integral correction);
     ``pose_error`` (6,) measured error ``[dx dy dz rx ry rz]`` (m, rad; zeros without a
-    measurement); ``iterations`` of the QP; ``warm`` True when the last tick's face was optimal."""
+    measurement); ``iterations`` of the QP; ``warm`` True when the last tick's face was optimal;
+    ``out_of_time`` True when the QP ran past the tick's deadline (held, not feasible)."""
 
     rest_lengths: FloatArray
     feasible: bool
@@ -278,6 +289,7 @@ class ControlCommand:
     pose_error: FloatArray
     iterations: int = 0
     warm: bool = False
+    out_of_time: bool = False
 
 
 # ---------------------------------------------------------------------------------- the pose
@@ -383,7 +395,8 @@ class QPResult:
     """``t`` (n,), the working set ``at_lo`` / ``at_hi`` (n,), ``iterations``, ``converged``,
     ``warm`` (the start face was optimal: one KKT solve); ``reason`` why it stopped short of the
     optimum (an iteration limit hit, SLSQP's message; with ``converged`` a feasible point SLSQP
-    left short of it), empty otherwise."""
+    left short of it; :data:`OUT_OF_TIME` at the deadline, with ``out_of_time``), empty
+    otherwise."""
 
     t: FloatArray
     at_lo: BoolArray
@@ -392,6 +405,7 @@ class QPResult:
     converged: bool
     warm: bool
     reason: str = ''
+    out_of_time: bool = False
 
 
 #: A face's KKT solution counts as accurate when its residual is at most this times
@@ -479,7 +493,8 @@ def warm_face_numpy(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray,
 def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
                  hi: FloatArray, t_start: FloatArray, at_lo: BoolArray | None = None,
                  at_hi: BoolArray | None = None, use_kernel: bool = True,
-                 max_iterations: int = MAX_ACTIVE_SET_ITERATIONS) -> QPResult:
+                 max_iterations: int = MAX_ACTIVE_SET_ITERATIONS, deadline: float = math.inf,
+                 min_iterations: int = MIN_QP_ITERATIONS) -> QPResult:
     """``min 1/2 t'Pt - c't`` s.t. ``A t = b``, ``lo <= t <= hi`` (P positive semidefinite) by a
     primal active-set method, warm-started from ``t_start`` and the working set ``at_lo`` /
     ``at_hi`` of the last solve. First the start face alone (optimal in steady state:
@@ -491,7 +506,10 @@ def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo:
     ``use_kernel``: the first step in the compiled kernel when it is loaded (the controllers
     pass their model's ``uses_kernel``). ``max_iterations`` bounds each active-set phase (the
     warm one at :data:`WARM_ACTIVE_SET_ITERATIONS`) and the SLSQP last resort (at
-    :data:`SLSQP_MAX_ITERATIONS`): no input makes a tick unbounded."""
+    :data:`SLSQP_MAX_ITERATIONS`): no input makes a tick unbounded. ``deadline``
+    (``time.perf_counter()`` s) bounds it in time after its first ``min_iterations``
+    iterations: past it the solve stops unconverged with ``out_of_time`` and the reason
+    :data:`OUT_OF_TIME`."""
     n = lo.size
     wl = np.zeros(n, bool) if at_lo is None else at_lo.copy()
     wh = np.zeros(n, bool) if at_hi is None else (at_hi & ~wl)
@@ -499,6 +517,20 @@ def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo:
     optimum = warm_face(P, c, A, b, lo, hi, t_start, wl, wh, use_kernel)
     if optimum is not None:
         return QPResult(optimum, wl, wh, 1, True, True)
+    spent = 0
+
+    def phase(P_: FloatArray, c_: FloatArray, A_: FloatArray, b_: FloatArray, t0: FloatArray,
+              limit: int) -> QPResult:
+        """One active-set phase under the deadline (the iterations before it count)."""
+        nonlocal spent
+        sol = _active_set(P_, c_, A_, b_, lo, hi, t0, limit, deadline,
+                          max(0, min_iterations - spent))
+        spent += sol.iterations
+        sol.iterations = spent
+        if sol.out_of_time:
+            sol.reason = _out_of_time(spent)
+        return sol
+
     # 2. A feasible start.
     t = np.clip(t_start, lo, hi)
     r = b - A @ t
@@ -512,47 +544,64 @@ def solve_box_qp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo:
                 and np.linalg.norm(A @ trial - b) <= FEASIBILITY_TOLERANCE):
             t = trial
         else:
-            AtA, Atb = A.T @ A, A.T @ b
-            phase1 = _active_set(AtA, Atb, np.zeros((0, n)), np.zeros(0), lo, hi, t,
-                                 max_iterations)
+            phase1 = phase(A.T @ A, A.T @ b, np.zeros((0, n)), np.zeros(0), t,
+                           max_iterations)
             t = phase1.t
-            if np.linalg.norm(A @ t - b) > FEASIBILITY_TOLERANCE:
+            if phase1.out_of_time or np.linalg.norm(A @ t - b) > FEASIBILITY_TOLERANCE:
                 return replace(phase1, converged=False)
     # 3. The active set; a warm start that stalls (cycling on a degenerate face) is redone cold
     # from the box least squares started at the middle, as the design does.
-    sol = _active_set(P, c, A, b, lo, hi, t, min(WARM_ACTIVE_SET_ITERATIONS, max_iterations))
-    if sol.converged:
+    sol = phase(P, c, A, b, t, min(WARM_ACTIVE_SET_ITERATIONS, max_iterations))
+    if sol.converged or sol.out_of_time:
         return sol
     middle = 0.5 * (lo + hi)
-    phase1 = _active_set(A.T @ A, A.T @ b, np.zeros((0, n)), np.zeros(0), lo, hi, middle,
-                         max_iterations)
-    if np.linalg.norm(A @ phase1.t - b) > FEASIBILITY_TOLERANCE:
+    phase1 = phase(A.T @ A, A.T @ b, np.zeros((0, n)), np.zeros(0), middle, max_iterations)
+    if phase1.out_of_time or np.linalg.norm(A @ phase1.t - b) > FEASIBILITY_TOLERANCE:
         return replace(phase1, converged=False)
-    cold = _active_set(P, c, A, b, lo, hi, phase1.t, max_iterations)
-    cold.iterations += sol.iterations + phase1.iterations
-    if cold.converged:
+    cold = phase(P, c, A, b, phase1.t, max_iterations)
+    if cold.converged or cold.out_of_time:
         return cold
     last = _slsqp(P, c, A, b, lo, hi, phase1.t, cold.iterations,
-                  min(SLSQP_MAX_ITERATIONS, max_iterations))
-    if last.reason:
+                  min(SLSQP_MAX_ITERATIONS, max_iterations), deadline)
+    if last.reason and not last.out_of_time:
         last.reason = f'{cold.reason}, then {last.reason}'
     return last
 
 
+def _out_of_time(iterations: int) -> str:
+    """The reason of a QP stopped at its deadline after ``iterations``."""
+    return f'{OUT_OF_TIME}: the QP passed its deadline after {iterations} iterations'
+
+
+class _DeadlineError(Exception):
+    """Raised inside SLSQP's objective to stop it at the deadline."""
+
+
 def _slsqp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
            hi: FloatArray, t0: FloatArray, iterations: int,
-           max_iterations: int = SLSQP_MAX_ITERATIONS) -> QPResult:
+           max_iterations: int = SLSQP_MAX_ITERATIONS, deadline: float = math.inf
+           ) -> QPResult:
     """Last resort for a degenerate face on which the active set cycles (seen on the spine's
     60-string QP with more active bounds than free dofs): scipy's SLSQP from a feasible point
-    (at most ``max_iterations``), then the equality restored exactly on the strings off their
-    bounds."""
+    (at most ``max_iterations``, stopped unconverged at ``deadline``), then the equality
+    restored exactly on the strings off their bounds."""
     from scipy.optimize import minimize
 
-    res = minimize(lambda t: 0.5 * t @ P @ t - c @ t, t0, jac=lambda t: P @ t - c,
-                   bounds=list(zip(lo, hi, strict=True)), method='SLSQP',
-                   constraints=[{'type': 'eq', 'fun': lambda t: A @ t - b,
-                                 'jac': lambda t: A}],
-                   options={'ftol': 1e-14, 'maxiter': max_iterations})
+    def objective(t: FloatArray) -> float:
+        if time.perf_counter() > deadline:
+            raise _DeadlineError
+        return 0.5 * t @ P @ t - c @ t
+
+    try:
+        res = minimize(objective, t0, jac=lambda t: P @ t - c,
+                       bounds=list(zip(lo, hi, strict=True)), method='SLSQP',
+                       constraints=[{'type': 'eq', 'fun': lambda t: A @ t - b,
+                                     'jac': lambda t: A}],
+                       options={'ftol': 1e-14, 'maxiter': max_iterations})
+    except _DeadlineError:
+        n = lo.size
+        return QPResult(t0.copy(), np.zeros(n, bool), np.zeros(n, bool), iterations, False,
+                        False, _out_of_time(iterations), True)
     t = np.clip(res.x, lo, hi)
     span = 1e-9 * np.maximum(1.0, hi - lo)
     at_lo, at_hi = t - lo <= span, hi - t <= span
@@ -571,8 +620,10 @@ def _slsqp(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: Float
 
 def _active_set(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: FloatArray,
                 hi: FloatArray, t0: FloatArray,
-                max_iterations: int = MAX_ACTIVE_SET_ITERATIONS) -> QPResult:
-    """Primal active set from a feasible ``t0`` (its bounds form the first working set)."""
+                max_iterations: int = MAX_ACTIVE_SET_ITERATIONS, deadline: float = math.inf,
+                min_iterations: int = 0) -> QPResult:
+    """Primal active set from a feasible ``t0`` (its bounds form the first working set),
+    stopped at ``deadline`` after ``min_iterations`` (:func:`active_set`)."""
 
     def face(t: FloatArray, free: BoolArray, nu: FloatArray) -> tuple[FloatArray, FloatArray]:
         if free.any():
@@ -580,10 +631,11 @@ def _active_set(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, lo: 
         return np.zeros(0), (np.linalg.lstsq(A.T, c - P @ t, rcond=None)[0] if A.shape[0]
                              else nu)
 
-    sol = active_set(P, c, A, lo, hi, t0, face, max_iterations)
-    reason = '' if sol.converged else (
+    sol = active_set(P, c, A, lo, hi, t0, face, max_iterations, deadline, min_iterations)
+    reason = '' if sol.converged or sol.out_of_time else (
         f'the active-set method stopped at its limit of {max_iterations} iterations')
-    return QPResult(sol.t, sol.at_lo, sol.at_hi, sol.iterations, sol.converged, False, reason)
+    return QPResult(sol.t, sol.at_lo, sol.at_hi, sol.iterations, sol.converged, False, reason,
+                    sol.out_of_time)
 
 
 def _objective(pose: PoseTerms, target: ControlTarget, S: FloatArray, middle: FloatArray
@@ -678,6 +730,21 @@ def _measured(pose: ArrayLike | None, screw: ArrayLike | None,
     if screw is not None:
         return _exp(kn, single_screw(screw))
     return None
+
+
+def _check_budget(time_budget: float | None) -> float | None:
+    """A tick's time budget: None (none) or finite and >= 0 s; ValueError otherwise."""
+    if time_budget is None:
+        return None
+    budget = finite_scalar('time_budget', time_budget)
+    if budget < 0.0:
+        raise ValueError(f'time_budget must be >= 0 s, got {budget}')
+    return budget
+
+
+def _deadline(time_budget: float | None) -> float:
+    """The deadline (``time.perf_counter()`` s) of a tick starting now (inf: none)."""
+    return math.inf if time_budget is None else time.perf_counter() + time_budget
 
 
 def _check_dt(dt: float) -> float:
@@ -856,14 +923,17 @@ class StiffnessController(_PoseFeedback):
     ``integral_gain`` k_i (1/s), ``proportional_gain`` k_p (share of the error added to the
     shift, in [0, 1)), ``integral_limit`` (rad, m) clamp of the correction;
     ``rest_length_offsets`` d (n,) m (true rest length = command + d); ``length_scale`` L (m) of
-    S (default as the design: the largest distance of a link-1 node from the origin)."""
+    S (default as the design: the largest distance of a link-1 node from the origin);
+    ``time_budget`` (s, None: none) the wall-clock budget of a tick, from the call of
+    :meth:`update`: a QP past it (after its first :data:`MIN_QP_ITERATIONS`) holds the tick
+    (:data:`OUT_OF_TIME`)."""
 
     def __init__(self, model: JointModel, limits: ActuatorLimits, rest_lengths: ArrayLike, *,
                  integral_gain: float = DEFAULT_INTEGRAL_GAIN,
                  proportional_gain: float = DEFAULT_PROPORTIONAL_GAIN,
                  integral_limit: Sequence[float] = DEFAULT_INTEGRAL_LIMIT,
                  rest_length_offsets: ArrayLike | None = None,
-                 length_scale: float | None = None) -> None:
+                 length_scale: float | None = None, time_budget: float | None = None) -> None:
         if not isinstance(model, JointModel):
             raise ValueError('model must be a JointModel')
         if not isinstance(limits, ActuatorLimits):
@@ -885,6 +955,7 @@ class StiffnessController(_PoseFeedback):
             if self.length_scale <= 0.0:
                 raise ValueError('length_scale must be > 0')
         self._S = length_scaling(self.length_scale)
+        self.time_budget = _check_budget(time_budget)
         reference = self._S[:, None] * pose_terms(model, model.initial_screw).B
         #: How many directions the strings do not hold at the unloaded pose (a ring: 1, its
         #: spin); those are left out of the equilibrium and of the pose feedback every tick.
@@ -945,10 +1016,11 @@ class StiffnessController(_PoseFeedback):
         (4x4 or [x y z qx qy qz qw]) or ``screw`` (none: no feedback this tick) and the known
         or estimated ``external_wrench`` (6,) on link 2 in {1} about its origin (default 0).
         Bad input raises ValueError naming it and leaves the state unchanged."""
+        deadline = _deadline(self.time_budget)
         dt, W, e, error, z = self._feedback(dt, target, pose, screw, 'external_wrench',
                                             external_wrench)
         T_d = _exp(self._exp_kernel, z + self.proportional_gain * e) @ target.transform
-        return self._tick(dt, target, T_d, W, z, error)
+        return self._tick(dt, target, T_d, W, z, error, deadline)
 
     def _problem(self, T_d: FloatArray, W: FloatArray) -> _JointProblem | str:
         """The QP data at the design pose under the load W, or why there is none."""
@@ -974,13 +1046,15 @@ class StiffnessController(_PoseFeedback):
         return _JointProblem(terms, lo, hi, 0.5 * (self._t_min + upper), A, b, start, unheld)
 
     def _tick(self, dt: float, target: ControlTarget, T_d: FloatArray, W: FloatArray,
-              z: FloatArray, error: FloatArray) -> ControlCommand:
+              z: FloatArray, error: FloatArray, deadline: float = math.inf) -> ControlCommand:
         pr = self._problem(T_d, W)
         if isinstance(pr, str):
             return self._hold(T_d, error, pr)
         P, c = _objective(pr.terms, target, self._S, pr.middle)
         sol = solve_box_qp(P, c, pr.A, pr.b, pr.lo, pr.hi, pr.start, self._at_lo, self._at_hi,
-                           self.model.uses_kernel)
+                           self.model.uses_kernel, deadline=deadline)
+        if sol.out_of_time:
+            return self._out_of_time(T_d, error, sol.iterations)
         if not sol.converged:
             return self._hold(T_d, error, _failure(pr.A, pr.b, sol))
         self._unheld = pr.unheld
@@ -1019,6 +1093,20 @@ class StiffnessController(_PoseFeedback):
         return ControlCommand(command.copy(), True, err, Kc, t.copy(), saturated,
                               '; '.join(messages) or 'ok', T_d, error, sol.iterations,
                               sol.warm)
+
+    def _out_of_time(self, T_d: FloatArray, error: FloatArray, iterations: int
+                     ) -> ControlCommand:
+        """Hold a tick whose QP ran past its deadline: the command and the integral are kept;
+        the warm start is dropped (a face the active set stalls on would stall every tick from
+        it again), so the next tick's QP starts from the middle of the box."""
+        n = self.model.n_strings
+        self._t = None
+        self._at_lo, self._at_hi = np.zeros(n, bool), np.zeros(n, bool)
+        budget = math.inf if self.time_budget is None else self.time_budget
+        held = self._hold(T_d, error, f'{OUT_OF_TIME}: the QP passed the tick\'s deadline of '
+                          f'{budget:.3g} s after {iterations} iterations (the next tick starts '
+                          'cold)')
+        return replace(held, out_of_time=True, iterations=iterations)
 
     def _hold(self, T_d: FloatArray, error: FloatArray, message: str) -> ControlCommand:
         """Keep the last safe command (infeasible target): the model's prediction of it at the
@@ -1078,13 +1166,14 @@ class ChainStiffnessController(_PoseFeedback):
     Gauss-Newton step per tick, so a reachable target is met over a few ticks. The tip stiffness is
     then reported by the exact chain formula (loads and weights included). Gains and limits as
     :class:`StiffnessController` (the joints' own integrals are off: the tip integral closes the
-    loop). Why only this much of the tip K_c can be shaped: ``docs/control.md``."""
+    loop). Why only this much of the tip K_c can be shaped: ``docs/control.md``.
+    ``time_budget`` (s, None: none): as :class:`StiffnessController`'s, for the whole tick."""
 
     def __init__(self, chain: JointChain, limits: ActuatorLimits | Sequence[ActuatorLimits],
                  rest_lengths: Any, *, integral_gain: float = DEFAULT_INTEGRAL_GAIN,
                  integral_limit: Sequence[float] = DEFAULT_INTEGRAL_LIMIT,
-                 rest_length_offsets: Any = None, initial_screws: ArrayLike | None = None
-                 ) -> None:
+                 rest_length_offsets: Any = None, initial_screws: ArrayLike | None = None,
+                 time_budget: float | None = None) -> None:
         if not isinstance(chain, JointChain):
             raise ValueError('chain must be a JointChain')
         N = chain.n_joints
@@ -1099,7 +1188,7 @@ class ChainStiffnessController(_PoseFeedback):
         rows = self._rows(rest_lengths)
         self.integral_gain, _, self.integral_limit = _gains(integral_gain, 0.0, integral_limit)
         self.joints = [StiffnessController(m, lim, r, integral_gain=0.0,
-                                           rest_length_offsets=d)
+                                           rest_length_offsets=d, time_budget=time_budget)
                        for m, lim, r, d in zip(chain.joints, per_limits, rows, offsets,
                                                strict=True)]
         ref = chain.unloaded_screws() if initial_screws is None else finite_array_of_shape(
@@ -1148,7 +1237,8 @@ class ChainStiffnessController(_PoseFeedback):
         return xi
 
     def _shape_tip(self, dt: float, target: ControlTarget, transforms: FloatArray,
-                   loads: FloatArray, frames: FloatArray) -> list[ControlCommand]:
+                   loads: FloatArray, frames: FloatArray, deadline: float = math.inf
+                   ) -> list[ControlCommand]:
         """All joints' tensions in one QP: each joint's equilibrium exact (its 6 equalities),
         the tip stiffness of the series compliance ``C = sum_i Ad_i K_i^-1 Ad_i^T`` linearised
         at the last tick's tensions (one Gauss-Newton step per tick, damped by
@@ -1198,7 +1288,10 @@ class ChainStiffnessController(_PoseFeedback):
         at_lo = np.concatenate([ctl._at_lo for ctl in self.joints])
         at_hi = np.concatenate([ctl._at_hi for ctl in self.joints])
         sol = solve_box_qp(P, c, A, b, lo, hi, t_all, at_lo, at_hi,
-                           self.joints[0].model.uses_kernel)
+                           self.joints[0].model.uses_kernel, deadline=deadline)
+        if sol.out_of_time:
+            return [ctl._out_of_time(x, np.zeros(6), sol.iterations)
+                    for ctl, x in zip(self.joints, xi, strict=True)]
         if not sol.converged:
             text = _failure(A, b, sol)
             return [ctl._hold(x, np.zeros(6), text) for ctl, x in zip(self.joints, xi,
@@ -1218,6 +1311,7 @@ class ChainStiffnessController(_PoseFeedback):
         """One tick: ``target`` (tip pose in the base; ``cartesian_stiffness`` the tip K_c* in
         the base), the measured ``tip_pose`` (4x4 or 7) and the known ``tip_wrench`` (6,)
         (base, about the tip link's origin; default 0); ``gravity`` as the chain's."""
+        deadline = _deadline(self.joints[0].time_budget)
         dt, W, _, error, z = self._feedback(dt, target, tip_pose, None, 'tip_wrench',
                                             tip_wrench)
         xi = self._screws_for(_exp(self._exp_kernel, z) @ target.transform)
@@ -1226,10 +1320,11 @@ class ChainStiffnessController(_PoseFeedback):
         loads = chain.residuals(xi, W, gravity) - state.wrenches
         if target.cartesian_stiffness is None:
             commands = [ctl._tick(dt, ControlTarget(screw=xi[i]), state.transforms[i],
-                                  loads[i], ctl.integral, np.zeros(6))
+                                  loads[i], ctl.integral, np.zeros(6), deadline)
                         for i, ctl in enumerate(self.joints)]
         else:
-            commands = self._shape_tip(dt, target, state.transforms, loads, state.joint_frames)
+            commands = self._shape_tip(dt, target, state.transforms, loads, state.joint_frames,
+                                       deadline)
         feasible = all(c.feasible for c in commands)
         saturated = np.array([c.saturated for c in commands])
         if feasible:

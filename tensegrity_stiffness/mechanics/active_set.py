@@ -11,6 +11,8 @@ bound with the most negative multiplier leaves it, until none is negative.
 
 from __future__ import annotations
 
+import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -34,7 +36,8 @@ FaceSolver = Callable[[FloatArray, BoolArray, FloatArray], tuple[FloatArray, Flo
 @dataclass
 class ActiveSetResult:
     """``t`` (n,), the equality multipliers ``nu`` (m,), the working set ``at_lo`` / ``at_hi``
-    (n,), ``iterations`` and ``converged`` (False: the iteration limit was hit)."""
+    (n,), ``iterations`` and ``converged`` (False: the iteration limit or, with
+    ``out_of_time``, the deadline was hit; ``t`` is then the last feasible iterate)."""
 
     t: FloatArray
     nu: FloatArray
@@ -42,6 +45,7 @@ class ActiveSetResult:
     at_hi: BoolArray
     iterations: int
     converged: bool
+    out_of_time: bool = False
 
 
 def kkt_system(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, t: FloatArray,
@@ -63,11 +67,13 @@ def kkt_system(P: FloatArray, c: FloatArray, A: FloatArray, b: FloatArray, t: Fl
 
 def active_set(P: FloatArray, c: FloatArray, A: FloatArray, lo: FloatArray, hi: FloatArray,
                t0: FloatArray, face: FaceSolver,
-               max_iterations: int = MAX_ACTIVE_SET_ITERATIONS) -> ActiveSetResult:
+               max_iterations: int = MAX_ACTIVE_SET_ITERATIONS, deadline: float = math.inf,
+               min_iterations: int = 0) -> ActiveSetResult:
     """Primal active set for ``min 1/2 t'Pt - c't`` s.t. ``A t = b``, ``lo <= t <= hi`` from a
     feasible ``t0`` (its bounds form the first working set); ``face`` solves each face (``b``
     is the face solver's). Multipliers count as nonnegative down to
-    ``-ACTIVE_SET_TOLERANCE * max(1, |P|, |c|)``."""
+    ``-ACTIVE_SET_TOLERANCE * max(1, |P|, |c|)``. Stops unconverged with ``out_of_time`` when
+    ``time.perf_counter() > deadline``, looked at after the first ``min_iterations``."""
     scale = max(1.0, float(np.abs(P).max()), float(np.abs(c).max()))
     t = np.clip(t0, lo, hi)
     span = np.maximum(hi - lo, 1e-300)
@@ -76,6 +82,8 @@ def active_set(P: FloatArray, c: FloatArray, A: FloatArray, lo: FloatArray, hi: 
     t[at_lo], t[at_hi] = lo[at_lo], hi[at_hi]
     nu = np.zeros(A.shape[0])
     for it in range(1, max_iterations + 1):
+        if it > min_iterations and time.perf_counter() > deadline:
+            return ActiveSetResult(t, nu, at_lo, at_hi, it - 1, False, True)
         free = ~(at_lo | at_hi)
         F = np.flatnonzero(free)
         target, nu = face(t, free, nu)

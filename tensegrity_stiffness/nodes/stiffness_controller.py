@@ -12,12 +12,13 @@ from __future__ import annotations
 import time
 from collections import deque
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from tensegrity_stiffness.control.controller import (
+    MIN_QP_ITERATIONS,
     ActuatorLimits,
     ControlCommand,
     ControlTarget,
@@ -62,6 +63,11 @@ CONTROL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'tension)', range=(0.0, 1e6)),
     ParameterSpec('control.rate', 'double', 500.0, 'controller ticks per second, Hz',
                   read_only=True, range=(1.0, 10_000.0)),
+    ParameterSpec('control.time_budget', 'double', 0.0,
+                  "wall-clock budget of one tick, s (0: one period, 1 / control.rate); a tick "
+                  f"whose QP is past it after its first {MIN_QP_ITERATIONS} iterations is held "
+                  "('time budget exhausted', the last command kept) and the next starts cold",
+                  range=(0.0, 10.0)),
     ParameterSpec('control.max_state_age', 'double', 0.05,
                   'a pose estimate older than this (s, by arrival) holds the last command',
                   range=(0.0, 3600.0)),
@@ -159,6 +165,11 @@ def controller_settings(values: Mapping[str, Any]) -> ControllerSettings:
     return settings
 
 
+def tick_time_budget(values: Mapping[str, Any]) -> float:
+    """A tick's time budget (s): ``control.time_budget``, or one period when it is 0."""
+    return values['control.time_budget'] or 1.0 / values['control.rate']
+
+
 def new_controller(settings: ControllerSettings, rest_lengths: np.ndarray | None = None
                    ) -> StiffnessController:
     """The controller of ``settings`` starting from the command ``rest_lengths`` (None: the
@@ -169,7 +180,8 @@ def new_controller(settings: ControllerSettings, rest_lengths: np.ndarray | None
                                settings.start if rest_lengths is None else rest_lengths,
                                integral_gain=values['control.integral_gain'],
                                proportional_gain=values['control.proportional_gain'],
-                               rest_length_offsets=settings.offsets)
+                               rest_length_offsets=settings.offsets,
+                               time_budget=tick_time_budget(values))
 
 
 def stiffness_target(values: np.ndarray, layout: tuple[int, ...] = ()) -> np.ndarray | None:
@@ -231,7 +243,9 @@ class ControllerTicks:
     holds the last command (counted in :attr:`held`, the reason in :attr:`hold_reason`) while
     there is no target pose or no state younger than ``control.max_state_age``; its time step
     is the time since the last tick, at most :data:`MAX_STEP_PERIODS` periods (the first: one
-    period). Not thread-safe: the node calls it under its lock."""
+    period). A tick whose QP runs past ``control.time_budget`` is held (counted in
+    :attr:`out_of_time`, its command's message names the parameter). Not thread-safe: the
+    node calls it under its lock."""
 
     def __init__(self, settings: ControllerSettings, controller: StiffnessController,
                  period: float) -> None:
@@ -251,6 +265,7 @@ class ControllerTicks:
         self.held = 0  # ticks that held the last command on a stale (or no) state
         self.old_state_ticks = 0  # commands computed from a state older than one period
         self.stamps_out_of_window = 0
+        self.out_of_time = 0  # ticks held at control.time_budget
         self.tick_time = 0.0
         self.state_age = float('nan')
         self.hold_reason = 'no target yet'
@@ -312,6 +327,10 @@ class ControllerTicks:
         except ValueError as exc:
             return TickOutcome(error=str(exc))
         self.ticks += 1
+        if cmd.out_of_time:  # held; the log and /diagnostics name the parameter
+            self.out_of_time += 1
+            cmd = replace(cmd, message=f'{cmd.message} (control.time_budget = '
+                          f'{self.controller.time_budget:g} s)')
         self.hold_reason = ''
         self.last = cmd
         if self.state_age > self.period:

@@ -13,8 +13,10 @@ commands, ``true - offset``) and ``~/predicted_stiffness`` (36 row-major); ``/di
 a second (the rate asked for and achieved, missed ticks, the latency from a reading to the first
 command computed from it, inputs skipped). A state older than ``control.max_state_age`` holds
 the last command and says so; a bad target or parameter is refused with a throttled warning and
-the last command is kept. In one process with the estimator (``control_loop``) the state is
-handed over directly (:meth:`StiffnessControllerNode.take_state`), not over topics.
+the last command is kept; so is a tick whose QP runs past ``control.time_budget`` (``tick held:
+time budget exhausted ...``, counted on /diagnostics). In one process with the estimator
+(``control_loop``) the state is handed over directly
+(:meth:`StiffnessControllerNode.take_state`), not over topics.
 
 Built from the shared parts (:mod:`.runtime.declared_parameters`, :mod:`.runtime.reporting`,
 :mod:`.runtime.topics`, :mod:`.runtime.runner`); the parameter table, the settings and the tick
@@ -268,6 +270,8 @@ class StiffnessControllerNode(Node):
             self._commands.record()
             if self._pub_stiffness.get_subscription_count():
                 self._publish_output(1, cmd)
+        elif cmd.out_of_time:
+            self.reporter.warn('tick', cmd.message, label='held')
         else:
             self.reporter.warn('target', cmd.message)
 
@@ -292,6 +296,8 @@ class StiffnessControllerNode(Node):
             *_statistics('latency from the reading', ticker.latencies),
             (STAMPS_KEY, ticker.stamps_out_of_window),
             ('ticks on a state older than one period', ticker.old_state_ticks),
+            ('ticks held at control.time_budget', ticker.out_of_time),
+            ('tick time budget [ms]', 1e3 * ticker.controller.time_budget),
             ('age of the state used [s]', ticker.state_age),
             (self.SKIPPED_KEY, self.skipped.counts() or 0),
             ('rejected inputs', dict(sorted(self.reporter.rejected.items())) or 0)]

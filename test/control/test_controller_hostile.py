@@ -8,6 +8,8 @@ import pytest
 from support import REPO
 
 from tensegrity_stiffness.control.controller import (
+    MIN_QP_ITERATIONS,
+    OUT_OF_TIME,
     ControlCommand,
     ControlTarget,
     StiffnessController,
@@ -190,3 +192,61 @@ def test_the_qp_stops_at_its_iteration_limit_and_says_so() -> None:
     assert not capped.converged
     assert capped.reason == 'the active-set method stopped at its limit of 1 iterations'
     assert solve_box_qp(P, c, A, b_far, lo, hi, middle).converged
+
+
+def test_the_qp_stops_at_its_deadline_and_says_so() -> None:
+    """issue #42 item 2: a deadline that has passed stops the QP after ``min_iterations``
+    (unconverged, ``out_of_time``, the reason :data:`OUT_OF_TIME`); the same QP converges
+    without one, and within ``min_iterations`` the deadline is not looked at."""
+    rng = np.random.default_rng(42)
+    n = 12
+    G = rng.normal(size=(20, n))
+    P, c = G.T @ G, 10.0 * G.T @ rng.normal(size=20)
+    A = rng.normal(size=(3, n))
+    lo, hi = np.zeros(n), np.ones(n)
+    middle = 0.5 * (lo + hi)
+    b = A @ middle
+    full = solve_box_qp(P, c, A, b, lo, hi, middle)
+    assert full.converged and not full.out_of_time
+    late = solve_box_qp(P, c, A, b, lo, hi, middle, deadline=0.0, min_iterations=0)
+    assert late.out_of_time and not late.converged and late.iterations == 0
+    assert late.reason == f'{OUT_OF_TIME}: the QP passed its deadline after 0 iterations'
+    exempt = solve_box_qp(P, c, A, b, lo, hi, middle, deadline=0.0,
+                          min_iterations=full.iterations)
+    assert exempt.converged and not exempt.out_of_time
+    np.testing.assert_allclose(exempt.t, full.t, rtol=0.0, atol=1e-12)
+
+
+def test_a_tick_past_its_deadline_is_held_and_keeps_the_state() -> None:
+    """A reachable stiffness target after an unreachable one: the warm start stalls on a
+    degenerate face (more than MIN_QP_ITERATIONS iterations, SLSQP ends it). With a time budget
+    of 0 s the tick is held with the named reason, the command and the integral unchanged; the
+    next tick starts cold and is held no longer (not a tick held for ever). A tick within
+    MIN_QP_ITERATIONS is not judged by the clock."""
+    settings = controller_settings(defaults())
+    model = settings.model
+    T0 = exp_se3(model.initial_screw)
+    K = model.evaluate(model.initial_screw).cartesian_stiffness
+    off = T0 @ _turned(0.01)  # a pose error (the integral is frozen: a rate limit binds)
+    reference = StiffnessController(model, settings.limits, settings.start)
+    ctl = StiffnessController(model, settings.limits, settings.start, time_budget=0.0)
+    for c in (reference, ctl):
+        first = c.update(DT, ControlTarget(pose=T0, cartesian_stiffness=3.0 * K), pose=off)
+        assert first.feasible and first.iterations <= MIN_QP_ITERATIONS
+    stalled = reference.update(DT, ControlTarget(pose=T0, cartesian_stiffness=K), pose=off)
+    assert stalled.feasible and stalled.iterations > MIN_QP_ITERATIONS  # the case exists
+    command, integral = ctl.rest_lengths, ctl.integral
+    assert not np.allclose(stalled.rest_lengths, command)  # the tick would move the motors
+    held = ctl.update(DT, ControlTarget(pose=T0, cartesian_stiffness=K), pose=off)
+    assert held.out_of_time and not held.feasible
+    assert held.iterations == MIN_QP_ITERATIONS
+    assert held.message.startswith(f"{OUT_OF_TIME}: the QP passed the tick's deadline of 0 s "
+                                   f'after {MIN_QP_ITERATIONS} iterations'), held.message
+    np.testing.assert_array_equal(held.rest_lengths, command)
+    np.testing.assert_array_equal(ctl.rest_lengths, command)
+    np.testing.assert_array_equal(ctl.integral, integral)
+    again = ctl.update(DT, ControlTarget(pose=T0, cartesian_stiffness=K), pose=off)
+    assert again.feasible and not again.out_of_time
+    assert again.iterations <= MIN_QP_ITERATIONS
+    with pytest.raises(ValueError, match='time_budget must be >= 0'):
+        StiffnessController(model, settings.limits, settings.start, time_budget=-1.0)

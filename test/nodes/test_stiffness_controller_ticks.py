@@ -18,6 +18,7 @@ from tensegrity_stiffness.nodes.stiffness_controller import (
     ControllerTicks,
     controller_settings,
     new_controller,
+    tick_time_budget,
 )
 
 PERIOD = 0.002
@@ -123,3 +124,27 @@ def test_a_refused_update_is_an_error_not_a_command(settings, ticker):
 def test_a_period_must_be_positive(settings):
     with pytest.raises(ValueError, match='period'):
         ControllerTicks(settings, new_controller(settings), 0.0)
+
+
+def test_a_tick_past_control_time_budget_is_held_and_named(settings):
+    """``control.time_budget`` (0: one period) reaches the controller; a tick whose QP runs
+    past it is held, counted, and its message names the parameter. The stalling tick: a
+    reachable stiffness target after an unreachable one (test_controller_hostile)."""
+    assert tick_time_budget(settings.values) == 1.0 / settings.values['control.rate']
+    assert new_controller(settings).time_budget == tick_time_budget(settings.values)
+    tight = controller_settings(dict(settings.values, **{'control.time_budget': 1e-9}))
+    ticker = ControllerTicks(tight, new_controller(tight), PERIOD)
+    model = tight.model
+    K = model.evaluate(model.initial_screw).cartesian_stiffness
+    ticker.target_pose = pose_of(tight)
+    outcomes = []
+    for now, stiffness in ((0.0, 3.0 * K), (PERIOD, K)):
+        ticker.target_stiffness = stiffness
+        ticker.take_state(pose_of(tight), received=now, stamp_ns=0)
+        outcomes.append(ticker.tick(now, 0).command)
+    first, held = outcomes
+    assert first.feasible and not first.out_of_time and ticker.out_of_time == 1
+    assert held.out_of_time and not held.feasible
+    assert 'time budget exhausted' in held.message
+    assert held.message.endswith('(control.time_budget = 1e-09 s)'), held.message
+    np.testing.assert_array_equal(held.rest_lengths, first.rest_lengths)
