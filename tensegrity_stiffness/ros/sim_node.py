@@ -157,13 +157,15 @@ class SimNode(SteppingTwin, Node):
                                  LATCHED_QOS)
         self.create_subscription(WrenchStamped, '~/external_wrench', self._on_external_wrench,
                                  input_qos(depth, 'reliable'))
-        self._start_stepping('sim_node stepping')
         kind = f'spine of {n_joints} joints' if spine else 'joint'
+        # Logged before the stepping starts: a client that got its first outputs finds the
+        # line in the log (on a busy machine the thread's first publications came first).
         self.get_logger().info(
             f'ready: MuJoCo twin of the {kind}, {values["sim.rate"]:g} Hz '
             f'{"real time" if self._real_time else "as fast as possible (/clock)"}, publishing '
             f'every {values["sim.publish_every"]} steps, max_length {values["sim.max_length"]}; '
             f'{self._frames.status}')
+        self._start_stepping('sim_node stepping')
 
     # ------------------------------------------------------------------ construction
     def _build_twin(self, settings: SimNodeSettings, screws: np.ndarray | None) -> None:

@@ -159,7 +159,7 @@ class StructureSimNode(SteppingTwin, Node):
                                  input_qos(depth, 'reliable'))
         self.create_timer(DIAGNOSTICS_PERIOD_S, self._publish_diagnostics)
         self._diagnosed = (time.perf_counter(), 0)
-        self._start_stepping('structure_sim_node stepping')
+        # Logged before the stepping starts (as sim_node's).
         self.get_logger().info(
             f'ready: MuJoCo twin of {settings.source} ({structure.n_bodies} bodies, '
             f'{structure.n_strings} strings, {len(self._sim.imu_bodies)} IMUs), '
@@ -167,6 +167,7 @@ class StructureSimNode(SteppingTwin, Node):
             f'{"real time" if self._real_time else "as fast as possible (/clock)"}, publishing '
             f'every {values["sim.publish_every"]} steps'
             + (f'; rolling {values["gait.steps"]} faces' if values['gait.enabled'] else ''))
+        self._start_stepping('structure_sim_node stepping')
 
     def _use_settings(self, settings: StructureSimSettings) -> None:
         """The settings in force and the reused output messages they fix."""

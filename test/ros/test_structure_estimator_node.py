@@ -36,9 +36,11 @@ EXAMPLE = 'three_bar.yaml'
 #: 2 mrad of the gravity direction).
 LENGTH_NOISE, ACCELEROMETER_NOISE, MARKER_NOISE = 1e-3, 0.02, 1e-3
 IMU_STD = 0.003
-#: "A few mm" and a degree; 2 degrees (the issue's bound) while the turn about the vertical is
-#: held where the last estimate with markers had it (that estimate's own error, up to a degree).
-POSITION_BOUND, ANGLE_BOUND, HELD_ANGLE_BOUND = 4e-3, np.radians(1.0), np.radians(2.0)
+#: The issue's bounds, 5 mm and 2 degrees, with markers and while the turn about the vertical
+#: is held where the last estimate with markers had it. A degree was tried: 1 mm marker noise on
+#: bars this long gives a turn's std of a few mrad, and a run saw 0.94 deg (16 mrad) on a bar,
+#: inside its 5-sigma covariance bound, which is the statistical check.
+POSITION_BOUND, ANGLE_BOUND, HELD_ANGLE_BOUND = 5e-3, np.radians(2.0), np.radians(2.0)
 #: The 5-sigma bound of a body's pose as a chi-square bound of its Mahalanobis distance (the
 #: probability of |z| <= 5, over the body's determined degrees of freedom). One estimate checked
 #: body by body catches a covariance grossly too small; its calibration is proven statistically
