@@ -22,7 +22,7 @@ from tensegrity_stiffness.estimation.joint_filter import DEFAULT_CHAIN_PROCESS_N
 from tensegrity_stiffness.estimation.measurements import Measurements
 from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.mechanics.chain import ChainState
-from tensegrity_stiffness.mechanics.dynamics import chain_link_inertias
+from tensegrity_stiffness.mechanics.inertia import chain_link_inertias
 from tensegrity_stiffness.mechanics.plausibility import (
     check_chain_translation,
     check_chain_wrench,
