@@ -163,6 +163,19 @@ def test_output_messages(settings):
     np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.state.stiffness)
 
 
+def test_the_controller_subscribes_to_the_estimators_pose_and_load_by_name():
+    """stiffness_controller's state inputs are estimator_node's pose and load outputs, named in
+    the output table (not taken by position): the same topics, with the message types the
+    controller subscribes with."""
+    from geometry_msgs.msg import WrenchStamped
+
+    from tensegrity_stiffness.ros import estimator_node, stiffness_controller
+
+    topics = {topic: msgtype for msgtype, topic in estimator_node.EstimatorNode.OUTPUT_TOPICS}
+    assert topics[stiffness_controller.POSE_ESTIMATE] is PoseWithCovarianceStamped
+    assert topics[stiffness_controller.WRENCH_ESTIMATE] is WrenchStamped
+
+
 def test_the_std_of_the_cartesian_stiffness_only_when_asked(settings):
     """The node asks for the std of K_c only while ~/cartesian_stiffness_std has a subscriber:
     without it the outputs say so, the std is NaN (never published) and the rest is the same
