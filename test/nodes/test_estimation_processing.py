@@ -28,6 +28,7 @@ from tensegrity_stiffness.nodes.estimator_node import (
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.conversions.geometry import transform_to_pose
+from tensegrity_stiffness.ros.conversions.outputs import output_topics
 
 
 @pytest.fixture(scope='module')
@@ -148,7 +149,7 @@ def test_output_messages(settings):
         assert (stamped.row_label, stamped.column_label, stamped.rows, stamped.cols) == (
             plain.layout.dim[0].label, plain.layout.dim[1].label, 6, 6)
         np.testing.assert_array_equal(stamped.data, plain.data)
-    topics = estimation_msgs.table_topics(messages.table)
+    topics = output_topics(messages.layouts)
     assert [topic for _, topic in topics] == [
         *(f'~/{name}' for name in ESTIMATOR_OUTPUTS), '~/stiffness_stamped',
         '~/cartesian_stiffness_stamped']
