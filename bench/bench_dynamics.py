@@ -35,9 +35,10 @@ from previous_checkout import build_kernel, import_modules  # noqa: E402
 
 from tensegrity_stiffness.mechanics import kernel  # noqa: E402
 from tensegrity_stiffness.mechanics.chain import JointChain  # noqa: E402
-from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, JointDynamics  # noqa: E402
+from tensegrity_stiffness.mechanics.chain_dynamics import ChainDynamics  # noqa: E402
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium  # noqa: E402
 from tensegrity_stiffness.mechanics.joint import JointModel  # noqa: E402
+from tensegrity_stiffness.mechanics.joint_dynamics import JointDynamics  # noqa: E402
 
 STEP = 1e-6
 DAMPING = 0.5

@@ -9,8 +9,8 @@
 //   H_D = sum [A; P A],  H_G = sum [A hat(q); P A hat(q)]  (P = hat(p1_j), q_j = T p2_j),
 //   K = [H_G G - H_D Q, -H_D G],  K_c = [H_D, -H_G].
 // Built on the same evaluation: the linear model of link 2's dynamics at an equilibrium
-// (mechanics/dynamics.py, JointDynamics: M = J_b^T G J_b, the blocks J_l^T Pi K, -L^T C L,
-// J_l^T Pi dF/dl0, J_l^T Pi and M^-1 of them), the stiffness controller's pose terms
+// (mechanics/joint_dynamics.py, JointDynamics: M = J_b^T G J_b, the blocks J_l^T Pi K,
+// -L^T C L, J_l^T Pi dF/dl0, J_l^T Pi and M^-1 of them), the stiffness controller's pose terms
 // (control/controller.py, pose_terms_numpy) and exp(hat(xi)) alone.
 // The numpy implementation in mechanics/joint.py stays the reference and the fallback; the tests
 // hold this kernel to it (test/kernel/test_joint_kernel.py); test/kernel/test_kernel_math.cpp to
@@ -564,7 +564,7 @@ int64_t tsk_joint_linear_model(const tsk_joint_model* model, const double* inert
         Jl_out[6 * i + c] = J[i][c];
       }
     }
-    // F + W and the equilibrium test of mechanics/dynamics.py
+    // F + W and the equilibrium test of mechanics/joint_dynamics.py
     // (|F + W| <= tol max(max tension, 1e-300)).
     double top = 0.0, largest = 0.0;
     for (int64_t j = 0; j < n; ++j) {

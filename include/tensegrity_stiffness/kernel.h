@@ -119,9 +119,10 @@ int64_t tsk_joint_measure_packed(const tsk_joint_model* model, int64_t mode, dou
  * (the same shape) and the equilibrium flag (1). */
 int64_t tsk_joint_linear_size(int64_t n_strings);
 
-/* The linear model of link 2's dynamics at one screw with zero velocity (mechanics/dynamics.py,
- * JointDynamics.linearize at an equilibrium): tsk_joint_evaluate_packed (same buf; K without
- * K_c), then in lin (lin_len >= tsk_joint_linear_size(n); it holds the external wrench W, [f; m]
+/* The linear model of link 2's dynamics at one screw with zero velocity
+ * (mechanics/joint_dynamics.py, JointDynamics.linearize at an equilibrium):
+ * tsk_joint_evaluate_packed (same buf; K without K_c), then in lin
+ * (lin_len >= tsk_joint_linear_size(n); it holds the external wrench W, [f; m]
  * in {1}, on entry) the blocks above, with J_b = J_l(-xi), G = inertia (6 x 6 spatial inertia
  * about {2}'s origin, twists [w; v]), Pi the swap of the 3-blocks, L = dl/dxi (n x 6), C =
  * diag(damping) (n values N s/m, or null: no damping, that block 0) and dF/dl0 the rest-length

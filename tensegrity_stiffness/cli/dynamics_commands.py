@@ -1,5 +1,5 @@
 """The dynamics' command ``modes``: the vibration modes of a joint (or, ``--spine``, a spine)
-at its unloaded equilibrium (:mod:`tensegrity_stiffness.mechanics.dynamics`), and a figure of
+at its unloaded equilibrium (:mod:`tensegrity_stiffness.mechanics.mode_reports`), and a figure of
 each mode's shape (:mod:`tensegrity_stiffness.cli.dynamics_plots`, needs matplotlib)."""
 
 from __future__ import annotations
@@ -9,18 +9,18 @@ import sys
 from typing import Any
 
 from tensegrity_stiffness.cli.common import EXIT_OK, PROG, add_json, parse_number, print_json
-from tensegrity_stiffness.mechanics.dynamics import DEFAULT_STRING_DAMPING
+from tensegrity_stiffness.mechanics.joint_dynamics import DEFAULT_STRING_DAMPING
 
 
 def _cmd_modes(args: argparse.Namespace) -> int:
-    from tensegrity_stiffness.mechanics import dynamics
+    from tensegrity_stiffness.mechanics import mode_reports
 
-    dyn, modes, report = dynamics.modes_from_config(args.config, args.spine,
-                                                    args.string_damping)
+    dyn, modes, report = mode_reports.modes_from_config(args.config, args.spine,
+                                                        args.string_damping)
     if args.json:
         print_json(report)
     else:
-        print(dynamics.format_modes(modes))
+        print(mode_reports.format_modes(modes))
     if args.plot:
         from tensegrity_stiffness.cli.dynamics_plots import plot_joint_modes, plot_spine_modes
         from tensegrity_stiffness.cli.figure_commands import png_size

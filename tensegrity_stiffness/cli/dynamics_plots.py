@@ -11,8 +11,8 @@ from numpy.typing import ArrayLike
 
 from tensegrity_stiffness.cli.plots import MM, MatplotlibMissingError, check_size
 from tensegrity_stiffness.mechanics.chain import JointChain
-from tensegrity_stiffness.mechanics.dynamics import JointModes
 from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.modes import JointModes
 
 #: Default figure size (pixels).
 DEFAULT_SIZE = (1500, 1000)

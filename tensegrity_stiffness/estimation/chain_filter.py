@@ -1,13 +1,13 @@
 """A recursive estimator of a moving spine: the extended Kalman filter of
 :mod:`~tensegrity_stiffness.estimation.joint_filter` on
-:class:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics` (no rclpy;
+:class:`~tensegrity_stiffness.mechanics.chain_dynamics.ChainDynamics` (no rclpy;
 docs/estimation.md#spines-chainfilter).
 
 State ``x = [xi (6N); xi_dot (6N); W (6)]``: every joint's screw and screw rate (joint-major)
 and, with ``load='unknown'``, the tip wrench ``W`` (base frame, about its origin) as a random
 walk. Prediction: ``M xi_ddot = Q`` with
-:meth:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics.mass_matrix` and
-:meth:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics.generalized_force` (strings,
+:meth:`~tensegrity_stiffness.mechanics.chain_dynamics.ChainDynamics.mass_matrix` and
+:meth:`~tensegrity_stiffness.mechanics.chain_dynamics.ChainDynamics.generalized_force` (strings,
 string damping, the links' weights, the tip load); the velocity-product terms of
 ``ChainDynamics.acceleration`` (quadratic in the rates: a spine moves slowly; they cost one 12x12
 matrix exponential per joint) are left to the process noise. Integrated as the joint filter does
@@ -58,7 +58,8 @@ from tensegrity_stiffness.geometry.screw import BLOCK_SWAP, ScrewKinematics, che
 from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics.chain import JointChain
-from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, LinkInertia
+from tensegrity_stiffness.mechanics.chain_dynamics import ChainDynamics
+from tensegrity_stiffness.mechanics.inertia import LinkInertia
 
 __all__ = ['ChainFilter']
 
@@ -72,8 +73,8 @@ class ChainFilter(FilterTrack):
     """Extended Kalman filter of a spine's screws, screw rates and tip load (module docstring).
 
     ``chain``: a :class:`~tensegrity_stiffness.mechanics.chain.JointChain` (with ``inertias``,
-    one :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` per link, and
-    ``string_damping``) or a :class:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics`;
+    one :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia` per link, and
+    ``string_damping``) or a :class:`~tensegrity_stiffness.mechanics.chain_dynamics.ChainDynamics`;
     ``process_noise`` a :class:`~tensegrity_stiffness.estimation.joint_filter.ProcessNoise`
     (its accelerations act on each joint's ``xi_ddot``, its rates on the tip load; default
     :data:`~tensegrity_stiffness.estimation.joint_filter.DEFAULT_CHAIN_PROCESS_NOISE`);

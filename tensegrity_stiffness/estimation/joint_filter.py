@@ -8,7 +8,7 @@ origin, constant in {1}) as a random walk. The error of ``xi`` is additive in sc
 coordinates (the static estimator's covariance, so the two compare directly).
 
 Prediction: the equations of motion of
-:class:`~tensegrity_stiffness.mechanics.dynamics.JointDynamics` in their Newton-Euler form in
+:class:`~tensegrity_stiffness.mechanics.joint_dynamics.JointDynamics` in their Newton-Euler form in
 {2} (that module's docstring: ``G dV/dt - ad_V^T G V = J_b^-T Q``), :func:`body_dynamics`:
 
     dxi/dt = J_b(xi)^-1 V,
@@ -80,8 +80,9 @@ from tensegrity_stiffness.geometry.screw import (
 )
 from tensegrity_stiffness.geometry.validation import finite_array, optional_vector
 from tensegrity_stiffness.mechanics import kernel
-from tensegrity_stiffness.mechanics.dynamics import JointDynamics, LinkInertia
+from tensegrity_stiffness.mechanics.inertia import LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.joint_dynamics import JointDynamics
 
 __all__ = [
     'DEFAULT_CHAIN_PROCESS_NOISE',
@@ -380,8 +381,9 @@ class JointFilter(FilterTrack):
     """Extended Kalman filter of one joint's pose, twist and load (module docstring).
 
     ``model``: a :class:`~tensegrity_stiffness.mechanics.joint.JointModel` (with ``inertia``,
-    link 2's :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`, and
-    ``string_damping`` N s/m) or a :class:`~tensegrity_stiffness.mechanics.dynamics.JointDynamics`;
+    link 2's :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia`, and
+    ``string_damping`` N s/m) or a
+    :class:`~tensegrity_stiffness.mechanics.joint_dynamics.JointDynamics`;
     ``process_noise`` a :class:`ProcessNoise` (default :data:`DEFAULT_PROCESS_NOISE`); ``load``
     ``'unknown'`` (a state) or ``'known'`` (given to :meth:`step`); ``gravity`` (3,) m/s^2 in {1}
     for the accelerometer; ``consistency_probability`` of the NIS test; ``stiffness_std`` whether

@@ -104,7 +104,7 @@ DEFAULT_SPINE_CONFIG = 'default_spine.yaml'
 #: --spine``): the work per evaluation grows with N^2.
 MAX_JOINTS = 100
 #: The keys of a config's ``chain`` section (:meth:`JointChain.from_dict`; ``link_inertias``
-#: read by :func:`~tensegrity_stiffness.mechanics.dynamics.chain_inertias_from_config`).
+#: read by :func:`~tensegrity_stiffness.mechanics.inertia.chain_inertias_from_config`).
 CHAIN_KEYS = ('n_joints', 'link_offsets', 'tool', 'link_masses', 'link_coms', 'gravity',
               'link_inertias')
 

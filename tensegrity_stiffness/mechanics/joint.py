@@ -68,7 +68,7 @@ JOINT_KEYS = ('node_names', 'link1_nodes', 'link2_nodes', 'link2_node_names', 's
               'string_link1_nodes', 'string_link2_nodes', 'stiffness', 'rest_lengths',
               'max_lengths', 'force_law', 'initial_screw')
 #: Every key a ``joint`` section may hold: :data:`JOINT_KEYS`, link 2's inertia (read by
-#: :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`) and the encoders' offsets (read
+#: :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia`) and the encoders' offsets (read
 #: by the nodes and the calibration). Any other key is a mistake (a typo would otherwise leave
 #: a value out and compute another joint's stiffness): refused with the nearest name.
 JOINT_SECTION_KEYS = JOINT_KEYS + ('link2_mass', 'link2_com', 'link2_inertia',

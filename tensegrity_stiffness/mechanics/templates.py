@@ -44,9 +44,10 @@ from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.geometry.validation import per_string
 from tensegrity_stiffness.mechanics.chain import MAX_JOINTS, JointChain
-from tensegrity_stiffness.mechanics.dynamics import DEFAULT_LINK_MASS, JointDynamics, LinkInertia
 from tensegrity_stiffness.mechanics.equilibrium import solve_equilibrium, stability_margin
+from tensegrity_stiffness.mechanics.inertia import DEFAULT_LINK_MASS, LinkInertia
 from tensegrity_stiffness.mechanics.joint import MAX_STRINGS, JointModel
+from tensegrity_stiffness.mechanics.joint_dynamics import JointDynamics
 from tensegrity_stiffness.mechanics.unloaded import (
     InitialScrewWarning,
     check_initial_screw,

@@ -35,7 +35,12 @@ from tensegrity_stiffness.estimation.trust import CONSISTENCY_PROBABILITY
 from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
 from tensegrity_stiffness.mechanics.plausibility import check_translation, check_wrench
-from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
+from tensegrity_stiffness.nodes.layouts import (
+    ESTIMATOR_OUTPUT_TABLE,
+    ESTIMATOR_STD_OUTPUT,
+    flat_table_arrays,
+    table_array_names,
+)
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec
 from tensegrity_stiffness.nodes.shared_parameters import (
     COMMON_PARAMETERS,
@@ -432,16 +437,26 @@ class EstimatorOutputs:
 
 
 #: Names of the published arrays, in :func:`output_arrays` order: the topics, and the pose's
-#: covariance after the pose.
-OUTPUT_NAMES = (ESTIMATOR_OUTPUTS[0], 'pose covariance', *ESTIMATOR_OUTPUTS[1:])
+#: covariance after the pose (those of
+#: :data:`~tensegrity_stiffness.nodes.layouts.ESTIMATOR_OUTPUT_TABLE`).
+OUTPUT_NAMES = table_array_names(ESTIMATOR_OUTPUT_TABLE)
 
 
 def output_arrays(outputs: EstimatorOutputs) -> tuple[FloatArray, ...]:
-    """The published arrays in :data:`OUTPUT_NAMES` order."""
-    est = outputs.estimate
-    state = est.state
-    return (est.transform, est.covariance, est.external_wrench, est.screw, state.stiffness,
-            state.cartesian_stiffness, state.tensions, est.cartesian_stiffness_std)
+    """The published arrays in :data:`OUTPUT_NAMES` order (the values of
+    :data:`~tensegrity_stiffness.nodes.layouts.ESTIMATOR_OUTPUT_TABLE`)."""
+    return flat_table_arrays(ESTIMATOR_OUTPUT_TABLE, outputs)
+
+
+def require_finite_outputs(names: Sequence[str], arrays: Sequence[FloatArray],
+                           std_output: str | None) -> None:
+    """ValueError naming the first of ``arrays`` (named by ``names``) that is not finite,
+    leaving out the one named ``std_output`` (a std not computed: NaN; None: none left out)."""
+    if std_output is None or std_output not in names:
+        require_all_finite(names, arrays)
+        return
+    kept = [i for i, name in enumerate(names) if name != std_output]
+    require_all_finite([names[i] for i in kept], [arrays[i] for i in kept])
 
 
 def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
@@ -499,11 +514,8 @@ def _checked_outputs(est: JointEstimate, snapshot: EstimatorInput,
     require_success(est, snapshot, readings, max_age)
     outputs = EstimatorOutputs(est, tuple(name for name in ESTIMATOR_INPUTS if name in readings),
                                ages, stiffness_std)
-    arrays = output_arrays(outputs)
-    if stiffness_std:
-        require_all_finite(OUTPUT_NAMES, arrays)
-    else:
-        require_all_finite(OUTPUT_NAMES[:-1], arrays[:-1])
+    require_finite_outputs(OUTPUT_NAMES, output_arrays(outputs),
+                           None if stiffness_std else ESTIMATOR_STD_OUTPUT)
     return outputs
 
 

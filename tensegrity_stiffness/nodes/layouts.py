@@ -174,11 +174,22 @@ class OutputRow:
     #: An output that only some nodes publish (a structure's contact forces: only with a
     #: ground): where it is absent, its layout is None and its value is None.
     optional: bool = False
+    #: The names of the arrays of a row of several values, in their order (the finite check
+    #: names the one that is not); none for a row of one value: its array has the row's name.
+    array_names: tuple[str, ...] = ()
     of: Callable[[Any], Any] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         values = (self.value,) if isinstance(self.value, str) else self.value
+        if len(self.array_names) != (len(values) if len(values) > 1 else 0):
+            raise ValueError(f'output {self.name!r}: {len(self.array_names)} array names for '
+                             f'{len(values)} values (a row of several values names each)')
         object.__setattr__(self, 'of', attrgetter(*values))
+
+    @property
+    def arrays(self) -> tuple[str, ...]:
+        """The names of this row's arrays, in the order of its values."""
+        return self.array_names or (self.name,)
 
     def within(self, attribute: str) -> OutputRow:
         """This row for outputs that hold this row's outputs as ``attribute`` (the structure
@@ -193,6 +204,20 @@ def table_arrays(table: Sequence[OutputRow], outputs: Any) -> tuple[Any, ...]:
     optional row)."""
     arrays = ((row, row.of(outputs)) for row in table)
     return tuple(value for row, value in arrays if not (row.optional and value is None))
+
+
+def table_array_names(table: Sequence[OutputRow]) -> tuple[str, ...]:
+    """The names of the arrays of ``table``'s rows, in :func:`flat_table_arrays` order (a row
+    of several values: :attr:`OutputRow.array_names`)."""
+    return tuple(name for row in table for name in row.arrays)
+
+
+def flat_table_arrays(table: Sequence[OutputRow], outputs: Any) -> tuple[Any, ...]:
+    """:func:`table_arrays` with the arrays of a row of several values (an estimated pose's
+    transform and covariance) one by one, in :func:`table_array_names` order."""
+    arrays = ((row, row.of(outputs)) for row in table)
+    return tuple(array for row, values in arrays if not (row.optional and values is None)
+                 for array in (values if len(row.arrays) > 1 else (values,)))
 
 
 def table_layouts(table: Sequence[OutputRow], sizes: Any) -> dict[str, OutputLayout]:
@@ -287,14 +312,19 @@ SPINE_STAMPED_OUTPUTS = {'tip_stiffness_stamped': 'tip_stiffness',
 #: K_c, labelled as K_c); ``spine_estimator_node``'s (the std of the tip stiffness).
 ESTIMATOR_STD_OUTPUT = 'cartesian_stiffness_std'
 SPINE_ESTIMATOR_STD_OUTPUT = 'tip_stiffness_base_std'
+#: ``estimator_node``'s estimated pose (with its covariance) and load: ``stiffness_controller``
+#: subscribes to its state on these names, so that one remap each wires it to the estimator.
+ESTIMATOR_POSE_OUTPUT = 'pose_estimate'
+ESTIMATOR_WRENCH_OUTPUT = 'wrench_estimate'
 #: ``estimator_node``'s per-estimate outputs, likewise (layouts of the string names, values of
 #: :class:`~tensegrity_stiffness.nodes.estimator_node.EstimatorOutputs`): the pose with its
 #: covariance, the load, the screw, then K, K_c and the tensions on the names of
 #: ``stiffness_node``'s (so that one remap serves both), the std of K_c.
 ESTIMATOR_OUTPUT_TABLE: tuple[OutputRow, ...] = (
-    OutputRow('pose_estimate', lambda names: OutputLayout(POSE_WITH_COVARIANCE_STAMPED),
-              ('estimate.transform', 'estimate.covariance')),
-    OutputRow('wrench_estimate', lambda names: OutputLayout(WRENCH_STAMPED),
+    OutputRow(ESTIMATOR_POSE_OUTPUT, lambda names: OutputLayout(POSE_WITH_COVARIANCE_STAMPED),
+              ('estimate.transform', 'estimate.covariance'),
+              array_names=(ESTIMATOR_POSE_OUTPUT, 'pose covariance')),
+    OutputRow(ESTIMATOR_WRENCH_OUTPUT, lambda names: OutputLayout(WRENCH_STAMPED),
               'estimate.external_wrench'),
     OutputRow('screw_estimate', lambda names: _array(vector_dims(6, SCREW_LABEL)),
               'estimate.screw'),
@@ -313,7 +343,8 @@ SPINE_ESTIMATOR_OUTPUT_TABLE: tuple[OutputRow, ...] = (
     OutputRow('screws_estimate', lambda n: _array(matrix_dims(n, 6, JOINTS_LABEL, SCREW_LABEL)),
               'estimate.screws'),
     OutputRow('tip_pose_estimate', lambda n: OutputLayout(POSE_WITH_COVARIANCE_STAMPED),
-              ('estimate.tip_transform', 'estimate.tip_pose_covariance')),
+              ('estimate.tip_transform', 'estimate.tip_pose_covariance'),
+              array_names=('tip_pose_estimate', 'tip pose covariance')),
     OutputRow('tip_wrench_estimate', lambda n: OutputLayout(WRENCH_STAMPED),
               'estimate.tip_wrench'),
     OutputRow('tip_stiffness_base', _tip_stiffness_base, 'estimate.tip_stiffness'),

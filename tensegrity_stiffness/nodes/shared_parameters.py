@@ -17,12 +17,9 @@ from typing import Any
 import numpy as np
 
 from tensegrity_stiffness.mechanics import templates
-from tensegrity_stiffness.mechanics.dynamics import (
-    DEFAULT_LINK_MASS,
-    DEFAULT_STRING_DAMPING,
-    LinkInertia,
-)
+from tensegrity_stiffness.mechanics.inertia import DEFAULT_LINK_MASS, LinkInertia
 from tensegrity_stiffness.mechanics.joint import FORCE_LAWS, JointModel
+from tensegrity_stiffness.mechanics.joint_dynamics import DEFAULT_STRING_DAMPING
 from tensegrity_stiffness.mechanics.plausibility import MIN_LINK_MASS, PLAUSIBILITY_MARGIN
 from tensegrity_stiffness.nodes.parameter_specs import RELIABILITIES, ParameterSpec
 

@@ -20,9 +20,8 @@ from tensegrity_stiffness.estimation.chain_estimator import ChainEstimate, estim
 from tensegrity_stiffness.estimation.chain_filter import ChainFilter
 from tensegrity_stiffness.estimation.joint_filter import DEFAULT_CHAIN_PROCESS_NOISE
 from tensegrity_stiffness.estimation.measurements import Measurements
-from tensegrity_stiffness.geometry.validation import require_all_finite
 from tensegrity_stiffness.mechanics.chain import ChainState
-from tensegrity_stiffness.mechanics.dynamics import chain_link_inertias
+from tensegrity_stiffness.mechanics.inertia import chain_link_inertias
 from tensegrity_stiffness.mechanics.plausibility import (
     check_chain_translation,
     check_chain_wrench,
@@ -37,10 +36,16 @@ from tensegrity_stiffness.nodes.estimator_node import (
     estimator_node_settings,
     load_measurement,
     pose_reading,
+    require_finite_outputs,
     require_success,
     usable_readings,
 )
-from tensegrity_stiffness.nodes.layouts import SPINE_ESTIMATOR_OUTPUTS
+from tensegrity_stiffness.nodes.layouts import (
+    SPINE_ESTIMATOR_OUTPUT_TABLE,
+    SPINE_ESTIMATOR_STD_OUTPUT,
+    flat_table_arrays,
+    table_array_names,
+)
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name, defaults
 from tensegrity_stiffness.nodes.shared_parameters import COMMON_PARAMETERS, JOINT_PARAMETERS
 from tensegrity_stiffness.nodes.spine_node import (
@@ -129,16 +134,16 @@ class SpineEstimatorOutputs:
         return self.estimate.screws, self.estimate.tip_wrench
 
 
-#: Names of the spine's published arrays, in :func:`spine_output_arrays` order.
-SPINE_OUTPUT_NAMES = (*SPINE_ESTIMATOR_OUTPUTS[:2], 'tip pose covariance',
-                      *SPINE_ESTIMATOR_OUTPUTS[2:])
+#: Names of the spine's published arrays, in :func:`spine_output_arrays` order: the topics,
+#: and the tip pose's covariance after the tip pose (those of
+#: :data:`~tensegrity_stiffness.nodes.layouts.SPINE_ESTIMATOR_OUTPUT_TABLE`).
+SPINE_OUTPUT_NAMES = table_array_names(SPINE_ESTIMATOR_OUTPUT_TABLE)
 
 
 def spine_output_arrays(outputs: SpineEstimatorOutputs) -> tuple[FloatArray, ...]:
-    """The published arrays in :data:`SPINE_OUTPUT_NAMES` order."""
-    est = outputs.estimate
-    return (est.screws, est.tip_transform, est.tip_pose_covariance, est.tip_wrench,
-            est.tip_stiffness, est.tip_stiffness_std)
+    """The published arrays in :data:`SPINE_OUTPUT_NAMES` order (the values of
+    :data:`~tensegrity_stiffness.nodes.layouts.SPINE_ESTIMATOR_OUTPUT_TABLE`)."""
+    return flat_table_arrays(SPINE_ESTIMATOR_OUTPUT_TABLE, outputs)
 
 
 def spine_joint_measurements(settings: SpineEstimatorNodeSettings,
@@ -243,9 +248,8 @@ def _checked_spine_outputs(est: ChainEstimate, snapshot: EstimatorInput,
     outputs = SpineEstimatorOutputs(
         est, tuple(name for name in SPINE_ESTIMATOR_INPUTS if name in readings), ages,
         stiffness_std)
-    arrays = spine_output_arrays(outputs)
-    count = len(arrays) if stiffness_std else len(arrays) - 1
-    require_all_finite(SPINE_OUTPUT_NAMES[:count], arrays[:count])
+    require_finite_outputs(SPINE_OUTPUT_NAMES, spine_output_arrays(outputs),
+                           None if stiffness_std else SPINE_ESTIMATOR_STD_OUTPUT)
     return outputs
 
 

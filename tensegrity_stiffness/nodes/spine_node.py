@@ -27,8 +27,9 @@ from tensegrity_stiffness.geometry.errors import (
 from tensegrity_stiffness.geometry.screw import CHART_LIMIT, check_in_chart, log_se3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
 from tensegrity_stiffness.mechanics.chain import ChainState, JointChain
-from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, chain_link_inertias
+from tensegrity_stiffness.mechanics.chain_dynamics import ChainDynamics
 from tensegrity_stiffness.mechanics.equilibrium import stability_margin
+from tensegrity_stiffness.mechanics.inertia import chain_link_inertias
 from tensegrity_stiffness.nodes.health import JointHealth
 from tensegrity_stiffness.nodes.layouts import SPINE_OUTPUT_TABLE, SPINE_OUTPUTS, table_arrays
 from tensegrity_stiffness.nodes.parameter_specs import ParameterSpec, by_name

@@ -23,9 +23,10 @@ from numpy.typing import ArrayLike, NDArray
 from tensegrity_stiffness.geometry.errors import BadRestLengthsError
 from tensegrity_stiffness.geometry.screw import check_in_chart, log_se3
 from tensegrity_stiffness.geometry.validation import require_all_finite, require_frame
-from tensegrity_stiffness.mechanics.dynamics import JointDynamics, JointModes
 from tensegrity_stiffness.mechanics.interpretation import interpretation_vector
 from tensegrity_stiffness.mechanics.joint import JointModel, JointState
+from tensegrity_stiffness.mechanics.joint_dynamics import JointDynamics
+from tensegrity_stiffness.mechanics.modes import JointModes
 from tensegrity_stiffness.mechanics.planar import PlanarMechanism
 from tensegrity_stiffness.mechanics.plausibility import (
     check_dynamics,

@@ -47,7 +47,8 @@ from tensegrity_stiffness.mechanics.plausibility import (
 )
 from tensegrity_stiffness.nodes.layouts import (
     CONTROLLER_OUTPUT_TABLE,
-    ESTIMATOR_OUTPUTS,
+    ESTIMATOR_POSE_OUTPUT,
+    ESTIMATOR_WRENCH_OUTPUT,
     controller_output_layouts,
 )
 from tensegrity_stiffness.nodes.messages import multiarray
@@ -71,8 +72,10 @@ from tensegrity_stiffness.ros.runtime.paced_loop import PacedLoop, RateCounter
 from tensegrity_stiffness.ros.runtime.reporting import Reporter, guarded
 from tensegrity_stiffness.ros.runtime.topics import LATCHED_QOS, create_output_publisher, input_qos
 
-#: The state inputs carry estimator_node's output names, so that one remap each wires them.
-POSE_ESTIMATE, WRENCH_ESTIMATE = (f'~/{name}' for name in ESTIMATOR_OUTPUTS[:2])
+#: The state inputs carry estimator_node's output names (its pose and its load, named in
+#: :mod:`tensegrity_stiffness.nodes.layouts`), so that one remap each wires them.
+POSE_ESTIMATE = f'~/{ESTIMATOR_POSE_OUTPUT}'
+WRENCH_ESTIMATE = f'~/{ESTIMATOR_WRENCH_OUTPUT}'
 
 NODE_NAME = 'stiffness_controller'
 #: The /diagnostics key of the readings whose stamp is outside :data:`STAMP_WINDOW`.

@@ -53,9 +53,7 @@ from tensegrity_stiffness.geometry.quaternion import rotation_to_quaternion
 from tensegrity_stiffness.geometry.screw import exp_se3, log_se3
 from tensegrity_stiffness.geometry.validation import finite_array
 from tensegrity_stiffness.mechanics.chain import JointChain
-from tensegrity_stiffness.mechanics.dynamics import (
-    DEFAULT_LINK_MASS,
-)
+from tensegrity_stiffness.mechanics.inertia import DEFAULT_LINK_MASS
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.simulation.twin_model import (
     DEFAULT_JOINT_DAMPING,

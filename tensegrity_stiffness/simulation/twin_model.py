@@ -24,13 +24,13 @@ from tensegrity_stiffness.geometry.validation import (
     positive_number,
 )
 from tensegrity_stiffness.mechanics.chain import DEFAULT_SPINE_CONFIG, JointChain
-from tensegrity_stiffness.mechanics.dynamics import (
+from tensegrity_stiffness.mechanics.inertia import (
     DEFAULT_LINK_MASS,
-    DEFAULT_STRING_DAMPING,
     LinkInertia,
     default_inertia_moments,
 )
 from tensegrity_stiffness.mechanics.joint import JointModel
+from tensegrity_stiffness.mechanics.joint_dynamics import DEFAULT_STRING_DAMPING
 
 FloatArray = NDArray[np.float64]
 
@@ -41,7 +41,7 @@ INTEGRATORS = ('implicitfast', 'implicit', 'Euler')
 #: Default time step (s): 1 kHz.
 DEFAULT_TIMESTEP = 1e-3
 #: Default damping of every string (N s/m): the dynamics' one value
-#: (:data:`~tensegrity_stiffness.mechanics.dynamics.DEFAULT_STRING_DAMPING`).
+#: (:data:`~tensegrity_stiffness.mechanics.joint_dynamics.DEFAULT_STRING_DAMPING`).
 DEFAULT_TENDON_DAMPING = DEFAULT_STRING_DAMPING
 #: Default damping of each free-joint dof of every link (N s/m, N m s/rad): a small damping
 #: against the world that damps the spine's slow bending mode (about 4 rad/s with 10 g links),
@@ -78,7 +78,7 @@ class SimulationOptions:
     mass); ``link_inertia`` ((3,) kg m^2 principal moments about the centre of mass; default
     ``None``: ``m r^2 / 2`` on each axis, ``r`` the RMS distance of the link's nodes from its
     centre of mass); ``link2`` (a single joint's link 2: a
-    :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`, its mass, centre of mass and
+    :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia`, its mass, centre of mass and
     full inertia, the config's ``joint.link2_*``; default ``None``: ``link_mass`` at the origin
     with ``link_inertia``); ``gravity`` ((3,) m/s^2 in the
     base; default ``None``: the chain's ``gravity``, for the joint (0, -9.81, 0));

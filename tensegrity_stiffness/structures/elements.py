@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from tensegrity_stiffness.geometry.transforms import rigid_transform
 from tensegrity_stiffness.geometry.validation import finite_array
-from tensegrity_stiffness.mechanics.dynamics import (
+from tensegrity_stiffness.mechanics.inertia import (
     DEFAULT_LINK_MASS,
     LinkInertia,
     default_inertia_moments,
@@ -106,7 +106,7 @@ class Body:
               mass: float = DEFAULT_LINK_MASS, com: ArrayLike = (0.0, 0.0, 0.0),
               inertia: ArrayLike | None = None, fixed: bool = False) -> Body:
         """A general body with named ``nodes`` in its frame (default inertia: the twin's,
-        :func:`~tensegrity_stiffness.mechanics.dynamics.default_inertia_moments`)."""
+        :func:`~tensegrity_stiffness.mechanics.inertia.default_inertia_moments`)."""
         if not isinstance(nodes, Mapping) or not nodes:
             raise ValueError('nodes must be a non-empty mapping {name: [x, y, z]}')
         points = {}
@@ -130,13 +130,13 @@ class Body:
     @property
     def link_inertia(self) -> LinkInertia:
         """The body's mass properties as the dynamics'
-        :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` (mass > 0 needed)."""
+        :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia` (mass > 0 needed)."""
         return LinkInertia(self.mass, self.com, self.inertia)
 
 
 def _inertia(mass: float, com: FloatArray, inertia: ArrayLike) -> FloatArray:
     """The (3, 3) inertia of 3 principal moments or 9 values, checked by
-    :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` (symmetric positive definite)
+    :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia` (symmetric positive definite)
     for a body with mass; zero for a massless body."""
     if mass == 0.0:
         arr = finite_array('inertia', inertia).ravel()

@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike
 
 from tensegrity_stiffness.geometry.screw import exp_se3
 from tensegrity_stiffness.mechanics.chain import JointChain
-from tensegrity_stiffness.mechanics.dynamics import LinkInertia
+from tensegrity_stiffness.mechanics.inertia import LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.structures.elements import Body, StringSpec
 
@@ -53,7 +53,7 @@ def joint_structure_arguments(model: JointModel, pose: ArrayLike | None = None,
     (:mod:`.joints`); ``pose`` of ``link2`` (default
     ``exp(hat(initial_screw))``); ``inertia``: link 2's mass properties (default massless: the
     joint has no weights; give the dynamics'
-    :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` for its modes);
+    :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia` for its modes);
     ``string_damping`` (N s/m, one for all or one per string)."""
     _check_names(list(model.node_names) + list(model.link2_node_names), 'joint')
     T = exp_se3(model.initial_screw) if pose is None else pose
@@ -81,7 +81,7 @@ def chain_structure_arguments(chain: JointChain, screws: ArrayLike | None = None
     """The ``Structure`` arguments (bodies, strings, gravity, force law) of the spine as a
     structure (:mod:`.joints`), its links at the frames ``L_k`` of
     ``screws`` (default the joints' unloaded screws); ``inertias``: one
-    :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia` per moving link for its mass
+    :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia` per moving link for its mass
     properties (default: the chain's masses and centres of mass, massless links massless; an
     inertia of None is the default of the joint's link-2 nodes, as the dynamics'). Gravity is
     the chain's when it has weights (a chain without link masses has none, as its statics);

@@ -20,7 +20,7 @@ from collections.abc import Sequence
 from numpy.typing import ArrayLike
 
 from tensegrity_stiffness.mechanics.chain import JointChain
-from tensegrity_stiffness.mechanics.dynamics import LinkInertia
+from tensegrity_stiffness.mechanics.inertia import LinkInertia
 from tensegrity_stiffness.mechanics.joint import JointModel
 from tensegrity_stiffness.structures.joint_parts import (  # noqa: F401 (public here)
     JOINT_BODIES,

@@ -5,7 +5,7 @@ coordinates, the stacked spatial twists ``delta`` ([dv; dw] in the world) of the
 
 * Mass matrix ``M = blockdiag(Ad_i^-T G_i Ad_i^-1)``: ``G_i`` the body's spatial inertia about
   its origin in its frame
-  (:meth:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia.spatial_inertia`, in [v; w] order
+  (:meth:`~tensegrity_stiffness.mechanics.inertia.LinkInertia.spatial_inertia`, in [v; w] order
   here) and ``Ad_i`` the adjoint of its pose, so that the kinetic energy is
   ``1/2 delta_dot^T M delta_dot``.
 * Stiffness: the equilibrium's tangent stiffness ``K_total`` (strings, weights, contact forces;
@@ -22,7 +22,7 @@ coordinates, the stacked spatial twists ``delta`` ([dv; dw] in the world) of the
   :func:`~tensegrity_stiffness.structures.equilibrium.gauge_twists`), each free bar's spin about
   its axis, and the rest, mechanisms (motions that change no string length to first order and
   that no prestress stiffens). The other modes, in the zero modes' M-orthogonal complement,
-  by the dynamics' method (:func:`~tensegrity_stiffness.mechanics.dynamics.state_matrix_modes`:
+  by the dynamics' method (:func:`~tensegrity_stiffness.mechanics.modes.state_matrix_modes`:
   one mode per conjugate pair of the state matrix, natural frequency ``|lambda| / 2 pi``,
   damping ratio ``-Re lambda / |lambda|``), so that a joint's modes are its dynamics' exactly.
 """
@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 
 from tensegrity_stiffness.geometry.screw import BLOCK_SWAP
 from tensegrity_stiffness.geometry.transforms import adjoint, inverse_transform
-from tensegrity_stiffness.mechanics.dynamics import state_matrix_modes
+from tensegrity_stiffness.mechanics.modes import state_matrix_modes
 from tensegrity_stiffness.structures.equilibrium import StructureEquilibrium, gauge_kind
 from tensegrity_stiffness.structures.structure import Structure
 

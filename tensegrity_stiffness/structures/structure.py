@@ -254,7 +254,7 @@ class Structure:
         """A joint (:class:`~tensegrity_stiffness.mechanics.joint.JointModel`) as a structure
         (:mod:`~tensegrity_stiffness.structures.joints`): ``link1`` fixed at the world origin,
         ``link2`` at ``pose`` (default ``exp(hat(xi0))`` of the model's ``initial_screw``);
-        ``inertia``: link 2's :class:`~tensegrity_stiffness.mechanics.dynamics.LinkInertia`
+        ``inertia``: link 2's :class:`~tensegrity_stiffness.mechanics.inertia.LinkInertia`
         (default massless); ``string_damping`` (N s/m, one for all or one per string)."""
         return cls(**joint_structure_arguments(model, pose, inertia, string_damping),
                    use_kernel=use_kernel)

@@ -359,11 +359,12 @@ def config_structure_document(document: Any) -> dict[str, Any]:
     """The structure of a joint or a spine config document (module docstring): a spine when
     the document has a ``chain`` section, a joint otherwise, with the config's dynamics (the
     links' inertias, the strings' damping:
-    :meth:`~tensegrity_stiffness.mechanics.dynamics.JointDynamics.from_config`,
-    :meth:`~tensegrity_stiffness.mechanics.dynamics.ChainDynamics.from_config`) so that the modes
-    have masses."""
+    :meth:`~tensegrity_stiffness.mechanics.joint_dynamics.JointDynamics.from_config`,
+    :meth:`~tensegrity_stiffness.mechanics.chain_dynamics.ChainDynamics.from_config`) so that the
+    modes have masses."""
     from tensegrity_stiffness import config
-    from tensegrity_stiffness.mechanics.dynamics import ChainDynamics, JointDynamics
+    from tensegrity_stiffness.mechanics.chain_dynamics import ChainDynamics
+    from tensegrity_stiffness.mechanics.joint_dynamics import JointDynamics
     from tensegrity_stiffness.structures.structure import Structure
 
     if isinstance(config.parameters(document).get('chain'), dict):

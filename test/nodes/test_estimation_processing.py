@@ -28,6 +28,7 @@ from tensegrity_stiffness.nodes.estimator_node import (
 from tensegrity_stiffness.nodes.layouts import ESTIMATOR_OUTPUTS
 from tensegrity_stiffness.ros.conversions import estimation as estimation_msgs
 from tensegrity_stiffness.ros.conversions.geometry import transform_to_pose
+from tensegrity_stiffness.ros.conversions.outputs import output_topics
 
 
 @pytest.fixture(scope='module')
@@ -148,7 +149,7 @@ def test_output_messages(settings):
         assert (stamped.row_label, stamped.column_label, stamped.rows, stamped.cols) == (
             plain.layout.dim[0].label, plain.layout.dim[1].label, 6, 6)
         np.testing.assert_array_equal(stamped.data, plain.data)
-    topics = estimation_msgs.table_topics(messages.table)
+    topics = output_topics(messages.layouts)
     assert [topic for _, topic in topics] == [
         *(f'~/{name}' for name in ESTIMATOR_OUTPUTS), '~/stiffness_stamped',
         '~/cartesian_stiffness_stamped']
@@ -161,6 +162,19 @@ def test_output_messages(settings):
     assert Kc_std.layout.dim[1].label == Kc.layout.dim[1].label
     assert wrench.header.frame_id == 'link1' and len(tensions.data) == 12
     np.testing.assert_allclose(np.reshape(K.data, (6, 6)), out.state.stiffness)
+
+
+def test_the_controller_subscribes_to_the_estimators_pose_and_load_by_name():
+    """stiffness_controller's state inputs are estimator_node's pose and load outputs, named in
+    the output table (not taken by position): the same topics, with the message types the
+    controller subscribes with."""
+    from geometry_msgs.msg import WrenchStamped
+
+    from tensegrity_stiffness.ros import estimator_node, stiffness_controller
+
+    topics = {topic: msgtype for msgtype, topic in estimator_node.EstimatorNode.OUTPUT_TOPICS}
+    assert topics[stiffness_controller.POSE_ESTIMATE] is PoseWithCovarianceStamped
+    assert topics[stiffness_controller.WRENCH_ESTIMATE] is WrenchStamped
 
 
 def test_the_std_of_the_cartesian_stiffness_only_when_asked(settings):

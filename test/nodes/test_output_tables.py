@@ -153,6 +153,11 @@ def test_the_estimators_table_names_its_outputs_and_fills_their_layouts() -> Non
                                       strict=True))
     assert tuple(layouts.estimator_output_layouts(model.string_names)) == (
         *layouts.ESTIMATOR_OUTPUTS, *layouts.JOINT_STAMPED_OUTPUTS)
+    # the checked arrays' names: the table's, the pose's covariance after the pose
+    assert estimator_node.OUTPUT_NAMES == (
+        'pose_estimate', 'pose covariance', 'wrench_estimate', 'screw_estimate', 'stiffness',
+        'cartesian_stiffness', 'string_tensions', 'cartesian_stiffness_std')
+    assert len(estimator_node.OUTPUT_NAMES) == len(estimator_node.output_arrays(outputs))
 
 
 def test_the_spine_estimators_table_names_its_outputs_and_fills_their_layouts() -> None:
@@ -178,3 +183,50 @@ def test_the_spine_estimators_table_names_its_outputs_and_fills_their_layouts() 
                                       flattened(arrays), strict=True))
     assert tuple(layouts.spine_estimator_output_layouts(3)) == (
         *layouts.SPINE_ESTIMATOR_OUTPUTS, 'tip_stiffness_base_stamped')
+    assert spine_estimator_node.SPINE_OUTPUT_NAMES == (
+        'screws_estimate', 'tip_pose_estimate', 'tip pose covariance', 'tip_wrench_estimate',
+        'tip_stiffness_base', 'tip_stiffness_base_std')
+    assert len(spine_estimator_node.SPINE_OUTPUT_NAMES) == len(
+        spine_estimator_node.spine_output_arrays(outputs))
+
+
+def test_the_estimators_pose_and_load_rows_carry_their_message_types() -> None:
+    """The rows stiffness_controller subscribes to, looked up by name: the pose with its
+    covariance and the load."""
+    found = layouts.estimator_output_layouts(())
+    assert found[layouts.ESTIMATOR_POSE_OUTPUT].msgtype == layouts.POSE_WITH_COVARIANCE_STAMPED
+    assert found[layouts.ESTIMATOR_WRENCH_OUTPUT].msgtype == layouts.WRENCH_STAMPED
+
+
+def test_a_row_of_several_values_names_each_array() -> None:
+    """A row whose message carries several arrays names each (the finite check says which is
+    not); a row of one value names none (its array has the row's name)."""
+    def layout(sizes):
+        return None
+
+    with pytest.raises(ValueError, match='1 array names for 2 values'):
+        layouts.OutputRow('pose', layout, ('a', 'b'), array_names=('pose',))
+    with pytest.raises(ValueError, match='2 array names for 1 values'):
+        layouts.OutputRow('wrench', layout, 'a', array_names=('wrench', 'other'))
+    row = layouts.OutputRow('pose', layout, ('a', 'b'), array_names=('pose', 'covariance'))
+    assert layouts.table_array_names((row, layouts.OutputRow('w', layout, 'c'))) == (
+        'pose', 'covariance', 'w')
+
+
+def test_the_estimators_finite_check_names_the_array_and_skips_a_std_not_computed() -> None:
+    """The first non-finite array is named by the table (the pose's covariance by its own
+    name); the std, when not computed (NaN), is left out by name, wherever its row is."""
+    names = estimator_node.OUTPUT_NAMES
+    arrays = [np.zeros(2) for _ in names]
+    arrays[names.index('pose covariance')] = np.array([0.0, np.inf])
+    with pytest.raises(ValueError, match=r'^pose covariance contains NaN or inf'):
+        estimator_node.require_finite_outputs(names, arrays, None)
+    arrays = [np.zeros(2) for _ in names]
+    std = names.index(layouts.ESTIMATOR_STD_OUTPUT)
+    arrays[std] = np.full(2, np.nan)
+    estimator_node.require_finite_outputs(names, arrays, layouts.ESTIMATOR_STD_OUTPUT)
+    reordered = (names[std], *names[:std], *names[std + 1:])
+    estimator_node.require_finite_outputs(
+        reordered, [arrays[std], *arrays[:std], *arrays[std + 1:]], layouts.ESTIMATOR_STD_OUTPUT)
+    with pytest.raises(ValueError, match=layouts.ESTIMATOR_STD_OUTPUT):
+        estimator_node.require_finite_outputs(names, arrays, None)

@@ -12,7 +12,6 @@ ordered ``[x y z rx ry rz]`` (:mod:`tensegrity_stiffness.estimation.sensor_model
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -22,14 +21,13 @@ from numpy.typing import NDArray
 from std_msgs.msg import Float64MultiArray
 
 from tensegrity_stiffness.nodes import messages
-from tensegrity_stiffness.nodes.layouts import OutputLayout
 from tensegrity_stiffness.nodes.messages import (
     multiarray_payload,
     write_pose_with_covariance_stamped,
 )
 from tensegrity_stiffness.ros.conversions.geometry import msg_to_wrench, pose_message_to_transform
 from tensegrity_stiffness.ros.conversions.imu import imu_to_arrays
-from tensegrity_stiffness.ros.conversions.outputs import RCLPY_TYPES, output_topics
+from tensegrity_stiffness.ros.conversions.outputs import RCLPY_TYPES
 
 FloatArray = NDArray[np.float64]
 
@@ -39,7 +37,6 @@ __all__ = [
     'imu_specific_force',
     'measured_values',
     'pose_with_covariance_to_arrays',
-    'table_topics',
     'wrench_stamped_to_array',
     'write_pose_with_covariance',
 ]
@@ -92,20 +89,11 @@ def imu_motion(msg: Any) -> tuple[FloatArray, FloatArray | None]:
     return specific_force, angular_velocity if has_gyro else None
 
 
-def table_topics(layouts: Mapping[str, OutputLayout]) -> tuple[tuple[Any, str], ...]:
-    """``(message type, '~/<name>')`` of the output messages' layouts by topic (an output
-    messages object's :attr:`~EstimatorOutputMessages.table`): the node's ``OUTPUT_TOPICS``,
-    as :func:`~tensegrity_stiffness.ros.conversions.outputs.output_topics`."""
-    return output_topics(layouts)
-
-
 class EstimatorOutputMessages(messages.EstimatorOutputMessages):
     """``estimator_node``'s per-estimate messages (rclpy), refilled by :meth:`fill`."""
 
     def __init__(self, string_names: tuple[str, ...]) -> None:
         super().__init__(tuple(string_names), RCLPY_TYPES)
-        #: The messages' layouts by topic, in :meth:`messages` order (:func:`table_topics`).
-        self.table = self.layouts
 
 
 class SpineEstimatorOutputMessages(messages.SpineEstimatorOutputMessages):
@@ -113,5 +101,3 @@ class SpineEstimatorOutputMessages(messages.SpineEstimatorOutputMessages):
 
     def __init__(self, n_joints: int) -> None:
         super().__init__(n_joints, RCLPY_TYPES)
-        #: As :attr:`EstimatorOutputMessages.table`.
-        self.table = self.layouts
