@@ -10,6 +10,7 @@
 #      control loop's ticks), one process, nothing beside them.
 # The extra args go to both passes (`-m "not slow"`, `-k`, a file: each pass keeps its tier of
 # them). TENSEGRITY_TEST_WORKERS=N sets the workers of pass 1 (0: no xdist, one process).
+# OPENBLAS_NUM_THREADS and OMP_NUM_THREADS are 1 unless set (small matrices, many processes).
 # TENSEGRITY_REQUIRE_ALL=1 is exported: a skip for a missing rclpy, MuJoCo, rosbags, kernel or
 # build is a failure naming the reason (test/conftest.py); each pass prints its skip count.
 # Exit code: the first failing pass's pytest exit code; 5 (no tests ran in either pass) counts as
@@ -91,6 +92,11 @@ lint_rc=0
 ruff check . --extend-exclude .venv,build,install,log || lint_rc=$?
 
 export TENSEGRITY_REQUIRE_ALL=1
+# One BLAS thread per process (unless the caller chose): three workers and their nodes on two
+# cores, each with OpenBLAS's threads spinning on small matrices, ran 40-45 % slower (the
+# dynamics, equilibrium and chain filter tests: 15-21 s against 8-13 s, same load).
+export OPENBLAS_NUM_THREADS="${OPENBLAS_NUM_THREADS:-1}"
+export OMP_NUM_THREADS="${OMP_NUM_THREADS:-1}"
 parallel_args=()
 if ((WORKERS > 0)); then
   parallel_args=(-n "$WORKERS" --dist loadfile --no-loadscope-reorder)
