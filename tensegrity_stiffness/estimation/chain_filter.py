@@ -108,7 +108,9 @@ class ChainFilter(FilterTrack):
         self.reject_outliers = reject_outliers
         n = self.n
         self.size = 12 * n + (6 if load == 'unknown' else 0)
-        self._rate_q = np.tile(process_noise.twist_density(), n)
+        # the screw rates' acceleration densities at ProcessNoise.motion_scale's factor 1
+        self._rate_q0 = np.tile(process_noise.twist_density(), n)
+        self._rate_q = self._rate_q0
         self._load_q = process_noise.load_density()
         self._gravity = self.chain.resolved_gravity(None)
         self._patterns: dict[Any, tuple[list[tuple[str, NDArray[np.intp], int]], int]] = {}
@@ -123,6 +125,7 @@ class ChainFilter(FilterTrack):
         1e-5 m, 1 N / 0.01 N m); without either the next :meth:`step` starts from the static
         estimator."""
         self._t: float | None = None
+        self._last_rest: FloatArray | None = None
         self._x: FloatArray | None = None
         self._P: FloatArray | None = None
         self._inconsistent = 0
@@ -204,6 +207,7 @@ class ChainFilter(FilterTrack):
             if not start.success:
                 return start
             self._t = t
+            self._last_rest = np.concatenate(rest)
             return self._estimate(rest, load, start.chi2, start.dof, start.consistent, False,
                                   dropped, start.outliers, start.outlier_reasons)
         self._predict(t - self._t, rest, load)
@@ -306,6 +310,11 @@ class ChainFilter(FilterTrack):
     def _predict(self, dt: float, rest: list[FloatArray], load: FloatArray) -> None:
         if dt <= 0.0:
             return
+        # the accelerations' densities of this prediction (the joint filter's rule)
+        every = np.concatenate(rest)
+        self._rate_q = self._rate_q0 * self.process_noise.motion_scale(self._last_rest, every,
+                                                                       dt)
+        self._last_rest = every
         steps = max(1, math.ceil(dt / MAX_SUBSTEP - 1e-9))
         h = dt / steps
         n = self.n

@@ -136,22 +136,38 @@ _EYE3 = np.eye(3)
 
 @dataclass(frozen=True)
 class ProcessNoise:
-    """White-noise densities of what the model leaves out (one sigma per sqrt(s)).
+    """White-noise densities of what the model leaves out (one sigma per sqrt(s)), the
+    accelerations' following the commanded rest lengths.
 
     ``angular_acceleration`` (rad/s^2 sqrt(s)) and ``linear_acceleration`` (m/s^2 sqrt(s)):
-    unmodelled accelerations of link 2 (in {2}); ``force_rate`` (N/s sqrt(s)) and
-    ``moment_rate`` (N m/s sqrt(s)): the random walk of an unknown load. Over a step ``dt``
-    a density ``q`` adds a variance ``q^2 dt`` (docs/estimation.md#process-noise says how to
-    choose them)."""
+    unmodelled accelerations of link 2 (in {2}) while the rest lengths change at the RMS rate
+    ``rest_rate`` (m/s); ``force_rate`` (N/s sqrt(s)) and ``moment_rate`` (N m/s sqrt(s)): the
+    random walk of an unknown load (constant). Over a step ``dt`` a density ``q`` adds a
+    variance ``q^2 dt``.
+
+    The accelerations' variance densities follow the input the filter predicts with (the rest
+    lengths ``r`` in force over the step, ``r_prev`` those of the step before,
+    :meth:`motion_scale`)::
+
+        q_a(t)^2 = q_a^2 (hold_fraction + (rdot / rest_rate)^2),
+        rdot = |r - r_prev| / (sqrt(n) dt)    (the RMS rate of the n strings over the step),
+
+    the model's error growing with how fast the strings are driven (measured on the twin,
+    docs/estimation.md#process-noise): while the rest lengths hold, only ``hold_fraction`` of
+    it is left. ``rest_rate = 0`` turns the rule off (constant densities ``q_a``, the filters'
+    behaviour before issue 37's steps); before the filter has seen two sets of rest lengths
+    the factor is 1."""
 
     angular_acceleration: float = 6.0
     linear_acceleration: float = 0.015
     force_rate: float = 0.5
     moment_rate: float = 0.01
+    rest_rate: float = 0.019
+    hold_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ('angular_acceleration', 'linear_acceleration', 'force_rate',
-                     'moment_rate'):
+                     'moment_rate', 'rest_rate', 'hold_fraction'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or \
                     not math.isfinite(value) or value < 0.0:
@@ -159,13 +175,26 @@ class ProcessNoise:
                                  f'{value!r}')
 
     def twist_density(self) -> FloatArray:
-        """(6,) variances per second of the body twist ``[w; v]``."""
+        """(6,) variances per second of the body twist ``[w; v]`` at the factor 1 of
+        :meth:`motion_scale`."""
         return np.array([self.angular_acceleration ** 2] * 3 +
                         [self.linear_acceleration ** 2] * 3)
 
     def load_density(self) -> FloatArray:
         """(6,) variances per second of the load ``[f; m]``."""
         return np.array([self.force_rate ** 2] * 3 + [self.moment_rate ** 2] * 3)
+
+    def motion_scale(self, previous_rest: FloatArray | None, rest: FloatArray,
+                     dt: float) -> float:
+        """The factor of :meth:`twist_density` over a prediction of ``dt`` s (> 0) with the
+        rest lengths ``rest`` (m, every string of the joint or the spine) after
+        ``previous_rest`` (the class docstring's rule; 1 with ``rest_rate = 0`` or no
+        ``previous_rest``)."""
+        if self.rest_rate == 0.0 or previous_rest is None:
+            return 1.0
+        d = rest - previous_rest
+        rate2 = float(d @ d) / (d.size * dt * dt)
+        return self.hold_fraction + rate2 / (self.rest_rate * self.rest_rate)
 
 
 #: The joint filter's defaults (the one home of their values: :class:`ProcessNoise`'s fields).
@@ -429,7 +458,10 @@ class JointFilter(FilterTrack):
         self.size = 18 if load == 'unknown' else 12
         self._inertia_inverse = np.linalg.inv(self.dynamics.spatial_inertia)
         self._identity = np.eye(self.size)
-        self._twist_q = process_noise.twist_density()
+        # the accelerations' densities at the factor 1 and those of the current prediction
+        # (ProcessNoise.motion_scale; written in place: the kernel keeps their address)
+        self._twist_q0 = process_noise.twist_density()
+        self._twist_q = self._twist_q0.copy()
         self._load_q = process_noise.load_density()
         self._kernel = kernel.library() if use_kernel else None
         self.use_kernel = self._kernel is not None
@@ -457,6 +489,7 @@ class JointFilter(FilterTrack):
         1e-5 m on the screw and 1 N / 0.01 N m on a load); without either: the next
         :meth:`step` starts from the static estimator."""
         self._t: float | None = None
+        self._last_rest: FloatArray | None = None
         self._inconsistent = 0
         self._patterns: dict[tuple, tuple[list, int]] = {}
         self._suspected: set[str] = set()
@@ -578,6 +611,7 @@ class JointFilter(FilterTrack):
             if not start.success:
                 return start
             self._t = t
+            self._last_rest = rest.copy()
             return self._estimate(prep, rest, load, start.chi2, start.dof, dropped,
                                   start.consistent, restarted, start.outliers,
                                   start.outlier_reasons)
@@ -656,6 +690,11 @@ class JointFilter(FilterTrack):
     def _predict(self, dt: float, rest: FloatArray, load: FloatArray) -> None:
         if dt <= 0.0:
             return
+        # the accelerations' densities of this prediction (ProcessNoise.motion_scale)
+        np.multiply(self._twist_q0,
+                    self.process_noise.motion_scale(self._last_rest, rest, dt),
+                    out=self._twist_q)
+        self._last_rest = rest.copy()
         steps = max(1, math.ceil(dt / MAX_SUBSTEP - 1e-9))
         h = dt / steps
         for _ in range(steps):

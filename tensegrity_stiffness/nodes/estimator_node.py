@@ -75,7 +75,15 @@ ESTIMATION_METHODS = ('filter', 'static')
 #: one home).
 PROCESS_NOISE_UNITS = {'angular_acceleration': 'rad/s^2 sqrt(s)',
                        'linear_acceleration': 'm/s^2 sqrt(s)', 'force_rate': 'N/s sqrt(s)',
-                       'moment_rate': 'N m/s sqrt(s)'}
+                       'moment_rate': 'N m/s sqrt(s)', 'rest_rate': 'm/s', 'hold_fraction': '1'}
+#: What the process noise's fields that are not densities say (the accelerations' rule,
+#: ProcessNoise's docstring).
+_PROCESS_NOISE_RULE = {
+    'rest_rate': 'process noise of the filter: the RMS rate of the rest lengths at which the '
+                 'acceleration densities are filter.angular_acceleration / linear_acceleration '
+                 '(their variance scales with (rate / rest_rate)^2); 0: constant densities, m/s',
+    'hold_fraction': 'process noise of the filter: the part of the acceleration variance '
+                     'densities kept while the rest lengths hold'}
 
 ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('estimation.method', 'string', 'filter',
@@ -83,7 +91,8 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
                   '(each reading set on its own, the joint at rest); docs/estimation.md',
                   choices=ESTIMATION_METHODS),
     *(ParameterSpec(f'filter.{name}', 'double', getattr(DEFAULT_PROCESS_NOISE, name),
-                    f'process noise of the filter: {name.replace("_", " ")} density, {unit}',
+                    _PROCESS_NOISE_RULE.get(name, f'process noise of the filter: '
+                                            f'{name.replace("_", " ")} density, {unit}'),
                     range=(0.0, 1e9)) for name, unit in PROCESS_NOISE_UNITS.items()),
     ParameterSpec('estimation.external_wrench', 'string', 'unknown',
                   "the load on link 2: 'unknown' (estimated, W = -F), 'zero' (unloaded, to "

@@ -4,9 +4,12 @@ prediction against an integration of JointDynamics.acceleration, agreement with 
 estimator at rest, and its trust rules (NIS, a broken sensor named, impossible readings, an
 unobservable set, a lost track restarted)."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
+from scipy.stats import chi2
 from support import REPO
 from support.estimation_trials import TENSION_STD
 
@@ -220,9 +223,15 @@ def test_prediction_follows_joint_dynamics(model):
 # ------------------------------------------------------------------ at rest
 def test_at_rest_the_filter_agrees_with_the_static_estimator(model):
     """On 30 resting states, after 40 updates with the same sensors the filter's estimate
-    lies within 3 std of the static estimate of the last reading (the filter has more
-    information: its std is below the static one)."""
+    lies within the static estimate's covariance of it (the filter has more information: its
+    std is below the static one). The difference ``d`` has a covariance below the static
+    estimate's ``C`` (the filter's error is nearly independent of the last reading's), so
+    ``d^T C^-1 d`` is at most chi-square with 6 dof: bounded at the quantile of a family-wise
+    false alarm of 1e-3 over the 30 states. (A bound of 3 std per coordinate, 180 of them,
+    fails one in two seeded draws once the filter at rest averages its readings: issue 37's
+    process noise that follows the rest lengths.)"""
     rng = np.random.default_rng(6)
+    bound = chi2.ppf(1.0 - 1e-3 / 30, 6)
     for _ in range(30):
         xi = model.initial_screw + rng.normal(scale=SPREAD)
         flt = JointFilter(model, string_damping=0.5, stiffness_std=False)
@@ -236,7 +245,7 @@ def test_at_rest_the_filter_agrees_with_the_static_estimator(model):
             gravity_std=ACCEL_STD / 9.81, gravity_base=GRAVITY / 9.81), stiffness_std=False)
         d = sm.pose_error(est.transform, static.transform)
         std = np.sqrt(np.diag(static.covariance))
-        assert np.all(np.abs(d) <= 3.0 * std), d / std
+        assert d @ np.linalg.solve(static.covariance, d) <= bound, d / std
         assert np.all(np.sqrt(np.diag(est.covariance)) <= std)
         np.testing.assert_allclose(est.external_wrench, static.external_wrench,
                                    atol=3.0 * np.sqrt(np.diag(static.wrench_covariance)).max())
@@ -332,6 +341,37 @@ def test_known_load(model):
     assert np.all(np.abs(d) <= 4.0 * np.sqrt(np.diag(est.covariance)))
 
 
+def test_process_noise_follows_the_rest_lengths(model):
+    """ProcessNoise.motion_scale: the accelerations' variance densities scale with
+    ``hold_fraction + (rdot / rest_rate)^2`` of the RMS rest-length rate over the step (1
+    before two sets of rest lengths, and with ``rest_rate = 0``); the filter's prediction adds
+    exactly that ``Q`` to the twist."""
+    noise = ProcessNoise(hold_fraction=0.01)
+    r0 = model.rest_lengths.copy()
+    dt = 1e-3  # one substep: the prediction adds Q to a zero covariance
+    moving = r0 + noise.rest_rate * dt * np.sign(np.arange(r0.size) - 5.5)  # RMS rest_rate
+    assert noise.motion_scale(None, moving, dt) == 1.0
+    assert noise.motion_scale(r0, r0, dt) == 0.01
+    assert noise.motion_scale(r0, moving, dt) == pytest.approx(1.01, rel=1e-12)
+    assert noise.motion_scale(r0, r0 + 2.0 * (moving - r0), dt) == pytest.approx(4.01,
+                                                                                 rel=1e-12)
+    assert ProcessNoise(rest_rate=0.0).motion_scale(r0, moving, dt) == 1.0
+    for bad in ({'rest_rate': -1.0}, {'hold_fraction': math.nan}):
+        with pytest.raises(ValueError, match=f'process_noise.{next(iter(bad))}'):
+            ProcessNoise(**bad)
+    for use_kernel in (True, False):
+        flt = JointFilter(model, process_noise=noise, load='known', string_damping=0.5,
+                          use_kernel=use_kernel)
+        flt.reset(model.initial_screw, covariance=np.zeros((12, 12)))
+        flt.predict(0.0, r0)
+        flt.predict(dt, r0)  # no rest lengths before: the factor 1
+        for t, rest, factor in ((2 * dt, r0, 0.01), (3 * dt, moving, 1.01)):
+            flt.set_state(flt.state, np.zeros((12, 12)))
+            flt.predict(t, rest)
+            np.testing.assert_allclose(np.diag(flt.covariance)[6:12],
+                                       noise.twist_density() * factor * dt, rtol=1e-12)
+
+
 def test_bad_input(model):
     flt = JointFilter(model)
     with pytest.raises(ValueError, match='load must be one of'):
@@ -368,9 +408,11 @@ def test_static_estimator_ignores_the_filter_fields(model):
 
 # ------------------------------------------------------------------ the compiled kernel
 def _run(model, use_kernel, load='unknown', damping=0.5, dt=1e-3):
-    """A seeded run with a moving joint, a broken load cell, a flipped IMU, a gap, a lost
-    track and a step over several substeps: every estimate's numbers."""
+    """A seeded run with a moving joint, rest lengths that change (the process noise's motion
+    factor, ProcessNoise.motion_scale, at every step), a broken load cell, a flipped IMU, a
+    gap, a lost track and a step over several substeps: every estimate's numbers."""
     rng = np.random.default_rng(21)
+    phase = np.arange(model.n_strings)
     flt = JointFilter(model, load=load, string_damping=damping, use_kernel=use_kernel)
     assert flt.use_kernel == (use_kernel and kernel.available())
     xi = model.initial_screw + rng.normal(scale=SPREAD)
@@ -387,7 +429,8 @@ def _run(model, use_kernel, load='unknown', damping=0.5, dt=1e-3):
         t += 2.5 * dt if k % 7 == 0 else dt
         if k == 50:
             t += 0.6  # a gap: restart
-        est = flt.step(t, m, known_load=np.zeros(6) if load == 'known' else None)
+        rest = model.rest_lengths + 1e-5 * np.sin(0.3 * k + phase)
+        est = flt.step(t, m, rest, known_load=np.zeros(6) if load == 'known' else None)
         out.append((est.screw, est.screw_covariance, est.twist, est.twist_covariance,
                     est.external_wrench, est.chi2, est.outliers, est.consistent,
                     est.restarted))
