@@ -35,6 +35,8 @@ from tensegrity_stiffness.estimation.joint_estimator import (
 from tensegrity_stiffness.estimation.least_squares import (
     SINGULAR_NORMAL_MATRIX,
     STALL_TOLERANCE,
+    TIME_BUDGET_EXHAUSTED,
+    FitClock,
     LevenbergMarquardtDamping,
     clip_screw_step,
     damped_normal_matrix,
@@ -228,11 +230,13 @@ def _tangent(Jc: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
 
 
 def _constrained_gauss_newton(problem: _ChainProblem, z0: FloatArray, max_iterations: int,
-                              tolerance: float) -> tuple[FloatArray, Any, int, bool, str]:
+                              tolerance: float, clock: FitClock | None = None
+                              ) -> tuple[FloatArray, Any, int, bool, str]:
     """Levenberg-Marquardt on the measurements over the equilibria (a manifold of dimension 6):
     each step lies in the tangent (the null space of dc/dz) and is followed by Newton's
     restoration onto the equilibria (:meth:`_ChainProblem.restore`); a step is kept when the
-    restored point lowers the cost. Converged when the decrement is below ``tolerance``.
+    restored point lowers the cost. Converged when the decrement is below ``tolerance``; not
+    converged (:data:`TIME_BUDGET_EXHAUSTED`) when the estimate's ``clock`` refuses a step.
     Returns (z, (r, J, c, dc/dz, state), iterations, converged, message)."""
     restored = problem.restore(z0)
     if restored is None:
@@ -253,6 +257,8 @@ def _constrained_gauss_newton(problem: _ChainProblem, z0: FloatArray, max_iterat
             return z, (r, J, c, Jc, state), it - 1, False, SINGULAR_NORMAL_MATRIX
         if float(-g @ full) < tolerance:
             return z, (r, J, c, Jc, state), it - 1, True, ''
+        if clock is not None and not clock.next_iteration():
+            return z, (r, J, c, Jc, state), it - 1, False, TIME_BUDGET_EXHAUSTED
         while True:
             y = full if damping.value == 0.0 else -np.linalg.solve(
                 damped_normal_matrix(A, damping.value), g)
@@ -346,7 +352,8 @@ def estimate_chain_state(chain: JointChain,
                          rank_tolerance: float = RANK_TOLERANCE,
                          stiffness_std: bool = True,
                          consistency_probability: float = CONSISTENCY_PROBABILITY,
-                         reject_outliers: bool = True) -> ChainEstimate:
+                         reject_outliers: bool = True,
+                         time_budget: float | None = None) -> ChainEstimate:
     """Every joint's screw, the tip load, the tip pose and the exact tip stiffness of a spine,
     each with its covariance.
 
@@ -361,11 +368,14 @@ def estimate_chain_state(chain: JointChain,
     (3,) for the link weights (default ``chain.gravity``). ``initial_screws`` (N, 6) and
     ``initial_tip_wrench`` warm-start (default: the unloaded screws and the known load or
     zero). Trust as :func:`estimate_joint_state`'s: impossible readings left out, a lost warm
-    start restarted cold, contradicted readings left out while redundancy remains.
+    start restarted cold, contradicted readings left out while redundancy remains; a
+    ``time_budget`` (s; None: no bound) as :func:`estimate_joint_state`'s (its fits'
+    iterations, not the restorations onto the equilibria, which are bounded in iterations).
     """
     inputs = _chain_inputs(chain, joint_measurements, tip_pose, tip_pose_covariance, tip_wrench,
                            tip_wrench_covariance, gravity, rest_lengths, initial_screws,
                            initial_tip_wrench, consistency_probability)
+    clock = FitClock(tolerance, max_iterations, time_budget)
     dropped = inputs.dropped
     measured = _measured_dof(inputs.preps, inputs.tip)
     if measured < 6:
@@ -375,12 +385,16 @@ def estimate_chain_state(chain: JointChain,
             'pose, or the tip load (tip_wrench)', chain.n_joints, measured, dropped, False,
             measured, math.inf)
     fitter = _ChainFitter(chain, inputs, tolerance, max_iterations, rank_tolerance,
-                          consistency_probability)
+                          consistency_probability, clock)
     fit, restarted = fitter.tracked(inputs.preps, inputs.tip, inputs.z0,
                                     initial_screws is not None)
     if reject_outliers:
         fit, restarted = reject_contradicted(fit, restarted, dropped, consistency_probability,
                                               fitter.readings, fitter.refit_without)
+    if clock.exhausted:
+        return _failed_chain(clock.message(inputs.text), chain.n_joints,
+                             _measured_dof(fit.preps, fit.tip), dropped, True, fit.rank,
+                             fit.cond, clock.iterations)
     return _chain_estimate(chain, inputs, fit, restarted, dropped, stiffness_std,
                            consistency_probability)
 
@@ -542,6 +556,7 @@ class _ChainFitter:
     max_iterations: int
     rank_tolerance: float
     probability: float
+    clock: FitClock | None = None
 
     def fit(self, preps: list[PreparedMeasurements | None], tip: frozenset[str],
             z0: FloatArray) -> _ChainFit:
@@ -554,7 +569,7 @@ class _ChainFitter:
                                 inputs.tip_wrench if 'wrench' in tip else None,
                                 inputs.tip_wrench_whitener)
         z, ev, iterations, converged, why = _constrained_gauss_newton(
-            problem, z0, self.max_iterations, self.tolerance)
+            problem, z0, self.max_iterations, self.tolerance, self.clock)
         out = _ChainFit(problem, preps, tip, z, ev, iterations, converged, why)
         if ev is not None:
             out.C, out.rank, out.cond, out.null = _chain_information(problem, ev[1], ev[3],

@@ -20,6 +20,7 @@ from scipy.linalg import lapack
 from tensegrity_stiffness.estimation import sensor_models as sm
 from tensegrity_stiffness.estimation.least_squares import (
     SINGULAR_NORMAL_MATRIX,
+    FitClock,
     InitialPointError,
     gauss_newton,
 )
@@ -351,7 +352,11 @@ def _failed_joint(message: str, prep: PreparedMeasurements | None, names: Sequen
 
 
 def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
-                   initial_screw: ArrayLike | None) -> FloatArray:
+                   initial_screw: ArrayLike | None, clock: FitClock | None = None
+                   ) -> FloatArray:
+    """The start of a fit: ``initial_screw`` (checked), else the measured pose, else the
+    equilibrium under the measured load (solved within the time ``clock`` leaves), else
+    ``model.initial_screw``."""
     if initial_screw is not None:
         x0 = np.array(initial_screw, dtype=np.float64)
         if x0.shape != (6,) or not math.isfinite(sum(x0.tolist())):  # NaN or inf in x0
@@ -362,7 +367,8 @@ def _initial_screw(model: JointModel, prep: PreparedMeasurements, rest: FloatArr
     if prep.pose is not None:
         return log_se3(prep.pose, model.initial_screw)
     if prep.wrench is not None:
-        res = solve_equilibrium(model, prep.wrench, rest)
+        res = solve_equilibrium(model, prep.wrench, rest,
+                                time_budget=None if clock is None else clock.remaining())
         if res.success:
             return res.screw
     return model.initial_screw.copy()
@@ -431,13 +437,13 @@ class _JointFit(EstimatorFit):
 
 
 def _fit_joint(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
-               x0: FloatArray, tolerance: float, max_iterations: int, rank_tolerance: float
-               ) -> _JointFit:
-    """Gauss-Newton from ``x0`` and the covariance, rank and condition at the optimum;
-    :class:`InitialPointError` when ``x0`` cannot be evaluated."""
+               x0: FloatArray, tolerance: float, max_iterations: int, rank_tolerance: float,
+               clock: FitClock | None = None) -> _JointFit:
+    """Gauss-Newton from ``x0`` (within the estimate's ``clock``) and the covariance, rank and
+    condition at the optimum; :class:`InitialPointError` when ``x0`` cannot be evaluated."""
     problem = JointProblem(model, prep, rest)
     x, ev, iterations, converged, why = gauss_newton(
-        problem.evaluate, x0, problem.length_scale, max_iterations, tolerance)
+        problem.evaluate, x0, problem.length_scale, max_iterations, tolerance, clock)
     r, J, A, state, kin = ev
     if kin is None:  # the kinematics at the estimate x (J: at the linearisation)
         kin = ScrewKinematics(x)
@@ -457,14 +463,15 @@ def better_fit(cold: EstimatorFit, warm: EstimatorFit) -> bool:
 
 
 def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray,
-                 warm: FloatArray | None, probability: float, options: tuple[float, int, float]
-                 ) -> tuple[_JointFit, bool]:
+                 warm: FloatArray | None, probability: float,
+                 options: tuple[float, int, float, FitClock]) -> tuple[_JointFit, bool]:
     """The fit from the warm start ``warm`` (a tracker's last estimate) and whether it was
     restarted: a warm start that cannot be evaluated, fails or is inconsistent has lost track
     and is fitted again from a cold start (:func:`_initial_screw` without it), whose fit is
     kept when better. Without ``warm``, the cold start's fit (ValueError when its starting
     point cannot be evaluated). The cold start (with a known load, an equilibrium solve) is
     computed only when it is used."""
+    clock = options[3]
     if warm is not None:
         try:
             fit = _fit_joint(model, prep, rest, warm, *options)
@@ -473,7 +480,7 @@ def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray
         if fit is not None and fit.on_track(probability):
             return fit, False
         try:
-            cold = _fit_joint(model, prep, rest, _initial_screw(model, prep, rest, None),
+            cold = _fit_joint(model, prep, rest, _initial_screw(model, prep, rest, None, clock),
                               *options)
         except InitialPointError:
             cold = None
@@ -484,14 +491,14 @@ def _tracked_fit(model: JointModel, prep: PreparedMeasurements, rest: FloatArray
             return cold, True
         return (cold, True) if cold is not None and better_fit(cold, fit) else (fit, False)
     try:
-        return _fit_joint(model, prep, rest, _initial_screw(model, prep, rest, None),
+        return _fit_joint(model, prep, rest, _initial_screw(model, prep, rest, None, clock),
                           *options), False
     except InitialPointError as exc:
         raise ValueError(f'initial_screw: {exc}') from None
 
 
 def _joint_refit_without(model: JointModel, rest: FloatArray, probability: float,
-                         options: tuple[float, int, float], fit: _JointFit, name: str
+                         options: tuple[float, int, float, FitClock], fit: _JointFit, name: str
                          ) -> tuple[_JointFit, bool] | None:
     """The joint's readings of ``fit`` without the reading ``name``, fitted again from the fit's
     estimate (:func:`_tracked_fit`); None when no start can be evaluated."""
@@ -539,7 +546,8 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
                          rank_tolerance: float = RANK_TOLERANCE,
                          stiffness_std: bool = True,
                          consistency_probability: float = CONSISTENCY_PROBABILITY,
-                         reject_outliers: bool = True) -> JointEstimate:
+                         reject_outliers: bool = True,
+                         time_budget: float | None = None) -> JointEstimate:
     """Estimate the screw, the pose, the load and the stiffness from ``measurements``.
 
     ``rest_lengths`` (n,) the encoders' values (default: the model's); ``initial_screw`` the warm
@@ -554,6 +562,11 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
     left, the reading the others contradict (:func:`suspect_reading`) is left out and the rest
     refitted (``reject_outliers=False``: none is). The estimate says ``consistent``,
     ``redundancy`` and ``outliers``.
+
+    ``time_budget`` (s; None: no bound): one deadline for the whole estimate (its fits and a
+    cold start's equilibrium), checked between Gauss-Newton iterations once the estimate has
+    taken :data:`~tensegrity_stiffness.estimation.least_squares.MIN_FIT_ITERATIONS`; an
+    estimate that hits it fails with ``time budget exhausted after <k> iterations (...)``.
     """
     prep = (measurements if isinstance(measurements, PreparedMeasurements)
             else Measurements.prepared(measurements, model.n_strings))
@@ -561,6 +574,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
         raise ValueError(f'measurements were prepared for {prep.n_strings} strings, the model '
                          f'has {model.n_strings}')
     consistency_threshold(1, consistency_probability)  # checks the probability
+    clock = FitClock(tolerance, max_iterations, time_budget)
     rest = model.validate_rest_lengths(rest_lengths, batched=False)
     names = model.string_names
     dropped = prep.impossible(model, rest)
@@ -572,7 +586,7 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
             message += ' (left out: ' + '; '.join(f'{n} {why}' for n, why in dropped) + ')'
         return _failed_joint(message, prep, names, False, min(prep.dof, 6), math.inf,
                              dropped=dropped)
-    options = (tolerance, max_iterations, rank_tolerance)
+    options = (tolerance, max_iterations, rank_tolerance, clock)
     warm = None if initial_screw is None else _initial_screw(model, prep, rest, initial_screw)
     fit, restarted = _tracked_fit(model, prep, rest, warm, consistency_probability, options)
     consistent = fit.consistent(consistency_probability)
@@ -584,6 +598,9 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
                               options))
         prep = fit.problem.prep
         consistent = fit.consistent(consistency_probability)
+    if clock.exhausted:
+        return _failed_joint(clock.message(prep.describe(names)), prep, names, True, fit.rank,
+                             fit.cond, clock.iterations, fit.s, dropped)
     if fit.rank < 6:
         rank, cond, s, message = _observability(fit.problem, fit.J, fit.state, fit.kin,
                                                 rank_tolerance)
