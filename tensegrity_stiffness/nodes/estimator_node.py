@@ -473,14 +473,16 @@ def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
     """The static estimate of the fresh readings of ``snapshot``, with the std of K_c when
     ``stiffness_std`` (None: ``settings.stiffness_std``; else NaN); ValueError (nothing is
     published) when the inputs are bad, the set cannot determine the pose (the message names
-    what is missing), the estimate does not converge or an output is not finite."""
+    what is missing), the estimate does not converge or runs past ``equilibrium.time_budget``
+    ('time budget exhausted ...') or an output is not finite."""
     if stiffness_std is None:
         stiffness_std = settings.stiffness_std
     readings, ages = usable_readings(snapshot, settings.max_age)
     est = estimate_joint_state(settings.model, measurements(settings, readings),
                                initial_screw=snapshot.initial_screw,
                                stiffness_std=stiffness_std,
-                               consistency_probability=settings.consistency_probability)
+                               consistency_probability=settings.consistency_probability,
+                               time_budget=settings.values['equilibrium.time_budget'])
     return _checked_outputs(est, snapshot, readings, ages, settings.max_age, stiffness_std)
 
 

@@ -270,6 +270,7 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
         settings.chain, spine_joint_measurements(settings, readings), tip_pose, tip_cov, load,
         load_covariance, rest_lengths=settings.current_rest_lengths(),
         initial_screws=initial_screws, initial_tip_wrench=initial_wrench,
-        stiffness_std=stiffness_std, consistency_probability=options.consistency_probability)
+        stiffness_std=stiffness_std, consistency_probability=options.consistency_probability,
+        time_budget=options.values['equilibrium.time_budget'])
     return _checked_spine_outputs(est, snapshot, readings, ages, options.max_age,
                                   stiffness_std)

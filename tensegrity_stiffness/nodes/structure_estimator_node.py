@@ -435,7 +435,8 @@ def _static(settings: StructureEstimatorSettings, readings: Mapping[str, Reading
     m, _ = structure_measurements(settings, readings, rest, contacts)
     est = estimate_structure_poses(settings.structure, m, start=start,
                                    hold_rigid_motion=settings.hold_rigid_motion,
-                                   consistency_probability=settings.consistency_probability)
+                                   consistency_probability=settings.consistency_probability,
+                                   time_budget=settings.node.equilibrium_time_budget)
     if not est.success:
         raise ValueError(f'no estimate: {est.message}')
     return est, contacts
