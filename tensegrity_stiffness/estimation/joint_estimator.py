@@ -538,6 +538,34 @@ def reject_contradicted(fit: _F, restarted: bool, dropped: list[tuple[str, str]]
     return fit, restarted
 
 
+def _failure(fit: _JointFit, prep: PreparedMeasurements, names: Sequence[str],
+             clock: FitClock, rank_tolerance: float, dropped: Sequence[tuple[str, str]]
+             ) -> JointEstimate | None:
+    """The failed estimate of a fit that ran out of time, left a direction undetermined or did
+    not converge (each named); None when it succeeded."""
+    if clock.exhausted:
+        return _failed_joint(clock.message(prep.describe(names)), prep, names, True, fit.rank,
+                             fit.cond, clock.iterations, fit.s, dropped)
+    if fit.rank < 6:
+        rank, cond, s, message = _observability(fit.problem, fit.J, fit.state, fit.kin,
+                                                rank_tolerance)
+        return _failed_joint(message, prep, names, False, rank, cond, fit.iterations, s,
+                             dropped)
+    if not fit.converged:
+        if fit.why == SINGULAR_NORMAL_MATRIX:
+            # Rank 6 at RANK_TOLERANCE, but too weakly determined to solve for: named as the
+            # unobservable sets are (a ring joint's spin about its axis from its lengths).
+            rank, cond, s, message = _observability(
+                fit.problem, fit.J, fit.state, fit.kin,
+                max(rank_tolerance, NEAR_SINGULAR_TOLERANCE))
+            if message:
+                return _failed_joint(message, prep, names, False, rank, cond, fit.iterations,
+                                     s, dropped)
+        return _failed_joint(f'{prep.describe(names)}: {fit.why}', prep, names, True, fit.rank,
+                             fit.cond, fit.iterations, fit.s, dropped)
+    return None
+
+
 def estimate_joint_state(model: JointModel, measurements: Measurements | PreparedMeasurements,
                          rest_lengths: ArrayLike | None = None,
                          initial_screw: ArrayLike | None = None, *,
@@ -598,26 +626,9 @@ def estimate_joint_state(model: JointModel, measurements: Measurements | Prepare
                               options))
         prep = fit.problem.prep
         consistent = fit.consistent(consistency_probability)
-    if clock.exhausted:
-        return _failed_joint(clock.message(prep.describe(names)), prep, names, True, fit.rank,
-                             fit.cond, clock.iterations, fit.s, dropped)
-    if fit.rank < 6:
-        rank, cond, s, message = _observability(fit.problem, fit.J, fit.state, fit.kin,
-                                                rank_tolerance)
-        return _failed_joint(message, prep, names, False, rank, cond, fit.iterations, s,
-                             dropped)
-    if not fit.converged:
-        if fit.why == SINGULAR_NORMAL_MATRIX:
-            # Rank 6 at RANK_TOLERANCE, but too weakly determined to solve for: named as the
-            # unobservable sets are (a ring joint's spin about its axis from its lengths).
-            rank, cond, s, message = _observability(
-                fit.problem, fit.J, fit.state, fit.kin,
-                max(rank_tolerance, NEAR_SINGULAR_TOLERANCE))
-            if message:
-                return _failed_joint(message, prep, names, False, rank, cond, fit.iterations,
-                                     s, dropped)
-        return _failed_joint(f'{prep.describe(names)}: {fit.why}', prep, names, True, fit.rank,
-                             fit.cond, fit.iterations, fit.s, dropped)
+    failed = _failure(fit, prep, names, clock, rank_tolerance, dropped)
+    if failed is not None:
+        return failed
     x, C, state = fit.x, fit.C, fit.state
     P = sm.pose_jacobian(x, fit.kin)  # at the estimate
     pose_cov = P @ C @ P.T
