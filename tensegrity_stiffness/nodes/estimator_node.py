@@ -104,6 +104,12 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('estimation.max_age', 'double', 0.05,
                   'inputs older than this (s, by arrival) are left out of an estimate',
                   range=(0.0, 3600.0)),
+    # Its own budget, not equilibrium.time_budget's 0.05 s: a structure's cold fit takes up to
+    # 30 iterations of about 2 ms, so a node starved of CPU would fail ordinary estimates.
+    ParameterSpec('estimation.time_budget', 'double', 0.5,
+                  "wall-clock budget of one 'static' estimate (its fits and refits), s: past "
+                  "its first iterations, which it never cuts short, the estimate fails with "
+                  "'time budget exhausted'", range=(1e-4, 10.0)),
     ParameterSpec('estimation.consistency_probability', 'double', CONSISTENCY_PROBABILITY,
                   'probability of the chi-square test of each estimate (consistent: False when '
                   'its chi2 exceeds the 1 - p quantile; contradicted readings are then left out '
@@ -473,7 +479,7 @@ def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
     """The static estimate of the fresh readings of ``snapshot``, with the std of K_c when
     ``stiffness_std`` (None: ``settings.stiffness_std``; else NaN); ValueError (nothing is
     published) when the inputs are bad, the set cannot determine the pose (the message names
-    what is missing), the estimate does not converge or runs past ``equilibrium.time_budget``
+    what is missing), the estimate does not converge or runs past ``estimation.time_budget``
     ('time budget exhausted ...') or an output is not finite."""
     if stiffness_std is None:
         stiffness_std = settings.stiffness_std
@@ -482,7 +488,7 @@ def estimator_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,
                                initial_screw=snapshot.initial_screw,
                                stiffness_std=stiffness_std,
                                consistency_probability=settings.consistency_probability,
-                               time_budget=settings.values['equilibrium.time_budget'])
+                               time_budget=settings.values['estimation.time_budget'])
     return _checked_outputs(est, snapshot, readings, ages, settings.max_age, stiffness_std)
 
 

@@ -85,9 +85,7 @@ COMMON_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'longer Float64MultiArray inputs are rejected unread',
                   range=(6, 1_000_000)),
     ParameterSpec('equilibrium.time_budget', 'double', 0.05,
-                  'wall-clock budget of one equilibrium solve, s (an estimator node: of one '
-                  'static estimate, whose first iterations it never cuts short)',
-                  range=(1e-4, 10.0)),
+                  'wall-clock budget of one equilibrium solve, s', range=(1e-4, 10.0)),
     ParameterSpec('equilibrium.max_iterations', 'int', 60,
                   'Newton iterations per solve stage', range=(1, 10_000)),
     ParameterSpec('markers.max_rate', 'double', 30.0,

@@ -271,6 +271,6 @@ def spine_estimator_outputs(settings: SpineEstimatorNodeSettings, snapshot: Esti
         load_covariance, rest_lengths=settings.current_rest_lengths(),
         initial_screws=initial_screws, initial_tip_wrench=initial_wrench,
         stiffness_std=stiffness_std, consistency_probability=options.consistency_probability,
-        time_budget=options.values['equilibrium.time_budget'])
+        time_budget=options.values['estimation.time_budget'])
     return _checked_spine_outputs(est, snapshot, readings, ages, options.max_age,
                                   stiffness_std)

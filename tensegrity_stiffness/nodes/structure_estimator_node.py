@@ -105,6 +105,7 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
                   "no older than estimation.max_age); 'imu': the last IMU of "
                   'estimation.imu_bodies', choices=TRIGGERS),
     JOINT_ESTIMATION['estimation.max_age'],  # one home: the joint's estimator's
+    JOINT_ESTIMATION['estimation.time_budget'],
     ParameterSpec('estimation.consistency_probability', 'double', CONSISTENCY_PROBABILITY,
                   'probability of the chi-square test of each estimate (and of the filter\'s '
                   'gate of each reading)', range=(1e-15, 0.5)),
@@ -436,7 +437,7 @@ def _static(settings: StructureEstimatorSettings, readings: Mapping[str, Reading
     est = estimate_structure_poses(settings.structure, m, start=start,
                                    hold_rigid_motion=settings.hold_rigid_motion,
                                    consistency_probability=settings.consistency_probability,
-                                   time_budget=settings.node.equilibrium_time_budget)
+                                   time_budget=settings.values['estimation.time_budget'])
     if not est.success:
         raise ValueError(f'no estimate: {est.message}')
     return est, contacts
