@@ -5,6 +5,7 @@ Run by hand after ``source scripts/env.sh`` (uses the environment's ROS_DOMAIN_I
 
     python bench/bench_loop.py [--seconds 20] [--repeats 2] [--rate 500] [--publish-every 1]
                                [--method filter] [--kinds three,one]
+                               [--blas-threads inherit,1]
 
 Each repeat runs, alternately, the three-process loop (``sim_node`` -> ``estimator_node`` (12
 load cells + IMU) -> ``stiffness_controller`` -> ``sim_node``) and the one-process loop
@@ -18,6 +19,8 @@ passed over for newer ones and its consistent share; the twin's achieved step ra
 of the estimator's process per estimate from the end of the hold (``cpu/est``, ms, from
 ``/proc``; with the controller's in the one process): the figure the machine's load moves
 least. With ``--publish-every 1`` the twin publishes both inputs (load cells, IMU) at 1 kHz.
+``--blas-threads``: the nodes' OPENBLAS_NUM_THREADS, each value in turn within a repeat
+(``inherit``: this shell's), to set the BLAS threading side by side.
 Goals: commands at >= 95 % of ``control.rate``, latency median <= 3 ms and p99 <= 10 ms (three
 processes), median <= 1.5 ms (one process). Numbers only, no assertions; ``uptime`` first and last.
 """
@@ -108,7 +111,8 @@ def newest(diagnostics, suffix: str) -> dict[str, str]:
     return {}
 
 
-def run(kind: str, seconds: float, rate: float, publish_every: int, method: str) -> None:
+def run(kind: str, seconds: float, rate: float, publish_every: int, method: str,
+        blas: str = 'inherit') -> None:
     model = JointModel.from_yaml(config.packaged_config_path())
     ns = unique_namespace('bench_loop')
     procs = start(kind, ns, rate, publish_every, method)
@@ -128,7 +132,7 @@ def run(kind: str, seconds: float, rate: float, publish_every: int, method: str)
         while not newest(diagnostics, f'{ctl}: controller') and time.monotonic() < deadline:
             time.sleep(0.2)
         print(f'{kind} ({method}, control.rate {rate:g} Hz, readings at '
-              f'{1000 / publish_every:g} Hz, {uptime()}):')
+              f'{1000 / publish_every:g} Hz, OPENBLAS_NUM_THREADS {blas}, {uptime()}):')
         estimator_pid = procs[1].pid
         last_cpu, last_count = 0.0, None
         start_t = time.monotonic()
@@ -186,12 +190,27 @@ def main() -> None:
     parser.add_argument('--method', default='filter', choices=('filter', 'static'))
     parser.add_argument('--kinds', default='three,one',
                         help='which loops, comma-separated: three (processes), one (process)')
+    parser.add_argument('--blas-threads', default='inherit',
+                        help="the nodes' OPENBLAS_NUM_THREADS, comma-separated values run in "
+                             "turn ('inherit': this shell's)")
     args = parser.parse_args()
     kinds = [KINDS[k.strip()] for k in args.kinds.split(',')]
+    blas_settings = [b.strip() for b in args.blas_threads.split(',')]
+    for b in blas_settings:
+        if b != 'inherit' and not b.isdigit():
+            parser.error(f"--blas-threads: 'inherit' or a number of threads, got {b!r}")
+    inherited = os.environ.get('OPENBLAS_NUM_THREADS')
     print(f'start: {uptime()}')
     for _ in range(args.repeats):
         for kind in kinds:
-            run(kind, args.seconds, args.rate, args.publish_every, args.method)
+            for blas in blas_settings:
+                value = inherited if blas == 'inherit' else blas
+                if value is None:
+                    os.environ.pop('OPENBLAS_NUM_THREADS', None)
+                else:
+                    os.environ['OPENBLAS_NUM_THREADS'] = value
+                run(kind, args.seconds, args.rate, args.publish_every, args.method,
+                    blas if value is None else value)
     print(f'end: {uptime()}')
 
 
