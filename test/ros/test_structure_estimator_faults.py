@@ -35,6 +35,10 @@ NOISE = {'lengths': 1e-3, 'accelerometer': 0.05, 'gyro': 0.01}
 IMU_STD_ROLLING = 0.1
 #: The faults: the library's filter test's (test/estimation/test_structure_estimator.py).
 BROKEN, FLIPPED = 'x1b-y1a', 'z1'
+#: The broken length's offset (m). The default 2 cm (20 std) while tipping was absorbed by the
+#: filter in 2 of about 30 runs: with the roll's process noise the update's chi-square rose to
+#: 70 for 66 degrees of freedom, under the gate, and the pose moved instead (docs/structures.md).
+LENGTH_OFFSET = 0.05
 BOUND_S = 0.1
 #: The twin's log line of the first publication with a fault (structure_sim_node._publish).
 ONSET = (r'sensor faults: {names} from the publication at simulated time (?P<time>[0-9.]+) s '
@@ -64,6 +68,7 @@ def rolling(tmp_path_factory):
     twin_params.write_text(
         '/**:\n  ros__parameters:\n    structure:\n      config: six_bar.yaml\n'
         '    gait:\n      enabled: true\n      steps: 20\n'
+        f'    faults:\n      length_offset: {LENGTH_OFFSET}\n'
         '    noise:\n' + ''.join(f'      {k}: {v}\n' for k, v in NOISE.items())
         + '      seed: 4\n')
     est_params.write_text(
