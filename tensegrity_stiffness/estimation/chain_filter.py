@@ -48,6 +48,7 @@ from tensegrity_stiffness.estimation.joint_filter import (
     FilterTrack,
     ProcessNoise,
     checked_prediction_time,
+    checked_restart_budget,
     kalman_update,
     resolved_load,
     validated_filter_options,
@@ -78,7 +79,8 @@ class ChainFilter(FilterTrack):
     ``process_noise`` a :class:`~tensegrity_stiffness.estimation.joint_filter.ProcessNoise`
     (its accelerations act on each joint's ``xi_ddot``, its rates on the tip load; default
     :data:`~tensegrity_stiffness.estimation.joint_filter.DEFAULT_CHAIN_PROCESS_NOISE`);
-    ``load`` ``'unknown'`` or ``'known'``; the rest as
+    ``load`` ``'unknown'`` or ``'known'``; the rest (``restart_time_budget`` included: of
+    ``estimate_chain_state``) as
     :class:`~tensegrity_stiffness.estimation.joint_filter.JointFilter`'s."""
 
     def __init__(self, chain: JointChain | ChainDynamics,
@@ -86,7 +88,8 @@ class ChainFilter(FilterTrack):
                  process_noise: ProcessNoise | None = None, load: str = 'unknown', *,
                  string_damping: Any = 0.0,
                  consistency_probability: float = CONSISTENCY_PROBABILITY,
-                 stiffness_std: bool = True, reject_outliers: bool = True) -> None:
+                 stiffness_std: bool = True, reject_outliers: bool = True,
+                 restart_time_budget: float | None = None) -> None:
         if isinstance(chain, ChainDynamics):
             if inertias is not None:
                 raise ValueError('inertias: give them to the ChainDynamics, not to the filter')
@@ -106,6 +109,7 @@ class ChainFilter(FilterTrack):
         self.consistency_probability = consistency_probability
         self.stiffness_std = stiffness_std
         self.reject_outliers = reject_outliers
+        self.restart_time_budget = checked_restart_budget(restart_time_budget)
         n = self.n
         self.size = 12 * n + (6 if load == 'unknown' else 0)
         # the screw rates' acceleration densities at ProcessNoise.motion_scale's factor 1
@@ -451,7 +455,8 @@ class ChainFilter(FilterTrack):
                                    tip_wrench, tip_wrench_cov, rest_lengths=rest,
                                    initial_screws=warm, stiffness_std=False,
                                    consistency_probability=self.consistency_probability,
-                                   reject_outliers=self.reject_outliers)
+                                   reject_outliers=self.reject_outliers,
+                                   time_budget=self.restart_time_budget)
         if est.success:
             t = self._t
             self.reset(estimate=est)

@@ -379,6 +379,18 @@ def validated_filter_options(load: str, process_noise: ProcessNoise | None,
     return process_noise
 
 
+def checked_restart_budget(restart_time_budget: float | None) -> float | None:
+    """A filter's ``restart_time_budget`` (s; None: no bound) checked: finite and >= 0
+    (ValueError naming it)."""
+    if restart_time_budget is None:
+        return None
+    value = float(restart_time_budget)
+    if not (math.isfinite(value) and value >= 0.0):
+        raise ValueError(f'restart_time_budget must be None or a finite number of seconds >= 0, '
+                         f'got {restart_time_budget}')
+    return value
+
+
 def checked_prediction_time(t: float, last: float | None) -> float:
     """``t`` (s) as a float, ValueError unless finite and not earlier than ``last``."""
     t = float(t)
@@ -419,7 +431,9 @@ class JointFilter(FilterTrack):
     estimates carry the std of ``K_c``; ``reject_outliers`` whether contradicted readings are left
     out; ``use_kernel`` the prediction's and the update's linear algebra in the compiled kernel
     when it is loaded (``tsk_filter_*``; the numpy lines here are the reference, equal to
-    rounding).
+    rounding); ``restart_time_budget`` (s, None: no bound) the time budget of a (re)start's
+    static estimate (``estimate_joint_state``'s ``time_budget``: its first iterations are never
+    cut short; past it the start fails by name and the next reading tries again).
 
     The :class:`~tensegrity_stiffness.estimation.estimators.JointEstimate` of a step: ``chi2``
     is the update's NIS and ``dof`` = ``redundancy`` its degrees of freedom (every reading
@@ -433,7 +447,7 @@ class JointFilter(FilterTrack):
                  string_damping: ArrayLike = 0.0, gravity: ArrayLike = DEFAULT_GRAVITY,
                  consistency_probability: float = CONSISTENCY_PROBABILITY,
                  stiffness_std: bool = True, reject_outliers: bool = True,
-                 use_kernel: bool = True) -> None:
+                 use_kernel: bool = True, restart_time_budget: float | None = None) -> None:
         if isinstance(model, JointDynamics):
             if inertia is not None:
                 raise ValueError('inertia: give it to the JointDynamics, not to the filter')
@@ -455,6 +469,7 @@ class JointFilter(FilterTrack):
         self.consistency_probability = consistency_probability
         self.stiffness_std = stiffness_std
         self.reject_outliers = reject_outliers
+        self.restart_time_budget = checked_restart_budget(restart_time_budget)
         self.size = 18 if load == 'unknown' else 12
         self._inertia_inverse = np.linalg.inv(self.dynamics.spatial_inertia)
         self._identity = np.eye(self.size)
@@ -930,7 +945,8 @@ class JointFilter(FilterTrack):
         est = estimate_joint_state(self.model, static, rest, warm,
                                    stiffness_std=False,
                                    consistency_probability=self.consistency_probability,
-                                   reject_outliers=self.reject_outliers)
+                                   reject_outliers=self.reject_outliers,
+                                   time_budget=self.restart_time_budget)
         if est.success:
             self._start_from(est)
             self._inconsistent = 0

@@ -506,7 +506,8 @@ def new_joint_filter(settings: EstimatorNodeSettings) -> JointFilter:
                        load='known' if settings.load_mode == 'zero' else 'unknown',
                        string_damping=values['dynamics.string_damping'], gravity=gravity,
                        consistency_probability=settings.consistency_probability,
-                       stiffness_std=settings.stiffness_std)
+                       stiffness_std=settings.stiffness_std,
+                       restart_time_budget=values['estimation.time_budget'])
 
 
 def filter_outputs(settings: EstimatorNodeSettings, snapshot: EstimatorInput,

@@ -208,7 +208,8 @@ def new_chain_filter(settings: SpineEstimatorNodeSettings) -> ChainFilter:
                        load='known' if options.load_mode == 'zero' else 'unknown',
                        string_damping=values['dynamics.string_damping'],
                        consistency_probability=options.consistency_probability,
-                       stiffness_std=options.stiffness_std)
+                       stiffness_std=options.stiffness_std,
+                       restart_time_budget=options.values['estimation.time_budget'])
 
 
 def _spine_readings(settings: SpineEstimatorNodeSettings, snapshot: EstimatorInput

@@ -112,6 +112,8 @@ def test_unobservable_and_bad_input(chain):
         flt.step(0.0, [None])
     with pytest.raises(ValueError, match='load must be one of'):
         ChainFilter(chain, load='perhaps')
+    with pytest.raises(ValueError, match='restart_time_budget'):
+        ChainFilter(chain, restart_time_budget=-0.1)
     with pytest.raises(ValueError, match='no state'):
         ChainFilter(chain).predict(0.0)
     with pytest.raises(ValueError, match='tip_pose_covariance'):
