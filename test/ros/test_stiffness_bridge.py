@@ -705,7 +705,23 @@ def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, 
         for m in messages[seen:]:
             updates |= whole(m)
         seen = len(messages)
-    status = kv(world.bridge_status(bridge_ns, lambda s: int(kv(s)['updates sent']) >= 30))
+    # The stream goes on until the bridge reports 30 updates sent: 30 inputs held whole can be
+    # fewer updates (a clipped value repeats, so one update can match several inputs), and a
+    # fresh-clone run waited 30 s for a count that the stopped stream could not raise.
+    def send_next() -> None:
+        nonlocal k
+        pub.publish(Float64MultiArray(data=(K0 * (1.0 + 0.01 * (k % 2000))).ravel().tolist()))
+        k += 1
+
+    def sent_30():  # the newest report counting 30 updates sent, else None (no wait)
+        name = f'{bridge_ns}/stiffness_bridge: controller stiffness'
+        for array in reversed(list(world.diagnostics.messages)):
+            for s in array.status:
+                if s.name == name and int(kv(s)['updates sent']) >= 30:
+                    return s
+        return None
+
+    status = kv(repeat_until(send_next, sent_30, timeout=60.0, period=0.01))
     # A call sent while the new controller's service is in the graph but not yet matched can
     # be lost (the discovery race the announcement period narrows, not closes): one on a quiet
     # machine, two seen beside a load of 20; a stall would lose a call per update.
