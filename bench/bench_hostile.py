@@ -5,7 +5,7 @@
 Seeded; no node. For the controller: N random targets (half absurd: huge, indefinite,
 antisymmetric, zero stiffnesses with pose estimates far away or turned by 180 deg about a random
 axis), each refused by the door's checks or ticked, by the controller the node builds (its
-``control.time_budget``: one period) and, on the same inputs, by one without a budget; the
+``control.time_budget``: half a period) and, on the same inputs, by one without a budget; the
 refusals and the held ticks counted by reason, the tick times of the plain and the accepted
 hostile inputs (median, p99, worst) and the slowest accepted input (its kind and values) against
 the plain median and the node's period (ratios: accepted input must not cost more than a period
@@ -174,7 +174,7 @@ def controller_run(n: int, rng: np.random.Generator) -> None:
                        cmd.iterations)
             previous = what
         budget = ('no time budget' if ctl.time_budget is None else
-                  f'control.time_budget {1e3 * ctl.time_budget:g} ms (one period)')
+                  f'control.time_budget {1e3 * ctl.time_budget:g} ms (half a period)')
         print(f'controller, {budget}: {n} inputs, {len(times["plain"])} plain ticks, '
               f'{len(times["accepted hostile"])} hostile accepted, '
               f'{sum(refusals.values())} refused, {sum(held.values())} ticks held')

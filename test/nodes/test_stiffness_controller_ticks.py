@@ -127,10 +127,10 @@ def test_a_period_must_be_positive(settings):
 
 
 def test_a_tick_past_control_time_budget_is_held_and_named(settings):
-    """``control.time_budget`` (0: one period) reaches the controller; a tick whose QP runs
+    """``control.time_budget`` (0: half a period) reaches the controller; a tick whose QP runs
     past it is held, counted, and its message names the parameter. The stalling tick: a
     reachable stiffness target after an unreachable one (test_controller_hostile)."""
-    assert tick_time_budget(settings.values) == 1.0 / settings.values['control.rate']
+    assert tick_time_budget(settings.values) == 0.5 / settings.values['control.rate']
     assert new_controller(settings).time_budget == tick_time_budget(settings.values)
     tight = controller_settings(dict(settings.values, **{'control.time_budget': 1e-9}))
     ticker = ControllerTicks(tight, new_controller(tight), PERIOD)
