@@ -115,9 +115,7 @@ else
     "$PYTHON" -m venv "$VENV"
   fi
   log "installing pinned requirements (constraints: ${CONSTRAINTS#"$REPO"/})"
-  # --no-compile: Python compiles a module when it is first imported; byte-compiling all of
-  # the 680 MB up front took 36 s of the install against 23 s without (same wheels, one run).
-  "$VENV/bin/python" -m pip install --no-input --progress-bar off --quiet --no-compile \
+  "$VENV/bin/python" -m pip install --no-input --progress-bar off --quiet \
     -c "$CONSTRAINTS" "${REQUIREMENTS[@]}"
   printf '%s\n' "$venv_hash" >"$VENV_STAMP"
   rm -f "$BUILD_STAMP"  # a new venv invalidates the build
