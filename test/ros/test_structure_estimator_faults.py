@@ -24,7 +24,11 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.serial]
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rcl_interfaces.srv import SetParameters  # noqa: E402
-from support.ros_harness import NodeProcess, RosClient, unique_namespace  # noqa: E402
+from support.ros_harness import (  # noqa: E402
+    RosClient,
+    start_structure_twin_and_estimator,
+    unique_namespace,
+)
 
 from tensegrity_stiffness import config  # noqa: E402
 from tensegrity_stiffness.structures.structure import Structure  # noqa: E402
@@ -77,13 +81,10 @@ def rolling(tmp_path_factory):
         f'    sensors:\n      length_std: {NOISE["lengths"]}\n      gyro_std: {NOISE["gyro"]}\n'
         f'      imu_std: {IMU_STD_ROLLING}\n')
     ns = unique_namespace('structure_faults')
-    sim_base, est_base = f'{ns}/structure_sim_node', f'{ns}/structure_estimator_node'
-    twin = NodeProcess(ns, twin_params, executable='structure_sim_node')
-    remaps = [f'{est_base}/{name}:={sim_base}/{name}' for name in (
-        'measured_lengths', 'measured_rest_lengths', 'measured_contacts',
-        *(f'imu/{bar}' for bar in structure.bar_names))]
-    estimator = NodeProcess(ns, est_params, executable='structure_estimator_node',
-                            extra_args=[arg for r in remaps for arg in ('-r', r)])
+    twin, estimator, sim_base, est_base = start_structure_twin_and_estimator(
+        ns, twin_params, est_params, ('measured_lengths', 'measured_rest_lengths',
+                                      'measured_contacts',
+                                      *(f'imu/{bar}' for bar in structure.bar_names)))
     ros = RosClient('structure_faults_test')
     out = {
         'structure': structure, 'twin': twin, 'estimator': estimator, 'ros': ros,

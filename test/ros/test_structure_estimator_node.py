@@ -21,9 +21,9 @@ from scipy.spatial.transform import Rotation  # noqa: E402
 from scipy.stats import chi2  # noqa: E402
 from std_msgs.msg import Float64MultiArray  # noqa: E402
 from support.ros_harness import (  # noqa: E402
-    NodeProcess,
     RosClient,
     log_has,
+    start_structure_twin_and_estimator,
     unique_namespace,
 )
 
@@ -78,13 +78,10 @@ def loop(tmp_path_factory):
         f'    sensors:\n      length_std: {LENGTH_NOISE}\n      imu_std: {IMU_STD}\n'
         f'      marker_std: {MARKER_NOISE}\n      gyro_std: 0.005\n')
     ns = unique_namespace('structure_estimator')
-    sim_base, est_base = f'{ns}/structure_sim_node', f'{ns}/structure_estimator_node'
-    twin = NodeProcess(ns, twin_params, executable='structure_sim_node')
-    remaps = [f'{est_base}/{name}:={sim_base}/{name}' for name in (
-        'measured_lengths', 'measured_rest_lengths', 'measured_markers',
-        *(f'imu/{bar}' for bar in structure.bar_names))]
-    estimator = NodeProcess(ns, est_params, executable='structure_estimator_node',
-                            extra_args=[arg for r in remaps for arg in ('-r', r)])
+    twin, estimator, sim_base, est_base = start_structure_twin_and_estimator(
+        ns, twin_params, est_params, ('measured_lengths', 'measured_rest_lengths',
+                                      'measured_markers',
+                                      *(f'imu/{bar}' for bar in structure.bar_names)))
     ros = RosClient('structure_estimator_test')
     out = {
         'structure': structure, 'twin': twin, 'estimator': estimator, 'ros': ros,

@@ -269,6 +269,22 @@ class NodeProcess:
         self._log.close()
 
 
+def start_structure_twin_and_estimator(namespace: str, twin_params: Path,
+                                       estimator_params: Path, inputs: Iterable[str]
+                                       ) -> tuple[NodeProcess, NodeProcess, str, str]:
+    """``structure_sim_node`` and ``structure_estimator_node`` in ``namespace``, the estimator's
+    ``inputs`` (names under its ``~/``) remapped to the twin's outputs of the same names.
+    Returns the twin, the estimator and their fully qualified bases."""
+    twin_base = f'{namespace}/structure_sim_node'
+    estimator_base = f'{namespace}/structure_estimator_node'
+    twin = NodeProcess(namespace, twin_params, executable='structure_sim_node')
+    remaps = [arg for name in inputs
+              for arg in ('-r', f'{estimator_base}/{name}:={twin_base}/{name}')]
+    estimator = NodeProcess(namespace, estimator_params, executable='structure_estimator_node',
+                            extra_args=remaps)
+    return twin, estimator, twin_base, estimator_base
+
+
 def log_has(proc: NodeProcess, pattern: str, timeout: float = MESSAGE_TIMEOUT) -> bool:
     """Whether the node's log matches ``pattern`` (re.search) within ``timeout`` s."""
     deadline = time.monotonic() + timeout
