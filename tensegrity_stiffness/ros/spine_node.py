@@ -75,6 +75,7 @@ class SpineNode(SpineFrames, SpineRestLengthTopic, StreamingNode):
     OUTPUT_TOPICS = OUTPUT_TOPICS
     EIGENVALUES_TOPIC = '~/tip_stiffness_eigenvalues'
     WORKER_NAME = 'chain equilibrium worker'
+    WORKER_FUNCTIONS = (solve_chain_equilibrium,)
     _build_settings = staticmethod(spine_node_settings)
     _output_frame = attrgetter('base_frame')
     _settings: SpineNodeSettings

@@ -70,6 +70,7 @@ class StiffnessNode(JointFrames, JointRestLengthTopic, StreamingNode):
     OUTPUT_TOPICS = output_topics(joint_output_layouts(()))
     EIGENVALUES_TOPIC = '~/stiffness_eigenvalues'
     WORKER_NAME = 'equilibrium worker'
+    WORKER_FUNCTIONS = (solve_equilibrium, design_rest_lengths)
     _build_settings = staticmethod(joint_node_settings)
     _output_frame = attrgetter('link1_frame')
     _settings: JointNodeSettings

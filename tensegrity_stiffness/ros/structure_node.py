@@ -59,6 +59,7 @@ class StructureNode(StreamingNode):
     of poses; solves the equilibrium and reports the analysis as services."""
 
     WORKER_NAME = 'structure equilibrium worker'
+    WORKER_FUNCTIONS = (solve_structure_equilibrium, processing.structure_report)
     _build_settings = staticmethod(structure_node_settings)
     _output_frame = attrgetter('world_frame')
     _settings: StructureNodeSettings

@@ -70,7 +70,9 @@ class StreamingNode(Node):
     """Publishes all outputs of every streamed input, under one lock, from one settings object.
 
     A node declares, as class attributes: ``OUTPUT_TOPICS`` (``(type, topic)`` in the order of
-    its messages object's ``messages()``), ``WORKER_NAME``, ``_build_settings(values,
+    its messages object's ``messages()``), ``WORKER_NAME``, ``WORKER_FUNCTIONS`` (what its
+    services run in the worker: their modules are imported before the worker is ready),
+    ``_build_settings(values,
     generation=0)`` (the settings of a whole parameter set; ValueError names the field) and
     ``_output_frame(settings)`` (the frame of the outputs' headers); and the methods
     :meth:`_parameter_table`, :meth:`_streams`, :meth:`_output_messages`, :meth:`_outputs`,
@@ -84,6 +86,8 @@ class StreamingNode(Node):
     #: The topic of the principal stiffnesses of :meth:`_cartesian_stiffness` ('' : none).
     EIGENVALUES_TOPIC = ''
     WORKER_NAME = 'worker'
+    #: The functions the node's services run in the worker (their modules preloaded).
+    WORKER_FUNCTIONS: tuple[Callable[..., Any], ...] = ()
     #: Whether the node serves solver calls (services): only then does it run a worker process.
     SERVES_SOLVES = True
     #: Whether each streamed input is taken newest only (the older messages queued behind it
@@ -113,7 +117,9 @@ class StreamingNode(Node):
         self._last_solution: np.ndarray | None = None
         self._clock = self.get_clock()
         self._messages = self._output_messages(self._settings)
-        self._solver = SolverWorker(self.WORKER_NAME) if self.SERVES_SOLVES else None
+        self._solver = SolverWorker(
+            self.WORKER_NAME, preload=tuple(dict.fromkeys(
+                f.__module__ for f in self.WORKER_FUNCTIONS))) if self.SERVES_SOLVES else None
         self._in_worker = WorkerCalls(self, self._solver) if self._solver is not None else None
 
         values = self._settings.values

@@ -11,13 +11,16 @@ job it was running fails with :class:`WorkerDiedError` naming the cause, the job
 started yet (the worker reports each start) go to the fresh worker, as do the jobs after. A job
 that does not come back within its deadline fails with :class:`WorkerOverrunError` and the worker
 is replaced. Jobs run one at a time, so a job's deadline runs from the moment it is the oldest
-job held and the worker is ready (its imports done): a worker stopped by a signal, that never
-starts the job, overruns too. Nothing here imports rclpy; results are handed to callbacks on
+job held and the worker is ready (its imports done: the ``preload`` modules, imported before the
+worker says so, so that a fresh worker's numpy, scipy and solver imports, seconds on a loaded
+machine, never count against a job's budget): a worker stopped by a signal, that never starts
+the job, overruns too. Nothing here imports rclpy; results are handed to callbacks on
 the reader thread.
 """
 
 from __future__ import annotations
 
+import importlib
 import itertools
 import multiprocessing
 import os
@@ -45,11 +48,17 @@ class WorkerOverrunError(TimeoutError):
     """The job did not come back within its deadline; the worker was replaced."""
 
 
-def _serve(conn: Connection) -> None:
-    """The worker's loop: run ``(job, fn, args, kwargs)`` requests, send back results."""
+def _serve(conn: Connection, preload: tuple[str, ...] = ()) -> None:
+    """The worker's loop: import the ``preload`` modules, say it is ready, then run ``(job, fn,
+    args, kwargs)`` requests and send back results."""
     os.nice(WORKER_NICE)
     # Ctrl-C in a terminal reaches the whole process group: the node ends its worker itself.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for module in preload:
+        try:
+            importlib.import_module(module)
+        except Exception:  # the job that needs it reports the import's error
+            pass
     conn.send((None, READY, None))
     while True:
         try:
@@ -95,12 +104,14 @@ class _Job:
 class SolverWorker:
     """A worker process that runs one job at a time, replaced when it dies or overruns.
 
-    ``name`` appears in error messages (``'equilibrium worker'``). ``restarts`` counts the
-    replacements; ``pid`` is the current worker's process id.
+    ``name`` appears in error messages (``'equilibrium worker'``). ``preload``: the modules each
+    worker imports before it is ready (the modules of the functions it will run). ``restarts``
+    counts the replacements; ``pid`` is the current worker's process id.
     """
 
-    def __init__(self, name: str = 'solver worker') -> None:
+    def __init__(self, name: str = 'solver worker', preload: tuple[str, ...] = ()) -> None:
         self.name = name
+        self.preload = tuple(preload)
         self.restarts = 0
         self._context = multiprocessing.get_context('spawn')
         self._lock = threading.Lock()
@@ -120,7 +131,7 @@ class SolverWorker:
     def _start(self) -> None:
         """Start a worker and its reader thread (called with the lock held or at init)."""
         parent, child = self._context.Pipe()
-        process = self._context.Process(target=_serve, args=(child,), daemon=True,
+        process = self._context.Process(target=_serve, args=(child, self.preload), daemon=True,
                                         name='tensegrity_solver')
         process.start()
         child.close()
