@@ -5,6 +5,7 @@ module uses another module's private names."""
 from __future__ import annotations
 
 import ast
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -64,6 +65,18 @@ PACKAGE = REPO / 'tensegrity_stiffness'
 MODULES = sorted(p for p in PACKAGE.rglob('*.py') if '__pycache__' not in p.parts)
 
 
+@functools.cache
+def parsed(path: Path) -> ast.Module:
+    """A module's syntax tree, parsed once for every test of this file (none changes it)."""
+    return ast.parse(path.read_text(encoding='utf-8'))
+
+
+@functools.cache
+def walked(path: Path) -> tuple[ast.AST, ...]:
+    """Every node of :func:`parsed`'s tree, in ``ast.walk`` order, listed once."""
+    return tuple(ast.walk(parsed(path)))
+
+
 def dotted(path: Path) -> str:
     parts = path.relative_to(REPO).with_suffix('').parts
     return '.'.join(parts[:-1] if parts[-1] == '__init__' else parts)
@@ -100,7 +113,7 @@ def test_no_module_imports_from_a_layer_above_or_a_sibling() -> None:
     for path in MODULES:
         module = dotted(path)
         mine = layer_of(module)
-        tree = ast.parse(path.read_text(encoding='utf-8'))
+        tree = parsed(path)
         for line, target in imported_modules(tree, module, path.name == '__init__.py'):
             theirs = layer_of(target)
             if theirs is None or mine is None or theirs.name == mine.name:
@@ -155,7 +168,7 @@ def test_code_inside_the_package_imports_the_parts_not_the_faces() -> None:
         if module in faces or layer_of(module).alias:  # a face's own imports; the old paths
             continue
         wrong += [f'{path.relative_to(REPO)}:{line} imports {what} through its face'
-                  for line, what in face_imports(ast.parse(path.read_text(encoding='utf-8')),
+                  for line, what in face_imports(parsed(path),
                                                  faces)]
     assert not wrong, '\n'.join(wrong)
 
@@ -176,7 +189,7 @@ def test_only_the_ros_layer_imports_rclpy_or_message_packages() -> None:
         module = dotted(path)
         if module.startswith('tensegrity_stiffness.ros'):
             continue
-        tree = ast.parse(path.read_text(encoding='utf-8'))
+        tree = parsed(path)
         for line, target in imported_modules(tree, module, path.name == '__init__.py'):
             if any(target == name or target.startswith(name + '.') for name in ROS_ONLY_IMPORTS):
                 wrong.append(f'{path.relative_to(REPO)}:{line} imports {target}')
@@ -236,7 +249,7 @@ DOCUMENTED_PRIVATE_NAMES = {
 def test_no_module_uses_another_module_s_private_names() -> None:
     wrong = []
     for path in MODULES:
-        tree = ast.parse(path.read_text(encoding='utf-8'))
+        tree = parsed(path)
         for line, name in private_uses(tree):
             if name not in DOCUMENTED_PRIVATE_NAMES:
                 wrong.append(f'{path.relative_to(REPO)}:{line} uses {name}')
@@ -265,18 +278,21 @@ def test_output_names_and_order_have_one_home() -> None:
     )
 
     home = PACKAGE / 'nodes' / 'layouts.py'
+    tables = [(frozenset(names), frozenset(f'~/{n}' for n in names))
+              for names in (JOINT_OUTPUTS, SPINE_OUTPUTS, ESTIMATOR_OUTPUTS,
+                            SPINE_ESTIMATOR_OUTPUTS)]
     wrong = []
-    for names in (JOINT_OUTPUTS, SPINE_OUTPUTS, ESTIMATOR_OUTPUTS,
-                  SPINE_ESTIMATOR_OUTPUTS):
+    for names, topics in tables:
         for path in MODULES:
             if path == home:
                 continue
-            for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
-                if isinstance(node, ast.Constant) and node.value in {f'~/{n}' for n in names}:
+            for node in walked(path):
+                if isinstance(node, ast.Constant) and isinstance(node.value, str) and \
+                        node.value in topics:
                     wrong.append(f'{path.relative_to(REPO)}:{node.lineno} {node.value!r}')
                 elif isinstance(node, (ast.Tuple, ast.List, ast.Set)):
                     values = [i.value for i in node.elts if isinstance(i, ast.Constant)]
-                    if len(set(values) & set(names)) >= 3:
+                    if len(names.intersection(values)) >= 3:
                         wrong.append(f'{path.relative_to(REPO)}:{node.lineno} {values}')
     assert not wrong, '\n'.join(wrong)
 
@@ -290,7 +306,7 @@ def test_rclpy_internals_are_used_in_one_module_only() -> None:
     for path in MODULES:
         if path == home:
             continue
-        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+        for node in walked(path):
             names = []
             if isinstance(node, ast.ImportFrom):
                 names = [node.module or '', *(a.name for a in node.names)]
@@ -314,7 +330,7 @@ def test_long_functions_say_why() -> None:
     gives the reason, as ``(Long: ...)``."""
     unexplained = []
     for path in MODULES:
-        for node in ast.walk(ast.parse(path.read_text())):
+        for node in walked(path):
             if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
                 continue
             length = node.end_lineno - node.lineno + 1
@@ -362,7 +378,7 @@ def import_graph() -> dict[str, set[str]]:
     graph: dict[str, set[str]] = {}
     for name in sorted(modules):
         path = names[name]
-        tree = ast.parse(path.read_text(encoding='utf-8'))
+        tree = parsed(path)
         graph[name] = runtime_import_targets(tree, name, path.name == '__init__.py',
                                              modules) - {name}
     return graph
@@ -448,7 +464,7 @@ def test_dynamic_imports_keep_the_import_rule() -> None:
     for path in MODULES:
         module = dotted(path)
         mine = layer_of(module)
-        for line, arg in dynamic_imports(ast.parse(path.read_text(encoding='utf-8'))):
+        for line, arg in dynamic_imports(parsed(path)):
             where = f'{path.relative_to(REPO)}:{line}'
             if mine.name == 'ros' or module in RUNTIME_NAME_IMPORTS:
                 continue
@@ -480,7 +496,7 @@ def test_moved_names_name_their_own_modules() -> None:
     wrong = []
     for path in MODULES:
         package = dotted(path) if path.name == '__init__.py' else dotted(path).rpartition('.')[0]
-        for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+        for node in walked(path):
             if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
                     and node.func.id == 'MovedNames'):
                 continue
