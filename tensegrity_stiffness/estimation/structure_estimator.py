@@ -76,16 +76,20 @@ __all__ = [
     'DEFAULT_ACCELEROMETER_STD',
     'DEFAULT_CONTACT_STD',
     'DEFAULT_CONTACT_VELOCITY_STD',
+    'DEFAULT_DYNAMICS_ACCELERATION_STD',
     'DEFAULT_GYRO_STD',
     'DEFAULT_IMU_STD',
     'DEFAULT_LENGTH_STD',
     'DEFAULT_MARKER_STD',
+    'DEFAULT_MAX_SUBSTEP',
     'DEFAULT_PIVOT_ACCELEROMETER_STD',
+    'DEFAULT_PREDICTION',
     'DEFAULT_TENSION_STD',
     'DEFAULT_WRENCH_STD',
     'FLIPPED_IMU_ANGLE',
     'GAUGE_TOLERANCE',
     'NULL_TOLERANCE',
+    'PREDICTIONS',
     'Reading',
     'StructureEstimate',
     'StructureFilter',
@@ -718,9 +722,18 @@ def _failed(message: str, structure: Structure, inputs: str, dropped: list[tuple
 
 
 # ---------------------------------------------------------------------------------- recursive
-#: Default process noise of :class:`StructureFilter`: white accelerations (m/s^2, rad/s^2) of
-#: each body's origin and turn, std per axis per sqrt(s) (a rolling robot's).
+#: Default process noise of :class:`StructureFilter`'s constant-velocity prediction: white
+#: accelerations (m/s^2, rad/s^2) of each body's origin and turn, std per axis per sqrt(s) (a
+#: rolling robot's).
 DEFAULT_ACCELERATION_STD = (2.0, 20.0)
+#: The same for the prediction on the dynamics (what they leave out: impacts, the contacts'
+#: slide, the encoders held over a step): on the rolling twins (3-bar, 6-bar; 4 seeds) the
+#: smallest of a grid (0.5 .. 2 m/s^2, 5 .. 20 rad/s^2) whose NEES stays below the band's upper
+#: end on both (at (0.7, 10) the 3-bar's is 1.03, at (1, 5) 2.4; constant velocity at (1, 10)
+#: 7.9, so that model keeps the larger). The one-step errors of the dynamics at the twin's true
+#: states are smaller (RMS 1.3 m/s^2; 16 rad/s^2 across a bar, 46 about its axis, over 0.01 s):
+#: they come in bursts (impacts, slides), not white.
+DEFAULT_DYNAMICS_ACCELERATION_STD = (1.0, 10.0)
 #: Default std of a gyro (rad/s) and of a contact node's velocity (m/s: it sticks).
 DEFAULT_GYRO_STD = 0.01
 DEFAULT_CONTACT_VELOCITY_STD = 2e-3
@@ -924,8 +937,15 @@ class StructureFilterUpdate:
 
 
 class StructureFilter:
-    """The recursive form: an extended Kalman filter on every free body's pose and velocity
-    (constant velocity with white accelerations, :data:`DEFAULT_ACCELERATION_STD`), updated by
+    """The recursive form: an extended Kalman filter on every free body's pose and velocity.
+    Prediction (``prediction``): ``'dynamics'`` (default), the structure's dynamics
+    (:meth:`drift`: Newton-Euler off the ground with the strings' forces at the held rest
+    lengths, their damping and gravity; Euler about a body's one sticking contact node;
+    constant velocity on a body with more nodes down) by linearly implicit trapezoidal steps
+    (:meth:`implicit_step`) of at most ``max_substep``, plus white accelerations
+    (``acceleration_std``, default :data:`DEFAULT_DYNAMICS_ACCELERATION_STD`) for what they
+    leave out; or ``'constant_velocity'`` with white accelerations (default
+    :data:`DEFAULT_ACCELERATION_STD`). Updated by
     the static estimator's measurement models (:func:`measurement_model`) plus each IMU's gyro
     (``R^T w``, Jacobian ``R^T`` in ``w`` and ``R^T hat(w)`` in ``dw``) and the contacts' zero
     velocity (a sticking node: ``v + w x (x - p) = 0``), which carries the position along the
@@ -944,7 +964,7 @@ class StructureFilter:
     ``poses`` the start ((N, 4, 4) or (N, 7)); ``pose_std`` (m, rad) its std per axis."""
 
     def __init__(self, structure: Structure, poses: ArrayLike, pose_std: tuple[float, float]
-                 = (0.01, 0.05), acceleration_std: tuple[float, float] = DEFAULT_ACCELERATION_STD,
+                 = (0.01, 0.05), acceleration_std: tuple[float, float] | None = None,
                  gyro_std: float = DEFAULT_GYRO_STD,
                  contact_velocity_std: float = DEFAULT_CONTACT_VELOCITY_STD,
                  gate_probability: float = CONSISTENCY_PROBABILITY,
@@ -969,6 +989,9 @@ class StructureFilter:
         p_std = np.tile([pose_std[0]] * 3 + [pose_std[1]] * 3, f // 6)
         v_std = np.tile([0.1] * 3 + [1.0] * 3, f // 6)
         self.P = np.diag(np.concatenate([p_std, v_std]) ** 2)
+        if acceleration_std is None:
+            acceleration_std = (DEFAULT_DYNAMICS_ACCELERATION_STD if prediction == 'dynamics'
+                                else DEFAULT_ACCELERATION_STD)
         self.q = np.tile([acceleration_std[0]] * 3 + [acceleration_std[1]] * 3, f // 6) ** 2
         self.gyro_std = _positive('gyro_std', gyro_std)
         self.contact_velocity_std = _positive('contact_velocity_std', contact_velocity_std)
