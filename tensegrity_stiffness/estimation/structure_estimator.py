@@ -753,8 +753,8 @@ DEFAULT_MAX_SUBSTEP = 0.01
 
 
 def body_accelerations(structure: Structure, T: FloatArray, V: FloatArray, rest: FloatArray,
-                       bodies: Sequence[int], pivots: Mapping[int, int] | None = None
-                       ) -> tuple[FloatArray, FloatArray, FloatArray]:
+                       bodies: Sequence[int], pivots: Mapping[int, int] | None = None,
+                       angular: bool = True) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The accelerations ``[a_i; alpha_i]`` (k, 6) (the origin's, the angular one; world) of
     ``bodies`` (free, each with its centre of mass at its origin) by their dynamics at the
     transforms ``T`` with ``rest``, ``V`` (N, 6) the bodies' ``[v; w]``:
@@ -772,7 +772,8 @@ def body_accelerations(structure: Structure, T: FloatArray, V: FloatArray, rest:
     Returns the accelerations and their Jacobians (6k, 6N) in the poses' ``[dp; dw]`` (through
     the strings' stiffness ``-K D``, ``D`` the map to ``K``'s spatial twists, and the body's own
     turn) and in ``V`` (the damping, the gyroscopic and centripetal terms); the damping's change
-    with the pose (second order) is left out."""
+    with the pose (second order) is left out but for its turn with the body. ``angular=False``:
+    ``alpha`` and its rows zero off the ground (the accelerometers' model needs only ``a``)."""
     pivots = {} if pivots is None else pivots
     state = structure.evaluate_transforms(T, rest)
     n6 = 6 * structure.n_bodies
@@ -800,7 +801,13 @@ def body_accelerations(structure: Structure, T: FloatArray, V: FloatArray, rest:
     for q, i in enumerate(idx):
         W, dWq = state.wrenches[i], dW[6 * q:6 * q + 6]
         rows = slice(6 * q, 6 * q + 6)
-        if i not in pivots:
+        if i not in pivots and not angular:  # Newton's law alone
+            m = structure.bodies[i].mass
+            acc[q, :3] = (W[:3] + Wd[q, :3]) / m + g
+            J_pose[6 * q:6 * q + 3] = dWq[:3] / m
+            J_vel[6 * q:6 * q + 3] = dWd[6 * q:6 * q + 3] / m
+            acc[q, 3:] = J_pose[6 * q + 3:6 * q + 6] = J_vel[6 * q + 3:6 * q + 6] = 0.0
+        elif i not in pivots:
             acc[q], J_pose[rows], J_vel[rows] = _free_acceleration(
                 structure, T, V, i, W, dWq, Wd[q], dWd[rows], g)
         else:
@@ -820,7 +827,8 @@ def specific_force_model(structure: Structure, T: FloatArray, V: FloatArray, res
 
     Returns ``f`` (k, 3) and its Jacobians (3k, 6N) in the poses' ``[dp; dw]`` (those of
     ``a_i`` and the body's own turn of ``R_i^T``) and in ``V``."""
-    acc, J_pose, J_vel = body_accelerations(structure, T, V, rest, bodies, pivots)
+    acc, J_pose, J_vel = body_accelerations(structure, T, V, rest, bodies, pivots,
+                                            angular=False)
     g = np.zeros(3) if structure.gravity is None else np.asarray(structure.gravity, float)
     k = len(acc)
     f = np.empty((k, 3))
