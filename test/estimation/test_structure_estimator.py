@@ -831,3 +831,28 @@ def test_filter_prediction_is_the_constant_velocity_model(prediction: str) -> No
     np.testing.assert_allclose(flt.P, F @ P0 @ F.T + Q, rtol=0, atol=1e-13 * np.abs(P0).max())
     assert np.array_equal(flt.P, flt.P.T)
     np.testing.assert_allclose(flt.T, apply_increment(T, (V0 * dt).ravel()), rtol=0, atol=1e-15)
+
+
+def test_filter_prediction_holds_the_last_updates_rest_lengths_and_contacts() -> None:
+    """predict on the dynamics holds the last update's encoders and contact nodes (the same
+    step as given explicitly); an unknown prediction or a sub-step <= 0 is refused by name."""
+    from tensegrity_stiffness.estimation.structure_estimator import StructureFilter
+
+    structure, T, contacts = example('three_bar')
+    rest = structure.rest_lengths * 0.99
+    m = StructureMeasurements(rest_lengths=rest, contacts=list(contacts))
+    held, given, still = (StructureFilter(structure, T, acceleration_std=(1.0, 10.0),
+                                          prediction=p)
+                          for p in ('dynamics', 'dynamics', 'constant_velocity'))
+    for flt in (held, given, still):
+        flt.update(m)
+    held.predict(0.01)
+    given.predict(0.01, rest_lengths=rest, contacts=list(contacts))
+    still.predict(0.01)
+    np.testing.assert_array_equal(held.T, given.T)
+    np.testing.assert_array_equal(held.P, given.P)
+    assert np.abs(held.V - still.V).max() > 1e-3  # the shortened strings accelerate it
+    with pytest.raises(ValueError, match='prediction'):
+        StructureFilter(structure, T, prediction='euler')
+    with pytest.raises(ValueError, match='max_substep'):
+        StructureFilter(structure, T, max_substep=0.0)
