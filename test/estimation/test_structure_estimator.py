@@ -759,7 +759,7 @@ def rms(errors: np.ndarray) -> tuple[float, float]:
 #: The rolls tracked (structure, seconds of simulated time from the settle's start, bounds on
 #: the position (m) and angle (deg) RMS, of the shape's position RMS (m)), from the measured
 #: figures of the test's docstring.
-ROLLS = [('six_bar', 6.0, 6.0e-3, 2.0, 1.0e-3), ('three_bar', 8.0, 9.0e-3, 2.0, 1.0e-3)]
+ROLLS = [('six_bar', 6.0, 5.5e-3, 2.0, 1.0e-3), ('three_bar', 8.0, 7.5e-3, 2.0, 1.0e-3)]
 
 
 @pytest.mark.slow
@@ -774,10 +774,11 @@ def test_filter_on_the_twin_rolling(name: str, seconds: float, position_rms: flo
     default process noise DEFAULT_DYNAMICS_ACCELERATION_STD) and so are the accelerometers
     (specific_force_model: Newton's law off the ground, held here to the twin's own IMUs at its
     states to 4e-3 m/s^2; Euler's about a sticking contact node). Measured (4 seeds pooled,
-    docs/structures.md): the 6-bar 5.3 mm / 0.92 deg RMS, its shape (the plane motion aligned)
-    0.43 mm / 0.92 deg, NEES 0.41 per dof, 12 readings gated (of 7176 accelerometer readings:
-    impacts); the 3-bar 7.8 mm / 1.17 deg, shape 0.43 mm / 1.19 deg, NEES 0.83, 106 gated (of
-    5988; at constant velocity: 6.6 mm / 1.18 deg, NEES 0.35, and 9.3 mm / 1.78 deg, NEES 0.82).
+    docs/structures.md): the 6-bar 5.0 mm / 0.87 deg RMS, its shape (the plane motion aligned)
+    0.33 mm / 0.86 deg, NEES 0.35 per dof, 13 readings gated (of 7176 accelerometer readings:
+    impacts); the 3-bar 6.3 mm / 1.09 deg, shape 0.53 mm / 1.09 deg, NEES 0.67, 142 gated (of
+    5988, 2.4 %; at constant velocity: 6.6 mm / 1.18 deg, NEES 0.35, 12 gated, and 9.3 mm /
+    1.78 deg, NEES 0.82, 36 gated).
     The rest of the position error is the plane motion, followed from the contacts as sticking
     while the twin's contacts slide (2 .. 7 mm while in contact: MuJoCo's soft friction), which
     no sensor of the set sees: the issue's 5 mm is missed there. NEES checked against the band's
@@ -802,7 +803,7 @@ def test_filter_on_the_twin_rolling(name: str, seconds: float, position_rms: flo
     pos, ang = rms(np.array(errors))
     shape_pos, shape_ang = rms(np.array(aligned))
     print(name, 'rolling', pos, ang, shape_pos, shape_ang, nees / dof, gated)
-    assert gated <= 0.02 * 4 * (len(records) - 1) * structure.n_bodies  # impacts
+    assert gated <= 0.03 * 4 * (len(records) - 1) * structure.n_bodies  # impacts
     assert pos < position_rms
     assert ang < angle_rms
     assert shape_pos < shape_rms
@@ -818,7 +819,8 @@ def test_filter_prediction_is_the_constant_velocity_model(prediction: str) -> No
 
     structure, T, _ = example('three_bar')
     rng = np.random.default_rng(16)
-    flt = StructureFilter(structure, T, prediction=prediction)
+    flt = StructureFilter(structure, T, prediction=prediction,
+                          acceleration_std=(2.0, 20.0))  # Q diagonal
     flt.V = rng.standard_normal((3, 6))
     X = rng.standard_normal((36, 36))
     flt.P = X @ X.T
@@ -856,3 +858,24 @@ def test_filter_prediction_holds_the_last_updates_rest_lengths_and_contacts() ->
         StructureFilter(structure, T, prediction='euler')
     with pytest.raises(ValueError, match='max_substep'):
         StructureFilter(structure, T, max_substep=0.0)
+
+
+@pytest.mark.parametrize('prediction', ['constant_velocity', 'dynamics'])
+def test_filter_process_noise_about_a_bars_axis(prediction: str) -> None:
+    """``acceleration_std = (linear, angular, about a bar's axis)``: from a zero covariance one
+    prediction's is the white accelerations' ``Q``, a bar's angular block ``R diag(q_t, q_t,
+    q_a) R^T`` (its axis the body's z), times ``dt`` in the velocities."""
+    from tensegrity_stiffness.estimation.structure_estimator import StructureFilter
+
+    structure, T, _ = example('three_bar')
+    flt = StructureFilter(structure, perturbed(T, np.random.default_rng(19), 0.3),
+                          acceleration_std=(1.0, 5.0, 15.0), prediction=prediction)
+    flt.P[:] = 0.0
+    dt = 0.01
+    flt.predict(dt)
+    for i in range(3):
+        R = flt.T[i, :3, :3]
+        w = slice(18 + 6 * i + 3, 18 + 6 * i + 6)
+        np.testing.assert_allclose(flt.P[w, w], dt * R @ np.diag([25.0, 25.0, 225.0]) @ R.T,
+                                   rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(flt.P[18 + 6 * i, 18 + 6 * i], dt, rtol=1e-12)
