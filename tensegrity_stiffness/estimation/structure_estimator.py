@@ -1051,10 +1051,10 @@ class StructureFilter:
 
     def drift(self, T: FloatArray, V: FloatArray, rest: FloatArray,
               contacts: Sequence[int] = ()) -> tuple[FloatArray, FloatArray]:
-        """The state's rate ``x' = [V; A(x)]`` (2f,) in the free columns (``V`` the poses' rate
-        in ``[dp; dw]``, ``A`` the bodies' accelerations of :func:`body_accelerations`, zero on
-        the bodies :meth:`dynamic_bodies` leaves out) and its Jacobian (2f, 2f) in the error
-        state ``[dp; dw; dV]``: ``[[Omega, I], [dA/dpose, dA/dV]]``, ``Omega`` the blocks
+        """The state's rate ``x' = [V; acc(x)]`` (2f,) in the free columns (``V`` the poses' rate
+        in ``[dp; dw]``, ``acc`` the bodies' ``[a; alpha]`` of :func:`body_accelerations`, zero
+        on the bodies :meth:`dynamic_bodies` leaves out) and its Jacobian ``A`` (2f, 2f) in the
+        error state ``[dp; dw; dV]``: ``[[Omega, I], [dacc/dpose, dacc/dV]]``, ``Omega`` the blocks
         ``hat(w_i)`` of the turn (``d dw/dt = dw_V + w x dw``: the world-frame increment turns
         with the body)."""
         f = self.cols.size
