@@ -731,10 +731,10 @@ DEFAULT_ACCELERATION_STD = (2.0, 20.0)
 #: dynamics' one-step errors at the rolling twins' true states (RMS over 0.01 s: 1.3 m/s^2,
 #: 16 rad/s^2 across a bar, 46 about its axis; constant velocity's 2.6, 25, 46) set the angular
 #: ratio, 1 : 3; the levels are the smallest of a grid (0.5 .. 2 m/s^2, 4 .. 10 rad/s^2) whose
-#: NEES stays below the band's top on both twins with at most 3 % of the readings gated (4
-#: seeds; at 0.7 m/s^2 the 3-bar's NEES is 2.2, at 4 rad/s^2 3.3 % gated). White noise at the
-#: errors' own RMS is inconsistent (NEES 3.5 .. 6, the 3-bar's track lost): they come in
-#: bursts (impacts, slides).
+#: NEES stays below the band's top on both twins, gating at most 3 % as many readings as there
+#: are accelerometer readings (4 seeds; at 0.7 m/s^2 the 3-bar's NEES is 2.2, at 4 rad/s^2
+#: 3.3 % gated). White noise at the errors' own RMS is inconsistent (NEES 3.5 .. 6, the 3-bar's
+#: track lost): they come in bursts (impacts, slides).
 DEFAULT_DYNAMICS_ACCELERATION_STD = (1.0, 5.0, 15.0)
 #: Default std of a gyro (rad/s) and of a contact node's velocity (m/s: it sticks).
 DEFAULT_GYRO_STD = 0.01
