@@ -76,22 +76,27 @@ __all__ = [
     'DEFAULT_ACCELEROMETER_STD',
     'DEFAULT_CONTACT_STD',
     'DEFAULT_CONTACT_VELOCITY_STD',
+    'DEFAULT_DYNAMICS_ACCELERATION_STD',
     'DEFAULT_GYRO_STD',
     'DEFAULT_IMU_STD',
     'DEFAULT_LENGTH_STD',
     'DEFAULT_MARKER_STD',
+    'DEFAULT_MAX_SUBSTEP',
     'DEFAULT_PIVOT_ACCELEROMETER_STD',
+    'DEFAULT_PREDICTION',
     'DEFAULT_TENSION_STD',
     'DEFAULT_WRENCH_STD',
     'FLIPPED_IMU_ANGLE',
     'GAUGE_TOLERANCE',
     'NULL_TOLERANCE',
+    'PREDICTIONS',
     'Reading',
     'StructureEstimate',
     'StructureFilter',
     'StructureFilterUpdate',
     'StructureMeasurements',
     'apply_increment',
+    'body_accelerations',
     'contact_nodes',
     'estimate_structure_poses',
     'force_scale',
@@ -717,9 +722,20 @@ def _failed(message: str, structure: Structure, inputs: str, dropped: list[tuple
 
 
 # ---------------------------------------------------------------------------------- recursive
-#: Default process noise of :class:`StructureFilter`: white accelerations (m/s^2, rad/s^2) of
-#: each body's origin and turn, std per axis per sqrt(s) (a rolling robot's).
+#: Default process noise of :class:`StructureFilter`'s constant-velocity prediction: white
+#: accelerations (m/s^2, rad/s^2) of each body's origin and turn, std per axis per sqrt(s) (a
+#: rolling robot's).
 DEFAULT_ACCELERATION_STD = (2.0, 20.0)
+#: The same for the prediction on the dynamics (what they leave out: impacts, the contacts'
+#: slide, the encoders held over a step), (linear, angular across a bar, about its axis): the
+#: dynamics' one-step errors at the rolling twins' true states (RMS over 0.01 s: 1.3 m/s^2,
+#: 16 rad/s^2 across a bar, 46 about its axis; constant velocity's 2.6, 25, 46) set the angular
+#: ratio, 1 : 3; the levels are the smallest of a grid (0.5 .. 2 m/s^2, 4 .. 10 rad/s^2) whose
+#: NEES stays below the band's top on both twins, gating at most 3 % as many readings as there
+#: are accelerometer readings (4 seeds; at 0.7 m/s^2 the 3-bar's NEES is 2.2, at 4 rad/s^2
+#: 3.3 % gated). White noise at the errors' own RMS is inconsistent (NEES 3.5 .. 6, the 3-bar's
+#: track lost): they come in bursts (impacts, slides).
+DEFAULT_DYNAMICS_ACCELERATION_STD = (1.0, 5.0, 15.0)
 #: Default std of a gyro (rad/s) and of a contact node's velocity (m/s: it sticks).
 DEFAULT_GYRO_STD = 0.01
 DEFAULT_CONTACT_VELOCITY_STD = 2e-3
@@ -730,28 +746,36 @@ DEFAULT_ACCELEROMETER_STD = 0.1
 #: the contact's own error (a soft contact that gives, a node that slides: median 0.03, 10 % of
 #: the readings above 0.45 m/s^2 on the rolling twin, up to 14 at an impact; 3e-3 at rest).
 DEFAULT_PIVOT_ACCELEROMETER_STD = 3.0
+#: :class:`StructureFilter`'s predictions: the structure's dynamics
+#: (:meth:`StructureFilter.drift`) or constant velocity.
+PREDICTIONS = ('dynamics', 'constant_velocity')
+DEFAULT_PREDICTION = 'dynamics'
+#: The dynamics' longest sub-step (s) of :class:`StructureFilter`'s linearly implicit step.
+DEFAULT_MAX_SUBSTEP = 0.01
 
 
-def specific_force_model(structure: Structure, T: FloatArray, V: FloatArray, rest: FloatArray,
-                         bodies: Sequence[int], pivots: Mapping[int, int] | None = None
-                         ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The accelerometers at the origins of ``bodies`` (free, each with its centre of mass at its
-    origin) while the structure moves: the specific force ``f_i = R_i^T (a_i - g)`` of the
-    body's dynamics at the transforms ``T`` with ``rest``, ``V`` (N, 6) the bodies' ``[v; w]``:
+def body_accelerations(structure: Structure, T: FloatArray, V: FloatArray, rest: FloatArray,
+                       bodies: Sequence[int], pivots: Mapping[int, int] | None = None,
+                       angular: bool = True) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The accelerations ``[a_i; alpha_i]`` (k, 6) (the origin's, the angular one; world) of
+    ``bodies`` (free, each with its centre of mass at its origin) by their dynamics at the
+    transforms ``T`` with ``rest``, ``V`` (N, 6) the bodies' ``[v; w]``:
 
-    * off the ground, Newton's law ``a_i = (F_i + F_d,i) / m_i + g`` (so ``f_i = R_i^T (F_i +
-      F_d,i) / m_i``), ``F_i`` the strings' force (``Structure.evaluate``'s wrenches) and
-      ``F_d,i`` their damping (the generalised force ``-L^T c (L V)``, ``c`` N s/m as MuJoCo's
-      tendon damping, ``L = dl/d[dp; dw]`` of :func:`string_model`);
+    * off the ground, Newton-Euler about the centre of mass: ``m a_i = F_i + F_d,i + m g``,
+      ``I_i alpha_i + w x I_i w = M_i + M_d,i`` (``I_i = R I R^T``), ``[F_i; M_i]`` the strings'
+      wrench (``Structure.evaluate``'s, moment taken about ``p_i``) and ``[F_d,i; M_d,i]`` their
+      damping (the generalised force ``-L^T c (L V)``, ``c`` N s/m as MuJoCo's tendon damping,
+      ``L = dl/d[dp; dw]`` of :func:`string_model`);
     * on one sticking node ``pivots[i]`` (``x_c``, ``r = p - x_c``), Euler's law about it (the
       contact force has no moment there): ``I_c alpha + w x I_c w = M_c`` with ``I_c`` the
       inertia about ``x_c`` and ``M_c`` the strings', their damping's and the weight's moment
       about it, and ``a_i = alpha x r + w x (w x r)``.
 
-    Returns ``f`` (k, 3) and its Jacobians (3k, 6N) in the poses' ``[dp; dw]`` (through the
-    strings' stiffness ``-K D``, ``D`` the map to ``K``'s spatial twists, and the body's own
-    turn) and in ``V`` (the damping, and ``w`` in the pivot's terms); the damping's change with
-    the pose (second order) is left out."""
+    Returns the accelerations and their Jacobians (6k, 6N) in the poses' ``[dp; dw]`` (through
+    the strings' stiffness ``-K D``, ``D`` the map to ``K``'s spatial twists, and the body's own
+    turn) and in ``V`` (the damping, the gyroscopic and centripetal terms); the damping's change
+    with the pose (second order) is left out but for its turn with the body. ``angular=False``:
+    ``alpha`` and its rows zero off the ground (the accelerometers' model needs only ``a``)."""
     pivots = {} if pivots is None else pivots
     state = structure.evaluate_transforms(T, rest)
     n6 = 6 * structure.n_bodies
@@ -773,34 +797,96 @@ def specific_force_model(structure: Structure, T: FloatArray, V: FloatArray, res
         Wd = -(Lb.T @ (cl @ V.reshape(-1))).reshape(k, 6)
         dWd = -Lb.T @ cl
     g = np.zeros(3) if structure.gravity is None else np.asarray(structure.gravity, float)
-    f = np.empty((k, 3))
-    H_pose = np.empty((3 * k, n6))
-    H_vel = np.empty((3 * k, n6))
+    acc = np.empty((k, 6))
+    J_pose = np.empty((6 * k, n6))
+    J_vel = np.empty((6 * k, n6))
     for q, i in enumerate(idx):
-        m = structure.bodies[i].mass
-        R = T[i, :3, :3]
         W, dWq = state.wrenches[i], dW[6 * q:6 * q + 6]
-        Fd, dFd = Wd[q, :3], dWd[6 * q:6 * q + 3]
-        own = slice(6 * i + 3, 6 * i + 6)
-        if i not in pivots:
-            a = (W[:3] + Fd) / m + g
-            Hp = dWq[:3] / m
-            Hv = dFd / m
+        rows = slice(6 * q, 6 * q + 6)
+        if i not in pivots and not angular:  # Newton's law alone
+            m = structure.bodies[i].mass
+            acc[q, :3] = (W[:3] + Wd[q, :3]) / m + g
+            J_pose[6 * q:6 * q + 3] = dWq[:3] / m
+            J_vel[6 * q:6 * q + 3] = dWd[6 * q:6 * q + 3] / m
+            acc[q, 3:] = J_pose[6 * q + 3:6 * q + 6] = J_vel[6 * q + 3:6 * q + 6] = 0.0
+        elif i not in pivots:
+            acc[q], J_pose[rows], J_vel[rows] = _free_acceleration(
+                structure, T, V, i, W, dWq, Wd[q], dWd[rows], g)
         else:
-            a, Hp, Hv = _pivot_acceleration(structure, T, V, i, pivots[i], W, dWq, Wd[q],
-                                            dWd[6 * q:6 * q + 6], g)
+            acc[q], J_pose[rows], J_vel[rows] = _pivot_acceleration(
+                structure, T, V, i, pivots[i], W, dWq, Wd[q], dWd[rows], g)
+    return acc, J_pose, J_vel
+
+
+def specific_force_model(structure: Structure, T: FloatArray, V: FloatArray, rest: FloatArray,
+                         bodies: Sequence[int], pivots: Mapping[int, int] | None = None
+                         ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The accelerometers at the origins of ``bodies`` (free, each with its centre of mass at its
+    origin) while the structure moves: the specific force ``f_i = R_i^T (a_i - g)`` of the
+    body's dynamics (:func:`body_accelerations`: off the ground Newton's law, so ``f_i = R_i^T
+    (F_i + F_d,i) / m_i``; on one sticking node ``pivots[i]`` Euler's law about it) at the
+    transforms ``T`` with ``rest``, ``V`` (N, 6) the bodies' ``[v; w]``.
+
+    Returns ``f`` (k, 3) and its Jacobians (3k, 6N) in the poses' ``[dp; dw]`` (those of
+    ``a_i`` and the body's own turn of ``R_i^T``) and in ``V``."""
+    acc, J_pose, J_vel = body_accelerations(structure, T, V, rest, bodies, pivots,
+                                            angular=False)
+    g = np.zeros(3) if structure.gravity is None else np.asarray(structure.gravity, float)
+    k = len(acc)
+    f = np.empty((k, 3))
+    H_pose = np.empty((3 * k, J_pose.shape[1]))
+    H_vel = np.empty((3 * k, J_pose.shape[1]))
+    for q, i in enumerate(bodies):
+        R = T[i, :3, :3]
+        a = acc[q, :3]
         f[q] = R.T @ (a - g)
-        H_pose[3 * q:3 * q + 3] = R.T @ Hp
-        H_pose[3 * q:3 * q + 3, own] += R.T @ hat3(a - g)
-        H_vel[3 * q:3 * q + 3] = R.T @ Hv
+        H_pose[3 * q:3 * q + 3] = R.T @ J_pose[6 * q:6 * q + 3]
+        H_pose[3 * q:3 * q + 3, 6 * i + 3:6 * i + 6] += R.T @ hat3(a - g)
+        H_vel[3 * q:3 * q + 3] = R.T @ J_vel[6 * q:6 * q + 3]
     return f, H_pose, H_vel
 
+
+def _free_acceleration(structure: Structure, T: FloatArray, V: FloatArray, i: int,
+                       W: FloatArray, dW: FloatArray, Wd: FloatArray, dWd: FloatArray,
+                       g: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Body ``i``'s ``[a; alpha]`` off the ground (Newton-Euler about its centre of mass, its
+    origin) and their Jacobians (6, 6N) in the poses and the velocities
+    (:func:`body_accelerations`): the strings' wrench ``W`` = [F; M0] about the world origin
+    with ``dW``, the damping's ``Wd`` = [F_d; M_d] about the body's origin with ``dWd`` in
+    ``V``."""
+    body = structure.bodies[i]
+    m = body.mass
+    R, p = T[i, :3, :3], T[i, :3, 3]
+    w = V[i, 3:]
+    F = W[:3]
+    Ig = R @ body.inertia @ R.T
+    Iw = Ig @ w
+    h_p, h_w, h_F, h_Iw = hat3(np.array([p, w, F, Iw]))  # one call
+    M = W[3:] - h_p @ F + Wd[3:]  # about p
+    alpha = np.linalg.solve(Ig, M - h_w @ Iw)
+    h_Ia, h_alpha = hat3(np.array([Ig @ alpha, alpha]))
+    own_p, own_w = slice(6 * i, 6 * i + 3), slice(6 * i + 3, 6 * i + 6)
+    dM = dW[3:] - h_p @ dW[:3]
+    dM[:, own_p] += h_F
+    # N = M - w x Ig w, less dIg alpha: the own turn (dIg = hat(dw) Ig - Ig hat(dw))
+    dM[:, own_w] += h_w @ h_Iw - h_w @ Ig @ h_w + h_Ia - Ig @ h_alpha
+    # the damping's moment turned with the body (its change with the pose is otherwise left
+    # out): kept normal to a bar's axis, whose tiny axial inertia would amplify it
+    dM[:, own_w] -= hat3(Wd[3:])
+    dMv = dWd[3:].copy()
+    dMv[:, own_w] += h_Iw - h_w @ Ig  # the gyroscopic term
+    n6 = dM.shape[1]
+    dalpha = np.linalg.solve(Ig, np.hstack([dM, dMv]))  # one solve for both
+    acc = np.concatenate([(F + Wd[:3]) / m + g, alpha])
+    J_pose = np.vstack([dW[:3] / m, dalpha[:, :n6]])
+    J_vel = np.vstack([dWd[:3] / m, dalpha[:, n6:]])
+    return acc, J_pose, J_vel
 
 def _pivot_acceleration(structure: Structure, T: FloatArray, V: FloatArray, i: int, node: int,
                         W: FloatArray, dW: FloatArray, Wd: FloatArray, dWd: FloatArray,
                         g: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Body ``i``'s origin acceleration (3,) turning about its sticking ``node`` and its
-    Jacobians (3, 6N) in the poses and the velocities (:func:`specific_force_model`): the
+    """Body ``i``'s ``[a; alpha]`` turning about its sticking ``node`` and their Jacobians
+    (6, 6N) in the poses and the velocities (:func:`body_accelerations`): the
     strings' wrench ``W`` = [F; M0] about the world origin with ``dW``, the damping's ``Wd`` =
     [F_d; M_d] about the body's origin with ``dWd`` in ``V``."""
     body = structure.bodies[i]
@@ -822,6 +908,8 @@ def _pivot_acceleration(structure: Structure, T: FloatArray, V: FloatArray, i: i
     dMc = dW[3:] - h_xc @ dW[:3]
     dMc[:, 6 * i:6 * i + 3] += h_F
     dMc[:, 6 * i + 3:6 * i + 6] += (h_F + h_Fd + h_mg) @ h_r
+    # the damping's wrench turned with the body (:func:`_free_acceleration`)
+    dMc[:, 6 * i + 3:6 * i + 6] -= hat3(Wd[3:]) + h_r @ h_Fd
     # N = M_c - w x I_c w, less dI_c alpha: the body's own turn
     dMc[:, 6 * i + 3:6 * i + 6] += h_w @ h_Iw - h_w @ Ic @ h_w + h_Ia - Ic @ h_alpha
     # velocities: the damping's wrench and w (gyroscopic and centripetal terms)
@@ -829,11 +917,15 @@ def _pivot_acceleration(structure: Structure, T: FloatArray, V: FloatArray, i: i
     dMv[:, 6 * i + 3:6 * i + 6] += h_Iw - h_w @ Ic
     n6 = dMc.shape[1]
     dalpha = np.linalg.solve(Ic, np.hstack([dMc, dMv]))  # one solve for both
-    H_pose = -h_r @ dalpha[:, :n6]
-    H_pose[:, 6 * i + 3:6 * i + 6] -= (h_alpha + h_w @ h_w) @ h_r
-    H_vel = -h_r @ dalpha[:, n6:]
-    H_vel[:, 6 * i + 3:6 * i + 6] -= h_wr + h_w @ h_r
-    return a, H_pose, H_vel
+    J_pose = np.empty((6, n6))
+    J_vel = np.empty((6, n6))
+    J_pose[:3] = -h_r @ dalpha[:, :n6]
+    J_pose[:3, 6 * i + 3:6 * i + 6] -= (h_alpha + h_w @ h_w) @ h_r
+    J_vel[:3] = -h_r @ dalpha[:, n6:]
+    J_vel[:3, 6 * i + 3:6 * i + 6] -= h_wr + h_w @ h_r
+    J_pose[3:] = dalpha[:, :n6]
+    J_vel[3:] = dalpha[:, n6:]
+    return np.concatenate([a, alpha]), J_pose, J_vel
 
 
 @dataclass
@@ -855,8 +947,16 @@ class StructureFilterUpdate:
 
 
 class StructureFilter:
-    """The recursive form: an extended Kalman filter on every free body's pose and velocity
-    (constant velocity with white accelerations, :data:`DEFAULT_ACCELERATION_STD`), updated by
+    """The recursive form: an extended Kalman filter on every free body's pose and velocity.
+    Prediction (``prediction``): ``'dynamics'`` (default), the structure's dynamics
+    (:meth:`drift`: Newton-Euler off the ground with the strings' forces at the held rest
+    lengths, their damping and gravity; Euler about a body's one sticking contact node;
+    constant velocity on a body with more nodes down) by linearly implicit trapezoidal steps
+    (:meth:`implicit_step`) of at most ``max_substep``, plus white accelerations
+    (``acceleration_std`` = (linear, angular[, a bar's about its own axis]), default
+    :data:`DEFAULT_DYNAMICS_ACCELERATION_STD`) for what they leave out; or
+    ``'constant_velocity'`` with white accelerations (default :data:`DEFAULT_ACCELERATION_STD`).
+    Updated by
     the static estimator's measurement models (:func:`measurement_model`) plus each IMU's gyro
     (``R^T w``, Jacobian ``R^T`` in ``w`` and ``R^T hat(w)`` in ``dw``) and the contacts' zero
     velocity (a sticking node: ``v + w x (x - p) = 0``), which carries the position along the
@@ -875,12 +975,22 @@ class StructureFilter:
     ``poses`` the start ((N, 4, 4) or (N, 7)); ``pose_std`` (m, rad) its std per axis."""
 
     def __init__(self, structure: Structure, poses: ArrayLike, pose_std: tuple[float, float]
-                 = (0.01, 0.05), acceleration_std: tuple[float, float] = DEFAULT_ACCELERATION_STD,
+                 = (0.01, 0.05), acceleration_std: tuple[float, ...] | None = None,
                  gyro_std: float = DEFAULT_GYRO_STD,
                  contact_velocity_std: float = DEFAULT_CONTACT_VELOCITY_STD,
                  gate_probability: float = CONSISTENCY_PROBABILITY,
                  accelerometer_std: float = DEFAULT_ACCELEROMETER_STD,
-                 pivot_accelerometer_std: float = DEFAULT_PIVOT_ACCELEROMETER_STD) -> None:
+                 pivot_accelerometer_std: float = DEFAULT_PIVOT_ACCELEROMETER_STD,
+                 prediction: str = DEFAULT_PREDICTION,
+                 max_substep: float = DEFAULT_MAX_SUBSTEP) -> None:
+        if prediction not in PREDICTIONS:
+            raise ValueError(f'prediction must be one of {PREDICTIONS}, got {prediction!r}')
+        self.prediction = prediction
+        self.max_substep = _positive('max_substep', max_substep)
+        #: The rest lengths (n,) and contact nodes the prediction holds (the last update's;
+        #: None before it: constant velocity).
+        self.held_rest_lengths: FloatArray | None = None
+        self.held_contacts: tuple[int, ...] = ()
         self.structure = structure
         self.T = structure.transforms(poses)
         n = structure.n_bodies
@@ -890,7 +1000,17 @@ class StructureFilter:
         p_std = np.tile([pose_std[0]] * 3 + [pose_std[1]] * 3, f // 6)
         v_std = np.tile([0.1] * 3 + [1.0] * 3, f // 6)
         self.P = np.diag(np.concatenate([p_std, v_std]) ** 2)
+        if acceleration_std is None:
+            acceleration_std = (DEFAULT_DYNAMICS_ACCELERATION_STD if prediction == 'dynamics'
+                                else DEFAULT_ACCELERATION_STD)
+        if len(acceleration_std) not in (2, 3):
+            raise ValueError('acceleration_std must be (linear, angular[, about a bar\'s axis])')
         self.q = np.tile([acceleration_std[0]] * 3 + [acceleration_std[1]] * 3, f // 6) ** 2
+        #: a bar's angular acceleration about its own axis: its density less the others'
+        self.q_axial = (acceleration_std[-1] ** 2 - acceleration_std[1] ** 2
+                        if len(acceleration_std) == 3 else 0.0)
+        free = np.flatnonzero(~structure.fixed)
+        self.free_bars = np.flatnonzero(np.isin(free, structure.bar_indices))  # among the free
         self.gyro_std = _positive('gyro_std', gyro_std)
         self.contact_velocity_std = _positive('contact_velocity_std', contact_velocity_std)
         self.accelerometer_std = _positive('accelerometer_std', accelerometer_std)
@@ -898,9 +1018,119 @@ class StructureFilter:
                                                  pivot_accelerometer_std)
         self.gate_probability = gate_probability
 
-    def predict(self, dt: float) -> None:
-        """Move the state ``dt`` (s) at constant velocity; grow the covariance."""
+    def predict(self, dt: float, rest_lengths: ArrayLike | None = None,
+                contacts: Sequence[str | int] | None = None) -> None:
+        """Move the state ``dt`` (s) and grow the covariance: by the structure's dynamics
+        (``prediction='dynamics'``, :meth:`drift`) with ``rest_lengths`` and the sticking
+        ``contacts`` (node names or indices) held over ``dt`` (None: the last update's; before
+        any, constant velocity), or at constant velocity (``prediction='constant_velocity'``)."""
         dt = _positive('dt', dt)
+        s = self.structure
+        rest = self.held_rest_lengths if rest_lengths is None else s.validate_rest_lengths(
+            rest_lengths)
+        nodes = self.held_contacts if contacts is None else tuple(
+            s.node_index(c) if isinstance(c, str) else int(c) for c in contacts)
+        if self.prediction == 'dynamics' and rest is not None:
+            steps = max(1, math.ceil(dt / self.max_substep - 1e-9))
+            for _ in range(steps):
+                self._implicit_step(dt / steps, rest, nodes)
+            return
+        self._constant_velocity_step(dt)
+
+    def dynamic_bodies(self, contacts: Sequence[int] = ()) -> tuple[list[int], dict[int, int]]:
+        """The free bodies whose accelerations the dynamics give (:func:`body_accelerations`:
+        mass, the centre of mass at the origin, at most one node among the ``contacts``) and
+        {body: its contact node} (its pivot); the others move at constant velocity."""
+        s = self.structure
+        nodes: dict[int, list[int]] = {}
+        for c in contacts:
+            if s.node_bodies[c] >= 0:
+                nodes.setdefault(int(s.node_bodies[c]), []).append(int(c))
+        bodies = [i for i in range(s.n_bodies) if _modelled(s, i) and len(nodes.get(i, ())) <= 1]
+        return bodies, {i: nodes[i][0] for i in bodies if i in nodes}
+
+    def drift(self, T: FloatArray, V: FloatArray, rest: FloatArray,
+              contacts: Sequence[int] = ()) -> tuple[FloatArray, FloatArray]:
+        """The state's rate ``x' = [V; acc(x)]`` (2f,) in the free columns (``V`` the poses' rate
+        in ``[dp; dw]``, ``acc`` the bodies' ``[a; alpha]`` of :func:`body_accelerations`, zero
+        on the bodies :meth:`dynamic_bodies` leaves out) and its Jacobian ``A`` (2f, 2f) in the
+        error state ``[dp; dw; dV]``: ``[[Omega, I], [dacc/dpose, dacc/dV]]``, ``Omega`` the blocks
+        ``hat(w_i)`` of the turn (``d dw/dt = dw_V + w x dw``: the world-frame increment turns
+        with the body)."""
+        f = self.cols.size
+        n6 = 6 * self.structure.n_bodies
+        rate = np.zeros(2 * f)
+        A = np.zeros((2 * f, 2 * f))
+        rate[:f] = V.reshape(-1)[self.cols]
+        A[np.arange(f), f + np.arange(f)] = 1.0
+        free = self.cols[::6] // 6
+        for q, i in enumerate(free):
+            A[6 * q + 3:6 * q + 6, 6 * q + 3:6 * q + 6] = hat3(V[i, 3:])
+        bodies, pivots = self.dynamic_bodies(contacts)
+        if bodies:
+            acc, J_pose, J_vel = body_accelerations(self.structure, T, V, rest, bodies, pivots)
+            full = np.zeros(n6)
+            rows = (6 * np.asarray(bodies)[:, None] + np.arange(6)).ravel()
+            full[rows] = acc.ravel()
+            rate[f:] = full[self.cols]
+            at = f + np.searchsorted(self.cols, rows)
+            A[np.ix_(at, np.arange(f))] = J_pose[:, self.cols]
+            A[np.ix_(at, f + np.arange(f))] = J_vel[:, self.cols]
+        return rate, A
+
+    def implicit_step(self, h: float, rest: FloatArray, contacts: Sequence[int] = ()
+                      ) -> tuple[FloatArray, FloatArray]:
+        """One linearly implicit trapezoidal (Rosenbrock, ``gamma = 1/2``) step of :meth:`drift`
+        over ``h`` from the state, as the joint's filter (``estimation/joint_filter.py``): the
+        increment ``dx = (I - h/2 A)^-1 h x'`` (2f,) of ``[dp; dw; dV]`` and ``Phi = (I - h/2
+        A)^-1 (I + h/2 A)`` (2f, 2f), its Jacobian but for ``A``'s own change (second order in
+        ``h``); A-stable against the string modes (up to 27 Hz), second order in ``h``."""
+        rate, A = self.drift(self.T, self.V, rest, contacts)
+        n = rate.size
+        E = -0.5 * h * A
+        E[np.arange(n), np.arange(n)] += 1.0
+        rhs = np.empty((n, n + 1))
+        rhs[:, 0] = h * rate
+        rhs[:, 1:] = 0.5 * h * A
+        rhs[np.arange(n), 1 + np.arange(n)] += 1.0
+        sol = np.linalg.solve(E, rhs)  # one factorisation for the step and Phi
+        return sol[:, 0], sol[:, 1:]
+
+    def _implicit_step(self, h: float, rest: FloatArray, contacts: Sequence[int]) -> None:
+        """The state moved by :meth:`implicit_step`, the covariance ``Phi P Phi^T + Q`` (``Q``
+        the white accelerations': what the dynamics leave out, contacts and impacts)."""
+        dx, Phi = self.implicit_step(h, rest, contacts)
+        f = self.cols.size
+        full = np.zeros(6 * self.structure.n_bodies)
+        full[self.cols] = dx[:f]
+        self.T = apply_increment(self.T, full)
+        self.V.reshape(-1)[self.cols] += dx[f:]
+        P = Phi @ self.P @ Phi.T
+        self.P = self._add_process_noise(0.5 * (P + P.T), h)
+
+    def _add_process_noise(self, P: FloatArray, dt: float) -> FloatArray:
+        """``P + Q``: the white accelerations' discretised noise over ``dt`` (``q`` per axis;
+        a bar's turn about its own axis ``a`` its own density: ``q_axial a a^T`` more), by
+        diagonals and the bars' (3, 3) blocks."""
+        f = self.cols.size
+        i = np.arange(f)
+        P[i, i] += self.q * dt ** 3 / 3.0
+        P[i, f + i] += self.q * dt ** 2 / 2.0
+        P[f + i, i] += self.q * dt ** 2 / 2.0
+        P[f + i, f + i] += self.q * dt
+        if self.q_axial and self.free_bars.size:
+            bars = self.free_bars
+            axes = self.T[self.cols[6 * bars] // 6, :3, 2]
+            blocks = self.q_axial * np.einsum('ki,kj->kij', axes, axes)  # (k, 3, 3)
+            rows = (6 * bars + 3)[:, None] + np.arange(3)
+            r, c = rows[:, :, None], rows[:, None, :]
+            for (dr, dc), scale in (((0, 0), dt ** 3 / 3.0), ((0, f), dt ** 2 / 2.0),
+                                    ((f, 0), dt ** 2 / 2.0), ((f, f), dt)):
+                P[r + dr, c + dc] += scale * blocks
+        return P
+
+    def _constant_velocity_step(self, dt: float) -> None:
+        """Move the state ``dt`` at constant velocity, the covariance by blocks."""
         step = self.V * dt
         step[self.structure.fixed] = 0.0
         self.T = apply_increment(self.T, step.ravel())
@@ -911,12 +1141,7 @@ class StructureFilter:
         P[:f, :f] += dt * (P[:f, f:] + P[f:, :f]) + dt * dt * P[f:, f:]
         P[:f, f:] = B
         P[f:, :f] = B.T
-        i = np.arange(f)
-        P[i, i] += self.q * dt ** 3 / 3.0
-        P[i, f + i] += self.q * dt ** 2 / 2.0
-        P[f + i, i] += self.q * dt ** 2 / 2.0
-        P[f + i, f + i] += self.q * dt
-        self.P = P
+        self.P = self._add_process_noise(P, dt)
 
     def _rows(self, measurements: StructureMeasurements,
               gyros: Mapping[str, ArrayLike] | None,
@@ -928,6 +1153,9 @@ class StructureFilter:
         f = self.cols.size
         readings = readings_of(s, replace_at_rest(measurements))
         rest = s.validate_rest_lengths(measurements.rest_lengths)
+        # held by the next prediction
+        self.held_rest_lengths = rest
+        self.held_contacts = tuple(r.index for r in readings if r.kind == 'contact')
         accel, pivots = self._accelerometers(readings, accelerometers)
         if accel:  # an accelerometer modelled by the dynamics replaces its gravity direction
             modelled = {f'imu[{s.body_names[i]}]' for i in accel}
@@ -1018,9 +1246,7 @@ class StructureFilter:
             a = finite_array(f'accelerometers[{key}]', value).reshape(-1)
             if a.shape != (3,):
                 raise ValueError(f'accelerometers[{key}] must be 3 values (m/s^2)')
-            body = s.bodies[i]
-            if (not s.fixed[i] and body.mass > 0.0 and i not in touching
-                    and not np.any(np.asarray(body.com, dtype=float))):
+            if _modelled(s, i) and i not in touching:
                 out[i] = a
         return out, {b: c[0] for b, c in nodes.items() if b in out}
 
@@ -1092,6 +1318,14 @@ class StructureFilter:
         f = self.cols.size
         C[np.ix_(self.cols, self.cols)] = self.P[:f, :f]
         return C
+
+
+def _modelled(structure: Structure, i: int) -> bool:
+    """Whether :func:`body_accelerations` models body ``i`` (free, with mass, its centre of mass
+    at its origin)."""
+    body = structure.bodies[i]
+    return bool(not structure.fixed[i] and body.mass > 0.0
+                and not np.any(np.asarray(body.com, dtype=float)))
 
 
 def _bad_gyro(key: str) -> FloatArray:

@@ -37,6 +37,7 @@ from tensegrity_stiffness.estimation.structure_estimator import (
     DEFAULT_LENGTH_STD,
     DEFAULT_MARKER_STD,
     DEFAULT_TENSION_STD,
+    PREDICTIONS,
     StructureFilter,
     StructureMeasurements,
     estimate_structure_poses,
@@ -149,6 +150,11 @@ ESTIMATION_PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec('filter.angular_acceleration', 'double', DEFAULT_ACCELERATION_STD[1],
                   "'filter': process noise, white angular acceleration of each body, "
                   'rad/s^2 sqrt(s)', range=(1e-9, 1e6)),
+    ParameterSpec('filter.prediction', 'string', 'constant_velocity',
+                  "'filter': 'constant_velocity' or 'dynamics' (the structure's, as "
+                  "StructureFilter's default; measured with the accelerometers, which this node "
+                  "reads as gravity directions: not yet across processes); docs/structures.md",
+                  choices=PREDICTIONS),
     ParameterSpec('filter.contact_velocity_std', 'double', DEFAULT_CONTACT_VELOCITY_STD,
                   "'filter': std of a contact node's velocity (it sticks), m/s",
                   range=(1e-12, 1e3)),
@@ -378,6 +384,7 @@ def new_structure_filter(settings: StructureEstimatorSettings, poses: FloatArray
         values['filter.linear_acceleration'], values['filter.angular_acceleration']),
         gyro_std=values['sensors.gyro_std'],
         contact_velocity_std=values['filter.contact_velocity_std'],
+        prediction=values['filter.prediction'],
         gate_probability=settings.consistency_probability)
 
 
