@@ -56,6 +56,10 @@ SPINE_PUBLISH_EVERY = 5
 JOINT_PUBLISH_EVERY = 5
 #: The live line calls the node behind when it answers less than this share of its inputs.
 ANSWERED_SHARE_BEHIND = 0.95
+#: With ``--duration`` (whose clock starts at the twin's first reading), the demo gives up when
+#: no reading came this many seconds after the launch (the nodes' start took 9-15 s on a
+#: loaded 2-core machine).
+NO_READING_LIMIT_S = 60.0
 
 
 def subscribe(node: Any, msg_type: Any, topic: str, callback: Any, qos: Any) -> Any:
@@ -74,6 +78,8 @@ class Monitor:
         self._lock = threading.Lock()
         self._inputs = 0
         self._outputs = 0
+        #: When (``time.monotonic()``) the twin's first reading arrived; None until then.
+        self.first_input: float | None = None
         self._pose: np.ndarray | None = None
         self._stiffness: np.ndarray | None = None
         self._tensions: np.ndarray | None = None
@@ -95,14 +101,20 @@ class Monitor:
         for msg_type, topic, callback in streams:
             subscribe(node, msg_type, topic, callback, qos)
 
+    def _count_input(self) -> None:
+        """One reading of the twin (lock held)."""
+        self._inputs += 1
+        if self.first_input is None:
+            self.first_input = time.monotonic()
+
     def _on_pose(self, msg: PoseStamped) -> None:
         with self._lock:
-            self._inputs += 1
+            self._count_input()
             self._pose = conversions.pose_message_to_transform(msg.pose)
 
     def _on_poses(self, msg: PoseArray) -> None:
         with self._lock:
-            self._inputs += 1
+            self._count_input()
 
     def _on_tip_pose(self, msg: PoseStamped) -> None:
         self._on_output(msg)
@@ -196,7 +208,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help='ROS parameter file (default: config/default_joint.yaml or '
                         'config/default_spine.yaml)')
     parser.add_argument('--duration', type=float, default=None,
-                        help='stop after this many seconds (default: until Ctrl-C)')
+                        help="stop after this many seconds of the twin's readings (the clock "
+                        "starts at the first one; default: until Ctrl-C)")
     parser.add_argument('--swing', type=float, default=None,
                         help='amplitude of the swinging load, N (default 0.1 joint, 0.01 spine)')
     parser.add_argument('--swing-period', type=float, default=None,
@@ -333,8 +346,15 @@ def run_demo(setup: DemoSetup) -> int:
                       flush=True)
                 code = 1
                 break
-            if setup.duration is not None and now - start >= setup.duration:
-                break
+            if setup.duration is not None:
+                first = monitor.first_input
+                if first is not None and now - first >= setup.duration:
+                    break
+                if first is None and now - start >= NO_READING_LIMIT_S:
+                    print(f'twin_demo: no reading from the twin in {NO_READING_LIMIT_S:g} s; '
+                          f'see {logs}', flush=True)
+                    code = 1
+                    break
     finally:
         stop.set()
         codes = [stop_process(p) for p in processes]

@@ -38,6 +38,7 @@ from support import JOINT_CONFIG, SPINE_CONFIG
 from support.ros_harness import (
     NodeProcess,
     RosClient,
+    log_has,
     repeat_until,
     unique_namespace,
 )
@@ -114,6 +115,9 @@ class Session:
         proc = start(ns)
         try:
             count, worst = check(ns, proc)
+            # The fast lane serves inputs from just before the node logs its 'ready' line
+            # (which names the frames' status): wait for that line before stopping the node.
+            log_has(proc, 'frames on /tf|no /tf')
         except BaseException:
             print(proc.log()[-4000:], file=sys.stderr)
             raise
