@@ -10,7 +10,9 @@ Each run starts two clients of the controller's ``set_parameters`` service (each
 with the package's profile, one without), then the controller stand-in
 (``test/support/controller_standins.py``, Fast DDS defaults), and prints for both how long after
 the controller's launch ``service_is_ready()`` became true (that includes the stand-in's own
-start-up, some 0.3-0.5 s here). Numbers only; ``uptime`` first.
+start-up, some 0.3-0.5 s here). Numbers only; ``uptime`` first. The time to the bridge's first
+answered call, with each side's discovery and the calls lost, before and after
+``target.first_contact_timeout``: ``bench/bench_bridge_first_update.py``.
 """
 
 from __future__ import annotations

@@ -21,6 +21,14 @@ PARAMETER_TARGET_RATE = 50.0
 #: The bridge's tick (Hz) when no rate limit sets it: retries, and the low-pass settling after the
 #: last input.
 BRIDGE_IDLE_TICK_RATE = 100.0
+#: ``target.first_contact_timeout`` default (s). A controller that starts after the bridge
+#: discovers the bridge's endpoints up to ~2 s after the bridge saw its service ready
+#: (``service_is_ready()`` reflects only the bridge's side): meanwhile a request is held, and a
+#: response is dropped when the controller's response writer has not matched the bridge's reader
+#: within its 100 ms (rmw_fastrtps) -- that call's answer never comes (issue 37, item 7;
+#: docs/performance.md). Until the first answer a call is sent again after this, doubled with
+#: each resend, instead of waiting ``target.timeout``.
+FIRST_CONTACT_TIMEOUT = 0.25
 
 
 @dataclass(frozen=True)
@@ -102,6 +110,11 @@ BRIDGE_PARAMETERS: tuple[ParameterSpec, ...] = (
                   'seconds a set_parameters call may take before it counts as lost (and is '
                   'sent again)',
                   range=(0.01, 60.0)),
+    ParameterSpec('target.first_contact_timeout', 'double', FIRST_CONTACT_TIMEOUT,
+                  'until the controller answers (at first, or after it was unreachable): '
+                  'seconds before a set_parameters call is sent again, doubled with each '
+                  'resend up to target.timeout (0: target.timeout)',
+                  range=(0.0, 60.0)),
     _COMMON_BY_NAME['qos.depth'],
     _COMMON_BY_NAME['qos.input_reliability'],
     _COMMON_BY_NAME['diagnostics.period'],
@@ -127,6 +140,7 @@ class BridgeSettings:
     max_rate: float
     deadband: float
     timeout: float
+    first_contact_timeout: float
     input_frame: str
     output_frame: str
     generation: int = 0
@@ -136,6 +150,14 @@ class BridgeSettings:
     def tick_period(self) -> float:
         """Seconds between the bridge's ticks (rate-limited outputs, retries, settling)."""
         return 1.0 / (self.max_rate if self.max_rate > 0.0 else BRIDGE_IDLE_TICK_RATE)
+
+    def call_timeout(self, answered: bool, resends: int) -> float:
+        """Seconds a ``set_parameters`` call may wait for its answer: ``timeout`` once the
+        controller ``answered`` (since it was last unreachable); before, the first-contact
+        timeout doubled ``resends`` times (calls given up on since), at most ``timeout``."""
+        if answered or self.first_contact_timeout <= 0.0:
+            return self.timeout
+        return min(self.timeout, self.first_contact_timeout * 2.0 ** min(resends, 30))
 
 
 def _clamp_bounds(name: str, value: list[float]) -> tuple[float, float] | None:
@@ -183,6 +205,7 @@ def bridge_settings(values: Mapping[str, Any], generation: int = 0) -> BridgeSet
         parameter_names=names if kind == 'parameters' else (), target_node=node,
         conditioner=conditioner, time_constant=checked['output.time_constant'], max_rate=rate,
         deadband=checked['target.deadband'], timeout=checked['target.timeout'],
+        first_contact_timeout=checked['target.first_contact_timeout'],
         input_frame=checked['input.frame'], output_frame=checked['output.frame'],
         generation=generation, values=checked)
 

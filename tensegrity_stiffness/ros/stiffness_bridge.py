@@ -8,7 +8,9 @@ the library (:mod:`tensegrity_stiffness.mechanics.controller_stiffness`: the con
 the nearest positive definite matrix, scale, clamps, low-pass) and delivers it, rate-limited: on
 ``~/output_stiffness`` in a layout (topic targets) or through the ``set_parameters`` service of
 the controller node (parameter targets: asynchronous calls, only when a value moved beyond the
-deadband; refusals are warned about with the controller's reason). ``/diagnostics`` says how far
+deadband; until the controller first answers, a call is sent again after
+``target.first_contact_timeout``, doubled each time, instead of ``target.timeout``; refusals are
+warned about with the controller's reason). ``/diagnostics`` says how far
 the projection moved the matrix, whether the input was positive definite at all (an unstable
 joint is never hidden), the clamps hit, the updates sent and refused and whether the target is
 reachable.
@@ -85,10 +87,13 @@ class StiffnessBridge(Node):
         self._outputs = 0
         self._refused = 0
         self._lost = 0
+        self._resends = 0  # calls given up on since the controller last answered
+        self._first_contact_resends = 0  # of those, sent again before target.timeout
         self._skipped = 0  # parameter updates inside the deadband
         self._last_refusal = ''
         self._acknowledged: np.ndarray | None = None
-        self._in_flight: tuple[Any, float, np.ndarray] | None = None
+        # the call waiting for its answer: (future, sent at, values, seconds it may wait)
+        self._in_flight: tuple[Any, float, np.ndarray, float] | None = None
         self._reachable: bool | None = None
         self._last: Conditioned | None = None
         self._max_relative_projection = 0.0
@@ -202,22 +207,28 @@ class StiffnessBridge(Node):
     @guarded('tick')
     def _tick(self) -> None:
         """Rate-limited outputs held back, low-pass settling after the last input, retries of a
-        target that was unreachable or busy, lost calls."""
+        target that was unreachable or busy, first-contact resends, lost calls."""
         settings = self._settings
         now = time.monotonic()
         with self._lock:
-            if self._in_flight is not None and now - self._in_flight[1] > settings.timeout:
-                future = self._in_flight[0]
+            if self._in_flight is not None and now - self._in_flight[1] > self._in_flight[3]:
+                future, _, _, waited = self._in_flight
                 self._in_flight = None
-                self._lost += 1
-                self._reachable = False
+                self._resends += 1
                 self._pending = True  # sent again (the controller may not have applied it)
                 self._client.remove_pending_request(future)
-                # a controller that is gone (or too slow to count as there): the documented
-                # warning of an unavailable target, with the reason
-                reason = ('gone' if not self._client.service_is_ready() else
-                          f'gave no answer within target.timeout = {settings.timeout:g} s')
-                self._warn_unavailable(settings, f' ({reason})')
+                if waited < settings.timeout:
+                    # not answered yet: the controller may not have matched the bridge's
+                    # endpoints (target.first_contact_timeout)
+                    self._first_contact_resends += 1
+                else:
+                    self._lost += 1
+                    self._reachable = False
+                    # a controller that is gone (or too slow to count as there): the
+                    # documented warning of an unavailable target, with the reason
+                    reason = ('gone' if not self._client.service_is_ready() else
+                              f'gave no answer within target.timeout = {settings.timeout:g} s')
+                    self._warn_unavailable(settings, f' ({reason})')
             if self._filter.target is None:
                 return
             if not self._filter.settled():
@@ -250,12 +261,14 @@ class StiffnessBridge(Node):
             return  # sent when the answer is in (a later tick)
         if not self._client.service_is_ready():
             self._reachable = False
+            self._resends = 0  # the controller that comes (back) is a first contact
             self._warn_unavailable(settings, '')
             return
         request = SetParameters.Request(parameters=_parameter_messages(
             settings.parameter_names, values))
         future = self._client.call_async(request)
-        self._in_flight = (future, now, values)
+        self._in_flight = (future, now, values,
+                           settings.call_timeout(self._reachable is True, self._resends))
         self._pending = False
         self._last_emit = now
         future.add_done_callback(self._on_answer)
@@ -277,13 +290,14 @@ class StiffnessBridge(Node):
         with self._lock:
             if self._in_flight is None or self._in_flight[0] is not future:
                 return  # given up on (timeout)
-            _, _, values = self._in_flight
+            _, _, values, _ = self._in_flight
             self._in_flight = None
             if future.cancelled() or future.exception() is not None:
                 self._lost += 1
                 self._pending = True  # sent again on a later tick
                 return
             self._reachable = True
+            self._resends = 0
             results = future.result().results
             refused = [(name, r.reason) for name, r in zip(settings.parameter_names, results,
                                                           strict=False) if not r.successful]
@@ -344,7 +358,9 @@ class StiffnessBridge(Node):
                     ('target', f'{settings.target_node}: {" ".join(settings.parameter_names)}'),
                     ('target reachable', 'unknown' if reachable is None else reachable),
                     ('updates sent', self._outputs), ('updates refused', self._refused),
-                    ('calls lost', self._lost), ('updates inside the deadband', self._skipped),
+                    ('calls lost', self._lost),
+                    ('first-contact resends', self._first_contact_resends),
+                    ('updates inside the deadband', self._skipped),
                     ('last refusal', self._last_refusal or 'none'),
                     ('off-diagonal share dropped |K - diag K|_F / |K|_F',
                      self._dropped_off_diagonal),

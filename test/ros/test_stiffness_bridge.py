@@ -668,7 +668,10 @@ def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, 
     accepted 30 updates. No call is lost and every value the controller holds is the bridge's
     output for one of the inputs sent. (The stall was the controller found at Fast DDS's next
     participant announcement, up to 3 s after it started: ``ANNOUNCEMENT_PERIOD_NS`` in
-    ``ros/runtime/middleware.py``, checked by ``test_middleware_profile.py``.)"""
+    ``ros/runtime/middleware.py``, checked by ``test_middleware_profile.py``; and calls sent
+    before the controller had matched the bridge's endpoints, held or their answers dropped,
+    waiting the whole ``target.timeout``: ``target.first_contact_timeout``, checked without ROS
+    by ``test/nodes/test_stiffness_bridge_calls.py``; docs/performance.md.)"""
     bridge_ns = f'{world.ns}/late{run}'
     source = f'{bridge_ns}/input'
     name = f'late_compliance_{run}'
@@ -722,9 +725,10 @@ def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, 
         return None
 
     status = kv(repeat_until(send_next, sent_30, timeout=60.0, period=0.01))
-    # A call sent while the new controller's service is in the graph but not yet matched can
-    # be lost (the discovery race the announcement period narrows, not closes): one on a quiet
-    # machine, two seen beside a load of 20; a stall would lose a call per update.
+    # A call sent while the controller has not yet matched the bridge's endpoints (its
+    # service_is_ready() is the bridge's side only) is held or its answer dropped; before the
+    # first answer it is sent again as a first-contact resend, not counted lost, but a resend
+    # that reached target.timeout (3 s here) is: a stall would lose a call per update.
     assert int(status['calls lost']) <= 3, status
     assert status['updates refused'] == '0'
     ctrl.stop()  # the test's stand-in controller: how it stops is not judged here
