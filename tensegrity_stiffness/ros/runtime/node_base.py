@@ -94,7 +94,7 @@ class StreamingNode(Node):
     SKIPPED_KEY = 'inputs skipped (a newer one was queued)'
     #: Whether ``~/rest_lengths`` is served on the fast lane (when the node runs one), every
     #: message in order, instead of by the executor: a node that takes a controller's commands
-    #: (500 Hz) would otherwise pay an executor wake-up for each (0.35-0.6 ms of CPU,
+    #: (500 Hz) would otherwise pay an executor wake-up for each (0.35-0.6 ms a callback,
     #: docs/nodes.md "QoS"), competing with its inputs for the GIL.
     REST_LENGTHS_ON_LANE = False
     _build_settings: Callable[..., Any]
