@@ -481,8 +481,8 @@ class JointModel:
         """A copy with new rest lengths (the maximum stretch of each string is kept): the
         same rest lengths, maximum lengths, stretches and kernel as a model built anew from
         this one's arguments, sharing this one's geometry, stiffnesses and names (validated
-        when it was built and never changed in place): some 20 us instead of 90 (a node takes
-        rest-length commands at 500 Hz)."""
+        when it was built and never changed in place): 45 us instead of the 86 us of building
+        one (a node takes rest-length commands at 500 Hz)."""
         rest = self.validate_rest_lengths(rest_lengths, batched=False)
         model = copy.copy(self)
         model._set_rest_lengths(rest, rest + self.max_stretch)
