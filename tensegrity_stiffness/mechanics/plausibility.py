@@ -102,8 +102,7 @@ def joint_ranges(model: JointModel, rest_lengths: ArrayLike | None = None) -> Jo
     limits = string_length_limits(model, rest)
     ends1 = np.linalg.norm(model.link1_string_nodes, axis=1)
     ends2 = np.linalg.norm(model.link2_nodes[model.connections[:, 1]], axis=1)
-    size = float(max(np.linalg.norm(model.link1_nodes, axis=1).max(),
-                     np.linalg.norm(model.link2_nodes, axis=1).max()))
+    size = _node_size(model)
     # The strings' own force law (eq. 8) just short of their longest: the largest tension and
     # its slope of each (the paper's law is not Hooke's).
     tension, slope, _, _ = model.string_forces(rest + (limits - rest) * (1.0 - 1e-9), rest)
@@ -123,9 +122,18 @@ def string_length_limits(model: JointModel, rest_lengths: ArrayLike | None = Non
     return np.where(np.isfinite(lmax), lmax, UNBOUNDED_STRETCH * rest)
 
 
+def _node_size(model: JointModel) -> float:
+    """The largest distance of a node from its link's origin (m), computed."""
+    return float(max(np.linalg.norm(model.link1_nodes, axis=1).max(),
+                     np.linalg.norm(model.link2_nodes, axis=1).max()))
+
+
 def joint_size(model: JointModel) -> float:
-    """The largest distance of a node from its link's origin (m)."""
-    return joint_ranges(model).size
+    """The largest distance of a node from its link's origin (m): the model's ranges' when
+    they are kept, else computed from the nodes alone (it does not depend on the rest lengths:
+    a model made for each rest-length command checks the next one without its ranges)."""
+    own = _OWN_RANGES.get(model)
+    return own.size if own is not None else _node_size(model)
 
 
 def reach(model: JointModel, rest_lengths: ArrayLike | None = None) -> float:
@@ -190,7 +198,7 @@ def check_rest_lengths(model: JointModel, rest_lengths: ArrayLike,
     ``MIN_REST_FRACTION`` of the joint's size; ValueError names the first string below. (A
     rest length too long leaves its string slack, which the solvers report as such.)"""
     rest = model.validate_rest_lengths(rest_lengths, batched=False)
-    low = MIN_REST_FRACTION * joint_ranges(model).size
+    low = MIN_REST_FRACTION * joint_size(model)
     bad = np.flatnonzero(rest < low)
     if bad.size:
         j = int(bad[0])

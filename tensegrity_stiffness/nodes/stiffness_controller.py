@@ -283,6 +283,19 @@ class ControllerTicks:
         self._states = 0
         self._commanded_state = 0  # the sequence number of the last state a command came from
         self._last_tick: float | None = None
+        # the ControlTarget of the targets set (pose, stiffness), validated once per set
+        self._target: tuple[Any, Any, ControlTarget] | None = None
+
+    def control_target(self) -> ControlTarget:
+        """The :class:`ControlTarget` of :attr:`target_pose` and :attr:`target_stiffness`,
+        built (and validated) once for each pair set, not every tick (the node sets new arrays
+        per message and never changes one in place); ValueError as ``ControlTarget``'s."""
+        cached = self._target
+        pose, stiffness = self.target_pose, self.target_stiffness
+        if cached is None or cached[0] is not pose or cached[1] is not stiffness:
+            cached = self._target = (pose, stiffness,
+                                     ControlTarget(pose=pose, cartesian_stiffness=stiffness))
+        return cached[2]
 
     def reconfigure(self, settings: ControllerSettings, controller: StiffnessController
                     ) -> None:
@@ -326,8 +339,7 @@ class ControllerTicks:
                                 f'{max_age:g} s: last command held')
             return TickOutcome()
         try:
-            target = ControlTarget(pose=self.target_pose,
-                                   cartesian_stiffness=self.target_stiffness)
+            target = self.control_target()
             start = time.perf_counter()
             cmd = self.controller.update(dt, target, pose=state.transform,
                                          external_wrench=self.load())

@@ -80,6 +80,9 @@ class EstimatorNode(JointFrames, JointRestLengthTopic, StreamingNode):
     #: on /diagnostics), so that an estimate that takes longer than a reading's period passes
     #: over the backlog instead of turning it into latency.
     NEWEST_INPUT_ONLY = True
+    #: The controller's rest-length commands (500 Hz) on the fast lane, in order: an executor
+    #: wake-up for each cost more CPU than an estimate's processing (issue 37).
+    REST_LENGTHS_ON_LANE = True
     #: Judges one reading on arrival (ValueError naming the input: the reading is dropped).
     _check_reading = staticmethod(check_reading)
     #: What the frame of ~/measured_pose and ~/measured_wrench is called in warnings.

@@ -405,3 +405,51 @@ def test_config_file_errors(tmp_path):
     del section['rest_lengths']
     with pytest.raises(ValueError, match=r'joint\.rest_lengths is missing'):
         JointModel.from_dict(section)
+
+
+def built_anew(model: JointModel, rest_lengths) -> JointModel:
+    """What ``JointModel.with_rest_lengths`` returned before it copied (main at 3ac95f7): the
+    model built anew from ``model``'s arguments."""
+    rest = model.validate_rest_lengths(rest_lengths, batched=False)
+    return JointModel(model.link1_nodes, model.connections, model.k, rest,
+                      link2_nodes=model.link2_nodes, max_lengths=rest + model.max_stretch,
+                      force_law=model.force_law, node_names=model.node_names,
+                      link2_node_names=model.link2_node_names, string_names=model.string_names,
+                      initial_screw=model.initial_screw, use_kernel=model.uses_kernel)
+
+
+def test_with_rest_lengths_is_the_model_built_anew():
+    """The copy ``with_rest_lengths`` makes (issue 37: a node takes commands at 500 Hz) holds
+    bitwise what a model built anew from the same arguments holds, evaluates bitwise as it
+    does, and refuses what it refuses with the same message; the original is unchanged."""
+    model = JointModel.from_yaml(config.packaged_config_path())
+    before = model.rest_lengths.copy()
+    rng = np.random.default_rng(3)
+    current = model
+    for i in range(60):
+        rest = model.rest_lengths * (1.0 + 0.05 * rng.standard_normal(model.n_strings))
+        anew = built_anew(current, rest)
+        copied = current.with_rest_lengths(rest)
+        assert copied is not current and copied.uses_kernel == anew.uses_kernel
+        for name in ('rest_lengths', 'max_lengths', 'max_stretch', 'link1_nodes',
+                     'link2_nodes', 'connections', 'k', 'initial_screw',
+                     'link1_string_nodes'):
+            a, b = getattr(copied, name), getattr(anew, name)
+            assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b), name
+        assert (copied.node_names, copied.link2_node_names, copied.string_names,
+                copied.force_law) == (anew.node_names, anew.link2_node_names,
+                                      anew.string_names, anew.force_law)
+        xi = model.initial_screw + 0.01 * rng.standard_normal(6)
+        s1, s2 = copied.evaluate(xi), anew.evaluate(xi)
+        for name in ('wrench', 'stiffness', 'cartesian_stiffness', 'tensions', 'lengths'):
+            assert np.array_equal(getattr(s1, name), getattr(s2, name)), (i, name)
+        current = copied
+    np.testing.assert_array_equal(model.rest_lengths, before)
+    for bad in (np.full(model.n_strings, np.nan), -model.rest_lengths, model.rest_lengths[:3],
+                model.rest_lengths * 1e17):
+        messages = []
+        for build in (model.with_rest_lengths, lambda r: built_anew(model, r)):
+            with pytest.raises(ValueError) as info:
+                build(bad)
+            messages.append((type(info.value), str(info.value)))
+        assert messages[0] == messages[1], messages

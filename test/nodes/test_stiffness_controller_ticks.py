@@ -148,3 +148,44 @@ def test_a_tick_past_control_time_budget_is_held_and_named(settings):
     assert 'time budget exhausted' in held.message
     assert held.message.endswith('(control.time_budget = 1e-09 s)'), held.message
     np.testing.assert_array_equal(held.rest_lengths, first.rest_lengths)
+
+
+def test_the_target_is_built_once_per_target_set_with_the_same_commands(settings):
+    """The ``ControlTarget`` is validated once per target set (issue 37: not every tick); the
+    commands are bitwise those of a ticker that builds it every tick (the targets set anew,
+    as copies, before each tick), through a pose step, a stiffness target and a bad target."""
+    cached, anew = (ControllerTicks(settings, new_controller(settings), PERIOD)
+                    for _ in range(2))
+    pose = pose_of(settings)
+    moved = pose.copy()
+    moved[:3, 3] += [0.002, -0.001, 0.001]
+    stiffness = None
+    rng = np.random.default_rng(4)
+    for i in range(60):
+        if i == 20:
+            pose = moved
+        if i == 35:
+            stiffness = np.asarray(new_controller(settings).update(  # a probe's controller
+                PERIOD, ControlTarget(pose=pose), pose=pose).predicted_cartesian_stiffness)
+        if i in (0, 20, 35):
+            cached.target_pose, cached.target_stiffness = pose, stiffness
+        anew.target_pose = pose.copy()
+        anew.target_stiffness = None if stiffness is None else stiffness.copy()
+        built = cached.control_target()
+        assert (cached.control_target() is built) and (anew.control_target() is not built)
+        state = pose_of(settings)
+        state[:3, 3] += 1e-4 * rng.standard_normal(3)
+        for ticker in (cached, anew):
+            ticker.take_state(state, received=1.0 + i * PERIOD, stamp_ns=0)
+        a, b = (ticker.tick(1.0 + i * PERIOD, 0) for ticker in (cached, anew))
+        assert a.error == b.error and (a.command is None) == (b.command is None), i
+        if a.command is not None:
+            for name in ('rest_lengths', 'tensions', 'predicted_cartesian_stiffness'):
+                assert np.array_equal(getattr(a.command, name), getattr(b.command, name),
+                                      equal_nan=True), (i, name)
+    cached.target_pose = np.full((4, 4), np.nan)
+    with pytest.raises(ValueError):
+        cached.control_target()
+    for t in (2.0, 2.0 + PERIOD):  # a bad target is refused at every tick, not cached
+        cached.take_state(pose_of(settings), received=t, stamp_ns=0)
+        assert cached.tick(t, 0).error

@@ -96,6 +96,11 @@ class StreamingNode(Node):
     NEWEST_INPUT_ONLY = False
     #: The /diagnostics key of the inputs passed over for a newer one, per topic.
     SKIPPED_KEY = 'inputs skipped (a newer one was queued)'
+    #: Whether ``~/rest_lengths`` is served on the fast lane (when the node runs one), every
+    #: message in order, instead of by the executor: a node that takes a controller's commands
+    #: (500 Hz) would otherwise pay an executor wake-up for each (0.35-0.6 ms a callback,
+    #: docs/nodes.md "QoS"), competing with its inputs for the GIL.
+    REST_LENGTHS_ON_LANE = False
     _build_settings: Callable[..., Any]
     _output_frame: Callable[[Any], str]
 
@@ -147,8 +152,12 @@ class StreamingNode(Node):
                     self, msg_type, topic, callback, qos,
                     on_error=lambda exc, t=topic: self.reporter.internal_error(t, exc),
                     skipped=skipped)
-        self.create_subscription(Float64MultiArray, '~/rest_lengths', self._on_rest_lengths,
-                                 LATCHED_QOS)
+        if self._lane is not None and self.REST_LENGTHS_ON_LANE:
+            self._lane.create_subscription(Float64MultiArray, '~/rest_lengths',
+                                           self._on_rest_lengths, LATCHED_QOS)
+        else:
+            self.create_subscription(Float64MultiArray, '~/rest_lengths',
+                                     self._on_rest_lengths, LATCHED_QOS)
 
     def _start(self, warm_up: Callable[..., Any], warm_up_args: tuple, summary: str) -> None:
         """After the node's services: the timers, a first job for the worker (``warm_up(
