@@ -54,30 +54,36 @@ def own_domain_per_worker() -> None:
 own_domain_per_worker()
 
 
-#: The files of the parallel pass that take longest (seconds of a whole run: a fresh clone's
-#: ``.ci/run`` with three workers on the 2-core machine, durations summed per file), started
-#: first so that no long file is left for the end of the pass while the other workers idle
-#: (xdist hands out whole files in collection order with ``--no-loadscope-reorder``). Files not
-#: listed follow in their usual order.
+#: The files of the parallel pass that take longest (seconds summed per file over one parallel
+#: pass with three workers on the 2-core machine, 2026-12-08, load 8-14 from other work: the
+#: figures are about 2.5 times a quiet run's, their order is what counts), started first so
+#: that no long file is left for the end of the pass while the other workers idle (xdist hands
+#: out whole files in collection order with ``--no-loadscope-reorder``). Files not listed
+#: follow in their usual order.
 LONGEST_FIRST = (
-    'test/package/test_workspace_build.py',  # 111 s: a colcon build of a fresh clone
-    'test/ros/test_stiffness_bridge.py',     # 134 s
-    'test/ros/test_spine_node.py',           # 59 s
-    'test/ros/test_sim_node.py',             # 46 s
-    'test/estimation/test_filter_twin.py',   # 40 s
-    'test/ros/test_control_demo_joints.py',  # 37 s
-    'test/ros/test_robustness.py',           # 37 s
-    'test/estimation/test_structure_estimator.py',  # 36 s
-    'test/ros/test_structure_sim_node.py',   # 33 s
-    'test/ros/test_record.py',               # 32 s
-    'test/ros/test_node_lifecycle.py',       # 27 s
-    'test/cli/test_your_joint.py',           # 27 s
-    'test/estimation/test_calibration.py',   # 26 s
-    'test/ros/test_estimator_trust.py',      # 26 s
-    'test/package/test_benches.py',          # 23 s
-    'test/ros/test_your_joint_nodes.py',     # 21 s
-    'test/ros/test_estimator_node.py',       # 21 s
-    'test/ros/test_tf.py',                   # 20 s: builds tf2_msgs
+    'test/package/test_workspace_build.py',  # 243 s: a colcon build of a fresh clone
+    'test/estimation/test_calibration.py',   # 173 s
+    'test/ros/test_node_lifecycle.py',       # 147 s
+    'test/ros/test_stiffness_bridge.py',     # 143 s
+    'test/package/test_benches.py',          # 132 s
+    'test/cli/test_calibration_command.py',  # 118 s
+    'test/estimation/test_filter_twin.py',   # 115 s
+    'test/control/test_control_twin.py',     # 111 s
+    'test/cli/test_cli.py',                  # 97 s
+    'test/ros/test_spine_node.py',           # 86 s
+    'test/ros/test_tf.py',                   # 86 s: builds tf2_msgs where the setup did not
+    'test/estimation/test_structure_estimator.py',  # 77 s
+    'test/ros/test_your_joint_nodes.py',     # 74 s
+    'test/ros/test_record.py',               # 72 s
+    'test/estimation/test_estimation_chain.py',  # 70 s
+    'test/cli/test_hostile_command_line.py',  # 69 s
+    'test/cli/test_your_joint.py',           # 69 s
+    'test/cli/test_structure_cli.py',        # 66 s
+    'test/ros/test_estimator_trust.py',      # 63 s
+    'test/ros/test_robustness.py',           # 60 s
+    'test/ros/test_sim_node.py',             # 54 s
+    'test/ros/test_control_demo_joints.py',  # 51 s
+    'test/ros/test_structure_sim_node.py',   # 39 s
 )
 
 
