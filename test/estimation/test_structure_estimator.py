@@ -503,20 +503,26 @@ def damped(structure: Structure, damping: float = 0.5) -> Structure:
                      structure.ground, structure.force_law)
 
 
+def dynamics_case(damping: float) -> tuple:
+    """The dynamics models' Jacobian case: the 6-bar (string damping ``damping``) at perturbed
+    poses and velocities, strings at 95 % of their rest lengths, bodies 0, 2 and 5, body 0 on its
+    node ``x1.a`` and body 5 on ``z2.b``: ``(structure, T, V, rest, bodies, pivots)``."""
+    structure, T0, _ = example('six_bar')
+    structure = damped(structure, damping) if damping else structure
+    rng = np.random.default_rng(15)
+    T = perturbed(T0, rng)
+    V = 0.1 * rng.standard_normal((6, 6))
+    pivots = {0: structure.node_index('x1.a'), 5: structure.node_index('z2.b')}
+    return structure, T, V, structure.rest_lengths * 0.95, [0, 2, 5], pivots
+
+
 @pytest.mark.parametrize('damping', [0.0, 0.5])
 def test_specific_force_model_jacobians_match_central_differences(damping: float) -> None:
     """The accelerometers' dynamics model, off the ground (Newton) and turning about a contact
     node (Euler about it): the velocity Jacobian exact, the pose Jacobian exact without damping;
     with damping it leaves out the damping's change with the pose (second order, 0.25 % of the
     largest entry here)."""
-    structure, T0, _ = example('six_bar')
-    structure = damped(structure, damping) if damping else structure
-    rng = np.random.default_rng(15)
-    T = perturbed(T0, rng)
-    V = 0.1 * rng.standard_normal((6, 6))
-    rest = structure.rest_lengths * 0.95
-    bodies = [0, 2, 5]
-    pivots = {0: structure.node_index('x1.a'), 5: structure.node_index('z2.b')}
+    structure, T, V, rest, bodies, pivots = dynamics_case(damping)
     model = functools.partial(specific_force_model, structure, rest=rest, bodies=bodies,
                               pivots=pivots)
     _, H_pose, H_vel = model(T, V)
@@ -543,14 +549,7 @@ def test_body_accelerations_jacobians_match_central_differences(damping: float) 
     damping the damping's change with the pose is left out but for its turn with the body
     (measured 4.8e-4 of the largest entry in ``a``, 1.6e-3 in ``alpha``; without that turn
     0.32 in ``alpha``: a bar's axial inertia is 1/1700 of its transverse one)."""
-    structure, T0, _ = example('six_bar')
-    structure = damped(structure, damping) if damping else structure
-    rng = np.random.default_rng(15)
-    T = perturbed(T0, rng)
-    V = 0.1 * rng.standard_normal((6, 6))
-    rest = structure.rest_lengths * 0.95
-    bodies = [0, 2, 5]
-    pivots = {0: structure.node_index('x1.a'), 5: structure.node_index('z2.b')}
+    structure, T, V, rest, bodies, pivots = dynamics_case(damping)
     model = functools.partial(body_accelerations, structure, rest=rest, bodies=bodies,
                               pivots=pivots)
     _, J_pose, J_vel = model(T, V)
