@@ -928,6 +928,11 @@ def _pivot_acceleration(structure: Structure, T: FloatArray, V: FloatArray, i: i
     return np.concatenate([a, alpha]), J_pose, J_vel
 
 
+#: Readings as the filter's update takes them: names, residuals ``z - h``, Jacobians in the
+#: state, stds and degrees of freedom, one entry per reading.
+ReadingRows = tuple[list[str], list[FloatArray], list[FloatArray], list[FloatArray], list[int]]
+
+
 @dataclass
 class StructureFilterUpdate:
     """One :meth:`StructureFilter.update`: ``poses`` (N, 4, 4), ``velocities`` (N, 6)
@@ -1145,9 +1150,7 @@ class StructureFilter:
 
     def _rows(self, measurements: StructureMeasurements,
               gyros: Mapping[str, ArrayLike] | None,
-              accelerometers: Mapping[str, ArrayLike] | None = None
-              ) -> tuple[list[str], list[FloatArray], list[FloatArray], list[FloatArray],
-                         list[int]]:
+              accelerometers: Mapping[str, ArrayLike] | None = None) -> ReadingRows:
         """(names, residuals z - h, Jacobians in the state, stds, dofs) of every reading."""
         s = self.structure
         f = self.cols.size
@@ -1172,46 +1175,11 @@ class StructureFilter:
             stds = np.split(std, starts[1:])
             dofs = [r.dof for r in readings]
             contacts = [r.index for r in readings if r.kind == 'contact']
-            if contacts:  # the contacts' zero velocity, all in one pass
-                nodes = np.array(contacts)
-                b = s.node_bodies[nodes]
-                arm = np.einsum('cij,cj->ci', self.T[b, :3, :3], s.node_points[nodes])
-                w = self.V[b, 3:]
-                h_arm, h_w = hat3(arm), hat3(w)
-                k = np.searchsorted(self.cols, 6 * b)
-                J = np.zeros((nodes.size, 3, 2 * f))
-                c = np.arange(nodes.size)[:, None, None]
-                i3 = np.arange(3)[None, :, None]
-                J[c, i3, (f + k)[:, None, None] + np.arange(3)] = np.eye(3)
-                J[c, i3, (f + k + 3)[:, None, None] + np.arange(3)] = -h_arm
-                J[c, i3, (k + 3)[:, None, None] + np.arange(3)] = -h_w @ h_arm
-                v = -(self.V[b, :3] + np.einsum('cij,cj->ci', h_w, arm))
-                names += [f'contact_velocity[{s.node_names[n]}]' for n in contacts]
-                res += list(v)
-                jac += list(J)
-                stds += [np.full(3, self.contact_velocity_std)] * nodes.size
-                dofs += [3] * nodes.size
-        if gyros:  # the gyros, all in one pass
-            keys = list(gyros)
-            idx = np.array([s.body_index(key) for key in keys])
-            g = np.empty((idx.size, 3))
-            for q, key in enumerate(keys):
-                g[q] = finite_array(f'gyros[{key}]', gyros[key]).reshape(-1) \
-                    if np.size(gyros[key]) == 3 else _bad_gyro(key)
-            R = self.T[idx, :3, :3]
-            Rt = np.transpose(R, (0, 2, 1))
-            w = self.V[idx, 3:]
-            k = np.searchsorted(self.cols, 6 * idx)
-            J = np.zeros((idx.size, 3, 2 * f))
-            c = np.arange(idx.size)[:, None, None]
-            i3 = np.arange(3)[None, :, None]
-            J[c, i3, (f + k + 3)[:, None, None] + np.arange(3)] = Rt
-            J[c, i3, (k + 3)[:, None, None] + np.arange(3)] = Rt @ hat3(w)
-            names += [f'gyro[{key}]' for key in keys]
-            res += list(g - np.einsum('kij,kj->ki', Rt, w))
-            jac += list(J)
-            stds += [np.full(3, self.gyro_std)] * idx.size
-            dofs += [3] * idx.size
+            if contacts:
+                self._extend_rows((names, res, jac, stds, dofs),
+                                  self._contact_velocity_rows(contacts))
+        if gyros:
+            self._extend_rows((names, res, jac, stds, dofs), self._gyro_rows(gyros))
         if accel:
             bodies = list(accel)
             h_a, H_p, H_v = specific_force_model(s, self.T, self.V, rest, bodies, pivots)
@@ -1225,6 +1193,63 @@ class StructureFilter:
                 stds.append(np.full(3, self.pivot_accelerometer_std if i in pivots
                                     else self.accelerometer_std))
                 dofs.append(3)
+        return names, res, jac, stds, dofs
+
+    @staticmethod
+    def _extend_rows(rows: ReadingRows, more: ReadingRows) -> None:
+        """Append the readings ``more`` (names, residuals, Jacobians, stds, dofs) to ``rows``."""
+        for kept, added in zip(rows, more, strict=True):
+            kept.extend(added)
+
+    def _contact_velocity_rows(self, contacts: list[int]) -> ReadingRows:
+        """The contact nodes' zero velocity (a sticking node: ``v + w x (x - p) = 0``), all in
+        one pass: (names, residuals, Jacobians, stds, dofs)."""
+        s = self.structure
+        f = self.cols.size
+        nodes = np.array(contacts)
+        b = s.node_bodies[nodes]
+        arm = np.einsum('cij,cj->ci', self.T[b, :3, :3], s.node_points[nodes])
+        w = self.V[b, 3:]
+        h_arm, h_w = hat3(arm), hat3(w)
+        k = np.searchsorted(self.cols, 6 * b)
+        J = np.zeros((nodes.size, 3, 2 * f))
+        c = np.arange(nodes.size)[:, None, None]
+        i3 = np.arange(3)[None, :, None]
+        J[c, i3, (f + k)[:, None, None] + np.arange(3)] = np.eye(3)
+        J[c, i3, (f + k + 3)[:, None, None] + np.arange(3)] = -h_arm
+        J[c, i3, (k + 3)[:, None, None] + np.arange(3)] = -h_w @ h_arm
+        v = -(self.V[b, :3] + np.einsum('cij,cj->ci', h_w, arm))
+        names = [f'contact_velocity[{s.node_names[n]}]' for n in contacts]
+        res = list(v)
+        jac = list(J)
+        stds = [np.full(3, self.contact_velocity_std)] * nodes.size
+        dofs = [3] * nodes.size
+        return names, res, jac, stds, dofs
+
+    def _gyro_rows(self, gyros: Mapping[str, ArrayLike]) -> ReadingRows:
+        """Each gyro (``R^T w``), all in one pass: (names, residuals, Jacobians, stds, dofs)."""
+        s = self.structure
+        f = self.cols.size
+        keys = list(gyros)
+        idx = np.array([s.body_index(key) for key in keys])
+        g = np.empty((idx.size, 3))
+        for q, key in enumerate(keys):
+            g[q] = finite_array(f'gyros[{key}]', gyros[key]).reshape(-1) \
+                if np.size(gyros[key]) == 3 else _bad_gyro(key)
+        R = self.T[idx, :3, :3]
+        Rt = np.transpose(R, (0, 2, 1))
+        w = self.V[idx, 3:]
+        k = np.searchsorted(self.cols, 6 * idx)
+        J = np.zeros((idx.size, 3, 2 * f))
+        c = np.arange(idx.size)[:, None, None]
+        i3 = np.arange(3)[None, :, None]
+        J[c, i3, (f + k + 3)[:, None, None] + np.arange(3)] = Rt
+        J[c, i3, (k + 3)[:, None, None] + np.arange(3)] = Rt @ hat3(w)
+        names = [f'gyro[{key}]' for key in keys]
+        res = list(g - np.einsum('kij,kj->ki', Rt, w))
+        jac = list(J)
+        stds = [np.full(3, self.gyro_std)] * idx.size
+        dofs = [3] * idx.size
         return names, res, jac, stds, dofs
 
     def _accelerometers(self, readings: Sequence[Reading],
