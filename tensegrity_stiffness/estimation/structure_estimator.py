@@ -1159,7 +1159,7 @@ class StructureFilter:
         # held by the next prediction
         self.held_rest_lengths = rest
         self.held_contacts = tuple(r.index for r in readings if r.kind == 'contact')
-        accel, pivots = self._accelerometers(readings, accelerometers)
+        accel, pivots = self._accelerometers(self.held_contacts, accelerometers)
         if accel:  # an accelerometer modelled by the dynamics replaces its gravity direction
             modelled = {f'imu[{s.body_names[i]}]' for i in accel}
             readings = [r for r in readings if r.name not in modelled]
@@ -1174,10 +1174,9 @@ class StructureFilter:
             jac = np.split(J_all, starts[1:])
             stds = np.split(std, starts[1:])
             dofs = [r.dof for r in readings]
-            contacts = [r.index for r in readings if r.kind == 'contact']
-            if contacts:
+            if self.held_contacts:
                 self._extend_rows((names, res, jac, stds, dofs),
-                                  self._contact_velocity_rows(contacts))
+                                  self._contact_velocity_rows(list(self.held_contacts)))
         if gyros:
             self._extend_rows((names, res, jac, stds, dofs), self._gyro_rows(gyros))
         if accel:
@@ -1252,28 +1251,24 @@ class StructureFilter:
         dofs = [3] * idx.size
         return names, res, jac, stds, dofs
 
-    def _accelerometers(self, readings: Sequence[Reading],
+    def _accelerometers(self, contacts: Sequence[int],
                         accelerometers: Mapping[str, ArrayLike] | None
                         ) -> tuple[dict[int, FloatArray], dict[int, int]]:
-        """{body index: specific force (3,)} of the accelerometers the dynamics model
-        (:func:`specific_force_model`: a free body with mass, its centre of mass at its origin,
-        at most one node among the contacts) and {body: its contact node} (its pivot);
-        checked (ValueError naming the body)."""
+        """{body index: specific force (3,)} of the accelerometers the dynamics model (on the
+        bodies of :meth:`dynamic_bodies` with the ``contacts``) and {body: its contact node}
+        (its pivot); checked (ValueError naming the body)."""
         s = self.structure
+        bodies, pivots = self.dynamic_bodies(contacts)
+        modelled = set(bodies)
         out: dict[int, FloatArray] = {}
-        nodes: dict[int, list[int]] = {}
-        for r in readings:
-            if r.kind == 'contact' and s.node_bodies[r.index] >= 0:
-                nodes.setdefault(int(s.node_bodies[r.index]), []).append(r.index)
-        touching = {b for b, c in nodes.items() if len(c) > 1}
         for key, value in (accelerometers or {}).items():
             i = s.body_index(key)
             a = finite_array(f'accelerometers[{key}]', value).reshape(-1)
             if a.shape != (3,):
                 raise ValueError(f'accelerometers[{key}] must be 3 values (m/s^2)')
-            if _modelled(s, i) and i not in touching:
+            if i in modelled:
                 out[i] = a
-        return out, {b: c[0] for b, c in nodes.items() if b in out}
+        return out, {b: c for b, c in pivots.items() if b in out}
 
     def update(self, measurements: StructureMeasurements,
                gyros: Mapping[str, ArrayLike] | None = None,

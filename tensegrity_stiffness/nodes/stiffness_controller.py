@@ -65,9 +65,8 @@ CONTROL_PARAMETERS: tuple[ParameterSpec, ...] = (
                   read_only=True, range=(1.0, 10_000.0)),
     ParameterSpec('control.time_budget', 'double', 0.0,
                   "wall-clock budget of one tick's QP, s (0: half a period, 0.5 / control.rate); "
-                  "a tick "
-                  f"whose QP is past it after its first {MIN_QP_ITERATIONS} iterations is held "
-                  "('time budget exhausted', the last command kept) and the next starts cold",
+                  f"a tick whose QP is past it after its first {MIN_QP_ITERATIONS} iterations is "
+                  "held ('time budget exhausted', the last command kept) and the next starts cold",
                   range=(0.0, 10.0)),
     ParameterSpec('control.max_state_age', 'double', 0.05,
                   'a pose estimate older than this (s, by arrival) holds the last command',
