@@ -699,8 +699,16 @@ def test_a_controller_started_after_the_bridge_gets_the_streamed_updates(world, 
     k = seen = 0
     updates: set[int] = set()  # distinct inputs held whole: one per update the bridge sent
     deadline = time.monotonic() + 120.0
+    def bridge_report() -> dict[str, str] | None:  # the bridge's newest /diagnostics, if any
+        for array in reversed(list(world.diagnostics.messages)):
+            for s in array.status:
+                if s.name == f'{bridge_ns}/stiffness_bridge: controller stiffness':
+                    return kv(s)
+        return None
+
     while len(updates) < 30:
-        assert time.monotonic() < deadline, (len(updates), bridge.log()[-2000:])
+        assert time.monotonic() < deadline, (len(updates), len(accepted.messages),
+                                             bridge_report(), bridge.log()[-2000:])
         pub.publish(Float64MultiArray(data=(K0 * (1.0 + 0.01 * (k % 2000))).ravel().tolist()))
         k += 1
         time.sleep(0.01)  # the stream's pace (100 Hz), not a wait for a state
